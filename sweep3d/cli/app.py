@@ -1,0 +1,145 @@
+"""Typer commands. User mistakes print one red line and exit 2; nothing here imports bpy."""
+
+from __future__ import annotations
+
+import functools
+from pathlib import Path
+from typing import Callable, Optional
+
+import typer
+from rich.console import Console
+from rich.markup import escape
+from rich.table import Table
+
+from sweep3d.errors import UserError
+
+app = typer.Typer(
+    add_completion=False,
+    no_args_is_help=True,
+    help="Find where computer-vision models fail by rendering 3D scenes under systematic variation.",
+)
+console = Console()
+err_console = Console(stderr=True)
+
+def command(func: Callable) -> Callable:
+    """Register a command whose user errors print one line and exit 2 (no traceback)."""
+
+    @functools.wraps(func)
+    def wrapper(*args, **kwargs):
+        try:
+            return func(*args, **kwargs)
+        except UserError as exc:
+            err_console.print(f"[bold red]error:[/] {escape(str(exc))}", highlight=False, soft_wrap=True)
+            raise typer.Exit(exc.exit_code) from None
+        except KeyboardInterrupt:
+            err_console.print("[yellow]interrupted[/]: everything finished so far is stored; run again to resume")
+            raise typer.Exit(130) from None
+
+    return app.command()(wrapper)
+
+
+SpecArg = typer.Argument(..., help="Path to the experiment's TOML spec.", show_default=False)
+
+
+@command
+def plan(spec: Path = SpecArg) -> None:
+    """Show the jobs a spec expands to, what is already cached, and an estimated time."""
+    from sweep3d.cli.views import print_plan
+    from sweep3d.spec import load_spec
+
+    print_plan(console, load_spec(spec))
+
+
+@command
+def run(
+    spec: Path = SpecArg,
+    report: bool = typer.Option(True, help="Write the HTML report when the run ends."),
+    wait: float = typer.Option(0.0, help="Seconds to wait for another run holding the store's lock."),
+) -> None:
+    """Render, postprocess and infer everything the spec needs that the store lacks."""
+    from sweep3d.cli.views import print_run
+    from sweep3d.pipeline import run as run_pipeline
+    from sweep3d.spec import load_spec
+
+    loaded = load_spec(spec)
+    result = run_pipeline(loaded, console, wait=wait)
+    print_run(console, result)
+    if report:
+        _write_report(loaded, None)
+    if result.failed:
+        raise typer.Exit(1)
+
+
+@command
+def report(
+    spec: Path = SpecArg,
+    output: Optional[Path] = typer.Option(None, "--output", "-o", help="HTML file to write."),
+) -> None:
+    """Write a self-contained HTML dashboard of the spec's results."""
+    from sweep3d.spec import load_spec
+
+    _write_report(load_spec(spec), output)
+
+
+@command
+def query(
+    spec: Path = SpecArg,
+    sql: str = typer.Argument(..., help="SQL over the views results, jobs, predictions, renders, images, runs."),
+    output: Optional[Path] = typer.Option(None, "--output", "-o", help="Write all rows to .csv, .json or .parquet."),
+    limit: int = typer.Option(50, help="Rows to print (all rows go to --output)."),
+) -> None:
+    """Answer SQL over the store with DuckDB."""
+    import duckdb
+
+    from sweep3d.cache.store import Store
+    from sweep3d.spec import load_spec
+
+    loaded = load_spec(spec)
+    con = Store(loaded.store).connect(loaded.name)
+    statement = sql.strip().rstrip(";")
+    try:
+        if output is not None:
+            _export(con, statement, output)
+            console.print(f"wrote {output}")
+            return
+        cursor = con.execute(statement)
+        columns = [d[0] for d in cursor.description or []]
+        rows = cursor.fetchmany(limit + 1)
+    except duckdb.Error as exc:
+        raise UserError(
+            f"query failed: {str(exc).splitlines()[0]} (views: results, jobs, predictions, renders, images, runs)"
+        ) from None
+    table = Table(*columns)
+    for row in rows[:limit]:
+        table.add_row(*[_cell(v) for v in row])
+    console.print(table)
+    if len(rows) > limit:
+        console.print(f"[dim]first {limit} rows shown; --limit N or --output FILE for more[/]")
+
+
+def _export(con, statement: str, output: Path) -> None:
+    suffix = output.suffix.lower()
+    formats = {".csv": "FORMAT CSV, HEADER", ".json": "FORMAT JSON, ARRAY true", ".parquet": "FORMAT PARQUET"}
+    if suffix not in formats:
+        raise UserError(f"--output {output}: unsupported format {suffix or '(none)'!r}; use .csv, .json or .parquet")
+    output.parent.mkdir(parents=True, exist_ok=True)
+    target = str(output).replace("'", "''")
+    con.execute(f"COPY ({statement}) TO '{target}' ({formats[suffix]})")
+
+
+def _cell(value) -> str:
+    if isinstance(value, float):
+        return f"{value:.4g}"
+    return "" if value is None else str(value)
+
+
+def _write_report(loaded, output: Optional[Path]) -> None:
+    from sweep3d.report import write_report
+
+    path = write_report(loaded, output)
+    console.print(f"report: [bold]{path}[/]")
+
+
+def main() -> None:
+    """Console entry point."""
+    app()

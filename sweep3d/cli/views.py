@@ -1,0 +1,77 @@
+"""What ``plan`` and ``run`` print: per-stage counts of needed, cached and computed keys."""
+
+from __future__ import annotations
+
+from rich.console import Console
+from rich.markup import escape
+from rich.table import Table
+
+from sweep3d.cache.store import Store
+from sweep3d.spec.loader import LoadedSpec
+from sweep3d.stages.plan import Plan, make_plan
+
+# Fallback per-image costs on a 2-core CPU (DESIGN.md measurements), when the store has no history.
+SECONDS_PER_SAMPLE_224 = 0.034
+DENOISE_SECONDS_224 = {"fast": 0.04, "accurate": 0.3, "none": 0.02}
+INFER_SECONDS = 0.05
+
+
+def cache_status(plan: Plan, store: Store) -> list[tuple[str, int, int]]:
+    """(stage, distinct keys needed, keys already stored) for render, postprocess and infer."""
+    renders = {j.render_key for j in plan.jobs}
+    images = {j.image_key for j in plan.jobs if j.image_key != j.render_key}
+    preds = {j.pred_key for j in plan.jobs}
+    return [
+        ("render", len(renders), len(renders & store.keys("renders"))),
+        ("postprocess", len(images), len(images & store.keys("images"))),
+        ("infer", len(preds), len(preds & store.keys("predictions"))),
+    ]
+
+
+def estimate_render_seconds(spec: LoadedSpec, store: Store) -> float:
+    """A rough per-render cost from the settings (DESIGN.md measurements on 2 CPU cores)."""
+    r = spec.spec.render
+    scale = (r.resolution / 224) ** 2
+    denoise = DENOISE_SECONDS_224[r.denoise_prefilter] if r.denoise else 0.0
+    return (SECONDS_PER_SAMPLE_224 * r.samples + denoise + 0.02) * scale
+
+
+def print_plan(console: Console, spec: LoadedSpec) -> None:
+    store = Store(spec.store)
+    plan = make_plan(spec)
+    status = cache_status(plan, store)
+    scenes = len({j.scene for j in plan.jobs})
+    console.print(f"[bold]{escape(spec.name)}[/]: {len(plan.jobs)} jobs over {scenes} scenes "
+                  f"({len(spec.spec.objects)} objects × {len(spec.spec.environments)} environments), "
+                  f"policy {spec.spec.policy.type}; store {escape(str(spec.store))}")
+    table = Table("stage", "needed", "cached", "to compute", "estimate")
+    per_item = {"render": estimate_render_seconds(spec, store), "postprocess": 0.005, "infer": INFER_SECONDS}
+    total = 0.0
+    for stage, needed, cached in status:
+        seconds = (needed - cached) * per_item[stage]
+        total += seconds
+        table.add_row(stage, str(needed), str(cached), str(needed - cached), _duration(seconds))
+    console.print(table)
+    console.print(f"estimated time: {_duration(total)} (plus ~5 s start-up when anything needs rendering)")
+
+
+def print_run(console: Console, result) -> None:
+    table = Table("stage", "needed", "cached", "computed", "failed", "skipped", "seconds")
+    for o in result.outcomes:
+        table.add_row(o.stage, str(o.total), str(o.cached), str(o.computed), str(o.failed), str(o.skipped),
+                      f"{o.seconds:.1f}")
+    console.print(table)
+    for o in result.outcomes:
+        for error in o.errors[:3]:
+            console.print(f"[red]{escape(error.splitlines()[0])}[/]")
+        if len(o.errors) > 3:
+            console.print(f"[red]... and {len(o.errors) - 3} more {o.stage} errors[/]")
+    console.print(f"{len(result.plan.jobs)} jobs in {result.seconds:.1f} s (run {result.run_id})")
+
+
+def _duration(seconds: float) -> str:
+    if seconds < 60:
+        return f"{seconds:.0f} s"
+    if seconds < 3600:
+        return f"{seconds / 60:.1f} min"
+    return f"{seconds / 3600:.1f} h"

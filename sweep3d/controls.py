@@ -1,0 +1,87 @@
+"""The control plug-in base and its registry, shared by the render and postprocess stages.
+
+A control declares its parameters as a pydantic model whose defaults are *neutral*: a control
+whose values equal its defaults leaves the image as it was, so it is dropped from the job's
+cache keys (a spec that adds ``yaw = 0`` re-renders nothing). Rendered controls live in
+``sweep3d.stages.render.controls`` and change the 3D scene; post controls live in
+``sweep3d.stages.postprocess.controls`` and map one image to another.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, ClassVar, Literal
+
+from pydantic import BaseModel, ConfigDict
+
+from sweep3d.registry import Registry
+
+
+class ControlParams(BaseModel):
+    """Base of every control's parameter model: unknown keys are errors, values are checked."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class Control:
+    """One instance of a control in a spec (the same type may appear twice with different ids).
+
+    Subclasses set ``Params`` (a :class:`ControlParams` model with neutral defaults), ``stage``
+    and, for angles, ``periodic`` (parameter name → period) so that equal configurations hash
+    equal (yaw 190° is yaw -170°).
+    """
+
+    stage: ClassVar[Literal["render", "post"]]
+    Params: ClassVar[type[ControlParams]] = ControlParams
+    periodic: ClassVar[dict[str, float]] = {}
+    #: Render passes (besides RGB) this control reads; the renderer writes only requested passes.
+    passes: ClassVar[frozenset[str]] = frozenset()
+    #: Bumped when the control's effect on pixels changes, so old cache entries are not reused.
+    version: ClassVar[int] = 1
+
+    def __init__(self, control_id: str, type_name: str) -> None:
+        self.id = control_id
+        self.type_name = type_name
+
+    def params(self, values: dict[str, Any]) -> ControlParams:
+        """Validate one job's values for this control into its ``Params`` model."""
+        return self.Params(**values)
+
+    def canonical(self, values: dict[str, Any]) -> dict[str, Any]:
+        """Values in a canonical form: periodic parameters wrapped into (-period/2, period/2]."""
+        out = dict(values)
+        for name, period in self.periodic.items():
+            if name in out and isinstance(out[name], (int, float)):
+                out[name] = wrap_periodic(float(out[name]), period)
+        return out
+
+    def is_identity(self, values: dict[str, Any]) -> bool:
+        """True when these values cannot change the image (they equal the neutral defaults)."""
+        canon = self.canonical(values)
+        neutral = self.canonical(self.Params().model_dump())
+        return all(canon.get(k) == v for k, v in neutral.items())
+
+    def key_part(self, values: dict[str, Any]) -> dict[str, Any]:
+        """What of this control goes into a cache key."""
+        return {"type": self.type_name, "v": self.version, "values": self.canonical(values)}
+
+
+def wrap_periodic(value: float, period: float) -> float:
+    """Wrap ``value`` into (-period/2, period/2], with -0.0 folded to 0.0."""
+    half = period / 2.0
+    wrapped = math.fmod(value + half, period)
+    if wrapped <= 0.0:
+        wrapped += period
+    result = wrapped - half
+    # fmod is exact, but the shifts above can land a hair off for huge inputs: snap ties.
+    if math.isclose(result, -half, rel_tol=0, abs_tol=1e-9):
+        result = half
+    return result + 0.0
+
+
+def _load_builtin_controls() -> None:
+    import sweep3d.stages.postprocess.controls  # noqa: F401  (registers post controls)
+    import sweep3d.stages.render.controls  # noqa: F401  (registers rendered controls)
+
+
+CONTROLS: Registry[type[Control]] = Registry("control", loader=_load_builtin_controls)

@@ -1,0 +1,38 @@
+"""Image blobs: float32 RGB arrays in [0, 1] to and from 8-bit PNG bytes."""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import numpy as np
+from PIL import Image
+
+
+def to_uint8(rgb: np.ndarray) -> np.ndarray:
+    """Quantise a float image; NaN becomes 0 (callers flag non-finite images before this)."""
+    clean = np.nan_to_num(rgb, nan=0.0, posinf=1.0, neginf=0.0)
+    return (np.clip(clean, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
+
+
+def encode_png(rgb: np.ndarray) -> bytes:
+    """PNG bytes of a float32 (H, W, 3) image."""
+    buf = io.BytesIO()
+    Image.fromarray(to_uint8(rgb), "RGB").save(buf, format="PNG", compress_level=1)
+    return buf.getvalue()
+
+
+def decode_png(path: str | Path) -> np.ndarray:
+    """A PNG file as float32 (H, W, 3) in [0, 1]."""
+    with Image.open(path) as img:
+        return np.asarray(img.convert("RGB"), dtype=np.float32) / 255.0
+
+
+def thumbnail_png(path: str | Path, size: int) -> bytes:
+    """A downscaled PNG (longest side ``size``) for embedding in reports."""
+    with Image.open(path) as img:
+        img = img.convert("RGB")
+        img.thumbnail((size, size), Image.Resampling.LANCZOS)
+        buf = io.BytesIO()
+        img.save(buf, format="PNG", optimize=True)
+        return buf.getvalue()

@@ -1,0 +1,272 @@
+"""Load a TOML spec into a validated, path-resolved :class:`LoadedSpec`.
+
+Every mistake becomes a :class:`~sweep3d.errors.SpecError` naming the file, the key path and
+what is expected, so the CLI can print one line instead of a traceback.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from pydantic import ValidationError
+
+from sweep3d.controls import CONTROLS, Control
+from sweep3d.errors import SpecError, UserError
+from sweep3d.spec.models import Spec
+from sweep3d.spec.params import Choice, Fixed, ParamSyntaxError, Range, Space, parse_space
+
+RESERVED_CONTROL_KEYS = {"type", "id", "objects", "environments"}
+
+
+@dataclass(frozen=True)
+class ControlInstance:
+    """A control as configured in the spec: its plug-in, its parameter spaces and where it applies."""
+
+    control: Control
+    spaces: dict[str, Space]
+    objects: frozenset[str] | None = None
+    environments: frozenset[str] | None = None
+
+    @property
+    def id(self) -> str:
+        return self.control.id
+
+    def applies_to(self, object_name: str, environment_name: str) -> bool:
+        return (self.objects is None or object_name in self.objects) and (
+            self.environments is None or environment_name in self.environments
+        )
+
+
+@dataclass(frozen=True)
+class LoadedSpec:
+    """A validated spec with its file, resolved paths, controls and policy."""
+
+    path: Path
+    spec: Spec
+    store: Path
+    meshes: dict[str, str]  # object name -> resolved mesh reference
+    hdris: dict[str, str | None]  # environment name -> resolved HDRI path (None for colours)
+    labels: dict[str, tuple]  # object name -> ImageNet ids (built-in models) or the labels as given
+    controls: list[ControlInstance] = field(default_factory=list)
+    policy: Any = None
+
+    @property
+    def name(self) -> str:
+        return self.spec.experiment.name
+
+    def fail(self, key: str, problem: str) -> SpecError:
+        return SpecError(str(self.path), key, problem)
+
+
+def load_spec(path: str | Path) -> LoadedSpec:
+    """Read, validate and resolve a spec file.
+
+    Raises:
+        SpecError: for any mistake in the file, naming the key and the fix.
+    """
+    path = Path(path)
+    raw = _read_toml(path)
+    try:
+        spec = Spec.model_validate(raw)
+    except ValidationError as exc:
+        raise _first_error(path, exc) from None
+    base = path.resolve().parent
+    fail = lambda key, problem: SpecError(str(path), key, problem)  # noqa: E731
+
+    from sweep3d.stages.render.assets import resolve_hdri, resolve_mesh
+
+    meshes = {}
+    for i, obj in enumerate(spec.objects):
+        try:
+            meshes[obj.name] = resolve_mesh(obj.mesh, base)
+        except UserError as exc:
+            raise fail(f"objects[{i}].mesh", str(exc)) from None
+    hdris: dict[str, str | None] = {}
+    for i, env in enumerate(spec.environments):
+        try:
+            hdris[env.name] = resolve_hdri(env.hdri, base) if env.hdri else None
+        except UserError as exc:
+            raise fail(f"environments[{i}].hdri", str(exc)) from None
+
+    _check_model(spec, fail)
+    labels = _resolve_labels(spec, fail)
+    controls = _load_controls(spec, fail)
+    policy = _load_policy(spec, fail)
+    store = Path(spec.experiment.store)
+    store = store if store.is_absolute() else base / store
+    return LoadedSpec(path, spec, store, meshes, hdris, labels, controls, policy)
+
+
+def _read_toml(path: Path) -> dict[str, Any]:
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise SpecError(str(path), "", "no such spec file; check the path") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SpecError(str(path), "", f"cannot read the spec: {exc}") from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SpecError(str(path), "", f"not valid TOML: {exc}") from None
+
+
+def _first_error(path: Path, exc: ValidationError) -> SpecError:
+    err = exc.errors()[0]
+    key = _key_path(err["loc"])
+    msg = err["msg"]
+    if err["type"] == "extra_forbidden":
+        msg = "unknown key; remove it or check its spelling"
+    elif err["type"] == "missing":
+        msg = "required key is missing"
+    elif "input" in err and err["type"] not in ("value_error",):
+        msg = f"{msg} (got {err['input']!r})"
+    more = len(exc.errors()) - 1
+    if more:
+        msg += f" (and {more} more error{'s' if more > 1 else ''})"
+    return SpecError(str(path), key, msg.removeprefix("Value error, "))
+
+
+def _key_path(loc: tuple[Any, ...]) -> str:
+    out = ""
+    for part in loc:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        else:
+            out += f".{part}" if out else str(part)
+    return out
+
+
+def _check_model(spec: Spec, fail) -> None:
+    from sweep3d.stages.infer.evaluators import EVALUATORS
+    from sweep3d.stages.infer.models import MODELS
+
+    for key, registry, name in (("model.name", MODELS, spec.model.name), ("evaluator.kind", EVALUATORS, spec.evaluator.kind)):
+        if ":" not in name:
+            try:
+                registry.get(name)
+            except UserError as exc:
+                raise fail(key, str(exc)) from None
+
+
+def _resolve_labels(spec: Spec, fail) -> dict[str, tuple]:
+    """Check labels against ImageNet for built-in models; a user's model checks its own at run time."""
+    from sweep3d.stages.infer.labels import IMAGENET, LabelError
+
+    out: dict[str, tuple] = {}
+    for i, obj in enumerate(spec.objects):
+        if ":" in spec.model.name:
+            out[obj.name] = tuple(obj.labels)
+            continue
+        ids = []
+        for j, label in enumerate(obj.labels):
+            try:
+                ids.append(IMAGENET.index(label))
+            except LabelError as exc:
+                raise fail(f"objects[{i}].labels[{j}]", str(exc)) from None
+        out[obj.name] = tuple(sorted(set(ids)))
+    return out
+
+
+def _load_controls(spec: Spec, fail) -> list[ControlInstance]:
+    instances: list[ControlInstance] = []
+    ids: set[str] = set()
+    object_names = {o.name for o in spec.objects}
+    env_names = {e.name for e in spec.environments}
+    for i, entry in enumerate(spec.controls):
+        where = f"controls[{i}]"
+        type_name = entry.get("type")
+        if not isinstance(type_name, str):
+            raise fail(f"{where}.type", f"required; one of: {', '.join(CONTROLS.names())}")
+        try:
+            cls = CONTROLS.get(type_name)
+        except UserError as exc:
+            raise fail(f"{where}.type", str(exc)) from None
+        if not (isinstance(cls, type) and issubclass(cls, Control)):
+            raise fail(f"{where}.type", f"{type_name!r} is not a sweep3d Control subclass")
+        control_id = entry.get("id", type_name.rsplit(":", 1)[-1])
+        if not isinstance(control_id, str) or not control_id.isidentifier():
+            raise fail(f"{where}.id", "must be a name made of letters, digits and underscores")
+        if control_id in ids:
+            raise fail(f"{where}.id", f"control id {control_id!r} is used twice; give this one its own id = '...'")
+        ids.add(control_id)
+        control = cls(control_id, type_name)
+        spaces = _control_spaces(control, entry, f"{where}", fail)
+        objects = _name_filter(entry, "objects", object_names, where, fail)
+        environments = _name_filter(entry, "environments", env_names, where, fail)
+        instances.append(ControlInstance(control, spaces, objects, environments))
+    return instances
+
+
+def _control_spaces(control: Control, entry: dict[str, Any], where: str, fail) -> dict[str, Space]:
+    fields = control.Params.model_fields
+    spaces: dict[str, Space] = {}
+    for name, raw in entry.items():
+        if name in RESERVED_CONTROL_KEYS:
+            continue
+        if name not in fields:
+            import difflib
+
+            close = difflib.get_close_matches(name, fields, n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            raise fail(
+                f"{where}.{name}",
+                f"unknown parameter for control {control.type_name!r}{hint}; valid: {', '.join(fields)}",
+            )
+        try:
+            space = parse_space(raw)
+        except ParamSyntaxError as exc:
+            raise fail(f"{where}.{name}", str(exc)) from None
+        spaces[name] = _check_space(control, name, space, f"{where}.{name}", fail)
+    return spaces
+
+
+def _check_space(control: Control, name: str, space: Space, key: str, fail) -> Space:
+    """Validate every value a space can produce against the control's parameter model."""
+
+    def check(value: Any) -> Any:
+        try:
+            return getattr(control.Params(**{name: value}), name)
+        except ValidationError as exc:
+            raise fail(key, f"{exc.errors()[0]['msg']} (got {value!r})") from None
+
+    if isinstance(space, Fixed):
+        return Fixed(check(space.value))
+    if isinstance(space, Choice):
+        return Choice(tuple(check(v) for v in space.options))
+    annotation = control.Params.model_fields[name].annotation
+    if annotation not in (int, float):
+        raise fail(key, f"a range needs a numeric parameter; {name!r} takes {getattr(annotation, '__name__', annotation)}: use a list")
+    check(space.low)
+    check(space.high)
+    return Range(space.low, space.high, log=space.log, integer=annotation is int)
+
+
+def _name_filter(entry, key, valid: set[str], where: str, fail) -> frozenset[str] | None:
+    if key not in entry:
+        return None
+    names = entry[key]
+    if not (isinstance(names, list) and all(isinstance(n, str) for n in names) and names):
+        raise fail(f"{where}.{key}", f"must be a non-empty list of {key[:-1]} names")
+    unknown = [n for n in names if n not in valid]
+    if unknown:
+        raise fail(f"{where}.{key}", f"unknown {key[:-1]} {unknown[0]!r}; valid: {', '.join(sorted(valid))}")
+    return frozenset(names)
+
+
+def _load_policy(spec: Spec, fail):
+    from sweep3d.stages.plan.policies import POLICIES
+
+    params = {k: v for k, v in (spec.policy.model_extra or {}).items()}
+    try:
+        cls = POLICIES.get(spec.policy.type)
+    except UserError as exc:
+        raise fail("policy.type", str(exc)) from None
+    try:
+        return cls(cls.Params(**params))
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        problem = "unknown key; remove it or check its spelling" if err["type"] == "extra_forbidden" else err["msg"]
+        raise fail(f"policy.{_key_path(err['loc'])}", problem) from None

@@ -1,0 +1,104 @@
+"""Pydantic models of the TOML spec. Every default lives here; every model forbids unknown keys."""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Any, Literal, Union
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+Name = Annotated[str, Field(min_length=1, max_length=200)]
+
+
+class StrictModel(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class ExperimentSpec(StrictModel):
+    name: Name = Field(description="Shown in the report; names the run's jobs table.")
+    seed: int = Field(0, ge=0, le=2**63 - 1, description="Drives random policies and noise.")
+    store: str = Field(".sweep3d", description="Content-addressed store; relative to the spec file.")
+
+
+class RenderSpec(StrictModel):
+    resolution: int = Field(224, ge=8, le=4096, description="Square image side in pixels.")
+    samples: int = Field(4, ge=1, le=65536, description="Cycles samples per pixel.")
+    denoise: bool = True
+    denoise_prefilter: Literal["fast", "accurate", "none"] = "fast"
+    max_bounces: int = Field(8, ge=0, le=1024)
+    threads: int = Field(0, ge=0, le=1024, description="Cycles threads per worker; 0 = all cores.")
+    workers: int = Field(1, ge=1, le=256, description="Render worker processes.")
+    timeout: float = Field(600.0, gt=0, description="Seconds one render may take before it fails.")
+
+    @field_validator("timeout")
+    @classmethod
+    def _finite(cls, value: float) -> float:
+        if not math.isfinite(value):
+            raise ValueError("must be a finite number of seconds")
+        return value
+
+    def key_part(self) -> dict[str, Any]:
+        """Settings that change pixels (threads and workers do not)."""
+        return self.model_dump(exclude={"threads", "workers", "timeout"})
+
+
+class ModelSpec(StrictModel):
+    name: str = Field("efficientnet-lite0", description="A built-in model or 'module:factory'.")
+    batch_size: int = Field(32, ge=1, le=4096)
+    threads: int = Field(0, ge=0, le=1024, description="torch threads; 0 = all cores.")
+
+
+class EvaluatorSpec(StrictModel):
+    kind: str = "classification"
+    top_k: int = Field(5, ge=1, le=100)
+
+
+class ObjectSpec(StrictModel):
+    name: Name
+    mesh: str = Field(description="OBJ/glTF/GLB/PLY/STL path, or 'archive.zip#member.obj'.")
+    labels: list[Union[int, str]] = Field(min_length=1, description="ImageNet class names or ids.")
+
+
+class EnvironmentSpec(StrictModel):
+    name: Name
+    hdri: str | None = Field(None, description="'builtin:NAME' or an .exr/.hdr/.png path.")
+    color: tuple[float, float, float] | None = Field(None, description="Plain background, RGB 0..1.")
+    strength: float = Field(1.0, gt=0, le=1e6, description="World light strength.")
+
+    @model_validator(mode="after")
+    def _one_background(self) -> "EnvironmentSpec":
+        if (self.hdri is None) == (self.color is None):
+            raise ValueError("give exactly one of hdri = '...' or color = [r, g, b]")
+        if self.color is not None:
+            for c in self.color:
+                if not (math.isfinite(c) and 0.0 <= c <= 1.0):
+                    raise ValueError(f"color components must be between 0 and 1, got {list(self.color)}")
+        return self
+
+
+class PolicySpec(BaseModel):
+    """``type`` picks the policy; its other keys are that policy's parameters."""
+
+    model_config = ConfigDict(extra="allow", frozen=True)
+    type: str = "grid"
+
+
+class Spec(StrictModel):
+    experiment: ExperimentSpec
+    render: RenderSpec = RenderSpec()
+    model: ModelSpec = ModelSpec()
+    evaluator: EvaluatorSpec = EvaluatorSpec()
+    objects: list[ObjectSpec] = Field(min_length=1)
+    environments: list[EnvironmentSpec] = Field(min_length=1)
+    controls: list[dict[str, Any]] = Field(default_factory=list)
+    policy: PolicySpec = PolicySpec()
+
+    @model_validator(mode="after")
+    def _unique_names(self) -> "Spec":
+        for field in ("objects", "environments"):
+            seen: set[str] = set()
+            for item in getattr(self, field):
+                if item.name in seen:
+                    raise ValueError(f"duplicate {field[:-1]} name {item.name!r}: names must be unique")
+                seen.add(item.name)
+        return self

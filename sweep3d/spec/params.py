@@ -1,0 +1,108 @@
+"""A control parameter in a spec is fixed (a scalar), a discrete set (a list) or a range.
+
+    yaw   = 30                          # fixed
+    yaw   = [0, 90, 180]                # discrete: every policy picks among these
+    yaw   = { range = [-180, 180] }     # continuous: policies sample inside it
+    zoom  = { range = [0.5, 4], log = true }
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Union
+
+Scalar = Union[bool, int, float, str]
+
+
+@dataclass(frozen=True)
+class Fixed:
+    value: Any
+
+    def values(self) -> list[Any]:
+        return [self.value]
+
+
+@dataclass(frozen=True)
+class Choice:
+    options: tuple[Any, ...]
+
+    def values(self) -> list[Any]:
+        return list(self.options)
+
+
+@dataclass(frozen=True)
+class Range:
+    low: float
+    high: float
+    log: bool = False
+    integer: bool = False
+
+    def at(self, u: float) -> float | int:
+        """The physical value at unit coordinate ``u`` in [0, 1]."""
+        u = min(max(float(u), 0.0), 1.0)
+        if self.log:
+            value = math.exp(math.log(self.low) + u * (math.log(self.high) - math.log(self.low)))
+        else:
+            value = self.low + u * (self.high - self.low)
+        value = min(max(value, self.low), self.high)  # guard rounding at the ends
+        return int(round(value)) if self.integer else value
+
+    def values(self) -> list[Any]:
+        return [self.low, self.high]
+
+
+Space = Union[Fixed, Choice, Range]
+
+
+class ParamSyntaxError(ValueError):
+    """The value is not a scalar, a list or a range table; the message says what is expected."""
+
+
+def parse_space(raw: Any) -> Space:
+    """Turn a TOML value into a parameter space (values are checked by the caller)."""
+    if isinstance(raw, dict):
+        unknown = set(raw) - {"range", "log"}
+        if unknown or "range" not in raw:
+            raise ParamSyntaxError(
+                "expected a scalar, a list, or a table { range = [low, high] } "
+                f"(optionally log = true); got keys {sorted(raw)}"
+            )
+        bounds = raw["range"]
+        if not (isinstance(bounds, list) and len(bounds) == 2):
+            raise ParamSyntaxError("range must be a list of two numbers [low, high]")
+        low, high = bounds
+        for bound in bounds:
+            if isinstance(bound, bool) or not isinstance(bound, (int, float)):
+                raise ParamSyntaxError(f"range bounds must be numbers, got {bound!r}")
+            if not math.isfinite(bound):
+                raise ParamSyntaxError(f"range bounds must be finite, got {bound!r}")
+        if not low < high:
+            raise ParamSyntaxError(
+                f"empty range [{low}, {high}]: low must be below high (use a scalar to fix a value)"
+            )
+        log = raw.get("log", False)
+        if not isinstance(log, bool):
+            raise ParamSyntaxError("log must be true or false")
+        if log and low <= 0:
+            raise ParamSyntaxError(f"a log range needs low > 0, got {low}")
+        return Range(float(low), float(high), log=log)
+    if isinstance(raw, list):
+        if not raw:
+            raise ParamSyntaxError("empty list: give at least one value")
+        for item in raw:
+            _check_scalar(item)
+        seen: list[Any] = []
+        for item in raw:
+            if item not in seen:
+                seen.append(item)
+        return Choice(tuple(seen)) if len(seen) > 1 else Fixed(seen[0])
+    _check_scalar(raw)
+    return Fixed(raw)
+
+
+def _check_scalar(value: Any) -> None:
+    if isinstance(value, float) and not math.isfinite(value):
+        raise ParamSyntaxError(f"{value!r} is not a finite number")
+    if not isinstance(value, (bool, int, float, str)):
+        raise ParamSyntaxError(f"expected a number, a string or a boolean, got {value!r}")

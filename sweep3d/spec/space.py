@@ -1,0 +1,71 @@
+"""The search space of one (object, environment) scene, and the map from policy points to values.
+
+Policies never see controls: they emit points made of unit-cube coordinates (one per
+continuous dimension) and choice indices (one per discrete dimension). :class:`SearchSpace`
+turns such a point into physical control values, so policies are testable on their own.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Sequence
+
+from sweep3d.spec.loader import ControlInstance
+from sweep3d.spec.params import Choice, Fixed, Range
+
+
+@dataclass(frozen=True)
+class Dim:
+    control_id: str
+    param: str
+    space: Range | Choice
+
+    @property
+    def column(self) -> str:
+        return f"{self.control_id}_{self.param}"
+
+
+@dataclass(frozen=True)
+class SpaceShape:
+    """What a policy knows of a space: how many continuous dims and the size of each discrete one."""
+
+    n_continuous: int
+    choice_sizes: tuple[int, ...]
+
+
+@dataclass(frozen=True)
+class Point:
+    unit: tuple[float, ...]
+    choice: tuple[int, ...]
+
+
+class SearchSpace:
+    """The dimensions that the controls applying to one scene leave open."""
+
+    def __init__(self, controls: Sequence[ControlInstance]) -> None:
+        self.controls = list(controls)
+        self.continuous: list[Dim] = []
+        self.discrete: list[Dim] = []
+        for inst in self.controls:
+            for param, space in inst.spaces.items():
+                if isinstance(space, Range):
+                    self.continuous.append(Dim(inst.id, param, space))
+                elif isinstance(space, Choice):
+                    self.discrete.append(Dim(inst.id, param, space))
+
+    @property
+    def shape(self) -> SpaceShape:
+        return SpaceShape(len(self.continuous), tuple(len(d.space.options) for d in self.discrete))
+
+    def values(self, point: Point) -> dict[str, dict[str, Any]]:
+        """Control id → parameter → physical value, including fixed parameters."""
+        if len(point.unit) != len(self.continuous) or len(point.choice) != len(self.discrete):
+            raise ValueError("point does not match the space's shape")
+        out: dict[str, dict[str, Any]] = {}
+        for inst in self.controls:
+            out[inst.id] = {p: s.value for p, s in inst.spaces.items() if isinstance(s, Fixed)}
+        for dim, u in zip(self.continuous, point.unit):
+            out[dim.control_id][dim.param] = dim.space.at(u)
+        for dim, index in zip(self.discrete, point.choice):
+            out[dim.control_id][dim.param] = dim.space.options[index]
+        return out

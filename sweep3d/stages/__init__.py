@@ -1,0 +1,1 @@
+"""The pipeline stages: plan → render → postprocess → infer → aggregate (→ report)."""

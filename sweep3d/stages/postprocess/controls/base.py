@@ -1,0 +1,24 @@
+"""The base class of post-processing controls."""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import numpy as np
+
+from sweep3d.controls import Control, ControlParams
+
+
+class PostControl(Control):
+    """Maps a rendered image to a new one, after rendering (so changing it re-renders nothing).
+
+    ``apply`` receives and returns float32 arrays of shape (H, W, 3) in [0, 1]. Controls that
+    draw random numbers set ``stochastic = True`` and must use only the ``rng`` they are given,
+    which is seeded from the job's cache key so cached results are reproducible.
+    """
+
+    stage = "post"
+    stochastic: ClassVar[bool] = False
+
+    def apply(self, image: np.ndarray, params: ControlParams, rng: np.random.Generator) -> np.ndarray:
+        raise NotImplementedError

@@ -1,0 +1,52 @@
+"""Blur, noise and brightness/contrast."""
+
+from __future__ import annotations
+
+import numpy as np
+from pydantic import Field
+from scipy import ndimage
+
+from sweep3d.controls import CONTROLS, ControlParams
+from sweep3d.stages.postprocess.controls.base import PostControl
+
+
+@CONTROLS.register("blur")
+class Blur(PostControl):
+    """Gaussian blur; ``sigma`` in pixels (0 = none, typical range 0..4)."""
+
+    class Params(ControlParams):
+        sigma: float = Field(0.0, ge=0.0, le=1000.0)
+
+    def apply(self, image: np.ndarray, params: Params, rng: np.random.Generator) -> np.ndarray:
+        if params.sigma == 0:
+            return image
+        return ndimage.gaussian_filter(image, sigma=(params.sigma, params.sigma, 0), mode="nearest")
+
+
+@CONTROLS.register("noise")
+class Noise(PostControl):
+    """Additive Gaussian pixel noise; ``std`` in units of the [0, 1] range (0 = none)."""
+
+    stochastic = True
+
+    class Params(ControlParams):
+        std: float = Field(0.0, ge=0.0, le=100.0)
+
+    def apply(self, image: np.ndarray, params: Params, rng: np.random.Generator) -> np.ndarray:
+        if params.std == 0:
+            return image
+        noisy = image + rng.normal(0.0, params.std, size=image.shape).astype(np.float32)
+        return np.clip(noisy, 0.0, 1.0)
+
+
+@CONTROLS.register("brightness_contrast")
+class BrightnessContrast(PostControl):
+    """``brightness`` is added (-1..1) and ``contrast`` scales about mid-grey (1 = unchanged)."""
+
+    class Params(ControlParams):
+        brightness: float = Field(0.0, ge=-1.0, le=1.0)
+        contrast: float = Field(1.0, ge=0.0, le=100.0)
+
+    def apply(self, image: np.ndarray, params: Params, rng: np.random.Generator) -> np.ndarray:
+        out = (image - 0.5) * params.contrast + 0.5 + params.brightness
+        return np.clip(out, 0.0, 1.0).astype(np.float32)

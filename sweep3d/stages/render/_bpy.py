@@ -1,0 +1,20 @@
+"""The one place that imports bpy, with install hints instead of a bare ImportError."""
+
+from __future__ import annotations
+
+from sweep3d.errors import UserError
+
+
+def import_bpy():
+    """Import and return the bpy module (call inside render workers only)."""
+    try:
+        import bpy  # noqa: PLC0415
+    except ImportError as exc:
+        hint = (
+            "install Blender as a module: pip install 'bpy==4.5.15' (Python 3.11, numpy<2)"
+            if "No module named" in str(exc)
+            else "on Debian install: apt-get install libx11-6 libxrender1 libxfixes3 libxi6 "
+            "libxkbcommon0 libsm6 libice6 libxext6 libgl1"
+        )
+        raise UserError(f"cannot import bpy ({exc}); {hint}") from None
+    return bpy

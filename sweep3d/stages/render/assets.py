@@ -1,0 +1,140 @@
+"""Where meshes and HDRIs come from, and the content digests that go into render keys.
+
+This module never imports bpy: the parent process resolves and hashes assets, the render
+workers load them. A mesh reference is a path (relative to the spec file) or
+``archive.zip#folder/model.obj`` for a model inside a zip (Sweet Home 3D's ``.sh3f``
+furniture libraries are zips); the member's folder is extracted once into the store.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import re
+import zipfile
+from functools import lru_cache
+from importlib import metadata
+from pathlib import Path
+
+from sweep3d.cache.keys import digest, files_digest
+from sweep3d.errors import UserError
+
+MESH_SUFFIXES = {".obj", ".gltf", ".glb", ".ply", ".stl"}
+HDRI_SUFFIXES = {".exr", ".hdr", ".png", ".jpg", ".jpeg", ".tif", ".tiff"}
+
+
+@lru_cache(maxsize=1)
+def bpy_root() -> Path:
+    """The bpy wheel's versioned data folder, found without importing bpy."""
+    spec = importlib.util.find_spec("bpy")
+    if spec is None or spec.origin is None:
+        raise UserError("bpy is not installed; run: pip install 'bpy==4.5.15'")
+    package = Path(spec.origin).parent
+    versions = sorted(p for p in package.iterdir() if re.fullmatch(r"\d+\.\d+", p.name))
+    if not versions:
+        raise UserError(f"cannot find Blender's data files under {package}; reinstall bpy")
+    return versions[-1]
+
+
+def builtin_hdris() -> dict[str, Path]:
+    """The CC0 studio-light HDRIs that ship inside the bpy wheel, by name."""
+    folder = bpy_root() / "datafiles" / "studiolights" / "world"
+    return {p.stem: p for p in sorted(folder.glob("*.exr"))}
+
+
+def blender_version() -> str:
+    return metadata.version("bpy")
+
+
+def resolve_hdri(ref: str, base: Path) -> str:
+    """An HDRI reference (``builtin:NAME`` or a path) as an absolute path that exists."""
+    if ref.startswith("builtin:"):
+        name = ref.removeprefix("builtin:")
+        maps = builtin_hdris()
+        if name not in maps:
+            raise UserError(f"no built-in HDRI {name!r}; valid: {', '.join('builtin:' + n for n in maps)}")
+        return str(maps[name])
+    path = Path(ref).expanduser()
+    path = path if path.is_absolute() else base / path
+    if not path.is_file():
+        raise UserError(f"HDRI file {str(path)!r} does not exist; give a path relative to the spec, or builtin:NAME")
+    if path.suffix.lower() not in HDRI_SUFFIXES:
+        raise UserError(f"{path.name!r} is not an image Blender reads as an HDRI ({', '.join(sorted(HDRI_SUFFIXES))})")
+    return str(path.resolve())
+
+
+def resolve_mesh(ref: str, base: Path) -> str:
+    """A mesh reference with its path made absolute; checks that the file (or zip member) exists."""
+    archive, sep, member = ref.partition("#")
+    path = Path(archive).expanduser()
+    path = path if path.is_absolute() else base / path
+    if not path.is_file():
+        raise UserError(f"mesh file {str(path)!r} does not exist; give a path relative to the spec file")
+    suffix = Path(member if sep else archive).suffix.lower()
+    if suffix not in MESH_SUFFIXES:
+        raise UserError(f"unsupported mesh format {suffix or '(none)'!r}; use one of {', '.join(sorted(MESH_SUFFIXES))}")
+    if sep:
+        try:
+            with zipfile.ZipFile(path) as zf:
+                if member not in zf.namelist():
+                    raise UserError(f"{path.name} has no member {member!r}")
+        except zipfile.BadZipFile:
+            raise UserError(f"{str(path)!r} is not a zip archive, so '#member' cannot be read from it") from None
+        return f"{path.resolve()}#{member}"
+    return str(path.resolve())
+
+
+def materialise_mesh(ref: str, scratch: Path) -> Path:
+    """A local file path for a mesh reference, extracting zip members' folders under ``scratch``."""
+    archive, sep, member = ref.partition("#")
+    if not sep:
+        return Path(archive)
+    folder = member.rsplit("/", 1)[0] + "/" if "/" in member else ""
+    target = scratch / "assets" / digest([archive, member])[:16]
+    done = target / ".complete"
+    if not done.exists():
+        with zipfile.ZipFile(archive) as zf:
+            for name in zf.namelist():
+                if name.startswith(folder) and not name.endswith("/") and name.count("/") == member.count("/"):
+                    zf.extract(name, target)
+        done.write_text("ok")
+    return target / member
+
+
+def mesh_files(path: Path) -> list[Path]:
+    """The mesh file and the files it references (MTL libraries, textures, glTF buffers)."""
+    files = [path]
+    folder = path.parent
+    suffix = path.suffix.lower()
+    if suffix == ".obj":
+        for mtl in _referenced(path, r"^\s*mtllib\s+(.+?)\s*$"):
+            mtl_path = folder / mtl
+            if mtl_path.is_file():
+                files.append(mtl_path)
+                files += [folder / t for t in _referenced(mtl_path, r"^\s*map_\w+\s+(?:-\S+\s+\S+\s+)*(.+?)\s*$")]
+    elif suffix == ".gltf":
+        try:
+            doc = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            doc = {}
+        for item in doc.get("buffers", []) + doc.get("images", []):
+            uri = item.get("uri", "")
+            if uri and not uri.startswith("data:"):
+                files.append(folder / uri)
+    return [f for f in dict.fromkeys(files) if f.is_file()]
+
+
+def _referenced(path: Path, pattern: str) -> list[str]:
+    regex = re.compile(pattern)
+    out = []
+    with open(path, encoding="utf-8", errors="replace") as fh:
+        for line in fh:
+            m = regex.match(line)
+            if m:
+                out.append(m.group(1).strip().replace("\\", "/"))
+    return out
+
+
+def mesh_digest(ref: str, scratch: Path) -> str:
+    """Content digest of a mesh and everything it references."""
+    return files_digest(mesh_files(materialise_mesh(ref, scratch)))

@@ -1,0 +1,80 @@
+"""Pose, camera, placement and size of the object."""
+
+from __future__ import annotations
+
+from pydantic import Field
+
+from sweep3d.controls import CONTROLS, ControlParams
+from sweep3d.stages.render.controls.base import RenderedControl
+from sweep3d.stages.render.state import SceneState
+
+
+@CONTROLS.register("orientation")
+class Orientation(RenderedControl):
+    """Rotates the object about its centre.
+
+    Parameters (degrees, default range -180..180): ``yaw`` about the vertical axis, ``pitch``
+    about the left-right axis, ``roll`` about the front-back axis.
+    """
+
+    order = 10
+    periodic = {"yaw": 360.0, "pitch": 360.0, "roll": 360.0}
+
+    class Params(ControlParams):
+        yaw: float = 0.0
+        pitch: float = 0.0
+        roll: float = 0.0
+
+    def apply(self, state: SceneState, params: Params) -> None:
+        state.yaw, state.pitch, state.roll = params.yaw, params.pitch, params.roll
+
+
+@CONTROLS.register("scale")
+class Scale(RenderedControl):
+    """Scales the object about its centre (``factor`` 1 = the normalised size, a unit bounding sphere)."""
+
+    order = 10
+
+    class Params(ControlParams):
+        factor: float = Field(1.0, gt=0, le=1e6)
+
+    def apply(self, state: SceneState, params: Params) -> None:
+        state.scale = params.factor
+
+
+@CONTROLS.register("camera")
+class Camera(RenderedControl):
+    """Moves the camera on a sphere around the object, looking at its centre.
+
+    ``azimuth`` (degrees, 0 = front), ``elevation`` (degrees, -90..90, 20 by default),
+    ``zoom`` (1 = the object's bounding sphere spans 80 % of the frame; 2 = twice as large) and
+    ``focal_length`` (mm, 36 mm sensor; the distance follows so framing stays, perspective changes).
+    """
+
+    order = 20
+    periodic = {"azimuth": 360.0}
+
+    class Params(ControlParams):
+        azimuth: float = 0.0
+        elevation: float = Field(20.0, ge=-90.0, le=90.0)
+        zoom: float = Field(1.0, gt=0, le=1e6)
+        focal_length: float = Field(50.0, ge=1.0, le=5000.0)
+
+    def apply(self, state: SceneState, params: Params) -> None:
+        state.azimuth, state.elevation = params.azimuth, params.elevation
+        state.zoom, state.focal_length = params.zoom, params.focal_length
+
+
+@CONTROLS.register("position")
+class Position(RenderedControl):
+    """Places the object's centre at (``x``, ``y``) in the image: -1..1 spans the frame
+    (fractions of the half-width and half-height; +x right, +y up)."""
+
+    order = 30
+
+    class Params(ControlParams):
+        x: float = Field(0.0, ge=-100.0, le=100.0)
+        y: float = Field(0.0, ge=-100.0, le=100.0)
+
+    def apply(self, state: SceneState, params: Params) -> None:
+        state.frame_x, state.frame_y = params.x, params.y

@@ -1,0 +1,149 @@
+"""A pool of persistent render worker processes, driven from the parent (which never imports bpy).
+
+Jobs arrive grouped by scene (object, environment); a group goes to one worker so the scene is
+loaded once. A worker that dies or exceeds the per-job timeout is replaced and its unfinished
+jobs are retried once; scratch files are removed when the pool closes, also on Ctrl-C.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import shutil
+import tempfile
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from multiprocessing.connection import Connection, wait
+from pathlib import Path
+from typing import Any, Iterator
+
+from sweep3d.errors import RenderError
+from sweep3d.stages.render.worker import worker_main
+
+
+@dataclass
+class RenderResult:
+    render_key: str
+    ok: bool
+    info: dict[str, Any] = field(default_factory=dict)
+    error: str | None = None
+
+
+@dataclass
+class _Worker:
+    process: Any
+    conn: Connection
+    task: list[dict[str, Any]] | None = None
+    done: set[str] = field(default_factory=set)
+    current: str | None = None
+    started: float = 0.0
+
+
+class RenderPool:
+    """Persistent workers; use as a context manager and call :meth:`run`."""
+
+    def __init__(self, settings: dict[str, Any], workers: int = 1, timeout: float = 600.0) -> None:
+        self.settings = settings
+        self.n_workers = workers
+        self.timeout = timeout
+        self.ctx = mp.get_context("spawn")
+        self.scratch = Path(tempfile.mkdtemp(prefix="sweep3d-", dir=_scratch_root()))
+        self.workers: list[_Worker] = []
+
+    def __enter__(self) -> "RenderPool":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _spawn(self) -> _Worker:
+        parent, child = self.ctx.Pipe()
+        process = self.ctx.Process(
+            target=worker_main, args=(child, self.settings, str(self.scratch)), daemon=True, name="sweep3d-render"
+        )
+        process.start()
+        child.close()
+        message = parent.recv() if parent.poll(120) else ("fatal", "worker did not start within 120 s")
+        if message[0] != "ready":
+            process.kill()
+            raise RenderError(f"render worker failed to start: {message[1]}")
+        return _Worker(process, parent)
+
+    def run(self, groups: list[list[dict[str, Any]]]) -> Iterator[RenderResult]:
+        """Render every job of every group, yielding one result per job as it finishes."""
+        queue: deque[list[dict[str, Any]]] = deque(g for g in groups if g)
+        retried: set[str] = set()
+        while len(self.workers) < min(self.n_workers, len(queue)):
+            self.workers.append(self._spawn())
+        while queue or any(w.task is not None for w in self.workers):
+            for worker in self.workers:
+                if worker.task is None and queue:
+                    worker.task, worker.done, worker.current = queue.popleft(), set(), None
+                    worker.conn.send(worker.task)
+            busy = [w for w in self.workers if w.task is not None]
+            ready = wait([w.conn for w in busy] + [w.process.sentinel for w in busy], timeout=1.0)
+            for worker in busy:
+                if worker.conn in ready:
+                    try:
+                        while worker.conn.poll():
+                            yield from self._handle(worker, worker.conn.recv())
+                    except (EOFError, OSError):
+                        pass  # died mid-message: handled below as a dead worker
+                timed_out = worker.current is not None and time.monotonic() - worker.started > self.timeout
+                if worker.task is not None and (not worker.process.is_alive() or timed_out):
+                    yield from self._replace(worker, queue, retried, timed_out)
+
+    def _handle(self, worker: _Worker, message: tuple) -> Iterator[RenderResult]:
+        kind = message[0]
+        if kind == "start":
+            worker.current, worker.started = message[1], time.monotonic()
+        elif kind == "done":
+            worker.done.add(message[1])
+            worker.current = None
+            yield RenderResult(message[1], True, message[2])
+        elif kind == "error":
+            worker.done.add(message[1])
+            worker.current = None
+            yield RenderResult(message[1], False, error=message[2])
+        elif kind == "idle":
+            worker.task = None
+
+    def _replace(self, worker: _Worker, queue, retried: set[str], timed_out: bool) -> Iterator[RenderResult]:
+        """Replace a dead or stuck worker; retry its unfinished jobs once, fail the culprit twice."""
+        culprit = worker.current
+        reason = f"render took longer than {self.timeout:g} s" if timed_out else (
+            f"render worker died (exit code {worker.process.exitcode})")
+        worker.process.kill()
+        worker.process.join(5)
+        leftover = [job for job in worker.task or [] if job["render_key"] not in worker.done]
+        self.workers.remove(worker)
+        retry = []
+        for job in leftover:
+            key = job["render_key"]
+            if key == culprit and key in retried:
+                yield RenderResult(key, False, error=reason)
+            else:
+                if key == culprit:
+                    retried.add(key)
+                retry.append(job)
+        if retry:
+            queue.appendleft(retry)
+            self.workers.append(self._spawn())
+
+    def close(self) -> None:
+        for worker in self.workers:
+            try:
+                worker.conn.send(None)
+            except (OSError, ValueError):
+                pass
+        for worker in self.workers:
+            worker.process.join(timeout=5)
+            if worker.process.is_alive():
+                worker.process.kill()
+        self.workers = []
+        shutil.rmtree(self.scratch, ignore_errors=True)
+
+
+def _scratch_root() -> str | None:
+    shm = Path("/dev/shm")
+    return str(shm) if shm.is_dir() else None

@@ -1,0 +1,202 @@
+"""The Blender view of a :class:`SceneState`: builds a scene once, then re-poses it per job.
+
+A :class:`BlenderScene` keeps one object and one world loaded and swaps only what changes:
+a new environment reloads the world, a new object reloads the mesh, and a job that changes
+only pose or camera just moves things (persistent render data keeps Cycles' scene and the
+world's importance map between renders).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sweep3d.errors import UserError
+from sweep3d.stages.render._bpy import import_bpy
+from sweep3d.stages.render.state import SENSOR_WIDTH_MM, SceneState
+
+IMPORTERS = {
+    ".obj": ("wm.obj_import", {}),
+    ".ply": ("wm.ply_import", {}),
+    ".stl": ("wm.stl_import", {}),
+    ".gltf": ("import_scene.gltf", {}),
+    ".glb": ("import_scene.gltf", {}),
+}
+
+
+class BlenderScene:
+    """One Blender scene in this process, configured from the spec's render settings."""
+
+    def __init__(self, settings: dict[str, Any], scratch: Path) -> None:
+        self.bpy = bpy = import_bpy()
+        self.settings = settings
+        self.scratch = scratch
+        self.object_ref: str | None = None
+        self.world_ref: tuple | None = None
+        self.background: tuple[float, float, float] | None = None
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        scene = self.scene = bpy.context.scene
+        self._configure(scene, settings)
+        cam_data = bpy.data.cameras.new("sweep3d_camera")
+        cam_data.sensor_fit = "HORIZONTAL"
+        cam_data.sensor_width = SENSOR_WIDTH_MM
+        cam_data.clip_start = 1e-3
+        cam_data.clip_end = 1e4
+        self.camera = bpy.data.objects.new("sweep3d_camera", cam_data)
+        scene.collection.objects.link(self.camera)
+        scene.camera = self.camera
+        self.pose = bpy.data.objects.new("sweep3d_pose", None)  # controls move this empty
+        scene.collection.objects.link(self.pose)
+        self.world = bpy.data.worlds.new("sweep3d_world")
+        scene.world = self.world
+        self.frame = scratch / f"frame-{os.getpid()}.png"
+
+    @staticmethod
+    def _configure(scene, s: dict[str, Any]) -> None:
+        scene.render.engine = "CYCLES"
+        cycles = scene.cycles
+        cycles.device = "CPU"
+        cycles.samples = s["samples"]
+        cycles.use_adaptive_sampling = False
+        cycles.seed = 0
+        cycles.max_bounces = s["max_bounces"]
+        cycles.use_denoising = bool(s["denoise"])
+        if s["denoise"]:
+            cycles.denoiser = "OPENIMAGEDENOISE"
+            cycles.denoising_prefilter = {"fast": "FAST", "accurate": "ACCURATE", "none": "NONE"}[s["denoise_prefilter"]]
+        scene.render.resolution_x = scene.render.resolution_y = s["resolution"]
+        scene.render.resolution_percentage = 100
+        scene.render.use_persistent_data = True  # world importance map built once per world
+        scene.render.threads_mode = "FIXED"
+        scene.render.threads = s["threads"] or os.cpu_count() or 1
+        scene.view_settings.view_transform = "Standard"
+        scene.view_settings.look = "None"
+        scene.render.image_settings.file_format = "PNG"
+        scene.render.image_settings.color_mode = "RGBA"
+        scene.render.image_settings.color_depth = "8"
+        scene.render.image_settings.compression = 0
+
+    # -- loading -------------------------------------------------------------------------------
+    def prepare(self, mesh_path: str, environment: dict[str, Any]) -> None:
+        """Make ``mesh_path`` and ``environment`` the loaded object and world (no-op if they are)."""
+        world_ref = (environment.get("hdri"), tuple(environment.get("color") or ()), environment["strength"])
+        if world_ref != self.world_ref:
+            self._load_world(environment)
+            self.world_ref = world_ref
+        if mesh_path != self.object_ref:
+            self._load_object(mesh_path)
+            self.object_ref = mesh_path
+
+    def _load_world(self, env: dict[str, Any]) -> None:
+        bpy = self.bpy
+        self.world.use_nodes = True
+        nodes, links = self.world.node_tree.nodes, self.world.node_tree.links
+        nodes.clear()
+        out = nodes.new("ShaderNodeOutputWorld")
+        background = nodes.new("ShaderNodeBackground")
+        background.inputs["Strength"].default_value = env["strength"]
+        links.new(background.outputs["Background"], out.inputs["Surface"])
+        if env.get("hdri"):
+            texture = nodes.new("ShaderNodeTexEnvironment")
+            try:
+                texture.image = bpy.data.images.load(env["hdri"], check_existing=True)
+            except RuntimeError as exc:
+                raise UserError(f"Blender cannot read the HDRI {env['hdri']!r}: {exc}") from None
+            links.new(texture.outputs["Color"], background.inputs["Color"])
+            self.scene.render.film_transparent = False
+            self.background = None
+        else:
+            # A plain background renders best as transparent film composited onto the colour:
+            # the world only lights the object, with neutral white light.
+            background.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+            self.scene.render.film_transparent = True
+            self.background = tuple(env["color"])
+
+    def _load_object(self, mesh_path: str) -> None:
+        bpy = self.bpy
+        for child in list(self.pose.children_recursive):
+            bpy.data.objects.remove(child, do_unlink=True)
+        bpy.data.orphans_purge(do_recursive=True)
+        before = set(bpy.data.objects)
+        suffix = Path(mesh_path).suffix.lower()
+        op_name, kwargs = IMPORTERS[suffix]
+        module, _, name = op_name.partition(".")
+        try:
+            getattr(getattr(bpy.ops, module), name)(filepath=str(mesh_path), **kwargs)
+        except RuntimeError as exc:
+            raise UserError(f"Blender cannot import {mesh_path!r}: {exc}") from None
+        imported = [o for o in bpy.data.objects if o not in before]
+        meshes = [o for o in imported if o.type == "MESH"]
+        if not meshes:
+            raise UserError(f"{mesh_path!r} contains no mesh objects")
+        points = self._world_vertices(meshes)
+        if len(points) == 0 or not np.all(np.isfinite(points)):
+            raise UserError(f"{mesh_path!r} has no finite vertices to render")
+        centre = (points.min(axis=0) + points.max(axis=0)) / 2.0
+        radius = float(np.sqrt(((points - centre) ** 2).sum(axis=1).max()))
+        if not radius > 0:
+            raise UserError(f"{mesh_path!r} has zero size (all vertices coincide)")
+        normaliser = bpy.data.objects.new("sweep3d_normaliser", None)
+        self.scene.collection.objects.link(normaliser)
+        normaliser.parent = self.pose
+        normaliser.scale = (1.0 / radius,) * 3
+        normaliser.location = tuple(-centre / radius)
+        for obj in imported:
+            if obj.parent is None:
+                world = obj.matrix_world.copy()
+                obj.parent = normaliser
+                obj.matrix_parent_inverse.identity()
+                obj.matrix_basis = world
+
+    @staticmethod
+    def _world_vertices(meshes) -> np.ndarray:
+        chunks = []
+        for obj in meshes:
+            n = len(obj.data.vertices)
+            if n == 0:
+                continue
+            local = np.empty(n * 3, dtype=np.float64)
+            obj.data.vertices.foreach_get("co", local)
+            local = local.reshape(n, 3)
+            m = np.array(obj.matrix_world)
+            chunks.append(local @ m[:3, :3].T + m[:3, 3])
+        return np.concatenate(chunks) if chunks else np.empty((0, 3))
+
+    # -- per job -------------------------------------------------------------------------------
+    def pose_scene(self, state: SceneState) -> None:
+        """Move object and camera to match ``state``; no data is reloaded."""
+        self.pose.rotation_mode = "XYZ"
+        self.pose.rotation_euler = (math.radians(state.pitch), math.radians(state.roll), math.radians(state.yaw))
+        self.pose.scale = (state.scale,) * 3
+        self.pose.location = tuple(state.object_location())
+        position, right, up, forward = state.camera_basis()
+        self.camera.data.lens = state.focal_length
+        from mathutils import Matrix  # noqa: PLC0415  (ships with bpy)
+
+        rotation = Matrix([list(right), list(up), list(-forward)]).transposed()
+        self.camera.matrix_world = Matrix.Translation(position) @ rotation.to_4x4()
+        distance = state.camera_distance()
+        self.camera.data.clip_start = max(distance * 1e-4, 1e-6)
+        self.camera.data.clip_end = distance + 1e3 * max(state.scale, 1.0)
+
+    def render(self) -> np.ndarray:
+        """Render the current scene.
+
+        Returns:
+            float32 array of shape (H, W, 3) with sRGB values in [0, 1], composited onto the
+            plain background colour when the environment has one.
+        """
+        from PIL import Image  # noqa: PLC0415
+
+        self.scene.render.filepath = str(self.frame)
+        self.bpy.ops.render.render(write_still=True)
+        with Image.open(self.frame) as img:
+            rgba = np.asarray(img.convert("RGBA"), dtype=np.float32) / 255.0
+        rgb, alpha = rgba[..., :3], rgba[..., 3:]
+        if self.background is not None:
+            rgb = rgb * alpha + np.asarray(self.background, dtype=np.float32) * (1.0 - alpha)
+        return rgb

@@ -1,0 +1,87 @@
+"""The render stage: every render key the plan needs and the store lacks, grouped by scene."""
+
+from __future__ import annotations
+
+import time
+from collections import defaultdict
+from datetime import datetime, timezone
+from typing import Any
+
+import pyarrow as pa
+
+from sweep3d.cache.store import Store
+from sweep3d.progress import RunProgress
+from sweep3d.stages.outcome import StageOutcome
+from sweep3d.stages.plan.jobs import Job, Plan
+from sweep3d.stages.render.assets import materialise_mesh
+from sweep3d.stages.render.pool import RenderPool
+
+GROUP_SIZE = 32  # jobs sent to a worker at once; a scene's jobs stay together in order
+
+RENDERS_SCHEMA = pa.schema([
+    ("render_key", pa.string()), ("width", pa.int32()), ("height", pa.int32()), ("valid", pa.bool_()),
+    ("seconds", pa.float64()), ("created_at", pa.timestamp("us", tz="UTC")),
+])
+
+
+def cached_renders(plan: Plan, store: Store) -> set[str]:
+    """Render keys of the plan that have a complete row and a blob in the store."""
+    have = store.keys("renders")
+    return {j.render_key for j in plan.jobs if j.render_key in have and store.blob_path(j.render_key).exists()}
+
+
+def render_stage(plan: Plan, store: Store, progress: RunProgress) -> StageOutcome:
+    """Render what is missing; rows are flushed every few seconds so a kill loses little."""
+    started = time.perf_counter()
+    unique: dict[str, Job] = {}
+    for job in plan.jobs:
+        unique.setdefault(job.render_key, job)
+    cached = cached_renders(plan, store)
+    todo = [job for key, job in unique.items() if key not in cached]
+    outcome = StageOutcome("render", total=len(unique), cached=len(cached))
+    if todo:
+        groups = _groups(plan, store, todo)
+        settings = plan.spec.spec.render.model_dump()
+        workers = min(plan.spec.spec.render.workers, len(groups))
+        with progress.stage("render", len(todo), len(cached)) as bar, \
+                RenderPool(settings, workers, plan.spec.spec.render.timeout) as pool, \
+                store.segment_writer("renders", RENDERS_SCHEMA) as writer:
+            for result in pool.run(groups):
+                if result.ok:
+                    writer.add({"render_key": result.render_key, **result.info, "created_at": _now()})
+                    outcome.computed += 1
+                else:
+                    outcome.failed += 1
+                    outcome.errors.append(f"render {result.render_key[:12]}: {result.error}")
+                bar.advance(failed=not result.ok)
+    outcome.seconds = time.perf_counter() - started
+    return outcome
+
+
+def _groups(plan: Plan, store: Store, todo: list[Job]) -> list[list[dict[str, Any]]]:
+    spec = plan.spec
+    controls = {c.id: c.control for c in spec.controls if c.control.stage == "render"}
+    ordered = sorted(controls.values(), key=lambda c: c.order)
+    environments = {e.name: e for e in spec.spec.environments}
+    meshes: dict[str, str] = {}
+    by_scene: dict[tuple[str, str], list[dict[str, Any]]] = defaultdict(list)
+    for job in todo:
+        if job.object not in meshes:
+            meshes[job.object] = str(materialise_mesh(spec.meshes[job.object], store.root))
+        env = environments[job.environment]
+        by_scene[job.scene].append({
+            "render_key": job.render_key,
+            "mesh": meshes[job.object],
+            "environment": {"hdri": spec.hdris[env.name], "color": env.color, "strength": env.strength},
+            "controls": [(c, c.params(job.values[c.id])) for c in ordered if c.id in job.values],
+            "blob": str(store.blob_path(job.render_key)),
+        })
+    groups = []
+    for scene in sorted(by_scene):
+        jobs = by_scene[scene]
+        groups += [jobs[i : i + GROUP_SIZE] for i in range(0, len(jobs), GROUP_SIZE)]
+    return groups
+
+
+def _now() -> datetime:
+    return datetime.now(timezone.utc)

@@ -1,0 +1,65 @@
+"""The scene as plain Python: what rendered controls change and what the Blender view draws.
+
+Rendered controls edit a :class:`SceneState`; :mod:`sweep3d.stages.render.scene` turns a state
+into Blender objects. Keeping the state free of bpy makes controls testable without Blender
+and lets the planner reason about geometry (for example, whether an object is in frame).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+SENSOR_WIDTH_MM = 36.0
+FRAME_FILL = 0.8  # at zoom 1 the object's bounding sphere spans this share of the frame
+
+
+@dataclass
+class SceneState:
+    """Neutral values here are the neutral defaults of the built-in controls.
+
+    The object is normalised to a bounding sphere of radius 1 at the origin, front facing -Y.
+    Angles are degrees.
+    """
+
+    yaw: float = 0.0
+    pitch: float = 0.0
+    roll: float = 0.0
+    scale: float = 1.0
+    azimuth: float = 0.0
+    elevation: float = 20.0
+    zoom: float = 1.0
+    focal_length: float = 50.0
+    frame_x: float = 0.0  # object centre in the image, as a fraction of the half-width (+ right)
+    frame_y: float = 0.0  # ... of the half-height (+ up)
+    extras: dict[str, object] = field(default_factory=dict)
+
+    def half_fov(self) -> float:
+        """Half the camera's field of view in radians (square sensor)."""
+        return math.atan(SENSOR_WIDTH_MM / (2.0 * self.focal_length))
+
+    def camera_distance(self) -> float:
+        """Distance at which a unit sphere (scale 1) spans ``FRAME_FILL`` of the frame at zoom 1."""
+        return 1.0 / (self.zoom * FRAME_FILL * math.sin(self.half_fov()))
+
+    def camera_basis(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Camera position, right, up and forward unit vectors (world space, float64, shape (3,)).
+
+        Up is the derivative of the position along elevation, so the basis stays well defined
+        at elevation ±90° (no gimbal lock).
+        """
+        az, el = math.radians(self.azimuth), math.radians(self.elevation)
+        d = self.camera_distance()
+        position = d * np.array([math.cos(el) * math.sin(az), -math.cos(el) * math.cos(az), math.sin(el)])
+        forward = -position / d
+        up = np.array([-math.sin(el) * math.sin(az), math.sin(el) * math.cos(az), math.cos(el)])
+        right = np.cross(forward, up)
+        return position, right, up, forward
+
+    def object_location(self) -> np.ndarray:
+        """Where the object's centre goes so it appears at (frame_x, frame_y) in the image."""
+        _, right, up, _ = self.camera_basis()
+        reach = self.camera_distance() * math.tan(self.half_fov())
+        return reach * (self.frame_x * right + self.frame_y * up)

@@ -1,0 +1,65 @@
+"""The render worker process: imports bpy once, keeps its scene, renders job after job.
+
+It talks to the parent over one pipe: it receives a list of jobs (one scene group) or None
+to stop, and sends ``("start", key)``, ``("done", key, info)``, ``("error", key, message)``
+and finally ``("idle",)`` for each list.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+import traceback
+from multiprocessing.connection import Connection
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+
+def worker_main(conn: Connection, settings: dict[str, Any], scratch: str) -> None:
+    """Entry point of a spawned worker process."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides when workers stop
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, 1)  # Blender prints progress straight to fd 1
+    from sweep3d.cache.store import atomic_write
+    from sweep3d.errors import UserError
+    from sweep3d.pixels import encode_png
+    from sweep3d.stages.render.scene import BlenderScene
+    from sweep3d.stages.render.state import SceneState
+
+    try:
+        scene = BlenderScene(settings, Path(scratch))
+    except Exception as exc:  # noqa: BLE001  (reported to the parent, which fails the run)
+        conn.send(("fatal", f"{type(exc).__name__}: {exc}"))
+        return
+    conn.send(("ready", os.getpid()))
+    while True:
+        try:
+            jobs = conn.recv()
+        except EOFError:
+            return
+        if jobs is None:
+            return
+        for job in jobs:
+            key = job["render_key"]
+            conn.send(("start", key))
+            started = time.perf_counter()
+            try:
+                scene.prepare(job["mesh"], job["environment"])
+                state = SceneState()
+                for control, params in job["controls"]:
+                    control.apply(state, params)
+                scene.pose_scene(state)
+                rgb = scene.render()
+                finite = bool(np.isfinite(rgb).all())
+                atomic_write(Path(job["blob"]), encode_png(rgb))
+                info = {"seconds": time.perf_counter() - started, "valid": finite,
+                        "width": rgb.shape[1], "height": rgb.shape[0]}
+                conn.send(("done", key, info))
+            except UserError as exc:
+                conn.send(("error", key, str(exc)))
+            except Exception as exc:  # noqa: BLE001  (one bad job must not kill the sweep)
+                conn.send(("error", key, f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=3)}"))
+        conn.send(("idle",))
