@@ -87,6 +87,10 @@ class Registry(Generic[T]):
                 f"cannot import {self.kind} module {module_name!r}: {exc}; "
                 "make sure it is installed or on PYTHONPATH"
             ) from None
+        except Exception as exc:  # noqa: BLE001  (a syntax error or a raise in the user's module)
+            raise UserError(
+                f"importing {self.kind} module {module_name!r} failed: {type(exc).__name__}: {exc}"
+            ) from None
         try:
             return getattr(module, attr)
         except AttributeError:

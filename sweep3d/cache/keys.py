@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 KEY_LENGTH = 40  # hex characters of SHA-256 kept: 160 bits
+FLOAT_TAG = "$f"  # floats are written as {"$f": repr}; mapping keys starting with "$" are escaped
 
 
 def canonical(value: Any) -> str:
@@ -32,13 +33,14 @@ def _normalise(value: Any) -> Any:
     if isinstance(value, float):
         if not math.isfinite(value):
             raise ValueError(f"cannot hash a non-finite number: {value!r}")
-        return {"f": repr(value + 0.0)}  # tagged so 1.0 and 1 differ; +0.0 folds -0.0
+        return {FLOAT_TAG: repr(value + 0.0)}  # tagged so 1.0 and 1 differ; +0.0 folds -0.0
     if isinstance(value, dict):
         out = {}
         for k, v in value.items():
             if not isinstance(k, str):
                 raise TypeError(f"mapping keys must be strings, got {k!r}")
-            out[k] = _normalise(v)
+            # Escape keys that start with "$" so no mapping can look like a tagged float.
+            out["$" + k if k.startswith("$") else k] = _normalise(v)
         return out
     if isinstance(value, (list, tuple)):
         return [_normalise(v) for v in value]

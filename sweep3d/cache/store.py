@@ -84,8 +84,9 @@ class Store:
         self.write_table_file(path, data)
         return path
 
-    def segment_writer(self, table: str, schema: pa.Schema | None = None, every: float = 3.0) -> "SegmentWriter":
-        return SegmentWriter(self, table, schema, every)
+    def segment_writer(self, table: str, schema: pa.Schema | None = None, every: float = 3.0,
+                       max_rows: int = 64) -> "SegmentWriter":
+        return SegmentWriter(self, table, schema, every, max_rows)
 
     # -- reads -------------------------------------------------------------------------------
     def segments(self, table: str) -> list[Path]:
@@ -165,17 +166,19 @@ class Store:
 
 
 class SegmentWriter:
-    """Buffers rows and writes a segment every ``every`` seconds, so a kill loses one batch at most."""
+    """Buffers rows and writes a segment every ``every`` seconds or ``max_rows`` rows, whichever
+    comes first, so a kill loses one small batch at most."""
 
-    def __init__(self, store: Store, table: str, schema: pa.Schema | None, every: float) -> None:
+    def __init__(self, store: Store, table: str, schema: pa.Schema | None, every: float, max_rows: int) -> None:
         self.store, self.table, self.schema, self.every = store, table, schema, every
+        self.max_rows = max_rows
         self.rows: list[dict[str, Any]] = []
         self.last = time.monotonic()
         self.written = 0
 
     def add(self, row: dict[str, Any]) -> None:
         self.rows.append(row)
-        if time.monotonic() - self.last >= self.every:
+        if len(self.rows) >= self.max_rows or time.monotonic() - self.last >= self.every:
             self.flush()
 
     def flush(self) -> None:

@@ -96,7 +96,7 @@ def load_spec(path: str | Path) -> LoadedSpec:
     controls = _load_controls(spec, fail)
     policy = _load_policy(spec, fail)
     store = Path(spec.experiment.store)
-    store = store if store.is_absolute() else base / store
+    store = (store if store.is_absolute() else base / store).resolve()
     return LoadedSpec(path, spec, store, meshes, hdris, labels, controls, policy)
 
 

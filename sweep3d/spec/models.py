@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from typing import Annotated, Any, Literal, Union
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator, model_validator
 
 Name = Annotated[str, Field(min_length=1, max_length=200)]
 
@@ -65,14 +65,19 @@ class EnvironmentSpec(StrictModel):
     color: tuple[float, float, float] | None = Field(None, description="Plain background, RGB 0..1.")
     strength: float = Field(1.0, gt=0, le=1e6, description="World light strength.")
 
+    @field_validator("color")
+    @classmethod
+    def _unit_color(cls, color: tuple[float, float, float] | None) -> tuple[float, float, float] | None:
+        if color is not None:
+            for c in color:
+                if not (math.isfinite(c) and 0.0 <= c <= 1.0):
+                    raise ValueError(f"color components must be between 0 and 1, got {list(color)}")
+        return color
+
     @model_validator(mode="after")
     def _one_background(self) -> "EnvironmentSpec":
         if (self.hdri is None) == (self.color is None):
             raise ValueError("give exactly one of hdri = '...' or color = [r, g, b]")
-        if self.color is not None:
-            for c in self.color:
-                if not (math.isfinite(c) and 0.0 <= c <= 1.0):
-                    raise ValueError(f"color components must be between 0 and 1, got {list(self.color)}")
         return self
 
 
@@ -93,12 +98,14 @@ class Spec(StrictModel):
     controls: list[dict[str, Any]] = Field(default_factory=list)
     policy: PolicySpec = PolicySpec()
 
-    @model_validator(mode="after")
-    def _unique_names(self) -> "Spec":
-        for field in ("objects", "environments"):
-            seen: set[str] = set()
-            for item in getattr(self, field):
-                if item.name in seen:
-                    raise ValueError(f"duplicate {field[:-1]} name {item.name!r}: names must be unique")
-                seen.add(item.name)
-        return self
+    @field_validator("objects", "environments")
+    @classmethod
+    def _unique_names(cls, items: list, info: ValidationInfo) -> list:
+        seen: set[str] = set()
+        for i, item in enumerate(items):
+            if item.name in seen:
+                raise ValueError(
+                    f"duplicate {info.field_name[:-1]} name {item.name!r} at [{i}]: names must be unique"
+                )
+            seen.add(item.name)
+        return items

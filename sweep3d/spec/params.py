@@ -46,6 +46,8 @@ class Range:
         else:
             value = self.low + u * (self.high - self.low)
         value = min(max(value, self.low), self.high)  # guard rounding at the ends
+        if u in (0.0, 1.0):  # the declared bounds exactly (low + (high - low) can round off high)
+            value = self.high if u == 1.0 else self.low
         return int(round(value)) if self.integer else value
 
     def values(self) -> list[Any]:

@@ -96,7 +96,8 @@ def make_plan(spec: LoadedSpec, model_digest: str | None = None) -> Plan:
                 post_parts = _key_parts(post, params)
                 image_key = render_key
                 if post_parts:
-                    stochastic = any(getattr(c.control, "stochastic", False) for c in post if c.id in params)
+                    stochastic = any(getattr(c.control, "stochastic", False) for c in post
+                                     if c.id in params and not c.control.is_identity(params[c.id]))
                     image_key = digest({"stage": "post", "v": POST_STAGE_VERSION, "render": render_key,
                                         "controls": post_parts, "seed": s.experiment.seed if stochastic else None})
                 pred_key = digest({"stage": "infer", "v": INFER_STAGE_VERSION, "image": image_key,

@@ -1,0 +1,34 @@
+#!/usr/bin/env bash
+# Set up sweep3d on a fresh Debian 12 machine: system libraries, meshes, a virtualenv.
+#   bash scripts/setup.sh          # what `sweep3d run` needs
+#   bash scripts/setup.sh --test   # plus the test extras and Chromium for the report's browser tests
+# Safe to rerun: it installs only what is missing.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+with_test=0
+[ "${1:-}" = "--test" ] && with_test=1
+
+# Libraries bpy needs to import headless, and Sweet Home 3D's furniture (the quickstart's meshes).
+packages="libx11-6 libxrender1 libxfixes3 libxi6 libxkbcommon0 libsm6 libice6 libxext6 libgl1 libegl1 sweethome3d-furniture"
+[ "$with_test" = 1 ] && packages="$packages chromium"
+if ! dpkg -s $packages >/dev/null 2>&1; then
+  sudo=""
+  [ "$(id -u)" -ne 0 ] && sudo="sudo"
+  $sudo apt-get update -q
+  DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -q $packages
+fi
+
+python=python3.11
+command -v "$python" >/dev/null 2>&1 || python=python3
+"$python" -c 'import sys; assert sys.version_info[:2] == (3, 11), "bpy 4.5 needs Python 3.11"'
+[ -x .venv/bin/python ] || "$python" -m venv .venv
+.venv/bin/python -m pip install -q --upgrade pip
+# The CPU build of torch first (an unpinned torch would pull a multi-GB CUDA build).
+.venv/bin/python -m pip install -q "torch==2.13.0"
+if [ "$with_test" = 1 ]; then
+  .venv/bin/python -m pip install -q -e ".[test]"
+else
+  .venv/bin/python -m pip install -q -e .
+fi
+echo "sweep3d is installed: .venv/bin/sweep3d --help"

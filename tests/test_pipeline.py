@@ -1,0 +1,141 @@
+"""End to end through the CLI with real Blender renders and the real model: what each rerun recomputes."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from sweep3d.cache.store import Store
+from sweep3d.cli import app
+from sweep3d.pipeline import run
+from sweep3d.spec import load_spec
+from tests.conftest import TINY_SPEC, write_spec
+
+pytestmark = pytest.mark.slow
+
+TEST_MODEL = '''
+import torch
+
+def make():
+    torch.manual_seed(0)
+    return torch.nn.Sequential(
+        torch.nn.Conv2d(3, 4, 3, stride=4), torch.nn.ReLU(),
+        torch.nn.AdaptiveAvgPool2d(1), torch.nn.Flatten(), torch.nn.Linear(4, 1000))
+'''
+
+
+def computed(folder: Path) -> dict[str, int]:
+    """Run the folder's spec in-process and return how many keys each stage computed."""
+    result = run(load_spec(folder / "spec.toml"))
+    assert result.failed == 0
+    return {o.stage: o.computed for o in result.outcomes}
+
+
+def edit_spec(folder: Path, old: str, new: str) -> None:
+    path = folder / "spec.toml"
+    text = path.read_text()
+    assert old in text
+    path.write_text(text.replace(old, new, 1))
+
+
+def test_first_run_stores_every_stage(tiny_run: Path) -> None:
+    store = Store(tiny_run / "store")
+    assert len(store.keys("renders")) == 4  # 2 yaws × 2 environments
+    assert len(store.keys("images")) == 4  # the blurred variants (sigma 0 reuses the render)
+    assert len(store.keys("predictions")) == 8
+    con = store.connect("tiny")
+    assert con.execute("SELECT count(*) FROM results").fetchone()[0] == 8
+    nulls = con.execute("SELECT count(*) FROM results WHERE valid AND (loss IS NULL OR isnan(loss))").fetchone()[0]
+    assert nulls == 0
+
+
+def test_second_run_computes_nothing(tiny_copy: Path) -> None:
+    started = time.perf_counter()
+    assert computed(tiny_copy) == {"render": 0, "postprocess": 0, "infer": 0}
+    assert time.perf_counter() - started < 10
+
+
+def test_changing_a_post_value_renders_nothing(tiny_copy: Path) -> None:
+    edit_spec(tiny_copy, "sigma = [0.0, 1.5]", "sigma = [0.0, 2.5]")
+    assert computed(tiny_copy) == {"render": 0, "postprocess": 4, "infer": 4}
+
+
+def test_changing_the_model_renders_and_postprocesses_nothing(tiny_copy: Path, monkeypatch) -> None:
+    (tiny_copy / "tiny_test_model.py").write_text(TEST_MODEL)
+    monkeypatch.syspath_prepend(str(tiny_copy))
+    edit_spec(tiny_copy, "[model]\n", '[model]\nname = "tiny_test_model:make"\n')
+    assert computed(tiny_copy) == {"render": 0, "postprocess": 0, "infer": 8}
+    con = Store(tiny_copy / "store").connect("tiny")
+    models = {r[0] for r in con.execute("SELECT model FROM results").fetchall()}
+    assert models == {"tiny_test_model:make"}
+
+
+def test_adding_an_object_renders_only_its_scenes(tiny_copy: Path) -> None:
+    (tiny_copy / "cube2.obj").write_text((tiny_copy / "cube.obj").read_text().replace("v 1 1 1", "v 1.5 1 1"))
+    edit_spec(tiny_copy, "[[environments]]", '[[objects]]\nname = "box2"\nmesh = "cube2.obj"\nlabels = ["carton"]\n\n[[environments]]', )
+    assert computed(tiny_copy) == {"render": 4, "postprocess": 4, "infer": 8}
+
+
+KILL_SPEC = TINY_SPEC.replace("yaw = [0, 45]", "yaw = { range = [-180, 180] }").replace(
+    '[policy]\ntype = "grid"', '[policy]\ntype = "grid"\nsamples_per_dim = 61'
+)
+
+
+def _results(folder: Path) -> list[tuple]:
+    con = Store(folder / "store").connect("tiny")
+    return con.execute(
+        "SELECT job, render_key, image_key, pred_key, top1_label, correct, round(loss, 2) FROM results ORDER BY job"
+    ).fetchall()
+
+
+def test_kill_minus_nine_then_resume_equals_uninterrupted(tmp_path: Path) -> None:
+    killed, clean = tmp_path / "killed", tmp_path / "clean"
+    for folder in (killed, clean):
+        folder.mkdir()
+        write_spec(folder, KILL_SPEC)
+    cmd = [sys.executable, "-m", "sweep3d", "run", "spec.toml", "--no-report"]
+    proc = subprocess.Popen(cmd, cwd=killed, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            start_new_session=True)
+    renders = killed / "store" / "tables" / "renders"
+    deadline = time.monotonic() + 180
+    while time.monotonic() < deadline and not (renders.is_dir() and any(renders.glob("*.parquet"))):
+        time.sleep(0.05)
+    os.killpg(proc.pid, signal.SIGKILL)  # the CLI and its render workers, mid-render
+    proc.wait()
+    store = Store(killed / "store")
+    stored_before = len(store.keys("renders"))
+    assert 0 < stored_before < 120, "the kill should land during rendering"
+
+    result = run(load_spec(killed / "spec.toml"))
+    assert result.failed == 0
+    assert result.outcome("render").cached == stored_before
+    assert result.outcome("render").computed == result.outcome("render").total - stored_before
+    assert run(load_spec(clean / "spec.toml")).failed == 0
+
+    resumed = _results(killed)
+    assert len(resumed) == len({r[0] for r in resumed}), "no duplicate rows"
+    assert resumed == _results(clean)
+
+
+def test_cli_run_prints_stage_counts_and_writes_report(tiny_copy: Path) -> None:
+    result = CliRunner().invoke(app, ["run", str(tiny_copy / "spec.toml")])
+    assert result.exit_code == 0, result.output
+    assert "render" in result.output and "infer" in result.output
+    assert "report:" in result.output
+    assert (tiny_copy / "store" / "reports" / "tiny.html").is_file()
+
+
+def test_cli_plan_reports_cached_keys(tiny_copy: Path) -> None:
+    result = CliRunner().invoke(app, ["plan", str(tiny_copy / "spec.toml")])
+    assert result.exit_code == 0, result.output
+    assert "8 jobs" in result.output
+    lines = {line.split("│")[1].strip(): line for line in result.output.splitlines() if line.count("│") > 3}
+    assert "│ 4      │ 4      │ 0 " in lines["render"]
+    assert "│ 8      │ 8      │ 0 " in lines["infer"]

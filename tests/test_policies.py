@@ -1,0 +1,202 @@
+"""Search policies (unit-cube points and choice indices) and the map from points to physical values."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
+
+from sweep3d.errors import UserError
+from sweep3d.spec import Choice, ControlInstance, Fixed, Range
+from sweep3d.spec.space import Point, SearchSpace, SpaceShape
+from sweep3d.stages.plan.policies import POLICIES, GridPolicy, RandomPolicy
+from sweep3d.stages.render.controls import Camera, Orientation
+
+FAST = settings(max_examples=120, deadline=None)
+
+shapes = st.builds(
+    SpaceShape,
+    n_continuous=st.integers(0, 3),
+    choice_sizes=st.lists(st.integers(1, 4), max_size=3).map(tuple),
+)
+
+
+def grid(n: int) -> GridPolicy:
+    return GridPolicy(GridPolicy.Params(samples_per_dim=n))
+
+
+def random_policy(samples: int) -> RandomPolicy:
+    return RandomPolicy(RandomPolicy.Params(samples=samples))
+
+
+def check_point(point: Point, shape: SpaceShape) -> None:
+    assert len(point.unit) == shape.n_continuous
+    assert len(point.choice) == len(shape.choice_sizes)
+    assert all(isinstance(u, float) and 0.0 <= u <= 1.0 for u in point.unit)
+    assert all(isinstance(c, int) and 0 <= c < size for c, size in zip(point.choice, shape.choice_sizes))
+
+
+def test_policies_are_registered():
+    assert {"grid", "random"} <= set(POLICIES.names())
+    assert POLICIES.get("grid") is GridPolicy
+    with pytest.raises(UserError, match="valid: grid, random"):
+        POLICIES.get("bayesian")
+
+
+# -- grid ------------------------------------------------------------------------------------
+
+
+@FAST
+@given(shapes, st.integers(1, 5))
+def test_grid_is_the_full_product(shape, n):
+    points = grid(n).points(shape, seed=0)
+    assert len(points) == n ** shape.n_continuous * math.prod(shape.choice_sizes)
+    assert len({(p.unit, p.choice) for p in points}) == len(points)  # no point twice
+    for point in points:
+        check_point(point, shape)
+    for axis, size in enumerate(shape.choice_sizes):
+        assert {p.choice[axis] for p in points} == set(range(size))
+
+
+@FAST
+@given(shapes.filter(lambda s: s.n_continuous > 0), st.integers(2, 6))
+def test_grid_includes_both_ends_evenly_spaced(shape, n):
+    points = grid(n).points(shape, seed=0)
+    for axis in range(shape.n_continuous):
+        ticks = sorted({p.unit[axis] for p in points})
+        assert len(ticks) == n
+        assert ticks[0] == 0.0 and ticks[-1] == 1.0
+        gaps = [b - a for a, b in zip(ticks, ticks[1:])]
+        assert max(gaps) == pytest.approx(min(gaps))
+
+
+def test_grid_of_one_takes_the_middle():
+    points = grid(1).points(SpaceShape(2, (3,)), seed=0)
+    assert [p.unit for p in points] == [(0.5, 0.5)] * 3
+    assert [p.choice for p in points] == [(0,), (1,), (2,)]
+
+
+def test_grid_of_an_empty_space_is_one_point():
+    assert grid(4).points(SpaceShape(0, ()), seed=0) == [Point((), ())]
+
+
+@FAST
+@given(shapes, st.integers(0, 2**63 - 1), st.integers(0, 2**63 - 1))
+def test_grid_ignores_the_seed(shape, s1, s2):
+    assert grid(3).points(shape, s1) == grid(3).points(shape, s2)
+
+
+# -- random ----------------------------------------------------------------------------------
+
+seeds = st.integers(0, 2**63 - 1)
+
+
+@FAST
+@given(shapes, seeds, st.integers(1, 40))
+def test_random_is_reproducible_and_in_bounds(shape, seed, samples):
+    first = random_policy(samples).points(shape, seed)
+    again = random_policy(samples).points(shape, seed)
+    assert first == again
+    assert len(first) == samples
+    for point in first:
+        check_point(point, shape)
+
+
+@FAST
+@given(shapes.filter(lambda s: s.n_continuous > 0), seeds, seeds)
+def test_random_differs_across_seeds(shape, s1, s2):
+    assume(s1 != s2)
+    a = random_policy(8).points(shape, s1)
+    b = random_policy(8).points(shape, s2)
+    assert [p.unit for p in a] != [p.unit for p in b]
+
+
+def test_random_choices_cover_the_options():
+    points = random_policy(400).points(SpaceShape(1, (3, 2)), seed=1)
+    assert {p.choice for p in points} == {(i, j) for i in range(3) for j in range(2)}
+    units = [p.unit[0] for p in points]
+    assert min(units) < 0.1 and max(units) > 0.9  # spread over the cube, not a constant
+
+
+# -- SearchSpace.values ----------------------------------------------------------------------
+
+
+def instance(control, **spaces) -> ControlInstance:
+    return ControlInstance(control, spaces)
+
+
+bounds = st.tuples(
+    st.floats(-1e6, 1e6, allow_nan=False), st.floats(-1e6, 1e6, allow_nan=False)
+).filter(lambda b: b[0] < b[1])
+log_bounds = st.tuples(st.floats(1e-6, 1e6), st.floats(1e-6, 1e6)).filter(lambda b: b[0] < b[1])
+units = st.floats(0.0, 1.0)
+
+
+@FAST
+@given(bounds, log_bounds, units, units, st.integers(0, 2))
+def test_values_stay_inside_declared_ranges(lin, log, u1, u2, index):
+    orientation = instance(Orientation("o", "orientation"), yaw=Range(*lin), roll=Fixed(5.0))
+    camera = instance(Camera("cam", "camera"), zoom=Range(*log, log=True), elevation=Choice((0.0, 30.0, 60.0)))
+    space = SearchSpace([orientation, camera])
+    assert space.shape == SpaceShape(2, (3,))
+
+    values = space.values(Point((u1, u2), (index,)))
+
+    assert lin[0] <= values["o"]["yaw"] <= lin[1]
+    assert log[0] <= values["cam"]["zoom"] <= log[1]
+    assert values["o"]["roll"] == 5.0
+    assert values["cam"]["elevation"] == (0.0, 30.0, 60.0)[index]
+    assert set(values["o"]) == {"yaw", "roll"} and set(values["cam"]) == {"zoom", "elevation"}
+
+
+@FAST
+@given(bounds, units, units)
+def test_linear_range_is_monotone_and_hits_the_ends(lin, u, v):
+    r = Range(*lin)
+    assert r.at(0.0) == lin[0] and r.at(1.0) == lin[1]
+    if u < v:
+        assert r.at(u) <= r.at(v)
+    assert r.at(0.5) == pytest.approx((lin[0] + lin[1]) / 2, rel=1e-9, abs=1e-6)
+
+
+@FAST
+@given(log_bounds, units)
+def test_log_range_is_geometric(log, u):
+    r = Range(*log, log=True)
+    assert r.at(0.0) == pytest.approx(log[0], rel=1e-12)
+    assert r.at(1.0) == pytest.approx(log[1], rel=1e-12)
+    assert r.at(0.5) == pytest.approx(math.sqrt(log[0] * log[1]), rel=1e-9)
+    assert log[0] <= r.at(u) <= log[1]
+
+
+@FAST
+@given(st.integers(-1000, 1000), st.integers(1, 1000), units)
+def test_integer_range_gives_ints_inside(low, width, u):
+    r = Range(float(low), float(low + width), integer=True)
+    value = r.at(u)
+    assert isinstance(value, int)
+    assert low <= value <= low + width
+
+
+def test_out_of_cube_units_are_clamped():
+    r = Range(10.0, 20.0)
+    assert r.at(-0.5) == 10.0 and r.at(1.5) == 20.0
+
+
+def test_point_must_match_the_shape():
+    space = SearchSpace([instance(Orientation("o", "orientation"), yaw=Range(0.0, 1.0))])
+    with pytest.raises(ValueError, match="shape"):
+        space.values(Point((0.5, 0.5), ()))
+    with pytest.raises(ValueError, match="shape"):
+        space.values(Point((0.5,), (0,)))
+
+
+def test_grid_over_a_space_reaches_every_declared_value():
+    orientation = instance(Orientation("o", "orientation"), yaw=Range(-90.0, 90.0), pitch=Choice((0.0, 45.0)))
+    space = SearchSpace([orientation])
+    values = [space.values(p)["o"] for p in grid(3).points(space.shape, seed=0)]
+    assert sorted({v["yaw"] for v in values}) == [-90.0, 0.0, 90.0]
+    assert {v["pitch"] for v in values} == {0.0, 45.0}
+    assert len(values) == 6

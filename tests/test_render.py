@@ -1,0 +1,103 @@
+"""Real Blender renders at tiny resolution: scene state and pixels."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sweep3d.errors import UserError
+from sweep3d.spec.models import RenderSpec
+from sweep3d.stages.render.assets import builtin_hdris
+from sweep3d.stages.render.controls import Camera, Orientation, Position
+from sweep3d.stages.render.state import SceneState
+from tests.conftest import write_cube
+
+pytestmark = pytest.mark.blender
+
+WHITE = {"hdri": None, "color": (1.0, 1.0, 1.0), "strength": 1.0}
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    from sweep3d.stages.render.scene import BlenderScene
+
+    folder = tmp_path_factory.mktemp("scene")
+    settings = RenderSpec(resolution=32, samples=1, denoise=False).model_dump()
+    blender = BlenderScene(settings, folder)
+    blender.cube = str(write_cube(folder))
+    return blender
+
+
+def render(scene, state: SceneState, env=WHITE) -> np.ndarray:
+    scene.prepare(scene.cube, env)
+    scene.pose_scene(state)
+    return scene.render()
+
+
+def test_render_returns_finite_rgb_with_the_object_on_the_background(scene) -> None:
+    image = render(scene, SceneState())
+    assert image.shape == (32, 32, 3) and image.dtype == np.float32
+    assert np.isfinite(image).all() and image.min() >= 0 and image.max() <= 1
+    corners = image[[0, 0, -1, -1], [0, -1, 0, -1]]
+    assert np.allclose(corners, 1.0, atol=0.02), "plain white background at the corners"
+    assert image[12:20, 12:20].mean() < 0.95, "the object covers the centre"
+
+
+def test_object_is_normalised_to_a_unit_sphere_at_the_origin(scene) -> None:
+    render(scene, SceneState())
+    points = scene._world_vertices([o for o in scene.pose.children_recursive if o.type == "MESH"])
+    centre = (points.min(axis=0) + points.max(axis=0)) / 2
+    radius = np.sqrt(((points - centre) ** 2).sum(axis=1)).max()
+    assert np.allclose(centre, 0, atol=1e-6) and radius == pytest.approx(1.0, rel=1e-6)
+
+
+def test_camera_follows_the_state(scene) -> None:
+    state = SceneState()
+    Camera("camera", "camera").apply(state, Camera.Params(azimuth=90, elevation=90, zoom=2))
+    render(scene, state)
+    position, *_ = state.camera_basis()
+    assert np.allclose(np.array(scene.camera.matrix_world.translation), position, atol=1e-5)
+    assert scene.camera.data.lens == pytest.approx(50.0)
+
+
+@pytest.mark.parametrize(
+    "control, params",
+    [
+        (Orientation, {"yaw": 45.0, "pitch": 30.0}),
+        (Camera, {"elevation": 80.0}),
+        (Camera, {"zoom": 0.5}),
+        (Position, {"x": 0.6, "y": -0.4}),
+    ],
+)
+def test_each_control_changes_the_image(scene, control, params) -> None:
+    base = render(scene, SceneState())
+    state = SceneState()
+    control("c", "c").apply(state, control.Params(**params))
+    changed = render(scene, state)
+    assert np.isfinite(changed).all()
+    assert np.abs(changed - base).mean() > 0.005
+
+
+def test_hdri_environment_fills_the_background(scene) -> None:
+    env = {"hdri": str(builtin_hdris()["forest"]), "color": None, "strength": 1.0}
+    image = render(scene, SceneState(), env)
+    assert not np.allclose(image[0, 0], 1.0, atol=0.05)
+    assert scene.scene.render.film_transparent is False
+
+
+def test_pose_change_does_not_reload_the_scene(scene) -> None:
+    render(scene, SceneState())
+    mesh = next(o for o in scene.pose.children_recursive if o.type == "MESH")
+    state = SceneState(yaw=90.0)
+    render(scene, state)
+    assert next(o for o in scene.pose.children_recursive if o.type == "MESH") == mesh
+
+
+def test_a_mesh_without_geometry_is_a_user_error(scene, tmp_path: Path) -> None:
+    empty = tmp_path / "empty.obj"
+    empty.write_text("# nothing\n")
+    with pytest.raises(UserError, match="no mesh"):
+        scene.prepare(str(empty), WHITE)
+    scene.object_ref = None  # let the next test reload the cube
