@@ -64,15 +64,17 @@ class ClassificationEvaluator(Evaluator):
     )
 
     def evaluate(self, logits: np.ndarray, truths: Sequence[tuple[int, ...]], labels: LabelMap) -> list[dict]:
-        logp = log_softmax(logits)
+        raw = np.asarray(logits, dtype=np.float64)
+        logp = log_softmax(raw)
         k = min(self.top_k, logp.shape[1])
         rows = []
-        for row, truth in zip(logp, truths):
+        for scores, row, truth in zip(raw, logp, truths):
             if not np.all(np.isfinite(row)):
                 rows.append({"valid": False, "correct": None, "top1": None, "top1_label": None, "topk": None,
                              "topk_labels": None, "topk_probs": None, "label_prob": None, "loss": None})
                 continue
-            order = np.argsort(-row, kind="stable")[:k]
+            # Rank by the logits themselves: log-probabilities can round distinct logits into ties.
+            order = np.argsort(-scores, kind="stable")[:k]
             truth_logp = row[list(truth)]
             label_logp = float(truth_logp.max() + np.log(np.exp(truth_logp - truth_logp.max()).sum()))
             rows.append(
