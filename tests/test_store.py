@@ -1,0 +1,296 @@
+"""The content-addressed store: Parquet segments, DuckDB views, atomic writes, the writer lock."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import subprocess
+import sys
+import time
+from datetime import datetime, timedelta, timezone
+from pathlib import Path
+
+import duckdb
+import pyarrow.parquet as pq
+import pytest
+from typer.testing import CliRunner
+
+from sweep3d.cache.store import Store, atomic_write
+from sweep3d.cli import app
+from sweep3d.errors import StoreBusyError, UserError
+
+T0 = datetime(2024, 1, 1, tzinfo=timezone.utc)
+
+
+def render_row(key: str, seconds: float = 1.0, minutes: int = 0) -> dict:
+    return {"render_key": key, "width": 32, "height": 32, "valid": True, "seconds": seconds,
+            "created_at": T0 + timedelta(minutes=minutes)}
+
+
+def files_under(folder: Path) -> list[str]:
+    return sorted(str(p.relative_to(folder)) for p in folder.rglob("*") if p.is_file())
+
+
+# -- segments and views ----------------------------------------------------------------------
+
+
+def test_append_and_keys_round_trip(tmp_path):
+    store = Store(tmp_path / "store")
+    assert store.keys("renders") == set()
+    assert store.append("renders", []) is None
+
+    first = store.append("renders", [render_row("a"), render_row("b")])
+    second = store.append("renders", [render_row("c")])
+
+    assert first is not None and second is not None and first != second
+    assert store.segments("renders") == sorted([first, second])
+    assert store.keys("renders") == {"a", "b", "c"}
+    assert store.keys("predictions") == set()
+    assert pq.read_table(first).num_rows == 2
+
+
+def test_views_deduplicate_keys_keeping_the_first_row(tmp_path):
+    store = Store(tmp_path / "store")
+    store.append("renders", [render_row("a", seconds=1.0, minutes=0), render_row("b", minutes=1)])
+    store.append("renders", [render_row("a", seconds=9.0, minutes=5), render_row("c", minutes=2)])
+
+    con = store.connect()
+    assert con.execute("select count(*) from renders").fetchone()[0] == 3
+    assert con.execute("select seconds from renders where render_key = 'a'").fetchone()[0] == 1.0
+    raw = duckdb.connect().execute(
+        f"select count(*) from read_parquet('{store.table_dir('renders')}/*.parquet')"
+    ).fetchone()[0]
+    assert raw == 4  # both copies are on disk; only the view dedupes
+
+
+def test_results_view_joins_jobs_and_predictions(tmp_path):
+    import pyarrow as pa
+
+    store = Store(tmp_path / "store")
+    jobs = pa.Table.from_pylist([
+        {"experiment": "e", "job": i, "render_key": f"r{i}", "image_key": f"i{i}", "pred_key": f"p{i}"}
+        for i in range(3)
+    ])
+    store.write_table_file(store.jobs_path("e"), jobs)
+    store.append("predictions", [
+        {"pred_key": "p0", "image_key": "i0", "correct": True, "created_at": T0},
+        {"pred_key": "p2", "image_key": "i2", "correct": False, "created_at": T0},
+        {"pred_key": "p0", "image_key": "i0", "correct": False, "created_at": T0 + timedelta(1)},
+    ])
+    con = store.connect("e")
+    rows = con.execute("select job, correct from results order by job").fetchall()
+    assert rows == [(0, True), (2, False)]
+    assert "results" not in {r[0] for r in store.connect().execute("show tables").fetchall()}
+
+
+def test_half_written_files_are_ignored(tmp_path):
+    store = Store(tmp_path / "store")
+    store.append("renders", [render_row("a")])
+    table = store.table_dir("renders")
+    (table / ".00000000000000000001-1-deadbeef.parquet.0123abcd.tmp").write_bytes(b"PAR1 half a footer")
+    (table / ".hidden.parquet").write_bytes(b"not parquet at all")
+
+    assert store.keys("renders") == {"a"}
+    assert len(store.segments("renders")) == 1
+    assert store.connect().execute("select count(*) from renders").fetchone()[0] == 1
+
+
+def test_atomic_write_leaves_only_the_target(tmp_path):
+    target = tmp_path / "blobs" / "ab" / "abcdef.png"
+    atomic_write(target, b"first")
+    atomic_write(target, b"second")
+    assert target.read_bytes() == b"second"
+    assert files_under(tmp_path) == ["blobs/ab/abcdef.png"]
+
+
+def test_table_files_are_written_atomically(tmp_path):
+    store = Store(tmp_path / "store")
+    for i in range(3):
+        store.append("images", [{"image_key": f"k{i}", "created_at": T0}])
+    leftovers = [p for p in (tmp_path / "store").rglob("*") if p.name.endswith(".tmp")]
+    assert leftovers == []
+    assert store.keys("images") == {"k0", "k1", "k2"}
+
+
+def test_segment_writer_flushes_on_exit(tmp_path):
+    store = Store(tmp_path / "store")
+    with store.segment_writer("renders", every=3600.0) as writer:
+        for key in "abc":
+            writer.add(render_row(key))
+        assert store.keys("renders") == set()  # still buffered
+    assert store.keys("renders") == {"a", "b", "c"}
+    assert writer.written == 3
+
+
+def test_blob_paths_shard_by_key_prefix(tmp_path):
+    store = Store(tmp_path)
+    assert store.blob_path("abcdef") == tmp_path / "blobs" / "ab" / "abcdef.png"
+    assert store.jobs_path("my exp/1").name == "my_exp_1.parquet"
+
+
+# -- the writer lock -------------------------------------------------------------------------
+
+HOLDER = """
+import sys, time
+from sweep3d.cache.store import Store
+
+with Store(sys.argv[1]).lock():
+    print("locked", flush=True)
+    if sys.argv[2] == "stdin":
+        sys.stdin.readline()
+    else:
+        time.sleep(float(sys.argv[2]))
+"""
+
+
+def hold_lock(root: Path, until: str) -> subprocess.Popen:
+    """Start a process that holds ``root``'s lock until a line on stdin or for ``until`` seconds."""
+    proc = subprocess.Popen([sys.executable, "-c", HOLDER, str(root), until],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    line = proc.stdout.readline()
+    assert line.strip() == "locked", line
+    return proc
+
+
+def test_second_writer_gets_a_clear_busy_error(tmp_path):
+    root = tmp_path / "store"
+    proc = hold_lock(root, "stdin")
+    try:
+        with pytest.raises(StoreBusyError) as caught:
+            with Store(root).lock():
+                pass
+        message = str(caught.value)
+        assert str(root) in message
+        assert f"pid {proc.pid}" in message
+        assert "--wait" in message
+        assert isinstance(caught.value, UserError)
+    finally:
+        proc.stdin.write("\n")
+        proc.stdin.close()
+        proc.wait(timeout=30)
+    with Store(root).lock():  # released with the process
+        pass
+
+
+def test_wait_lets_the_second_writer_in_after_release(tmp_path):
+    root = tmp_path / "store"
+    proc = hold_lock(root, "1.0")
+    try:
+        start = time.monotonic()
+        with Store(root).lock(wait=30.0):
+            assert proc.poll() is not None  # the holder had finished
+        assert time.monotonic() - start < 25.0
+    finally:
+        proc.wait(timeout=30)
+
+
+def test_lock_is_reentrant_across_sequential_uses(tmp_path):
+    store = Store(tmp_path / "store")
+    for _ in range(2):
+        with store.lock():
+            assert (tmp_path / "store" / "lock").read_text().startswith("sweep3d pid")
+
+
+def test_store_under_a_file_is_a_user_error(tmp_path):
+    blocker = tmp_path / "not-a-folder"
+    blocker.write_text("")
+    with pytest.raises(UserError, match="not writable.*experiment.store"):
+        with Store(blocker / "store").lock():
+            pass
+
+
+def test_read_only_store_is_a_user_error(tmp_path):
+    parent = tmp_path / "ro"
+    parent.mkdir()
+    parent.chmod(0o500)
+    try:
+        if os.access(parent, os.W_OK):
+            pytest.skip("running with privileges that ignore folder permissions")
+        with pytest.raises(UserError, match="not writable"):
+            Store(parent / "store").ensure_writable()
+    finally:
+        parent.chmod(0o700)
+
+
+# -- a real run's store ----------------------------------------------------------------------
+
+
+def test_real_run_tables_open_with_plain_duckdb(tiny_run):
+    store = tiny_run / "store"
+    con = duckdb.connect()
+    jobs = con.execute(
+        f"select count(*), count(distinct pred_key), count(distinct render_key) "
+        f"from read_parquet('{store}/jobs/tiny.parquet')"
+    ).fetchone()
+    predictions = con.execute(
+        f"select count(distinct pred_key) from read_parquet('{store}/tables/predictions/*.parquet')"
+    ).fetchone()[0]
+    renders = con.execute(
+        f"select count(distinct render_key) from read_parquet('{store}/tables/renders/*.parquet')"
+    ).fetchone()[0]
+    assert jobs[0] > 0
+    assert predictions == jobs[1]
+    assert renders == jobs[2]
+    for (key,) in con.execute(f"select render_key from read_parquet('{store}/tables/renders/*.parquet')").fetchall():
+        assert Store(store).blob_path(key).is_file()
+
+
+def _results_count(folder: Path) -> int:
+    from sweep3d.spec import load_spec
+
+    loaded = load_spec(folder / "spec.toml")
+    return Store(loaded.store).connect(loaded.name).execute("select count(*) from results").fetchone()[0]
+
+
+def test_query_prints_a_table(tiny_run):
+    result = CliRunner().invoke(
+        app, ["query", str(tiny_run / "spec.toml"),
+              "select environment, count(*) as n from results group by environment order by environment"]
+    )
+    assert result.exit_code == 0, result.output
+    assert "environment" in result.output
+    assert "studio" in result.output and "white" in result.output
+
+
+def test_query_limit_says_more_rows_exist(tiny_run):
+    result = CliRunner().invoke(app, ["query", str(tiny_run / "spec.toml"), "select job from jobs", "--limit", "2"])
+    assert result.exit_code == 0, result.output
+    assert "first 2 rows shown" in result.output
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".json", ".parquet"])
+def test_query_output_files_hold_every_row(tiny_run, tmp_path, suffix):
+    expected = _results_count(tiny_run)
+    out = tmp_path / "out" / f"results{suffix}"
+    result = CliRunner().invoke(
+        app, ["query", str(tiny_run / "spec.toml"), "select job, object, correct from results;",
+              "--output", str(out), "--limit", "1"]
+    )
+    assert result.exit_code == 0, result.output
+    if suffix == ".csv":
+        with open(out, newline="") as fh:
+            rows = list(csv.DictReader(fh))
+        assert len(rows) == expected and set(rows[0]) == {"job", "object", "correct"}
+    elif suffix == ".json":
+        rows = json.loads(out.read_text())
+        assert len(rows) == expected and rows[0]["object"] == "box"
+    else:
+        assert pq.read_table(out).num_rows == expected
+
+
+@pytest.mark.parametrize(
+    "args, text",
+    [
+        (["select nope from results"], "query failed"),
+        (["select 1", "--output", "x.xlsx"], "unsupported format"),
+    ],
+)
+def test_query_mistakes_are_one_line_errors(tiny_run, tmp_path, args, text):
+    if "--output" in args:
+        args = [*args[:-1], str(tmp_path / args[-1])]
+    result = CliRunner().invoke(app, ["query", str(tiny_run / "spec.toml"), *args])
+    assert result.exit_code == 2
+    assert "Traceback" not in result.output
+    assert text in result.output
+    assert len([line for line in result.output.splitlines() if line.strip()]) == 1
