@@ -101,3 +101,59 @@ def test_a_mesh_without_geometry_is_a_user_error(scene, tmp_path: Path) -> None:
     with pytest.raises(UserError, match="no mesh"):
         scene.prepare(str(empty), WHITE)
     scene.object_ref = None  # let the next test reload the cube
+
+
+def _triangle_formats(folder: Path) -> dict[str, Path]:
+    """A tetrahedron in PLY, STL and glTF (buffer embedded as a data URI)."""
+    import base64
+    import json
+    import struct
+
+    verts = [(0, 0, 0), (2, 0, 0), (0, 2, 0), (0, 0, 2)]
+    faces = [(0, 2, 1), (0, 1, 3), (0, 3, 2), (1, 2, 3)]
+    ply = folder / "tetra.ply"
+    ply.write_text(
+        "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+        "element face 4\nproperty list uchar int vertex_indices\nend_header\n"
+        + "".join(f"{x} {y} {z}\n" for x, y, z in verts)
+        + "".join(f"3 {a} {b} {c}\n" for a, b, c in faces)
+    )
+    stl = folder / "tetra.stl"
+    stl.write_text(
+        "solid t\n"
+        + "".join(
+            "facet normal 0 0 0\nouter loop\n" + "".join(f"vertex {x} {y} {z}\n" for x, y, z in (verts[i] for i in f))
+            + "endloop\nendfacet\n"
+            for f in faces
+        )
+        + "endsolid t\n"
+    )
+    positions = b"".join(struct.pack("<3f", *v) for v in verts)
+    indices = b"".join(struct.pack("<3H", *f) for f in faces)
+    data = positions + indices
+    gltf = folder / "tetra.gltf"
+    gltf.write_text(json.dumps({
+        "asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
+        "buffers": [{"byteLength": len(data), "uri": "data:application/octet-stream;base64," + base64.b64encode(data).decode()}],
+        "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": len(positions)},
+                        {"buffer": 0, "byteOffset": len(positions), "byteLength": len(indices)}],
+        "accessors": [{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3",
+                       "min": [0, 0, 0], "max": [2, 2, 2]},
+                      {"bufferView": 1, "componentType": 5123, "count": 12, "type": "SCALAR"}],
+    }))
+    return {"ply": ply, "stl": stl, "gltf": gltf}
+
+
+@pytest.mark.parametrize("fmt", ["ply", "stl", "gltf"])
+def test_other_mesh_formats_load_and_are_normalised(scene, tmp_path: Path, fmt: str) -> None:
+    path = _triangle_formats(tmp_path)[fmt]
+    scene.prepare(str(path), WHITE)
+    scene.pose_scene(SceneState())
+    image = scene.render()
+    meshes = [o for o in scene.pose.children_recursive if o.type == "MESH"]
+    points = scene._world_vertices(meshes)
+    radius = np.sqrt(((points - (points.min(0) + points.max(0)) / 2) ** 2).sum(axis=1)).max()
+    assert radius == pytest.approx(1.0, rel=1e-5)
+    assert np.abs(image - 1.0).max() > 0.1, "the tetrahedron is visible on white"
+    scene.object_ref = None

@@ -175,12 +175,15 @@ def test_second_writer_gets_a_clear_busy_error(tmp_path):
 
 def test_wait_lets_the_second_writer_in_after_release(tmp_path):
     root = tmp_path / "store"
-    proc = hold_lock(root, "1.0")
+    proc = hold_lock(root, "1.5")
     try:
         start = time.monotonic()
+        with pytest.raises(StoreBusyError):
+            with Store(root).lock(wait=0.3):
+                pass
         with Store(root).lock(wait=30.0):
-            assert proc.poll() is not None  # the holder had finished
-        assert time.monotonic() - start < 25.0
+            waited = time.monotonic() - start
+        assert 1.0 <= waited < 25.0  # it waited for the holder's 1.5 s, then got in
     finally:
         proc.wait(timeout=30)
 
