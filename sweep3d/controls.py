@@ -69,6 +69,8 @@ class Control:
 def wrap_periodic(value: float, period: float) -> float:
     """Wrap ``value`` into (-period/2, period/2], with -0.0 folded to 0.0."""
     half = period / 2.0
+    if -half < value <= half:
+        return value + 0.0  # already canonical: keep it bit-exact
     wrapped = math.fmod(value + half, period)
     if wrapped <= 0.0:
         wrapped += period

@@ -9,11 +9,10 @@ from __future__ import annotations
 import time
 import uuid
 from dataclasses import dataclass, field
-from datetime import datetime, timezone
 
 from rich.console import Console
 
-from sweep3d.cache.store import Store
+from sweep3d.cache.store import Store, utc_now
 from sweep3d.progress import RunProgress
 from sweep3d.spec.loader import LoadedSpec
 from sweep3d.stages.infer import infer_stage
@@ -49,7 +48,7 @@ def run(spec: LoadedSpec, console: Console | None = None, wait: float = 0.0) -> 
     """Run every stage of ``spec`` and return what each did."""
     store = Store(spec.store)
     started = time.perf_counter()
-    started_at = datetime.now(timezone.utc)
+    started_at = utc_now()
     with store.lock(wait):
         plan = make_plan(spec)
         write_jobs(plan, store)
@@ -61,7 +60,7 @@ def run(spec: LoadedSpec, console: Console | None = None, wait: float = 0.0) -> 
         store.append("runs", [{
             "run_id": result.run_id, "experiment": spec.name, "spec_path": str(spec.path),
             "spec": spec.path.read_text(encoding="utf-8"), "jobs": len(plan.jobs),
-            "started_at": started_at, "created_at": datetime.now(timezone.utc), "seconds": result.seconds,
+            "started_at": started_at, "created_at": utc_now(), "seconds": result.seconds,
             **{f"{o.stage}_{k}": v for o in result.outcomes for k, v in o.as_row().items() if k != "stage"},
         }])
     return result

@@ -17,6 +17,7 @@ import fcntl
 import os
 import time
 import uuid
+from datetime import datetime, timezone
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Iterator
@@ -193,6 +194,11 @@ class SegmentWriter:
 
     def __exit__(self, *exc: object) -> None:
         self.flush()
+
+
+def utc_now() -> datetime:
+    """Now, in UTC, as a naive timestamp (tz-aware ones would need pytz to read back through DuckDB)."""
+    return datetime.now(timezone.utc).replace(tzinfo=None)
 
 
 def atomic_write(path: Path, data: bytes) -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import signal
 from pathlib import Path
 from typing import Callable, Optional
 
@@ -62,6 +63,7 @@ def run(
     from sweep3d.spec import load_spec
 
     loaded = load_spec(spec)
+    signal.signal(signal.SIGTERM, _interrupt)  # clean up workers and scratch files as on Ctrl-C
     result = run_pipeline(loaded, console, wait=wait)
     print_run(console, result)
     if report:
@@ -125,6 +127,10 @@ def _export(con, statement: str, output: Path) -> None:
     output.parent.mkdir(parents=True, exist_ok=True)
     target = str(output).replace("'", "''")
     con.execute(f"COPY ({statement}) TO '{target}' ({formats[suffix]})")
+
+
+def _interrupt(signum, frame) -> None:
+    raise KeyboardInterrupt
 
 
 def _cell(value) -> str:

@@ -46,7 +46,7 @@ def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit:
     Args:
         columns: the control-parameter columns of the jobs table.
     """
-    jobs = con.execute("SELECT count(*) FROM jobs").fetchone()[0]
+    jobs = con.execute("SELECT count(*) FROM jobs").fetchone()[0] if _has_view(con, "jobs") else 0
     if not _has_view(con, "results"):
         return Summary(jobs, 0, 0, 0, None, [], [], [], [])
     evaluated, invalid, correct = con.execute(

@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import os
 import time
-from datetime import datetime, timezone
 import numpy as np
 import pyarrow as pa
 
-from sweep3d.cache.store import Store
+from sweep3d.cache.store import Store, utc_now
 from sweep3d.errors import UserError
 from sweep3d.pixels import decode_png
 from sweep3d.progress import RunProgress
@@ -19,7 +18,7 @@ from sweep3d.stages.plan.jobs import Job, Plan
 
 BASE_COLUMNS = [("pred_key", pa.string()), ("image_key", pa.string()), ("model", pa.string()),
                 ("model_digest", pa.string()), ("seconds", pa.float64()),
-                ("created_at", pa.timestamp("us", tz="UTC"))]
+                ("created_at", pa.timestamp("us"))]
 
 
 def predictions_schema(evaluator: Evaluator) -> pa.Schema:
@@ -82,7 +81,7 @@ def infer_stage(plan: Plan, store: Store, progress: RunProgress) -> StageOutcome
                                     f"but its label map has {len(labels)}")
                 rows = evaluator.evaluate(logits, [truths[j.object] for j in batch], labels)
                 per_image = (time.perf_counter() - t0) / len(batch)
-                now = datetime.now(timezone.utc)
+                now = utc_now()
                 for job, row in zip(batch, rows):
                     writer.add({"pred_key": job.pred_key, "image_key": job.image_key, "model": spec.model.name,
                                 "model_digest": plan.model_digest, "seconds": per_image, "created_at": now, **row})

@@ -3,13 +3,12 @@
 from __future__ import annotations
 
 import time
-from datetime import datetime, timezone
 from typing import Any, Sequence
 
 import numpy as np
 import pyarrow as pa
 
-from sweep3d.cache.store import Store, atomic_write
+from sweep3d.cache.store import Store, atomic_write, utc_now
 from sweep3d.pixels import decode_png, encode_png
 from sweep3d.progress import RunProgress
 from sweep3d.spec.loader import ControlInstance
@@ -18,7 +17,7 @@ from sweep3d.stages.plan.jobs import Job, Plan
 
 IMAGES_SCHEMA = pa.schema([
     ("image_key", pa.string()), ("render_key", pa.string()), ("valid", pa.bool_()),
-    ("seconds", pa.float64()), ("created_at", pa.timestamp("us", tz="UTC")),
+    ("seconds", pa.float64()), ("created_at", pa.timestamp("us")),
 ])
 
 
@@ -60,7 +59,7 @@ def postprocess_stage(plan: Plan, store: Store, progress: RunProgress) -> StageO
                 valid = bool(np.isfinite(image).all())
                 atomic_write(store.blob_path(job.image_key), encode_png(image))
                 writer.add({"image_key": job.image_key, "render_key": job.render_key, "valid": valid,
-                            "seconds": time.perf_counter() - t0, "created_at": datetime.now(timezone.utc)})
+                            "seconds": time.perf_counter() - t0, "created_at": utc_now()})
                 outcome.computed += 1
                 bar.advance()
     outcome.seconds = time.perf_counter() - started

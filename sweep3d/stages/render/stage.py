@@ -4,12 +4,11 @@ from __future__ import annotations
 
 import time
 from collections import defaultdict
-from datetime import datetime, timezone
 from typing import Any
 
 import pyarrow as pa
 
-from sweep3d.cache.store import Store
+from sweep3d.cache.store import Store, utc_now
 from sweep3d.progress import RunProgress
 from sweep3d.stages.outcome import StageOutcome
 from sweep3d.stages.plan.jobs import Job, Plan
@@ -20,7 +19,7 @@ GROUP_SIZE = 32  # jobs sent to a worker at once; a scene's jobs stay together i
 
 RENDERS_SCHEMA = pa.schema([
     ("render_key", pa.string()), ("width", pa.int32()), ("height", pa.int32()), ("valid", pa.bool_()),
-    ("seconds", pa.float64()), ("created_at", pa.timestamp("us", tz="UTC")),
+    ("seconds", pa.float64()), ("created_at", pa.timestamp("us")),
 ])
 
 
@@ -48,7 +47,7 @@ def render_stage(plan: Plan, store: Store, progress: RunProgress) -> StageOutcom
                 store.segment_writer("renders", RENDERS_SCHEMA) as writer:
             for result in pool.run(groups):
                 if result.ok:
-                    writer.add({"render_key": result.render_key, **result.info, "created_at": _now()})
+                    writer.add({"render_key": result.render_key, **result.info, "created_at": utc_now()})
                     outcome.computed += 1
                 else:
                     outcome.failed += 1
@@ -81,7 +80,3 @@ def _groups(plan: Plan, store: Store, todo: list[Job]) -> list[list[dict[str, An
         jobs = by_scene[scene]
         groups += [jobs[i : i + GROUP_SIZE] for i in range(0, len(jobs), GROUP_SIZE)]
     return groups
-
-
-def _now() -> datetime:
-    return datetime.now(timezone.utc)
