@@ -54,8 +54,9 @@ class Registry(Generic[T]):
         return sorted(self._items)
 
     def __contains__(self, name: str) -> bool:
+        """True for registered short names (``module:Name`` references are checked by :meth:`get`)."""
         self._ensure_loaded()
-        return name in self._items or ":" in name
+        return name in self._items
 
     def __iter__(self) -> Iterator[str]:
         return iter(self.names())

@@ -266,7 +266,7 @@ def test_relative_paths_resolve_against_the_spec_folder(tmp_path, monkeypatch):
     body = BASE.replace('mesh = "cube.obj"', 'mesh = "../meshes/cube.obj"').replace(
         'seed = 3', 'seed = 3\nstore = "../cache"'
     )
-    path = write_spec(project / "specs", body, cube=False)
+    write_spec(project / "specs", body, cube=False)
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
     monkeypatch.chdir(elsewhere)

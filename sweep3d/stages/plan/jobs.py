@@ -12,7 +12,6 @@ Each key hashes exactly what changes its stage's output (see DESIGN.md §2):
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 from sweep3d.cache.keys import digest, file_digest
@@ -114,8 +113,3 @@ def _key_parts(controls: list[ControlInstance], params: dict[str, dict[str, Any]
             parts.append(inst.control.key_part(params[inst.id]))
     return parts
 
-
-def scene_path(spec: LoadedSpec, object_name: str) -> Path:
-    from sweep3d.stages.render.assets import materialise_mesh
-
-    return materialise_mesh(spec.meshes[object_name], spec.store)
