@@ -140,7 +140,7 @@ def test_values_stay_inside_declared_ranges(lin, log, u1, u2, index):
     orientation = instance(Orientation("o", "orientation"), yaw=Range(*lin), roll=Fixed(5.0))
     camera = instance(Camera("cam", "camera"), zoom=Range(*log, log=True), elevation=Choice((0.0, 30.0, 60.0)))
     space = SearchSpace([orientation, camera])
-    assert space.shape == SpaceShape(2, (3,))
+    assert (space.shape.n_continuous, space.shape.choice_sizes) == (2, (3,))
 
     values = space.values(Point((u1, u2), (index,)))
 
@@ -199,3 +199,41 @@ def test_grid_over_a_space_reaches_every_declared_value():
     assert sorted({v["yaw"] for v in values}) == [-90.0, 0.0, 90.0]
     assert {v["pitch"] for v in values} == {0.0, 45.0}
     assert len(values) == 6
+
+
+def test_grid_over_a_full_turn_does_not_repeat_its_end(tmp_path) -> None:
+    """yaw over [-180, 180]: six distinct poses, not five plus -180 and 180 twice."""
+    from sweep3d.spec import load_spec
+    from sweep3d.stages.plan import make_plan
+    from tests.conftest import write_spec
+
+    body = TINY_FULL_TURN
+    plan = make_plan(load_spec(write_spec(tmp_path, body)), model_digest="m")
+    yaws = sorted(j.values["orientation"]["yaw"] for j in plan.jobs if j.environment == "white")
+    assert yaws == [-180.0, -120.0, -60.0, 0.0, 60.0, 120.0]
+    assert len({j.render_key for j in plan.jobs}) == len(plan.jobs)
+    half = make_plan(load_spec(write_spec(tmp_path, body.replace("[-180, 180]", "[0, 180]"))), model_digest="m")
+    assert max(j.values["orientation"]["yaw"] for j in half.jobs) == 180.0  # a partial range keeps both ends
+
+
+TINY_FULL_TURN = """\
+[experiment]
+name = "turn"
+
+[[objects]]
+name = "box"
+mesh = "cube.obj"
+labels = ["carton"]
+
+[[environments]]
+name = "white"
+color = [1.0, 1.0, 1.0]
+
+[[controls]]
+type = "orientation"
+yaw = { range = [-180, 180] }
+
+[policy]
+type = "grid"
+samples_per_dim = 6
+"""

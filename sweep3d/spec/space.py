@@ -19,6 +19,13 @@ class Dim:
     control_id: str
     param: str
     space: Range | Choice
+    period: float | None = None  # for periodic parameters (angles)
+
+    @property
+    def wraps(self) -> bool:
+        """True when the range spans a whole period, so its two ends are one configuration."""
+        return (self.period is not None and isinstance(self.space, Range)
+                and self.space.high - self.space.low >= self.period)
 
     @property
     def column(self) -> str:
@@ -27,10 +34,18 @@ class Dim:
 
 @dataclass(frozen=True)
 class SpaceShape:
-    """What a policy knows of a space: how many continuous dims and the size of each discrete one."""
+    """What a policy knows of a space: how many continuous dims and the size of each discrete one.
+
+    ``wraps`` marks continuous dims whose range covers a whole period (an angle over 360°), where
+    unit coordinates 0 and 1 are the same configuration; empty means none wraps.
+    """
 
     n_continuous: int
     choice_sizes: tuple[int, ...]
+    wraps: tuple[bool, ...] = ()
+
+    def wrapping(self, dim: int) -> bool:
+        return bool(self.wraps) and self.wraps[dim]
 
 
 @dataclass(frozen=True)
@@ -49,13 +64,14 @@ class SearchSpace:
         for inst in self.controls:
             for param, space in inst.spaces.items():
                 if isinstance(space, Range):
-                    self.continuous.append(Dim(inst.id, param, space))
+                    self.continuous.append(Dim(inst.id, param, space, inst.control.periodic.get(param)))
                 elif isinstance(space, Choice):
                     self.discrete.append(Dim(inst.id, param, space))
 
     @property
     def shape(self) -> SpaceShape:
-        return SpaceShape(len(self.continuous), tuple(len(d.space.options) for d in self.discrete))
+        return SpaceShape(len(self.continuous), tuple(len(d.space.options) for d in self.discrete),
+                          tuple(d.wraps for d in self.continuous))
 
     def values(self, point: Point) -> dict[str, dict[str, Any]]:
         """Control id → parameter → physical value, including fixed parameters."""

@@ -33,8 +33,9 @@ POLICIES: Registry[type[Policy]] = Registry("policy")
 
 @POLICIES.register("grid")
 class GridPolicy(Policy):
-    """Every combination: ``samples_per_dim`` evenly spaced values per range (ends included),
-    times every option of each list."""
+    """Every combination: ``samples_per_dim`` evenly spaced values per range (ends included,
+    except that a range covering a whole period, like yaw over 360°, leaves out its upper end,
+    which is the lower end again), times every option of each list."""
 
     class Params(PolicyParams):
         samples_per_dim: int = Field(4, ge=1, le=10_000)
@@ -42,7 +43,8 @@ class GridPolicy(Policy):
     def points(self, shape: SpaceShape, seed: int) -> list[Point]:
         n = self.params.samples_per_dim
         ticks = [0.5] if n == 1 else [i / (n - 1) for i in range(n)]
-        axes = [ticks] * shape.n_continuous
+        around = [0.5] if n == 1 else [i / n for i in range(n)]
+        axes = [around if shape.wrapping(d) else ticks for d in range(shape.n_continuous)]
         choices = [range(size) for size in shape.choice_sizes]
         out = []
         for combo in itertools.product(*axes, *choices):
