@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
@@ -237,3 +238,19 @@ yaw = { range = [-180, 180] }
 type = "grid"
 samples_per_dim = 6
 """
+
+
+def test_sobol_is_reproducible_in_range_and_more_even_than_random() -> None:
+    from scipy.stats import qmc
+
+    from sweep3d.stages.plan.policies import POLICIES
+
+    sobol = POLICIES.get("sobol")(POLICIES.get("sobol").Params(samples=256))
+    rand = POLICIES.get("random")(POLICIES.get("random").Params(samples=256))
+    shape = SpaceShape(2, (3,))
+    points = sobol.points(shape, seed=5)
+    assert points == sobol.points(shape, seed=5) and points != sobol.points(shape, seed=6)
+    assert all(0 <= u <= 1 for p in points for u in p.unit) and {p.choice[0] for p in points} == {0, 1, 2}
+    unit = np.array([p.unit for p in points])
+    random_unit = np.array([p.unit for p in rand.points(shape, seed=5)])
+    assert qmc.discrepancy(unit) < qmc.discrepancy(random_unit)

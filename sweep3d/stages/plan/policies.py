@@ -68,3 +68,27 @@ class RandomPolicy(Policy):
         return [
             Point(tuple(float(u) for u in unit[i]), tuple(int(c[i]) for c in choice)) for i in range(n)
         ]
+
+
+@POLICIES.register("sobol")
+class SobolPolicy(Policy):
+    """``samples`` scrambled Sobol points per scene: quasi-random, so they cover the space more
+    evenly than random draws (best with a power of two). Lists are sampled as extra dimensions."""
+
+    class Params(PolicyParams):
+        samples: int = Field(16, ge=1, le=10_000_000)
+
+    def points(self, shape: SpaceShape, seed: int) -> list[Point]:
+        import warnings
+
+        from scipy.stats import qmc
+
+        n, k = self.params.samples, shape.n_continuous
+        dims = k + len(shape.choice_sizes)
+        if dims == 0:
+            return [Point((), ())]
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # "balance properties" for n not a power of 2
+            unit = qmc.Sobol(d=dims, scramble=True, seed=np.random.default_rng(seed)).random(n)
+        choice = [np.minimum((unit[:, k + j] * size).astype(int), size - 1) for j, size in enumerate(shape.choice_sizes)]
+        return [Point(tuple(float(u) for u in unit[i, :k]), tuple(int(c[i]) for c in choice)) for i in range(n)]

@@ -1,6 +1,9 @@
 """Built-in post-processing controls: pure functions from one image to another."""
 
+from sweep3d.stages.postprocess.controls.artifacts import Cutout, Jpeg
 from sweep3d.stages.postprocess.controls.base import PostControl
-from sweep3d.stages.postprocess.controls.photometric import Blur, BrightnessContrast, Noise
+from sweep3d.stages.postprocess.controls.corruptions import CORRUPTIONS, Corruption
+from sweep3d.stages.postprocess.controls.photometric import Blur, BrightnessContrast, ColorJitter, Noise
 
-__all__ = ["Blur", "BrightnessContrast", "Noise", "PostControl"]
+__all__ = ["CORRUPTIONS", "Blur", "BrightnessContrast", "ColorJitter", "Corruption", "Cutout", "Jpeg", "Noise",
+           "PostControl"]

@@ -1,4 +1,4 @@
-"""Blur, noise and brightness/contrast."""
+"""Blur, noise, brightness/contrast and colour jitter."""
 
 from __future__ import annotations
 
@@ -48,5 +48,26 @@ class BrightnessContrast(PostControl):
         contrast: float = Field(1.0, ge=0.0, le=100.0)
 
     def apply(self, image: np.ndarray, params: Params, rng: np.random.Generator) -> np.ndarray:
+        if params.brightness == 0 and params.contrast == 1:
+            return image
         out = (image - 0.5) * params.contrast + 0.5 + params.brightness
         return np.clip(out, 0.0, 1.0).astype(np.float32)
+
+
+@CONTROLS.register("color_jitter")
+class ColorJitter(PostControl):
+    """Shifts ``hue`` (turns, -0.5..0.5) and scales ``saturation`` (1 = unchanged, 0 = grey)."""
+
+    class Params(ControlParams):
+        hue: float = Field(0.0, ge=-0.5, le=0.5)
+        saturation: float = Field(1.0, ge=0.0, le=10.0)
+
+    def apply(self, image: np.ndarray, params: Params, rng: np.random.Generator) -> np.ndarray:
+        if params.hue == 0 and params.saturation == 1:
+            return image
+        from skimage.color import hsv2rgb, rgb2hsv  # noqa: PLC0415  (scikit-image comes with imagecorruptions)
+
+        hsv = rgb2hsv(np.clip(image, 0.0, 1.0))
+        hsv[..., 0] = (hsv[..., 0] + params.hue) % 1.0
+        hsv[..., 1] = np.clip(hsv[..., 1] * params.saturation, 0.0, 1.0)
+        return hsv2rgb(hsv).astype(np.float32)
