@@ -9,6 +9,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 from typer.testing import CliRunner
 
@@ -139,3 +140,19 @@ def test_cli_plan_reports_cached_keys(tiny_copy: Path) -> None:
     lines = {line.split("│")[1].strip(): line for line in result.output.splitlines() if line.count("│") > 3}
     assert "│ 4      │ 4      │ 0 " in lines["render"]
     assert "│ 8      │ 8      │ 0 " in lines["infer"]
+
+
+def test_sheet_shows_one_row_per_control(tiny_copy: Path) -> None:
+    from PIL import Image
+
+    from sweep3d.report.sheet import LABEL_WIDTH, TILE
+
+    edit_spec(tiny_copy, "[policy]", '[[controls]]\ntype = "material"\nskin = ["original", "zebra", "cow"]\n\n[policy]')
+    out = tiny_copy / "sheet.png"
+    result = CliRunner().invoke(app, ["sheet", str(tiny_copy / "spec.toml"), "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    with Image.open(out) as sheet:
+        assert sheet.size == (LABEL_WIDTH + 3 * TILE, 3 * TILE)  # 3 controls; at most 3 values each
+        pixels = np.asarray(sheet.convert("RGB"), dtype=np.float32)
+    tiles = [pixels[2 * TILE : 3 * TILE - 14, LABEL_WIDTH + i * TILE : LABEL_WIDTH + (i + 1) * TILE] for i in range(3)]
+    assert np.abs(tiles[0] - tiles[1]).mean() > 1 and np.abs(tiles[1] - tiles[2]).mean() > 1  # skins differ

@@ -8,26 +8,18 @@ import numpy as np
 import pytest
 
 from sweep3d.errors import UserError
-from sweep3d.spec.models import RenderSpec
 from sweep3d.stages.render.assets import builtin_hdris
 from sweep3d.stages.render.controls import Camera, Orientation, Position
 from sweep3d.stages.render.state import SceneState
-from tests.conftest import write_cube
 
 pytestmark = pytest.mark.blender
 
 WHITE = {"hdri": None, "color": (1.0, 1.0, 1.0), "strength": 1.0}
 
 
-@pytest.fixture(scope="module")
-def scene(tmp_path_factory):
-    from sweep3d.stages.render.scene import BlenderScene
-
-    folder = tmp_path_factory.mktemp("scene")
-    settings = RenderSpec(resolution=32, samples=1, denoise=False).model_dump()
-    blender = BlenderScene(settings, folder)
-    blender.cube = str(write_cube(folder))
-    return blender
+@pytest.fixture
+def scene(blender_scene):
+    return blender_scene
 
 
 def render(scene, state: SceneState, env=WHITE) -> np.ndarray:

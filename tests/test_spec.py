@@ -12,11 +12,11 @@ from typing import Callable
 import pytest
 from typer.testing import CliRunner
 
-from tests.conftest import write_cube, write_spec
 from sweep3d.cli import app
 from sweep3d.errors import SpecError
 from sweep3d.spec import Choice, Fixed, Range, load_spec
 from sweep3d.spec.space import Point, SearchSpace
+from tests.conftest import write_cube, write_spec
 
 BASE = """\
 [experiment]

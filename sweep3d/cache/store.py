@@ -17,8 +17,8 @@ import fcntl
 import os
 import time
 import uuid
-from datetime import datetime, timezone
 from contextlib import contextmanager
+from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -46,8 +46,11 @@ class Store:
         return self.root / "tables" / table
 
     def jobs_path(self, experiment: str) -> Path:
-        safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in experiment)
-        return self.root / "jobs" / f"{safe}.parquet"
+        return self.root / "jobs" / f"{safe_filename(experiment)}.parquet"
+
+    def report_path(self, experiment: str, suffix: str = ".html") -> Path:
+        """Where an experiment's report files go by default: ``reports/<experiment><suffix>``."""
+        return self.root / "reports" / f"{safe_filename(experiment)}{suffix}"
 
     def tmp_dir(self) -> Path:
         path = self.root / "tmp"
@@ -194,6 +197,11 @@ class SegmentWriter:
 
     def __exit__(self, *exc: object) -> None:
         self.flush()
+
+
+def safe_filename(name: str) -> str:
+    """``name`` with every character outside letters, digits, ``-_.`` replaced by ``_``."""
+    return "".join(c if c.isalnum() or c in "-_." else "_" for c in name)
 
 
 def utc_now() -> datetime:

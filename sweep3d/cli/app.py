@@ -84,6 +84,24 @@ def report(
 
 
 @command
+def sheet(
+    spec: Path = SpecArg,
+    output: Optional[Path] = typer.Option(None, "--output", "-o", help="PNG file to write."),
+) -> None:
+    """Render a contact sheet: one row per control, showing its effect alone on the first scene."""
+    from sweep3d.cache.store import Store
+    from sweep3d.progress import RunProgress
+    from sweep3d.report.sheet import contact_sheet
+    from sweep3d.spec import load_spec
+
+    loaded = load_spec(spec)
+    target = output or Store(loaded.store).report_path(loaded.name, "-controls.png")
+    with RunProgress(console) as progress:
+        path = contact_sheet(loaded, target, progress)
+    console.print(f"contact sheet: [bold]{path}[/]")
+
+
+@command
 def query(
     spec: Path = SpecArg,
     sql: str = typer.Argument(..., help="SQL over the views results, jobs, predictions, renders, images, runs."),

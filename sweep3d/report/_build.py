@@ -72,8 +72,7 @@ def write_report(loaded: LoadedSpec, output: Path | None = None) -> Path:
 
 def default_path(loaded: LoadedSpec) -> Path:
     """``<store>/reports/<experiment>.html``, the name made safe for any file system."""
-    safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in loaded.name)
-    return loaded.store / "reports" / f"{safe}.html"
+    return Store(loaded.store).report_path(loaded.name)
 
 
 def build_context(loaded: LoadedSpec, con: duckdb.DuckDBPyConnection, store: Store) -> dict[str, Any]:

@@ -16,7 +16,14 @@ from pydantic import ValidationError
 from sweep3d.controls import CONTROLS, Control
 from sweep3d.errors import SpecError, UserError
 from sweep3d.spec.models import Spec
-from sweep3d.spec.params import Choice, Fixed, ParamSyntaxError, Range, Space, parse_space
+from sweep3d.spec.params import (
+    Choice,
+    Fixed,
+    ParamSyntaxError,
+    Range,
+    Space,
+    parse_space,
+)
 
 RESERVED_CONTROL_KEYS = {"type", "id", "objects", "environments"}
 

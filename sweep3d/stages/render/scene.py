@@ -17,7 +17,10 @@ import numpy as np
 
 from sweep3d.errors import UserError
 from sweep3d.stages.render._bpy import import_bpy
+from sweep3d.stages.render.props import PropsView
+from sweep3d.stages.render.skins import SkinView
 from sweep3d.stages.render.state import SENSOR_WIDTH_MM, SceneState
+from sweep3d.stages.render.world import WorldView
 
 IMPORTERS = {
     ".obj": ("wm.obj_import", {}),
@@ -36,7 +39,6 @@ class BlenderScene:
         self.settings = settings
         self.scratch = scratch
         self.object_ref: str | None = None
-        self.world_ref: tuple | None = None
         self.background: tuple[float, float, float] | None = None
         bpy.ops.wm.read_factory_settings(use_empty=True)
         scene = self.scene = bpy.context.scene
@@ -51,8 +53,12 @@ class BlenderScene:
         scene.camera = self.camera
         self.pose = bpy.data.objects.new("sweep3d_pose", None)  # controls move this empty
         scene.collection.objects.link(self.pose)
-        self.world = bpy.data.worlds.new("sweep3d_world")
-        scene.world = self.world
+        world = bpy.data.worlds.new("sweep3d_world")
+        scene.world = world
+        self.world = WorldView(bpy, world)
+        self.skins = SkinView(bpy)
+        self.props = PropsView(bpy, scene)
+        self.environment: dict[str, Any] = {}
         self.frame = scratch / f"frame-{os.getpid()}.png"
 
     @staticmethod
@@ -82,39 +88,11 @@ class BlenderScene:
 
     # -- loading -------------------------------------------------------------------------------
     def prepare(self, mesh_path: str, environment: dict[str, Any]) -> None:
-        """Make ``mesh_path`` and ``environment`` the loaded object and world (no-op if they are)."""
-        world_ref = (environment.get("hdri"), tuple(environment.get("color") or ()), environment["strength"])
-        if world_ref != self.world_ref:
-            self._load_world(environment)
-            self.world_ref = world_ref
+        """Make ``mesh_path`` the loaded object and ``environment`` the job's world (lazily synced)."""
+        self.environment = environment
         if mesh_path != self.object_ref:
             self._load_object(mesh_path)
             self.object_ref = mesh_path
-
-    def _load_world(self, env: dict[str, Any]) -> None:
-        bpy = self.bpy
-        self.world.use_nodes = True
-        nodes, links = self.world.node_tree.nodes, self.world.node_tree.links
-        nodes.clear()
-        out = nodes.new("ShaderNodeOutputWorld")
-        background = nodes.new("ShaderNodeBackground")
-        background.inputs["Strength"].default_value = env["strength"]
-        links.new(background.outputs["Background"], out.inputs["Surface"])
-        if env.get("hdri"):
-            texture = nodes.new("ShaderNodeTexEnvironment")
-            try:
-                texture.image = bpy.data.images.load(env["hdri"], check_existing=True)
-            except RuntimeError as exc:
-                raise UserError(f"Blender cannot read the HDRI {env['hdri']!r}: {exc}") from None
-            links.new(texture.outputs["Color"], background.inputs["Color"])
-            self.scene.render.film_transparent = False
-            self.background = None
-        else:
-            # A plain background renders best as transparent film composited onto the colour:
-            # the world only lights the object, with neutral white light.
-            background.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
-            self.scene.render.film_transparent = True
-            self.background = tuple(env["color"])
 
     def _load_object(self, mesh_path: str) -> None:
         bpy = self.bpy
@@ -151,6 +129,8 @@ class BlenderScene:
                 obj.parent = normaliser
                 obj.matrix_parent_inverse.identity()
                 obj.matrix_basis = world
+        self.meshes = meshes
+        self.skins.reset(meshes, radius)
 
     @staticmethod
     def _world_vertices(meshes) -> np.ndarray:
@@ -168,7 +148,10 @@ class BlenderScene:
 
     # -- per job -------------------------------------------------------------------------------
     def pose_scene(self, state: SceneState) -> None:
-        """Move object and camera to match ``state``; no data is reloaded."""
+        """Make the scene match ``state``: pose, camera, world, lights, material, props.
+
+        Only what differs from the previous job is touched; no file is reloaded.
+        """
         self.pose.rotation_mode = "XYZ"
         self.pose.rotation_euler = (math.radians(state.pitch), math.radians(state.roll), math.radians(state.yaw))
         self.pose.scale = (state.scale,) * 3
@@ -182,6 +165,26 @@ class BlenderScene:
         distance = state.camera_distance()
         self.camera.data.clip_start = max(distance * 1e-4, 1e-6)
         self.camera.data.clip_end = distance + 1e3 * max(state.scale, 1.0)
+        dof = self.camera.data.dof
+        dof.use_dof = state.fstop > 0
+        if dof.use_dof:
+            dof.aperture_fstop = state.fstop
+            dof.focus_distance = float(np.linalg.norm(state.object_location() - position))
+        denoise = self.settings["denoise"] if state.denoise is None else state.denoise
+        if self.scene.cycles.use_denoising != denoise:
+            self.scene.cycles.use_denoising = denoise
+        env = self.environment
+        self.world.sync(env, state)
+        self.background = state.background or (tuple(env["color"]) if env.get("color") and state.sky is None else None)
+        self.scene.render.film_transparent = self.background is not None
+        self.skins.sync(state.skin, state.skin_scale, state.skin_image)
+        self.props.sync_lights(state)
+        self.props.sync_occluder(state)
+        lowest = None
+        if state.pin_to_ground:
+            self.bpy.context.view_layer.update()
+            lowest = float(self._world_vertices(self.meshes)[:, 2].min())
+        self.props.sync_ground(state, lowest)
 
     def render(self) -> np.ndarray:
         """Render the current scene.

@@ -16,6 +16,40 @@ SENSOR_WIDTH_MM = 36.0
 FRAME_FILL = 0.8  # at zoom 1 the object's bounding sphere spans this share of the frame
 
 
+@dataclass(frozen=True)
+class PointLight:
+    """A point light placed on a sphere around the object (angles as for the camera)."""
+
+    rgb: tuple[float, float, float]
+    watts: float
+    distance: float  # in object radii
+    azimuth: float
+    elevation: float
+    radius: float = 0.1  # soft-shadow size, in object radii
+
+    def position(self) -> np.ndarray:
+        az, el = math.radians(self.azimuth), math.radians(self.elevation)
+        return self.distance * np.array([math.cos(el) * math.sin(az), -math.cos(el) * math.cos(az), math.sin(el)])
+
+
+@dataclass(frozen=True)
+class Occluder:
+    """A flat grey plate between camera and object covering part of the object's extent."""
+
+    coverage: float  # 0..1 of the object's diameter, from the ``direction`` side
+    direction: float  # degrees in the image plane: 0 = from the right, 90 = from the top
+    grey: float = 0.5
+
+
+@dataclass(frozen=True)
+class Sky:
+    """Blender's procedural sky (Nishita) lit by a sun at this elevation and azimuth (degrees)."""
+
+    sun_elevation: float
+    sun_azimuth: float
+    strength: float = 1.0
+
+
 @dataclass
 class SceneState:
     """Neutral values here are the neutral defaults of the built-in controls.
@@ -34,7 +68,18 @@ class SceneState:
     focal_length: float = 50.0
     frame_x: float = 0.0  # object centre in the image, as a fraction of the half-width (+ right)
     frame_y: float = 0.0  # ... of the half-height (+ up)
-    extras: dict[str, object] = field(default_factory=dict)
+    fstop: float = 0.0  # 0 = pinhole camera (no depth of field)
+    pin_to_ground: bool = False
+    occluder: Occluder | None = None
+    skin: str = "original"  # or a procedural skin name, or "image"
+    skin_scale: float = 1.0
+    skin_image: str | None = None
+    denoise: bool | None = None  # None = as the render settings say
+    lights: list[PointLight] = field(default_factory=list)
+    sky: Sky | None = None
+    world_rotation: float = 0.0  # degrees about the vertical axis
+    world_strength: float = 1.0  # multiplies the environment's strength
+    background: tuple[float, float, float] | None = None  # a plain colour behind the object
 
     def half_fov(self) -> float:
         """Half the camera's field of view in radians (square sensor)."""

@@ -3,7 +3,12 @@
 from sweep3d.stages.postprocess.controls.artifacts import Cutout, Jpeg
 from sweep3d.stages.postprocess.controls.base import PostControl
 from sweep3d.stages.postprocess.controls.corruptions import CORRUPTIONS, Corruption
-from sweep3d.stages.postprocess.controls.photometric import Blur, BrightnessContrast, ColorJitter, Noise
+from sweep3d.stages.postprocess.controls.photometric import (
+           Blur,
+           BrightnessContrast,
+           ColorJitter,
+           Noise,
+)
 
 __all__ = ["CORRUPTIONS", "Blur", "BrightnessContrast", "ColorJitter", "Corruption", "Cutout", "Jpeg", "Noise",
            "PostControl"]

@@ -1,6 +1,21 @@
 """Built-in rendered controls: they edit a :class:`~sweep3d.stages.render.state.SceneState`."""
 
+from sweep3d.stages.render.controls.appearance import SKINS, Material, Occlusion
 from sweep3d.stages.render.controls.base import RenderedControl
-from sweep3d.stages.render.controls.geometry import Camera, Orientation, Position, Scale
+from sweep3d.stages.render.controls.geometry import (
+           Camera,
+           Orientation,
+           PinToGround,
+           Position,
+           Scale,
+)
+from sweep3d.stages.render.controls.lighting import (
+           Background,
+           Denoiser,
+           Hdri,
+           PointLightControl,
+           SkyControl,
+)
 
-__all__ = ["Camera", "Orientation", "Position", "RenderedControl", "Scale"]
+__all__ = ["SKINS", "Background", "Camera", "Denoiser", "Hdri", "Material", "Occlusion", "Orientation",
+           "PinToGround", "PointLightControl", "Position", "RenderedControl", "Scale", "SkyControl"]

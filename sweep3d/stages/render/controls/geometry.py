@@ -47,8 +47,9 @@ class Camera(RenderedControl):
     """Moves the camera on a sphere around the object, looking at its centre.
 
     ``azimuth`` (degrees, 0 = front), ``elevation`` (degrees, -90..90, 20 by default),
-    ``zoom`` (1 = the object's bounding sphere spans 80 % of the frame; 2 = twice as large) and
-    ``focal_length`` (mm, 36 mm sensor; the distance follows so framing stays, perspective changes).
+    ``zoom`` (1 = the object's bounding sphere spans 80 % of the frame; 2 = twice as large),
+    ``focal_length`` (mm, 36 mm sensor; the distance follows so framing stays, perspective changes)
+    and ``fstop`` (aperture for depth of field, focused on the object's centre; 0 = pinhole).
     """
 
     order = 20
@@ -59,10 +60,12 @@ class Camera(RenderedControl):
         elevation: float = Field(20.0, ge=-90.0, le=90.0)
         zoom: float = Field(1.0, gt=0, le=1e6)
         focal_length: float = Field(50.0, ge=1.0, le=5000.0)
+        fstop: float = Field(0.0, ge=0.0, le=1000.0)
 
     def apply(self, state: SceneState, params: Params) -> None:
         state.azimuth, state.elevation = params.azimuth, params.elevation
         state.zoom, state.focal_length = params.zoom, params.focal_length
+        state.fstop = params.fstop
 
 
 @CONTROLS.register("position")
@@ -78,3 +81,17 @@ class Position(RenderedControl):
 
     def apply(self, state: SceneState, params: Params) -> None:
         state.frame_x, state.frame_y = params.x, params.y
+
+
+@CONTROLS.register("pin_to_ground")
+class PinToGround(RenderedControl):
+    """Sets the object down on a ground plane that catches its shadow (``enabled``), after
+    rotation and scaling, so it rests on its lowest point as on a table."""
+
+    order = 15
+
+    class Params(ControlParams):
+        enabled: bool = False
+
+    def apply(self, state: SceneState, params: Params) -> None:
+        state.pin_to_ground = params.enabled
