@@ -18,6 +18,8 @@ from sweep3d.spec.loader import LoadedSpec
 from sweep3d.stages.infer import infer_stage
 from sweep3d.stages.outcome import StageOutcome
 from sweep3d.stages.plan import Plan, make_plan
+from sweep3d.stages.plan.jobs import History
+from sweep3d.stages.plan.policies import Outcome
 from sweep3d.stages.postprocess import postprocess_stage
 from sweep3d.stages.render import render_stage
 
@@ -37,6 +39,41 @@ class RunResult:
         return next(o for o in self.outcomes if o.stage == stage)
 
 
+def outcomes_by_scene(plan: Plan, store: Store) -> History:
+    """What the model did on each job of ``plan``, per scene, for adaptive policies.
+
+    A job with no valid prediction (its render failed, or the model gave NaN) counts as not
+    failed with zero loss, so the search moves on instead of waiting for it.
+    """
+    con = store.connect()
+    rows: dict[str, tuple] = {}
+    if store.segments("predictions"):
+        keys = list({j.pred_key for j in plan.jobs})
+        rows = {r[0]: r[1:] for r in con.execute(
+            "SELECT pred_key, valid, correct, loss FROM predictions WHERE pred_key IN (SELECT unnest(?))", [keys]
+        ).fetchall()}
+    history: History = {}
+    for job in plan.jobs:
+        valid, correct, loss = rows.get(job.pred_key, (False, None, None))
+        outcome = Outcome(failed=bool(valid and not correct), loss=float(loss) if valid else 0.0)
+        history.setdefault(job.scene, {})[job.point] = outcome
+    return history
+
+
+def _merge(before: list[StageOutcome], now: list[StageOutcome]) -> list[StageOutcome]:
+    """Add up a stage's outcomes over the rounds of an adaptive run (keys cached from an earlier
+    round of the same run count as computed, not cached)."""
+    if not before:
+        return now
+    merged = []
+    for old, new in zip(before, now):
+        merged.append(StageOutcome(
+            old.stage, total=new.total, cached=old.cached, computed=old.computed + new.computed,
+            failed=old.failed + new.failed, skipped=new.skipped, seconds=old.seconds + new.seconds,
+            errors=old.errors + new.errors))
+    return merged
+
+
 def write_jobs(plan: Plan, store: Store) -> None:
     """Record the plan as the experiment's jobs table (what ``results`` joins against)."""
     import pyarrow as pa
@@ -50,12 +87,19 @@ def run(spec: LoadedSpec, console: Console | None = None, wait: float = 0.0) -> 
     started = time.perf_counter()
     started_at = utc_now()
     with store.lock(wait):
-        plan = make_plan(spec)
-        write_jobs(plan, store)
-        result = RunResult(uuid.uuid4().hex[:12], plan)
+        result = RunResult(uuid.uuid4().hex[:12], make_plan(spec))
         with RunProgress(console) as progress:
-            for stage in (render_stage, postprocess_stage, infer_stage):
-                result.outcomes.append(stage(plan, store, progress))
+            history: History = {}
+            while True:  # one pass for fixed policies; one per round for adaptive ones
+                plan = make_plan(spec, result.plan.model_digest, history) if history else result.plan
+                write_jobs(plan, store)
+                outcomes = [stage(plan, store, progress) for stage in (render_stage, postprocess_stage, infer_stage)]
+                result.outcomes = _merge(result.outcomes, outcomes)
+                grown = len(plan.jobs) > len(result.plan.jobs) or not history
+                result.plan = plan
+                if not spec.policy.adaptive or not grown:
+                    break
+                history = outcomes_by_scene(plan, store)
         result.seconds = time.perf_counter() - started
         store.append("runs", [{
             "run_id": result.run_id, "experiment": spec.name, "spec_path": str(spec.path),

@@ -156,3 +156,21 @@ def test_sheet_shows_one_row_per_control(tiny_copy: Path) -> None:
         pixels = np.asarray(sheet.convert("RGB"), dtype=np.float32)
     tiles = [pixels[2 * TILE : 3 * TILE - 14, LABEL_WIDTH + i * TILE : LABEL_WIDTH + (i + 1) * TILE] for i in range(3)]
     assert np.abs(tiles[0] - tiles[1]).mean() > 1 and np.abs(tiles[1] - tiles[2]).mean() > 1  # skins differ
+
+
+ADAPTIVE_SPEC = TINY_SPEC.replace("yaw = [0, 45]", "yaw = { range = [-180, 180] }\npitch = { range = [-90, 90] }").replace(
+    'sigma = [0.0, 1.5]', 'sigma = { range = [0.0, 3.0] }').replace(
+    '[policy]\ntype = "grid"', '[policy]\ntype = "adaptive"\nsamples = 12\ninitial = 4\nbatch = 4')
+
+
+def test_adaptive_policy_runs_rounds_and_resumes_from_the_cache(tmp_path: Path) -> None:
+    spec = write_spec(tmp_path, ADAPTIVE_SPEC)
+    first = run(load_spec(spec))
+    assert first.failed == 0
+    assert len(first.plan.jobs) == 24  # 12 per scene, proposed over 3 rounds
+    assert first.outcome("render").computed == 24
+    again = run(load_spec(spec))  # replays the rounds: every key is cached, same jobs
+    assert again.outcome("render").computed == 0 and again.outcome("infer").computed == 0
+    assert [j.pred_key for j in again.plan.jobs] == [j.pred_key for j in first.plan.jobs]
+    rows = Store(tmp_path / "store").connect("tiny").execute("SELECT count(*) FROM results").fetchone()[0]
+    assert rows == 24

@@ -42,7 +42,7 @@ def check_point(point: Point, shape: SpaceShape) -> None:
 def test_policies_are_registered():
     assert {"grid", "random"} <= set(POLICIES.names())
     assert POLICIES.get("grid") is GridPolicy
-    with pytest.raises(UserError, match="valid: grid, random"):
+    with pytest.raises(UserError, match="valid: adaptive, grid, random, sobol"):
         POLICIES.get("bayesian")
 
 
@@ -254,3 +254,57 @@ def test_sobol_is_reproducible_in_range_and_more_even_than_random() -> None:
     unit = np.array([p.unit for p in points])
     random_unit = np.array([p.unit for p in rand.points(shape, seed=5)])
     assert qmc.discrepancy(unit) < qmc.discrepancy(random_unit)
+
+
+def _adaptive(**kw):
+    from sweep3d.stages.plan.policies import POLICIES
+
+    cls = POLICIES.get("adaptive")
+    return cls(cls.Params(**kw))
+
+
+def _evaluate(points, fails):
+    from sweep3d.stages.plan.policies import Outcome
+
+    return {p: Outcome(failed=fails(p), loss=float(fails(p))) for p in points}
+
+
+def test_adaptive_rounds_extend_a_fixed_prefix_and_stop_at_the_budget() -> None:
+    policy = _adaptive(samples=40, initial=8, batch=8)
+    shape = SpaceShape(2, (3,))
+    fails = lambda p: p.unit[0] > 0.8  # noqa: E731  (a failure region: the top fifth of dim 0)
+    history: dict = {}
+    seen: list = []
+    for _ in range(10):
+        points = policy.points(shape, seed=3, history=history)
+        assert points[: len(seen)] == seen, "earlier rounds never change"
+        if len(points) == len(seen):
+            break
+        seen = points
+        history = _evaluate(points, fails)
+    assert len(seen) == 40 and len(set(seen)) == 40
+    assert all(0 <= u <= 1 for p in seen for u in p.unit) and all(0 <= p.choice[0] < 3 for p in seen)
+    assert policy.points(shape, seed=3, history=history) == seen  # pure function of its inputs
+
+
+def test_adaptive_concentrates_samples_where_the_model_fails() -> None:
+    shape = SpaceShape(2, ())
+    fails = lambda p: p.unit[0] > 0.8 and p.unit[1] < 0.3  # noqa: E731  (6 % of the square)
+    history: dict = {}
+    policy = _adaptive(samples=96, initial=16, batch=16)
+    for _ in range(10):
+        points = policy.points(shape, seed=11, history=history)
+        history = _evaluate(points, fails)
+    later = points[16:]
+    assert sum(map(fails, later)) / len(later) > 0.3  # versus 0.06 for uniform sampling
+
+
+def test_adaptive_wraps_periodic_dims_instead_of_clipping() -> None:
+    shape = SpaceShape(1, (), wraps=(True,))
+    fails = lambda p: p.unit[0] > 0.97 or p.unit[0] < 0.03  # noqa: E731
+    history: dict = {}
+    policy = _adaptive(samples=64, initial=16, batch=16, radius=0.2)
+    for _ in range(6):
+        points = policy.points(shape, seed=2, history=history)
+        history = _evaluate(points, fails)
+    assert not any(p.unit[0] in (0.0, 1.0) for p in points[16:])  # clipping would pile points on the ends

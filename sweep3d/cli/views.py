@@ -52,6 +52,9 @@ def print_plan(console: Console, spec: LoadedSpec) -> None:
         total += seconds
         table.add_row(stage, str(needed), str(cached), str(needed - cached), _duration(seconds))
     console.print(table)
+    if spec.policy.adaptive:
+        console.print(f"adaptive policy: this is its first round; it proposes up to "
+                      f"{spec.policy.params.samples} jobs per scene as results come in")
     console.print(f"estimated time: {_duration(total)} (plus ~5 s start-up when anything needs rendering)")
 
 
@@ -67,6 +70,24 @@ def print_run(console: Console, result) -> None:
         if len(o.errors) > 3:
             console.print(f"[red]... and {len(o.errors) - 3} more {o.stage} errors[/]")
     console.print(f"{len(result.plan.jobs)} jobs in {result.seconds:.1f} s (run {result.run_id})")
+    print_findings(console, result.plan)
+
+
+def print_findings(console: Console, plan: Plan) -> None:
+    """Accuracy and where the model fails most (the weakest control values)."""
+    from sweep3d.stages.aggregate import summarise, weakest_regions
+
+    con = Store(plan.spec.store).connect(plan.spec.name)
+    summary = summarise(con, plan.columns)
+    if summary.accuracy is None:
+        return
+    console.print(f"accuracy {summary.accuracy:.1%} ({summary.correct} of {summary.evaluated - summary.invalid}); "
+                  f"{summary.evaluated - summary.invalid - summary.correct} failures"
+                  + (f", {summary.invalid} invalid (NaN/inf) excluded" if summary.invalid else ""))
+    regions = weakest_regions(summary)
+    if regions:
+        console.print("fails most at: " + "; ".join(
+            f"{escape(r.column)} = {escape(r.label)} ({r.accuracy:.0%} of {r.count})" for r in regions))
 
 
 def _duration(seconds: float) -> str:

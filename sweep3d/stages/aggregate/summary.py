@@ -122,3 +122,21 @@ def _fmt(value: Any) -> str:
     if isinstance(value, float):
         return f"{value:.4g}"
     return str(value)
+
+
+@dataclass(frozen=True)
+class Region:
+    """One control parameter's value (or bin) and how the model did there."""
+
+    column: str
+    label: str
+    accuracy: float
+    count: int
+
+
+def weakest_regions(summary: Summary, min_count: int = 3, top: int = 3) -> list[Region]:
+    """The parameter values with the lowest accuracy, each supported by ``min_count`` results."""
+    regions = [Region(e.column, label, acc, n)
+               for e in summary.effects for label, acc, n in zip(e.labels, e.accuracy, e.count)
+               if n >= min_count and acc is not None]
+    return sorted(regions, key=lambda r: (r.accuracy, -r.count))[:top]

@@ -16,7 +16,8 @@ from typing import Any
 
 from sweep3d.cache.keys import digest, file_digest
 from sweep3d.spec.loader import ControlInstance, LoadedSpec
-from sweep3d.spec.space import SearchSpace
+from sweep3d.spec.space import Point, SearchSpace
+from sweep3d.stages.plan.policies import Outcome
 
 RENDER_STAGE_VERSION = 1
 POST_STAGE_VERSION = 1
@@ -32,6 +33,7 @@ class Job:
     render_key: str
     image_key: str
     pred_key: str
+    point: Point | None = None  # where the policy put it (for policies that learn from results)
 
     @property
     def scene(self) -> tuple[str, str]:
@@ -61,8 +63,17 @@ class Plan:
         return out
 
 
-def make_plan(spec: LoadedSpec, model_digest: str | None = None) -> Plan:
-    """Expand ``spec`` into jobs, sorted by scene so workers reload as little as possible."""
+#: What an adaptive policy learns per scene: the outcome of each point already evaluated.
+History = dict[tuple[str, str], dict[Point, Outcome]]
+
+
+def make_plan(spec: LoadedSpec, model_digest: str | None = None, history: History | None = None) -> Plan:
+    """Expand ``spec`` into jobs, sorted by scene so workers reload as little as possible.
+
+    Args:
+        history: for adaptive policies, the outcomes so far per (object, environment); the
+            policy then proposes its next round on top of the points already evaluated.
+    """
     from sweep3d.stages.infer.models import model_digest as compute_model_digest
     from sweep3d.stages.render.assets import blender_version, mesh_digest
 
@@ -87,7 +98,11 @@ def make_plan(spec: LoadedSpec, model_digest: str | None = None) -> Plan:
             scene_controls = [c for c in spec.controls if c.applies_to(obj.name, env.name)]
             space = SearchSpace(scene_controls)
             seed = int(digest([s.experiment.seed, obj.name, env.name])[:15], 16)
-            for point in spec.policy.points(space.shape, seed):
+            if spec.policy.adaptive:
+                points = spec.policy.points(space.shape, seed, (history or {}).get((obj.name, env.name), {}))
+            else:
+                points = spec.policy.points(space.shape, seed)
+            for point in points:
                 values = space.values(point)
                 params = {c.id: c.control.params(values[c.id]).model_dump() for c in scene_controls}
                 render_key = digest({**render_base, "object": object_digest, "environment": env_part,
@@ -101,7 +116,7 @@ def make_plan(spec: LoadedSpec, model_digest: str | None = None) -> Plan:
                                         "controls": post_parts, "seed": s.experiment.seed if stochastic else None})
                 pred_key = digest({"stage": "infer", "v": INFER_STAGE_VERSION, "image": image_key,
                                    "model": model_digest, "evaluator": evaluator, "truth": truth})
-                jobs.append(Job(len(jobs), obj.name, env.name, params, render_key, image_key, pred_key))
+                jobs.append(Job(len(jobs), obj.name, env.name, params, render_key, image_key, pred_key, point))
     return Plan(spec, jobs, model_digest, columns)
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
@@ -16,10 +17,24 @@ class PolicyParams(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
 
+@dataclass(frozen=True)
+class Outcome:
+    """What the model did on one evaluated point."""
+
+    failed: bool
+    loss: float
+
+
 class Policy:
-    """Base of every policy: ``points`` must be a pure function of the shape and the seed."""
+    """Base of every policy: ``points`` must be a pure function of the shape and the seed.
+
+    An *adaptive* policy also receives the outcomes of the points it proposed before
+    (``history``) and returns them followed by its next round; the pipeline calls it until it
+    proposes nothing new. The result must stay a pure function of (shape, seed, history).
+    """
 
     Params: ClassVar[type[PolicyParams]] = PolicyParams
+    adaptive: ClassVar[bool] = False
 
     def __init__(self, params: PolicyParams) -> None:
         self.params = params
@@ -92,3 +107,67 @@ class SobolPolicy(Policy):
             unit = qmc.Sobol(d=dims, scramble=True, seed=np.random.default_rng(seed)).random(n)
         choice = [np.minimum((unit[:, k + j] * size).astype(int), size - 1) for j, size in enumerate(shape.choice_sizes)]
         return [Point(tuple(float(u) for u in unit[i, :k]), tuple(int(c[i]) for c in choice)) for i in range(n)]
+
+
+@POLICIES.register("adaptive")
+class AdaptivePolicy(Policy):
+    """Failure search under a budget of ``samples`` points per scene.
+
+    Starts with ``initial`` Sobol points; each later round proposes ``batch`` points, most of
+    them perturbations of the failures found so far (Gaussian, ``radius`` in unit-cube units,
+    shrinking by ``shrink`` each round; lists switch option with probability ``switch``) and
+    an ``explore`` share of fresh random points so unseen regions still get looked at. With no
+    failure yet, it refines around the points with the highest loss.
+    """
+
+    adaptive = True
+
+    class Params(PolicyParams):
+        samples: int = Field(64, ge=1, le=1_000_000)
+        initial: int = Field(16, ge=1, le=1_000_000)
+        batch: int = Field(16, ge=1, le=1_000_000)
+        radius: float = Field(0.12, gt=0.0, le=1.0)
+        shrink: float = Field(0.8, gt=0.0, le=1.0)
+        switch: float = Field(0.2, ge=0.0, le=1.0)
+        explore: float = Field(0.25, ge=0.0, le=1.0)
+
+    def points(self, shape: SpaceShape, seed: int, history: dict[Point, Outcome] | None = None) -> list[Point]:
+        p = self.params
+        history = history or {}
+        first = SobolPolicy(SobolPolicy.Params(samples=min(p.initial, p.samples))).points(shape, seed)
+        points = list(dict.fromkeys(first))
+        round_index = 1
+        while len(points) < p.samples and all(q in history for q in points):
+            rng = np.random.default_rng([seed, round_index])
+            wanted = min(p.batch, p.samples - len(points))
+            new = self._round(shape, points, history, rng, wanted, p.radius * p.shrink ** (round_index - 1))
+            fresh = [q for q in dict.fromkeys(new) if q not in set(points)]
+            if not fresh:
+                break
+            points += fresh
+            round_index += 1
+        return points
+
+    def _round(self, shape: SpaceShape, points: list[Point], history: dict[Point, Outcome],
+               rng: np.random.Generator, n: int, radius: float) -> list[Point]:
+        failures = [q for q in points if history[q].failed]
+        parents = failures or sorted(points, key=lambda q: -history[q].loss)[: max(1, len(points) // 4)]
+        n_explore = int(round(n * self.params.explore)) if failures else n // 2
+        out = []
+        for i in range(n):
+            if i < n - n_explore:
+                parent = parents[int(rng.integers(len(parents)))]
+                out.append(self._perturb(shape, parent, rng, radius))
+            else:
+                unit = tuple(float(u) for u in rng.random(shape.n_continuous))
+                out.append(Point(unit, tuple(int(rng.integers(size)) for size in shape.choice_sizes)))
+        return out
+
+    def _perturb(self, shape: SpaceShape, parent: Point, rng: np.random.Generator, radius: float) -> Point:
+        unit = []
+        for d, u in enumerate(parent.unit):
+            v = u + rng.normal(0.0, radius)
+            unit.append(float(v % 1.0) if shape.wrapping(d) else float(min(max(v, 0.0), 1.0)))
+        choice = tuple(int(rng.integers(size)) if rng.random() < self.params.switch else c
+                       for c, size in zip(parent.choice, shape.choice_sizes))
+        return Point(tuple(unit), choice)
