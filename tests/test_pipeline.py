@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -17,7 +18,7 @@ from sweep3d.cache.store import Store
 from sweep3d.cli import app
 from sweep3d.pipeline import run
 from sweep3d.spec import load_spec
-from tests.conftest import TINY_SPEC, write_spec
+from tests.conftest import REPO, TINY_SPEC, write_cube, write_spec
 
 pytestmark = pytest.mark.slow
 
@@ -174,3 +175,19 @@ def test_adaptive_policy_runs_rounds_and_resumes_from_the_cache(tmp_path: Path) 
     assert [j.pred_key for j in again.plan.jobs] == [j.pred_key for j in first.plan.jobs]
     rows = Store(tmp_path / "store").connect("tiny").execute("SELECT count(*) FROM results").fetchone()[0]
     assert rows == 24
+
+
+def test_the_all_controls_spec_renders_every_control_without_error(tmp_path: Path) -> None:
+    from sweep3d.controls import CONTROLS
+
+    text = (REPO / "specs" / "all_controls.toml").read_text()
+    listed = set(re.findall(r"^type\s*=\s*\"(\w+)\"", text.split("[policy]")[0], re.M))
+    assert listed == set(CONTROLS.names()), "specs/all_controls.toml must use every built-in control"
+    text = (text.replace("resolution = 224", "resolution = 32").replace("samples    = 4", "samples    = 1")
+            .replace('store = "../.sweep3d"', 'store = "store"').replace("samples = 64", "samples = 12"))
+    spec = tmp_path / "all.toml"
+    write_cube(tmp_path)
+    spec.write_text(re.sub(r'mesh\s*=\s*".*"', 'mesh = "cube.obj"', text))
+    result = run(load_spec(spec))
+    assert result.failed == 0, [e for o in result.outcomes for e in o.errors]
+    assert result.outcome("render").computed == 12 and result.outcome("infer").computed == 12
