@@ -14,6 +14,7 @@ from sweep3d.spec import Choice, ControlInstance, Fixed, Range
 from sweep3d.spec.space import Point, SearchSpace, SpaceShape
 from sweep3d.stages.plan.policies import POLICIES, GridPolicy, RandomPolicy
 from sweep3d.stages.render.controls import Camera, Orientation
+from tests.conftest import TINY_SPEC
 
 FAST = settings(max_examples=120, deadline=None)
 
@@ -217,27 +218,11 @@ def test_grid_over_a_full_turn_does_not_repeat_its_end(tmp_path) -> None:
     assert max(j.values["orientation"]["yaw"] for j in half.jobs) == 180.0  # a partial range keeps both ends
 
 
-TINY_FULL_TURN = """\
-[experiment]
-name = "turn"
-
-[[objects]]
-name = "box"
-mesh = "cube.obj"
-labels = ["carton"]
-
-[[environments]]
-name = "white"
-color = [1.0, 1.0, 1.0]
-
-[[controls]]
-type = "orientation"
-yaw = { range = [-180, 180] }
-
-[policy]
-type = "grid"
-samples_per_dim = 6
-"""
+TINY_FULL_TURN = (
+    TINY_SPEC.replace("yaw = [0, 45]", "yaw = { range = [-180, 180] }")
+    .replace("sigma = [0.0, 1.5]", "sigma = 0.0")
+    .replace('[policy]\ntype = "grid"', '[policy]\ntype = "grid"\nsamples_per_dim = 6')
+)
 
 
 def test_sobol_is_reproducible_in_range_and_more_even_than_random() -> None:
