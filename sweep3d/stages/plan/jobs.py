@@ -95,6 +95,8 @@ def make_plan(spec: LoadedSpec, model_digest: str | None = None, history: Histor
             hdri = spec.hdris[env.name]
             env_part = {"hdri": file_digest(hdri) if hdri else None,
                         "color": list(env.color) if env.color else None, "strength": env.strength}
+            # Everything of the render key that is fixed for the scene, hashed once.
+            scene_key = digest({**render_base, "object": object_digest, "environment": env_part})
             scene_controls = [c for c in spec.controls if c.applies_to(obj.name, env.name)]
             space = SearchSpace(scene_controls)
             seed = int(digest([s.experiment.seed, obj.name, env.name])[:15], 16)
@@ -105,8 +107,7 @@ def make_plan(spec: LoadedSpec, model_digest: str | None = None, history: Histor
             for point in points:
                 values = space.values(point)
                 params = {c.id: c.control.params(values[c.id]).model_dump() for c in scene_controls}
-                render_key = digest({**render_base, "object": object_digest, "environment": env_part,
-                                     "controls": _key_parts(rendered, params)})
+                render_key = digest({"scene": scene_key, "controls": _key_parts(rendered, params)})
                 post_parts = _key_parts(post, params)
                 image_key = render_key
                 if post_parts:
