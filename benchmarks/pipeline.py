@@ -1,0 +1,281 @@
+"""Pipeline benchmarks (issue 4), measured in one run and printed as one table.
+
+1. Render throughput of `sweep3d run` against a bare bpy render loop at the same settings.
+2. Against one Blender process per render (3DB-style cold start).
+3. A no-op rerun of 10 000 cached jobs.
+4. Share of wall time in render / postprocess / infer / store I/O.
+5. Peak memory per render worker (and of the parent, which holds the model).
+
+    .venv/bin/python benchmarks/pipeline.py [--renders 40] [--cold 4] [--cached 10000]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+import textwrap
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+from rich.console import Console
+from rich.table import Table
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+MESH = "/usr/share/sweethome3d/furniture/BlendSwap-CC-0.sh3f#blendswap-cc-0/basketball/basketball.obj"
+SETTINGS = {"resolution": 224, "samples": 4}
+
+SPEC = f"""
+[experiment]
+name = "bench"
+store = "store"
+
+[render]
+resolution = {SETTINGS['resolution']}
+samples = {SETTINGS['samples']}
+
+[[objects]]
+name = "basketball"
+mesh = "{MESH}"
+labels = ["basketball"]
+
+[[environments]]
+name = "forest"
+hdri = "builtin:forest"
+
+[[controls]]
+type = "orientation"
+yaw = {{ range = [-180, 180] }}
+
+[policy]
+type = "grid"
+samples_per_dim = {{n}}
+"""
+
+# A hand-written bpy loop: what a careful user would write without sweep3d (same scene, same settings).
+BARE = textwrap.dedent("""
+    import json, math, os, sys, time, zipfile
+    t0 = time.perf_counter()
+    import bpy
+    n, hdri, archive, member, out = int(sys.argv[1]), sys.argv[2], sys.argv[3], sys.argv[4], sys.argv[5]
+    folder = out + "/mesh"
+    with zipfile.ZipFile(archive) as zf:
+        for name in zf.namelist():
+            if name.startswith(member.rsplit("/", 1)[0] + "/") and not name.endswith("/"):
+                zf.extract(name, folder)
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    scene.render.engine = "CYCLES"
+    c = scene.cycles
+    c.device, c.samples, c.use_adaptive_sampling, c.use_denoising = "CPU", 4, False, True
+    c.denoiser, c.denoising_prefilter = "OPENIMAGEDENOISE", "FAST"
+    c.max_bounces = 8  # sweep3d's default
+    scene.render.image_settings.compression = 0
+    scene.render.resolution_x = scene.render.resolution_y = 224
+    scene.render.use_persistent_data = True
+    scene.render.threads_mode, scene.render.threads = "FIXED", os.cpu_count()
+    scene.view_settings.view_transform = "Standard"
+    scene.render.image_settings.file_format = "PNG"
+    bpy.ops.wm.obj_import(filepath=folder + "/" + member)
+    obj = bpy.context.selected_objects[0]
+    # Frame it as sweep3d does: centred, unit bounding sphere spanning 80 % of the frame, 20° up.
+    corners = [obj.matrix_world @ __import__("mathutils").Vector(c) for c in obj.bound_box]
+    centre = sum(corners, __import__("mathutils").Vector()) / 8
+    radius = max((v - centre).length for v in obj.data.vertices and [obj.matrix_world @ v.co for v in obj.data.vertices])
+    obj.location -= centre
+    obj.scale = [s / radius for s in obj.scale]
+    obj.location /= radius
+    cam = bpy.data.objects.new("cam", bpy.data.cameras.new("cam"))
+    scene.collection.objects.link(cam)
+    scene.camera = cam
+    d = 1 / (0.8 * math.sin(math.atan(18 / 50)))
+    cam.location = (0, -d * math.cos(math.radians(20)), d * math.sin(math.radians(20)))
+    cam.rotation_euler = (math.radians(70), 0, 0)
+    world = bpy.data.worlds.new("w"); scene.world = world; world.use_nodes = True
+    env = world.node_tree.nodes.new("ShaderNodeTexEnvironment")
+    env.image = bpy.data.images.load(hdri)
+    world.node_tree.links.new(env.outputs["Color"], world.node_tree.nodes["Background"].inputs["Color"])
+    t1 = time.perf_counter()
+    devnull = os.open(os.devnull, os.O_WRONLY); saved = os.dup(1); os.dup2(devnull, 1)
+    for i in range(n):
+        obj.rotation_euler[2] = 2 * math.pi * i / max(n, 1)
+        scene.render.filepath = f"{out}/frame{i}.png"
+        bpy.ops.render.render(write_still=True)
+    os.dup2(saved, 1)
+    t2 = time.perf_counter()
+    print(json.dumps({"setup": t1 - t0, "loop": t2 - t1}))
+""")
+
+
+def bare_loop(n: int, scratch: Path) -> dict:
+    """Seconds of a bare bpy loop of ``n`` renders in one process (import + setup, loop)."""
+    from sweep3d.stages.render.assets import builtin_hdris
+
+    archive, member = MESH.split("#")
+    started = time.perf_counter()
+    out = subprocess.run([sys.executable, "-c", BARE, str(n), str(builtin_hdris()["forest"]), archive, member,
+                          str(scratch)], capture_output=True, text=True, check=True)
+    timing = json.loads(out.stdout.strip().splitlines()[-1])
+    timing["wall"] = time.perf_counter() - started
+    return timing
+
+
+def cold_start(n: int, scratch: Path) -> float:
+    """Seconds per image when each render starts its own Blender process."""
+    started = time.perf_counter()
+    for i in range(n):
+        bare_loop(1, scratch / f"cold{i}")
+    return (time.perf_counter() - started) / n
+
+
+class MemoryWatch(threading.Thread):
+    """Polls the peak resident memory (VmHWM) of this process's children while a run goes on."""
+
+    def __init__(self) -> None:
+        super().__init__(daemon=True)
+        self.peaks: dict[int, int] = {}
+        self.stop = threading.Event()
+
+    def run(self) -> None:
+        import multiprocessing
+
+        while not self.stop.is_set():
+            for child in multiprocessing.active_children():
+                try:
+                    status = Path(f"/proc/{child.pid}/status").read_text()
+                except OSError:
+                    continue
+                for line in status.splitlines():
+                    if line.startswith("VmHWM"):  # absent once the process is a zombie
+                        self.peaks[child.pid] = max(self.peaks.get(child.pid, 0), int(line.split()[1]))
+            time.sleep(0.05)
+
+
+def pipeline(n: int, folder: Path) -> dict:
+    """Run the spec through sweep3d in this process: stage times, store I/O time, memory."""
+    import resource
+
+    from sweep3d.cache import store as store_module
+    from sweep3d.pipeline import run
+    from sweep3d.spec import load_spec
+
+    io = {"seconds": 0.0}
+
+    def timed(fn):
+        def wrapper(*args, **kwargs):
+            t = time.perf_counter()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                io["seconds"] += time.perf_counter() - t
+        return wrapper
+
+    for name in ("append", "keys", "write_table_file"):  # benchmark-only instrumentation
+        setattr(store_module.Store, name, timed(getattr(store_module.Store, name)))
+    store_module.atomic_write = timed(store_module.atomic_write)
+    (folder / "spec.toml").write_text(SPEC.replace("{n}", str(n)))  # a full turn: n distinct yaws
+    watch = MemoryWatch()
+    watch.start()
+    started = time.perf_counter()
+    result = run(load_spec(folder / "spec.toml"))
+    wall = time.perf_counter() - started
+    watch.stop.set()
+    assert result.failed == 0 and result.outcome("render").computed == n, result.outcomes
+    stages = {o.stage: o.seconds for o in result.outcomes}
+    return {"wall": wall, "stages": stages, "store_io": io["seconds"],
+            "worker_peak_mb": max(watch.peaks.values(), default=0) / 1024,
+            "parent_peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
+
+
+def noop_rerun(n: int, folder: Path) -> dict:
+    """Seconds for `sweep3d run` when all ``n`` jobs are cached (rows synthesised, blobs tiny)."""
+    from sweep3d.cache.store import Store, atomic_write, utc_now
+    from sweep3d.pixels import encode_png
+    from sweep3d.spec import load_spec
+    from sweep3d.stages.infer import ClassificationEvaluator
+    from sweep3d.stages.infer.stage import predictions_schema
+    from sweep3d.stages.plan import make_plan
+
+    (folder / "cube.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    spec = SPEC.replace(MESH, "cube.obj").replace('samples_per_dim = {n}', "").replace(
+        'type = "grid"', f'type = "random"\nsamples = {n}').replace('yaw = {', 'pitch = { range = [-90, 90] }\nyaw = {')
+    (folder / "spec.toml").write_text(spec)
+    plan = make_plan(load_spec(folder / "spec.toml"))
+    store = Store(folder / "store")
+    png = encode_png(np.zeros((8, 8, 3), np.float32))
+    now = utc_now()
+    for job in plan.jobs:
+        atomic_write(store.blob_path(job.render_key), png)
+    store.append("renders", [{"render_key": j.render_key, "width": 8, "height": 8, "valid": True, "seconds": 0.0,
+                              "created_at": now} for j in plan.jobs])
+    schema = predictions_schema(ClassificationEvaluator())
+    store.append("predictions", [{"pred_key": j.pred_key, "image_key": j.image_key, "model": "m", "valid": True,
+                                  "correct": True, "top1_label": "basketball", "loss": 0.1, "created_at": now}
+                                 for j in plan.jobs], schema)
+    started = time.perf_counter()
+    out = subprocess.run([sys.executable, "-m", "sweep3d", "run", "spec.toml", "--no-report"], cwd=folder,
+                         capture_output=True, text=True)
+    wall = time.perf_counter() - started
+    assert out.returncode == 0 and f"{n} jobs" in out.stdout, out.stdout + out.stderr
+    return {"jobs": len(plan.jobs), "wall": wall}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--renders", type=int, default=40, help="renders in the throughput comparison")
+    parser.add_argument("--cold", type=int, default=4, help="renders for the one-process-per-render baseline")
+    parser.add_argument("--cached", type=int, default=10_000, help="jobs in the no-op rerun")
+    args = parser.parse_args()
+    console = Console()
+    with tempfile.TemporaryDirectory(prefix="sweep3d-bench-", dir="/dev/shm" if Path("/dev/shm").is_dir() else None) as tmp:
+        tmp = Path(tmp)
+        for sub in ("bare", "cold", "pipe", "noop"):
+            (tmp / sub).mkdir()
+        console.print("bare bpy loop ...")
+        bare = bare_loop(args.renders, tmp / "bare")
+        console.print("one process per render ...")
+        cold = cold_start(args.cold, tmp / "cold")
+        console.print("sweep3d run ...")
+        pipe = pipeline(args.renders, tmp / "pipe")
+        console.print("no-op rerun ...")
+        noop = noop_rerun(args.cached, tmp / "noop")
+
+    n = args.renders
+    bare_rate = n / bare["wall"]
+    bare_loop_rate = n / bare["loop"]
+    render_rate = n / pipe["stages"]["render"]
+    e2e_rate = n / pipe["wall"]
+    table = Table(title=f"sweep3d pipeline benchmarks ({n} renders at {SETTINGS['resolution']}², "
+                        f"{SETTINGS['samples']} spp + OIDN fast, one scene)")
+    for column in ("measure", "value", "target", "met"):
+        table.add_column(column, justify="right" if column != "measure" else "left")
+
+    def row(name: str, value: str, target: str = "", met: bool | None = None) -> None:
+        table.add_row(name, value, target, "" if met is None else ("yes" if met else "NO"))
+
+    row("bare bpy loop, whole process (img/s)", f"{bare_rate:.2f}")
+    row("bare bpy loop, render loop only (img/s)", f"{bare_loop_rate:.2f}")
+    row("sweep3d render stage (img/s)", f"{render_rate:.2f}")
+    row("1. render stage / bare process", f"{render_rate / bare_rate:.2f}", "≥ 0.85", render_rate / bare_rate >= 0.85)
+    row("   render stage / bare loop only", f"{render_rate / bare_loop_rate:.2f}")
+    row("   whole run incl. model load + inference (img/s)", f"{e2e_rate:.2f}")
+    row("2. render stage / one process per render", f"{render_rate * cold:.1f}×", "≥ 5×", render_rate * cold >= 5)
+    row(f"3. no-op rerun of {noop['jobs']:,} cached jobs (s, CLI wall)", f"{noop['wall']:.2f}", "≤ 5", noop["wall"] <= 5)
+    total = pipe["wall"]
+    for stage in ("render", "postprocess", "infer"):
+        row(f"4. share of wall: {stage}", f"{pipe['stages'][stage] / total:.0%}")
+    row("4. share of wall: store I/O (inside the stages)", f"{pipe['store_io'] / total:.1%}")
+    row("4. share of wall: plan, start-up, other", f"{1 - sum(pipe['stages'].values()) / total:.0%}")
+    row("5. peak memory per render worker (MB)", f"{pipe['worker_peak_mb']:.0f}")
+    row("5. peak memory of the parent (MB, model + store)", f"{pipe['parent_peak_mb']:.0f}")
+    console.print(table)
+
+
+if __name__ == "__main__":
+    main()
