@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from sweep3d.stages.render._rna import assign
 from sweep3d.stages.render.state import SceneState
 
 OCCLUDER_DEPTH = 0.5  # the plate sits at this fraction of the way from camera to object
@@ -57,7 +58,7 @@ class PropsView:
     def sync_occluder(self, state: SceneState) -> None:
         """Place a grey plate, facing the camera, over ``coverage`` of the object's projected disc."""
         occ = state.occluder
-        self.occluder.hide_render = occ is None
+        assign(self.occluder, "hide_render", occ is None)
         if occ is None:
             return
         position, right, up, forward = state.camera_basis()
@@ -76,11 +77,11 @@ class PropsView:
         rotation = Matrix([list(right), list(up), list(-forward)]).transposed().to_4x4()
         self.occluder.matrix_world = Matrix.Translation(plate_centre) @ rotation @ Matrix.Diagonal((half, half, 1, 1))
         bsdf = self.occluder.data.materials[0].node_tree.nodes["Principled BSDF"]
-        bsdf.inputs["Base Color"].default_value = (occ.grey, occ.grey, occ.grey, 1.0)
+        assign(bsdf.inputs["Base Color"], "default_value", (occ.grey, occ.grey, occ.grey, 1.0))
 
     def sync_ground(self, state: SceneState, lowest_z: float | None) -> None:
         """A large shadow catcher under the object's lowest point (when pinned to the ground)."""
-        self.ground.hide_render = not state.pin_to_ground or lowest_z is None
+        assign(self.ground, "hide_render", not state.pin_to_ground or lowest_z is None)
         if not self.ground.hide_render:
             size = 50.0 * max(state.scale, 1.0)
             self.ground.location = (0.0, 0.0, lowest_z)

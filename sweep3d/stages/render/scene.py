@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from sweep3d.errors import UserError
+from sweep3d.stages.render._rna import assign
 from sweep3d.stages.render._bpy import import_bpy
 from sweep3d.stages.render.props import PropsView
 from sweep3d.stages.render.skins import SkinView
@@ -157,26 +158,25 @@ class BlenderScene:
         self.pose.scale = (state.scale,) * 3
         self.pose.location = tuple(state.object_location())
         position, right, up, forward = state.camera_basis()
-        self.camera.data.lens = state.focal_length
+        assign(self.camera.data, "lens", state.focal_length)
         from mathutils import Matrix  # noqa: PLC0415  (ships with bpy)
 
         rotation = Matrix([list(right), list(up), list(-forward)]).transposed()
         self.camera.matrix_world = Matrix.Translation(position) @ rotation.to_4x4()
         distance = state.camera_distance()
-        self.camera.data.clip_start = max(distance * 1e-4, 1e-6)
-        self.camera.data.clip_end = distance + 1e3 * max(state.scale, 1.0)
+        assign(self.camera.data, "clip_start", max(distance * 1e-4, 1e-6))
+        assign(self.camera.data, "clip_end", distance + 1e3 * max(state.scale, 1.0))
         dof = self.camera.data.dof
-        dof.use_dof = state.fstop > 0
+        assign(dof, "use_dof", state.fstop > 0)
         if dof.use_dof:
-            dof.aperture_fstop = state.fstop
-            dof.focus_distance = float(np.linalg.norm(state.object_location() - position))
+            assign(dof, "aperture_fstop", state.fstop)
+            assign(dof, "focus_distance", float(np.linalg.norm(state.object_location() - position)))
         denoise = self.settings["denoise"] if state.denoise is None else state.denoise
-        if self.scene.cycles.use_denoising != denoise:
-            self.scene.cycles.use_denoising = denoise
+        assign(self.scene.cycles, "use_denoising", denoise)
         env = self.environment
         self.world.sync(env, state)
         self.background = state.background or (tuple(env["color"]) if env.get("color") and state.sky is None else None)
-        self.scene.render.film_transparent = self.background is not None
+        assign(self.scene.render, "film_transparent", self.background is not None)
         self.skins.sync(state.skin, state.skin_scale, state.skin_image)
         self.props.sync_lights(state)
         self.props.sync_occluder(state)

@@ -11,6 +11,7 @@ import math
 from typing import Any
 
 from sweep3d.errors import UserError
+from sweep3d.stages.render._rna import assign
 from sweep3d.stages.render.state import SceneState
 
 
@@ -31,14 +32,11 @@ class WorldView:
         if sky is not None:
             strength = sky.strength * state.world_strength
             node = self.nodes["sky"]
-            _set(node, "sun_elevation", math.radians(sky.sun_elevation))
-            _set(node, "sun_rotation", math.radians(sky.sun_azimuth))
+            assign(node, "sun_elevation", math.radians(sky.sun_elevation))
+            assign(node, "sun_rotation", math.radians(sky.sun_azimuth))
         if "mapping" in self.nodes:
-            rotation = self.nodes["mapping"].inputs["Rotation"]
-            target = (0.0, 0.0, math.radians(state.world_rotation))
-            if tuple(rotation.default_value) != target:
-                rotation.default_value = target
-        _set(self.nodes["background"].inputs["Strength"], "default_value", strength)
+            assign(self.nodes["mapping"].inputs["Rotation"], "default_value", (0.0, 0.0, math.radians(state.world_rotation)))
+        assign(self.nodes["background"].inputs["Strength"], "default_value", strength)
 
     def _build(self, structure: tuple, env: dict[str, Any]) -> None:
         self.world.use_nodes = True
@@ -70,9 +68,3 @@ class WorldView:
         else:
             # A plain background is composited after rendering; the world only lights the object.
             background.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
-
-
-def _set(target, name: str, value) -> None:
-    """Assign only when the value differs (any assignment re-tags the world for an update)."""
-    if getattr(target, name) != value:
-        setattr(target, name, value)
