@@ -81,3 +81,20 @@ def _names(n: int):
     from sweep3d.stages.infer import LabelMap
 
     return LabelMap([[f"c{i}"] for i in range(n)])
+
+
+def test_onnx_backend_agrees_with_torch(lite0, tmp_path) -> None:
+    from skimage import data
+
+    from sweep3d.stages.infer.onnx_backend import OnnxRunner
+
+    runner = OnnxRunner(lite0, tmp_path, "lite0", threads=2)
+    assert (tmp_path / "lite0.onnx").is_file() and (tmp_path / "lite0.checked").is_file()
+    coffee = data.coffee().astype(np.float32) / 255.0
+    images = np.stack([coffee, coffee[::-1], coffee[:, ::-1]])
+    torch_logits = predict(lite0, images)
+    onnx_logits = predict(lite0, images, runner)
+    assert np.array_equal(torch_logits.argmax(1), onnx_logits.argmax(1))
+    assert np.abs(torch_logits - onnx_logits).max() < 1e-3
+    again = OnnxRunner(lite0, tmp_path, "lite0", threads=2)  # reuses the checked export
+    assert np.allclose(again(lite0.preprocess(images)), onnx_logits)

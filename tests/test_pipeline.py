@@ -191,3 +191,12 @@ def test_the_all_controls_spec_renders_every_control_without_error(tmp_path: Pat
     result = run(load_spec(spec))
     assert result.failed == 0, [e for o in result.outcomes for e in o.errors]
     assert result.outcome("render").computed == 12 and result.outcome("infer").computed == 12
+
+
+def test_onnx_backend_reinfers_but_renders_nothing_and_agrees(tiny_copy: Path) -> None:
+    con = Store(tiny_copy / "store").connect("tiny")
+    torch_rows = con.execute("SELECT job, top1_label, correct FROM results ORDER BY job").fetchall()
+    edit_spec(tiny_copy, "[model]\n", '[model]\nbackend = "onnx"\n')
+    assert computed(tiny_copy) == {"render": 0, "postprocess": 0, "infer": 8}
+    con = Store(tiny_copy / "store").connect("tiny")
+    assert con.execute("SELECT job, top1_label, correct FROM results ORDER BY job").fetchall() == torch_rows

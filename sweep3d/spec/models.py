@@ -51,6 +51,7 @@ class RenderSpec(StrictModel):
 
 class ModelSpec(StrictModel):
     name: str = Field("efficientnet-lite0", description="A built-in model or 'module:factory'.")
+    backend: Literal["torch", "onnx"] = Field("torch", description="onnx: ONNX Runtime, checked against torch.")
     batch_size: int = Field(32, ge=1, le=4096)
     threads: int = Field(0, ge=0, le=1024, description="torch threads; 0 = all cores.")
 

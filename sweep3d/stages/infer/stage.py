@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import time
+from typing import Callable
 
 import numpy as np
 import pyarrow as pa
@@ -26,11 +27,12 @@ def predictions_schema(evaluator: Evaluator) -> pa.Schema:
     return pa.schema(BASE_COLUMNS + list(zip(evaluator.schema.names, evaluator.schema.types)))
 
 
-def predict(model: Classifier, images: np.ndarray) -> np.ndarray:
+def predict(model: Classifier, images: np.ndarray, runner: Callable | None = None) -> np.ndarray:
     """Logits of a batch.
 
     Args:
         images: float32 (N, H, W, 3) in [0, 1].
+        runner: runs the preprocessed batch instead of the torch module (e.g. ONNX Runtime).
     Returns:
         float32 (N, C) logits.
     Raises:
@@ -39,7 +41,8 @@ def predict(model: Classifier, images: np.ndarray) -> np.ndarray:
     import torch
 
     with torch.inference_mode():
-        out = model.module(model.preprocess(images))
+        batch = model.preprocess(images)
+        out = torch.from_numpy(runner(batch)) if runner is not None else model.module(batch)
     if isinstance(out, (tuple, list)):
         out = out[0]
     if not isinstance(out, torch.Tensor) or out.ndim != 2 or out.shape[0] != len(images):
@@ -63,8 +66,14 @@ def infer_stage(plan: Plan, store: Store, progress: RunProgress) -> StageOutcome
     if todo:
         import torch
 
-        torch.set_num_threads(spec.model.threads or os.cpu_count() or 1)
+        threads = spec.model.threads or os.cpu_count() or 1
+        torch.set_num_threads(threads)
         model = load_model(spec.model.name)
+        runner = None
+        if spec.model.backend == "onnx":
+            from sweep3d.stages.infer.onnx_backend import OnnxRunner
+
+            runner = OnnxRunner(model, store.root / "models", plan.model_digest, threads)
         labels = model.label_map()
         evaluator = EVALUATORS.get(spec.evaluator.kind)(top_k=spec.evaluator.top_k)
         truths = _truths(plan, labels)
@@ -76,7 +85,7 @@ def infer_stage(plan: Plan, store: Store, progress: RunProgress) -> StageOutcome
                 batch = todo[start : start + size]
                 t0 = time.perf_counter()
                 pixels = np.stack([decode_png(store.blob_path(j.image_key)) for j in batch])
-                logits = predict(model, pixels)
+                logits = predict(model, pixels, runner)
                 if logits.shape[1] != len(labels):
                     raise UserError(f"model {spec.model.name!r} returns {logits.shape[1]} classes "
                                     f"but its label map has {len(labels)}")

@@ -81,7 +81,10 @@ def make_plan(spec: LoadedSpec, model_digest: str | None = None, history: Histor
     s = spec.spec
     render_base = {"stage": "render", "v": RENDER_STAGE_VERSION, "blender": blender_version(),
                    "settings": s.render.key_part(), "passes": []}
-    evaluator = {"kind": s.evaluator.kind, "top_k": s.evaluator.top_k}
+    infer_base = {"stage": "infer", "v": INFER_STAGE_VERSION, "model": model_digest,
+                  "evaluator": {"kind": s.evaluator.kind, "top_k": s.evaluator.top_k}}
+    if s.model.backend != "torch":  # another backend may differ in the last bits: its own answers
+        infer_base["backend"] = s.model.backend
     rendered = sorted((c for c in spec.controls if c.control.stage == "render"),
                       key=lambda c: (c.control.order, spec.controls.index(c)))
     post = [c for c in spec.controls if c.control.stage == "post"]
@@ -115,8 +118,7 @@ def make_plan(spec: LoadedSpec, model_digest: str | None = None, history: Histor
                                      if c.id in params and not c.control.is_identity(params[c.id]))
                     image_key = digest({"stage": "post", "v": POST_STAGE_VERSION, "render": render_key,
                                         "controls": post_parts, "seed": s.experiment.seed if stochastic else None})
-                pred_key = digest({"stage": "infer", "v": INFER_STAGE_VERSION, "image": image_key,
-                                   "model": model_digest, "evaluator": evaluator, "truth": truth})
+                pred_key = digest({**infer_base, "image": image_key, "truth": truth})
                 jobs.append(Job(len(jobs), obj.name, env.name, params, render_key, image_key, pred_key, point))
     return Plan(spec, jobs, model_digest, columns)
 
