@@ -53,7 +53,7 @@ def outcomes_by_scene(plan: Plan, store: Store) -> History:
             "SELECT pred_key, valid, correct, loss FROM predictions WHERE pred_key IN (SELECT unnest(?))", [keys]
         ).fetchall()}
     history: History = {}
-    for job in plan.jobs:
+    for job in plan.jobs + plan.out_of_frame:
         valid, correct, loss = rows.get(job.pred_key, (False, None, None))
         outcome = Outcome(failed=bool(valid and not correct), loss=float(loss) if valid else 0.0)
         history.setdefault(job.scene, {})[job.point] = outcome

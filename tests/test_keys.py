@@ -421,3 +421,17 @@ def test_random_policy_draws_differ_per_scene(tmp_path):
         yaws.setdefault(job.environment, []).append(job.values["orientation"]["yaw"])
     assert yaws["white"] != yaws["grey"]
     assert all(-180.0 <= y <= 180.0 for ys in yaws.values() for y in ys)
+
+
+def test_out_of_frame_jobs_are_flagged_and_not_planned_for_rendering(tmp_path) -> None:
+    from sweep3d.spec import load_spec
+    from sweep3d.stages.plan import make_plan
+    from tests.conftest import TINY_SPEC, write_spec
+
+    body = TINY_SPEC.replace("[policy]", '[[controls]]\ntype = "position"\nx = [0.0, 0.5, 3.0]\n\n[policy]')
+    plan = make_plan(load_spec(write_spec(tmp_path, body)), model_digest="m")
+    assert len(plan.jobs) == 16 and len(plan.out_of_frame) == 8
+    assert all(j.values["position"]["x"] == 3.0 for j in plan.out_of_frame)
+    rows = plan.rows()
+    assert [r["job"] for r in rows] == list(range(24))
+    assert sum(not r["in_frame"] for r in rows) == 8

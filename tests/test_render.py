@@ -149,3 +149,21 @@ def test_other_mesh_formats_load_and_are_normalised(scene, tmp_path: Path, fmt: 
     assert radius == pytest.approx(1.0, rel=1e-5)
     assert image.max() > 0.3 and image[0, 0].max() < 0.01, "the tetrahedron is visible on black"
     scene.object_ref = None
+
+
+@pytest.mark.parametrize("state", [
+    SceneState(frame_x=0.9), SceneState(frame_x=-1.2, frame_y=0.5), SceneState(zoom=8.0, frame_x=0.5),
+    SceneState(elevation=89.0, azimuth=30.0, frame_y=1.1), SceneState(scale=0.05, frame_x=0.95, frame_y=-0.95),
+    SceneState(frame_x=3.0), SceneState(scale=0.1, frame_x=1.5), SceneState(frame_y=-2.0, zoom=0.5),
+])
+def test_out_of_frame_detection_agrees_with_the_render(scene, state) -> None:
+    """The planner's geometric test says 'out of frame' exactly when the render shows no object."""
+    from sweep3d.stages.render.state import in_frame
+
+    image = render(scene, state)
+    visible = bool((np.abs(image - 1.0) > 0.02).any())
+    predicted = in_frame(state)
+    if not predicted:
+        assert not visible, "flagged out of frame, but the object shows"
+    if visible:
+        assert predicted

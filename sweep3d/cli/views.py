@@ -41,7 +41,7 @@ def print_plan(console: Console, spec: LoadedSpec) -> None:
     plan = make_plan(spec)
     status = cache_status(plan, store)
     scenes = len({j.scene for j in plan.jobs})
-    console.print(f"[bold]{escape(spec.name)}[/]: {len(plan.jobs)} jobs over {scenes} scenes "
+    console.print(f"[bold]{escape(spec.name)}[/]: {len(plan.jobs) + len(plan.out_of_frame)} jobs over {scenes} scenes "
                   f"({len(spec.spec.objects)} objects × {len(spec.spec.environments)} environments), "
                   f"policy {spec.spec.policy.type}; store {escape(str(spec.store))}")
     table = Table("stage", "needed", "cached", "to compute", "estimate")
@@ -52,6 +52,8 @@ def print_plan(console: Console, spec: LoadedSpec) -> None:
         total += seconds
         table.add_row(stage, str(needed), str(cached), str(needed - cached), _duration(seconds))
     console.print(table)
+    if plan.out_of_frame:
+        console.print(f"{len(plan.out_of_frame)} jobs put the object wholly out of frame: flagged, not rendered")
     if spec.policy.adaptive:
         console.print(f"adaptive policy: this is its first round; it proposes up to "
                       f"{spec.policy.params.samples} jobs per scene as results come in")
@@ -69,7 +71,9 @@ def print_run(console: Console, result) -> None:
             console.print(f"[red]{escape(error.splitlines()[0])}[/]")
         if len(o.errors) > 3:
             console.print(f"[red]... and {len(o.errors) - 3} more {o.stage} errors[/]")
-    console.print(f"{len(result.plan.jobs)} jobs in {result.seconds:.1f} s (run {result.run_id})")
+    skipped = len(result.plan.out_of_frame)
+    console.print(f"{len(result.plan.jobs) + skipped} jobs in {result.seconds:.1f} s (run {result.run_id})"
+                  + (f"; {skipped} out of frame, not rendered" if skipped else ""))
     print_findings(console, result.plan)
 
 

@@ -17,6 +17,7 @@ from typing import Any
 from sweep3d.cache.keys import digest, file_digest
 from sweep3d.spec.loader import ControlInstance, LoadedSpec
 from sweep3d.spec.space import Point, SearchSpace
+from sweep3d.stages.render.state import SceneState, in_frame
 from sweep3d.stages.plan.policies import Outcome
 
 RENDER_STAGE_VERSION = 1
@@ -46,11 +47,14 @@ class Plan:
     jobs: list[Job]
     model_digest: str
     columns: list[str] = field(default_factory=list)  # one column per control parameter
+    #: Jobs whose object is wholly outside the frame: flagged, never rendered or evaluated.
+    out_of_frame: list[Job] = field(default_factory=list)
 
     def rows(self) -> list[dict[str, Any]]:
-        """The jobs table: one row per job with its scene, control values and keys."""
+        """The jobs table: one row per job with its scene, control values, keys and ``in_frame``."""
         out = []
-        for job in self.jobs:
+        flagged = {id(j) for j in self.out_of_frame}
+        for job in sorted(self.jobs + self.out_of_frame, key=lambda j: j.index):
             row: dict[str, Any] = {"experiment": self.spec.name, "job": job.index,
                                    "object": job.object, "environment": job.environment}
             for column in self.columns:
@@ -58,7 +62,8 @@ class Plan:
             for control_id, values in job.values.items():
                 for param, value in values.items():
                     row[f"{control_id}_{param}"] = value
-            row.update(render_key=job.render_key, image_key=job.image_key, pred_key=job.pred_key)
+            row.update(render_key=job.render_key, image_key=job.image_key, pred_key=job.pred_key,
+                       in_frame=id(job) not in flagged)
             out.append(row)
         return out
 
@@ -91,6 +96,8 @@ def make_plan(spec: LoadedSpec, model_digest: str | None = None, history: Histor
     columns = [f"{c.id}_{p}" for c in spec.controls for p in c.spaces]
 
     jobs: list[Job] = []
+    out_of_frame: list[Job] = []
+    index = 0
     for obj in s.objects:
         object_digest = mesh_digest(spec.meshes[obj.name], spec.store)
         truth = list(spec.labels[obj.name])
@@ -109,7 +116,8 @@ def make_plan(spec: LoadedSpec, model_digest: str | None = None, history: Histor
                 points = spec.policy.points(space.shape, seed)
             for point in points:
                 values = space.values(point)
-                params = {c.id: c.control.params(values[c.id]).model_dump() for c in scene_controls}
+                models = {c.id: c.control.params(values[c.id]) for c in scene_controls}
+                params = {key: model.model_dump() for key, model in models.items()}
                 render_key = digest({"scene": scene_key, "controls": _key_parts(rendered, params)})
                 post_parts = _key_parts(post, params)
                 image_key = render_key
@@ -119,8 +127,19 @@ def make_plan(spec: LoadedSpec, model_digest: str | None = None, history: Histor
                     image_key = digest({"stage": "post", "v": POST_STAGE_VERSION, "render": render_key,
                                         "controls": post_parts, "seed": s.experiment.seed if stochastic else None})
                 pred_key = digest({**infer_base, "image": image_key, "truth": truth})
-                jobs.append(Job(len(jobs), obj.name, env.name, params, render_key, image_key, pred_key, point))
-    return Plan(spec, jobs, model_digest, columns)
+                job = Job(index, obj.name, env.name, params, render_key, image_key, pred_key, point)
+                index += 1
+                (jobs if _in_frame(rendered, models) else out_of_frame).append(job)
+    return Plan(spec, jobs, model_digest, columns, out_of_frame)
+
+
+def _in_frame(rendered: list[ControlInstance], models: dict[str, Any]) -> bool:
+    """Whether the job's object can appear in its image, from geometry alone (no rendering)."""
+    state = SceneState()
+    for inst in rendered:
+        if inst.id in models:
+            inst.control.apply(state, models[inst.id])
+    return in_frame(state)
 
 
 def _key_parts(controls: list[ControlInstance], params: dict[str, dict[str, Any]]) -> list[dict[str, Any]]:

@@ -108,3 +108,21 @@ class SceneState:
         _, right, up, _ = self.camera_basis()
         reach = self.camera_distance() * math.tan(self.half_fov())
         return reach * (self.frame_x * right + self.frame_y * up)
+
+
+def in_frame(state: SceneState) -> bool:
+    """False when the object's bounding sphere lies wholly outside the camera's view.
+
+    Uses the same geometry the renderer will: the sphere of radius ``scale`` at
+    :meth:`SceneState.object_location`, against the four side planes of the (square) frustum
+    and the plane of the camera.
+    """
+    position, right, up, forward = state.camera_basis()
+    rel = state.object_location() - position
+    x, y, z = float(np.dot(rel, right)), float(np.dot(rel, up)), float(np.dot(rel, forward))
+    radius = state.scale
+    if z < -radius:
+        return False
+    half = state.half_fov()
+    cos_a, sin_a = math.cos(half), math.sin(half)
+    return all(side * cos_a - z * sin_a <= radius for side in (x, -x, y, -y))
