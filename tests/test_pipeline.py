@@ -200,3 +200,23 @@ def test_onnx_backend_reinfers_but_renders_nothing_and_agrees(tiny_copy: Path) -
     assert computed(tiny_copy) == {"render": 0, "postprocess": 0, "infer": 8}
     con = Store(tiny_copy / "store").connect("tiny")
     assert con.execute("SELECT job, top1_label, correct FROM results ORDER BY job").fetchall() == torch_rows
+
+
+def test_bench_measures_settings_and_applies_the_recommendation(tiny_copy: Path) -> None:
+    import tomllib
+
+    spec = tiny_copy / "spec.toml"
+    spec.write_text("# my experiment\n" + spec.read_text())
+    args = ["bench", str(spec), "--jobs", "2", "--reference-samples", "8", "--agreement", "0.5"]
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 0, result.output
+    assert "recommended:" in result.output
+    assert (tiny_copy / "store" / "reports" / "tiny-bench.html").stat().st_size > 100_000
+    again = CliRunner().invoke(app, args + ["--apply"])
+    assert again.exit_code == 0, again.output
+    assert "failed" not in again.output  # every setting was cached: no progress bar ran
+    text = spec.read_text()
+    assert text.startswith("# my experiment")  # comments survive --apply
+    render = tomllib.loads(text)["render"]
+    assert set(render) >= {"samples", "denoise", "denoise_prefilter", "max_bounces", "resolution"}
+    load_spec(spec)  # still a valid spec

@@ -84,6 +84,38 @@ def report(
 
 
 @command
+def bench(
+    spec: Path = SpecArg,
+    jobs: int = typer.Option(8, min=1, help="Jobs sampled (seeded) from the spec's plan."),
+    reference_samples: int = typer.Option(512, min=1, help="Samples per pixel of the reference renders."),
+    agreement: float = typer.Option(0.99, min=0.0, max=1.0, help="Prediction agreement the recommendation needs."),
+    apply: bool = typer.Option(False, "--apply", help="Write the recommended setting into the spec's [render]."),
+) -> None:
+    """Render time against error: find the cheapest render setting the model cannot tell apart."""
+    from sweep3d.bench import Setting, apply_setting, default_settings, measure, recommend
+    from sweep3d.bench.plot import write_pareto_plot
+    from sweep3d.cache.store import Store
+    from sweep3d.cli.views import print_bench
+    from sweep3d.progress import RunProgress
+    from sweep3d.spec import load_spec
+
+    loaded = load_spec(spec)
+    r = loaded.spec.render
+    current = Setting(r.samples, r.denoise_prefilter if r.denoise else "off", r.max_bounces)
+    reference = Setting(reference_samples, "off", max(r.max_bounces, 12))
+    with RunProgress(console) as progress:
+        rows = measure(loaded, default_settings(current), reference, jobs, progress)
+    best = recommend(rows, agreement)
+    print_bench(console, rows, best, current)
+    plot = write_pareto_plot(rows, best, Store(loaded.store).report_path(loaded.name, "-bench.html"),
+                             f"{loaded.name}: render time against error ({jobs} jobs)")
+    console.print(f"Pareto plot: [bold]{plot}[/]")
+    if apply and best is not None:
+        apply_setting(spec, best.setting, r.resolution)
+        console.print(f"wrote {best.setting.label()} into the \\[render] table of {escape(str(spec))}")
+
+
+@command
 def sheet(
     spec: Path = SpecArg,
     output: Optional[Path] = typer.Option(None, "--output", "-o", help="PNG file to write."),

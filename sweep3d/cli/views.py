@@ -100,3 +100,33 @@ def _duration(seconds: float) -> str:
     if seconds < 3600:
         return f"{seconds / 60:.1f} min"
     return f"{seconds / 3600:.1f} h"
+
+
+def print_bench(console: Console, rows, best, current) -> None:
+    """The bench table: one row per setting, the reference last; the recommendation below."""
+    from sweep3d.bench.measure import pareto
+
+    front = {id(r) for r in pareto([r for r in rows if not r.is_reference])}
+    base = next((r for r in rows if r.setting == current and not r.is_reference), None)
+    table = Table()
+    table.add_column("setting", no_wrap=True)
+    for name in ("s/img", "speed-up", "PSNR", "SSIM", "top-1 =", "verdict ="):
+        table.add_column(name, justify="right")
+    table.add_column("note", no_wrap=True)
+    for row in sorted(rows, key=lambda r: (r.is_reference, r.seconds)):
+        notes = [n for n, on in (("reference", row.is_reference), ("spec", row is base), ("recommended", row is best),
+                                 ("Pareto", id(row) in front)) if on]
+        speed = f"{base.seconds / row.seconds:.1f}×" if base and row.seconds > 0 else ""
+        table.add_row(row.setting.label(), f"{row.seconds:.3f}", speed, f"{row.psnr:.1f}", f"{row.ssim:.3f}",
+                      f"{row.top1_agreement:.0%}", f"{row.verdict_agreement:.0%}", ", ".join(notes))
+    console.print(table)
+    if best is None:
+        console.print("no setting reached the required agreement with the reference; keep the spec's")
+    else:
+        gain = ""
+        if base is not None and best.setting != base.setting:
+            ratio = base.seconds / best.seconds
+            gain = f", {ratio:.1f}× faster than the spec's setting" if ratio >= 1 else (
+                f", {1 / ratio:.1f}× slower than the spec's setting, which disagrees with the reference")
+        console.print(f"recommended: [bold]{best.setting.label()}[/] ({best.seconds:.3f} s/image, "
+                      f"{best.psnr:.1f} dB, top-1 agreement {best.top1_agreement:.0%}{gain})")

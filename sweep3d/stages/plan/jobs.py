@@ -17,7 +17,6 @@ from typing import Any
 from sweep3d.cache.keys import digest, file_digest
 from sweep3d.spec.loader import ControlInstance, LoadedSpec
 from sweep3d.spec.space import Point, SearchSpace
-from sweep3d.stages.render.state import SceneState, in_frame
 from sweep3d.stages.plan.policies import Outcome
 
 RENDER_STAGE_VERSION = 1
@@ -135,6 +134,8 @@ def make_plan(spec: LoadedSpec, model_digest: str | None = None, history: Histor
 
 def _in_frame(rendered: list[ControlInstance], models: dict[str, Any]) -> bool:
     """Whether the job's object can appear in its image, from geometry alone (no rendering)."""
+    from sweep3d.stages.render.state import SceneState, in_frame  # the render package imports this one
+
     state = SceneState()
     for inst in rendered:
         if inst.id in models:
