@@ -20,6 +20,7 @@ import errno
 import fcntl
 import logging
 import os
+import re
 import time
 import uuid
 from contextlib import contextmanager
@@ -54,13 +55,15 @@ class StoreWriteError(UserError):
 class Store:
     """A store rooted at ``root``; cheap to construct, creates directories on first write."""
 
-    def __init__(self, root: str | Path, quarantine: bool = True) -> None:
+    def __init__(self, root: str | Path, quarantine: bool = True, warn: bool = True) -> None:
         """Args:
             quarantine: move unreadable segments to ``quarantine/`` when a read finds them
                 (False: only skip them, leaving the store untouched, as ``cache verify`` does).
+            warn: log one warning per unreadable file (``cache verify`` lists them itself).
         """
         self.root = Path(root)
         self.quarantine_bad = quarantine
+        self.warn = warn
         self._checked: set[tuple[str, int, int]] = set()  # segments fully read once (path, size, mtime)
         self._bad: dict[str, str] = {}  # unreadable files already reported -> why
         self.discarded = 0  # rows dropped because their blob was missing or corrupt
@@ -253,9 +256,13 @@ class Store:
     def _report_bad(self, path: Path, why: str, move: bool) -> None:
         if str(path) in self._bad:
             return
+        why = re.sub(r"^(\w+: )Could not open Parquet input source '[^']*': ", r"\1", why.replace(str(path), path.name))
         self._bad[str(path)] = why
         where = _relative(path, self.root)
-        if move and self.quarantine(path) is not None:
+        moved = move and self.quarantine(path) is not None
+        if not self.warn:
+            return
+        if moved:
             log.warning(f"warning: {where} is unreadable ({why}); moved it to quarantine/, its rows will be "
                         "recomputed")
         else:
