@@ -129,10 +129,10 @@ def _writable(spec: LoadedSpec, store: Store) -> None:
 def run(spec: LoadedSpec, console: Console | None = None, wait: float = 0.0) -> RunResult:
     """Run every stage of ``spec`` and return what each did."""
     store = Store(spec.store)
-    started = time.perf_counter()
-    started_at = utc_now()
     _writable(spec, store)
     with store.lock(wait):
+        started = time.perf_counter()  # time spent waiting for the lock is not the run's
+        started_at = utc_now()
         result = RunResult(uuid.uuid4().hex[:12], make_plan(spec, _model_digest(spec)))
         model = prepare_model(result.plan) if pending_predictions(result.plan, store) else None
         with RunProgress(console) as progress:

@@ -174,7 +174,8 @@ def collect_garbage(root: Path, older_than: float = TEMP_AGE, purge_quarantine: 
 def _remove_empty_dirs(folder: Path) -> None:
     if not folder.is_dir():
         return
-    for path in sorted((p for p in folder.rglob("*") if p.is_dir()), key=lambda p: len(p.parts), reverse=True):
+    for path in [*sorted((p for p in folder.rglob("*") if p.is_dir()), key=lambda p: len(p.parts), reverse=True),
+                 folder]:
         try:
             path.rmdir()
         except OSError:
