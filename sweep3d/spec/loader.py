@@ -288,4 +288,6 @@ def _load_policy(spec: Spec, fail):
     except ValidationError as exc:
         err = exc.errors()[0]
         problem = "unknown key; remove it or check its spelling" if err["type"] == "extra_forbidden" else err["msg"]
+        if "input" in err and err["type"] != "extra_forbidden":
+            problem += f" (got {err['input']!r})"
         raise fail(f"policy.{_key_path(err['loc'])}", problem) from None

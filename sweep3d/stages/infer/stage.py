@@ -188,6 +188,6 @@ def _truths(plan: Plan, labels) -> dict[str, tuple[int, ...]]:
                 labels.index(label)
             except ValueError as exc:
                 raise SpecError(str(plan.spec.path), f"objects[{i}].labels[{j}]",
-                                f"{exc}; use a class of model {plan.spec.spec.model.name!r}") from None
+                                f"{exc} (the classes of model {plan.spec.spec.model.name!r})") from None
         out[obj.name] = tuple(sorted({labels.index(label) for label in obj.labels}))
     return out
