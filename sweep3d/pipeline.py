@@ -2,10 +2,17 @@
 
 The process holding the store's lock is its single writer. Each stage computes only the keys
 the store lacks, and flushes rows every few seconds, so a killed run resumes where it stopped.
+
+Before anything is rendered the model is loaded and tried on a blank image (when anything
+needs inferring), so a broken model fails in seconds. A stage that finds a damaged blob
+upstream discards it; the run then repeats the stages (a few passes at most) to recompute it.
+The experiment's jobs table is written once its stages have run, so a run that stops on a
+user error leaves the store's tables as they were.
 """
 
 from __future__ import annotations
 
+import functools
 import time
 import uuid
 from dataclasses import dataclass, field
@@ -13,9 +20,11 @@ from dataclasses import dataclass, field
 from rich.console import Console
 
 from sweep3d.cache.store import Store, utc_now
+from sweep3d.errors import SpecError, UserError
 from sweep3d.progress import RunProgress
 from sweep3d.spec.loader import LoadedSpec
 from sweep3d.stages.infer import infer_stage
+from sweep3d.stages.infer.stage import ReadyModel, pending_predictions, prepare_model
 from sweep3d.stages.outcome import StageOutcome
 from sweep3d.stages.plan import Plan, make_plan
 from sweep3d.stages.plan.jobs import History
@@ -61,16 +70,18 @@ def outcomes_by_scene(plan: Plan, store: Store) -> History:
 
 
 def _merge(before: list[StageOutcome], now: list[StageOutcome]) -> list[StageOutcome]:
-    """Add up a stage's outcomes over the rounds of an adaptive run (keys cached from an earlier
-    round of the same run count as computed, not cached)."""
+    """Add up a stage's outcomes over the passes of one run (adaptive rounds, repair passes).
+
+    Keys cached from an earlier pass of the same run count as computed, not cached. Each pass
+    covers the whole plan so far and retries what failed, so failures are the last pass's.
+    """
     if not before:
         return now
     merged = []
     for old, new in zip(before, now):
         merged.append(StageOutcome(
             old.stage, total=new.total, cached=old.cached, computed=old.computed + new.computed,
-            failed=old.failed + new.failed, skipped=new.skipped, seconds=old.seconds + new.seconds,
-            errors=old.errors + new.errors))
+            failed=new.failed, skipped=new.skipped, seconds=old.seconds + new.seconds, errors=new.errors))
     return merged
 
 
@@ -81,19 +92,59 @@ def write_jobs(plan: Plan, store: Store) -> None:
     store.write_table_file(store.jobs_path(plan.spec.name), pa.Table.from_pylist(plan.rows()))
 
 
+REPAIR_PASSES = 3  # extra passes over the stages when a damaged blob was found (render → post → infer)
+
+
+def run_stages(plan: Plan, store: Store, progress: RunProgress, model: ReadyModel | None = None) -> list[StageOutcome]:
+    """Render, postprocess and infer ``plan``; again while a stage discarded a damaged blob."""
+    outcomes: list[StageOutcome] = []
+    for _ in range(1 + REPAIR_PASSES):
+        discarded = store.discarded
+        stages = (render_stage, postprocess_stage, functools.partial(infer_stage, model=model))
+        outcomes = _merge(outcomes, [stage(plan, store, progress) for stage in stages])
+        if store.discarded == discarded:
+            break
+    return outcomes
+
+
+def _model_digest(spec: LoadedSpec) -> str:
+    """The model's digest (loads a user's factory), its errors naming ``model.name``."""
+    from sweep3d.stages.infer.models import model_digest
+
+    try:
+        return model_digest(spec.spec.model.name)
+    except SpecError:
+        raise
+    except UserError as exc:
+        raise SpecError(str(spec.path), "model.name", str(exc)) from None
+
+
+def _writable(spec: LoadedSpec, store: Store) -> None:
+    try:
+        store.ensure_writable()
+    except UserError as exc:
+        raise SpecError(str(spec.path), "experiment.store", str(exc)) from None
+
+
 def run(spec: LoadedSpec, console: Console | None = None, wait: float = 0.0) -> RunResult:
     """Run every stage of ``spec`` and return what each did."""
     store = Store(spec.store)
-    started = time.perf_counter()
-    started_at = utc_now()
+    _writable(spec, store)
     with store.lock(wait):
-        result = RunResult(uuid.uuid4().hex[:12], make_plan(spec))
+        started = time.perf_counter()  # time spent waiting for the lock is not the run's
+        started_at = utc_now()
+        result = RunResult(uuid.uuid4().hex[:12], make_plan(spec, _model_digest(spec)))
+        model = prepare_model(result.plan, store) if pending_predictions(result.plan, store) else None
         with RunProgress(console) as progress:
             history: History = {}
             while True:  # one pass for fixed policies; one per round for adaptive ones
                 plan = make_plan(spec, result.plan.model_digest, history) if history else result.plan
+                try:
+                    outcomes = run_stages(plan, store, progress, model)
+                except KeyboardInterrupt:
+                    write_jobs(plan, store)  # what finished is stored: let query and report show it
+                    raise
                 write_jobs(plan, store)
-                outcomes = [stage(plan, store, progress) for stage in (render_stage, postprocess_stage, infer_stage)]
                 result.outcomes = _merge(result.outcomes, outcomes)
                 grown = len(plan.jobs) > len(result.plan.jobs) or not history
                 result.plan = plan

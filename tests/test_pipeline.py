@@ -104,7 +104,7 @@ def test_kill_minus_nine_then_resume_equals_uninterrupted(tmp_path: Path) -> Non
         write_spec(folder, KILL_SPEC)
     cmd = [sys.executable, "-m", "sweep3d", "run", "spec.toml", "--no-report"]
     proc = subprocess.Popen(cmd, cwd=killed, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                            start_new_session=True)
+                            start_new_session=True, env={**os.environ, "PYTHONPATH": str(REPO)})  # this checkout
     renders = killed / "store" / "tables" / "renders"
     deadline = time.monotonic() + 180
     while time.monotonic() < deadline and not (renders.is_dir() and any(renders.glob("*.parquet"))):

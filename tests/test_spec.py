@@ -16,7 +16,7 @@ from sweep3d.cli import app
 from sweep3d.errors import SpecError
 from sweep3d.spec import Choice, Fixed, Range, load_spec
 from sweep3d.spec.space import Point, SearchSpace
-from tests.conftest import write_cube, write_spec
+from tests.conftest import CUBE_OBJ, write_cube, write_spec
 
 BASE = """\
 [experiment]
@@ -107,7 +107,7 @@ class Mistake:
 
 def _zip_with_other_member(folder: Path) -> None:
     with zipfile.ZipFile(folder / "furniture.zip", "w") as zf:
-        zf.writestr("chairs/chair.obj", "v 0 0 0\n")
+        zf.writestr("chairs/chair.obj", CUBE_OBJ)  # a real mesh: a vertex-only OBJ fails the load-time check
 
 
 def _text_mesh(folder: Path) -> None:

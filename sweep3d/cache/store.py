@@ -8,13 +8,19 @@ Layout under the store root::
     lock                          held by the one process that writes
 
 Every write is a temp file plus an atomic rename, so a killed run leaves either a whole file
-or none: rerunning recomputes only what no complete row records.
+or none: rerunning recomputes only what no complete row records. Segments carry Parquet page
+checksums; a segment that fails to read (corrupted on disk) is moved to ``quarantine/`` with one
+warning and its rows are recomputed, so a damaged store never crashes a run. A full disk or a
+read-only folder is a :class:`StoreWriteError` (a one-line user error), and leaves no temp file.
 """
 
 from __future__ import annotations
 
+import errno
 import fcntl
+import logging
 import os
+import re
 import time
 import uuid
 from contextlib import contextmanager
@@ -24,19 +30,43 @@ from typing import Any, Iterator
 
 import duckdb
 import pyarrow as pa
+import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 from sweep3d.errors import StoreBusyError, UserError
 
 TABLES = ("renders", "images", "predictions", "runs")
 KEY_COLUMN = {"renders": "render_key", "images": "image_key", "predictions": "pred_key", "runs": "run_id"}
+BLOB_TABLES = ("renders", "images")  # tables whose rows each own the blob named by their key
+DIGEST_COLUMN = "sha256"  # hex SHA-256 of a blob's bytes, recorded in its row when written
+
+#: Write failures the user can fix (free space, permissions), reported as one line, not a traceback.
+WRITE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM})
+#: What reading a damaged Parquet file raises (pyarrow's ArrowInvalid is a ValueError).
+READ_ERRORS = (OSError, ValueError, pa.ArrowException)
+
+log = logging.getLogger("sweep3d.store")
+
+
+class StoreWriteError(UserError):
+    """The store cannot be written: a full disk, a quota, a read-only or forbidden folder."""
 
 
 class Store:
     """A store rooted at ``root``; cheap to construct, creates directories on first write."""
 
-    def __init__(self, root: str | Path) -> None:
+    def __init__(self, root: str | Path, quarantine: bool = True, warn: bool = True) -> None:
+        """Args:
+            quarantine: move unreadable segments to ``quarantine/`` when a read finds them
+                (False: only skip them, leaving the store untouched, as ``cache verify`` does).
+            warn: log one warning per unreadable file (``cache verify`` lists them itself).
+        """
         self.root = Path(root)
+        self.quarantine_bad = quarantine
+        self.warn = warn
+        self._checked: set[tuple[str, int, int]] = set()  # segments fully read once (path, size, mtime)
+        self._bad: dict[str, str] = {}  # unreadable files already reported -> why
+        self.discarded = 0  # rows dropped because their blob was missing or corrupt
 
     # -- paths -------------------------------------------------------------------------------
     def blob_path(self, key: str, ext: str = "png") -> Path:
@@ -71,20 +101,30 @@ class Store:
 
     # -- writes ------------------------------------------------------------------------------
     def write_table_file(self, path: Path, table: pa.Table) -> None:
-        path.parent.mkdir(parents=True, exist_ok=True)
+        """Write ``table`` to ``path`` atomically (temp file, fsync, rename), with page checksums.
+
+        Raises:
+            StoreWriteError: the disk is full or the folder is not writable (no temp file is left).
+        """
         tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
-        pq.write_table(table, tmp, compression="zstd")
-        with open(tmp, "rb") as fh:
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            pq.write_table(table, tmp, compression="zstd", write_page_checksum=True)
+            with open(tmp, "rb") as fh:
+                os.fsync(fh.fileno())
+            os.replace(tmp, path)
+        except BaseException as exc:
+            _unlink_quietly(tmp)
+            if _is_write_error(exc):
+                raise _as_write_error(exc, path) from None
+            raise
 
     def append(self, table: str, rows: list[dict[str, Any]], schema: pa.Schema | None = None) -> Path | None:
         """Write ``rows`` as one new segment of ``table``; returns its path (None if no rows)."""
         if not rows:
             return None
         data = pa.Table.from_pylist(rows, schema=schema)
-        name = f"{time.time_ns():020d}-{os.getpid()}-{uuid.uuid4().hex[:8]}.parquet"
-        path = self.table_dir(table) / name
+        path = self.table_dir(table) / segment_name()
         self.write_table_file(path, data)
         return path
 
@@ -94,47 +134,196 @@ class Store:
 
     # -- reads -------------------------------------------------------------------------------
     def segments(self, table: str) -> list[Path]:
+        """The segment files of ``table`` in write order (temp files are never listed)."""
         directory = self.table_dir(table)
         if not directory.is_dir():
             return []
         return sorted(p for p in directory.glob("*.parquet") if not p.name.startswith("."))
 
+    def read_segment(self, path: Path, columns: list[str] | None = None) -> pa.Table | None:
+        """One segment (only the ``columns`` it has, when given), or None when it cannot be read.
+
+        A segment is read whole, with its page checksums verified, the first time this store
+        object sees it (by path, size and mtime); one that fails is quarantined and reported once.
+        A segment that vanished meanwhile (compacted away by another process) is None, silently.
+        """
+        try:
+            stat = path.stat()
+            ident = (str(path), stat.st_size, stat.st_mtime_ns)
+            if ident not in self._checked:
+                whole = pq.read_table(path, page_checksum_verification=True)
+                self._checked.add(ident)
+                return whole.select([c for c in columns if c in whole.column_names]) if columns else whole
+            if columns:
+                names = pq.read_schema(path).names
+                columns = [c for c in columns if c in names]
+            return pq.read_table(path, columns=columns)
+        except FileNotFoundError:
+            return None
+        except PermissionError as exc:
+            self._report_bad(path, f"cannot read it: {exc.strerror}", move=False)
+            return None
+        except READ_ERRORS as exc:
+            self._report_bad(path, _first_line(exc), move=self.quarantine_bad)
+            return None
+
+    def readable_segments(self, table: str) -> list[Path]:
+        """Segments of ``table`` that read without error (unreadable ones are quarantined)."""
+        for _ in range(3):  # a segment compacted away between listing and reading: list again
+            files = self.segments(table)
+            ok = [p for p in files if self.read_segment(p, [KEY_COLUMN[table]]) is not None]
+            if all(p.exists() or str(p) in self._bad for p in files):
+                return ok
+        return ok
+
+    def table(self, table: str, columns: list[str] | None = None) -> pa.Table | None:
+        """Every readable row of ``table`` (duplicates included), or None if it has no segments."""
+        parts = [t for t in (self.read_segment(p, columns) for p in self.readable_segments(table)) if t is not None]
+        if not parts:
+            return None
+        return pa.concat_tables(parts, promote_options="permissive")
+
     def keys(self, table: str) -> set[str]:
         """Every key with a complete row in ``table``."""
-        files = self.segments(table)
-        if not files:
-            return set()
         column = KEY_COLUMN[table]
-        keys: set[str] = set()
-        for path in files:
-            keys.update(pq.read_table(path, columns=[column]).column(column).to_pylist())
-        return keys
+        data = self.table(table, [column])
+        return set(data.column(column).to_pylist()) if data is not None else set()
+
+    def column_map(self, table: str, column: str) -> dict[str, Any]:
+        """Key → ``column`` of its first row (the row the views show), for keys that have one."""
+        key = KEY_COLUMN[table]
+        data = self.table(table, [key, column])
+        if data is None or column not in data.column_names:
+            return {}
+        out: dict[str, Any] = {}
+        for k, v in zip(data.column(key).to_pylist(), data.column(column).to_pylist()):
+            out.setdefault(k, v)
+        return out
+
+    def digests(self, table: str) -> dict[str, set[str]]:
+        """Key → the blob digests its rows recorded (rows written before digests existed add none)."""
+        key = KEY_COLUMN[table]
+        data = self.table(table, [key, DIGEST_COLUMN])
+        out: dict[str, set[str]] = {}
+        if data is None:
+            return out
+        digests = data.column(DIGEST_COLUMN).to_pylist() if DIGEST_COLUMN in data.column_names else [None] * len(data)
+        for k, d in zip(data.column(key).to_pylist(), digests):
+            entry = out.setdefault(k, set())
+            if d:
+                entry.add(d)
+        return out
 
     def connect(self, experiment: str | None = None) -> duckdb.DuckDBPyConnection:
         """An in-memory DuckDB connection with views over this store's Parquet files.
 
         Views: ``renders``, ``images``, ``predictions``, ``runs`` (deduplicated by key), and when
         ``experiment`` has a plan, ``jobs`` (its latest plan) and ``results`` (jobs ⨝ predictions).
+        Unreadable segments are left out (and quarantined); when every segment of a table is
+        readable the view globs its folder (segment names start with a digit, temp files with a
+        dot), so segments written or compacted after this call are read by later queries too.
         """
         con = duckdb.connect()
         for table in TABLES:
-            files = self.segments(table)
+            listed = self.segments(table)
+            files = self.readable_segments(table)
             key = KEY_COLUMN[table]
             if files:
-                listing = ", ".join(_sql_str(str(p)) for p in files)
+                if files == listed and all(p.name[:1].isdigit() for p in files):
+                    source = _sql_str(str(self.table_dir(table) / "[0-9]*.parquet"))
+                else:
+                    source = "[" + ", ".join(_sql_str(str(p)) for p in files) + "]"
                 con.execute(
-                    f"CREATE VIEW {table} AS SELECT * FROM read_parquet([{listing}], union_by_name = true) "
+                    f"CREATE VIEW {table} AS SELECT * FROM read_parquet({source}, union_by_name = true) "
                     f"QUALIFY row_number() OVER (PARTITION BY {key} ORDER BY created_at) = 1"
                 )
-        if experiment is not None and self.jobs_path(experiment).exists():
-            jobs = _sql_str(str(self.jobs_path(experiment)))
-            con.execute(f"CREATE VIEW jobs AS SELECT * FROM read_parquet({jobs})")
-            if self.segments("predictions"):
+        jobs_path = self.jobs_path(experiment) if experiment is not None else None
+        if jobs_path is not None and jobs_path.exists() and self.read_segment(jobs_path, ["pred_key"]) is not None:
+            con.execute(f"CREATE VIEW jobs AS SELECT * FROM read_parquet({_sql_str(str(jobs_path))})")
+            if self.readable_segments("predictions"):
                 con.execute(
                     "CREATE VIEW results AS SELECT j.*, p.* EXCLUDE (pred_key, image_key, created_at) "
                     "FROM jobs j JOIN predictions p USING (pred_key)"
                 )
         return con
+
+    # -- damage control ----------------------------------------------------------------------
+    @property
+    def unreadable(self) -> dict[str, str]:
+        """Files this store object found unreadable (path → why), each reported once."""
+        return dict(self._bad)
+
+    def _report_bad(self, path: Path, why: str, move: bool) -> None:
+        if str(path) in self._bad:
+            return
+        why = re.sub(r"^(\w+: )Could not open Parquet input source '[^']*': ", r"\1", why.replace(str(path), path.name))
+        self._bad[str(path)] = why
+        where = _relative(path, self.root)
+        moved = move and self.quarantine(path) is not None
+        if not self.warn:
+            return
+        if moved:
+            log.warning(f"warning: {where} is unreadable ({why}); moved it to quarantine/, its rows will be "
+                        "recomputed")
+        else:
+            log.warning(f"warning: {where} is unreadable ({why}); skipping it (sweep3d cache verify --repair "
+                        "moves it aside)")
+
+    def quarantine(self, path: Path) -> Path | None:
+        """Move a damaged file under ``quarantine/`` (same relative path); None if it could not be moved."""
+        target = self.root / "quarantine" / _relative(path, self.root)
+        if target.exists():
+            target = target.with_name(f"{target.name}.{uuid.uuid4().hex[:8]}")
+        try:
+            target.parent.mkdir(parents=True, exist_ok=True)
+            os.replace(path, target)
+        except OSError:
+            return None
+        return target
+
+    def drop_rows(self, table: str, keys: set[str] | list[str]) -> int:
+        """Remove every row of ``keys`` from ``table``, rewriting the segments that hold them.
+
+        Each segment is replaced atomically, so a reader sees it with or without the rows, never
+        half; call it holding the writer lock. Returns the number of rows removed.
+        """
+        keys = set(keys)
+        if not keys:
+            return 0
+        column = KEY_COLUMN[table]
+        value_set = pa.array(sorted(keys), type=pa.string())
+        removed = 0
+        for path in self.readable_segments(table):
+            data = self.read_segment(path)
+            if data is None:
+                continue
+            hit = pc.fill_null(pc.is_in(data.column(column), value_set=value_set), False)
+            count = pc.sum(hit).as_py() or 0
+            if not count:
+                continue
+            kept = data.filter(pc.invert(hit))
+            if kept.num_rows:
+                self.write_table_file(path, kept)
+            else:
+                path.unlink(missing_ok=True)
+            removed += count
+        return removed
+
+    def discard(self, table: str, keys: set[str] | list[str], why: str) -> None:
+        """Forget ``keys`` of a blob table whose blobs are missing or damaged, so they are recomputed:
+        their rows are dropped and their blobs moved to ``quarantine/`` (one warning per call)."""
+        keys = set(keys)
+        if not keys:
+            return
+        self.drop_rows(table, keys)
+        for key in keys:
+            blob = self.blob_path(key)
+            if blob.exists():
+                self.quarantine(blob)
+        self.discarded += len(keys)
+        sample = ", ".join(sorted(k[:12] for k in keys)[:3])
+        log.warning(f"warning: {len(keys)} {table} blob(s) {why} ({sample}{', …' if len(keys) > 3 else ''}); "
+                    "recomputing them")
 
     # -- locking -----------------------------------------------------------------------------
     @contextmanager
@@ -210,14 +399,64 @@ def utc_now() -> datetime:
 
 
 def atomic_write(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` through a temp file in the same folder and a rename."""
-    path.parent.mkdir(parents=True, exist_ok=True)
+    """Write ``data`` to ``path`` through a temp file in the same folder and a rename.
+
+    Raises:
+        StoreWriteError: the disk is full or the folder is not writable (no temp file is left).
+    """
     tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
-    with open(tmp, "wb") as fh:
-        fh.write(data)
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with open(tmp, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException as exc:
+        _unlink_quietly(tmp)
+        if _is_write_error(exc):
+            raise _as_write_error(exc, path) from None
+        raise
+
+
+def _is_write_error(exc: BaseException) -> bool:
+    if not isinstance(exc, OSError):
+        return False
+    return exc.errno in WRITE_ERRNOS or "No space left on device" in str(exc)
+
+
+def _as_write_error(exc: BaseException, path: Path) -> StoreWriteError:
+    assert isinstance(exc, OSError)
+    code = exc.errno if exc.errno in WRITE_ERRNOS else errno.ENOSPC
+    reason = exc.strerror or os.strerror(code)
+    fix = ("free some disk space" if code in (errno.ENOSPC, errno.EDQUOT)
+           else "make the folder writable")
+    return StoreWriteError(f"cannot write {path}: {reason}; {fix}, or set experiment.store to a folder on "
+                           "another disk")
+
+
+def _unlink_quietly(path: Path) -> None:
+    try:
+        path.unlink()
+    except OSError:
+        pass
+
+
+def segment_name() -> str:
+    """A new segment's file name: sorts in write order, unique across processes."""
+    return f"{time.time_ns():020d}-{os.getpid()}-{uuid.uuid4().hex[:8]}.parquet"
+
+
+def _relative(path: Path, root: Path) -> Path:
+    try:
+        return path.relative_to(root)
+    except ValueError:
+        return Path(path.name)
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip().splitlines()
+    return f"{type(exc).__name__}: {text[0] if text else ''}"
 
 
 def _sql_str(text: str) -> str:

@@ -199,3 +199,12 @@ def _write_report(loaded, output: Optional[Path]) -> None:
 def main() -> None:
     """Console entry point."""
     app()
+
+
+def _register_subcommands() -> None:
+    from sweep3d.cli.cache import cache_app
+
+    app.add_typer(cache_app, name="cache")
+
+
+_register_subcommands()

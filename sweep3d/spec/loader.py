@@ -85,18 +85,23 @@ def load_spec(path: str | Path) -> LoadedSpec:
 
     from sweep3d.stages.render.assets import resolve_hdri, resolve_mesh
 
+    from sweep3d.spec.sniff import check_hdri, check_mesh
+
     meshes = {}
     for i, obj in enumerate(spec.objects):
         try:
             meshes[obj.name] = resolve_mesh(obj.mesh, base)
+            check_mesh(meshes[obj.name])
         except UserError as exc:
-            raise fail(f"objects[{i}].mesh", str(exc)) from None
+            raise fail(f"objects[{i}].mesh", _naming(obj.mesh, exc)) from None
     hdris: dict[str, str | None] = {}
     for i, env in enumerate(spec.environments):
         try:
             hdris[env.name] = resolve_hdri(env.hdri, base) if env.hdri else None
+            if hdris[env.name]:
+                check_hdri(hdris[env.name])
         except UserError as exc:
-            raise fail(f"environments[{i}].hdri", str(exc)) from None
+            raise fail(f"environments[{i}].hdri", _naming(env.hdri or "", exc)) from None
 
     _check_model(spec, fail)
     labels = _resolve_labels(spec, fail)
@@ -105,6 +110,13 @@ def load_spec(path: str | Path) -> LoadedSpec:
     store = Path(spec.experiment.store)
     store = (store if store.is_absolute() else base / store).resolve()
     return LoadedSpec(path, spec, store, meshes, hdris, labels, controls, policy)
+
+
+def _naming(ref: str, exc: UserError) -> str:
+    """The error's message, prefixed with the file as the spec gives it unless it already says it."""
+    message = str(exc)
+    name = Path(ref.partition("#")[2] or ref).name
+    return message if name and name in message else f"{ref}: {message}"
 
 
 def _read_toml(path: Path) -> dict[str, Any]:
@@ -276,4 +288,6 @@ def _load_policy(spec: Spec, fail):
     except ValidationError as exc:
         err = exc.errors()[0]
         problem = "unknown key; remove it or check its spelling" if err["type"] == "extra_forbidden" else err["msg"]
+        if "input" in err and err["type"] != "extra_forbidden":
+            problem += f" (got {err['input']!r})"
         raise fail(f"policy.{_key_path(err['loc'])}", problem) from None

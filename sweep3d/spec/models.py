@@ -66,12 +66,22 @@ class ObjectSpec(StrictModel):
     mesh: str = Field(description="OBJ/glTF/GLB/PLY/STL path, or 'archive.zip#member.obj'.")
     labels: list[Union[int, str]] = Field(min_length=1, description="ImageNet class names or ids.")
 
+    @field_validator("labels", mode="before")
+    @classmethod
+    def _names_or_ids(cls, labels: Any) -> Any:
+        """Refuse what pydantic would coerce: ``true`` would silently become class 1, 2.0 class 2."""
+        for i, label in enumerate(labels if isinstance(labels, list) else []):
+            if isinstance(label, bool) or not isinstance(label, (int, str)):
+                raise ValueError(f"labels[{i}] = {label!r} is not a class name or id; give an ImageNet class "
+                                 "name such as \"coffee mug\" or an integer id 0..999")
+        return labels
+
 
 class EnvironmentSpec(StrictModel):
     name: Name
     hdri: str | None = Field(None, description="'builtin:NAME' or an .exr/.hdr/.png path.")
     color: tuple[float, float, float] | None = Field(None, description="Plain background, RGB 0..1.")
-    strength: float = Field(1.0, gt=0, le=1e6, description="World light strength.")
+    strength: float = Field(1.0, gt=0, le=1e6, allow_inf_nan=False, description="World light strength.")
 
     @field_validator("color")
     @classmethod

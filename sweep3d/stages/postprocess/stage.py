@@ -1,4 +1,9 @@
-"""The postprocess stage: one image per image key, from its render and the job's post controls."""
+"""The postprocess stage: one image per image key, from its render and the job's post controls.
+
+An image is valid only if its render was valid and the post controls left every pixel finite.
+A render blob that is missing or damaged (its bytes do not match the digest its row recorded,
+or it does not decode) is discarded so the next pass of the run renders it again.
+"""
 
 from __future__ import annotations
 
@@ -8,8 +13,9 @@ from typing import Any, Sequence
 import numpy as np
 import pyarrow as pa
 
-from sweep3d.cache.store import Store, atomic_write, utc_now
-from sweep3d.pixels import decode_png, encode_png
+from sweep3d.cache.blobs import load_image, sha256_bytes
+from sweep3d.cache.store import DIGEST_COLUMN, Store, atomic_write, utc_now
+from sweep3d.pixels import encode_png
 from sweep3d.progress import RunProgress
 from sweep3d.spec.loader import ControlInstance
 from sweep3d.stages.outcome import StageOutcome
@@ -17,7 +23,7 @@ from sweep3d.stages.plan.jobs import Job, Plan
 
 IMAGES_SCHEMA = pa.schema([
     ("image_key", pa.string()), ("render_key", pa.string()), ("valid", pa.bool_()),
-    ("seconds", pa.float64()), ("created_at", pa.timestamp("us")),
+    ("seconds", pa.float64()), ("created_at", pa.timestamp("us")), (DIGEST_COLUMN, pa.string()),
 ])
 
 
@@ -46,21 +52,36 @@ def postprocess_stage(plan: Plan, store: Store, progress: RunProgress) -> StageO
             unique.setdefault(job.image_key, job)
     have = store.keys("images")
     cached = {k for k in unique if k in have and store.blob_path(k).exists()}
+    store.drop_rows("images", {k for k in unique if k in have and k not in cached})  # blob gone: redo
     renders = store.keys("renders")
-    todo = [j for k, j in unique.items() if k not in cached and j.render_key in renders]
+    todo = [j for k, j in unique.items() if k not in cached and j.render_key in renders
+            and store.blob_path(j.render_key).exists()]
     outcome = StageOutcome("postprocess", total=len(unique), cached=len(cached),
                            skipped=len(unique) - len(cached) - len(todo))
     if todo:
+        render_valid = store.column_map("renders", "valid")
+        render_digests = store.digests("renders")
+        damaged: set[str] = set()
         with progress.stage("postprocess", len(todo), len(cached)) as bar, \
                 store.segment_writer("images", IMAGES_SCHEMA) as writer:
             for job in todo:
                 t0 = time.perf_counter()
-                image = apply_post(decode_png(store.blob_path(job.render_key)), post, job.values, job.image_key)
-                valid = bool(np.isfinite(image).all())
-                atomic_write(store.blob_path(job.image_key), encode_png(image))
+                render = None if job.render_key in damaged else \
+                    load_image(store, job.render_key, render_digests.get(job.render_key))
+                if render is None:  # damaged render: discarded below, rendered again next pass
+                    damaged.add(job.render_key)
+                    outcome.skipped += 1
+                    bar.advance()
+                    continue
+                image = apply_post(render, post, job.values, job.image_key)
+                valid = render_valid.get(job.render_key) is not False and bool(np.isfinite(image).all())
+                data = encode_png(image)
+                atomic_write(store.blob_path(job.image_key), data)
                 writer.add({"image_key": job.image_key, "render_key": job.render_key, "valid": valid,
-                            "seconds": time.perf_counter() - t0, "created_at": utc_now()})
+                            "seconds": time.perf_counter() - t0, "created_at": utc_now(),
+                            DIGEST_COLUMN: sha256_bytes(data)})
                 outcome.computed += 1
                 bar.advance()
+        store.discard("renders", damaged, "are damaged (digest mismatch or undecodable)")
     outcome.seconds = time.perf_counter() - started
     return outcome

@@ -27,6 +27,7 @@ class RenderResult:
     ok: bool
     info: dict[str, Any] = field(default_factory=dict)
     error: str | None = None
+    kind: str = "internal"  # "user": the job failed because of the spec's input (see worker.py)
 
 
 @dataclass
@@ -104,7 +105,7 @@ class RenderPool:
         elif kind == "error":
             worker.done.add(message[1])
             worker.current = None
-            yield RenderResult(message[1], False, error=message[2])
+            yield RenderResult(message[1], False, error=message[2], kind=message[3] if len(message) > 3 else "internal")
         elif kind == "idle":
             worker.task = None
 

@@ -1,14 +1,23 @@
-"""The render stage: every render key the plan needs and the store lacks, grouped by scene."""
+"""The render stage: every render key the plan needs and the store lacks, grouped by scene.
+
+A render counts as stored when it has a row and a blob; a row whose blob has gone is dropped
+and the key rendered again. Each row records the SHA-256 of its blob, so readers can tell a
+damaged blob from a good one. A job that fails because of the user's input (a mesh or HDRI
+Blender cannot use, a full disk) stops the run with a one-line error naming the spec key.
+"""
 
 from __future__ import annotations
 
 import time
 from collections import defaultdict
+from pathlib import Path
 from typing import Any
 
 import pyarrow as pa
 
-from sweep3d.cache.store import Store, utc_now
+from sweep3d.cache.blobs import sha256_bytes
+from sweep3d.cache.store import DIGEST_COLUMN, Store, utc_now
+from sweep3d.errors import SpecError, UserError
 from sweep3d.progress import RunProgress
 from sweep3d.stages.outcome import StageOutcome
 from sweep3d.stages.plan.jobs import Job, Plan
@@ -19,7 +28,7 @@ GROUP_SIZE = 32  # jobs sent to a worker at once; a scene's jobs stay together i
 
 RENDERS_SCHEMA = pa.schema([
     ("render_key", pa.string()), ("width", pa.int32()), ("height", pa.int32()), ("valid", pa.bool_()),
-    ("seconds", pa.float64()), ("created_at", pa.timestamp("us")),
+    ("seconds", pa.float64()), ("created_at", pa.timestamp("us")), (DIGEST_COLUMN, pa.string()),
 ])
 
 
@@ -29,6 +38,12 @@ def cached_renders(plan: Plan, store: Store) -> set[str]:
     return {j.render_key for j in plan.jobs if j.render_key in have and store.blob_path(j.render_key).exists()}
 
 
+def _stale_rows(plan: Plan, store: Store, cached: set[str]) -> set[str]:
+    """Render keys of the plan with a row but no blob (deleted, or moved to quarantine)."""
+    have = store.keys("renders")
+    return {j.render_key for j in plan.jobs if j.render_key in have and j.render_key not in cached}
+
+
 def render_stage(plan: Plan, store: Store, progress: RunProgress) -> StageOutcome:
     """Render what is missing; rows are flushed every few seconds so a kill loses little."""
     started = time.perf_counter()
@@ -36,6 +51,7 @@ def render_stage(plan: Plan, store: Store, progress: RunProgress) -> StageOutcom
     for job in plan.jobs:
         unique.setdefault(job.render_key, job)
     cached = cached_renders(plan, store)
+    store.drop_rows("renders", _stale_rows(plan, store, cached))  # rendered again below, one row each
     todo = [job for key, job in unique.items() if key not in cached]
     outcome = StageOutcome("render", total=len(unique), cached=len(cached))
     if todo:
@@ -46,13 +62,18 @@ def render_stage(plan: Plan, store: Store, progress: RunProgress) -> StageOutcom
                 RenderPool(settings, workers, plan.spec.spec.render.timeout) as pool, \
                 store.segment_writer("renders", RENDERS_SCHEMA) as writer:
             for result in pool.run(groups):
-                if result.ok:
-                    writer.add({"render_key": result.render_key, **result.info, "created_at": utc_now()})
+                if not result.ok and getattr(result, "kind", "internal") == "user":
+                    raise _user_error(plan, unique[result.render_key], result.error or "")
+                digest = _blob_digest(store.blob_path(result.render_key)) if result.ok else None
+                if digest is not None:
+                    writer.add({"render_key": result.render_key, **result.info, "created_at": utc_now(),
+                                DIGEST_COLUMN: digest})
                     outcome.computed += 1
                 else:
                     outcome.failed += 1
-                    outcome.errors.append(f"render {result.render_key[:12]}: {result.error}")
-                bar.advance(failed=not result.ok)
+                    error = result.error or "the worker reported success but its blob cannot be read"
+                    outcome.errors.append(f"render {result.render_key[:12]}: {error}")
+                bar.advance(failed=digest is None)
     outcome.seconds = time.perf_counter() - started
     return outcome
 
@@ -80,3 +101,28 @@ def _groups(plan: Plan, store: Store, todo: list[Job]) -> list[list[dict[str, An
         jobs = by_scene[scene]
         groups += [jobs[i : i + GROUP_SIZE] for i in range(0, len(jobs), GROUP_SIZE)]
     return groups
+
+
+def _blob_digest(path: Path) -> str | None:
+    try:
+        return sha256_bytes(path.read_bytes())
+    except OSError:
+        return None
+
+
+def _user_error(plan: Plan, job: Job, message: str) -> UserError:
+    """A worker's user error as one line naming the spec file, the key to fix and how."""
+    spec = plan.spec
+    problem = " ".join(message.split())  # Blender's messages may span lines
+    hdri = spec.hdris.get(job.environment)
+    objects = [o.name for o in spec.spec.objects]
+    environments = [e.name for e in spec.spec.environments]
+    if hdri and hdri in message:
+        key = f"environments[{environments.index(job.environment)}].hdri"
+        fix = "give an .exr/.hdr image Blender can read"
+    elif "cannot write" in message:
+        return UserError(problem)
+    else:
+        key = f"objects[{objects.index(job.object)}].mesh"
+        fix = "check that the file opens in Blender, or export the mesh again"
+    return SpecError(str(spec.path), key, f"{problem.rstrip('.')} ({job.object!r} in {job.environment!r}); {fix}")

@@ -1,7 +1,8 @@
 """The render worker process: imports bpy once, keeps its scene, renders job after job.
 
 It talks to the parent over one pipe: it receives a list of jobs (one scene group) or None
-to stop, and sends ``("start", key)``, ``("done", key, info)``, ``("error", key, message)``
+to stop, and sends ``("start", key)``, ``("done", key, info)``, ``("error", key, message, kind)``
+(kind "user" for a UserError, which the run reports as a user error; "internal" otherwise)
 and finally ``("idle",)`` for each list.
 """
 
@@ -58,8 +59,8 @@ def worker_main(conn: Connection, settings: dict[str, Any], scratch: str) -> Non
                 info = {"seconds": time.perf_counter() - started, "valid": finite,
                         "width": rgb.shape[1], "height": rgb.shape[0]}
                 conn.send(("done", key, info))
-            except UserError as exc:
-                conn.send(("error", key, str(exc)))
+            except UserError as exc:  # the spec's input (a mesh, an HDRI) or a full disk: exit 2
+                conn.send(("error", key, str(exc), "user"))
             except Exception as exc:  # noqa: BLE001  (one bad job must not kill the sweep)
-                conn.send(("error", key, f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=3)}"))
+                conn.send(("error", key, f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=3)}", "internal"))
         conn.send(("idle",))

@@ -1,0 +1,141 @@
+"""``sweep3d cache``: verify (and repair), gc, compact and stats for the store a spec points at.
+
+Commands that change the store take its writer lock (``--wait`` as for ``run``); ``verify``
+without ``--repair`` and ``stats`` only read it.
+"""
+
+from __future__ import annotations
+
+import functools
+from pathlib import Path
+from typing import Callable
+
+import typer
+from rich.console import Console
+from rich.markup import escape
+from rich.table import Table
+
+from sweep3d.errors import UserError
+
+cache_app = typer.Typer(no_args_is_help=True, help="Check and tidy a spec's store: verify, gc, compact, stats.")
+console = Console()
+err_console = Console(stderr=True)
+
+SpecArg = typer.Argument(..., help="Path to a spec whose store to work on.", show_default=False)
+WaitOption = typer.Option(0.0, help="Seconds to wait for a run holding the store's lock.")
+MAX_LISTED = 20  # problems printed one per line; the rest are counted
+
+
+def command(func: Callable) -> Callable:
+    """Register a cache command whose user errors print one line and exit 2."""
+
+    @functools.wraps(func)
+    def wrapper(*args, **kwargs):
+        try:
+            return func(*args, **kwargs)
+        except UserError as exc:
+            err_console.print(f"[bold red]error:[/] {escape(str(exc))}", highlight=False, soft_wrap=True)
+            raise typer.Exit(exc.exit_code) from None
+
+    return cache_app.command()(wrapper)
+
+
+def _store_root(spec: Path) -> Path:
+    from sweep3d.spec import load_spec
+
+    loaded = load_spec(spec)
+    if not loaded.store.is_dir():
+        raise UserError(f"store {loaded.store} does not exist yet; run: sweep3d run {spec}")
+    return loaded.store
+
+
+@command
+def verify(
+    spec: Path = SpecArg,
+    repair: bool = typer.Option(False, "--repair", help="Quarantine corrupt files and drop their rows, "
+                                "so the next run recomputes them."),
+    wait: float = WaitOption,
+) -> None:
+    """Re-read every segment and re-hash every blob; report corrupt or missing ones (exit 1 if any)."""
+    from sweep3d.cache.maintenance import repair as repair_store
+    from sweep3d.cache.maintenance import verify as verify_store
+    from sweep3d.cache.store import Store
+
+    root = _store_root(spec)
+    report = verify_store(root)
+    console.print(f"checked {report.segments} segments ({report.rows} rows) and {report.blobs} blobs in "
+                  f"{escape(str(root))}")
+    for problem in report.problems[:MAX_LISTED]:
+        console.print(f"[red]{escape(problem.line(root))}[/]", highlight=False)
+    if len(report.problems) > MAX_LISTED:
+        console.print(f"[red]... and {len(report.problems) - MAX_LISTED} more[/]")
+    if report.ok:
+        console.print("[green]store OK[/]")
+        return
+    if not repair:
+        console.print(f"{len(report.problems)} problems; run: sweep3d cache verify {escape(str(spec))} --repair "
+                      "(or the next run recomputes what it needs)")
+        raise typer.Exit(1)
+    with Store(root).lock(wait):
+        report = verify_store(root)  # again, holding the lock: a run may have changed things
+        fixed = repair_store(root, report)
+    console.print(f"repaired {fixed} problems: damaged files moved to quarantine/; the next run recomputes "
+                  "their rows")
+
+
+@command
+def gc(
+    spec: Path = SpecArg,
+    older_than: float = typer.Option(3600.0, help="Remove temp files older than this many seconds."),
+    purge_quarantine: bool = typer.Option(False, "--purge-quarantine", help="Also delete quarantined files."),
+    wait: float = WaitOption,
+) -> None:
+    """Remove blobs no row references and leftover temp files."""
+    from sweep3d.cache.maintenance import collect_garbage
+    from sweep3d.cache.store import Store
+
+    root = _store_root(spec)
+    with Store(root).lock(wait):
+        out = collect_garbage(root, older_than, purge_quarantine)
+    console.print(f"removed {out.blobs} unreferenced blobs, {out.temp_files} temp files"
+                  + (f", {out.quarantined} quarantined files" if purge_quarantine else "")
+                  + f" ({_bytes(out.bytes)})")
+
+
+@command
+def compact(spec: Path = SpecArg, wait: float = WaitOption) -> None:
+    """Merge each table's segments into one (dropping duplicate rows); readers see no gap."""
+    from sweep3d.cache.maintenance import compact_table
+    from sweep3d.cache.store import TABLES, Store
+
+    root = _store_root(spec)
+    store = Store(root)
+    with store.lock(wait):
+        done = [c for c in (compact_table(store, t) for t in TABLES) if c is not None]
+    if not done:
+        console.print("nothing to compact")
+    for c in done:
+        console.print(f"{c.table}: {c.segments_before} segments → 1 ({c.rows_before} rows → {c.rows_after})")
+
+
+@command
+def stats(spec: Path = SpecArg) -> None:
+    """Files, rows, distinct keys and bytes per table, blobs, temp files and quarantine."""
+    from sweep3d.cache.maintenance import store_stats
+
+    root = _store_root(spec)
+    table = Table("table", "files", "rows", "keys", "size", title=escape(str(root)))
+    total = 0
+    for t in store_stats(root):
+        total += t.bytes
+        table.add_row(t.name, str(t.files), str(t.rows), str(t.keys), _bytes(t.bytes))
+    table.add_row("[bold]total[/]", "", "", "", f"[bold]{_bytes(total)}[/]")
+    console.print(table)
+
+
+def _bytes(n: int) -> str:
+    for unit in ("B", "KB", "MB", "GB"):
+        if n < 1024 or unit == "GB":
+            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
+        n /= 1024
+    return f"{n:.1f} TB"

@@ -1,0 +1,406 @@
+"""Damage and concurrency: corrupt or truncated blobs and segments, full disks, compaction under
+readers, ``sweep3d cache`` (verify, repair, gc, compact, stats), and two runs on one store."""
+
+from __future__ import annotations
+
+import errno
+import logging
+import os
+import re
+import shutil
+import subprocess
+import sys
+import threading
+import time
+from datetime import datetime, timedelta
+from pathlib import Path
+
+import pyarrow.parquet as pq
+import pytest
+from typer.testing import CliRunner
+
+from sweep3d.cache.blobs import sha256_bytes
+from sweep3d.cache.maintenance import collect_garbage, compact_table, repair, store_stats, verify
+from sweep3d.cache.store import DIGEST_COLUMN, Store, StoreWriteError, atomic_write
+from sweep3d.cli import app
+from sweep3d.errors import UserError
+from sweep3d.pipeline import run
+from sweep3d.pixels import encode_png
+from sweep3d.spec import load_spec
+from tests.conftest import REPO, TINY_SPEC, write_spec
+
+T0 = datetime(2024, 1, 1)
+
+
+def render_row(key: str, minutes: int = 0, digest: str | None = None, seconds: float = 1.0) -> dict:
+    return {"render_key": key, "width": 4, "height": 4, "valid": True, "seconds": seconds,
+            "created_at": T0 + timedelta(minutes=minutes), DIGEST_COLUMN: digest}
+
+
+def add_render(store: Store, key: str, minutes: int = 0) -> bytes:
+    """A blob and its row, as the render stage writes them."""
+    import numpy as np
+
+    data = encode_png(np.full((4, 4, 3), (minutes % 10) / 10, np.float32))
+    atomic_write(store.blob_path(key), data)
+    store.append("renders", [render_row(key, minutes, sha256_bytes(data))])
+    return data
+
+
+def flip_bytes(path: Path, at: float = 0.5, n: int = 4) -> None:
+    data = bytearray(path.read_bytes())
+    i = int(len(data) * at)
+    for j in range(i, min(i + n, len(data))):
+        data[j] ^= 0xFF
+    path.write_bytes(bytes(data))
+
+
+def tree(root: Path) -> dict[str, str]:
+    """Every file under ``root`` (relative path) with its content digest."""
+    return {str(p.relative_to(root)): sha256_bytes(p.read_bytes()) for p in sorted(root.rglob("*")) if p.is_file()}
+
+
+# -- unreadable segments ---------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("damage", ["flipped", "truncated", "garbage", "empty"])
+def test_an_unreadable_segment_is_quarantined_with_one_warning_and_skipped(tmp_path, caplog, damage):
+    store = Store(tmp_path / "store")
+    good = store.append("renders", [render_row("a"), render_row("b")])
+    bad = store.append("renders", [render_row(f"k{i}", i) for i in range(200)])
+    if damage == "flipped":
+        flip_bytes(bad, 0.3)  # inside a data page: caught by its checksum
+    elif damage == "truncated":
+        bad.write_bytes(bad.read_bytes()[: bad.stat().st_size // 2])
+    elif damage == "garbage":
+        bad.write_bytes(os.urandom(4000))
+    else:
+        bad.write_bytes(b"")
+
+    with caplog.at_level(logging.WARNING, logger="sweep3d.store"):
+        assert store.keys("renders") == {"a", "b"}
+        con = store.connect()
+        assert con.execute("select count(*) from renders").fetchone()[0] == 2
+        assert store.keys("renders") == {"a", "b"}
+    warnings = [r.getMessage() for r in caplog.records]
+    assert len(warnings) == 1, warnings
+    assert bad.name in warnings[0] and "quarantine" in warnings[0] and "\n" not in warnings[0]
+    assert store.segments("renders") == [good]
+    assert (tmp_path / "store" / "quarantine" / "tables" / "renders" / bad.name).is_file()
+
+
+def test_a_reader_that_must_not_write_skips_without_moving(tmp_path, caplog):
+    store = Store(tmp_path / "store")
+    store.append("renders", [render_row("a")])
+    bad = store.append("renders", [render_row("b")])
+    bad.write_bytes(b"PAR1 not really")
+    before = tree(tmp_path / "store")
+    assert Store(tmp_path / "store", quarantine=False).keys("renders") == {"a"}
+    assert tree(tmp_path / "store") == before
+
+
+def test_drop_rows_rewrites_only_the_segments_holding_them(tmp_path):
+    store = Store(tmp_path / "store")
+    first = store.append("renders", [render_row("a"), render_row("b")])
+    second = store.append("renders", [render_row("c")])
+    untouched = store.append("renders", [render_row("d")])
+    stamp = untouched.stat().st_mtime_ns
+    assert store.drop_rows("renders", {"b", "c", "zz"}) == 2
+    assert store.keys("renders") == {"a", "d"}
+    assert first.exists() and not second.exists()  # emptied segments are removed
+    assert untouched.stat().st_mtime_ns == stamp
+    assert not list((tmp_path / "store").rglob("*.tmp"))
+
+
+# -- full disk -------------------------------------------------------------------------------
+
+
+def _enospc(*args, **kwargs):
+    raise OSError(errno.ENOSPC, "No space left on device")
+
+
+def test_a_full_disk_while_writing_a_segment_is_one_line_and_leaves_no_temp_file(tmp_path, monkeypatch):
+    store = Store(tmp_path / "store")
+    store.append("renders", [render_row("a")])
+    before = tree(tmp_path / "store")
+
+    def half_then_full(table, where, **kwargs):
+        Path(where).write_bytes(b"PAR1 half")
+        _enospc()
+
+    monkeypatch.setattr(pq, "write_table", half_then_full)
+    with pytest.raises(StoreWriteError) as caught:
+        store.append("renders", [render_row("b")])
+    message = str(caught.value)
+    assert isinstance(caught.value, UserError) and "\n" not in message
+    assert "No space left on device" in message and "free some disk space" in message
+    assert "experiment.store" in message
+    assert tree(tmp_path / "store") == before
+
+
+def test_a_full_disk_while_writing_a_blob_leaves_no_temp_file(tmp_path, monkeypatch):
+    monkeypatch.setattr(os, "fsync", _enospc)
+    target = tmp_path / "blobs" / "ab" / "abcd.png"
+    with pytest.raises(StoreWriteError, match="No space left"):
+        atomic_write(target, b"x" * 1000)
+    assert [p.name for p in tmp_path.rglob("*") if p.is_file()] == []
+
+
+# -- verify, repair, gc, compact, stats --------------------------------------------------------
+
+
+def test_verify_finds_every_kind_of_damage_and_repair_fixes_it(tmp_path):
+    root = tmp_path / "store"
+    store = Store(root)
+    for i, key in enumerate(["aa01", "bb02", "cc03", "dd04"]):
+        add_render(store, key, i)
+    store.append("renders", [render_row("ee05", 9)])  # an old-style row without a digest
+    atomic_write(store.blob_path("ee05"), b"\x89PNG\r\n\x1a\n not really")
+    predictions = store.append("predictions", [{"pred_key": "p", "created_at": T0}])
+    store.write_table_file(store.jobs_path("exp"), pq.read_table(predictions))
+    assert verify(root).ok is False  # ee05 does not decode
+
+    flip_bytes(store.blob_path("bb02"), 0.6)  # a bit flip: still a file, wrong content
+    store.blob_path("cc03").unlink()  # gone
+    predictions.write_bytes(predictions.read_bytes()[:40])  # truncated segment
+    store.jobs_path("exp").write_bytes(b"nonsense")
+    report = verify(root)
+    kinds = sorted((p.kind, p.key or p.path.name) for p in report.problems)
+    assert kinds == [("corrupt blob", "bb02"), ("corrupt blob", "ee05"), ("corrupt jobs table", "exp.parquet"),
+                     ("corrupt segment", predictions.name), ("missing blob", "cc03")]
+    assert verify(root).problems == report.problems  # verify changes nothing
+
+    with store.lock():
+        assert repair(root, verify(root)) == 5
+    assert verify(root).ok
+    assert Store(root).keys("renders") == {"aa01", "dd04"}  # the others are recomputed by the next run
+    quarantined = {p.name for p in (root / "quarantine").rglob("*") if p.is_file()}
+    assert quarantined == {"bb02.png", "ee05.png", predictions.name, "exp.parquet"}
+
+
+def test_gc_removes_unreferenced_blobs_and_old_temp_files_only(tmp_path):
+    root = tmp_path / "store"
+    store = Store(root)
+    add_render(store, "aa01")
+    atomic_write(store.blob_path("ff99"), b"orphan: its run was killed before the row was written")
+    old_tmp = store.blob_path("aa01").with_name(".aa01.png.dead.tmp")
+    old_tmp.write_bytes(b"half")
+    os.utime(old_tmp, (time.time() - 7200, time.time() - 7200))
+    young_tmp = store.table_dir("renders") / ".x.parquet.live.tmp"
+    young_tmp.write_bytes(b"being written")
+    out = collect_garbage(root, older_than=3600)
+    assert (out.blobs, out.temp_files) == (1, 1)
+    assert store.blob_path("aa01").exists() and not store.blob_path("ff99").exists()
+    assert young_tmp.exists() and not old_tmp.exists()
+    assert verify(root).ok
+
+
+def test_compaction_merges_segments_drops_duplicates_and_leaves_the_views_as_they_were(tmp_path):
+    root = tmp_path / "store"
+    store = Store(root)
+    for i in range(30):
+        store.append("renders", [render_row(f"k{i:02d}", i, seconds=i), render_row(f"k{i // 2:02d}", 100 + i, seconds=-1)])
+    con = store.connect()
+    before = con.execute("select * from renders order by render_key").fetchall()
+    assert len(before) == 30 and all(r[4] >= 0 for r in before)  # the first row of each key wins
+
+    done = compact_table(store, "renders")
+    assert (done.segments_before, done.rows_before, done.rows_after) == (30, 60, 30)
+    assert len(store.segments("renders")) == 1
+    assert Store(root).connect().execute("select * from renders order by render_key").fetchall() == before
+    assert con.execute("select * from renders order by render_key").fetchall() == before  # an open connection too
+    assert compact_table(store, "renders") is None  # nothing left to do
+
+
+def test_readers_see_every_row_exactly_once_while_compaction_runs(tmp_path):
+    """A reader thread reads through fresh Store objects (keys, and DuckDB views) while the table
+    gets later duplicate rows and is compacted over and over: every reading shows each key once,
+    and always the same (first) row of it — no gap, no duplicate, no flip."""
+    root = tmp_path / "store"
+    store = Store(root)
+    n = 360
+    for i in range(0, n, 3):
+        store.append("renders", [render_row(f"k{i + j}", 0, seconds=1.0) for j in range(3)])
+    seen: list[tuple] = []
+    errors: list[BaseException] = []
+    stop = threading.Event()
+
+    def reader():
+        while not stop.is_set():
+            try:
+                reading = Store(root)
+                keys = len(reading.keys("renders"))
+                rows, total = reading.connect().execute("select count(*), sum(seconds) from renders").fetchone()
+                seen.append((keys, rows, total))
+            except BaseException as exc:  # noqa: BLE001
+                errors.append(exc)
+
+    thread = threading.Thread(target=reader)
+    thread.start()
+    try:
+        for round_ in range(8):
+            for i in range(15):  # later duplicates of existing keys: the views must keep showing the first
+                store.append("renders", [render_row(f"k{(round_ * 15 + i) % n}", 10 + round_, seconds=-1.0)])
+            compact_table(store, "renders")
+    finally:
+        stop.set()
+        thread.join()
+    assert not errors, errors[:3]
+    assert len(seen) > 5
+    assert all(s == (n, n, float(n)) for s in seen), [s for s in seen if s != (n, n, float(n))][:5]
+    assert len(store.segments("renders")) == 1
+
+
+def test_stats_count_files_rows_and_bytes(tmp_path):
+    root = tmp_path / "store"
+    store = Store(root)
+    add_render(store, "aa01")
+    add_render(store, "bb02", 1)
+    store.append("renders", [render_row("aa01", 5)])  # a duplicate row
+    stats = {s.name: s for s in store_stats(root)}
+    assert (stats["renders"].files, stats["renders"].rows, stats["renders"].keys) == (3, 3, 2)
+    assert stats["blobs"].files == 2 and stats["blobs"].bytes > 0
+    assert stats["predictions"].files == 0
+
+
+# -- a real run's store ----------------------------------------------------------------------
+
+
+def _results(folder: Path) -> list[tuple]:
+    con = Store(folder / "store").connect("tiny")
+    return con.execute("SELECT job, pred_key, top1_label, correct, loss FROM results ORDER BY job").fetchall()
+
+
+def _same_results(got: list[tuple], want: list[tuple]) -> None:
+    assert len(got) == len(want)
+    for a, b in zip(got, want):
+        assert a[:4] == b[:4]
+        assert a[4] == pytest.approx(b[4], abs=0.05)
+
+
+@pytest.mark.slow
+def test_damaged_blobs_and_segments_are_recomputed_not_fatal(tiny_copy: Path, caplog) -> None:
+    """A flipped render blob, a truncated image blob and a truncated predictions segment: the next
+    run warns, quarantines, recomputes exactly what is needed (rendering again with Blender)."""
+    root = tiny_copy / "store"
+    want = _results(tiny_copy)
+    con = Store(root).connect("tiny")
+    render, image = con.execute(
+        "SELECT render_key, image_key FROM jobs WHERE image_key <> render_key ORDER BY job LIMIT 1").fetchone()
+    flip_bytes(Store(root).blob_path(render), 0.7)
+    image_blob = Store(root).blob_path(image)
+    image_blob.write_bytes(image_blob.read_bytes()[:50])
+    for segment in Store(root).segments("predictions"):
+        segment.write_bytes(segment.read_bytes()[:-20])
+
+    with caplog.at_level(logging.WARNING, logger="sweep3d.store"):
+        result = run(load_spec(tiny_copy / "spec.toml"))
+    assert result.failed == 0
+    assert result.outcome("render").computed == 1  # the damaged render, found by the stages reading it
+    assert result.outcome("postprocess").computed == 1
+    assert result.outcome("infer").computed == 8
+    assert any("quarantine" in r.getMessage() for r in caplog.records)
+    _same_results(_results(tiny_copy), want)
+    assert verify(root).ok
+    assert Store(root).keys("renders") >= {render} and len(Store(root).keys("renders")) == 4
+
+
+@pytest.mark.slow
+def test_cache_commands_on_a_real_store(tiny_copy: Path) -> None:
+    spec = str(tiny_copy / "spec.toml")
+    root = tiny_copy / "store"
+    runner = CliRunner()
+    want = _results(tiny_copy)
+
+    stats = runner.invoke(app, ["cache", "stats", spec])
+    assert stats.exit_code == 0, stats.output
+    assert re.search(r"renders\s+│\s+\d+\s+│\s+4\s+│\s+4\s", stats.output), stats.output
+    assert "predictions" in stats.output and "blobs" in stats.output and "total" in stats.output
+
+    ok = runner.invoke(app, ["cache", "verify", spec])
+    assert ok.exit_code == 0 and "store OK" in ok.output
+
+    blob = Store(root).blob_path(sorted(Store(root).keys("images"))[0])
+    flip_bytes(blob)
+    found = runner.invoke(app, ["cache", "verify", spec])
+    assert found.exit_code == 1
+    assert "corrupt blob" in found.output and blob.name in found.output and "--repair" in found.output
+    fixed = runner.invoke(app, ["cache", "verify", spec, "--repair"])
+    assert fixed.exit_code == 0 and "repaired 1" in fixed.output
+    assert runner.invoke(app, ["cache", "verify", spec]).exit_code == 0
+
+    atomic_write(Store(root).blob_path("ff" * 20), b"orphan")
+    swept = runner.invoke(app, ["cache", "gc", spec, "--purge-quarantine"])
+    assert swept.exit_code == 0 and "removed 1 unreferenced blobs" in swept.output
+    assert not (root / "quarantine").exists()
+
+    again = run(load_spec(tiny_copy / "spec.toml"))  # recomputes the repaired image
+    assert again.outcome("postprocess").computed == 1 and again.outcome("render").computed == 0
+    compacted = runner.invoke(app, ["cache", "compact", spec])
+    assert compacted.exit_code == 0 and "segments → 1" in compacted.output
+    assert all(len(Store(root).segments(t)) <= 1 for t in ("renders", "images", "predictions", "runs"))
+    after = run(load_spec(tiny_copy / "spec.toml"))
+    assert {o.stage: o.computed for o in after.outcomes} == {"render": 0, "postprocess": 0, "infer": 0}
+    _same_results(_results(tiny_copy), want)
+    assert runner.invoke(app, ["cache", "verify", spec]).exit_code == 0
+
+
+def test_cache_commands_on_a_store_that_does_not_exist_are_one_line_errors(tmp_path) -> None:
+    spec = write_spec(tmp_path, TINY_SPEC)
+    result = CliRunner().invoke(app, ["cache", "verify", str(spec)])
+    assert result.exit_code == 2
+    lines = [line for line in result.output.splitlines() if line.strip()]
+    assert len(lines) == 1 and "does not exist yet" in lines[0] and "sweep3d run" in lines[0]
+
+
+# -- two runs at once ------------------------------------------------------------------------
+
+CONCURRENT_SPEC = TINY_SPEC.replace("yaw = [0, 45]", "yaw = { range = [-180, 180] }").replace(
+    '[policy]\ntype = "grid"', '[policy]\ntype = "grid"\nsamples_per_dim = 12')  # yaws -180, -150, ..., 150
+OTHER_SPEC = TINY_SPEC.replace('name = "tiny"', 'name = "other"').replace("yaw = [0, 45]", "yaw = [0, 45, 90]")
+
+
+def _cli(folder: Path, *args: str) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "sweep3d", *args], cwd=folder, text=True,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env={**os.environ, "PYTHONPATH": str(REPO)})
+
+
+@pytest.mark.slow
+def test_a_second_run_on_a_busy_store_refuses_in_one_line_or_waits_with_wait(tmp_path: Path) -> None:
+    write_spec(tmp_path, CONCURRENT_SPEC)
+    write_spec(tmp_path, OTHER_SPEC, name="other.toml")
+    first = _cli(tmp_path, "run", "spec.toml", "--no-report")
+    lock = tmp_path / "store" / "lock"
+    deadline = time.monotonic() + 120
+    while not (lock.exists() and lock.read_text().strip() == f"sweep3d pid {first.pid}"):
+        assert first.poll() is None and time.monotonic() < deadline, first.communicate()
+        time.sleep(0.02)
+
+    refused = _cli(tmp_path, "run", "other.toml", "--no-report")
+    out, err = refused.communicate(timeout=120)
+    assert refused.returncode == 2, out + err
+    lines = [line for line in (out + err).splitlines() if line.strip()]
+    assert len(lines) == 1, lines
+    assert f"in use by sweep3d pid {first.pid}" in lines[0] and "--wait" in lines[0]
+    assert first.poll() is None, "the refusal must come while the first run still holds the lock"
+
+    waiting = _cli(tmp_path, "run", "other.toml", "--no-report", "--wait", "300")
+    out1, err1 = first.communicate(timeout=300)
+    assert first.returncode == 0, err1
+    out2, err2 = waiting.communicate(timeout=300)
+    assert waiting.returncode == 0, err2
+    finished_first = re.search(r"run (\w+)\)", out1).group(1)
+
+    store = Store(tmp_path / "store")
+    runs = store.connect().execute("SELECT experiment, started_at, created_at FROM runs ORDER BY created_at").fetchall()
+    assert [r[0] for r in runs] == ["tiny", "other"]
+    assert runs[1][1] >= runs[0][2], "the waiting run started after the first had finished"
+    assert finished_first
+    assert re.search(r"render\s+│\s+6\s+│\s+4\s+│\s+2\s", out2), out2  # yaw 0 and 90 were rendered by the first
+    for table in ("renders", "images", "predictions"):
+        keys = [k for p in store.segments(table) for k in pq.read_table(p).column(0).to_pylist()]
+        assert len(keys) == len(set(keys)), f"duplicate {table} rows"
+    assert verify(tmp_path / "store").ok
+    assert store.connect("tiny").execute("SELECT count(*) FROM results").fetchone()[0] == 48
+    assert store.connect("other").execute("SELECT count(*) FROM results").fetchone()[0] == 12
+    shutil.rmtree(tmp_path / "store")
