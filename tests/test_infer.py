@@ -97,4 +97,4 @@ def test_onnx_backend_agrees_with_torch(lite0, tmp_path) -> None:
     assert np.array_equal(torch_logits.argmax(1), onnx_logits.argmax(1))
     assert np.abs(torch_logits - onnx_logits).max() < 1e-3
     again = OnnxRunner(lite0, tmp_path, "lite0", threads=2)  # reuses the checked export
-    assert np.allclose(again(lite0.preprocess(images)), onnx_logits)
+    assert np.allclose(again(lite0.preprocess(images)), onnx_logits, atol=1e-4)  # threads: last-bit noise
