@@ -143,11 +143,8 @@ CASES = [
          one_job=True),
     mesh("cut.stl", b"solid x\nfacet normal 0 0 1\n outer loop\n  vertex 0 0 0\n", "Blender cannot import",
          "export the mesh again", one_job=True),
-    pytest.param(mesh("dangling.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n", "no faces", one_job=True),
-                 marks=pytest.mark.xfail(strict=True, reason="needs a zero-area check in render/scene.py "
-                                                            "(faces pointing past the vertex list are dropped)")),
-    pytest.param(mesh("flat.obj", b"v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n", "zero area", one_job=True),
-                 marks=pytest.mark.xfail(strict=True, reason="needs a zero-area check in render/scene.py")),
+    mesh("dangling.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n", "no faces", one_job=True),
+    mesh("flat.obj", b"v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n", "zero area", one_job=True),
     # HDRIs that are not images, or not whole ones (Blender would light the scene magenta)
     hdri("garbage.exr", GARBAGE, "not an OpenEXR image"),
     hdri("truncated.exr", _exr_truncated(), "truncated", "save it again"),

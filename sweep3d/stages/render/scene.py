@@ -119,6 +119,11 @@ class BlenderScene:
         radius = float(np.sqrt(((points - centre) ** 2).sum(axis=1).max()))
         if not radius > 0:
             raise UserError(f"{mesh_path!r} has zero size (all vertices coincide)")
+        faces = sum(len(o.data.polygons) for o in meshes)
+        if faces == 0:
+            raise UserError(f"{mesh_path!r} has no faces to render (are its face indices valid?)")
+        if self._surface_area(meshes) <= 1e-12 * radius**2:
+            raise UserError(f"{mesh_path!r} has zero area (its faces are degenerate: all points on a line)")
         normaliser = bpy.data.objects.new("sweep3d_normaliser", None)
         self.scene.collection.objects.link(normaliser)
         normaliser.parent = self.pose
@@ -132,6 +137,15 @@ class BlenderScene:
                 obj.matrix_basis = world
         self.meshes = meshes
         self.skins.reset(meshes, radius)
+
+    @staticmethod
+    def _surface_area(meshes) -> float:
+        total = 0.0
+        for obj in meshes:
+            areas = np.empty(len(obj.data.polygons), dtype=np.float64)
+            obj.data.polygons.foreach_get("area", areas)
+            total += float(areas.sum() * abs(np.linalg.det(np.array(obj.matrix_world)[:3, :3])) ** (2 / 3))
+        return total
 
     @staticmethod
     def _world_vertices(meshes) -> np.ndarray:
