@@ -31,6 +31,7 @@ from sweep3d.stages.plan.jobs import History
 from sweep3d.stages.plan.policies import Outcome
 from sweep3d.stages.postprocess import postprocess_stage
 from sweep3d.stages.render import render_stage
+from sweep3d.stages.render.stage import LOCAL, Executor
 
 
 @dataclass
@@ -95,12 +96,14 @@ def write_jobs(plan: Plan, store: Store) -> None:
 REPAIR_PASSES = 3  # extra passes over the stages when a damaged blob was found (render → post → infer)
 
 
-def run_stages(plan: Plan, store: Store, progress: RunProgress, model: ReadyModel | None = None) -> list[StageOutcome]:
+def run_stages(plan: Plan, store: Store, progress: RunProgress, model: ReadyModel | None = None,
+               executor: Executor = LOCAL) -> list[StageOutcome]:
     """Render, postprocess and infer ``plan``; again while a stage discarded a damaged blob."""
     outcomes: list[StageOutcome] = []
     for _ in range(1 + REPAIR_PASSES):
         discarded = store.discarded
-        stages = (render_stage, postprocess_stage, functools.partial(infer_stage, model=model))
+        stages = (functools.partial(render_stage, executor=executor), postprocess_stage,
+                  functools.partial(infer_stage, model=model))
         outcomes = _merge(outcomes, [stage(plan, store, progress) for stage in stages])
         if store.discarded == discarded:
             break
@@ -126,8 +129,8 @@ def _writable(spec: LoadedSpec, store: Store) -> None:
         raise SpecError(str(spec.path), "experiment.store", str(exc)) from None
 
 
-def run(spec: LoadedSpec, console: Console | None = None, wait: float = 0.0) -> RunResult:
-    """Run every stage of ``spec`` and return what each did."""
+def run(spec: LoadedSpec, console: Console | None = None, wait: float = 0.0, executor: Executor = LOCAL) -> RunResult:
+    """Run every stage of ``spec`` and return what each did (renders on ``executor``)."""
     store = Store(spec.store)
     _writable(spec, store)
     with store.lock(wait):
@@ -140,7 +143,7 @@ def run(spec: LoadedSpec, console: Console | None = None, wait: float = 0.0) -> 
             while True:  # one pass for fixed policies; one per round for adaptive ones
                 plan = make_plan(spec, result.plan.model_digest, history) if history else result.plan
                 try:
-                    outcomes = run_stages(plan, store, progress, model)
+                    outcomes = run_stages(plan, store, progress, model, executor)
                 except KeyboardInterrupt:
                     write_jobs(plan, store)  # what finished is stored: let query and report show it
                     raise

@@ -56,15 +56,21 @@ def run(
     spec: Path = SpecArg,
     report: bool = typer.Option(True, help="Write the HTML report when the run ends."),
     wait: float = typer.Option(0.0, help="Seconds to wait for another run holding the store's lock."),
+    executor: str = typer.Option("local", help="Where renders run: local worker processes, or ray."),
+    address: Optional[str] = typer.Option(None, help="With --executor ray: the cluster's address (default: "
+                                                      "start a local one on 127.0.0.1)."),
 ) -> None:
     """Render, postprocess and infer everything the spec needs that the store lacks."""
     from sweep3d.cli.views import print_run
     from sweep3d.pipeline import run as run_pipeline
+    from sweep3d.stages.render.stage import Executor
     from sweep3d.spec import load_spec
 
     loaded = load_spec(spec)
     signal.signal(signal.SIGTERM, _interrupt)  # clean up workers and scratch files as on Ctrl-C
-    result = run_pipeline(loaded, console, wait=wait)
+    if executor not in ("local", "ray"):
+        raise UserError(f"--executor {executor!r}: use local or ray")
+    result = run_pipeline(loaded, console, wait=wait, executor=Executor(executor, address))
     print_run(console, result)
     if report:
         _write_report(loaded, None)

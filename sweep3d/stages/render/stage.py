@@ -9,6 +9,7 @@ Blender cannot use, a full disk) stops the run with a one-line error naming the 
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from collections import defaultdict
 from pathlib import Path
 from typing import Any
@@ -44,7 +45,26 @@ def _stale_rows(plan: Plan, store: Store, cached: set[str]) -> set[str]:
     return {j.render_key for j in plan.jobs if j.render_key in have and j.render_key not in cached}
 
 
-def render_stage(plan: Plan, store: Store, progress: RunProgress) -> StageOutcome:
+@dataclass(frozen=True)
+class Executor:
+    """Where renders run: ``local`` worker processes (the default) or a ``ray`` cluster
+    (``address`` of an existing cluster, or None for a local one on loopback)."""
+
+    kind: str = "local"
+    address: str | None = None
+
+    def pool(self, settings: dict[str, Any], workers: int, timeout: float):
+        if self.kind == "ray":
+            from sweep3d.stages.render.ray_pool import RayRenderPool
+
+            return RayRenderPool(settings, workers, self.address)
+        return RenderPool(settings, workers, timeout)
+
+
+LOCAL = Executor()
+
+
+def render_stage(plan: Plan, store: Store, progress: RunProgress, executor: Executor = LOCAL) -> StageOutcome:
     """Render what is missing; rows are flushed every few seconds so a kill loses little."""
     started = time.perf_counter()
     unique: dict[str, Job] = {}
@@ -59,7 +79,7 @@ def render_stage(plan: Plan, store: Store, progress: RunProgress) -> StageOutcom
         settings = plan.spec.spec.render.model_dump()
         workers = min(plan.spec.spec.render.workers, len(groups))
         with progress.stage("render", len(todo), len(cached)) as bar, \
-                RenderPool(settings, workers, plan.spec.spec.render.timeout) as pool, \
+                executor.pool(settings, workers, plan.spec.spec.render.timeout) as pool, \
                 store.segment_writer("renders", RENDERS_SCHEMA) as writer:
             for result in pool.run(groups):
                 if not result.ok and getattr(result, "kind", "internal") == "user":

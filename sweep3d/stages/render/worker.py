@@ -24,11 +24,7 @@ def worker_main(conn: Connection, settings: dict[str, Any], scratch: str) -> Non
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides when workers stop
     devnull = os.open(os.devnull, os.O_WRONLY)
     os.dup2(devnull, 1)  # Blender prints progress straight to fd 1
-    from sweep3d.cache.store import atomic_write
-    from sweep3d.errors import UserError
-    from sweep3d.pixels import encode_png
     from sweep3d.stages.render.scene import BlenderScene
-    from sweep3d.stages.render.state import SceneState
 
     try:
         scene = BlenderScene(settings, Path(scratch))
@@ -44,23 +40,42 @@ def worker_main(conn: Connection, settings: dict[str, Any], scratch: str) -> Non
         if jobs is None:
             return
         for job in jobs:
-            key = job["render_key"]
-            conn.send(("start", key))
-            started = time.perf_counter()
-            try:
-                scene.prepare(job["mesh"], job["environment"])
-                state = SceneState()
-                for control, params in job["controls"]:
-                    control.apply(state, params)
-                scene.pose_scene(state)
-                rgb = scene.render()
-                finite = bool(np.isfinite(rgb).all())
-                atomic_write(Path(job["blob"]), encode_png(rgb))
-                info = {"seconds": time.perf_counter() - started, "valid": finite,
-                        "width": rgb.shape[1], "height": rgb.shape[0]}
-                conn.send(("done", key, info))
-            except UserError as exc:  # the spec's input (a mesh, an HDRI) or a full disk: exit 2
-                conn.send(("error", key, str(exc), "user"))
-            except Exception as exc:  # noqa: BLE001  (one bad job must not kill the sweep)
-                conn.send(("error", key, f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=3)}", "internal"))
+            conn.send(("start", job["render_key"]))
+            message, _ = render_job(scene, job)
+            conn.send(message)
         conn.send(("idle",))
+
+
+def render_job(scene, job: dict[str, Any], keep_pixels: bool = False) -> tuple[tuple, bytes | None]:
+    """Render one job in ``scene`` (a BlenderScene); shared by process workers and Ray actors.
+
+    Returns:
+        The message for the parent (``("done", key, info)`` or ``("error", key, message, kind)``)
+        and, when ``keep_pixels``, the PNG bytes instead of writing them to ``job["blob"]`` (so a
+        remote worker needs no shared file system: the driver writes the store).
+    """
+    from sweep3d.cache.store import atomic_write
+    from sweep3d.errors import UserError
+    from sweep3d.pixels import encode_png
+    from sweep3d.stages.render.state import SceneState
+
+    key = job["render_key"]
+    started = time.perf_counter()
+    try:
+        scene.prepare(job["mesh"], job["environment"])
+        state = SceneState()
+        for control, params in job["controls"]:
+            control.apply(state, params)
+        scene.pose_scene(state)
+        rgb = scene.render()
+        finite = bool(np.isfinite(rgb).all())
+        png = encode_png(rgb)
+        if not keep_pixels:
+            atomic_write(Path(job["blob"]), png)
+        info = {"seconds": time.perf_counter() - started, "valid": finite,
+                "width": rgb.shape[1], "height": rgb.shape[0]}
+        return ("done", key, info), (png if keep_pixels else None)
+    except UserError as exc:  # the spec's input (a mesh, an HDRI) or a full disk: exit 2
+        return ("error", key, str(exc), "user"), None
+    except Exception as exc:  # noqa: BLE001  (one bad job must not kill the sweep)
+        return ("error", key, f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=3)}", "internal"), None

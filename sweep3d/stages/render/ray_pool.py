@@ -1,0 +1,196 @@
+"""Render on a Ray cluster: the same jobs and results as :class:`RenderPool`, with Ray actors
+as the persistent workers.
+
+Each actor imports bpy once and keeps its scene, as a local worker does. Assets travel through
+Ray's object store (a mesh with its materials and textures, a custom HDRI), and pixels come
+back as PNG bytes, so workers need no shared file system: the driver writes every blob and
+every row, and stays the store's single writer. A group whose actor dies is rendered again by
+a new actor; results are yielded only for finished groups, so nothing is counted twice.
+"""
+
+from __future__ import annotations
+
+import io
+import tarfile
+from collections import deque
+from pathlib import Path
+from typing import Any, Iterator
+
+from sweep3d.cache.keys import digest
+from sweep3d.cache.store import atomic_write
+from sweep3d.errors import UserError
+from sweep3d.stages.render.assets import bpy_root, mesh_files
+from sweep3d.stages.render.pool import RenderResult
+
+MAX_GROUP_RETRIES = 2
+
+
+def _ray():
+    try:
+        import ray
+    except ImportError:
+        raise UserError("--executor ray needs Ray: pip install 'sweep3d[ray]'") from None
+    return ray
+
+
+class RenderActor:
+    """A Ray actor holding one Blender scene (created remotely through ``ray.remote``)."""
+
+    def __init__(self, settings: dict[str, Any]) -> None:
+        import os
+        import tempfile
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), 1)  # Blender prints progress straight to fd 1
+        from sweep3d.stages.render.scene import BlenderScene
+
+        self.scratch = Path(tempfile.mkdtemp(prefix="sweep3d-ray-"))
+        self.scene = BlenderScene(settings, self.scratch)
+        self.unpacked: dict[str, str] = {}
+
+    def pid(self) -> int:
+        import os
+
+        return os.getpid()
+
+    def render_group(self, jobs: list[dict[str, Any]], packs: dict[str, bytes]) -> list[tuple[tuple, bytes | None]]:
+        from sweep3d.stages.render.worker import render_job
+
+        out = []
+        for job in jobs:
+            job = dict(job)
+            job["mesh"] = self._local(job["mesh"], packs)
+            env = dict(job["environment"])
+            if env.get("hdri"):
+                env["hdri"] = self._local(env["hdri"], packs)
+            job["environment"] = env
+            out.append(render_job(self.scene, job, keep_pixels=True))
+        return out
+
+    def _local(self, ref: str, packs: dict[str, bytes]) -> str:
+        """The local path of a shipped asset ("pack:<digest>/<name>"), unpacked once per actor."""
+        if not ref.startswith("pack:"):
+            return ref
+        pack, _, name = ref.removeprefix("pack:").partition("/")
+        if pack not in self.unpacked:
+            folder = self.scratch / "assets" / pack
+            with tarfile.open(fileobj=io.BytesIO(packs[pack])) as tar:
+                tar.extractall(folder, filter="data")
+            self.unpacked[pack] = str(folder)
+        return str(Path(self.unpacked[pack]) / name)
+
+
+class RayRenderPool:
+    """Ray actors as render workers; use as a context manager and call :meth:`run`."""
+
+    def __init__(self, settings: dict[str, Any], workers: int = 1, address: str | None = None) -> None:
+        ray = self.ray = _ray()
+        if not ray.is_initialized():
+            if address:
+                ray.init(address=address, include_dashboard=False, log_to_driver=False)
+            else:  # a local cluster, on loopback only
+                ray.init(_node_ip_address="127.0.0.1", include_dashboard=False, log_to_driver=False)
+            self._owns_ray = True
+        else:
+            self._owns_ray = False
+        cpus = max(1, int(ray.cluster_resources().get("CPU", 1)) // max(workers, 1))
+        self.actor_cls = ray.remote(num_cpus=cpus, max_restarts=0)(RenderActor)
+        self.settings = settings
+        self.n_workers = workers
+        self.actors: list[Any] = []
+        self.packs: dict[str, bytes] = {}
+
+    def __enter__(self) -> "RayRenderPool":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def run(self, groups: list[list[dict[str, Any]]]) -> Iterator[RenderResult]:
+        """Render every group, yielding one result per job as each group finishes."""
+        ray = self.ray
+        queue = deque(self._shippable(g) for g in groups if g)
+        self.actors = [self.actor_cls.remote(self.settings) for _ in range(min(self.n_workers, len(queue)))]
+        packs_ref = ray.put(self.packs)
+        running: dict[Any, tuple[Any, list[dict[str, Any]], int]] = {}
+        last_scene: dict[Any, str] = {}
+
+        def submit(actor, group, tries: int) -> None:
+            running[actor.render_group.remote(group, packs_ref)] = (actor, group, tries)
+            last_scene[actor] = group[0]["mesh"]
+
+        def next_group(actor) -> list[dict[str, Any]]:
+            for i, group in enumerate(queue):  # keep the actor on the scene it has loaded
+                if group[0]["mesh"] == last_scene.get(actor):
+                    del queue[i]
+                    return group
+            return queue.popleft()
+
+        for actor in self.actors:
+            if queue:
+                submit(actor, next_group(actor), 0)
+        while running:
+            done, _ = ray.wait(list(running), num_returns=1)
+            actor, group, tries = running.pop(done[0])
+            try:
+                results = ray.get(done[0])
+            except (ray.exceptions.RayActorError, ray.exceptions.WorkerCrashedError) as exc:
+                self.actors.remove(actor)
+                if tries >= MAX_GROUP_RETRIES:
+                    for job in group:
+                        yield RenderResult(job["render_key"], False, error=f"render actor died: {exc}")
+                else:  # a new actor takes the group; its results were never yielded
+                    replacement = self.actor_cls.remote(self.settings)
+                    self.actors.append(replacement)
+                    submit(replacement, group, tries + 1)
+                continue
+            for job, (message, png) in zip(group, results):
+                yield self._result(job, message, png)
+            if queue:
+                submit(actor, next_group(actor), 0)
+
+    @staticmethod
+    def _result(job: dict[str, Any], message: tuple, png: bytes | None) -> RenderResult:
+        if message[0] == "done":
+            atomic_write(Path(job["blob"]), png or b"")  # the driver writes the store
+            return RenderResult(message[1], True, message[2])
+        return RenderResult(message[1], False, error=message[2], kind=message[3])
+
+    def _shippable(self, group: list[dict[str, Any]]) -> list[dict[str, Any]]:
+        """Replace local asset paths by packs in the object store (built-in HDRIs stay: every
+        node with bpy has them)."""
+        out = []
+        builtin = str(bpy_root())
+        for job in group:
+            job = dict(job)
+            job["mesh"] = self._pack(Path(job["mesh"]), mesh_files(Path(job["mesh"])))
+            env = dict(job["environment"])
+            if env.get("hdri") and not env["hdri"].startswith(builtin):
+                env["hdri"] = self._pack(Path(env["hdri"]), [Path(env["hdri"])])
+            job["environment"] = env
+            out.append(job)
+        return out
+
+    def _pack(self, main: Path, files: list[Path]) -> str:
+        key = digest([str(main)] + [str(f) for f in files])[:16]
+        if key not in self.packs:
+            buffer = io.BytesIO()
+            with tarfile.open(fileobj=buffer, mode="w") as tar:
+                for f in files:
+                    tar.add(f, arcname=str(f.relative_to(main.parent)))
+            self.packs[key] = buffer.getvalue()
+        return f"pack:{key}/{main.name}"
+
+    def kill_one(self) -> None:
+        """Kill one actor (for fault-tolerance tests)."""
+        if self.actors:
+            self.ray.kill(self.actors[0], no_restart=True)
+
+    def close(self) -> None:
+        for actor in self.actors:
+            try:
+                self.ray.kill(actor)
+            except Exception:  # noqa: BLE001  (already gone)
+                pass
+        self.actors = []
+        if self._owns_ray:
+            self.ray.shutdown()

@@ -1,0 +1,69 @@
+"""Rendering on a Ray cluster started on loopback: same results as the local pool, and a killed
+actor's jobs are rendered again without duplicates."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from sweep3d.cache.store import Store
+from sweep3d.pipeline import run
+from sweep3d.spec import load_spec
+from sweep3d.stages.render.stage import Executor
+from tests.conftest import TINY_SPEC, write_spec
+
+ray = pytest.importorskip("ray")
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def local_cluster():
+    """A one-node Ray cluster bound to 127.0.0.1 (tests never talk to another address)."""
+    ray.init(_node_ip_address="127.0.0.1", include_dashboard=False, num_cpus=2, log_to_driver=False)
+    yield
+    ray.shutdown()
+
+
+def _results(folder: Path) -> list[tuple]:
+    return Store(folder / "store").connect("tiny").execute(
+        "SELECT job, render_key, image_key, pred_key, top1_label, correct, round(loss, 3) FROM results ORDER BY job"
+    ).fetchall()
+
+
+def test_ray_executor_gives_the_local_results(local_cluster, tmp_path: Path) -> None:
+    ray_dir, local_dir = tmp_path / "ray", tmp_path / "local"
+    for folder in (ray_dir, local_dir):
+        folder.mkdir()
+        write_spec(folder, TINY_SPEC)
+    on_ray = run(load_spec(ray_dir / "spec.toml"), executor=Executor("ray"))
+    assert on_ray.failed == 0 and on_ray.outcome("render").computed == 4
+    assert run(load_spec(local_dir / "spec.toml")).failed == 0
+    assert _results(ray_dir) == _results(local_dir)
+    again = run(load_spec(ray_dir / "spec.toml"), executor=Executor("ray"))  # resumes from the store
+    assert again.outcome("render").computed == 0
+
+
+def test_a_killed_actor_loses_no_job_and_duplicates_none(local_cluster, tmp_path: Path) -> None:
+    from sweep3d.spec.models import RenderSpec
+    from sweep3d.stages.plan import make_plan
+    from sweep3d.stages.render.ray_pool import RayRenderPool
+    from sweep3d.stages.render.stage import _groups
+
+    spec = write_spec(tmp_path, TINY_SPEC.replace("yaw = [0, 45]", "yaw = [0, 30, 60, 90, 120, 150]"))
+    loaded = load_spec(spec)
+    plan = make_plan(loaded, model_digest="m")
+    store = Store(loaded.store)
+    unique = list({j.render_key: j for j in plan.jobs}.values())  # blur variants share a render
+    groups = [[job] for group in _groups(plan, store, unique) for job in group]  # 12 one-job groups
+    settings = RenderSpec(resolution=32, samples=1, denoise=False).model_dump()
+    seen = []
+    with RayRenderPool(settings, workers=2) as pool:
+        for result in pool.run(groups):
+            seen.append(result)
+            if len(seen) == 2:
+                pool.kill_one()  # mid-run: its group in flight is lost and must be rendered again
+    keys = [r.render_key for r in seen]
+    assert len(keys) == len(set(keys)) == 12, "every job exactly once"
+    assert all(r.ok for r in seen), [r.error for r in seen if not r.ok]
+    assert all(store.blob_path(k).stat().st_size > 0 for k in keys)
