@@ -128,19 +128,23 @@ def build_store(folder: Path, results: int, seed: int = 0) -> Path:
 
 def _prediction(key: str, obj: str, env: str, yaw: float, elevation: float, sigma: float,
                 rng: np.random.Generator) -> dict:
+    from sweep3d.stages.infer.labels import IMAGENET
+
     label, base, confusions = OBJECTS[obj]
-    p = base * (1 - 0.45 * abs(math.sin(math.radians(yaw)))) * (1 - 0.2 * sigma) * (1 - elevation / 400)
+    p = base * (1 - 0.35 * abs(math.sin(math.radians(yaw)))) * (1 - 0.15 * sigma) * (1 - elevation / 400)
     if obj == "orange" and env == "night":
         p *= 0.3
     correct = bool(rng.random() < p)
     names = [label, *confusions]
-    if not correct:
-        names = [confusions[int(rng.integers(len(confusions)))], label] + [c for c in confusions][:1]
+    if not correct:  # one confusion first, then the truth, then the others
+        first = confusions[int(rng.integers(len(confusions)))]
+        names = [first, label, *[c for c in confusions if c != first]]
     probs = sorted(rng.dirichlet(np.ones(len(names))).tolist(), reverse=True)
     label_prob = probs[names.index(label)]
+    ids = [IMAGENET.index(name) for name in names]
     return {"pred_key": key, "image_key": key, "model": "efficientnet-lite0", "model_digest": "synthetic",
-            "seconds": 0.01, "created_at": utc_now(), "valid": True, "correct": correct, "top1": 0,
-            "top1_label": names[0], "topk": list(range(len(names))), "topk_labels": names, "topk_probs": probs,
+            "seconds": 0.01, "created_at": utc_now(), "valid": True, "correct": correct, "top1": ids[0],
+            "top1_label": names[0], "topk": ids, "topk_labels": names, "topk_probs": probs,
             "label_prob": label_prob, "loss": -math.log(max(label_prob, 1e-9))}
 
 

@@ -11,7 +11,7 @@ from typing import Any
 
 import duckdb
 
-from sweep3d.stages.aggregate.views import register_views
+from sweep3d.stages.aggregate.views import has_view, register_views
 
 
 @dataclass
@@ -49,13 +49,13 @@ def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit:
     Args:
         columns: the control-parameter columns of the jobs table.
     """
-    jobs = con.execute("SELECT count(*) FROM jobs").fetchone()[0] if _has_view(con, "jobs") else 0
-    if not _has_view(con, "results"):
+    jobs = con.execute("SELECT count(*) FROM jobs").fetchone()[0] if has_view(con, "jobs") else 0
+    if not has_view(con, "results"):
         return Summary(jobs, 0, 0, 0, None, [], [], [], [])
     evaluated, invalid, correct = con.execute(
         "SELECT count(*), count(*) FILTER (WHERE NOT valid), count(*) FILTER (WHERE valid AND correct) FROM results"
     ).fetchone()
-    if not _has_view(con, "control_accuracy"):  # a connection made without Store.connect
+    if not has_view(con, "control_accuracy"):  # a connection made without Store.connect
         register_views(con)
     valid = evaluated - invalid
     accuracy = correct / valid if valid else None
@@ -88,11 +88,6 @@ def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit:
     ]
     return Summary(jobs, evaluated, invalid, correct, accuracy, objects, environments, scene_accuracy,
                    scene_count, effects, failures, per_object)
-
-
-def _has_view(con: duckdb.DuckDBPyConnection, name: str) -> bool:
-    return bool(con.execute(
-        "SELECT count(*) FROM duckdb_views() WHERE view_name = ? AND NOT internal", [name]).fetchone()[0])
 
 
 def control_effects(con: duckdb.DuckDBPyConnection, columns: list[str]) -> list[ControlEffect]:

@@ -76,7 +76,7 @@ def register_views(con: duckdb.DuckDBPyConnection) -> bool:
         :data:`REQUIRED_COLUMNS` (an evaluator that does not say what is correct).
     """
     _create_macros(con)
-    if not _has_view(con, "results"):
+    if not has_view(con, "results"):
         return False
     result_columns = _columns(con, "results")
     if not REQUIRED_COLUMNS <= result_columns.keys():
@@ -232,13 +232,13 @@ def _view_statements(parameters: list[tuple[str, bool]], has_predictions: bool) 
                        NULL::INTEGER AS position_b
                 FROM control_accuracy c SEMI JOIN control_parameters p ON p.parameter = c.parameter AND p.levels > 1
                 UNION ALL
-                SELECT 2, parameter_a || ' = ' || label_a || ' · ' || parameter_b || ' = ' || label_b,
-                       parameter_a, level_a, label_a, parameter_b, level_b, label_b,
-                       n, n_correct, accuracy, wilson_low, wilson_high, position_a, position_b
+                SELECT 2, p.parameter_a || ' = ' || p.label_a || ' · ' || p.parameter_b || ' = ' || p.label_b,
+                       p.parameter_a, p.level_a, p.label_a, p.parameter_b, p.level_b, p.label_b,
+                       p.n, p.n_correct, p.accuracy, p.wilson_low, p.wilson_high, p.position_a, p.position_b
                 FROM pair_accuracy p
-                WHERE p.wilson_high < (SELECT min(c.accuracy) FROM control_accuracy c
-                                       WHERE (c.parameter, c.level) IN ((p.parameter_a, p.level_a),
-                                                                        (p.parameter_b, p.level_b))))
+                JOIN control_accuracy a ON a.parameter = p.parameter_a AND a.level = p.level_a
+                JOIN control_accuracy b ON b.parameter = p.parameter_b AND b.level = p.level_b
+                WHERE p.wilson_high < least(a.accuracy, b.accuracy))
             WHERE n >= min_count AND accuracy < (SELECT avg(correct::DOUBLE) FROM results WHERE valid)
             ORDER BY wilson_high, accuracy, n DESC, size, position_a, level_a, position_b, level_b""",
     ]
@@ -272,7 +272,8 @@ def _values_sql(parameters: list[tuple[str, bool]]) -> str:
 
 
 # -- helpers ----------------------------------------------------------------------------------
-def _has_view(con: duckdb.DuckDBPyConnection, name: str) -> bool:
+def has_view(con: duckdb.DuckDBPyConnection, name: str) -> bool:
+    """Whether ``con`` has a (user) view called ``name``."""
     return bool(con.execute(
         "SELECT count(*) FROM duckdb_views() WHERE view_name = ? AND NOT internal", [name]).fetchone()[0])
 
