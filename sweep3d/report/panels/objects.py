@@ -40,14 +40,14 @@ def build(inputs: PanelInputs) -> dict[str, Any]:
         objects.append({
             "object": row["object"], "labels": labels.get(row["object"], ""), "count": row["n"],
             "accuracy": pct(row["accuracy"]), "interval": interval(row["wilson_low"], row["wilson_high"]),
-            "sensitive": [_sensitivity(s) for s in sensitivity[row["object"]][:SENSITIVE]],
+            "sensitive": [_sensitivity(s) for s in sensitivity[row["object"]] if s["eta2"]][:SENSITIVE],
             "confusions": [_confusion(inputs, row["level"], c) for c in confusions[row["object"]]],
         })
     return {"objects": objects, "figure": _figure(sensitivity, [o["object"] for o in objects], known)}
 
 
 def _sensitivity(row: dict[str, Any]) -> dict[str, Any]:
-    return {"parameter": row["parameter"], "share": pct(row["eta2"], 0) if row["eta2"] is not None else "–",
+    return {"parameter": row["parameter"], "share": pct(row["eta2"], 0),
             "worst": row["worst_level"], "worst_accuracy": pct(row["accuracy_min"], 0),
             "best": row["best_level"], "best_accuracy": pct(row["accuracy_max"], 0)}
 
@@ -68,6 +68,8 @@ def _figure(sensitivity: dict[str, list[dict[str, Any]]], objects: list[str], pa
     if not columns or not objects:
         return None
     z = [[cells[(o, p)]["eta2"] if (o, p) in cells else None for p in columns] for o in objects]
+    if all(v is None for row in z for v in row):  # no object has both right and wrong results
+        return None
     hover = [[_hover(cells.get((o, p))) for p in columns] for o in objects]
     trace = {
         "type": "heatmap", "z": z, "x": [plot_text(p) for p in columns], "y": [plot_text(o) for o in objects],
