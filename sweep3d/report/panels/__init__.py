@@ -17,7 +17,7 @@ from sweep3d.report.panel import Panel
 from sweep3d.report.panels import aggregate, explorer, failure_modes, failures, objects, overall
 
 CORE_PANELS: tuple[Panel, ...] = (
-    Panel("overall", "Overall", "panels/overall.html.j2", overall.build),
+    Panel("overall", "Overall accuracy", "panels/overall.html.j2", overall.build),
     Panel("explorer", "Explorer", "panels/explorer.html.j2", explorer.build),
     Panel("failure-modes", "Failure modes", "panels/failure_modes.html.j2", failure_modes.build),
     Panel("failures", "Worst failures", "panels/failures.html.j2", failures.build),

@@ -11,7 +11,7 @@
   var PLOT_CONFIG = {
     displaylogo: false,
     responsive: true,
-    modeBarButtonsToRemove: ['select2d', 'lasso2d'],
+    modeBarButtonsToRemove: ['select2d', 'lasso2d', 'sendChartToCloud'],  // nothing leaves the page
   };
   var thumbs = JSON.parse(document.getElementById('thumbs').textContent);
   var figures = Array.prototype.map.call(document.querySelectorAll('script.fig-data'), function (node) {
