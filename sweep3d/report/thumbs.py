@@ -80,7 +80,7 @@ def thumbnail_size(images: int) -> int:
 
 
 def encode_thumbnail(path: Path, size: int) -> str | None:
-    """A data URI of the image at ``path`` downscaled to ``size`` (JPEG or PNG, whichever is smaller).
+    """A JPEG data URI of the image at ``path`` downscaled to ``size`` (longest side).
 
     Returns:
         None if the file is missing or not an image (the page shows a placeholder instead).
@@ -91,12 +91,6 @@ def encode_thumbnail(path: Path, size: int) -> str | None:
             img.thumbnail((size, size), Image.Resampling.LANCZOS)
     except (OSError, ValueError):
         return None
-    best: tuple[int, str, bytes] | None = None
-    for fmt, options in (("jpeg", {"quality": JPEG_QUALITY, "optimize": True}), ("png", {"optimize": True})):
-        buf = io.BytesIO()
-        img.save(buf, format=fmt.upper(), **options)
-        data = buf.getvalue()
-        if best is None or len(data) < best[0]:
-            best = (len(data), fmt, data)
-    _, fmt, data = best
-    return f"data:image/{fmt};base64," + base64.b64encode(data).decode("ascii")
+    buf = io.BytesIO()
+    img.save(buf, format="JPEG", quality=JPEG_QUALITY, optimize=True)
+    return "data:image/jpeg;base64," + base64.b64encode(buf.getvalue()).decode("ascii")

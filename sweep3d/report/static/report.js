@@ -128,6 +128,7 @@
         document.documentElement.dataset.ready = '1';
         return drawRest();
       }).then(function () {
+        window.sweep3d.drawnAt = performance.now();
         document.documentElement.dataset.drawn = '1';
       });
     },
