@@ -38,8 +38,9 @@ def _effect_figure(index: int, parameter: Parameter, rows: list[dict[str, Any]])
         band_x = x + x[::-1]
         band_y = [r["wilson_high"] for r in rows] + [r["wilson_low"] for r in rows][::-1]
         data = [
-            {"type": "scatter", "mode": "lines", "x": band_x, "y": band_y, "fill": "toself", "fillcolor": COLORS["band"],
-             "line": {"width": 0}, "hoverinfo": "skip", "name": "95% Wilson interval", "showlegend": False},
+            {"type": "scatter", "mode": "lines", "x": band_x, "y": band_y, "fill": "toself",
+             "fillcolor": COLORS["band"], "line": {"width": 0}, "hoverinfo": "skip", "name": "95% Wilson interval",
+             "showlegend": False},
             {"type": "scatter", "mode": "lines+markers", "x": x, "y": accuracy, "text": labels, "customdata": custom,
              "line": {"color": COLORS["bar"], "width": 2}, "marker": {"size": 6}, "hovertemplate": hover,
              "name": "accuracy", "showlegend": False, "connectgaps": False},

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from sweep3d.report.figures import COLORS, ACCURACY_AXIS, interval, layout, make_figure, pct, plot_text
+from sweep3d.report.figures import ACCURACY_AXIS, COLORS, Figure, interval, layout, make_figure, pct, plot_text
 from sweep3d.report.panel import PanelInputs
 
 TOP = 12  # regions listed
@@ -25,17 +25,14 @@ def build(inputs: PanelInputs) -> dict[str, Any]:
     known = {p.name for p in inputs.table.parameters}
     rows = []
     for mode in modes:
-        where = {mode["parameter_a"]: mode["level_a"]}
-        if mode["parameter_b"] is not None:
-            where[mode["parameter_b"]] = mode["level_b"]
+        terms = [(mode[f"parameter_{s}"], mode[f"level_{s}"], mode[f"label_{s}"]) for s in "ab"
+                 if mode[f"parameter_{s}"] is not None]
+        where = {parameter: level for parameter, level, _ in terms}
         examples = []
         if set(where) <= known:
             examples = [inputs.tile(row) for row in inputs.table.examples(inputs.table.mask(where), EXAMPLES)]
-        terms = [(mode["parameter_a"], mode["label_a"])]
-        if mode["parameter_b"] is not None:
-            terms.append((mode["parameter_b"], mode["label_b"]))
         rows.append({
-            "terms": terms, "accuracy": pct(mode["accuracy"], 0),
+            "terms": [(parameter, label) for parameter, _, label in terms], "accuracy": pct(mode["accuracy"], 0),
             "interval": interval(mode["wilson_low"], mode["wilson_high"]),
             "wrong": mode["n"] - mode["n_correct"], "count": mode["n"], "examples": examples,
         })
@@ -47,7 +44,7 @@ def build(inputs: PanelInputs) -> dict[str, Any]:
     }
 
 
-def _figure(modes: list[dict[str, Any]], overall: float | None, sql: str):
+def _figure(modes: list[dict[str, Any]], overall: float | None, sql: str) -> Figure:
     """Accuracy of each region (dot) with its Wilson interval (bar), worst at the top."""
     labels = [f"{i + 1}. " + plot_text(m["region"]) for i, m in enumerate(modes)]
     trace = {

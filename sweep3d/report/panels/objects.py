@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from sweep3d.report.figures import interval, layout, make_figure, pct, plot_text
+from sweep3d.report.figures import Figure, interval, layout, make_figure, pct, plot_text
 from sweep3d.report.panel import PanelInputs
 from sweep3d.stages.aggregate.views import has_view
 
@@ -26,17 +26,17 @@ def build(inputs: PanelInputs) -> dict[str, Any]:
     known = [p.name for p in table.parameters if p.name != "object"]
     sensitivity: dict[str, list[dict[str, Any]]] = defaultdict(list)
     for row in inputs.rows("SELECT object, parameter, eta2, accuracy_min, worst_level, accuracy_max, best_level "
-                          "FROM object_sensitivity WHERE list_contains(?, parameter)", [known]):
+                           "FROM object_sensitivity WHERE list_contains(?, parameter)", [known]):
         sensitivity[row["object"]].append(row)
     confusions: dict[str, list[dict[str, Any]]] = defaultdict(list)
     if has_view(con, "object_confusions"):
         for row in inputs.rows("SELECT object, prediction, n, share FROM object_confusions WHERE rank <= ?",
-                         [CONFUSIONS]):
+                               [CONFUSIONS]):
             confusions[row["object"]].append(row)
     labels = {o.name: ", ".join(str(label) for label in o.labels) for o in inputs.loaded.spec.objects}
     objects = []
     for row in inputs.rows("SELECT label AS object, level, n, accuracy, wilson_low, wilson_high FROM control_accuracy "
-                          "WHERE parameter = 'object' ORDER BY accuracy NULLS LAST, label"):
+                           "WHERE parameter = 'object' ORDER BY accuracy NULLS LAST, label"):
         objects.append({
             "object": row["object"], "labels": labels.get(row["object"], ""), "count": row["n"],
             "accuracy": pct(row["accuracy"]), "interval": interval(row["wilson_low"], row["wilson_high"]),
@@ -61,7 +61,7 @@ def _confusion(inputs: PanelInputs, level: int, row: dict[str, Any]) -> dict[str
             "example": inputs.tile(example[0]) if example else None}
 
 
-def _figure(sensitivity: dict[str, list[dict[str, Any]]], objects: list[str], parameters: list[str]):
+def _figure(sensitivity: dict[str, list[dict[str, Any]]], objects: list[str], parameters: list[str]) -> Figure | None:
     """Heat map: share of each object's variance explained by each parameter."""
     cells = {(r["object"], r["parameter"]): r for rows in sensitivity.values() for r in rows}
     columns = [p for p in parameters if any((o, p) in cells for o in objects)]

@@ -23,6 +23,7 @@ def build(inputs: PanelInputs) -> dict[str, Any]:
         legend={"orientation": "h", "y": -0.35, "x": 0, "traceorder": "normal"}, yaxis={"visible": False},
         xaxis={"title": None, "range": [0, max(summary.evaluated, 1)]},
     )
-    query = ("SELECT count(*) FILTER (WHERE valid AND correct) AS correct, count(*) FILTER (WHERE valid AND NOT correct) "
-             "AS wrong, count(*) FILTER (WHERE NOT valid) AS invalid FROM results")
+    query = ("SELECT count(*) FILTER (WHERE valid AND correct) AS correct, "
+             "count(*) FILTER (WHERE valid AND NOT correct) AS wrong, count(*) FILTER (WHERE NOT valid) AS invalid "
+             "FROM results")
     return {"accuracy": pct(summary.accuracy), "figure": make_figure("fig-outcomes", traces, figure_layout, query)}

@@ -103,10 +103,11 @@ def control_columns(con: duckdb.DuckDBPyConnection) -> list[tuple[str, bool]]:
 # -- SQL --------------------------------------------------------------------------------------
 def _create_macros(con: duckdb.DuckDBPyConnection) -> None:
     z2 = Z95 * Z95
+    p = "(k::DOUBLE / n)"
     for name, sign in (("wilson_low", "-"), ("wilson_high", "+")):
         con.execute(
             f"CREATE OR REPLACE MACRO {name}(k, n) AS CASE WHEN n > 0 THEN "
-            f"((k::DOUBLE / n + {z2!r} / (2 * n)) {sign} {Z95!r} * sqrt(greatest((k::DOUBLE / n) * (1 - k::DOUBLE / n) / n "
+            f"(({p} + {z2!r} / (2 * n)) {sign} {Z95!r} * sqrt(greatest({p} * (1 - {p}) / n "
             f"+ {z2!r} / (4 * n::DOUBLE * n), 0))) / (1 + {z2!r} / n) END"
         )
     con.execute(
@@ -223,7 +224,7 @@ def _view_statements(parameters: list[tuple[str, bool]], has_predictions: bool) 
             WHERE l.n > 0
             GROUP BY l.object, l.parameter, l.position HAVING count(*) > 1
             ORDER BY l.object, eta2 DESC NULLS LAST, accuracy_range DESC, l.position""",
-        f"""CREATE OR REPLACE MACRO failure_modes(min_count := 10) AS TABLE
+        """CREATE OR REPLACE MACRO failure_modes(min_count := 10) AS TABLE
             SELECT * FROM (
                 SELECT 1 AS size, parameter || ' = ' || label AS region,
                        parameter AS parameter_a, level AS level_a, label AS label_a,
