@@ -27,7 +27,7 @@ from sweep3d.report import build_context, render_html, write_report
 from sweep3d.report.page import SCRIPTS, plotly_js, script_json
 from sweep3d.report.panel import Panel
 from sweep3d.report.panels import PANELS, overall
-from sweep3d.report.thumbs import SIZES
+from sweep3d.report.thumbs import SIZES, Thumbnails, thumbnail_size
 from sweep3d.spec import load_spec
 from tests.conftest import REPO, TINY_SPEC, write_spec
 
@@ -109,6 +109,26 @@ def test_page_uses_the_plotly_bundle_matching_plotly_py() -> None:
     header = plotly_js()[:200]
     assert f"v{get_plotlyjs_version()}" in header
     assert "cartesian" in header  # the smaller bundle shipped in sweep3d/report/static
+
+
+def test_thumbnails_are_shared_by_key_downscaled_and_kept_within_the_budget(tmp_path: Path) -> None:
+    store = Store(tmp_path / "store")
+    for key, shade in (("aa1", 40), ("bb2", 200), ("cc3", 120)):
+        path = store.blob_path(key)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        Image.new("RGB", (224, 160), (shade, 90, 30)).save(path)
+    thumbs = Thumbnails(store, expected=3)
+    assert [thumbs.want(k) for k in ("aa1", "bb2", "aa1", "gone", "cc3")] == [0, 1, 0, 2, 3]
+    uris = thumbs.data_uris()
+    assert uris[2] is None and thumbs.missing == 1  # no blob: the page shows a placeholder
+    with Image.open(io.BytesIO(base64.b64decode(DATA_URI.fullmatch(uris[0]).group(2)))) as img:
+        assert img.size == (96, 69)
+    small = Thumbnails(store, expected=3, budget=len(uris[0]) + 10)
+    for key in ("aa1", "bb2", "cc3"):
+        small.want(key)
+    kept = small.data_uris()
+    assert kept[0] == uris[0] and kept[1:] == [None, None] and small.left_out == 2  # first asked, first kept
+    assert thumbnail_size(100) == 96 and thumbnail_size(10_000) == 64
 
 
 def test_optional_panels_show_only_with_data(tiny_run: Path) -> None:
