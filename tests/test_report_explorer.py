@@ -113,6 +113,9 @@ def test_heat_map_matches_sql_and_shows_right_and_wrong(tmp_path: Path) -> None:
         column = heatmap(page)
         assert [row[0] for row in column["z"]] == pytest.approx([accuracy for _, accuracy in levels])
 
+        low, high = con.execute("SELECT wilson_low(3, 10), wilson_high(3, 10)").fetchone()
+        assert page.evaluate("window.sweep3d.wilson(3, 10)") == pytest.approx([low, high])  # JS = SQL
+
         click_cell(page, 0, 0)
         tiles = gallery(page)
         outcomes = [t["outcome"] for t in tiles]

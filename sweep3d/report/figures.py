@@ -8,6 +8,7 @@ HTML subset in labels, so names are escaped to show literally.
 from __future__ import annotations
 
 import html
+import json
 from dataclasses import dataclass
 from typing import Any
 
@@ -30,6 +31,13 @@ def layout(**extra: Any) -> dict[str, Any]:
         "hoverlabel": {"font": {"family": FONT}},
     }
     return {**base, **extra}
+
+
+def layout_json(**extra: Any) -> dict[str, Any]:
+    """:func:`layout` as plotly.js takes it (the template expanded), for figures drawn in JS."""
+    import plotly.graph_objects as go
+
+    return json.loads(go.Figure(layout=layout(**extra)).to_json())["layout"]
 
 
 def title(text: str) -> dict[str, Any]:

@@ -10,7 +10,7 @@ from __future__ import annotations
 import json
 from typing import Any
 
-from sweep3d.report.figures import ACCURACY_COLORSCALE
+from sweep3d.report.figures import ACCURACY_COLORSCALE, layout_json
 from sweep3d.report.panel import PanelInputs
 from sweep3d.report.results import ResultTable
 from sweep3d.stages.aggregate.views import SCENE_COLUMNS
@@ -31,7 +31,7 @@ def payload(inputs: PanelInputs) -> dict[str, Any]:
     per parameter: each result's level); ``outcome`` (0 wrong, 1 correct, 2 invalid); ``pred``
     (index into ``preds``, -1 for none); ``thumb`` (index into the page's thumbnails); ``job``;
     ``defaults`` (the parameters first on the x and y axes, -1 for none); ``limit`` (gallery size);
-    ``colorscale`` (of the heat map).
+    ``colorscale`` and ``layout`` (the report's plot style) for the heat map.
     Rows come wrong-first, highest loss first (see :mod:`sweep3d.report.results`).
     """
     table = inputs.table
@@ -50,6 +50,7 @@ def payload(inputs: PanelInputs) -> dict[str, Any]:
         "defaults": default_axes(table, shown),
         "limit": GALLERY_LIMIT,
         "colorscale": ACCURACY_COLORSCALE,
+        "layout": layout_json(margin={"l": 16, "r": 16, "t": 16, "b": 48}),
     }
 
 

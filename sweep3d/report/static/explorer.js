@@ -160,12 +160,10 @@
     var shapes = state.cell ? [{type: 'rect', x0: state.cell.x - 0.5, x1: state.cell.x + 0.5,
                                 y0: state.cell.y - 0.5, y1: state.cell.y + 0.5,
                                 line: {color: '#1f2328', width: 3}}] : [];
-    var layout = {
-      template: 'plotly_white', font: {family: 'system-ui, -apple-system, Segoe UI, Roboto, sans-serif', size: 12},
-      height: Math.min(900, Math.max(300, 120 + 34 * y.n)), margin: {l: 16, r: 16, t: 16, b: 48},
-      shapes: shapes,
+    var layout = Object.assign({}, data.layout, {
+      height: Math.min(900, Math.max(300, 120 + 34 * y.n)), shapes: shapes,
       xaxis: axisLayout(x, false), yaxis: axisLayout(y, true),
-    };
+    });
     return S.draw(plot, {data: [trace], layout: layout}).then(function () {
       if (!clickBound) {
         plot.on('plotly_click', onClick);
