@@ -1,12 +1,15 @@
 """The HTML report: self-contained, drawn by a real browser, escaped, and a clear error when empty.
 
 The browser tests drive the system's headless Chromium (``/usr/bin/chromium``, from apt) through
-the ``playwright`` package; they skip, saying why, where that browser is missing.
+the ``playwright`` package; they skip, saying why, where that browser is missing. Screenshots of
+each panel go to ``test-artifacts/`` (git-ignored). ``open_page`` is shared with the explorer and
+scale tests.
 """
 
 from __future__ import annotations
 
 import base64
+import hashlib
 import io
 import json
 import re
@@ -20,8 +23,11 @@ from typer.testing import CliRunner
 
 from sweep3d.cache.store import Store
 from sweep3d.cli import app
-from sweep3d.report import write_report
-from sweep3d.report._build import THUMB_SIZE, script_json
+from sweep3d.report import build_context, render_html, write_report
+from sweep3d.report.page import SCRIPTS, plotly_js, script_json
+from sweep3d.report.panel import Panel
+from sweep3d.report.panels import PANELS, overall
+from sweep3d.report.thumbs import SIZES, Thumbnails, thumbnail_size
 from sweep3d.spec import load_spec
 from tests.conftest import REPO, TINY_SPEC, write_spec
 
@@ -29,24 +35,30 @@ CHROMIUM = Path("/usr/bin/chromium")
 CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
                  "--disable-component-update", "--no-first-run", "--disable-sync"]
 ARTIFACTS = REPO / "test-artifacts"
-DATA_URI = re.compile(r'src="data:image/png;base64,([A-Za-z0-9+/=]+)"')
 SCRIPT = re.compile(r"<script\b[^>]*>.*?</script>", re.S | re.I)
+INLINE_SCRIPT = re.compile(r"<script>(.*?)</script>", re.S)
+DATA_URI = re.compile(r"data:image/(png|jpeg);base64,([A-Za-z0-9+/=]+)")
 EXTERNAL = re.compile(r"""(?:src|href)\s*=\s*["']?\s*(?:https?:)?//|url\(\s*["']?\s*(?:https?:)?//|@import""", re.I)
+PANEL_IDS = [p.id for p in PANELS]
 
 EVIL_OBJECT = "box<script>alert(1)</script>"
 EVIL_ENV = "</script><img src=x onerror=alert(2)> & <b>bold</b>"
 EVIL_EXPERIMENT = "tiny</title><script>alert(3)</script>"
 
 
-def _failure_count(folder: Path) -> int:
+def results_count(folder: Path, where: str = "true") -> int:
     loaded = load_spec(folder / "spec.toml")
     con = Store(loaded.store).connect(loaded.name)
-    return con.execute("SELECT count(*) FROM results WHERE valid AND NOT correct").fetchone()[0]
+    return con.execute(f"SELECT count(*) FROM results WHERE {where}").fetchone()[0]
+
+
+def page_thumbnails(html: str) -> list[str | None]:
+    found = re.search(r'<script type="application/json" id="thumbs">(.*?)</script>', html, re.S)
+    assert found, "the page has no thumbnail block"
+    return json.loads(found.group(1))
 
 
 def test_report_is_self_contained(tiny_run: Path, tmp_path: Path) -> None:
-    from plotly.offline import get_plotlyjs
-
     loaded = load_spec(tiny_run / "spec.toml")
     path = write_report(loaded)
     assert path == tiny_run / "store" / "reports" / "tiny.html"
@@ -54,19 +66,30 @@ def test_report_is_self_contained(tiny_run: Path, tmp_path: Path) -> None:
 
     markup = SCRIPT.sub("<script></script>", html)  # plotly.js names URLs in strings; markup must not
     assert not EXTERNAL.search(markup), EXTERNAL.search(markup)
-    assert html.count("<script>") == 2  # plotly.js once, then the boot script; figures are JSON
-    assert html.count('type="application/json"') >= 3
-    assert "Content-Security-Policy" in html and "default-src &#39;none&#39;" in html
-    assert len(html.encode()) < len(get_plotlyjs().encode()) + 400_000
+    scripts = INLINE_SCRIPT.findall(html)
+    assert len(scripts) == 1 + len(SCRIPTS)  # plotly.js, then the report's own; all data is JSON
+    csp = re.search(r'http-equiv="Content-Security-Policy" content="([^"]+)"', html).group(1)
+    assert "default-src &#39;none&#39;" in csp
+    for script in scripts:  # each inline script is allowed by its hash, and only those
+        digest = base64.b64encode(hashlib.sha256(script.encode()).digest()).decode()
+        assert f"sha256-{digest}" in csp
+    assert csp.count("sha256-") == len(scripts)
+    assert html.count('type="application/json"') >= 2 + len(PANEL_IDS)  # thumbnails, explorer, figures
+    assert len(html.encode()) < len(plotly_js().encode()) + 400_000
 
-    thumbs = DATA_URI.findall(markup)
-    assert len(thumbs) == min(_failure_count(tiny_run), 48)
-    for data in thumbs:
+    thumbs = page_thumbnails(html)
+    assert len(thumbs) == results_count(tiny_run, "true") == 8  # one per distinct image key
+    assert len(set(thumbs)) == len(thumbs)
+    for uri in thumbs:
+        kind, data = DATA_URI.fullmatch(uri).groups()
         with Image.open(io.BytesIO(base64.b64decode(data))) as img:
-            assert img.format == "PNG" and max(img.size) <= THUMB_SIZE
+            assert img.format == kind.upper() and max(img.size) <= SIZES[0][1]
 
-    for text in ("tiny", "efficientnet-lite0", "orientation_yaw", "blur_sigma", "studio", "white", "box", "carton"):
+    for text in ("tiny", "efficientnet-lite0", "orientation_yaw", "blur_sigma", "studio", "white", "box", "carton",
+                 "control_accuracy", "failure_modes"):
         assert text in html
+    for panel in PANEL_IDS:
+        assert f'<section id="{panel}">' in html
 
     elsewhere = write_report(loaded, tmp_path / "out" / "r.html")
     assert elsewhere == tmp_path / "out" / "r.html" and elsewhere.stat().st_size > 0
@@ -80,9 +103,48 @@ def test_script_json_cannot_close_the_script_element() -> None:
     assert json.loads(safe) == json.loads(text)
 
 
+def test_page_uses_the_plotly_bundle_matching_plotly_py() -> None:
+    from plotly.offline import get_plotlyjs_version
+
+    header = plotly_js()[:200]
+    assert f"v{get_plotlyjs_version()}" in header
+    assert "cartesian" in header  # the smaller bundle shipped in sweep3d/report/static
+
+
+def test_thumbnails_are_shared_by_key_downscaled_and_kept_within_the_budget(tmp_path: Path) -> None:
+    store = Store(tmp_path / "store")
+    for key, shade in (("aa1", 40), ("bb2", 200), ("cc3", 120)):
+        path = store.blob_path(key)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        Image.new("RGB", (224, 160), (shade, 90, 30)).save(path)
+    thumbs = Thumbnails(store, expected=3)
+    assert [thumbs.want(k) for k in ("aa1", "bb2", "aa1", "gone", "cc3")] == [0, 1, 0, 2, 3]
+    uris = thumbs.data_uris()
+    assert uris[2] is None and thumbs.missing == 1  # no blob: the page shows a placeholder
+    with Image.open(io.BytesIO(base64.b64decode(DATA_URI.fullmatch(uris[0]).group(2)))) as img:
+        assert img.size == (96, 69)
+    small = Thumbnails(store, expected=3, budget=len(uris[0]) + 10)
+    for key in ("aa1", "bb2", "cc3"):
+        small.want(key)
+    kept = small.data_uris()
+    assert kept[0] == uris[0] and kept[1:] == [None, None] and small.left_out == 2  # first asked, first kept
+    assert thumbnail_size(100) == 96 and thumbnail_size(10_000) == 64
+
+
+def test_optional_panels_show_only_with_data(tiny_run: Path) -> None:
+    loaded = load_spec(tiny_run / "spec.toml")
+    store = Store(loaded.store)
+    absent = Panel("parts", "Part visibility", "panels/overall.html.j2", lambda inputs: None)
+    present = Panel("extra", "Extra panel", "panels/overall.html.j2", overall.build)
+    html = render_html(build_context(loaded, store.connect(loaded.name), store, PANELS + (absent, present)))
+    assert 'id="parts"' not in html and "Part visibility" not in html
+    assert '<section id="extra">' in html and '<a href="#extra">Extra panel</a>' in html
+
+
 @contextmanager
-def _page(path: Path) -> Iterator[tuple[Any, dict[str, list]]]:
-    """A headless Chromium page showing ``path``, once plotly has drawn every figure."""
+def open_page(path: Path, wait_all: bool = True) -> Iterator[tuple[Any, dict[str, list]]]:
+    """A headless Chromium page showing ``path`` once it is interactive (and, with ``wait_all``,
+    once every figure is drawn and every image loaded); events collected for :func:`assert_clean`."""
     if not CHROMIUM.exists():
         pytest.skip(f"headless Chromium not found at {CHROMIUM}; install it with: apt-get install chromium")
     sync_api = pytest.importorskip("playwright.sync_api", reason="the playwright package is not installed")
@@ -96,56 +158,67 @@ def _page(path: Path) -> Iterator[tuple[Any, dict[str, list]]]:
             page.on("request", lambda req: events["requests"].append(req.url))
             page.on("dialog", lambda dialog: (events["dialogs"].append(dialog.message), dialog.dismiss()))
             page.goto(path.as_uri())
-            page.wait_for_function(
-                "() => { const want = document.querySelectorAll('script.fig-data').length;"
-                " const drawn = Array.from(document.querySelectorAll('.js-plotly-plot'))"
-                "   .filter(d => d.querySelector('svg.main-svg')).length;"
-                " return want > 0 && drawn === want; }",
-                timeout=30_000,
-            )
-            page.wait_for_function(
-                "() => Array.from(document.querySelectorAll('.failure img')).every(i => i.complete)",
-                timeout=10_000,
-            )
+            page.wait_for_function("() => document.documentElement.dataset.ready === '1'", timeout=60_000)
+            if wait_all:
+                page.wait_for_function("() => document.documentElement.dataset.drawn === '1'", timeout=60_000)
+                page.wait_for_function("() => Array.from(document.images).every(i => i.complete)", timeout=10_000)
             yield page, events
         finally:
             browser.close()
 
 
-def _assert_clean(path: Path, events: dict[str, list]) -> None:
+def assert_clean(path: Path, events: dict[str, list]) -> None:
+    """No script error, no console error, no dialog, and no request but the file itself (and the
+    in-page ``blob:`` URLs a PNG export makes)."""
     assert events["errors"] == []
     assert events["console"] == []
     assert events["dialogs"] == []
-    assert events["requests"] == [path.as_uri()]  # nothing but the file itself
+    assert {url for url in events["requests"] if not url.startswith("blob:")} == {path.as_uri()}
+
+
+def screenshot_panels(page: Any, prefix: str) -> None:
+    ARTIFACTS.mkdir(exist_ok=True)
+    page.screenshot(path=str(ARTIFACTS / f"{prefix}.png"), full_page=True)
+    for panel in PANEL_IDS:
+        page.locator(f"#{panel}").screenshot(path=str(ARTIFACTS / f"{prefix}-{panel}.png"))
 
 
 @pytest.mark.browser
 def test_report_draws_in_chromium(tiny_run: Path) -> None:
     path = write_report(load_spec(tiny_run / "spec.toml"))
-    failures = _failure_count(tiny_run)
-    with _page(path) as (page, events):
+    failures = results_count(tiny_run, "valid AND NOT correct")
+    with open_page(path) as (page, events):
+        figures = page.evaluate("Array.from(document.querySelectorAll('script.fig-data')).map(s => s.dataset.target)")
         drawn = page.evaluate(
-            "Array.from(document.querySelectorAll('.js-plotly-plot'))"
-            ".filter(d => d.querySelector('svg.main-svg')).length"
-        )
-        assert drawn >= 3
-        traces = page.evaluate(
-            "Array.from(document.querySelectorAll('.js-plotly-plot')).flatMap(d => d.data.map(t => t.type))"
-        )
-        assert "heatmap" in traces and "bar" in traces
-        assert page.evaluate("document.querySelectorAll('#fig-scenes .hm image').length") == 1
-        assert page.evaluate("document.querySelectorAll('#controls .js-plotly-plot').length") == 2
+            "Array.from(document.querySelectorAll('.js-plotly-plot')).filter(d => d.querySelector('svg.main-svg'))"
+            ".map(d => d.id)")
+        assert set(figures) | {"explorer-plot"} == set(drawn)
+        traces = set(page.evaluate(
+            "Array.from(document.querySelectorAll('.js-plotly-plot')).flatMap(d => d.data.map(t => t.type))"))
+        assert {"heatmap", "bar", "box", "scatter"} <= traces
+        assert page.evaluate("document.querySelectorAll('#explorer-plot .hm image').length") == 1
+        effects = page.evaluate("Array.from(document.querySelectorAll('#aggregate .plot')).map(d => d.id)")
+        assert sum(e.startswith("fig-effect-") for e in effects) == 3  # environment, yaw, blur
 
         widths = page.evaluate("Array.from(document.querySelectorAll('.failure img')).map(i => i.naturalWidth)")
-        assert len(widths) == min(failures, 48)
-        assert all(w > 0 for w in widths)
-
+        assert len(widths) == min(failures, 48) and all(w > 0 for w in widths)
         assert page.inner_text("#experiment") == "tiny"
         assert "box" in page.inner_text("#objects")
 
-        ARTIFACTS.mkdir(exist_ok=True)
-        page.screenshot(path=str(ARTIFACTS / "report.png"), full_page=True)
-        _assert_clean(path, events)
+        # every figure exports as PNG, from the mode bar and from the API behind it
+        titles = page.evaluate("Array.from(document.querySelectorAll('#fig-outcomes .modebar-btn'))"
+                               ".map(b => b.dataset.title)")
+        assert "Download plot as a PNG" in titles
+        assert not [t for t in titles if "Share" in t or "Cloud" in t]  # nothing leaves the page
+        png = page.evaluate("Plotly.toImage(document.getElementById('fig-outcomes'), {format: 'png'})")
+        assert png.startswith("data:image/png;base64,")
+        with page.expect_download() as download:
+            page.hover("#explorer-plot")
+            page.click("#explorer-plot .modebar-btn[data-title='Download plot as a PNG']")
+        assert download.value.suggested_filename == "explorer-plot.png"
+
+        screenshot_panels(page, "report")
+        assert_clean(path, events)
 
 
 @pytest.mark.browser
@@ -165,22 +238,44 @@ def test_names_are_escaped(tiny_copy: Path) -> None:
         assert raw not in html
     assert "box&lt;script&gt;alert(1)&lt;/script&gt;" in html
 
-    with _page(path) as (page, events):
+    with open_page(path) as (page, events):
         assert page.inner_text("#experiment") == EVIL_EXPERIMENT
         assert page.title().startswith(EVIL_EXPERIMENT)
-        gallery = page.inner_text("#failures")
-        if _failure_count(tiny_copy):
+        if results_count(tiny_copy, "valid AND NOT correct"):
+            gallery = page.inner_text("#failures")
             assert EVIL_OBJECT in gallery and EVIL_ENV in gallery
         assert EVIL_OBJECT in page.inner_text("#objects")
-        ticks = page.evaluate(
-            "Array.from(document.querySelectorAll('#fig-scenes .xtick text, #fig-scenes .ytick text'))"
-            ".map(t => t.textContent)"
-        )
-        assert EVIL_OBJECT in ticks and EVIL_ENV in ticks
+        for plot in ("explorer-plot", "fig-box-environment", "fig-box-object", "fig-effect-1"):
+            ticks = page.evaluate(
+                f"Array.from(document.querySelectorAll('#{plot} .xtick text, #{plot} .ytick text'))"
+                ".map(t => t.textContent)")
+            assert EVIL_OBJECT in ticks or EVIL_ENV in ticks, (plot, ticks)
+        explorer = page.evaluate("Array.from(document.querySelectorAll('#explorer-plot .xtick text, "
+                                 "#explorer-plot .ytick text')).map(t => t.textContent)")
+        assert EVIL_OBJECT in explorer and EVIL_ENV in explorer
+
+        page.mouse.click(*cell_centre(page, 0, 0))  # the gallery's captions and titles, built in JS
+        page.wait_for_selector("#explorer-gallery .tile")
+        titles = page.evaluate("Array.from(document.querySelectorAll('#explorer-gallery .tile')).map(t => t.title)")
+        assert titles and all(EVIL_OBJECT in t for t in titles)
+        assert EVIL_OBJECT in page.inner_text("#explorer-gallery h3")
+        page.select_option("select[aria-label='role of environment']", "slider")
+        assert EVIL_ENV in page.inner_text("#explorer-controls")
+
         assert not page.evaluate("Array.from(document.querySelectorAll('b')).some(b => b.textContent === 'bold')")
-        assert page.evaluate("document.querySelectorAll('img:not([src^=\"data:\"])').length") == 0
-        assert page.evaluate("Array.from(document.scripts).filter(s => !s.type).length") == 2
-        _assert_clean(path, events)
+        assert page.evaluate("document.querySelectorAll('img[src]:not([src^=\"data:\"])').length") == 0
+        assert page.evaluate("Array.from(document.scripts).filter(s => !s.type).length") == 1 + len(SCRIPTS)
+        assert_clean(path, events)
+
+
+def cell_centre(page: Any, x: int, y: int) -> tuple[float, float]:
+    """Page coordinates of the centre of the explorer heat map's cell (x, y)."""
+    return tuple(page.evaluate(
+        """([x, y]) => {
+             const gd = document.getElementById('explorer-plot'), box = gd.getBoundingClientRect();
+             const xa = gd._fullLayout.xaxis, ya = gd._fullLayout.yaxis;
+             return [box.left + xa._offset + xa.l2p(x), box.top + ya._offset + ya.l2p(y)];
+           }""", [x, y]))
 
 
 def test_report_on_an_empty_store_says_how_to_fix(tmp_path: Path) -> None:

@@ -218,7 +218,8 @@ class Store:
         """An in-memory DuckDB connection with views over this store's Parquet files.
 
         Views: ``renders``, ``images``, ``predictions``, ``runs`` (deduplicated by key), and when
-        ``experiment`` has a plan, ``jobs`` (its latest plan) and ``results`` (jobs ⨝ predictions).
+        ``experiment`` has a plan, ``jobs`` (its latest plan) and ``results`` (jobs ⨝ predictions),
+        with the aggregate views over ``results`` (see :mod:`sweep3d.stages.aggregate.views`).
         Unreadable segments are left out (and quarantined); when every segment of a table is
         readable the view globs its folder (segment names start with a digit, temp files with a
         dot), so segments written or compacted after this call are read by later queries too.
@@ -245,6 +246,9 @@ class Store:
                     "CREATE VIEW results AS SELECT j.*, p.* EXCLUDE (pred_key, image_key, created_at) "
                     "FROM jobs j JOIN predictions p USING (pred_key)"
                 )
+        from sweep3d.stages.aggregate import register_views  # the report's aggregates, as views
+
+        register_views(con)
         return con
 
     # -- damage control ----------------------------------------------------------------------

@@ -1,4 +1,10 @@
-"""The static HTML report: one self-contained file (plotly.js, figures and thumbnails inlined).
+"""The static HTML report: one self-contained file (plotly.js, data and thumbnails inlined).
+
+Panels (see :mod:`sweep3d.report.panels`): overall accuracy; the explorer (any parameter as a
+heat-map axis, slider or pooled, computed in the browser; click a cell for its images); failure
+modes (regions ranked by their Wilson interval); the worst failures; per object (sensitivity,
+confusions); aggregate (accuracy per parameter with Wilson bands, box plots over scenes,
+variance explained). Optional panels show only when their data exists.
 
 Usage::
 

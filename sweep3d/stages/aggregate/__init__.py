@@ -1,11 +1,19 @@
-"""Aggregate: accuracy overall, per control value, per scene, and the failures, by SQL over the store."""
+"""Aggregate: accuracy overall, per control value, per scene, and the failures, by SQL over the store.
+
+:func:`register_views` adds the SQL views and macros behind the report's numbers (per-level
+accuracy with Wilson intervals, failure modes, variance explained, …) to a DuckDB connection;
+:meth:`Store.connect` calls it, so ``sweep3d query`` sees them too.
+"""
 
 from sweep3d.stages.aggregate.summary import (
     ControlEffect,
     Region,
     Summary,
+    control_effects,
     summarise,
     weakest_regions,
 )
+from sweep3d.stages.aggregate.views import MACROS, VIEWS, has_view, register_views
 
-__all__ = ["ControlEffect", "Region", "Summary", "summarise", "weakest_regions"]
+__all__ = ["MACROS", "VIEWS", "ControlEffect", "Region", "Summary", "control_effects", "has_view",
+           "register_views", "summarise", "weakest_regions"]

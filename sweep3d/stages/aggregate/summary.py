@@ -11,17 +11,20 @@ from typing import Any
 
 import duckdb
 
-MAX_LEVELS = 12  # a parameter with more distinct values is binned
-BINS = 10
+from sweep3d.stages.aggregate.views import has_view, register_views
 
 
 @dataclass
 class ControlEffect:
+    """Accuracy at each level (value or bin) of one parameter, with its 95 % Wilson interval."""
+
     column: str
-    levels: list[Any]  # value or bin centre
+    levels: list[int]  # level index in the ``control_levels`` view
     labels: list[str]
-    accuracy: list[float]
+    accuracy: list[float | None]
     count: list[int]
+    low: list[float | None]
+    high: list[float | None]
 
 
 @dataclass
@@ -46,12 +49,14 @@ def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit:
     Args:
         columns: the control-parameter columns of the jobs table.
     """
-    jobs = con.execute("SELECT count(*) FROM jobs").fetchone()[0] if _has_view(con, "jobs") else 0
-    if not _has_view(con, "results"):
+    jobs = con.execute("SELECT count(*) FROM jobs").fetchone()[0] if has_view(con, "jobs") else 0
+    if not has_view(con, "results"):
         return Summary(jobs, 0, 0, 0, None, [], [], [], [])
     evaluated, invalid, correct = con.execute(
         "SELECT count(*), count(*) FILTER (WHERE NOT valid), count(*) FILTER (WHERE valid AND correct) FROM results"
     ).fetchone()
+    if not has_view(con, "control_accuracy"):  # a connection made without Store.connect
+        register_views(con)
     valid = evaluated - invalid
     accuracy = correct / valid if valid else None
 
@@ -60,13 +65,13 @@ def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit:
     cells = {
         (o, e): (acc, n)
         for o, e, acc, n in con.execute(
-            "SELECT object, environment, avg(correct::DOUBLE), count(*) FROM results WHERE valid GROUP BY 1, 2"
+            "SELECT object, environment, accuracy, n FROM scene_accuracy WHERE n > 0"
         ).fetchall()
     }
     scene_accuracy = [[cells.get((o, e), (None, 0))[0] for e in environments] for o in objects]
     scene_count = [[cells.get((o, e), (None, 0))[1] for e in environments] for o in objects]
 
-    effects = [e for e in (_effect(con, c) for c in columns) if e is not None]
+    effects = control_effects(con, columns)
     failures = [
         dict(zip(["job", "object", "environment", "image_key", "top1_label", "topk_labels", "topk_probs", "loss"], r))
         for r in con.execute(
@@ -85,43 +90,23 @@ def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit:
                    scene_count, effects, failures, per_object)
 
 
-def _has_view(con: duckdb.DuckDBPyConnection, name: str) -> bool:
-    return bool(con.execute(
-        "SELECT count(*) FROM duckdb_views() WHERE view_name = ? AND NOT internal", [name]).fetchone()[0])
+def control_effects(con: duckdb.DuckDBPyConnection, columns: list[str]) -> list[ControlEffect]:
+    """Accuracy per level of each of ``columns`` that takes two levels or more, in that order.
 
-
-def _effect(con: duckdb.DuckDBPyConnection, column: str) -> ControlEffect | None:
-    """Accuracy at each value of one control parameter (binned when it has many values)."""
-    q = f'"{column}"'
-    distinct, numeric = con.execute(
-        f"SELECT count(DISTINCT {q}), bool_and(typeof({q}) IN ('DOUBLE','BIGINT','INTEGER','FLOAT')) "
-        f"FROM results WHERE {q} IS NOT NULL"
-    ).fetchone()
-    if distinct is None or distinct < 2:
-        return None
-    if distinct <= MAX_LEVELS or not numeric:
-        rows = con.execute(
-            f"SELECT {q}, avg(correct::DOUBLE), count(*) FROM results WHERE valid AND {q} IS NOT NULL "
-            f"GROUP BY 1 ORDER BY 1"
-        ).fetchall()
-        return ControlEffect(column, [r[0] for r in rows], [_fmt(r[0]) for r in rows],
-                             [r[1] for r in rows], [r[2] for r in rows])
-    lo, hi = con.execute(f"SELECT min({q}), max({q}) FROM results").fetchone()
-    width = (hi - lo) / BINS
+    Read from the ``control_accuracy`` view (levels and bins as defined there).
+    """
     rows = con.execute(
-        f"SELECT least(floor(({q} - ?) / ?), ?)::INTEGER AS b, avg(correct::DOUBLE), count(*) "
-        f"FROM results WHERE valid AND {q} IS NOT NULL GROUP BY 1 ORDER BY 1",
-        [lo, width, BINS - 1],
+        "SELECT parameter, level, label, accuracy, n, wilson_low, wilson_high FROM control_accuracy "
+        "WHERE parameter IN (SELECT parameter FROM control_parameters WHERE levels > 1) "
+        "AND list_contains(?, parameter) ORDER BY level", [columns]
     ).fetchall()
-    centres = [lo + (b + 0.5) * width for b, _, _ in rows]
-    labels = [f"{_fmt(lo + b * width)}–{_fmt(lo + (b + 1) * width)}" for b, _, _ in rows]
-    return ControlEffect(column, centres, labels, [r[1] for r in rows], [r[2] for r in rows])
-
-
-def _fmt(value: Any) -> str:
-    if isinstance(value, float):
-        return f"{value:.4g}"
-    return str(value)
+    effects = {c: ControlEffect(c, [], [], [], [], [], []) for c in columns}
+    for column, level, label, accuracy, count, low, high in rows:
+        effect = effects[column]
+        for values, value in ((effect.levels, level), (effect.labels, label), (effect.accuracy, accuracy),
+                              (effect.count, count), (effect.low, low), (effect.high, high)):
+            values.append(value)
+    return [e for e in effects.values() if e.levels]
 
 
 @dataclass(frozen=True)

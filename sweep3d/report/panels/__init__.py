@@ -1,0 +1,33 @@
+"""The report's panels, in page order.
+
+Adding a panel: write ``build(inputs: PanelInputs) -> dict | None`` in a module here and a
+template ``templates/panels/<name>.html.j2`` that draws ``data`` (figures as
+:class:`~sweep3d.report.figures.Figure`, drawn by the page with the ``figure`` macro of
+``templates/_macros.html.j2``; images through ``inputs.thumbs.want(key)`` or ``inputs.tile(row)``),
+then list it below. A panel whose data may be absent returns None and is left out of the page.
+
+``OPTIONAL_PANELS`` is where such panels go. The part-visibility panel (accuracy conditioned on
+which parts of the object's surface are visible, from a UV render pass) belongs there: its
+``build`` returns None when the store holds no UV-pass data for the experiment.
+"""
+
+from __future__ import annotations
+
+from sweep3d.report.panel import Panel
+from sweep3d.report.panels import aggregate, explorer, failure_modes, failures, objects, overall
+
+CORE_PANELS: tuple[Panel, ...] = (
+    Panel("overall", "Overall accuracy", "panels/overall.html.j2", overall.build),
+    Panel("explorer", "Explorer", "panels/explorer.html.j2", explorer.build),
+    Panel("failure-modes", "Failure modes", "panels/failure_modes.html.j2", failure_modes.build),
+    Panel("failures", "Worst failures", "panels/failures.html.j2", failures.build),
+    Panel("objects", "Per object", "panels/objects.html.j2", objects.build),
+    Panel("aggregate", "Aggregate", "panels/aggregate.html.j2", aggregate.build),
+)
+
+#: Panels shown only when their data exists (their ``build`` returns None otherwise).
+OPTIONAL_PANELS: tuple[Panel, ...] = ()
+
+PANELS: tuple[Panel, ...] = CORE_PANELS + OPTIONAL_PANELS
+
+__all__ = ["CORE_PANELS", "OPTIONAL_PANELS", "PANELS"]

@@ -1,0 +1,40 @@
+"""Worst failures: the wrong predictions with the highest loss, each with its top-k."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from sweep3d.report.figures import pct
+from sweep3d.report.panel import PanelInputs, control_columns
+
+
+def build(inputs: PanelInputs) -> dict[str, Any]:
+    """Cards of the summary's failures: thumbnail, scene, control values, top-k, loss."""
+    failures = inputs.summary.failures
+    columns = control_columns(inputs.loaded)
+    selected = "".join(f', "{c}"' for c in columns)
+    extra = {row[0]: row[1:] for row in inputs.con.execute(
+        f"SELECT job, topk{selected} FROM results WHERE list_contains(?, job)", [[f["job"] for f in failures]]
+    ).fetchall()} if failures else {}
+    cards = []
+    for failure in failures:
+        topk_ids, *values = extra.get(failure["job"], (None,))
+        truth = set(inputs.loaded.labels.get(failure["object"], ()))
+        names = failure["topk_labels"] or []
+        ids = topk_ids or [None] * len(names)
+        cards.append({
+            "job": failure["job"],
+            "object": failure["object"],
+            "environment": failure["environment"],
+            "thumb": inputs.thumbs.want(failure["image_key"]),
+            "controls": [(c, _fmt(v)) for c, v in zip(columns, values) if v is not None],
+            "topk": [{"label": name, "prob": pct(prob), "truth": i in truth or name in truth}
+                     for name, prob, i in zip(names, failure["topk_probs"] or [], ids)],
+            "loss": f"{failure['loss']:.2f}" if failure["loss"] is not None else "",
+        })
+    wrong = inputs.summary.evaluated - inputs.summary.invalid - inputs.summary.correct
+    return {"cards": cards, "wrong": wrong}
+
+
+def _fmt(value: Any) -> str:
+    return f"{value:.4g}" if isinstance(value, float) else str(value)

@@ -1,0 +1,93 @@
+"""Per object: accuracy, the controls it is most sensitive to, and what it is taken for.
+
+Sensitivity to a parameter is the share of the variance of ``correct`` (within the object's
+results) that the parameter's levels explain (eta², from the ``object_sensitivity`` view), shown
+with the accuracy range over those levels. Wrong predictions come from ``object_confusions``.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from typing import Any
+
+import numpy as np
+
+from sweep3d.report.figures import Figure, interval, layout, make_figure, pct, plot_text
+from sweep3d.report.panel import PanelInputs
+from sweep3d.stages.aggregate.views import has_view
+
+SENSITIVE = 3  # parameters listed per object
+CONFUSIONS = 3  # wrong predictions listed per object
+
+
+def build(inputs: PanelInputs) -> dict[str, Any]:
+    """One row per object, and a heat map of eta² per (object, parameter)."""
+    con, table = inputs.con, inputs.table
+    known = [p.name for p in table.parameters if p.name != "object"]
+    sensitivity: dict[str, list[dict[str, Any]]] = defaultdict(list)
+    for row in inputs.rows("SELECT object, parameter, eta2, accuracy_min, worst_level, accuracy_max, best_level "
+                           "FROM object_sensitivity WHERE list_contains(?, parameter)", [known]):
+        sensitivity[row["object"]].append(row)
+    confusions: dict[str, list[dict[str, Any]]] = defaultdict(list)
+    if has_view(con, "object_confusions"):
+        for row in inputs.rows("SELECT object, prediction, n, share FROM object_confusions WHERE rank <= ?",
+                               [CONFUSIONS]):
+            confusions[row["object"]].append(row)
+    labels = {o.name: ", ".join(str(label) for label in o.labels) for o in inputs.loaded.spec.objects}
+    objects = []
+    for row in inputs.rows("SELECT label AS object, level, n, accuracy, wilson_low, wilson_high FROM control_accuracy "
+                           "WHERE parameter = 'object' ORDER BY accuracy NULLS LAST, label"):
+        objects.append({
+            "object": row["object"], "labels": labels.get(row["object"], ""), "count": row["n"],
+            "accuracy": pct(row["accuracy"]), "interval": interval(row["wilson_low"], row["wilson_high"]),
+            "sensitive": [_sensitivity(s) for s in sensitivity[row["object"]] if s["eta2"]][:SENSITIVE],
+            "confusions": [_confusion(inputs, row["level"], c) for c in confusions[row["object"]]],
+        })
+    return {"objects": objects, "figure": _figure(sensitivity, [o["object"] for o in objects], known)}
+
+
+def _sensitivity(row: dict[str, Any]) -> dict[str, Any]:
+    return {"parameter": row["parameter"], "share": pct(row["eta2"], 0),
+            "worst": row["worst_level"], "worst_accuracy": pct(row["accuracy_min"], 0),
+            "best": row["best_level"], "best_accuracy": pct(row["accuracy_max"], 0)}
+
+
+def _confusion(inputs: PanelInputs, level: int, row: dict[str, Any]) -> dict[str, Any]:
+    """A wrong prediction with its count, share and its highest-loss example."""
+    table = inputs.table
+    selected = table.mask({"object": level}) & (np.asarray(table.prediction, dtype=object) == row["prediction"])
+    example = table.examples(selected, 1)
+    return {"prediction": row["prediction"], "count": row["n"], "share": pct(row["share"], 0),
+            "example": inputs.tile(example[0]) if example else None}
+
+
+def _figure(sensitivity: dict[str, list[dict[str, Any]]], objects: list[str], parameters: list[str]) -> Figure | None:
+    """Heat map: share of each object's variance explained by each parameter."""
+    cells = {(r["object"], r["parameter"]): r for rows in sensitivity.values() for r in rows}
+    columns = [p for p in parameters if any((o, p) in cells for o in objects)]
+    if not columns or not objects:
+        return None
+    z = [[cells[(o, p)]["eta2"] if (o, p) in cells else None for p in columns] for o in objects]
+    if all(v is None for row in z for v in row):  # no object has both right and wrong results
+        return None
+    hover = [[_hover(cells.get((o, p))) for p in columns] for o in objects]
+    trace = {
+        "type": "heatmap", "z": z, "x": [plot_text(p) for p in columns], "y": [plot_text(o) for o in objects],
+        "zmin": 0, "zmax": max([v for row in z for v in row if v is not None] + [0.05]), "colorscale": "Reds",
+        "text": [[f"{v:.0%}" if v is not None else "" for v in row] for row in z], "texttemplate": "%{text}",
+        "hovertext": hover, "hovertemplate": "%{y} · %{x}<br>%{hovertext}<extra></extra>", "xgap": 2, "ygap": 2,
+        "colorbar": {"tickformat": ".0%", "title": {"text": "eta²"}},
+    }
+    figure_layout = layout(
+        height=max(220, 110 + 34 * len(objects)), margin={"l": 16, "r": 16, "t": 16, "b": 48},
+        xaxis={"type": "category", "automargin": True, "title": {"text": "parameter"}},
+        yaxis={"type": "category", "automargin": True, "autorange": "reversed"},
+    )
+    return make_figure("fig-object-sensitivity", [trace], figure_layout, "FROM object_sensitivity")
+
+
+def _hover(cell: dict[str, Any] | None) -> str:
+    if cell is None:
+        return "no variation"
+    return (f"explains {pct(cell['eta2'], 0)} of the variance<br>worst {plot_text(cell['worst_level'])}: "
+            f"{pct(cell['accuracy_min'], 0)}<br>best {plot_text(cell['best_level'])}: {pct(cell['accuracy_max'], 0)}")

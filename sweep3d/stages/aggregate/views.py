@@ -1,0 +1,296 @@
+"""SQL views and macros over ``results``: the numbers behind every plot of the report.
+
+:func:`register_views` adds them to a connection from :meth:`Store.connect`, so the report reads
+the same numbers that ``sweep3d query`` and the DuckDB CLI see. Every *parameter* is a column of
+the jobs table that varies a scene: ``object``, ``environment`` and each control parameter
+``<control id>_<param>``. A parameter's *levels* are its values, or, for a numeric parameter
+with more than :data:`MAX_LEVELS` distinct values, :data:`BINS` equal-width bins; a job where a
+control does not apply sits in the level ``(not applied)``. Accuracy counts valid predictions
+only (NaN/inf outputs are counted apart, never averaged in).
+
+Views:
+
+``control_parameters``
+    parameter, position (spec order: object, environment, then controls), levels, numeric, binned.
+``control_levels``
+    one row per (result, parameter): job, object, environment, valid, correct, parameter,
+    position, level (0-based, in value order), label.
+``control_accuracy``
+    per (parameter, level): n (valid results), n_correct, accuracy, wilson_low, wilson_high.
+``pair_accuracy``
+    the same per pair of levels of two parameters (both with 2 levels or more).
+``scene_accuracy``
+    the same per (object, environment).
+``variance_explained``
+    share of the variance of ``correct`` explained by each parameter (kind ``main``) and each
+    pair beyond its two main effects (kind ``interaction``): eta² = between-group sum of
+    squares / total sum of squares. In an unbalanced design the shares overlap.
+``object_sensitivity``
+    per (object, other parameter): accuracy range over the levels, worst and best level, and
+    eta² within the object.
+``object_confusions``
+    per object, its wrong top-1 predictions with counts, share of its failures and rank.
+
+Macros:
+
+``wilson_low(k, n)``, ``wilson_high(k, n)``
+    the 95 % Wilson score interval of a proportion k/n (NULL when n = 0).
+``failure_modes(min_count := 10)``
+    single levels and pairs of levels with at least ``min_count`` valid results and accuracy
+    below the overall accuracy, ranked by ``wilson_high`` (the most certainly bad first).
+"""
+
+from __future__ import annotations
+
+import duckdb
+
+MAX_LEVELS = 12  # a numeric parameter with more distinct values is binned
+BINS = 10
+Z95 = 1.959963984540054  # two-sided 95 % normal quantile
+NOT_APPLIED = "(not applied)"
+SCENE_COLUMNS = ("object", "environment")
+REQUIRED_COLUMNS = frozenset({"job", "object", "environment", "valid", "correct"})
+# bookkeeping columns of the jobs table (in_frame: the plan flags objects wholly outside the frame)
+NON_PARAMETERS = frozenset({"experiment", "job", "render_key", "image_key", "pred_key", "in_frame"})
+_NUMERIC = ("TINYINT", "SMALLINT", "INTEGER", "BIGINT", "HUGEINT", "UTINYINT", "USMALLINT", "UINTEGER",
+            "UBIGINT", "FLOAT", "DOUBLE", "DECIMAL")
+
+# accuracy and its Wilson interval from the counts n (valid results) and n_correct of an inner query
+_ACCURACY = ("n_correct / nullif(n, 0) AS accuracy, wilson_low(n_correct, n) AS wilson_low, "
+             "wilson_high(n_correct, n) AS wilson_high")
+
+VIEWS = ("control_values", "control_stats", "control_levels", "control_parameters", "control_accuracy",
+         "pair_accuracy", "scene_accuracy", "variance_explained", "object_sensitivity", "object_confusions")
+MACROS = ("wilson_low", "wilson_high", "failure_modes")
+
+
+def register_views(con: duckdb.DuckDBPyConnection) -> bool:
+    """Create the aggregate views and macros on ``con`` (idempotent).
+
+    Args:
+        con: a connection whose ``jobs`` and ``results`` views exist (see :meth:`Store.connect`).
+
+    Returns:
+        True if the views were created; False (and nothing created but the Wilson macros) when
+        the connection has no ``results`` view yet, or one without the columns of
+        :data:`REQUIRED_COLUMNS` (an evaluator that does not say what is correct).
+    """
+    _create_macros(con)
+    if not has_view(con, "results"):
+        return False
+    result_columns = _columns(con, "results")
+    if not REQUIRED_COLUMNS <= result_columns.keys():
+        return False
+    parameters = control_columns(con)
+    for sql in _view_statements(parameters, "top1_label" in result_columns):
+        con.execute(sql)
+    return True
+
+
+def control_columns(con: duckdb.DuckDBPyConnection) -> list[tuple[str, bool]]:
+    """The jobs table's parameter columns, in table order, each with whether it is numeric.
+
+    ``object`` and ``environment`` come first; then every column that is neither a key nor
+    bookkeeping (the control parameters ``<control id>_<param>``).
+    """
+    columns = _columns(con, "jobs")
+    out = [(name, False) for name in SCENE_COLUMNS if name in columns]
+    out += [(name, _is_numeric(kind)) for name, kind in columns.items()
+            if name not in NON_PARAMETERS and name not in SCENE_COLUMNS and not name.endswith("_key")]
+    return out
+
+
+# -- SQL --------------------------------------------------------------------------------------
+def _create_macros(con: duckdb.DuckDBPyConnection) -> None:
+    z2 = Z95 * Z95
+    p = "(k::DOUBLE / n)"
+    for name, sign in (("wilson_low", "-"), ("wilson_high", "+")):
+        con.execute(
+            f"CREATE OR REPLACE MACRO {name}(k, n) AS CASE WHEN n > 0 THEN "
+            f"(({p} + {z2!r} / (2 * n)) {sign} {Z95!r} * sqrt(greatest({p} * (1 - {p}) / n "
+            f"+ {z2!r} / (4 * n::DOUBLE * n), 0))) / (1 + {z2!r} / n) END"
+        )
+    con.execute(
+        "CREATE OR REPLACE MACRO level_number_label(x) AS CASE "
+        "WHEN x = round(x) AND abs(x) < 1e9 THEN CAST(CAST(x AS BIGINT) AS VARCHAR) "
+        "ELSE printf('%.4g', x) END"
+    )
+
+
+def _view_statements(parameters: list[tuple[str, bool]], has_predictions: bool) -> list[str]:
+    """The CREATE statements, in dependency order."""
+    accuracy = _ACCURACY
+    statements = [
+        "CREATE OR REPLACE VIEW control_values AS " + _values_sql(parameters),
+        f"""CREATE OR REPLACE VIEW control_stats AS
+            SELECT *, (hi - lo) / {BINS} AS width,
+                   CASE WHEN binned THEN greatest(0, 1 - floor(log10((hi - lo) / {BINS})))::INTEGER END AS digits
+            FROM (
+                SELECT parameter, position, count(DISTINCT raw) AS distinct_values,
+                       count(number) > 0 AND count(number) = count(raw) AS numeric,
+                       min(number) AS lo, max(number) AS hi,
+                       count(number) > 0 AND count(number) = count(raw) AND count(DISTINCT raw) > {MAX_LEVELS}
+                           AND max(number) > min(number) AS binned
+                FROM control_values GROUP BY parameter, position)""",
+        f"""CREATE OR REPLACE VIEW control_levels AS
+            WITH placed AS (
+                SELECT v.*, s.lo, s.width, s.digits,
+                       CASE WHEN s.binned AND v.number IS NOT NULL
+                            THEN least(floor((v.number - s.lo) / s.width), {BINS - 1})::INTEGER END AS bin
+                FROM control_values v JOIN control_stats s USING (parameter, position))
+            SELECT job, object, environment, valid, correct, parameter, position,
+                   (dense_rank() OVER (PARTITION BY parameter ORDER BY raw IS NULL, coalesce(bin::DOUBLE, number),
+                                       CASE WHEN bin IS NULL THEN raw END) - 1)::INTEGER AS level,
+                   CASE WHEN raw IS NULL THEN '{NOT_APPLIED}'
+                        WHEN bin IS NOT NULL THEN level_number_label(round(lo + bin * width, digits)) || '–'
+                                                  || level_number_label(round(lo + (bin + 1) * width, digits))
+                        WHEN number IS NOT NULL THEN level_number_label(number)
+                        ELSE raw END AS label
+            FROM placed""",
+        """CREATE OR REPLACE VIEW control_parameters AS
+            SELECT l.parameter, l.position, count(DISTINCT l.level)::INTEGER AS levels,
+                   any_value(s.numeric) AS numeric, any_value(s.binned) AS binned
+            FROM control_levels l JOIN control_stats s USING (parameter, position)
+            GROUP BY l.parameter, l.position ORDER BY l.position""",
+        f"""CREATE OR REPLACE VIEW control_accuracy AS
+            SELECT *, {accuracy} FROM (
+                SELECT parameter, position, level, any_value(label) AS label,
+                       count(*) FILTER (WHERE valid) AS n, count(*) FILTER (WHERE valid AND correct) AS n_correct
+                FROM control_levels GROUP BY parameter, position, level)
+            ORDER BY position, level""",
+        f"""CREATE OR REPLACE VIEW pair_accuracy AS
+            WITH varied AS (SELECT l.* FROM control_levels l
+                            SEMI JOIN control_parameters p ON p.parameter = l.parameter AND p.levels > 1)
+            SELECT *, {accuracy} FROM (
+                SELECT a.parameter AS parameter_a, a.position AS position_a, a.level AS level_a,
+                       any_value(a.label) AS label_a,
+                       b.parameter AS parameter_b, b.position AS position_b, b.level AS level_b,
+                       any_value(b.label) AS label_b,
+                       count(*) FILTER (WHERE a.valid) AS n, count(*) FILTER (WHERE a.valid AND a.correct) AS n_correct
+                FROM varied a JOIN varied b ON a.job = b.job AND a.position < b.position
+                GROUP BY a.parameter, a.position, a.level, b.parameter, b.position, b.level)
+            ORDER BY position_a, position_b, level_a, level_b""",
+        f"""CREATE OR REPLACE VIEW scene_accuracy AS
+            SELECT *, {accuracy} FROM (
+                SELECT object, environment, count(*) FILTER (WHERE valid) AS n,
+                       count(*) FILTER (WHERE valid AND correct) AS n_correct
+                FROM results GROUP BY object, environment)
+            ORDER BY object, environment""",
+        """CREATE OR REPLACE VIEW variance_explained AS
+            WITH overall AS (SELECT count(*) AS n, avg(correct::DOUBLE) AS p FROM results WHERE valid),
+            total AS (SELECT n, n * p * (1 - p) AS ss FROM overall),
+            main AS (
+                SELECT c.parameter, c.position, sum(c.n * (c.accuracy - o.p) ^ 2) AS ss, count(*) - 1 AS df
+                FROM control_accuracy c SEMI JOIN control_parameters v ON v.parameter = c.parameter AND v.levels > 1,
+                     overall o
+                WHERE c.n > 0 GROUP BY c.parameter, c.position),
+            cells AS (
+                SELECT parameter_a, position_a, parameter_b, position_b, sum(c.n * (c.accuracy - o.p) ^ 2) AS ss,
+                       count(*) - 1 AS df
+                FROM pair_accuracy c, overall o WHERE c.n > 0
+                GROUP BY parameter_a, position_a, parameter_b, position_b),
+            effects AS (
+                SELECT 'main' AS kind, m.parameter AS effect, m.parameter AS parameter_a,
+                       NULL::VARCHAR AS parameter_b, m.ss AS sum_of_squares, m.df,
+                       (t.ss - m.ss) / nullif(t.n - m.df - 1, 0) AS mean_square_error,
+                       m.position AS position_a, NULL::INTEGER AS position_b
+                FROM main m, total t
+                UNION ALL
+                SELECT 'interaction', c.parameter_a || ' × ' || c.parameter_b, c.parameter_a, c.parameter_b,
+                       greatest(c.ss - a.ss - b.ss, 0), c.df - a.df - b.df,
+                       (t.ss - c.ss) / nullif(t.n - c.df - 1, 0), c.position_a, c.position_b
+                FROM cells c JOIN main a ON a.parameter = c.parameter_a JOIN main b ON b.parameter = c.parameter_b,
+                     total t)
+            SELECT kind, effect, parameter_a, parameter_b, sum_of_squares, df,
+                   sum_of_squares / nullif(t.ss, 0) AS eta2,
+                   greatest(sum_of_squares - df * mean_square_error, 0) / nullif(t.ss, 0) AS eta2_adjusted,
+                   position_a, position_b
+            FROM effects, total t
+            ORDER BY eta2_adjusted DESC NULLS LAST, eta2 DESC, position_a, position_b NULLS FIRST""",
+        """CREATE OR REPLACE VIEW object_sensitivity AS
+            WITH per_level AS (
+                SELECT object, parameter, position, level, any_value(label) AS label,
+                       count(*) FILTER (WHERE valid) AS n, avg(correct::DOUBLE) FILTER (WHERE valid) AS accuracy
+                FROM control_levels WHERE parameter <> 'object'
+                GROUP BY object, parameter, position, level),
+            per_object AS (SELECT object, count(*) AS n, avg(correct::DOUBLE) AS p FROM results WHERE valid
+                           GROUP BY object)
+            SELECT l.object, l.parameter, l.position, count(*)::INTEGER AS levels,
+                   min(l.accuracy) AS accuracy_min, arg_min(l.label, l.accuracy) AS worst_level,
+                   max(l.accuracy) AS accuracy_max, arg_max(l.label, l.accuracy) AS best_level,
+                   max(l.accuracy) - min(l.accuracy) AS accuracy_range,
+                   sum(l.n * (l.accuracy - o.p) ^ 2) / nullif(any_value(o.n * o.p * (1 - o.p)), 0) AS eta2
+            FROM per_level l JOIN per_object o USING (object)
+            WHERE l.n > 0
+            GROUP BY l.object, l.parameter, l.position HAVING count(*) > 1
+            ORDER BY l.object, eta2 DESC NULLS LAST, accuracy_range DESC, l.position""",
+        """CREATE OR REPLACE MACRO failure_modes(min_count := 10) AS TABLE
+            SELECT * FROM (
+                SELECT 1 AS size, parameter || ' = ' || label AS region,
+                       parameter AS parameter_a, level AS level_a, label AS label_a,
+                       NULL::VARCHAR AS parameter_b, NULL::INTEGER AS level_b, NULL::VARCHAR AS label_b,
+                       n, n_correct, accuracy, wilson_low, wilson_high, position AS position_a,
+                       NULL::INTEGER AS position_b
+                FROM control_accuracy c SEMI JOIN control_parameters p ON p.parameter = c.parameter AND p.levels > 1
+                UNION ALL
+                SELECT 2, p.parameter_a || ' = ' || p.label_a || ' · ' || p.parameter_b || ' = ' || p.label_b,
+                       p.parameter_a, p.level_a, p.label_a, p.parameter_b, p.level_b, p.label_b,
+                       p.n, p.n_correct, p.accuracy, p.wilson_low, p.wilson_high, p.position_a, p.position_b
+                FROM pair_accuracy p
+                JOIN control_accuracy a ON a.parameter = p.parameter_a AND a.level = p.level_a
+                JOIN control_accuracy b ON b.parameter = p.parameter_b AND b.level = p.level_b
+                WHERE p.wilson_high < least(a.accuracy, b.accuracy))
+            WHERE n >= min_count AND accuracy < (SELECT avg(correct::DOUBLE) FROM results WHERE valid)
+            ORDER BY wilson_high, accuracy, n DESC, size, position_a, level_a, position_b, level_b""",
+    ]
+    if has_predictions:
+        statements.append(
+            """CREATE OR REPLACE VIEW object_confusions AS
+                SELECT object, top1_label AS prediction, count(*) AS n,
+                       count(*) / sum(count(*)) OVER (PARTITION BY object) AS share,
+                       row_number() OVER (PARTITION BY object ORDER BY count(*) DESC, top1_label) AS rank
+                FROM results WHERE valid AND NOT correct GROUP BY object, top1_label
+                ORDER BY object, rank"""
+        )
+    return statements
+
+
+def _values_sql(parameters: list[tuple[str, bool]]) -> str:
+    """``control_values``: results in long form, one row per (result, parameter), raw values."""
+    parts = []
+    for position, (name, numeric) in enumerate(parameters):
+        column = _identifier(name)
+        number = f"CAST({column} AS DOUBLE)" if numeric else "NULL::DOUBLE"
+        parts.append(
+            f"SELECT job, object, environment, valid, correct, {_literal(name)} AS parameter, "
+            f"{position} AS position, CAST({column} AS VARCHAR) AS raw, {number} AS number FROM results"
+        )
+    if not parts:  # a jobs table without scene columns: an empty view of the right shape
+        return ("SELECT NULL::BIGINT AS job, NULL::VARCHAR AS object, NULL::VARCHAR AS environment, "
+                "NULL::BOOLEAN AS valid, NULL::BOOLEAN AS correct, NULL::VARCHAR AS parameter, "
+                "NULL::INTEGER AS position, NULL::VARCHAR AS raw, NULL::DOUBLE AS number WHERE false")
+    return "\nUNION ALL ".join(parts)
+
+
+# -- helpers ----------------------------------------------------------------------------------
+def has_view(con: duckdb.DuckDBPyConnection, name: str) -> bool:
+    """Whether ``con`` has a (user) view called ``name``."""
+    return bool(con.execute(
+        "SELECT count(*) FROM duckdb_views() WHERE view_name = ? AND NOT internal", [name]).fetchone()[0])
+
+
+def _columns(con: duckdb.DuckDBPyConnection, view: str) -> dict[str, str]:
+    """Column name → DuckDB type name of ``view``, in order."""
+    return {name: kind for name, kind, *_ in con.execute(f"DESCRIBE {_identifier(view)}").fetchall()}
+
+
+def _is_numeric(kind: str) -> bool:
+    return kind.upper().split("(")[0] in _NUMERIC
+
+
+def _identifier(name: str) -> str:
+    return '"' + name.replace('"', '""') + '"'
+
+
+def _literal(text: str) -> str:
+    return "'" + text.replace("'", "''") + "'"

@@ -1,0 +1,212 @@
+"""The aggregate SQL views: levels and bins, Wilson intervals, failure modes, variance explained.
+
+Stores here are written row by row (jobs table and prediction segments) so each test knows the
+exact answer; ``test_query_sees_the_views`` runs them on the real tiny run through the CLI.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+import duckdb
+import pyarrow as pa
+import pytest
+from typer.testing import CliRunner
+
+from sweep3d.cache.store import Store
+from sweep3d.cli import app
+from sweep3d.stages.aggregate import MACROS, VIEWS, register_views, summarise
+from sweep3d.stages.aggregate.views import BINS, NOT_APPLIED
+
+T0 = datetime(2024, 1, 1)
+
+
+def make_store(folder: Path, rows: list[dict[str, Any]], experiment: str = "e") -> duckdb.DuckDBPyConnection:
+    """A store whose jobs are ``rows`` (scene, control columns, ``correct``; ``valid`` default True)."""
+    store = Store(folder / "store")
+    jobs, predictions = [], []
+    for i, row in enumerate(rows):
+        row = dict(row)
+        correct, valid = row.pop("correct"), row.pop("valid", True)
+        key = f"k{i}"
+        jobs.append({"experiment": experiment, "job": i, "object": row.pop("object", "obj"),
+                     "environment": row.pop("environment", "env"), **row,
+                     "render_key": key, "image_key": key, "pred_key": key})
+        predictions.append({"pred_key": key, "image_key": key, "created_at": T0, "valid": valid,
+                            "correct": correct if valid else None, "top1_label": row.get("prediction", "thing"),
+                            "topk": [0], "topk_labels": [row.get("prediction", "thing")], "topk_probs": [0.9],
+                            "loss": 1.0})
+    store.write_table_file(store.jobs_path(experiment), pa.Table.from_pylist(jobs))
+    store.append("predictions", predictions)
+    return store.connect(experiment)
+
+
+def rows_of(con: duckdb.DuckDBPyConnection, sql: str) -> list[dict[str, Any]]:
+    cursor = con.execute(sql)
+    names = [d[0] for d in cursor.description]
+    return [dict(zip(names, r)) for r in cursor.fetchall()]
+
+
+def wilson(k: int, n: int, z: float = 1.959963984540054) -> tuple[float, float]:
+    p = k / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return centre - half, centre + half
+
+
+def test_wilson_macros_match_the_formula_and_published_values() -> None:
+    con = duckdb.connect()
+    assert register_views(con) is False  # no results: only the macros
+    for k, n in ((0, 10), (5, 10), (10, 10), (3, 7), (1, 1000)):
+        low, high = con.execute("SELECT wilson_low(?, ?), wilson_high(?, ?)", [k, n, k, n]).fetchone()
+        assert (low, high) == pytest.approx(wilson(k, n), abs=1e-12)
+    # Newcombe (1998), table I: 0/10 → 0.0000–0.2775, 5/10 → 0.2366–0.7634 (z = 1.96)
+    published = con.execute("SELECT round(wilson_high(0, 10), 4), round(wilson_low(5, 10), 4)").fetchone()
+    assert published == (0.2775, 0.2366)
+    assert con.execute("SELECT wilson_low(0, 0), wilson_high(0, 0)").fetchone() == (None, None)
+
+
+def test_levels_keep_value_order_bin_many_numbers_and_mark_not_applied(tmp_path: Path) -> None:
+    rows = []
+    for i in range(40):
+        rows.append({"c_size": [5.0, 10.0, 45.0][i % 3],  # numeric order, not string order
+                     "c_angle": float(i * 2.5),  # 40 values in 0..97.5: binned
+                     "c_name": ["b", "a"][i % 2],
+                     "c_only": 1.0 if i < 30 else None,  # a control limited to some scenes
+                     "correct": i % 4 == 0})
+    con = make_store(tmp_path, rows)
+    params = {r["parameter"]: r for r in rows_of(con, "FROM control_parameters")}
+    assert list(params) == ["object", "environment", "c_size", "c_angle", "c_name", "c_only"]
+    assert [params[p]["levels"] for p in params] == [1, 1, 3, 10, 2, 2]
+    assert params["c_angle"]["binned"] and not params["c_size"]["binned"]
+
+    labels = {}
+    for r in rows_of(con, "SELECT parameter, label FROM control_accuracy ORDER BY position, level"):
+        labels.setdefault(r["parameter"], []).append(r["label"])
+    assert labels["c_size"] == ["5", "10", "45"]
+    assert labels["c_name"] == ["a", "b"]
+    assert labels["c_only"] == ["1", NOT_APPLIED]
+    assert len(labels["c_angle"]) == BINS
+    assert labels["c_angle"][0] == "0–9.8" and labels["c_angle"][-1] == "87.8–97.5"  # edges to 2 digits of the width
+
+    counts = dict(con.execute(
+        "SELECT label, n FROM control_accuracy WHERE parameter = 'c_angle' ORDER BY level").fetchall())
+    assert sum(counts.values()) == 40 and set(counts.values()) == {4}  # the maximum falls in the last bin
+
+
+def test_accuracy_counts_valid_results_only(tmp_path: Path) -> None:
+    rows = [{"c_x": 1, "correct": True}, {"c_x": 1, "correct": False}, {"c_x": 1, "correct": None, "valid": False},
+            {"c_x": 2, "correct": True}]
+    con = make_store(tmp_path, rows)
+    found = {r["label"]: r for r in rows_of(con, "FROM control_accuracy WHERE parameter = 'c_x'")}
+    assert (found["1"]["n"], found["1"]["n_correct"], found["1"]["accuracy"]) == (2, 1, 0.5)
+    assert (found["1"]["wilson_low"], found["1"]["wilson_high"]) == pytest.approx(wilson(1, 2))
+    assert (found["2"]["n"], found["2"]["accuracy"]) == (1, 1.0)
+
+
+def _grid(correct, repeat: int = 5, b_values: tuple[int, ...] = (0, 1, 2)) -> list[dict[str, Any]]:
+    return [{"c_a": a, "c_b": b, "correct": correct(a, b)} for a in (0, 1) for b in b_values for _ in range(repeat)]
+
+
+def test_variance_explained_separates_main_effects_from_interactions(tmp_path: Path) -> None:
+    con = make_store(tmp_path / "main", _grid(lambda a, b: a == 1))
+    shares = {r["effect"]: r for r in rows_of(con, "FROM variance_explained")}
+    assert shares["c_a"]["eta2"] == pytest.approx(1.0)
+    assert shares["c_b"]["eta2"] == pytest.approx(0.0)
+    assert shares["c_a × c_b"]["eta2"] == pytest.approx(0.0)
+    assert shares["c_a"]["kind"] == "main" and shares["c_a × c_b"]["kind"] == "interaction"
+    assert shares["c_a"]["df"] == 1 and shares["c_b"]["df"] == 2 and shares["c_a × c_b"]["df"] == 2
+    assert 0 < shares["c_a"]["eta2_adjusted"] <= 1.0
+
+    con = make_store(tmp_path / "xor", _grid(lambda a, b: a != b, b_values=(0, 1)))
+    shares = {r["effect"]: r["eta2"] for r in rows_of(con, "FROM variance_explained")}
+    assert shares["c_a"] == pytest.approx(0.0, abs=1e-12) and shares["c_b"] == pytest.approx(0.0, abs=1e-12)
+    assert shares["c_a × c_b"] == pytest.approx(1.0)
+
+
+def test_failure_modes_need_support_rank_by_upper_bound_and_list_pairs_only_when_worse(tmp_path: Path) -> None:
+    rows = []
+    rows += [{"c_a": "bad", "c_b": b, "correct": i < 2} for i in range(20) for b in ["x"]]  # 10 %, n = 20
+    rows += [{"c_a": "tiny", "c_b": "x", "correct": False} for _ in range(3)]  # 0 %, n = 3
+    rows += [{"c_a": "good", "c_b": "x", "correct": True} for _ in range(40)]
+    rows += [{"c_a": "good", "c_b": "y", "correct": i < 8} for i in range(20)]  # 40 %: bad only with b = y
+    con = make_store(tmp_path, rows)
+    overall = con.execute("SELECT avg(correct::DOUBLE) FROM results WHERE valid").fetchone()[0]
+
+    modes = rows_of(con, "FROM failure_modes(min_count := 5)")
+    regions = [m["region"] for m in modes]
+    assert "c_a = tiny" not in regions  # 3 results: too few
+    assert regions[0] == "c_a = bad"
+    assert all(m["n"] >= 5 and m["accuracy"] < overall for m in modes)
+    highs = [m["wilson_high"] for m in modes]
+    assert highs == sorted(highs)
+    assert "c_b = y" in regions
+    pairs = [m for m in modes if m["size"] == 2]
+    assert all(m["parameter_b"] is not None for m in pairs)
+    for m in pairs:  # each pair is confidently worse than both of its values alone
+        singles = dict(con.execute(
+            "SELECT parameter || '=' || label, accuracy FROM control_accuracy").fetchall())
+        assert m["wilson_high"] < singles[f"{m['parameter_a']}={m['label_a']}"]
+        assert m["wilson_high"] < singles[f"{m['parameter_b']}={m['label_b']}"]
+    assert len(rows_of(con, "FROM failure_modes(min_count := 3)")) > len(modes)
+
+
+def test_per_object_sensitivity_and_confusions(tmp_path: Path) -> None:
+    rows = []
+    for yaw in (0, 90):
+        for i in range(10):
+            rows.append({"object": "mug", "c_yaw": yaw, "c_blur": i % 2, "correct": yaw == 0,
+                         "prediction": "mug" if yaw == 0 else ("cup" if i < 7 else "bowl")})
+            rows.append({"object": "ball", "c_yaw": yaw, "c_blur": i % 2, "correct": i % 2 == 0,
+                         "prediction": "ball" if i % 2 == 0 else "egg"})
+    con = make_store(tmp_path, rows)
+    found = {(r["object"], r["parameter"]): r for r in rows_of(con, "FROM object_sensitivity")}
+    mug_yaw = found[("mug", "c_yaw")]
+    assert mug_yaw["eta2"] == pytest.approx(1.0)
+    assert (mug_yaw["accuracy_min"], mug_yaw["worst_level"], mug_yaw["accuracy_max"], mug_yaw["best_level"]) == (
+        0.0, "90", 1.0, "0")
+    assert found[("ball", "c_blur")]["eta2"] == pytest.approx(1.0)
+    assert found[("ball", "c_yaw")]["accuracy_range"] == pytest.approx(0.0)
+    assert ("mug", "object") not in found
+
+    confusions = rows_of(con, "FROM object_confusions WHERE object = 'mug'")
+    assert [(c["prediction"], c["n"], c["rank"]) for c in confusions] == [("cup", 7, 1), ("bowl", 3, 2)]
+    assert confusions[0]["share"] == pytest.approx(0.7)
+
+
+def test_views_come_with_every_connection_and_summary_reads_them(tmp_path: Path) -> None:
+    con = make_store(tmp_path, _grid(lambda a, b: a == 1))
+    present = {r[0] for r in con.execute("SELECT view_name FROM duckdb_views() WHERE NOT internal").fetchall()}
+    assert set(VIEWS) <= present
+    macros = {r[0] for r in con.execute("SELECT function_name FROM duckdb_functions() WHERE function_type IN "
+                                        "('macro', 'table_macro')").fetchall()}
+    assert set(MACROS) <= macros
+    assert register_views(con) is True  # idempotent
+
+    summary = summarise(con, ["c_a", "c_b"])
+    effect = {e.column: e for e in summary.effects}
+    assert effect["c_a"].labels == ["0", "1"] and effect["c_a"].accuracy == [0.0, 1.0]
+    assert effect["c_a"].count == [15, 15]
+    assert effect["c_a"].high[0] == pytest.approx(wilson(0, 15)[1])
+
+    bare = Store(tmp_path / "store").connect()  # no experiment: no results, no views over them
+    assert not {r[0] for r in bare.execute("SELECT view_name FROM duckdb_views() WHERE NOT internal").fetchall()} & set(
+        VIEWS)
+
+
+def test_query_sees_the_views(tiny_run: Path, tmp_path: Path) -> None:
+    spec = tiny_run / "spec.toml"
+    for sql in ("FROM control_accuracy", "FROM failure_modes(min_count := 2)", "FROM variance_explained",
+                "SELECT wilson_high(0, 8) AS high"):
+        result = CliRunner().invoke(app, ["query", str(spec), sql])
+        assert result.exit_code == 0, result.output
+    out = tmp_path / "levels.json"
+    result = CliRunner().invoke(app, ["query", str(spec), "FROM control_accuracy", "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    rows = json.loads(out.read_text())
+    assert {"object", "environment", "orientation_yaw", "blur_sigma"} <= {r["parameter"] for r in rows}
+    assert sum(r["n"] for r in rows if r["parameter"] == "orientation_yaw") == 8
