@@ -10,8 +10,11 @@ from __future__ import annotations
 
 import base64
 import hashlib
+import os
+import sys
 from functools import lru_cache
 from importlib import resources
+from pathlib import Path
 from typing import Any
 
 import jinja2
@@ -20,7 +23,9 @@ from markupsafe import Markup
 #: The report's scripts, run in this order after plotly.js.
 SCRIPTS = ("report.js", "explorer.js")
 STYLESHEET = "report.css"
-PLOTLY_CARTESIAN = "plotly-cartesian.min.js"  # plotly.js 4.1.1, cartesian traces only (see plotly_js)
+#: plotly.js's smaller "cartesian" bundle, installed at set-up time from the npm registry
+#: (``plotly.js-cartesian-dist-min``, MIT) by scripts/setup.sh; not part of this repository.
+PLOTLY_CARTESIAN = Path(sys.prefix) / "share" / "sweep3d" / "plotly-cartesian.min.js"
 
 _JSON_ESCAPES = {"<": "\\u003c", ">": "\\u003e", "&": "\\u0026", "\u2028": "\\u2028", "\u2029": "\\u2029"}
 
@@ -65,17 +70,19 @@ def static_text(name: str) -> str:
 
 @lru_cache(maxsize=1)
 def plotly_js() -> str:
-    """plotly.js for the page: the cartesian bundle shipped here when it is the version plotly.py
-    writes figures for, else the full bundle inside the plotly package.
+    """plotly.js for the page: the cartesian bundle when it is installed and is the version
+    plotly.py writes figures for, else the full bundle inside the plotly package.
 
-    The cartesian bundle (npm ``plotly.js-cartesian-dist-min``, MIT, ``static/plotly-cartesian.*``)
-    has every trace type the report draws and starts in about half the time of the full one.
+    The cartesian bundle has every trace type the report draws and starts in about half the
+    time of the full one (``SWEEP3D_PLOTLY_JS`` may point at another copy).
     """
     from plotly.offline import get_plotlyjs, get_plotlyjs_version
 
-    bundled = static_text(PLOTLY_CARTESIAN)
-    if f"v{get_plotlyjs_version()}\n" in bundled[:200]:
-        return bundled
+    path = Path(os.environ.get("SWEEP3D_PLOTLY_JS", PLOTLY_CARTESIAN))
+    if path.is_file():
+        bundled = _browser_text(path.read_text(encoding="utf-8"))
+        if f"v{get_plotlyjs_version()}\n" in bundled[:200]:
+            return bundled
     return _browser_text(get_plotlyjs())
 
 
