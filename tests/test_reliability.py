@@ -211,6 +211,13 @@ def test_compaction_merges_segments_drops_duplicates_and_leaves_the_views_as_the
     assert con.execute("select * from renders order by render_key").fetchall() == before  # an open connection too
     assert compact_table(store, "renders") is None  # nothing left to do
 
+    on_disk = list(store.table_dir("renders").glob("*.parquet"))
+    assert len(on_disk) == 31  # the replaced segments wait out their grace period for open readers
+    assert store.sweep_superseded("renders") == 0
+    assert store.sweep_superseded("renders", older_than=0) == 30
+    assert list(store.table_dir("renders").glob("*")) == store.segments("renders")
+    assert Store(root).connect().execute("select * from renders order by render_key").fetchall() == before
+
 
 def test_readers_see_every_row_exactly_once_while_compaction_runs(tmp_path):
     """A reader thread reads through fresh Store objects (keys, and DuckDB views) while the table
