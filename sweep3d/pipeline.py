@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 from rich.console import Console
 
-from sweep3d.cache.store import Store, utc_now
+from sweep3d.cache.store import TABLES, Store, utc_now
 from sweep3d.errors import SpecError, UserError
 from sweep3d.progress import RunProgress
 from sweep3d.spec.loader import LoadedSpec
@@ -136,6 +136,8 @@ def run(spec: LoadedSpec, console: Console | None = None, wait: float = 0.0, exe
     with store.lock(wait):
         started = time.perf_counter()  # time spent waiting for the lock is not the run's
         started_at = utc_now()
+        for table in TABLES:
+            store.sweep_superseded(table)  # segments an earlier compaction merged, past their grace
         result = RunResult(uuid.uuid4().hex[:12], make_plan(spec, _model_digest(spec)))
         model = prepare_model(result.plan, store) if pending_predictions(result.plan, store) else None
         with RunProgress(console) as progress:

@@ -9,6 +9,7 @@ so a reader sees every row exactly once before, during and after them.
 
 from __future__ import annotations
 
+import json
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -22,6 +23,7 @@ from sweep3d.cache.store import (
     KEY_COLUMN,
     TABLES,
     Store,
+    atomic_write,
     segment_name,
 )
 
@@ -123,7 +125,8 @@ class Collected:
 
 
 def collect_garbage(root: Path, older_than: float = TEMP_AGE, purge_quarantine: bool = False) -> Collected:
-    """Remove blobs that no row references and temp files older than ``older_than`` seconds.
+    """Remove blobs that no row references, and temp files and segments a compaction replaced
+    that are older than ``older_than`` seconds.
 
     Call it holding the writer lock (no run is writing). ``purge_quarantine`` also empties
     ``quarantine/``.
@@ -153,6 +156,8 @@ def collect_garbage(root: Path, older_than: float = TEMP_AGE, purge_quarantine: 
                 out.temp_files += 1
         elif path.name.split(".", 1)[0] not in referenced and remove(path):
             out.blobs += 1
+    for table in TABLES:
+        out.temp_files += store.sweep_superseded(table, older_than)
     for folder in (root / "tables", root / "jobs", root / "reports"):
         for path in folder.rglob(".*.tmp") if folder.is_dir() else []:
             if now - path.stat().st_mtime >= older_than and remove(path):
@@ -195,10 +200,13 @@ def compact_table(store: Store, table: str) -> Compacted | None:
     """Merge every readable segment of ``table`` into one, dropping duplicate rows of a key
     (keeping the row the views show: the earliest ``created_at``). Call it holding the lock.
 
-    The merged segment is written (atomically) before the old ones are removed, so a reader
-    sees the old segments, or old and merged ones (deduplicated by the views), or the merged
-    one: never a gap. Returns None when there is nothing to merge.
+    The merged segment is written (atomically) first, then a record of the segments it replaces
+    (from then on they are no longer listed); the replaced files stay on disk for
+    ``SUPERSEDED_GRACE`` seconds so a reader that listed them just before can still read them.
+    A reader sees the old segments, or old and merged ones (deduplicated by the views), or the
+    merged one: never a gap. Returns None when there is nothing to merge.
     """
+    store.sweep_superseded(table)
     paths = store.readable_segments(table)
     parts = [(p, store.read_segment(p)) for p in paths]
     parts = [(p, t) for p, t in parts if t is not None]
@@ -214,9 +222,10 @@ def compact_table(store: Store, table: str) -> Compacted | None:
     if len(parts) == 1 and len(first) == rows_before:
         return None
     merged = merged.take(pa.array(first, type=pa.int64()))
-    store.write_table_file(store.table_dir(table) / segment_name(), merged)
-    for path, _ in parts:
-        path.unlink(missing_ok=True)
+    name = segment_name()
+    store.write_table_file(store.table_dir(table) / name, merged)
+    record = {"merged": name, "replaces": [p.name for p, _ in parts], "at": time.time()}
+    atomic_write(store.table_dir(table) / f".compacted-{Path(name).stem}.json", json.dumps(record).encode())
     return Compacted(table, len(parts), rows_before, merged.num_rows)
 
 
@@ -245,6 +254,9 @@ def store_stats(root: Path) -> list[TableStats]:
     blobs = [p for p in (root / "blobs").glob("*/*") if p.is_file() and not p.name.startswith(".")] \
         if (root / "blobs").is_dir() else []
     out.append(TableStats("blobs", len(blobs), len(blobs), len(blobs), sum(_size(p) for p in blobs)))
+    replaced = [store.table_dir(t) / n for t in TABLES for _, names, _ in store.superseded(t) for n in names]
+    replaced = [p for p in replaced if p.is_file()]
+    out.append(TableStats("compacted away", len(replaced), 0, 0, sum(_size(p) for p in replaced)))
     temp = [p for p in root.rglob(".*.tmp")] if root.is_dir() else []
     out.append(TableStats("temp files", len(temp), 0, 0, sum(_size(p) for p in temp)))
     quarantine = [p for p in (root / "quarantine").rglob("*") if p.is_file()] if (root / "quarantine").is_dir() else []

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import errno
 import fcntl
+import json
 import logging
 import os
 import re
@@ -39,6 +40,7 @@ TABLES = ("renders", "images", "predictions", "runs")
 KEY_COLUMN = {"renders": "render_key", "images": "image_key", "predictions": "pred_key", "runs": "run_id"}
 BLOB_TABLES = ("renders", "images")  # tables whose rows each own the blob named by their key
 DIGEST_COLUMN = "sha256"  # hex SHA-256 of a blob's bytes, recorded in its row when written
+SUPERSEDED_GRACE = 600.0  # seconds a compaction keeps the segments it merged, for readers that listed them
 
 #: Write failures the user can fix (free space, permissions), reported as one line, not a traceback.
 WRITE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM})
@@ -64,7 +66,7 @@ class Store:
         self.root = Path(root)
         self.quarantine_bad = quarantine
         self.warn = warn
-        self._checked: set[tuple[str, int, int]] = set()  # segments fully read once (path, size, mtime)
+        self._checked: dict[tuple[str, int, int], list[str]] = {}  # (path, size, mtime) read whole once -> columns
         self._bad: dict[str, str] = {}  # unreadable files already reported -> why
         self.discarded = 0  # rows dropped because their blob was missing or corrupt
 
@@ -134,11 +136,46 @@ class Store:
 
     # -- reads -------------------------------------------------------------------------------
     def segments(self, table: str) -> list[Path]:
-        """The segment files of ``table`` in write order (temp files are never listed)."""
+        """The segment files of ``table`` in write order.
+
+        Temp files are never listed, nor segments a compaction has merged into one that exists
+        (they stay on disk a while for readers that listed them before; see :meth:`superseded`).
+        """
         directory = self.table_dir(table)
         if not directory.is_dir():
             return []
-        return sorted(p for p in directory.glob("*.parquet") if not p.name.startswith("."))
+        merged = {name for _, names, _ in self.superseded(table) for name in names}
+        return sorted(p for p in directory.glob("*.parquet") if not p.name.startswith(".") and p.name not in merged)
+
+    def superseded(self, table: str) -> list[tuple[Path, list[str], float]]:
+        """Compactions of ``table`` whose merged segment exists: (record, segment names it
+        replaces, when). The replaced files are deleted by :meth:`sweep_superseded` after a grace
+        period, so a query that listed them just before the compaction can still open them."""
+        out = []
+        for record in sorted(self.table_dir(table).glob(".compacted-*.json")):
+            try:
+                entry = json.loads(record.read_text())
+            except (OSError, ValueError):
+                continue
+            if (self.table_dir(table) / entry.get("merged", "")).is_file():
+                out.append((record, list(entry.get("replaces", [])), float(entry.get("at", 0.0))))
+        return out
+
+    def sweep_superseded(self, table: str, older_than: float = SUPERSEDED_GRACE) -> int:
+        """Delete segments that a compaction older than ``older_than`` seconds replaced; call it
+        holding the writer lock. Returns how many files went."""
+        removed = 0
+        for record, names, at in self.superseded(table):
+            if time.time() - at < older_than:
+                continue
+            for name in names:
+                try:
+                    (self.table_dir(table) / name).unlink()
+                    removed += 1
+                except FileNotFoundError:
+                    pass
+            record.unlink(missing_ok=True)
+        return removed
 
     def read_segment(self, path: Path, columns: list[str] | None = None) -> pa.Table | None:
         """One segment (only the ``columns`` it has, when given), or None when it cannot be read.
@@ -150,14 +187,12 @@ class Store:
         try:
             stat = path.stat()
             ident = (str(path), stat.st_size, stat.st_mtime_ns)
-            if ident not in self._checked:
+            names = self._checked.get(ident)
+            if names is None:
                 whole = pq.read_table(path, page_checksum_verification=True)
-                self._checked.add(ident)
+                self._checked[ident] = whole.column_names
                 return whole.select([c for c in columns if c in whole.column_names]) if columns else whole
-            if columns:
-                names = pq.read_schema(path).names
-                columns = [c for c in columns if c in names]
-            return pq.read_table(path, columns=columns)
+            return pq.read_table(path, columns=[c for c in columns if c in names] if columns else None)
         except FileNotFoundError:
             return None
         except PermissionError as exc:
@@ -167,18 +202,30 @@ class Store:
             self._report_bad(path, _first_line(exc), move=self.quarantine_bad)
             return None
 
+    def _read_all(self, table: str, columns: list[str] | None) -> list[tuple[Path, pa.Table]]:
+        """(segment, rows) for every readable segment of ``table``; unreadable ones are quarantined.
+        A segment compacted away between listing and reading makes it list again, so a reader
+        racing a compaction sees the merged segment instead of a gap."""
+        parts: list[tuple[Path, pa.Table]] = []
+        for _ in range(5):
+            parts, vanished = [], False
+            for path in self.segments(table):
+                data = self.read_segment(path, columns)
+                if data is not None:
+                    parts.append((path, data))
+                elif not path.exists() and str(path) not in self._bad:
+                    vanished = True
+            if not vanished:
+                break
+        return parts
+
     def readable_segments(self, table: str) -> list[Path]:
         """Segments of ``table`` that read without error (unreadable ones are quarantined)."""
-        for _ in range(3):  # a segment compacted away between listing and reading: list again
-            files = self.segments(table)
-            ok = [p for p in files if self.read_segment(p, [KEY_COLUMN[table]]) is not None]
-            if all(p.exists() or str(p) in self._bad for p in files):
-                return ok
-        return ok
+        return [path for path, _ in self._read_all(table, [KEY_COLUMN[table]])]
 
     def table(self, table: str, columns: list[str] | None = None) -> pa.Table | None:
         """Every readable row of ``table`` (duplicates included), or None if it has no segments."""
-        parts = [t for t in (self.read_segment(p, columns) for p in self.readable_segments(table)) if t is not None]
+        parts = [data for _, data in self._read_all(table, columns)]
         if not parts:
             return None
         return pa.concat_tables(parts, promote_options="permissive")
@@ -220,22 +267,18 @@ class Store:
         Views: ``renders``, ``images``, ``predictions``, ``runs`` (deduplicated by key), and when
         ``experiment`` has a plan, ``jobs`` (its latest plan) and ``results`` (jobs ⨝ predictions),
         with the aggregate views over ``results`` (see :mod:`sweep3d.stages.aggregate.views`).
-        Unreadable segments are left out (and quarantined); when every segment of a table is
-        readable the view globs its folder (segment names start with a digit, temp files with a
-        dot), so segments written or compacted after this call are read by later queries too.
+        Unreadable segments are left out (and quarantined). The views read the segments listed
+        now; a compaction keeps the files it replaced for ``SUPERSEDED_GRACE`` seconds, so a
+        connection stays good that long whatever happens to the store meanwhile.
         """
         con = duckdb.connect()
         for table in TABLES:
-            listed = self.segments(table)
             files = self.readable_segments(table)
             key = KEY_COLUMN[table]
             if files:
-                if files == listed and all(p.name[:1].isdigit() for p in files):
-                    source = _sql_str(str(self.table_dir(table) / "[0-9]*.parquet"))
-                else:
-                    source = "[" + ", ".join(_sql_str(str(p)) for p in files) + "]"
+                listing = ", ".join(_sql_str(str(p)) for p in files)
                 con.execute(
-                    f"CREATE VIEW {table} AS SELECT * FROM read_parquet({source}, union_by_name = true) "
+                    f"CREATE VIEW {table} AS SELECT * FROM read_parquet([{listing}], union_by_name = true) "
                     f"QUALIFY row_number() OVER (PARTITION BY {key} ORDER BY created_at) = 1"
                 )
         jobs_path = self.jobs_path(experiment) if experiment is not None else None

@@ -90,14 +90,14 @@ def gc(
     purge_quarantine: bool = typer.Option(False, "--purge-quarantine", help="Also delete quarantined files."),
     wait: float = WaitOption,
 ) -> None:
-    """Remove blobs no row references and leftover temp files."""
+    """Remove blobs no row references, leftover temp files and segments compaction replaced."""
     from sweep3d.cache.maintenance import collect_garbage
     from sweep3d.cache.store import Store
 
     root = _store_root(spec)
     with Store(root).lock(wait):
         out = collect_garbage(root, older_than, purge_quarantine)
-    console.print(f"removed {out.blobs} unreferenced blobs, {out.temp_files} temp files"
+    console.print(f"removed {out.blobs} unreferenced blobs, {out.temp_files} temp or compacted-away files"
                   + (f", {out.quarantined} quarantined files" if purge_quarantine else "")
                   + f" ({_bytes(out.bytes)})")
 

@@ -45,6 +45,8 @@ class Range:
             value = math.exp(math.log(self.low) + u * (math.log(self.high) - math.log(self.low)))
         else:
             value = self.low + u * (self.high - self.low)
+            if not math.isfinite(value):  # high - low overflowed (a range near ±1.8e308)
+                value = self.low * (1.0 - u) + self.high * u
         value = min(max(value, self.low), self.high)  # guard rounding at the ends
         if u in (0.0, 1.0):  # the declared bounds exactly (low + (high - low) can round off high)
             value = self.high if u == 1.0 else self.low

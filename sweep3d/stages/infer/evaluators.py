@@ -36,8 +36,9 @@ def log_softmax(logits: np.ndarray) -> np.ndarray:
         logits: float array (N, C); rows with non-finite values give NaN rows (flagged invalid).
     """
     x = np.asarray(logits, dtype=np.float64)
-    shifted = x - x.max(axis=-1, keepdims=True)
-    return shifted - np.log(np.exp(shifted).sum(axis=-1, keepdims=True))
+    with np.errstate(invalid="ignore", over="ignore"):  # inf - inf: a NaN row, flagged, not a warning
+        shifted = x - x.max(axis=-1, keepdims=True)
+        return shifted - np.log(np.exp(shifted).sum(axis=-1, keepdims=True))
 
 
 @EVALUATORS.register("classification")
