@@ -13,7 +13,6 @@ import dataclasses
 import os
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 from rich.console import Console
@@ -84,7 +83,6 @@ def main() -> None:
         rows.append(("local pool, 1 worker × all cores", render_rate(tmp / "local1", args.renders, LOCAL, 1)))
         rows.append(("local pool, 2 workers", render_rate(tmp / "local2", args.renders, LOCAL, 2)))
         ray.init(_node_ip_address="127.0.0.1", include_dashboard=False, log_to_driver=False)
-        t = time.perf_counter()
         rows.append(("ray, 1 actor", render_rate(tmp / "ray1", args.renders, Executor("ray"), 1)))
         rows.append(("ray, 2 actors", render_rate(tmp / "ray2", args.renders, Executor("ray"), 2)))
         ray.shutdown()

@@ -7,7 +7,6 @@ from __future__ import annotations
 import math
 import struct
 import sys
-import textwrap
 from fractions import Fraction
 from pathlib import Path
 
@@ -25,7 +24,7 @@ from sweep3d.spec.params import Range
 from sweep3d.stages.aggregate import summarise
 from sweep3d.stages.infer import ClassificationEvaluator, LabelMap
 from sweep3d.stages.infer.evaluators import log_softmax
-from tests.conftest import CUBE_OBJ, TINY_SPEC, write_spec
+from tests.conftest import CUBE_OBJ, write_spec
 
 
 def write_exr(path: Path, rgb: np.ndarray) -> None:
@@ -326,7 +325,7 @@ def _results_connection(table: pa.Table) -> duckdb.DuckDBPyConnection:
     con = duckdb.connect()
     con.register("results_data", table)
     con.execute("CREATE VIEW results AS SELECT * FROM results_data")
-    con.execute("CREATE VIEW jobs AS SELECT job, object, environment FROM results_data")
+    con.execute("CREATE VIEW jobs AS SELECT * EXCLUDE (valid, correct) FROM results_data")  # parameters live in jobs
     return con
 
 
@@ -365,8 +364,8 @@ def test_accuracies_over_a_million_rows_equal_exact_fractions() -> None:
             assert summary.scene_accuracy[i][j] == pytest.approx(float(want), rel=1e-15, abs=0)
     zoom = next(e for e in summary.effects if e.column == "zoom")
     zooms = data.column("zoom").to_numpy()
-    for level, accuracy, count in zip(zoom.levels, zoom.accuracy, zoom.count):
-        cell = valid & (zooms == level)
+    for label, accuracy, count in zip(zoom.labels, zoom.accuracy, zoom.count):
+        cell = valid & (zooms == float(label))
         assert count == int(cell.sum())
         assert accuracy == pytest.approx(float(Fraction(int((correct & cell).sum()), count)), rel=1e-15, abs=0)
     yaw = next(e for e in summary.effects if e.column == "yaw")  # binned: counts add up, accuracy exact

@@ -2,11 +2,7 @@
 
 from __future__ import annotations
 
-import os
 import re
-import signal
-import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -83,47 +79,6 @@ def test_adding_an_object_renders_only_its_scenes(tiny_copy: Path) -> None:
     (tiny_copy / "cube2.obj").write_text((tiny_copy / "cube.obj").read_text().replace("v 1 1 1", "v 1.5 1 1"))
     edit_spec(tiny_copy, "[[environments]]", '[[objects]]\nname = "box2"\nmesh = "cube2.obj"\nlabels = ["carton"]\n\n[[environments]]', )
     assert computed(tiny_copy) == {"render": 4, "postprocess": 4, "infer": 8}
-
-
-KILL_SPEC = TINY_SPEC.replace("yaw = [0, 45]", "yaw = { range = [-180, 180] }").replace(
-    '[policy]\ntype = "grid"', '[policy]\ntype = "grid"\nsamples_per_dim = 61'
-)
-
-
-def _results(folder: Path) -> list[tuple]:
-    con = Store(folder / "store").connect("tiny")
-    return con.execute(
-        "SELECT job, render_key, image_key, pred_key, top1_label, correct, round(loss, 2) FROM results ORDER BY job"
-    ).fetchall()
-
-
-def test_kill_minus_nine_then_resume_equals_uninterrupted(tmp_path: Path) -> None:
-    killed, clean = tmp_path / "killed", tmp_path / "clean"
-    for folder in (killed, clean):
-        folder.mkdir()
-        write_spec(folder, KILL_SPEC)
-    cmd = [sys.executable, "-m", "sweep3d", "run", "spec.toml", "--no-report"]
-    proc = subprocess.Popen(cmd, cwd=killed, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                            start_new_session=True, env={**os.environ, "PYTHONPATH": str(REPO)})  # this checkout
-    renders = killed / "store" / "tables" / "renders"
-    deadline = time.monotonic() + 180
-    while time.monotonic() < deadline and not (renders.is_dir() and any(renders.glob("*.parquet"))):
-        time.sleep(0.05)
-    os.killpg(proc.pid, signal.SIGKILL)  # the CLI and its render workers, mid-render
-    proc.wait()
-    store = Store(killed / "store")
-    stored_before = len(store.keys("renders"))
-    assert 0 < stored_before < 120, "the kill should land during rendering"
-
-    result = run(load_spec(killed / "spec.toml"))
-    assert result.failed == 0
-    assert result.outcome("render").cached == stored_before
-    assert result.outcome("render").computed == result.outcome("render").total - stored_before
-    assert run(load_spec(clean / "spec.toml")).failed == 0
-
-    resumed = _results(killed)
-    assert len(resumed) == len({r[0] for r in resumed}), "no duplicate rows"
-    assert resumed == _results(clean)
 
 
 def test_cli_run_prints_stage_counts_and_writes_report(tiny_copy: Path) -> None:

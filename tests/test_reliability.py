@@ -20,7 +20,13 @@ import pytest
 from typer.testing import CliRunner
 
 from sweep3d.cache.blobs import sha256_bytes
-from sweep3d.cache.maintenance import collect_garbage, compact_table, repair, store_stats, verify
+from sweep3d.cache.maintenance import (
+    collect_garbage,
+    compact_table,
+    repair,
+    store_stats,
+    verify,
+)
 from sweep3d.cache.store import DIGEST_COLUMN, Store, StoreWriteError, atomic_write
 from sweep3d.cli import app
 from sweep3d.errors import UserError

@@ -20,7 +20,7 @@ from sweep3d.pixels import decode_png
 from sweep3d.progress import RunProgress
 from sweep3d.spec.loader import LoadedSpec
 from sweep3d.stages.infer import infer_stage
-from sweep3d.stages.plan import Job, Plan, make_plan
+from sweep3d.stages.plan import Plan, make_plan
 from sweep3d.stages.postprocess import postprocess_stage
 from sweep3d.stages.render import render_stage
 

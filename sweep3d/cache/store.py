@@ -289,7 +289,9 @@ class Store:
                     "CREATE VIEW results AS SELECT j.*, p.* EXCLUDE (pred_key, image_key, created_at) "
                     "FROM jobs j JOIN predictions p USING (pred_key)"
                 )
-        from sweep3d.stages.aggregate import register_views  # the report's aggregates, as views
+        from sweep3d.stages.aggregate import (
+            register_views,  # the report's aggregates, as views
+        )
 
         register_views(con)
         return con

@@ -63,8 +63,8 @@ def run(
     """Render, postprocess and infer everything the spec needs that the store lacks."""
     from sweep3d.cli.views import print_run
     from sweep3d.pipeline import run as run_pipeline
-    from sweep3d.stages.render.stage import Executor
     from sweep3d.spec import load_spec
+    from sweep3d.stages.render.stage import Executor
 
     loaded = load_spec(spec)
     signal.signal(signal.SIGTERM, _interrupt)  # clean up workers and scratch files as on Ctrl-C
@@ -98,7 +98,13 @@ def bench(
     apply: bool = typer.Option(False, "--apply", help="Write the recommended setting into the spec's [render]."),
 ) -> None:
     """Render time against error: find the cheapest render setting the model cannot tell apart."""
-    from sweep3d.bench import Setting, apply_setting, default_settings, measure, recommend
+    from sweep3d.bench import (
+        Setting,
+        apply_setting,
+        default_settings,
+        measure,
+        recommend,
+    )
     from sweep3d.bench.plot import write_pareto_plot
     from sweep3d.cache.store import Store
     from sweep3d.cli.views import print_bench

@@ -83,9 +83,8 @@ def load_spec(path: str | Path) -> LoadedSpec:
     base = path.resolve().parent
     fail = lambda key, problem: SpecError(str(path), key, problem)  # noqa: E731
 
-    from sweep3d.stages.render.assets import resolve_hdri, resolve_mesh
-
     from sweep3d.spec.sniff import check_hdri, check_mesh
+    from sweep3d.stages.render.assets import resolve_hdri, resolve_mesh
 
     meshes = {}
     for i, obj in enumerate(spec.objects):

@@ -14,7 +14,14 @@ which parts of the object's surface are visible, from a UV render pass) belongs 
 from __future__ import annotations
 
 from sweep3d.report.panel import Panel
-from sweep3d.report.panels import aggregate, explorer, failure_modes, failures, objects, overall
+from sweep3d.report.panels import (
+    aggregate,
+    explorer,
+    failure_modes,
+    failures,
+    objects,
+    overall,
+)
 
 CORE_PANELS: tuple[Panel, ...] = (
     Panel("overall", "Overall accuracy", "panels/overall.html.j2", overall.build),

@@ -11,7 +11,16 @@ from __future__ import annotations
 
 from typing import Any
 
-from sweep3d.report.figures import ACCURACY_AXIS, COLORS, Figure, interval, layout, make_figure, pct, plot_text
+from sweep3d.report.figures import (
+    ACCURACY_AXIS,
+    COLORS,
+    Figure,
+    interval,
+    layout,
+    make_figure,
+    pct,
+    plot_text,
+)
 from sweep3d.report.panel import PanelInputs
 
 TOP = 12  # regions listed

@@ -134,7 +134,10 @@ def make_plan(spec: LoadedSpec, model_digest: str | None = None, history: Histor
 
 def _in_frame(rendered: list[ControlInstance], models: dict[str, Any]) -> bool:
     """Whether the job's object can appear in its image, from geometry alone (no rendering)."""
-    from sweep3d.stages.render.state import SceneState, in_frame  # the render package imports this one
+    from sweep3d.stages.render.state import (  # the render package imports this one
+        SceneState,
+        in_frame,
+    )
 
     state = SceneState()
     for inst in rendered:

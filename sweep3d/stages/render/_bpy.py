@@ -7,6 +7,13 @@ from sweep3d.errors import UserError
 
 def import_bpy():
     """Import and return the bpy module (call inside render workers only)."""
+    import sys
+
+    if "bpy" not in sys.modules:
+        # A process spawned by one that imported bpy inherits bpy's own script folders on
+        # sys.path, where a pure-Python "bpy" shadows the real module: drop them first.
+        sys.path[:] = [p for p in sys.path if "/bpy/" not in p.replace("\\", "/") + "/"
+                       or p.rstrip("/").endswith("site-packages")]
     try:
         import bpy  # noqa: PLC0415
     except ImportError as exc:

@@ -16,8 +16,8 @@ from typing import Any
 import numpy as np
 
 from sweep3d.errors import UserError
-from sweep3d.stages.render._rna import assign
 from sweep3d.stages.render._bpy import import_bpy
+from sweep3d.stages.render._rna import assign
 from sweep3d.stages.render.props import PropsView
 from sweep3d.stages.render.skins import SkinView
 from sweep3d.stages.render.state import SENSOR_WIDTH_MM, SceneState

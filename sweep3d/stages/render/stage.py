@@ -9,8 +9,8 @@ Blender cannot use, a full disk) stops the run with a one-line error naming the 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
 from collections import defaultdict
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 

@@ -55,6 +55,8 @@ class WorldView:
                 texture.image = self.bpy.data.images.load(env["hdri"], check_existing=True)
             except RuntimeError as exc:
                 raise UserError(f"Blender cannot read the HDRI {env['hdri']!r}: {exc}") from None
+            if texture.image.size[0] == 0:  # Blender loads unreadable images silently (a magenta world)
+                raise UserError(f"Blender cannot read the HDRI {env['hdri']!r}; save it again as .exr or .hdr")
             links.new(coords.outputs["Generated"], mapping.inputs["Vector"])
             links.new(mapping.outputs["Vector"], texture.inputs["Vector"])
             links.new(texture.outputs["Color"], background.inputs["Color"])
