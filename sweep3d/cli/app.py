@@ -2,16 +2,16 @@
 
 from __future__ import annotations
 
-import functools
 import signal
 from pathlib import Path
-from typing import Callable, Optional
+from typing import Optional
 
 import typer
 from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
+from sweep3d.cli._commands import registrar
 from sweep3d.errors import UserError
 
 app = typer.Typer(
@@ -20,23 +20,8 @@ app = typer.Typer(
     help="Find where computer-vision models fail by rendering 3D scenes under systematic variation.",
 )
 console = Console()
-err_console = Console(stderr=True)
 
-def command(func: Callable) -> Callable:
-    """Register a command whose user errors print one line and exit 2 (no traceback)."""
-
-    @functools.wraps(func)
-    def wrapper(*args, **kwargs):
-        try:
-            return func(*args, **kwargs)
-        except UserError as exc:
-            err_console.print(f"[bold red]error:[/] {escape(str(exc))}", highlight=False, soft_wrap=True)
-            raise typer.Exit(exc.exit_code) from None
-        except KeyboardInterrupt:
-            err_console.print("[yellow]interrupted[/]: everything finished so far is stored; run again to resume")
-            raise typer.Exit(130) from None
-
-    return app.command()(wrapper)
+command = registrar(app)
 
 
 SpecArg = typer.Argument(..., help="Path to the experiment's TOML spec.", show_default=False)

@@ -6,38 +6,25 @@ without ``--repair`` and ``stats`` only read it.
 
 from __future__ import annotations
 
-import functools
 from pathlib import Path
-from typing import Callable
 
 import typer
 from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
+from sweep3d.cli._commands import registrar
 from sweep3d.errors import UserError
 
 cache_app = typer.Typer(no_args_is_help=True, help="Check and tidy a spec's store: verify, gc, compact, stats.")
 console = Console()
-err_console = Console(stderr=True)
 
 SpecArg = typer.Argument(..., help="Path to a spec whose store to work on.", show_default=False)
 WaitOption = typer.Option(0.0, help="Seconds to wait for a run holding the store's lock.")
 MAX_LISTED = 20  # problems printed one per line; the rest are counted
 
 
-def command(func: Callable) -> Callable:
-    """Register a cache command whose user errors print one line and exit 2."""
-
-    @functools.wraps(func)
-    def wrapper(*args, **kwargs):
-        try:
-            return func(*args, **kwargs)
-        except UserError as exc:
-            err_console.print(f"[bold red]error:[/] {escape(str(exc))}", highlight=False, soft_wrap=True)
-            raise typer.Exit(exc.exit_code) from None
-
-    return cache_app.command()(wrapper)
+command = registrar(cache_app)
 
 
 def _store_root(spec: Path) -> Path:

@@ -1,0 +1,34 @@
+"""How every command reports a user's mistake: one red line on stderr and exit code 2."""
+
+from __future__ import annotations
+
+import functools
+from typing import Callable
+
+import typer
+from rich.console import Console
+from rich.markup import escape
+
+from sweep3d.errors import UserError
+
+err_console = Console(stderr=True)
+
+
+def registrar(app: typer.Typer) -> Callable[[Callable], Callable]:
+    """A decorator registering commands on ``app`` whose user errors print one line and exit 2."""
+
+    def command(func: Callable) -> Callable:
+        @functools.wraps(func)
+        def wrapper(*args, **kwargs):
+            try:
+                return func(*args, **kwargs)
+            except UserError as exc:
+                err_console.print(f"[bold red]error:[/] {escape(str(exc))}", highlight=False, soft_wrap=True)
+                raise typer.Exit(exc.exit_code) from None
+            except KeyboardInterrupt:
+                err_console.print("[yellow]interrupted[/]: everything finished so far is stored; run again to resume")
+                raise typer.Exit(130) from None
+
+        return app.command()(wrapper)
+
+    return command
