@@ -103,7 +103,7 @@ def run_stages(plan: Plan, store: Store, progress: RunProgress, model: ReadyMode
     for _ in range(1 + REPAIR_PASSES):
         discarded = store.discarded
         stages = (functools.partial(render_stage, executor=executor), postprocess_stage,
-                  functools.partial(infer_stage, model=model))
+                  functools.partial(infer_stage, model=model, on_ray=executor.kind == "ray"))
         outcomes = _merge(outcomes, [stage(plan, store, progress) for stage in stages])
         if store.discarded == discarded:
             break
@@ -133,6 +133,21 @@ def run(spec: LoadedSpec, console: Console | None = None, wait: float = 0.0, exe
     """Run every stage of ``spec`` and return what each did (renders on ``executor``)."""
     store = Store(spec.store)
     _writable(spec, store)
+    owns_ray = False
+    if executor.kind == "ray":
+        from sweep3d.stages.render.ray_pool import connect
+
+        owns_ray = connect(executor.address)
+    try:
+        return _run_locked(spec, store, console, wait, executor)
+    finally:
+        if owns_ray:
+            import ray
+
+            ray.shutdown()
+
+
+def _run_locked(spec: LoadedSpec, store: Store, console: Console | None, wait: float, executor: Executor) -> RunResult:
     with store.lock(wait):
         started = time.perf_counter()  # time spent waiting for the lock is not the run's
         started_at = utc_now()

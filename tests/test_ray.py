@@ -31,12 +31,23 @@ def _results(folder: Path) -> list[tuple]:
     ).fetchall()
 
 
-def test_ray_executor_gives_the_local_results(local_cluster, tmp_path: Path) -> None:
+def test_ray_executor_gives_the_local_results(local_cluster, tmp_path: Path, monkeypatch) -> None:
+    from sweep3d.stages.infer import ray_actor
+
+    batches = []
+    make_runner = ray_actor.remote_runner
+
+    def counting_runner(name):
+        runner = make_runner(name)
+        return lambda images: batches.append(len(images)) or runner(images)
+
+    monkeypatch.setattr(ray_actor, "remote_runner", counting_runner)
     ray_dir, local_dir = tmp_path / "ray", tmp_path / "local"
     for folder in (ray_dir, local_dir):
         folder.mkdir()
         write_spec(folder, TINY_SPEC)
     on_ray = run(load_spec(ray_dir / "spec.toml"), executor=Executor("ray"))
+    assert sum(batches) == 8, "inference ran on the Ray actor"
     assert on_ray.failed == 0 and on_ray.outcome("render").computed == 4
     assert run(load_spec(local_dir / "spec.toml")).failed == 0
     assert _results(ray_dir) == _results(local_dir)

@@ -112,7 +112,8 @@ def prepare_model(plan: Plan, store: Store | None = None) -> ReadyModel:
     return ReadyModel(model, labels, _truths(plan, labels), runner)
 
 
-def infer_stage(plan: Plan, store: Store, progress: RunProgress, model: ReadyModel | None = None) -> StageOutcome:
+def infer_stage(plan: Plan, store: Store, progress: RunProgress, model: ReadyModel | None = None,
+                on_ray: bool = False) -> StageOutcome:
     """Predict every image of the plan that has no prediction yet.
 
     Args:
@@ -131,6 +132,11 @@ def infer_stage(plan: Plan, store: Store, progress: RunProgress, model: ReadyMod
                            skipped=len(unique) - len(cached) - len(todo))
     if todo:
         ready = model or prepare_model(plan, store)
+        remote = None
+        if on_ray and spec.model.backend == "torch":  # batches go to an inference actor (GPU if any)
+            from sweep3d.stages.infer.ray_actor import remote_runner
+
+            remote = remote_runner(spec.model.name)
         evaluator = EVALUATORS.get(spec.evaluator.kind)(top_k=spec.evaluator.top_k)
         schema = predictions_schema(evaluator)
         valid = {**store.column_map("renders", "valid"), **store.column_map("images", "valid")}
@@ -155,7 +161,9 @@ def infer_stage(plan: Plan, store: Store, progress: RunProgress, model: ReadyMod
                     pixels.append(image)
                 rows = []
                 if batch:
-                    logits = predict(ready.model, np.stack(pixels), spec.model.name, ready.runner)
+                    stacked = np.stack(pixels)
+                    logits = remote(stacked) if remote is not None else predict(
+                        ready.model, stacked, spec.model.name, ready.runner)
                     _check_classes(logits, ready.labels, spec.model.name)
                     rows = evaluator.evaluate(logits, [ready.truths[j.object] for j in batch], ready.labels)
                 per_image = (time.perf_counter() - t0) / max(len(batch) + len(invalid), 1)

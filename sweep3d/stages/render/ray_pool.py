@@ -33,6 +33,19 @@ def _ray():
     return ray
 
 
+def connect(address: str | None) -> bool:
+    """Join the cluster at ``address``, or start a local one bound to 127.0.0.1; True if this
+    call started Ray (the caller then shuts it down)."""
+    ray = _ray()
+    if ray.is_initialized():
+        return False
+    if address:
+        ray.init(address=address, include_dashboard=False, log_to_driver=False)
+    else:
+        ray.init(_node_ip_address="127.0.0.1", include_dashboard=False, log_to_driver=False)
+    return True
+
+
 class RenderActor:
     """A Ray actor holding one Blender scene (created remotely through ``ray.remote``)."""
 
@@ -84,14 +97,7 @@ class RayRenderPool:
 
     def __init__(self, settings: dict[str, Any], workers: int = 1, address: str | None = None) -> None:
         ray = self.ray = _ray()
-        if not ray.is_initialized():
-            if address:
-                ray.init(address=address, include_dashboard=False, log_to_driver=False)
-            else:  # a local cluster, on loopback only
-                ray.init(_node_ip_address="127.0.0.1", include_dashboard=False, log_to_driver=False)
-            self._owns_ray = True
-        else:
-            self._owns_ray = False
+        self._owns_ray = connect(address)
         cpus = max(1, int(ray.cluster_resources().get("CPU", 1)) // max(workers, 1))
         self.actor_cls = ray.remote(num_cpus=cpus, max_restarts=0)(RenderActor)
         self.settings = settings

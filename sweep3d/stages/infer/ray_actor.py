@@ -1,0 +1,43 @@
+"""Inference on a Ray actor (on a GPU when the cluster has one), for ``--executor ray``.
+
+The actor loads the model once and answers batches of images with logits; the driver keeps
+evaluating and writing, so it stays the store's single writer.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+
+class InferenceActor:
+    """Holds one classifier; ``logits`` runs a batch on the actor's device."""
+
+    def __init__(self, name: str) -> None:
+        import torch
+
+        from sweep3d.stages.infer.models import load_model
+
+        self.model = load_model(name)
+        self.device = "cuda" if torch.cuda.is_available() else "cpu"
+        self.model.module.to(self.device)
+
+    def logits(self, images: np.ndarray) -> np.ndarray:
+        import torch
+
+        with torch.inference_mode():
+            batch = self.model.preprocess(images).to(self.device)
+            out = self.model.module(batch)
+        if isinstance(out, (tuple, list)):
+            out = out[0]
+        return out.detach().float().cpu().numpy()
+
+
+def remote_runner(name: str) -> Any:
+    """A callable mapping images (N, H, W, 3) to logits through a Ray actor."""
+    import ray
+
+    gpus = 1 if ray.cluster_resources().get("GPU", 0) >= 1 else 0
+    actor = ray.remote(num_gpus=gpus, num_cpus=1)(InferenceActor).remote(name)
+    return lambda images: ray.get(actor.logits.remote(images))
