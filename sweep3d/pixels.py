@@ -26,13 +26,3 @@ def decode_png(path: str | Path) -> np.ndarray:
     """A PNG file as float32 (H, W, 3) in [0, 1]."""
     with Image.open(path) as img:
         return np.asarray(img.convert("RGB"), dtype=np.float32) / 255.0
-
-
-def thumbnail_png(path: str | Path, size: int) -> bytes:
-    """A downscaled PNG (longest side ``size``) for embedding in reports."""
-    with Image.open(path) as img:
-        img = img.convert("RGB")
-        img.thumbnail((size, size), Image.Resampling.LANCZOS)
-        buf = io.BytesIO()
-        img.save(buf, format="PNG", optimize=True)
-        return buf.getvalue()
