@@ -16,41 +16,9 @@ from sweep3d.cli import app
 from sweep3d.errors import SpecError
 from sweep3d.spec import Choice, Fixed, Range, load_spec
 from sweep3d.spec.space import Point, SearchSpace
-from tests.conftest import CUBE_OBJ, write_cube, write_spec
+from tests.conftest import CUBE_OBJ, TINY_SPEC, write_cube, write_spec
 
-BASE = """\
-[experiment]
-name = "mistakes"
-seed = 3
-
-[render]
-resolution = 32
-samples = 1
-
-[[objects]]
-name = "box"
-mesh = "cube.obj"
-labels = ["carton"]
-
-[[environments]]
-name = "white"
-color = [1.0, 1.0, 1.0]
-
-[[environments]]
-name = "studio"
-hdri = "builtin:studio"
-
-[[controls]]
-type = "orientation"
-yaw = [0, 45]
-
-[[controls]]
-type = "blur"
-sigma = [0.0, 1.5]
-
-[policy]
-type = "grid"
-"""
+BASE = TINY_SPEC.replace('name = "tiny"\nseed = 7\nstore = "store"', 'name = "mistakes"\nseed = 3')
 
 # A user's control plug-in with a string and an integer parameter (no built-in has either).
 USER_MODULE = "sweep3d_test_user_controls"
@@ -195,7 +163,7 @@ MISTAKES = [
             "objects", ("duplicate object name 'box'", "[1]", "unique")),
     Mistake("environment-name-duplicate", append('[[environments]]\nname = "white"\ncolor = [0.0, 0.0, 0.0]\n'),
             "environments", ("duplicate environment name 'white'", "[2]")),
-    Mistake("model-unknown", edit("samples = 1", 'samples = 1\n\n[model]\nname = "efficientnet-lite1"'),
+    Mistake("model-unknown", edit("[model]\n", '[model]\nname = "efficientnet-lite1"\n'),
             "model.name", ("'efficientnet-lite1'", "efficientnet-lite0", "module:Name")),
 ]
 
