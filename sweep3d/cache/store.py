@@ -3,7 +3,7 @@
 Layout under the store root::
 
     blobs/ab/abcdef….png          one file per key (renders and post-processed images)
-    tables/<table>/<seg>.parquet  append-only row segments (renders, images, predictions, runs)
+    tables/<table>/<seg>.parquet  append-only row segments (renders, images, predictions, runs, parts)
     jobs/<experiment>.parquet     the latest plan of each experiment (its jobs and their keys)
     lock                          held by the one process that writes
 
@@ -36,8 +36,9 @@ import pyarrow.parquet as pq
 
 from sweep3d.errors import StoreBusyError, UserError
 
-TABLES = ("renders", "images", "predictions", "runs")
-KEY_COLUMN = {"renders": "render_key", "images": "image_key", "predictions": "pred_key", "runs": "run_id"}
+TABLES = ("renders", "images", "predictions", "runs", "parts")
+KEY_COLUMN = {"renders": "render_key", "images": "image_key", "predictions": "pred_key", "runs": "run_id",
+              "parts": "parts_key"}
 BLOB_TABLES = ("renders", "images")  # tables whose rows each own the blob named by their key
 DIGEST_COLUMN = "sha256"  # hex SHA-256 of a blob's bytes, recorded in its row when written
 SUPERSEDED_GRACE = 600.0  # seconds a compaction keeps the segments it merged, for readers that listed them

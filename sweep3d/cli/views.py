@@ -21,8 +21,10 @@ def cache_status(plan: Plan, store: Store) -> list[tuple[str, int, int]]:
     renders = {j.render_key for j in plan.jobs}
     images = {j.image_key for j in plan.jobs if j.image_key != j.render_key}
     preds = {j.pred_key for j in plan.jobs}
+    stored, parts = store.keys("renders"), store.keys("parts")  # a render needs its UV pass if asked for
+    rendered = {j.render_key for j in plan.jobs if j.render_key in stored and j.parts_key in parts | {None}}
     return [
-        ("render", len(renders), len(renders & store.keys("renders"))),
+        ("render", len(renders), len(rendered)),
         ("postprocess", len(images), len(images & store.keys("images"))),
         ("infer", len(preds), len(preds & store.keys("predictions"))),
     ]

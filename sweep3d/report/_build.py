@@ -80,7 +80,7 @@ def build_context(loaded: LoadedSpec, con: duckdb.DuckDBPyConnection, store: Sto
     table = load_results(con, ["object", "environment", *columns])
     images = con.execute("SELECT count(DISTINCT image_key) FROM results").fetchone()[0]
     thumbs = Thumbnails(store, images)
-    inputs = PanelInputs(loaded, con, summary, table, thumbs, min_count(summary))
+    inputs = PanelInputs(loaded, con, summary, table, thumbs, min_count(summary), store)
     built = build_panels(panels, inputs)
     uris = thumbs.data_uris()
     return {

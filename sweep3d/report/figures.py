@@ -8,6 +8,7 @@ HTML subset in labels, so names are escaped to show literally.
 from __future__ import annotations
 
 import html
+import itertools
 import json
 from dataclasses import dataclass
 from typing import Any
@@ -19,6 +20,19 @@ FONT = "system-ui, -apple-system, Segoe UI, Roboto, sans-serif"
 ACCURACY_COLORSCALE = [[i / 10, c] for i, c in enumerate([
     "rgb(165,0,38)", "rgb(215,48,39)", "rgb(244,109,67)", "rgb(253,174,97)", "rgb(254,224,139)", "rgb(255,255,191)",
     "rgb(217,239,139)", "rgb(166,217,106)", "rgb(102,189,99)", "rgb(26,152,80)", "rgb(0,104,55)"])]
+
+
+def accuracy_rgb(accuracy: float) -> tuple[float, float, float]:
+    """The colour of ``accuracy`` (0..1) on :data:`ACCURACY_COLORSCALE`, as sRGB floats in [0, 1]."""
+    stops = [(at, [int(c) / 255 for c in colour[4:-1].split(",")]) for at, colour in ACCURACY_COLORSCALE]
+    x = min(max(float(accuracy), 0.0), 1.0)
+    for (lo, a), (hi, b) in itertools.pairwise(stops):
+        if x <= hi:
+            t = (x - lo) / (hi - lo)
+            return tuple(ca + t * (cb - ca) for ca, cb in zip(a, b))
+    return tuple(stops[-1][1])
+
+
 ACCURACY_AXIS = {"range": [0, 1.05], "tickformat": ".0%", "title": {"text": "accuracy"}, "zeroline": False}
 
 

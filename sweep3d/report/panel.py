@@ -13,6 +13,7 @@ from typing import Any, Callable
 
 import duckdb
 
+from sweep3d.cache.store import Store
 from sweep3d.report.results import OUTCOME_NAMES, ResultTable
 from sweep3d.report.thumbs import Thumbnails
 from sweep3d.spec.loader import LoadedSpec
@@ -30,6 +31,7 @@ class PanelInputs:
         table: every result with its parameter levels.
         thumbs: the page's images; ``thumbs.want(image_key)`` gives an index for a template.
         min_count: the fewest valid results a region needs to be ranked as a failure mode.
+        store: the experiment's store (panels that cache what they draw keep it there).
     """
 
     loaded: LoadedSpec
@@ -38,6 +40,7 @@ class PanelInputs:
     table: ResultTable
     thumbs: Thumbnails
     min_count: int
+    store: Store
 
     def rows(self, sql: str, params: list[Any] | None = None) -> list[dict[str, Any]]:
         """The rows of a query on :attr:`con`, each as a dict by column name."""

@@ -99,6 +99,13 @@ class EnvironmentSpec(StrictModel):
         return self
 
 
+class ReportSpec(StrictModel):
+    part_visibility: bool = Field(
+        False, description="Add the part-visibility panel: renders a UV pass and records which parts of "
+                           "each object every image shows (decided before rendering; a later switch re-renders "
+                           "for the pass only and re-infers nothing).")
+
+
 class PolicySpec(BaseModel):
     """``type`` picks the policy; its other keys are that policy's parameters."""
 
@@ -115,6 +122,7 @@ class Spec(StrictModel):
     environments: list[EnvironmentSpec] = Field(min_length=1)
     controls: list[dict[str, Any]] = Field(default_factory=list)
     policy: PolicySpec = PolicySpec()
+    report: ReportSpec = ReportSpec()
 
     @field_validator("objects", "environments")
     @classmethod

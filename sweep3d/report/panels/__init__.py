@@ -6,9 +6,9 @@ template ``templates/panels/<name>.html.j2`` that draws ``data`` (figures as
 ``templates/_macros.html.j2``; images through ``inputs.thumbs.want(key)`` or ``inputs.tile(row)``),
 then list it below. A panel whose data may be absent returns None and is left out of the page.
 
-``OPTIONAL_PANELS`` is where such panels go. The part-visibility panel (accuracy conditioned on
-which parts of the object's surface are visible, from a UV render pass) belongs there: its
-``build`` returns None when the store holds no UV-pass data for the experiment.
+``OPTIONAL_PANELS`` is where such panels go: the part-visibility panel (accuracy conditioned on
+which parts of the object's surface are visible, from a UV render pass) returns None when the
+spec did not ask for the pass.
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ from sweep3d.report.panels import (
     failures,
     objects,
     overall,
+    part_visibility,
 )
 
 CORE_PANELS: tuple[Panel, ...] = (
@@ -33,7 +34,9 @@ CORE_PANELS: tuple[Panel, ...] = (
 )
 
 #: Panels shown only when their data exists (their ``build`` returns None otherwise).
-OPTIONAL_PANELS: tuple[Panel, ...] = ()
+OPTIONAL_PANELS: tuple[Panel, ...] = (
+    Panel("part-visibility", "Part visibility", "panels/part_visibility.html.j2", part_visibility.build),
+)
 
 PANELS: tuple[Panel, ...] = CORE_PANELS + OPTIONAL_PANELS
 

@@ -30,6 +30,9 @@ Views:
     eta² within the object.
 ``object_confusions``
     per object, its wrong top-1 predictions with counts, share of its failures and rank.
+``part_visibility``
+    only when the spec asks for it (a UV pass): per (object, part of its surface), accuracy
+    over the results that show the part (see :mod:`sweep3d.stages.aggregate.parts`).
 
 Macros:
 
@@ -43,6 +46,8 @@ Macros:
 from __future__ import annotations
 
 import duckdb
+
+from sweep3d.stages.aggregate.parts import register_part_views
 
 MAX_LEVELS = 12  # a numeric parameter with more distinct values is binned
 BINS = 10
@@ -60,7 +65,8 @@ _ACCURACY = ("n_correct / nullif(n, 0) AS accuracy, wilson_low(n_correct, n) AS 
              "wilson_high(n_correct, n) AS wilson_high")
 
 VIEWS = ("control_values", "control_stats", "control_levels", "control_parameters", "control_accuracy",
-         "pair_accuracy", "scene_accuracy", "variance_explained", "object_sensitivity", "object_confusions")
+         "pair_accuracy", "scene_accuracy", "variance_explained", "object_sensitivity", "object_confusions",
+         "part_visibility")
 MACROS = ("wilson_low", "wilson_high", "failure_modes")
 
 
@@ -84,6 +90,7 @@ def register_views(con: duckdb.DuckDBPyConnection) -> bool:
     parameters = control_columns(con)
     for sql in _view_statements(parameters, "top1_label" in result_columns):
         con.execute(sql)
+    register_part_views(con, set(result_columns))
     return True
 
 

@@ -6,7 +6,10 @@ Each key hashes exactly what changes its stage's output (see DESIGN.md §2):
   rendered controls that apply to the scene and are not at their neutral values;
 * ``image_key``: the render key plus the effective post controls (plus the seed if one of them
   is random); equal to the render key when no post control changes the image;
-* ``pred_key``: the image key plus the model's digest, the evaluator and the ground truth.
+* ``pred_key``: the image key plus the model's digest, the evaluator and the ground truth;
+* ``parts_key`` (only when the part-visibility panel is asked for): the render key plus the
+  parts layout. Extra render passes leave the RGB image as it is, so they are not part of the
+  render key: switching the panel on re-renders for the UV pass and re-infers nothing.
 """
 
 from __future__ import annotations
@@ -15,6 +18,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from sweep3d.cache.keys import digest, file_digest
+from sweep3d.parts import PARTS_LAYOUT
 from sweep3d.spec.loader import ControlInstance, LoadedSpec
 from sweep3d.spec.space import Point, SearchSpace
 from sweep3d.stages.plan.policies import Outcome
@@ -34,6 +38,7 @@ class Job:
     image_key: str
     pred_key: str
     point: Point | None = None  # where the policy put it (for policies that learn from results)
+    parts_key: str | None = None  # the UV pass's visible parts, when the report asks for them
 
     @property
     def scene(self) -> tuple[str, str]:
@@ -62,7 +67,7 @@ class Plan:
                 for param, value in values.items():
                     row[f"{control_id}_{param}"] = value
             row.update(render_key=job.render_key, image_key=job.image_key, pred_key=job.pred_key,
-                       in_frame=id(job) not in flagged)
+                       parts_key=job.parts_key, in_frame=id(job) not in flagged)
             out.append(row)
         return out
 
@@ -84,7 +89,7 @@ def make_plan(spec: LoadedSpec, model_digest: str | None = None, history: Histor
     model_digest = model_digest or compute_model_digest(spec.spec.model.name)
     s = spec.spec
     render_base = {"stage": "render", "v": RENDER_STAGE_VERSION, "blender": blender_version(),
-                   "settings": s.render.key_part(), "passes": []}
+                   "settings": s.render.key_part()}
     infer_base = {"stage": "infer", "v": INFER_STAGE_VERSION, "model": model_digest,
                   "evaluator": {"kind": s.evaluator.kind, "top_k": s.evaluator.top_k}}
     if s.model.backend != "torch":  # another backend may differ in the last bits: its own answers
@@ -126,7 +131,9 @@ def make_plan(spec: LoadedSpec, model_digest: str | None = None, history: Histor
                     image_key = digest({"stage": "post", "v": POST_STAGE_VERSION, "render": render_key,
                                         "controls": post_parts, "seed": s.experiment.seed if stochastic else None})
                 pred_key = digest({**infer_base, "image": image_key, "truth": truth})
-                job = Job(index, obj.name, env.name, params, render_key, image_key, pred_key, point)
+                parts_key = (digest({"stage": "parts", "layout": PARTS_LAYOUT, "render": render_key})
+                             if s.report.part_visibility else None)
+                job = Job(index, obj.name, env.name, params, render_key, image_key, pred_key, point, parts_key)
                 index += 1
                 (jobs if _in_frame(rendered, models) else out_of_frame).append(job)
     return Plan(spec, jobs, model_digest, columns, out_of_frame)

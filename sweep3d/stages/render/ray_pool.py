@@ -157,7 +157,8 @@ class RayRenderPool:
     @staticmethod
     def _result(job: dict[str, Any], message: tuple, png: bytes | None) -> RenderResult:
         if message[0] == "done":
-            atomic_write(Path(job["blob"]), png or b"")  # the driver writes the store
+            if job["blob"] is not None:  # None: only the UV pass was wanted
+                atomic_write(Path(job["blob"]), png or b"")  # the driver writes the store
             return RenderResult(message[1], True, message[2])
         return RenderResult(message[1], False, error=message[2], kind=message[3])
 

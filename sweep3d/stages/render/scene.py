@@ -21,6 +21,7 @@ from sweep3d.stages.render._rna import assign
 from sweep3d.stages.render.props import PropsView
 from sweep3d.stages.render.skins import SkinView
 from sweep3d.stages.render.state import SENSOR_WIDTH_MM, SceneState
+from sweep3d.stages.render.uv_pass import UVPass
 from sweep3d.stages.render.world import WorldView
 
 IMPORTERS = {
@@ -61,6 +62,8 @@ class BlenderScene:
         self.props = PropsView(bpy, scene)
         self.environment: dict[str, Any] = {}
         self.frame = scratch / f"frame-{os.getpid()}.png"
+        self.uv_pass = UVPass(bpy, scene, scratch) if "uv" in settings.get("passes", ()) else None
+        self.parts: dict[str, Any] | None = None  # what the UV pass saw in the latest render
 
     @staticmethod
     def _configure(scene, s: dict[str, Any]) -> None:
@@ -137,6 +140,10 @@ class BlenderScene:
                 obj.matrix_basis = world
         self.meshes = meshes
         self.skins.reset(meshes, radius)
+        if self.uv_pass is not None:
+            bpy.context.view_layer.update()
+            to_pose = self.pose.matrix_world.inverted()
+            self.uv_pass.prepare(meshes, lambda obj: to_pose @ obj.matrix_world)
 
     @staticmethod
     def _surface_area(meshes) -> float:
@@ -211,6 +218,8 @@ class BlenderScene:
 
         self.scene.render.filepath = str(self.frame)
         self.bpy.ops.render.render(write_still=True)
+        if self.uv_pass is not None:
+            self.parts = self.uv_pass.read()
         with Image.open(self.frame) as img:
             rgba = np.asarray(img.convert("RGBA"), dtype=np.float32) / 255.0
         rgb, alpha = rgba[..., :3], rgba[..., 3:]

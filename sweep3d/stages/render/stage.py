@@ -4,6 +4,10 @@ A render counts as stored when it has a row and a blob; a row whose blob has gon
 and the key rendered again. Each row records the SHA-256 of its blob, so readers can tell a
 damaged blob from a good one. A job that fails because of the user's input (a mesh or HDRI
 Blender cannot use, a full disk) stops the run with a one-line error naming the spec key.
+
+When the report asks for part visibility, workers also write a UV pass and each render records
+which parts of the object it shows (the ``parts`` table, one row per ``parts_key``). A render
+that is cached but lacks that row is rendered again for the pass only: its blob is kept.
 """
 
 from __future__ import annotations
@@ -19,6 +23,7 @@ import pyarrow as pa
 from sweep3d.cache.blobs import sha256_bytes
 from sweep3d.cache.store import DIGEST_COLUMN, Store, utc_now
 from sweep3d.errors import SpecError, UserError
+from sweep3d.parts import PARTS_LAYOUT
 from sweep3d.progress import RunProgress
 from sweep3d.stages.outcome import StageOutcome
 from sweep3d.stages.plan.jobs import Job, Plan
@@ -30,6 +35,11 @@ GROUP_SIZE = 32  # jobs sent to a worker at once; a scene's jobs stay together i
 RENDERS_SCHEMA = pa.schema([
     ("render_key", pa.string()), ("width", pa.int32()), ("height", pa.int32()), ("valid", pa.bool_()),
     ("seconds", pa.float64()), ("created_at", pa.timestamp("us")), (DIGEST_COLUMN, pa.string()),
+])
+PARTS_SCHEMA = pa.schema([
+    ("parts_key", pa.string()), ("render_key", pa.string()), ("layout", pa.string()),
+    ("parts", pa.list_(pa.int16())), ("pixels", pa.list_(pa.int32())), ("object_pixels", pa.int32()),
+    ("created_at", pa.timestamp("us")),
 ])
 
 
@@ -72,33 +82,54 @@ def render_stage(plan: Plan, store: Store, progress: RunProgress, executor: Exec
         unique.setdefault(job.render_key, job)
     cached = cached_renders(plan, store)
     store.drop_rows("renders", _stale_rows(plan, store, cached))  # rendered again below, one row each
-    todo = [job for key, job in unique.items() if key not in cached]
-    outcome = StageOutcome("render", total=len(unique), cached=len(cached))
+    have_parts = store.keys("parts") if plan.spec.spec.report.part_visibility else set()
+    todo = [job for key, job in unique.items()
+            if key not in cached or (job.parts_key is not None and job.parts_key not in have_parts)]
+    outcome = StageOutcome("render", total=len(unique), cached=len(unique) - len(todo))
     if todo:
-        groups = _groups(plan, store, todo)
+        groups = _groups(plan, store, todo, cached)
         settings = plan.spec.spec.render.model_dump()
+        settings["passes"] = ["uv"] if plan.spec.spec.report.part_visibility else []
         workers = min(plan.spec.spec.render.workers, len(groups))
-        with progress.stage("render", len(todo), len(cached)) as bar, \
+        with progress.stage("render", len(todo), outcome.cached) as bar, \
                 executor.pool(settings, workers, plan.spec.spec.render.timeout) as pool, \
-                store.segment_writer("renders", RENDERS_SCHEMA) as writer:
+                store.segment_writer("renders", RENDERS_SCHEMA) as writer, \
+                store.segment_writer("parts", PARTS_SCHEMA) as parts_writer:
             for result in pool.run(groups):
+                job = unique[result.render_key]
                 if not result.ok and getattr(result, "kind", "internal") == "user":
-                    raise _user_error(plan, unique[result.render_key], result.error or "")
-                digest = _blob_digest(store.blob_path(result.render_key)) if result.ok else None
-                if digest is not None:
-                    writer.add({"render_key": result.render_key, **result.info, "created_at": utc_now(),
-                                DIGEST_COLUMN: digest})
+                    raise _user_error(plan, job, result.error or "")
+                ok = result.ok and (job.render_key in cached or _record_render(store, writer, result))
+                if ok and job.parts_key is not None:
+                    _record_parts(parts_writer, job, result.info)
+                if ok:
                     outcome.computed += 1
                 else:
                     outcome.failed += 1
                     error = result.error or "the worker reported success but its blob cannot be read"
                     outcome.errors.append(f"render {result.render_key[:12]}: {error}")
-                bar.advance(failed=digest is None)
+                bar.advance(failed=not ok)
     outcome.seconds = time.perf_counter() - started
     return outcome
 
 
-def _groups(plan: Plan, store: Store, todo: list[Job]) -> list[list[dict[str, Any]]]:
+def _record_render(store: Store, writer, result) -> bool:
+    """Add a rendered key's row (with its blob's digest); False if the blob cannot be read."""
+    digest = _blob_digest(store.blob_path(result.render_key))
+    if digest is None:
+        return False
+    info = {k: v for k, v in result.info.items() if k != "parts"}
+    writer.add({"render_key": result.render_key, **info, "created_at": utc_now(), DIGEST_COLUMN: digest})
+    return True
+
+
+def _record_parts(writer, job: Job, info: dict[str, Any]) -> None:
+    """Add the job's visible parts (its worker rendered the UV pass: ``info["parts"]``)."""
+    writer.add({"parts_key": job.parts_key, "render_key": job.render_key, "layout": PARTS_LAYOUT,
+                **info["parts"], "created_at": utc_now()})
+
+
+def _groups(plan: Plan, store: Store, todo: list[Job], cached: set[str]) -> list[list[dict[str, Any]]]:
     spec = plan.spec
     controls = {c.id: c.control for c in spec.controls if c.control.stage == "render"}
     ordered = sorted(controls.values(), key=lambda c: c.order)
@@ -114,7 +145,7 @@ def _groups(plan: Plan, store: Store, todo: list[Job]) -> list[list[dict[str, An
             "mesh": meshes[job.object],
             "environment": {"hdri": spec.hdris[env.name], "color": env.color, "strength": env.strength},
             "controls": [(c, c.params(job.values[c.id])) for c in ordered if c.id in job.values],
-            "blob": str(store.blob_path(job.render_key)),
+            "blob": None if job.render_key in cached else str(store.blob_path(job.render_key)),
         })
     groups = []
     for scene in sorted(by_scene):

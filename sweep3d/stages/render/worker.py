@@ -52,7 +52,9 @@ def render_job(scene, job: dict[str, Any], keep_pixels: bool = False) -> tuple[t
     Returns:
         The message for the parent (``("done", key, info)`` or ``("error", key, message, kind)``)
         and, when ``keep_pixels``, the PNG bytes instead of writing them to ``job["blob"]`` (so a
-        remote worker needs no shared file system: the driver writes the store).
+        remote worker needs no shared file system: the driver writes the store). A job whose
+        ``blob`` is None is rendered only for its UV pass: no pixels are written or returned.
+        With the UV pass on, ``info["parts"]`` holds what it saw (see ``parts.part_counts``).
     """
     from sweep3d.cache.store import atomic_write
     from sweep3d.errors import UserError
@@ -69,11 +71,15 @@ def render_job(scene, job: dict[str, Any], keep_pixels: bool = False) -> tuple[t
         scene.pose_scene(state)
         rgb = scene.render()
         finite = bool(np.isfinite(rgb).all())
-        png = encode_png(rgb)
-        if not keep_pixels:
-            atomic_write(Path(job["blob"]), png)
+        png = None
+        if job["blob"] is not None:  # None: the render is cached, the job is here for its UV pass
+            png = encode_png(rgb)
+            if not keep_pixels:
+                atomic_write(Path(job["blob"]), png)
         info = {"seconds": time.perf_counter() - started, "valid": finite,
                 "width": rgb.shape[1], "height": rgb.shape[0]}
+        if scene.parts is not None:
+            info["parts"] = scene.parts
         return ("done", key, info), (png if keep_pixels else None)
     except UserError as exc:  # the spec's input (a mesh, an HDRI) or a full disk: exit 2
         return ("error", key, str(exc), "user"), None

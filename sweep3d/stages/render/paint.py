@@ -1,0 +1,92 @@
+"""Paint an object with one colour per part and render it from a few sides.
+
+The part-visibility panel shows accuracy "as a coloured render of the object" (the paper's
+Figure 8): each part of the surface (see :mod:`sweep3d.parts`) takes the colour of the accuracy
+of the images that show it. The paint is an image texture of one texel per part on the parts UV
+map, sampled without interpolation, lit by a plain white world so the colours read true.
+
+:func:`paint_objects` runs Blender in a spawned process (the report's process never imports bpy).
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from sweep3d.parts import AZIMUTH_PARTS, ELEVATION_PARTS, PARTS, UV_MAP
+
+#: (label, camera azimuth, camera elevation): the sides shown, as the camera control names them.
+VIEWS = (("front", 0.0, 15.0), ("right", 90.0, 15.0), ("back", 180.0, 15.0), ("left", 270.0, 15.0),
+         ("top", 0.0, 80.0), ("bottom", 0.0, -80.0))
+BACKGROUND = (1.0, 1.0, 1.0)
+
+
+def paint_objects(items: list[tuple[str, np.ndarray]], resolution: int = 160, samples: int = 16) -> list[list[bytes]]:
+    """PNG renders of each ``(mesh, colours)`` (colours: PARTS × 3, sRGB in [0, 1]), one per view.
+
+    Runs Blender once, in a fresh spawned process, for all the items.
+    """
+    items = [(mesh, np.asarray(colours, dtype=np.float32).reshape(PARTS, 3)) for mesh, colours in items]
+    if not items:
+        return []
+    with mp.get_context("spawn").Pool(1) as pool:
+        return pool.apply(_paint_in_this_process, (items, resolution, samples))
+
+
+def _paint_in_this_process(items: list[tuple[str, np.ndarray]], resolution: int, samples: int) -> list[list[bytes]]:
+    os.dup2(os.open(os.devnull, os.O_WRONLY), 1)  # Blender prints progress straight to fd 1
+    from sweep3d.pixels import encode_png
+    from sweep3d.spec.models import RenderSpec
+    from sweep3d.stages.render.scene import BlenderScene
+    from sweep3d.stages.render.state import SceneState
+
+    settings = RenderSpec(resolution=resolution, samples=samples, denoise=True).model_dump()
+    settings["passes"] = ["uv"]  # builds the parts UV map the paint is laid on
+    out = []
+    with tempfile.TemporaryDirectory(prefix="sweep3d-paint-") as scratch:
+        scene = BlenderScene(settings, Path(scratch))
+        for mesh, colours in items:
+            scene.prepare(mesh, {"hdri": None, "color": BACKGROUND, "strength": 1.0})
+            material = _paint_material(scene.bpy, colours)
+            images = []
+            for _, azimuth, elevation in VIEWS:
+                scene.pose_scene(SceneState(azimuth=azimuth, elevation=elevation, zoom=0.95))
+                for obj in scene.meshes:
+                    if not obj.material_slots:
+                        obj.data.materials.append(material)
+                    for slot in obj.material_slots:
+                        slot.material = material
+                images.append(encode_png(scene.render()))
+            out.append(images)
+    return out
+
+
+def _paint_material(bpy, colours: np.ndarray):
+    """A diffuse material whose colour is the part's texel (two turns of ``u``: see parts.py)."""
+    texels = np.ones((ELEVATION_PARTS, 2 * AZIMUTH_PARTS, 4), dtype=np.float32)
+    grid = colours.reshape(ELEVATION_PARTS, AZIMUTH_PARTS, 3)
+    texels[:, :AZIMUTH_PARTS, :3] = texels[:, AZIMUTH_PARTS:, :3] = grid
+    image = bpy.data.images.new("sweep3d_paint", 2 * AZIMUTH_PARTS, ELEVATION_PARTS, alpha=True)
+    image.colorspace_settings.name = "sRGB"
+    image.pixels.foreach_set(texels.ravel())  # rows from the bottom: row 0 = lowest band
+    image.pack()
+    material = bpy.data.materials.new("sweep3d_paint")
+    material.use_nodes = True
+    nodes, links = material.node_tree.nodes, material.node_tree.links
+    nodes.clear()
+    uv = nodes.new("ShaderNodeUVMap")
+    uv.uv_map = UV_MAP
+    texture = nodes.new("ShaderNodeTexImage")
+    texture.image = image
+    texture.interpolation = "Closest"
+    texture.extension = "EXTEND"  # u stays below 0.75; v = 1 (the top pole) must not wrap
+    diffuse = nodes.new("ShaderNodeBsdfDiffuse")
+    out = nodes.new("ShaderNodeOutputMaterial")
+    links.new(uv.outputs["UV"], texture.inputs["Vector"])
+    links.new(texture.outputs["Color"], diffuse.inputs["Color"])
+    links.new(diffuse.outputs["BSDF"], out.inputs["Surface"])
+    return material
