@@ -31,6 +31,12 @@ def _results(folder: Path) -> list[tuple]:
     ).fetchall()
 
 
+def _visible_parts(folder: Path) -> dict[str, list[int]]:
+    rows = Store(folder / "store").connect("tiny").execute(
+        "SELECT render_key, parts, pixels, object_pixels FROM parts").fetchall()
+    return {key: [p for p, n in zip(parts, pixels) if n >= 0.05 * total] for key, parts, pixels, total in rows}
+
+
 def test_ray_executor_gives_the_local_results(local_cluster, tmp_path: Path, monkeypatch) -> None:
     from sweep3d.stages.infer import ray_actor
 
@@ -45,12 +51,13 @@ def test_ray_executor_gives_the_local_results(local_cluster, tmp_path: Path, mon
     ray_dir, local_dir = tmp_path / "ray", tmp_path / "local"
     for folder in (ray_dir, local_dir):
         folder.mkdir()
-        write_spec(folder, TINY_SPEC)
+        write_spec(folder, TINY_SPEC + "\n[report]\npart_visibility = true\n")  # with the UV pass
     on_ray = run(load_spec(ray_dir / "spec.toml"), executor=Executor("ray"))
     assert sum(batches) == 8, "inference ran on the Ray actor"
     assert on_ray.failed == 0 and on_ray.outcome("render").computed == 4
     assert run(load_spec(local_dir / "spec.toml")).failed == 0
     assert _results(ray_dir) == _results(local_dir)
+    assert _visible_parts(ray_dir) == _visible_parts(local_dir) and len(_visible_parts(ray_dir)) == 4
     again = run(load_spec(ray_dir / "spec.toml"), executor=Executor("ray"))  # resumes from the store
     assert again.outcome("render").computed == 0
 

@@ -129,7 +129,10 @@ def _record_parts(writer, job: Job, info: dict[str, Any]) -> None:
                 **info["parts"], "created_at": utc_now()})
 
 
-def _groups(plan: Plan, store: Store, todo: list[Job], cached: set[str]) -> list[list[dict[str, Any]]]:
+def _groups(plan: Plan, store: Store, todo: list[Job], cached: frozenset[str] | set[str] = frozenset()
+            ) -> list[list[dict[str, Any]]]:
+    """Jobs as worker messages, grouped by scene; a job whose render is in ``cached`` (there for
+    its UV pass) carries no blob path."""
     spec = plan.spec
     controls = {c.id: c.control for c in spec.controls if c.control.stage == "render"}
     ordered = sorted(controls.values(), key=lambda c: c.order)

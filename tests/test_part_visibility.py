@@ -1,0 +1,202 @@
+"""Part visibility end to end: the UV pass, the parts table and view, and the report panel.
+
+Real Blender renders of a cube at 48×48 turned to four yaws; the real classifier.
+"""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from sweep3d.cache.store import Store
+from sweep3d.cli import app
+from sweep3d.parts import AZIMUTH_PARTS, PARTS, part_of, sphere_turns
+from sweep3d.pixels import decode_png
+from sweep3d.report import write_report
+from sweep3d.spec import load_spec
+from sweep3d.stages.aggregate.parts import VISIBLE_SHARE
+from tests.conftest import write_spec
+from tests.test_parts import direction
+from tests.test_report import ARTIFACTS, assert_clean, open_page, screenshot_panels
+
+PARTS_SPEC = """\
+[experiment]
+name = "parts"
+seed = 3
+store = "store"
+
+[render]
+resolution = 48
+samples = 1
+denoise = false
+
+[model]
+batch_size = 8
+
+[report]
+part_visibility = true
+
+[[objects]]
+name = "box"
+mesh = "cube.obj"
+labels = ["carton"]
+
+[[environments]]
+name = "white"
+color = [1.0, 1.0, 1.0]
+
+[[controls]]
+type = "orientation"
+yaw = [0, 90, 180, 270]
+
+[policy]
+type = "grid"
+"""
+YAWS = (0, 90, 180, 270)
+
+
+def run_cli(spec: Path) -> None:
+    result = CliRunner().invoke(app, ["run", str(spec), "--no-report"])
+    assert result.exit_code == 0, result.output
+
+
+@pytest.fixture(scope="module")
+def parts_run(tmp_path_factory) -> Path:
+    folder = tmp_path_factory.mktemp("parts_run")
+    run_cli(write_spec(folder, PARTS_SPEC))
+    return folder
+
+
+def query(folder: Path, sql: str) -> list[tuple]:
+    return Store(folder / "store").connect("parts").execute(sql).fetchall()
+
+
+def part_at(azimuth: float, elevation: float) -> int:
+    turns, band = sphere_turns(direction(azimuth, elevation))
+    return int(part_of(turns / 2, band)[0])
+
+
+def test_each_render_records_the_parts_facing_the_camera(parts_run: Path) -> None:
+    rows = query(parts_run, "SELECT j.orientation_yaw, p.parts, p.pixels, p.object_pixels "
+                            "FROM jobs j JOIN parts p USING (parts_key) ORDER BY 1")
+    assert [r[0] for r in rows] == list(YAWS)
+    for yaw, parts, pixels, object_pixels in rows:
+        assert object_pixels > 100 and sum(pixels) == object_pixels and all(0 <= p < PARTS for p in parts)
+        visible = {p for p, n in zip(parts, pixels) if n >= VISIBLE_SHARE * object_pixels}
+        # turning the object by +yaw brings its side at azimuth -yaw in front of the camera
+        assert part_at(5 - yaw, 10) in visible, yaw
+        assert part_at(185 - yaw, 10) not in visible, yaw  # its back is hidden
+    # the four yaws show four different sets of parts, a quarter turn apart
+    slices = [{p % AZIMUTH_PARTS for p in parts} for _, parts, _, _ in rows]
+    assert all(a != b for i, a in enumerate(slices) for b in slices[i + 1:])
+
+
+def test_the_view_agrees_with_a_count_by_hand(parts_run: Path) -> None:
+    raw = query(parts_run, "SELECT r.correct, p.parts, p.pixels, p.object_pixels FROM results r "
+                           "JOIN parts p USING (parts_key) WHERE r.valid")
+    expected: dict[int, list[int]] = {}
+    for correct, parts, pixels, total in raw:
+        for part, n in zip(parts, pixels):
+            if n >= max(1, VISIBLE_SHARE * total):
+                expected.setdefault(part, []).append(int(correct))
+    view = query(parts_run, "SELECT part, n, n_correct, accuracy, object_n, object_accuracy, lift, "
+                            "azimuth_from, elevation_to FROM part_visibility WHERE object = 'box'")
+    assert {r[0]: (r[1], r[2]) for r in view} == {p: (len(v), sum(v)) for p, v in expected.items()}
+    overall = np.mean([int(r[0]) for r in raw])
+    for part, n, n_correct, accuracy, object_n, object_accuracy, lift, *_ in view:
+        assert object_n == len(raw) and object_accuracy == pytest.approx(overall)
+        assert accuracy == pytest.approx(n_correct / n) and lift == pytest.approx(accuracy - overall)
+
+
+def test_a_rerun_renders_nothing(parts_run: Path) -> None:
+    result = CliRunner().invoke(app, ["plan", str(parts_run / "spec.toml")])
+    assert result.exit_code == 0
+    assert run_stage_counts(parts_run) == {"render": 0, "infer": 0}
+
+
+def run_stage_counts(folder: Path) -> dict[str, int]:
+    from sweep3d.pipeline import run
+
+    outcome = run(load_spec(folder / "spec.toml"))
+    return {s: outcome.outcome(s).computed for s in ("render", "infer")}
+
+
+def test_switching_the_panel_on_renders_the_pass_only(parts_run: Path, tmp_path: Path) -> None:
+    spec = write_spec(tmp_path, PARTS_SPEC.replace("part_visibility = true", "part_visibility = false"))
+    run_cli(spec)
+    store = Store(tmp_path / "store")
+    before = dict(store.connect("parts").execute("SELECT render_key, sha256 FROM renders").fetchall())
+    assert not store.keys("parts")
+    spec.write_text(PARTS_SPEC)
+    assert run_stage_counts(tmp_path) == {"render": 4, "infer": 0}  # rendered for the pass; nothing re-inferred
+    con = store.connect("parts")
+    assert dict(con.execute("SELECT render_key, sha256 FROM renders").fetchall()) == before  # blobs kept
+    assert con.execute("SELECT count(*) FROM parts").fetchone()[0] == 4
+    # the pass leaves the RGB image alone: the same render keys, the same pixels as the run with it
+    other = Store(parts_run / "store")
+    for key in before:
+        a, b = decode_png(store.blob_path(key)), decode_png(other.blob_path(key))
+        assert np.abs(a - b).max() <= 1.5 / 255
+
+
+def test_painted_object_takes_the_colour_of_each_side(tmp_path: Path) -> None:
+    from sweep3d.stages.render.paint import VIEWS, paint_objects
+    from tests.conftest import write_cube
+
+    colours = np.tile([[0.9, 0.1, 0.1]], (PARTS, 1))  # red all round ...
+    for part in range(PARTS):
+        if part % AZIMUTH_PARTS in (AZIMUTH_PARTS // 2 - 1, AZIMUTH_PARTS // 2):  # ... green in front
+            colours[part] = [0.1, 0.8, 0.1]
+    (images,) = paint_objects([(str(write_cube(tmp_path)), colours)], resolution=48, samples=4)
+    assert len(images) == len(VIEWS)
+    by_view = {label: decode_png_bytes(png) for (label, _, _), png in zip(VIEWS, images)}
+    centre = {label: img[24, 24] for label, img in by_view.items()}
+    assert centre["front"][1] > centre["front"][0] + 0.2  # green
+    for side in ("back", "left", "right"):
+        assert centre[side][0] > centre[side][1] + 0.2, side  # red
+    assert np.allclose(by_view["front"][0, 0], 1.0, atol=0.02)  # the plain white background
+
+
+def decode_png_bytes(png: bytes) -> np.ndarray:
+    import io
+
+    from PIL import Image
+
+    return np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=np.float32) / 255.0
+
+
+def test_report_panel_only_when_asked_for(parts_run: Path, tiny_run: Path) -> None:
+    html = write_report(load_spec(parts_run / "spec.toml")).read_text()
+    assert '<section id="part-visibility">' in html
+    assert html.count('alt="box, ') == 6 and "FROM part_visibility WHERE object = &#39;box&#39;" in html
+    assert 'id="part-visibility"' not in write_report(load_spec(tiny_run / "spec.toml")).read_text()
+    painted = list((parts_run / "store" / "cache" / "paint").glob("*/*.png"))
+    assert len(painted) == 6
+    stamps = {p: p.stat().st_mtime_ns for p in painted}
+    write_report(load_spec(parts_run / "spec.toml"))  # painted once, then read from the store
+    assert {p: p.stat().st_mtime_ns for p in painted} == stamps
+
+
+@pytest.mark.browser
+def test_part_visibility_panel_draws_in_chromium(parts_run: Path, tmp_path: Path) -> None:
+    folder = tmp_path / "copy"
+    shutil.copytree(parts_run, folder)
+    spec = folder / "spec.toml"
+    spec.write_text(spec.read_text().replace('name = "box"', 'name = "<b>box</b>"'))  # names stay text
+    run_cli(spec)
+    path = write_report(load_spec(spec))
+    with open_page(path) as (page, events):
+        panel = page.locator("#part-visibility")
+        assert panel.locator("h3").first.inner_text().startswith("<b>box</b>")
+        widths = panel.evaluate("p => Array.from(p.querySelectorAll('.part-views img')).map(i => i.naturalWidth)")
+        assert widths == [160] * 6
+        traces = page.evaluate("document.getElementById('fig-parts-0').data.map(t => t.type)")
+        assert traces == ["heatmap", "heatmap"] and panel.locator("svg.main-svg").count() >= 1
+        screenshot_panels(page, "parts")
+        panel.screenshot(path=str(ARTIFACTS / "parts-part-visibility.png"))
+        assert_clean(path, events)
+
