@@ -181,7 +181,8 @@ def test_per_object_sensitivity_and_confusions(tmp_path: Path) -> None:
 def test_views_come_with_every_connection_and_summary_reads_them(tmp_path: Path) -> None:
     con = make_store(tmp_path, _grid(lambda a, b: a == 1))
     present = {r[0] for r in con.execute("SELECT view_name FROM duckdb_views() WHERE NOT internal").fetchall()}
-    assert set(VIEWS) <= present
+    assert set(VIEWS) - {"part_visibility"} <= present
+    assert "part_visibility" not in present  # only with a UV pass (tests/test_part_visibility.py)
     macros = {r[0] for r in con.execute("SELECT function_name FROM duckdb_functions() WHERE function_type IN "
                                         "('macro', 'table_macro')").fetchall()}
     assert set(MACROS) <= macros

@@ -56,6 +56,9 @@ def print_plan(console: Console, spec: LoadedSpec) -> None:
     console.print(table)
     if plan.out_of_frame:
         console.print(f"{len(plan.out_of_frame)} jobs put the object wholly out of frame: flagged, not rendered")
+    if spec.spec.report.part_visibility:
+        console.print("renders carry a UV pass (the report's part-visibility panel); a render cached "
+                      "without it is rendered again for the pass only")
     if spec.policy.adaptive:
         console.print(f"adaptive policy: this is its first round; it proposes up to "
                       f"{spec.policy.params.samples} jobs per scene as results come in")
