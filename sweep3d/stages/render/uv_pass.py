@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from sweep3d.errors import UserError
 from sweep3d.parts import UV_MAP, loop_uvs, part_counts
 
 CHANNELS = ("u", "v", "mask")
@@ -76,6 +77,10 @@ class UVPass:
             uvs = loop_uvs(points, loop_vertices, starts[order])
             self._pin_textures(obj)
             layer = mesh.uv_layers.get(UV_MAP) or mesh.uv_layers.new(name=UV_MAP, do_init=False)
+            if layer is None:
+                raise UserError(f"mesh {obj.name!r} has {len(mesh.uv_layers)} UV maps, Blender's limit: the "
+                                "part-visibility pass needs one more (remove one, or set [report] "
+                                "part_visibility = false)")
             layer.data.foreach_set("uv", uvs.ravel())
             layer.active_render = True
 
