@@ -1,6 +1,6 @@
 """Part visibility end to end: the UV pass, the parts table and view, and the report panel.
 
-Real Blender renders of a cube at 48×48 turned to four yaws; the real classifier.
+Real Blender renders of a cube at 48×48 turned to four yaws, in two environments; the real classifier.
 """
 
 from __future__ import annotations
@@ -19,44 +19,13 @@ from sweep3d.pixels import decode_png
 from sweep3d.report import write_report
 from sweep3d.spec import load_spec
 from sweep3d.stages.aggregate.parts import VISIBLE_SHARE
-from tests.conftest import write_spec
+from tests.conftest import TINY_SPEC, write_spec
 from tests.test_parts import direction
 from tests.test_report import ARTIFACTS, assert_clean, open_page, screenshot_panels
 
-PARTS_SPEC = """\
-[experiment]
-name = "parts"
-seed = 3
-store = "store"
-
-[render]
-resolution = 48
-samples = 1
-denoise = false
-
-[model]
-batch_size = 8
-
-[report]
-part_visibility = true
-
-[[objects]]
-name = "box"
-mesh = "cube.obj"
-labels = ["carton"]
-
-[[environments]]
-name = "white"
-color = [1.0, 1.0, 1.0]
-
-[[controls]]
-type = "orientation"
-yaw = [0, 90, 180, 270]
-
-[policy]
-type = "grid"
-"""
 YAWS = (0, 90, 180, 270)
+PARTS_SPEC = (TINY_SPEC.replace("resolution = 32", "resolution = 48").replace("yaw = [0, 45]", f"yaw = {list(YAWS)}")
+              + "\n[report]\npart_visibility = true\n")
 
 
 def run_cli(spec: Path) -> None:
@@ -72,7 +41,7 @@ def parts_run(tmp_path_factory) -> Path:
 
 
 def query(folder: Path, sql: str) -> list[tuple]:
-    return Store(folder / "store").connect("parts").execute(sql).fetchall()
+    return Store(folder / "store").connect("tiny").execute(sql).fetchall()
 
 
 def part_at(azimuth: float, elevation: float) -> int:
@@ -81,8 +50,8 @@ def part_at(azimuth: float, elevation: float) -> int:
 
 
 def test_each_render_records_the_parts_facing_the_camera(parts_run: Path) -> None:
-    rows = query(parts_run, "SELECT j.orientation_yaw, p.parts, p.pixels, p.object_pixels "
-                            "FROM jobs j JOIN parts p USING (parts_key) ORDER BY 1")
+    rows = query(parts_run, "SELECT DISTINCT j.orientation_yaw, p.parts, p.pixels, p.object_pixels "
+                            "FROM jobs j JOIN parts p USING (parts_key) WHERE environment = 'white' ORDER BY 1")
     assert [r[0] for r in rows] == list(YAWS)
     for yaw, parts, pixels, object_pixels in rows:
         assert object_pixels > 100 and sum(pixels) == object_pixels and all(0 <= p < PARTS for p in parts)
@@ -129,13 +98,13 @@ def test_switching_the_panel_on_renders_the_pass_only(parts_run: Path, tmp_path:
     spec = write_spec(tmp_path, PARTS_SPEC.replace("part_visibility = true", "part_visibility = false"))
     run_cli(spec)
     store = Store(tmp_path / "store")
-    before = dict(store.connect("parts").execute("SELECT render_key, sha256 FROM renders").fetchall())
+    before = dict(store.connect("tiny").execute("SELECT render_key, sha256 FROM renders").fetchall())
     assert not store.keys("parts")
     spec.write_text(PARTS_SPEC)
-    assert run_stage_counts(tmp_path) == {"render": 4, "infer": 0}  # rendered for the pass; nothing re-inferred
-    con = store.connect("parts")
+    assert run_stage_counts(tmp_path) == {"render": 8, "infer": 0}  # rendered for the pass; nothing re-inferred
+    con = store.connect("tiny")
     assert dict(con.execute("SELECT render_key, sha256 FROM renders").fetchall()) == before  # blobs kept
-    assert con.execute("SELECT count(*) FROM parts").fetchone()[0] == 4
+    assert con.execute("SELECT count(*) FROM parts").fetchone()[0] == 8
     # the pass leaves the RGB image alone: the same render keys, the same pixels as the run with it
     other = Store(parts_run / "store")
     for key in before:
