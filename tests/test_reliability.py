@@ -417,3 +417,18 @@ def test_a_second_run_on_a_busy_store_refuses_in_one_line_or_waits_with_wait(tmp
     assert store.connect("tiny").execute("SELECT count(*) FROM results").fetchone()[0] == 32
     assert store.connect("other").execute("SELECT count(*) FROM results").fetchone()[0] == 12
     shutil.rmtree(tmp_path / "store")
+
+
+def test_scratch_of_a_killed_run_is_removed_by_the_next_pool(tmp_path: Path) -> None:
+    from sweep3d.stages.render.pool import SCRATCH_PREFIX, remove_stale_scratch
+
+    gone = subprocess.Popen([sys.executable, "-c", "pass"])
+    gone.wait()  # a process that has exited: its pid names a killed run's folder
+    dead = tmp_path / f"{SCRATCH_PREFIX}{gone.pid}-a1b2"
+    live = tmp_path / f"{SCRATCH_PREFIX}{os.getpid()}-c3d4"
+    other = tmp_path / f"{SCRATCH_PREFIX}ray-e5f6"  # not named after a pid: not ours to judge
+    for folder in (dead, live, other):
+        (folder / "uv").mkdir(parents=True)
+        (folder / "frame.png").write_bytes(b"x")
+    assert remove_stale_scratch(tmp_path) == 1
+    assert not dead.exists() and live.exists() and other.exists()

@@ -8,6 +8,7 @@ jobs are retried once; scratch files are removed when the pool closes, also on C
 from __future__ import annotations
 
 import multiprocessing as mp
+import os
 import shutil
 import tempfile
 import time
@@ -19,6 +20,8 @@ from typing import Any, Iterator
 
 from sweep3d.errors import RenderError
 from sweep3d.stages.render.worker import worker_main
+
+SCRATCH_PREFIX = "sweep3d-"  # + the parent's pid: a later run can tell a killed run's folder
 
 
 @dataclass
@@ -48,7 +51,9 @@ class RenderPool:
         self.n_workers = workers
         self.timeout = timeout
         self.ctx = mp.get_context("spawn")
-        self.scratch = Path(tempfile.mkdtemp(prefix="sweep3d-", dir=_scratch_root()))
+        root = _scratch_root()
+        remove_stale_scratch(Path(root or tempfile.gettempdir()))
+        self.scratch = Path(tempfile.mkdtemp(prefix=f"{SCRATCH_PREFIX}{os.getpid()}-", dir=root))
         self.workers: list[_Worker] = []
 
     def __enter__(self) -> "RenderPool":
@@ -143,6 +148,28 @@ class RenderPool:
                 worker.process.kill()
         self.workers = []
         shutil.rmtree(self.scratch, ignore_errors=True)
+
+
+def remove_stale_scratch(root: Path) -> int:
+    """Remove scratch folders left by runs that were killed (SIGKILL skips every clean-up):
+    each is named after its process, which no longer exists. Returns how many were removed."""
+    removed = 0
+    for folder in root.glob(f"{SCRATCH_PREFIX}*-*"):
+        pid = folder.name[len(SCRATCH_PREFIX):].split("-", 1)[0]
+        if pid.isdigit() and not _alive(int(pid)):
+            shutil.rmtree(folder, ignore_errors=True)
+            removed += 1
+    return removed
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # someone else's process
+        return True
+    return True
 
 
 def _scratch_root() -> str | None:
