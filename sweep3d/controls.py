@@ -10,11 +10,25 @@ cache keys (a spec that adds ``yaw = 0`` re-renders nothing). Rendered controls 
 from __future__ import annotations
 
 import math
-from typing import Any, ClassVar, Literal
+from typing import Annotated, Any, ClassVar, Literal
 
 from pydantic import BaseModel, ConfigDict
 
 from sweep3d.registry import Registry
+
+
+class _SpecRelativePath:
+    """Marks a ``str`` parameter as a file: see :data:`SpecPath`."""
+
+
+#: A parameter that names a file. The spec loader resolves it against the spec file's folder (as it
+#: does meshes and HDRIs) and refuses a file that does not exist, naming the key.
+SpecPath = Annotated[str, _SpecRelativePath()]
+
+
+def is_spec_path(field: Any) -> bool:
+    """Whether a pydantic field was declared as :data:`SpecPath`."""
+    return any(isinstance(m, _SpecRelativePath) for m in getattr(field, "metadata", ()))
 
 
 class ControlParams(BaseModel):
@@ -34,8 +48,6 @@ class Control:
     stage: ClassVar[Literal["render", "post"]]
     Params: ClassVar[type[ControlParams]] = ControlParams
     periodic: ClassVar[dict[str, float]] = {}
-    #: Render passes (besides RGB) this control reads; the renderer writes only requested passes.
-    passes: ClassVar[frozenset[str]] = frozenset()
     #: Bumped when the control's effect on pixels changes, so old cache entries are not reused.
     version: ClassVar[int] = 1
 

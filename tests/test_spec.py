@@ -163,6 +163,13 @@ MISTAKES = [
             "objects", ("duplicate object name 'box'", "[1]", "unique")),
     Mistake("environment-name-duplicate", append('[[environments]]\nname = "white"\ncolor = [0.0, 0.0, 0.0]\n'),
             "environments", ("duplicate environment name 'white'", "[2]")),
+    Mistake("material-image-missing",
+            append('[[controls]]\ntype = "material"\nskin = "image"\nimage = ["textures/none.png"]\n'),
+            "controls[2].image", ("textures/none.png", "no such file", "relative to the spec file")),
+    Mistake("part-visibility-not-a-bool", append('[report]\npart_visibility = "yes please"\n'),
+            "report.part_visibility", ("valid boolean",)),
+    Mistake("report-key-unknown", append("[report]\npart_visiblity = true\n"), "report.part_visiblity",
+            ("unknown key",)),
     Mistake("model-unknown", edit("[model]\n", '[model]\nname = "efficientnet-lite1"\n'),
             "model.name", ("'efficientnet-lite1'", "efficientnet-lite0", "module:Name")),
 ]
@@ -243,6 +250,14 @@ def test_relative_paths_resolve_against_the_spec_folder(tmp_path, monkeypatch):
 
     assert Path(loaded.meshes["box"]) == mesh.resolve()
     assert loaded.store.resolve() == (project / "cache").resolve()
+    # a control's file parameter (a material's image texture) resolves the same way
+    texture = project / "specs" / "textures" / "wood.png"
+    texture.parent.mkdir()
+    texture.write_bytes(b"not looked into at load")
+    spec = project / "specs" / "spec.toml"
+    spec.write_text(spec.read_text() + '[[controls]]\ntype = "material"\nskin = "image"\nimage = "textures/wood.png"\n')
+    material = load_spec(Path("..") / "project" / "specs" / "spec.toml").controls[-1]
+    assert material.spaces["image"] == Fixed(str(texture.resolve()))
     assert Path(loaded.hdris["studio"]).is_file()
     assert loaded.hdris["white"] is None
 

@@ -13,7 +13,7 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from sweep3d.controls import CONTROLS, Control
+from sweep3d.controls import CONTROLS, Control, is_spec_path
 from sweep3d.errors import SpecError, UserError
 from sweep3d.spec.models import Spec
 from sweep3d.spec.params import (
@@ -104,7 +104,7 @@ def load_spec(path: str | Path) -> LoadedSpec:
 
     _check_model(spec, fail)
     labels = _resolve_labels(spec, fail)
-    controls = _load_controls(spec, fail)
+    controls = _load_controls(spec, fail, base)
     policy = _load_policy(spec, fail)
     store = Path(spec.experiment.store)
     store = (store if store.is_absolute() else base / store).resolve()
@@ -188,7 +188,7 @@ def _resolve_labels(spec: Spec, fail) -> dict[str, tuple]:
     return out
 
 
-def _load_controls(spec: Spec, fail) -> list[ControlInstance]:
+def _load_controls(spec: Spec, fail, base: Path) -> list[ControlInstance]:
     instances: list[ControlInstance] = []
     ids: set[str] = set()
     object_names = {o.name for o in spec.objects}
@@ -211,14 +211,14 @@ def _load_controls(spec: Spec, fail) -> list[ControlInstance]:
             raise fail(f"{where}.id", f"control id {control_id!r} is used twice; give this one its own id = '...'")
         ids.add(control_id)
         control = cls(control_id, type_name)
-        spaces = _control_spaces(control, entry, f"{where}", fail)
+        spaces = _control_spaces(control, entry, f"{where}", fail, base)
         objects = _name_filter(entry, "objects", object_names, where, fail)
         environments = _name_filter(entry, "environments", env_names, where, fail)
         instances.append(ControlInstance(control, spaces, objects, environments))
     return instances
 
 
-def _control_spaces(control: Control, entry: dict[str, Any], where: str, fail) -> dict[str, Space]:
+def _control_spaces(control: Control, entry: dict[str, Any], where: str, fail, base: Path) -> dict[str, Space]:
     fields = control.Params.model_fields
     spaces: dict[str, Space] = {}
     for name, raw in entry.items():
@@ -238,7 +238,26 @@ def _control_spaces(control: Control, entry: dict[str, Any], where: str, fail) -
         except ParamSyntaxError as exc:
             raise fail(f"{where}.{name}", str(exc)) from None
         spaces[name] = _check_space(control, name, space, f"{where}.{name}", fail)
+        if is_spec_path(fields[name]):
+            spaces[name] = _resolve_paths(spaces[name], base, f"{where}.{name}", fail)
     return spaces
+
+
+def _resolve_paths(space: Space, base: Path, key: str, fail) -> Space:
+    """A file parameter's values as absolute paths (relative ones against the spec's folder)."""
+
+    def resolve(value: str) -> str:
+        if not value:
+            return value
+        path = Path(value).expanduser()
+        path = path if path.is_absolute() else base / path
+        if not path.is_file():
+            raise fail(key, f"no such file {value!r} (paths are relative to the spec file)")
+        return str(path.resolve())
+
+    if isinstance(space, Choice):
+        return Choice(tuple(resolve(v) for v in space.options))
+    return Fixed(resolve(space.value))
 
 
 def _check_space(control: Control, name: str, space: Space, key: str, fail) -> Space:

@@ -7,7 +7,7 @@ from typing import Any, Literal
 from pydantic import Field
 
 from sweep3d.cache.keys import file_digest
-from sweep3d.controls import CONTROLS, ControlParams
+from sweep3d.controls import CONTROLS, ControlParams, SpecPath
 from sweep3d.errors import UserError
 from sweep3d.stages.render.controls.base import RenderedControl
 from sweep3d.stages.render.state import Occluder, SceneState
@@ -28,7 +28,7 @@ class Material(RenderedControl):
     class Params(ControlParams):
         skin: Literal[SKINS] = "original"  # type: ignore[valid-type]
         scale: float = Field(1.0, gt=0.0, le=1000.0)
-        image: str = ""
+        image: SpecPath = ""  # relative to the spec file
 
     def params(self, values: dict[str, Any]) -> Params:
         params = self.Params(**values)
