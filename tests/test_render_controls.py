@@ -98,3 +98,15 @@ def test_occlusion_covers_the_side_it_comes_from(blender_scene) -> None:
     right = render(blender_scene, blender_scene.cube, env, [("occlusion", {"coverage": 0.5, "direction": 0.0, "grey": 0.0})])
     diff = np.abs(right - base).mean(axis=2)
     assert diff[:, 16:].mean() > 3 * diff[:, :16].mean()
+
+
+def test_a_procedural_sky_has_a_ground_below_the_horizon(blender_scene) -> None:
+    env = environment("plain")
+    looking_down = [("camera", {"elevation": 50.0}), ("sky", {"enabled": True, "sun_elevation": 30.0})]
+    looking_up = [("camera", {"elevation": -50.0}), ("sky", {"enabled": True, "sun_elevation": 30.0})]
+    down = render(blender_scene, blender_scene.cube, env, looking_down)
+    up = render(blender_scene, blender_scene.cube, env, looking_up)
+    corner = (slice(0, 4), slice(0, 4))  # background only
+    ground, sky = down[corner].mean(), up[corner].mean()
+    assert ground > 0.05, "below the horizon is not black"
+    assert ground < sky, "the ground is dimmer than the sky (its albedo)"

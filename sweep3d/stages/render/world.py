@@ -15,6 +15,9 @@ from sweep3d.stages.render._rna import assign
 from sweep3d.stages.render.state import SceneState
 
 
+GROUND_ALBEDO = 0.3  # below the horizon of a procedural sky
+
+
 class WorldView:
     def __init__(self, bpy, world) -> None:
         self.bpy, self.world = bpy, world
@@ -34,6 +37,8 @@ class WorldView:
             node = self.nodes["sky"]
             assign(node, "sun_elevation", math.radians(sky.sun_elevation))
             assign(node, "sun_rotation", math.radians(sky.sun_azimuth))
+            colour = next(i for i in self.nodes["ground"].inputs if i.identifier == "B_Color")
+            assign(colour, "default_value", ground_colour(sky.sun_elevation))
         if "mapping" in self.nodes:
             assign(self.nodes["mapping"].inputs["Rotation"], "default_value", (0.0, 0.0, math.radians(state.world_rotation)))
         assign(self.nodes["background"].inputs["Strength"], "default_value", strength)
@@ -65,8 +70,33 @@ class WorldView:
             sky = nodes.new("ShaderNodeTexSky")
             sky.sky_type = "NISHITA"
             sky.sun_disc = True
-            links.new(sky.outputs["Color"], background.inputs["Color"])
+            self.nodes["ground"] = self._ground(nodes, links, sky, background)
             self.nodes["sky"] = sky
         else:
             # A plain background is composited after rendering; the world only lights the object.
             background.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+
+    @staticmethod
+    def _ground(nodes, links, sky, background) -> Any:
+        """Nishita's sky is black below the horizon (and takes no direction input to mirror it):
+        show a plain ground there, its brightness set from the sun in :meth:`sync`."""
+        coords = nodes.new("ShaderNodeTexCoord")
+        split = nodes.new("ShaderNodeSeparateXYZ")
+        below = nodes.new("ShaderNodeMath")
+        below.operation = "LESS_THAN"
+        below.inputs[1].default_value = 0.0
+        ground = nodes.new("ShaderNodeMix")
+        ground.data_type = "RGBA"
+        links.new(coords.outputs["Generated"], split.inputs["Vector"])
+        links.new(split.outputs["Z"], below.inputs[0])
+        links.new(below.outputs["Value"], ground.inputs["Factor"])
+        links.new(sky.outputs["Color"], ground.inputs["A"])
+        links.new(ground.outputs["Result"], background.inputs["Color"])
+        return ground
+
+
+def ground_colour(sun_elevation: float) -> tuple[float, float, float, float]:
+    """Linear RGBA of a grey ground lit by a sun at ``sun_elevation`` degrees (a little sky light
+    when the sun is down): albedo × (direct + ambient), in the sky's units at strength 1."""
+    lit = GROUND_ALBEDO * (max(math.sin(math.radians(sun_elevation)), 0.0) + 0.05)
+    return (lit, lit, lit, 1.0)
