@@ -14,7 +14,6 @@ from sweep3d.errors import UserError
 from sweep3d.stages.render._rna import assign
 from sweep3d.stages.render.state import SceneState
 
-
 GROUND_ALBEDO = 0.3  # below the horizon of a procedural sky
 
 
