@@ -28,10 +28,11 @@ def cache_status(plan: Plan, store: Store) -> list[tuple[str, int, int]]:
     ]
 
 
-def estimate_render_seconds(spec: LoadedSpec, store: Store) -> float:
-    """A rough per-render cost from the settings (DESIGN.md measurements on 2 CPU cores)."""
+def estimate_render_seconds(spec: LoadedSpec, pixels: int) -> float:
+    """A rough per-render cost from the settings and the rendered side in pixels (DESIGN.md
+    measurements on 2 CPU cores)."""
     r = spec.spec.render
-    scale = (r.resolution / 224) ** 2
+    scale = (pixels / 224) ** 2
     denoise = DENOISE_SECONDS_224[r.denoise_prefilter] if r.denoise else 0.0
     return (SECONDS_PER_SAMPLE_224 * r.samples + denoise + 0.02) * scale
 
@@ -45,7 +46,7 @@ def print_plan(console: Console, spec: LoadedSpec) -> None:
                   f"({len(spec.spec.objects)} objects × {len(spec.spec.environments)} environments), "
                   f"policy {spec.spec.policy.type}; store {escape(str(spec.store))}")
     table = Table("stage", "needed", "cached", "to compute", "estimate")
-    per_item = {"render": estimate_render_seconds(spec, store), "postprocess": 0.005, "infer": INFER_SECONDS}
+    per_item = {"render": estimate_render_seconds(spec, plan.framing.crop), "postprocess": 0.005, "infer": INFER_SECONDS}
     total = 0.0
     for stage, needed, cached in status:
         seconds = (needed - cached) * per_item[stage]

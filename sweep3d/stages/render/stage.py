@@ -76,7 +76,7 @@ def render_stage(plan: Plan, store: Store, progress: RunProgress, executor: Exec
     outcome = StageOutcome("render", total=len(unique), cached=len(cached))
     if todo:
         groups = _groups(plan, store, todo)
-        settings = plan.spec.spec.render.model_dump()
+        settings = plan.render_settings()
         workers = min(plan.spec.spec.render.workers, len(groups))
         with progress.stage("render", len(todo), len(cached)) as bar, \
                 executor.pool(settings, workers, plan.spec.spec.render.timeout) as pool, \
