@@ -22,6 +22,7 @@ from rich.console import Console
 from sweep3d.cache.store import TABLES, Store, utc_now
 from sweep3d.errors import SpecError, UserError
 from sweep3d.progress import RunProgress
+from sweep3d.spec.framing import Framing, resolve_framing
 from sweep3d.spec.loader import LoadedSpec
 from sweep3d.stages.infer import infer_stage
 from sweep3d.stages.infer.stage import ReadyModel, pending_predictions, prepare_model
@@ -110,12 +111,12 @@ def run_stages(plan: Plan, store: Store, progress: RunProgress, model: ReadyMode
     return outcomes
 
 
-def _model_digest(spec: LoadedSpec) -> str:
-    """The model's digest (loads a user's factory), its errors naming ``model.name``."""
+def _model_digest(spec: LoadedSpec, framing: Framing) -> str:
+    """The model's digest for this framing (loads a user's factory), its errors naming ``model.name``."""
     from sweep3d.stages.infer.models import model_digest
 
     try:
-        return model_digest(spec.spec.model.name)
+        return model_digest(spec.spec.model.name, framing.model)
     except SpecError:
         raise
     except UserError as exc:
@@ -153,12 +154,13 @@ def _run_locked(spec: LoadedSpec, store: Store, console: Console | None, wait: f
         started_at = utc_now()
         for table in TABLES:
             store.sweep_superseded(table)  # segments an earlier compaction merged, past their grace
-        result = RunResult(uuid.uuid4().hex[:12], make_plan(spec, _model_digest(spec)))
+        framing = resolve_framing(spec)
+        result = RunResult(uuid.uuid4().hex[:12], make_plan(spec, _model_digest(spec, framing), framing=framing))
         model = prepare_model(result.plan, store) if pending_predictions(result.plan, store) else None
         with RunProgress(console) as progress:
             history: History = {}
             while True:  # one pass for fixed policies; one per round for adaptive ones
-                plan = make_plan(spec, result.plan.model_digest, history) if history else result.plan
+                plan = make_plan(spec, result.plan.model_digest, history, framing) if history else result.plan
                 try:
                     outcomes = run_stages(plan, store, progress, model, executor)
                 except KeyboardInterrupt:

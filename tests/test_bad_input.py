@@ -90,6 +90,9 @@ def two_labels():
 
 def fine():
     return Net(1000)
+
+def own_preprocess():
+    return Classifier(Net(1000), preprocess=lambda images: torch.zeros(len(images), 3, 8, 8))
 '''
 
 
@@ -160,7 +163,13 @@ CASES = [
          ("between 0 and 1",)),
     Case("policy-samples-negative", ('type = "grid"', 'type = "random"\nsamples = -5'), "policy.samples",
          ("greater than or equal to 1",)),
-    Case("resolution-tiny", ("resolution = 32", "resolution = 4"), "render.resolution", ("greater than or equal to 8",)),
+    Case("resolution-tiny", ("resolution = 32", "resolution = 4"), "render.resolution", ("8..4096 pixels or \"model\"",)),
+    Case("resolution-word", ("resolution = 32", 'resolution = "full"'), "render.resolution",
+         ("8..4096 pixels or \"model\"", "'full'")),
+    Case("resolution-model-of-a-model-with-its-own-preprocessing",
+         ("resolution = 32\nsamples = 1\ndenoise = false\n\n[model]\n",
+          'resolution = "model"\nsamples = 1\ndenoise = false\n\n[model]\nname = "bad_input_models:own_preprocess"\n'),
+         "render.resolution", ("input size is unknown", "resolution = 224"), model_module=True),
     Case("label-boolean", ('labels = ["carton"]', "labels = [true]"), "objects[0].labels",
          ("not a class name or id",)),
     Case("evaluator-unknown", ("[model]\n", '[evaluator]\nkind = "detektion"\n\n[model]\n'), "evaluator.kind",

@@ -1,9 +1,13 @@
 """Measure render settings against a high-sample reference on a seeded sample of a spec's jobs.
 
 Every setting's renders and predictions go through the normal cached stages, so a second
-bench (or a run at the chosen setting) reuses them. Error is measured on the renders (PSNR,
-SSIM against the reference, at the reference's resolution); agreement on the predictions
-(same top-1 class; same correct/incorrect verdict).
+bench (or a run at the chosen setting) reuses them. Error is measured on what the model sees:
+the reference is rendered at the model's input (``resolution = "model"``) when its size is
+known, and each setting's image is brought to that view by the model's own resize and crop
+before PSNR and SSIM, so full-frame and model-framed settings are compared like with like.
+Agreement is measured on the predictions (same top-1 class; same correct/incorrect verdict),
+with a 95 % Wilson interval, against a noise floor: the reference rendered again with
+another Cycles seed (a near-tie job can flip between two references too).
 """
 
 from __future__ import annotations
@@ -19,6 +23,7 @@ from sweep3d.errors import UserError
 from sweep3d.pixels import decode_png
 from sweep3d.progress import RunProgress
 from sweep3d.spec.loader import LoadedSpec
+from sweep3d.stages.aggregate import wilson_interval
 from sweep3d.stages.infer import infer_stage
 from sweep3d.stages.plan import Plan, make_plan
 from sweep3d.stages.postprocess import postprocess_stage
@@ -32,20 +37,29 @@ class Setting:
     samples: int
     denoise: str  # "off" or the OIDN prefilter: "none", "fast", "accurate"
     max_bounces: int = 8
-    resolution: int | None = None  # None: the spec's
+    resolution: int | str | None = None  # None: the spec's; "model": the model's input
+    adaptive: float = 0.0  # Cycles adaptive sampling threshold (0 = off)
+    seed: int = 0  # Cycles seed: the noise-floor reference differs from the reference only here
 
-    def render_update(self, spec_resolution: int) -> dict:
+    def render_update(self, spec_resolution: int | str) -> dict:
         return {"samples": self.samples, "denoise": self.denoise != "off",
                 "denoise_prefilter": "fast" if self.denoise == "off" else self.denoise,
-                "max_bounces": self.max_bounces, "resolution": self.resolution or spec_resolution}
+                "max_bounces": self.max_bounces, "resolution": self.resolution or spec_resolution,
+                "adaptive_threshold": self.adaptive, "seed": self.seed}
 
     def label(self) -> str:
-        """Compact, e.g. ``4spp oidn-fast``, ``64spp plain b2 160px``."""
+        """Compact, e.g. ``4spp oidn-fast``, ``64spp plain b2 160px``, ``4spp oidn-fast model``."""
         parts = [f"{self.samples}spp", "plain" if self.denoise == "off" else f"oidn-{self.denoise}"]
+        if self.adaptive:
+            parts.append(f"adaptive {self.adaptive:g}")
         if self.max_bounces != 8:
             parts.append(f"b{self.max_bounces}")
-        if self.resolution:
+        if self.resolution == "model":
+            parts.append("model")
+        elif self.resolution:
             parts.append(f"{self.resolution}px")
+        if self.seed:
+            parts.append(f"seed {self.seed}")
         return " ".join(parts)
 
 
@@ -53,32 +67,62 @@ class Setting:
 class BenchRow:
     setting: Setting
     seconds: float  # median render seconds per image
-    psnr: float  # dB against the reference, mean over jobs
+    psnr: float  # dB against the reference, mean over jobs, in the model's view
     ssim: float
-    top1_agreement: float  # share of jobs whose top-1 class matches the reference's
-    verdict_agreement: float  # share whose correct/incorrect verdict matches
+    top1: int  # jobs whose top-1 class matches the reference's
+    verdicts: int  # jobs whose correct/incorrect verdict matches
+    jobs: int
     is_reference: bool = False
+    is_floor: bool = False  # the reference again with another seed: the noise floor
+    passes: bool = False  # set by :func:`recommend`
+
+    @property
+    def top1_agreement(self) -> float:
+        return self.top1 / self.jobs
+
+    @property
+    def verdict_agreement(self) -> float:
+        return self.verdicts / self.jobs
+
+    def interval(self) -> tuple[float, float]:
+        """95 % Wilson interval of the top-1 agreement (verdicts agree whenever top-1 classes do)."""
+        return wilson_interval(self.top1, self.jobs)
+
+    @property
+    def is_setting(self) -> bool:
+        """A candidate (not one of the two references)."""
+        return not (self.is_reference or self.is_floor)
 
 
-def default_settings(current: Setting) -> list[Setting]:
-    """The grid: samples × denoiser, a few bounce and resolution variants, and the spec's own."""
-    grid = [Setting(s, d) for s in (1, 4, 16, 64) for d in ("off", "fast", "accurate")]
+def default_settings(current: Setting, model_view: bool = True) -> list[Setting]:
+    """The grid: samples × denoiser, adaptive sampling, bounces, resolutions, the model's view
+    (when its input size is known), and the spec's own setting."""
+    grid = [Setting(s, d) for s in (1, 4, 16) for d in ("off", "fast", "accurate")]
+    grid += [Setting(64, "fast"), Setting(64, "fast", adaptive=0.05)]
     grid += [Setting(4, "fast", max_bounces=b) for b in (2, 4)]
     grid += [Setting(4, "fast", resolution=160)]
+    if model_view:
+        grid += [Setting(s, d, resolution="model") for s, d in ((1, "fast"), (4, "fast"), (4, "accurate"), (16, "fast"))]
     return list(dict.fromkeys(grid + [current]))
 
 
-def measure(loaded: LoadedSpec, settings: list[Setting], reference: Setting, jobs: int,
+def reference_settings(samples: int, denoise: str, current: Setting, model_view: bool) -> tuple[Setting, Setting]:
+    """The reference and its noise floor: the same render with another Cycles seed."""
+    reference = Setting(samples, denoise, max(current.max_bounces, 12), "model" if model_view else None)
+    return reference, dataclasses.replace(reference, seed=1)
+
+
+def measure(loaded: LoadedSpec, settings: list[Setting], reference: Setting, floor: Setting | None, jobs: int,
             progress: RunProgress) -> list[BenchRow]:
-    """Render the sample under every setting and the reference; compare each with the reference."""
-    plans = {}
+    """Render the sample under every setting and both references; compare each with the reference."""
+    plans: dict[Setting, Plan] = {}
     indices = None
-    for setting in [reference] + settings:
+    for setting in [reference] + ([floor] if floor else []) + settings:
         plan = make_plan(_with(loaded, setting))
         if indices is None:
             indices = _sample(plan, jobs, loaded.spec.experiment.seed)
         by_index = {j.index: j for j in plan.jobs}
-        plans[setting] = Plan(plan.spec, [by_index[i] for i in indices], plan.model_digest, plan.columns)
+        plans[setting] = dataclasses.replace(plan, jobs=[by_index[i] for i in indices], out_of_frame=[])
     store = Store(loaded.store)
     with store.lock():
         for setting, plan in plans.items():
@@ -91,24 +135,39 @@ def measure(loaded: LoadedSpec, settings: list[Setting], reference: Setting, job
     seconds = dict(con.execute("SELECT render_key, seconds FROM renders").fetchall())
     verdicts = {r[0]: (r[1], r[2]) for r in con.execute("SELECT pred_key, top1, correct FROM predictions").fetchall()}
     ref_plan = plans[reference]
-    ref_images = [decode_png(store.blob_path(j.render_key)) for j in ref_plan.jobs]
+    ref_images = [_as_seen(decode_png(store.blob_path(j.render_key)), ref_plan) for j in ref_plan.jobs]
     rows = []
     for setting, plan in plans.items():
-        images = [decode_png(store.blob_path(j.render_key)) for j in plan.jobs]
+        images = [_as_seen(decode_png(store.blob_path(j.render_key)), plan, ref_images[0].shape[0])
+                  for j in plan.jobs]
         errors = [_errors(img, ref) for img, ref in zip(images, ref_images)]
-        same_top1 = [verdicts[j.pred_key][0] == verdicts[r.pred_key][0] for j, r in zip(plan.jobs, ref_plan.jobs)]
-        same_verdict = [verdicts[j.pred_key][1] == verdicts[r.pred_key][1] for j, r in zip(plan.jobs, ref_plan.jobs)]
+        pairs = [(verdicts[j.pred_key], verdicts[r.pred_key]) for j, r in zip(plan.jobs, ref_plan.jobs)]
         rows.append(BenchRow(
             setting, statistics.median(seconds[j.render_key] for j in plan.jobs),
             float(np.mean([e[0] for e in errors])), float(np.mean([e[1] for e in errors])),
-            float(np.mean(same_top1)), float(np.mean(same_verdict)), is_reference=setting == reference))
+            sum(a[0] == b[0] for a, b in pairs), sum(a[1] == b[1] for a, b in pairs), len(pairs),
+            is_reference=setting == reference, is_floor=setting == floor))
     return rows
 
 
 def recommend(rows: list[BenchRow], agreement: float = 0.99) -> BenchRow | None:
-    """The fastest non-reference setting whose top-1 and verdict agreement both reach ``agreement``."""
-    good = [r for r in rows if not r.is_reference and min(r.top1_agreement, r.verdict_agreement) >= agreement]
-    return min(good, key=lambda r: r.seconds, default=None)
+    """The fastest setting that passes; marks each row's ``passes``.
+
+    A setting passes when its top-1 agreement with the reference is not clearly below the
+    target: the top of its 95 % Wilson interval reaches ``agreement``, or the noise floor's
+    agreement (the reference against itself at another seed) if that is lower, since no
+    setting can be expected to agree with the reference more than the reference does with itself.
+    """
+    target = required_agreement(rows, agreement)
+    for row in rows:
+        row.passes = row.is_setting and row.interval()[1] >= target
+    return min((r for r in rows if r.passes), key=lambda r: r.seconds, default=None)
+
+
+def required_agreement(rows: list[BenchRow], agreement: float) -> float:
+    """The target, lowered to the noise floor's agreement when that is lower."""
+    floor = next((r for r in rows if r.is_floor), None)
+    return min(agreement, floor.top1_agreement) if floor else agreement
 
 
 def pareto(rows: list[BenchRow]) -> list[BenchRow]:
@@ -132,15 +191,34 @@ def _sample(plan: Plan, jobs: int, seed: int) -> list[int]:
     return sorted(distinct[i].index for i in chosen)
 
 
+def _as_seen(image: np.ndarray, plan: Plan, side: int | None = None) -> np.ndarray:
+    """The image as the model sees it (its resize and centre crop; nothing for a model-framed
+    render), or, when the model's input size is unknown, resized to the reference's ``side``."""
+    from sweep3d.stages.infer.models import Preprocess, input_geometry
+
+    framing = plan.framing
+    if framing is not None and framing.model:
+        return image
+    try:
+        resize, crop = input_geometry(plan.spec.spec.model.name)
+    except UserError:  # a user's own preprocessing: compare at the reference's resolution
+        return image if side in (None, image.shape[0]) else _resize(image, side)
+    geometry = Preprocess(resize, crop, mean=(0.0, 0.0, 0.0), std=(1.0, 1.0, 1.0))
+    return geometry(image[None])[0].permute(1, 2, 0).numpy()
+
+
+def _resize(image: np.ndarray, side: int) -> np.ndarray:
+    from PIL import Image
+
+    pil = Image.fromarray((np.clip(image, 0, 1) * 255 + 0.5).astype(np.uint8))
+    return np.asarray(pil.resize((side, side), Image.Resampling.BICUBIC), np.float32) / 255.0
+
+
 def _errors(image: np.ndarray, reference: np.ndarray) -> tuple[float, float]:
-    """(PSNR in dB, SSIM) of ``image`` against ``reference``, resized to it if needed."""
+    """(PSNR in dB, SSIM) of ``image`` against ``reference`` (same shape)."""
     from skimage.metrics import structural_similarity
 
-    if image.shape != reference.shape:
-        from PIL import Image
-
-        pil = Image.fromarray((np.clip(image, 0, 1) * 255 + 0.5).astype(np.uint8))
-        image = np.asarray(pil.resize(reference.shape[1::-1], Image.Resampling.BICUBIC), np.float32) / 255.0
+    image = np.clip(image, 0.0, 1.0)
     mse = float(np.mean((image - reference) ** 2))
     psnr = 100.0 if mse == 0 else 10.0 * np.log10(1.0 / mse)
     ssim = float(structural_similarity(image, reference, channel_axis=2, data_range=1.0))

@@ -12,9 +12,9 @@ from sweep3d.cache.store import atomic_write
 
 def write_pareto_plot(rows: list[BenchRow], recommended: BenchRow | None, path: Path, title: str) -> Path:
     """Write a self-contained HTML plot (plotly inlined) and return its path."""
-    front = sorted(pareto([r for r in rows if not r.is_reference]), key=lambda r: r.seconds)
+    front = sorted(pareto([r for r in rows if r.is_setting]), key=lambda r: r.seconds)
     fig = go.Figure()
-    others = [r for r in rows if not r.is_reference]
+    others = [r for r in rows if r.is_setting]
     fig.add_trace(go.Scatter(
         x=[r.seconds for r in others], y=[r.psnr for r in others], mode="markers+text",
         text=[r.setting.label() for r in others], textposition="top center", name="settings",

@@ -77,12 +77,26 @@ def report(
 @command
 def bench(
     spec: Path = SpecArg,
-    jobs: int = typer.Option(8, min=1, help="Jobs sampled (seeded) from the spec's plan."),
+    jobs: int = typer.Option(100, min=1, help="Jobs sampled (seeded) from the spec's plan; agreement is known to "
+                                              "about ±1/sqrt(jobs), so a few dozen at least."),
     reference_samples: int = typer.Option(512, min=1, help="Samples per pixel of the reference renders."),
-    agreement: float = typer.Option(0.99, min=0.0, max=1.0, help="Prediction agreement the recommendation needs."),
+    reference_denoise: str = typer.Option("off", help="The reference's denoiser: off, or OIDN with the "
+                                                      "accurate/fast/none prefilter."),
+    floor: bool = typer.Option(True, help="Render the reference again with another Cycles seed: how often two "
+                                          "references disagree is the noise floor (doubles the reference's cost)."),
+    agreement: float = typer.Option(0.99, min=0.0, max=1.0, help="Top-1 agreement with the reference a setting "
+                                                                 "needs (lowered to the noise floor's, if lower)."),
     apply: bool = typer.Option(False, "--apply", help="Write the recommended setting into the spec's [render]."),
 ) -> None:
-    """Render time against error: find the cheapest render setting the model cannot tell apart."""
+    """Render time against error: find the cheapest render setting the model cannot tell apart.
+
+    Renders a seeded sample of jobs at a high-sample reference, at the reference again with
+    another seed (the noise floor) and at a grid of cheaper settings, all through the cached
+    stages. A setting passes when the top of the 95 % Wilson interval of its top-1 agreement
+    with the reference reaches --agreement (or the floor's agreement, if lower): it is not
+    clearly worse. The fastest passing setting is recommended, with its speed-up over the
+    spec's setting measured in the same run.
+    """
     from sweep3d.bench import (
         Setting,
         apply_setting,
@@ -90,22 +104,32 @@ def bench(
         measure,
         recommend,
     )
+    from sweep3d.bench.measure import reference_settings
     from sweep3d.bench.plot import write_pareto_plot
     from sweep3d.cache.store import Store
     from sweep3d.cli.views import print_bench
     from sweep3d.progress import RunProgress
     from sweep3d.spec import load_spec
+    from sweep3d.stages.infer.models import input_geometry
 
+    if reference_denoise not in ("off", "accurate", "fast", "none"):
+        raise UserError(f"--reference-denoise {reference_denoise!r}: use off, accurate, fast or none")
     loaded = load_spec(spec)
     r = loaded.spec.render
-    current = Setting(r.samples, r.denoise_prefilter if r.denoise else "off", r.max_bounces)
-    reference = Setting(reference_samples, "off", max(r.max_bounces, 12))
+    try:
+        input_geometry(loaded.spec.model.name)
+        model_view = True
+    except UserError:  # a user's own preprocessing: no model framing, compare at the spec's resolution
+        model_view = False
+    current = Setting(r.samples, r.denoise_prefilter if r.denoise else "off", r.max_bounces,
+                      "model" if r.resolution == "model" else None, r.adaptive_threshold)
+    reference, twin = reference_settings(reference_samples, reference_denoise, current, model_view)
     with RunProgress(console) as progress:
-        rows = measure(loaded, default_settings(current), reference, jobs, progress)
+        rows = measure(loaded, default_settings(current, model_view), reference, twin if floor else None, jobs, progress)
     best = recommend(rows, agreement)
-    print_bench(console, rows, best, current)
+    print_bench(console, rows, best, current, agreement)
     plot = write_pareto_plot(rows, best, Store(loaded.store).report_path(loaded.name, "-bench.html"),
-                             f"{loaded.name}: render time against error ({jobs} jobs)")
+                             f"{loaded.name}: render time against error ({rows[0].jobs} jobs)")
     console.print(f"Pareto plot: [bold]{plot}[/]")
     if apply and best is not None:
         apply_setting(spec, best.setting, r.resolution)

@@ -15,6 +15,7 @@ from PIL import Image, ImageDraw
 from sweep3d.cache.store import Store
 from sweep3d.errors import UserError
 from sweep3d.progress import RunProgress
+from sweep3d.spec.framing import resolve_framing
 from sweep3d.spec.loader import LoadedSpec
 from sweep3d.stages.plan import Job, Plan, make_plan
 from sweep3d.stages.plan.policies import GridPolicy
@@ -33,14 +34,15 @@ def contact_sheet(loaded: LoadedSpec, output: Path, progress: RunProgress) -> Pa
         raise UserError(f"{loaded.path}: the spec has no [[controls]] to show")
     rows: list[tuple[str, list[Job]]] = []
     jobs: list[Job] = []
+    framing = resolve_framing(loaded)
     for inst in loaded.controls:
-        plan = make_plan(_one_control(loaded, inst), model_digest="sheet")
+        plan = make_plan(_one_control(loaded, inst), model_digest="sheet", framing=framing)
         distinct = list({j.image_key: j for j in plan.jobs}.values())
         if len(distinct) > MAX_TILES:  # several ranges: a spread of the grid
             distinct = [distinct[round(i * (len(distinct) - 1) / (MAX_TILES - 1))] for i in range(MAX_TILES)]
         rows.append((inst.id, distinct))
         jobs += distinct
-    plan = Plan(loaded, jobs, "sheet")
+    plan = Plan(loaded, jobs, "sheet", framing=framing)
     store = Store(loaded.store)
     with store.lock():
         for stage in (render_stage, postprocess_stage):

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from typing import Annotated, Any, Literal, Union
+from typing import Annotated, Any, Literal
 
 from pydantic import (
     BaseModel,
@@ -28,14 +28,28 @@ class ExperimentSpec(StrictModel):
 
 
 class RenderSpec(StrictModel):
-    resolution: int = Field(224, ge=8, le=4096, description="Square image side in pixels.")
+    resolution: int | Literal["model"] = Field(
+        224, description="Square image side in pixels, or 'model': render exactly the model's input "
+                         "(the centre crop of a frame of its resize size), which it then does not resample.")
     samples: int = Field(4, ge=1, le=65536, description="Cycles samples per pixel.")
     denoise: bool = True
     denoise_prefilter: Literal["fast", "accurate", "none"] = "fast"
     max_bounces: int = Field(8, ge=0, le=1024)
+    adaptive_threshold: float = Field(0.0, ge=0.0, le=1.0, allow_inf_nan=False,
+                                      description="Cycles adaptive sampling noise threshold; 0 = off.")
+    seed: int = Field(0, ge=0, le=2**31 - 1, description="Cycles sampling seed.")
     threads: int = Field(0, ge=0, le=1024, description="Cycles threads per worker; 0 = all cores.")
     workers: int = Field(1, ge=1, le=256, description="Render worker processes.")
     timeout: float = Field(600.0, gt=0, description="Seconds one render may take before it fails.")
+
+    @field_validator("resolution", mode="before")
+    @classmethod
+    def _pixels_or_model(cls, value: Any) -> Any:
+        """One clear line instead of pydantic's two union branches."""
+        if value == "model" or (isinstance(value, int) and not isinstance(value, bool) and 8 <= value <= 4096):
+            return value
+        raise ValueError(f"must be a square image side of 8..4096 pixels or \"model\" (the model's input "
+                         f"size, which it then does not resample); got {value!r}")
 
     @field_validator("timeout")
     @classmethod
@@ -44,9 +58,18 @@ class RenderSpec(StrictModel):
             raise ValueError("must be a finite number of seconds")
         return value
 
-    def key_part(self) -> dict[str, Any]:
-        """Settings that change pixels (threads and workers do not)."""
-        return self.model_dump(exclude={"threads", "workers", "timeout"})
+    def key_part(self, pixels: dict[str, int]) -> dict[str, Any]:
+        """Settings that change pixels (threads and workers do not).
+
+        Args:
+            pixels: the resolved frame (``Framing.key_part()``): "model" is never hashed as such,
+                so a model-framed render and a full-frame one cannot share a key. New settings at
+                their neutral value are left out, so older keys stay valid.
+        """
+        part = self.model_dump(exclude={"threads", "workers", "timeout", "resolution", "adaptive_threshold", "seed"})
+        part.update(pixels)
+        part.update({k: v for k in ("adaptive_threshold", "seed") if (v := getattr(self, k))})
+        return part
 
 
 class ModelSpec(StrictModel):
@@ -64,7 +87,7 @@ class EvaluatorSpec(StrictModel):
 class ObjectSpec(StrictModel):
     name: Name
     mesh: str = Field(description="OBJ/glTF/GLB/PLY/STL path, or 'archive.zip#member.obj'.")
-    labels: list[Union[int, str]] = Field(min_length=1, description="ImageNet class names or ids.")
+    labels: list[int | str] = Field(min_length=1, description="ImageNet class names or ids.")
 
     @field_validator("labels", mode="before")
     @classmethod
@@ -93,7 +116,7 @@ class EnvironmentSpec(StrictModel):
         return color
 
     @model_validator(mode="after")
-    def _one_background(self) -> "EnvironmentSpec":
+    def _one_background(self) -> EnvironmentSpec:
         if (self.hdri is None) == (self.color is None):
             raise ValueError("give exactly one of hdri = '...' or color = [r, g, b]")
         return self

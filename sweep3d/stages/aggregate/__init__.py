@@ -13,7 +13,13 @@ from sweep3d.stages.aggregate.summary import (
     summarise,
     weakest_regions,
 )
-from sweep3d.stages.aggregate.views import MACROS, VIEWS, has_view, register_views
+from sweep3d.stages.aggregate.views import (
+    MACROS,
+    VIEWS,
+    has_view,
+    register_views,
+    wilson_interval,
+)
 
 __all__ = ["MACROS", "VIEWS", "ControlEffect", "Region", "Summary", "control_effects", "has_view",
-           "register_views", "summarise", "weakest_regions"]
+           "register_views", "summarise", "weakest_regions", "wilson_interval"]

@@ -124,6 +124,17 @@ def _create_macros(con: duckdb.DuckDBPyConnection) -> None:
     )
 
 
+def wilson_interval(k: int, n: int) -> tuple[float, float]:
+    """The 95 % Wilson interval of k successes in n, from the same SQL macros the report uses."""
+    con = duckdb.connect()
+    try:
+        _create_macros(con)
+        low, high = con.execute("SELECT wilson_low($k, $n), wilson_high($k, $n)", {"k": k, "n": n}).fetchone()
+    finally:
+        con.close()
+    return float(low), float(high)
+
+
 def _view_statements(parameters: list[tuple[str, bool]], has_predictions: bool) -> list[str]:
     """The CREATE statements, in dependency order."""
     accuracy = _ACCURACY

@@ -8,6 +8,7 @@ user's own code: nothing is downloaded at run time.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import hashlib
 import io
 from dataclasses import dataclass, field
@@ -120,17 +121,50 @@ def efficientnet_lite0() -> Classifier:
     return Classifier(module, LITE0_PREPROCESS, None, weights_digest=file_digest(weights))
 
 
-#: Digests of built-in models that need no torch import (plan stays fast).
-_CHEAP_DIGESTS: dict[str, Callable[[], str]] = {
-    "efficientnet-lite0": lambda: _model_key("efficientnet-lite0", file_digest(_lite0_weights()), LITE0_PREPROCESS),
+#: Weights digests and preprocessing of built-in models, known without importing torch (plan stays fast).
+_BUILTIN: dict[str, tuple[Callable[[], str], Preprocess]] = {
+    "efficientnet-lite0": (lambda: file_digest(_lite0_weights()), LITE0_PREPROCESS),
 }
 
 
-def model_digest(name: str) -> str:
-    """The digest that goes into prediction keys; loads the model only for user factories."""
-    if name in _CHEAP_DIGESTS:
-        return _CHEAP_DIGESTS[name]()
-    return load_model(name).digest(name)
+def for_model_framing(preprocess: Any, name: str) -> Preprocess:
+    """``preprocess`` for images rendered at the model's input (``resolution = "model"``).
+
+    Resizing to the crop size is the identity on a crop-sized image, so only normalisation is
+    left; its key differs from the resampling one's, so predictions are not shared.
+
+    Raises:
+        UserError: if the preprocessing is not a :class:`Preprocess` (its input size is unknown).
+    """
+    if not isinstance(preprocess, Preprocess):
+        raise UserError(f"model {name!r} preprocesses with a {type(preprocess).__name__}, not sweep3d's Preprocess, "
+                        "so its input size is unknown; give a pixel size, e.g. resolution = 224")
+    return dataclasses.replace(preprocess, resize=preprocess.crop)
+
+
+def input_geometry(name: str) -> tuple[int, int]:
+    """(resize, crop) of the model's preprocessing; loads the model only for user factories."""
+    if name in _BUILTIN:
+        pre = _BUILTIN[name][1]
+    else:
+        pre = load_model(name).preprocess
+        for_model_framing(pre, name)  # raises when its sizes are unknown
+    return pre.resize, pre.crop
+
+
+def model_digest(name: str, model_framed: bool = False) -> str:
+    """The digest that goes into prediction keys; loads the model only for user factories.
+
+    Args:
+        model_framed: images are rendered at the model's input: the preprocessing only normalises.
+    """
+    if name in _BUILTIN:
+        weights, pre = _BUILTIN[name]
+        return _model_key(name, weights(), for_model_framing(pre, name) if model_framed else pre)
+    model = load_model(name)
+    if model_framed:
+        model.preprocess = for_model_framing(model.preprocess, name)
+    return model.digest(name)
 
 
 def load_model(name: str) -> Classifier:

@@ -14,12 +14,14 @@ import numpy as np
 class InferenceActor:
     """Holds one classifier; ``logits`` runs a batch on the actor's device."""
 
-    def __init__(self, name: str) -> None:
+    def __init__(self, name: str, model_framed: bool = False) -> None:
         import torch
 
-        from sweep3d.stages.infer.models import load_model
+        from sweep3d.stages.infer.models import for_model_framing, load_model
 
         self.model = load_model(name)
+        if model_framed:  # images are the model's input already (resolution = "model")
+            self.model.preprocess = for_model_framing(self.model.preprocess, name)
         self.device = "cuda" if torch.cuda.is_available() else "cpu"
         self.model.module.to(self.device)
 
@@ -34,10 +36,10 @@ class InferenceActor:
         return out.detach().float().cpu().numpy()
 
 
-def remote_runner(name: str) -> Any:
+def remote_runner(name: str, model_framed: bool = False) -> Any:
     """A callable mapping images (N, H, W, 3) to logits through a Ray actor."""
     import ray
 
     gpus = 1 if ray.cluster_resources().get("GPU", 0) >= 1 else 0
-    actor = ray.remote(num_gpus=gpus, num_cpus=1)(InferenceActor).remote(name)
+    actor = ray.remote(num_gpus=gpus, num_cpus=1)(InferenceActor).remote(name, model_framed)
     return lambda images: ray.get(actor.logits.remote(images))

@@ -20,9 +20,10 @@ from sweep3d.cache.blobs import load_image
 from sweep3d.cache.store import Store, utc_now
 from sweep3d.errors import SpecError, UserError
 from sweep3d.progress import RunProgress
+from sweep3d.spec.framing import resolve_framing
 from sweep3d.stages.infer.evaluators import EVALUATORS, Evaluator
 from sweep3d.stages.infer.labels import LabelMap
-from sweep3d.stages.infer.models import Classifier, load_model
+from sweep3d.stages.infer.models import Classifier, for_model_framing, load_model
 from sweep3d.stages.outcome import StageOutcome
 from sweep3d.stages.plan.jobs import Job, Plan
 
@@ -93,10 +94,13 @@ def prepare_model(plan: Plan, store: Store | None = None) -> ReadyModel:
     name = spec.spec.model.name
     threads = spec.spec.model.threads or os.cpu_count() or 1
     torch.set_num_threads(threads)
+    framing = plan.framing or resolve_framing(spec)
     try:
         model = load_model(name)
+        if framing.model:  # the image is the model's input already: no resize or crop again
+            model.preprocess = for_model_framing(model.preprocess, name)
         labels = model.label_map()
-        size = spec.spec.render.resolution
+        size = framing.crop
         logits = predict(model, np.zeros((1, size, size, 3), np.float32), name)
         _check_classes(logits, labels, name)
     except SpecError:
@@ -136,7 +140,7 @@ def infer_stage(plan: Plan, store: Store, progress: RunProgress, model: ReadyMod
         if on_ray and spec.model.backend == "torch":  # batches go to an inference actor (GPU if any)
             from sweep3d.stages.infer.ray_actor import remote_runner
 
-            remote = remote_runner(spec.model.name)
+            remote = remote_runner(spec.model.name, bool(plan.framing and plan.framing.model))
         evaluator = EVALUATORS.get(spec.evaluator.kind)(top_k=spec.evaluator.top_k)
         schema = predictions_schema(evaluator)
         valid = {**store.column_map("renders", "valid"), **store.column_map("images", "valid")}

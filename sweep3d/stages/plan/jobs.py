@@ -19,6 +19,7 @@ from typing import Any
 
 from sweep3d.cache.keys import digest, file_digest
 from sweep3d.parts import PARTS_LAYOUT
+from sweep3d.spec.framing import Framing, resolve_framing
 from sweep3d.spec.loader import ControlInstance, LoadedSpec
 from sweep3d.spec.space import Point, SearchSpace
 from sweep3d.stages.plan.policies import Outcome
@@ -53,6 +54,15 @@ class Plan:
     columns: list[str] = field(default_factory=list)  # one column per control parameter
     #: Jobs whose object is wholly outside the frame: flagged, never rendered or evaluated.
     out_of_frame: list[Job] = field(default_factory=list)
+    #: The resolved frame (``resolution = "model"`` becomes the model's resize and crop sizes).
+    framing: Framing | None = None
+
+    def render_settings(self) -> dict[str, Any]:
+        """The [render] settings with the resolved frame and the passes to write, as render
+        workers need them (the UV pass only for the report's part-visibility panel)."""
+        framing = self.framing or resolve_framing(self.spec)
+        passes = ["uv"] if self.spec.spec.report.part_visibility else []
+        return {**self.spec.spec.render.model_dump(), **framing.settings(), "passes": passes}
 
     def rows(self) -> list[dict[str, Any]]:
         """The jobs table: one row per job with its scene, control values, keys and ``in_frame``."""
@@ -76,20 +86,25 @@ class Plan:
 History = dict[tuple[str, str], dict[Point, Outcome]]
 
 
-def make_plan(spec: LoadedSpec, model_digest: str | None = None, history: History | None = None) -> Plan:
+def make_plan(spec: LoadedSpec, model_digest: str | None = None, history: History | None = None,
+              framing: Framing | None = None) -> Plan:
     """Expand ``spec`` into jobs, sorted by scene so workers reload as little as possible.
 
     Args:
+        model_digest: the model's digest for the spec's framing, if already known.
         history: for adaptive policies, the outcomes so far per (object, environment); the
             policy then proposes its next round on top of the points already evaluated.
+        framing: the resolved frame, if already known (resolving may load a user's model).
     """
     from sweep3d.stages.infer.models import model_digest as compute_model_digest
     from sweep3d.stages.render.assets import blender_version, mesh_digest
 
-    model_digest = model_digest or compute_model_digest(spec.spec.model.name)
+    framing = framing or resolve_framing(spec)
+    model_digest = model_digest or compute_model_digest(spec.spec.model.name, framing.model)
     s = spec.spec
     render_base = {"stage": "render", "v": RENDER_STAGE_VERSION, "blender": blender_version(),
-                   "settings": s.render.key_part()}
+                   "settings": s.render.key_part(framing.key_part()),
+                   "passes": []}  # the RGB image's; extra passes leave it alone and are keyed apart
     infer_base = {"stage": "infer", "v": INFER_STAGE_VERSION, "model": model_digest,
                   "evaluator": {"kind": s.evaluator.kind, "top_k": s.evaluator.top_k}}
     if s.model.backend != "torch":  # another backend may differ in the last bits: its own answers
@@ -136,7 +151,7 @@ def make_plan(spec: LoadedSpec, model_digest: str | None = None, history: Histor
                 job = Job(index, obj.name, env.name, params, render_key, image_key, pred_key, point, parts_key)
                 index += 1
                 (jobs if _in_frame(rendered, models) else out_of_frame).append(job)
-    return Plan(spec, jobs, model_digest, columns, out_of_frame)
+    return Plan(spec, jobs, model_digest, columns, out_of_frame, framing)
 
 
 def _in_frame(rendered: list[ControlInstance], models: dict[str, Any]) -> bool:

@@ -71,8 +71,10 @@ class BlenderScene:
         cycles = scene.cycles
         cycles.device = "CPU"
         cycles.samples = s["samples"]
-        cycles.use_adaptive_sampling = False
-        cycles.seed = 0
+        cycles.use_adaptive_sampling = bool(s.get("adaptive_threshold"))
+        if cycles.use_adaptive_sampling:
+            cycles.adaptive_threshold = s["adaptive_threshold"]
+        cycles.seed = s.get("seed", 0)
         cycles.max_bounces = s["max_bounces"]
         cycles.use_denoising = bool(s["denoise"])
         if s["denoise"]:
@@ -80,6 +82,7 @@ class BlenderScene:
             cycles.denoising_prefilter = {"fast": "FAST", "accurate": "ACCURATE", "none": "NONE"}[s["denoise_prefilter"]]
         scene.render.resolution_x = scene.render.resolution_y = s["resolution"]
         scene.render.resolution_percentage = 100
+        _crop_to_centre(scene.render, s["resolution"], s.get("crop") or s["resolution"])
         scene.render.use_persistent_data = True  # world importance map built once per world
         scene.render.threads_mode = "FIXED"
         scene.render.threads = s["threads"] or os.cpu_count() or 1
@@ -226,3 +229,19 @@ class BlenderScene:
         if self.background is not None:
             rgb = rgb * alpha + np.asarray(self.background, dtype=np.float32) * (1.0 - alpha)
         return rgb
+
+
+def _crop_to_centre(render, size: int, crop: int) -> None:
+    """Render only the centre ``crop`` pixels of the ``size`` frame, and output just those.
+
+    A render border keeps the camera, the pixel grid and each pixel's sample pattern of the
+    full frame, so the result is the full render's centre crop (the denoiser sees no margin);
+    it costs what a ``crop``-sized render of the same view costs. Blender truncates
+    ``border * size`` to whole pixels: a quarter pixel inside keeps float error from shifting it.
+    """
+    render.use_border = render.use_crop_to_border = crop < size
+    if crop < size:
+        left = (size - crop) // 2  # where Preprocess's centre crop starts, from the top and left
+        bottom = size - crop - left  # Blender counts y from the bottom
+        render.border_min_x, render.border_max_x = (left + 0.25) / size, (left + crop + 0.25) / size
+        render.border_min_y, render.border_max_y = (bottom + 0.25) / size, (bottom + crop + 0.25) / size

@@ -88,8 +88,7 @@ def render_stage(plan: Plan, store: Store, progress: RunProgress, executor: Exec
     outcome = StageOutcome("render", total=len(unique), cached=len(unique) - len(todo))
     if todo:
         groups = _groups(plan, store, todo, cached)
-        settings = plan.spec.spec.render.model_dump()
-        settings["passes"] = ["uv"] if plan.spec.spec.report.part_visibility else []
+        settings = plan.render_settings()
         workers = min(plan.spec.spec.render.workers, len(groups))
         with progress.stage("render", len(todo), outcome.cached) as bar, \
                 executor.pool(settings, workers, plan.spec.spec.render.timeout) as pool, \

@@ -116,6 +116,11 @@ def in_frame(state: SceneState) -> bool:
     Uses the same geometry the renderer will: the sphere of radius ``scale`` at
     :meth:`SceneState.object_location`, against the four side planes of the (square) frustum
     and the plane of the camera.
+
+    The frame is always the full one, also with ``resolution = "model"``, where only its centre
+    crop is rendered: position, zoom and occlusion keep their meaning, and an object that lies
+    only in the cropped-away margin is rendered but not seen, as the model never saw that
+    margin before either (its preprocessing cropped it).
     """
     position, right, up, forward = state.camera_basis()
     rel = state.object_location() - position
