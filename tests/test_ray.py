@@ -43,8 +43,8 @@ def test_ray_executor_gives_the_local_results(local_cluster, tmp_path: Path, mon
     batches = []
     make_runner = ray_actor.remote_runner
 
-    def counting_runner(name):
-        runner = make_runner(name)
+    def counting_runner(*args):
+        runner = make_runner(*args)
         return lambda images: batches.append(len(images)) or runner(images)
 
     monkeypatch.setattr(ray_actor, "remote_runner", counting_runner)
