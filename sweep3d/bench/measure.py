@@ -131,7 +131,8 @@ def measure(loaded: LoadedSpec, settings: list[Setting], reference: Setting, flo
     with store.lock():
         for chunk in range(ROUNDS):  # settings take turns, so a machine's changing load hits all alike
             for setting, plan in plans.items():
-                part = dataclasses.replace(plan, jobs=plan.jobs[chunk::ROUNDS])
+                n = len(plan.jobs)  # contiguous: a scene's jobs stay together, as in a run
+                part = dataclasses.replace(plan, jobs=plan.jobs[chunk * n // ROUNDS : (chunk + 1) * n // ROUNDS])
                 for stage in (render_stage, postprocess_stage, infer_stage):
                     outcome = stage(part, store, progress)
                     if outcome.failed:
