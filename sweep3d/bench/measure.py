@@ -29,6 +29,10 @@ from sweep3d.stages.plan import Plan, make_plan
 from sweep3d.stages.postprocess import postprocess_stage
 from sweep3d.stages.render import render_stage
 
+#: The sample is rendered in this many rounds, every setting taking its turn in each, so that
+#: timings taken on a shared machine whose load changes are comparable (a worker start per turn).
+ROUNDS = 4
+
 
 @dataclass(frozen=True)
 class Setting:
@@ -125,12 +129,15 @@ def measure(loaded: LoadedSpec, settings: list[Setting], reference: Setting, flo
         plans[setting] = dataclasses.replace(plan, jobs=[by_index[i] for i in indices], out_of_frame=[])
     store = Store(loaded.store)
     with store.lock():
-        for setting, plan in plans.items():
-            for stage in (render_stage, postprocess_stage, infer_stage):
-                outcome = stage(plan, store, progress)
-                if outcome.failed:
-                    raise UserError(f"bench: {outcome.failed} {outcome.stage} jobs failed at {setting.label()}: "
-                                    f"{outcome.errors[0].splitlines()[0]}")
+        for chunk in range(ROUNDS):  # settings take turns, so a machine's changing load hits all alike
+            for setting, plan in plans.items():
+                n = len(plan.jobs)  # contiguous: a scene's jobs stay together, as in a run
+                part = dataclasses.replace(plan, jobs=plan.jobs[chunk * n // ROUNDS : (chunk + 1) * n // ROUNDS])
+                for stage in (render_stage, postprocess_stage, infer_stage):
+                    outcome = stage(part, store, progress)
+                    if outcome.failed:
+                        raise UserError(f"bench: {outcome.failed} {outcome.stage} jobs failed at {setting.label()}: "
+                                        f"{outcome.errors[0].splitlines()[0]}")
     con = store.connect()
     seconds = dict(con.execute("SELECT render_key, seconds FROM renders").fetchall())
     verdicts = {r[0]: (r[1], r[2]) for r in con.execute("SELECT pred_key, top1, correct FROM predictions").fetchall()}
@@ -182,13 +189,19 @@ def _with(loaded: LoadedSpec, setting: Setting) -> LoadedSpec:
 
 
 def _sample(plan: Plan, jobs: int, seed: int) -> list[int]:
-    """A seeded sample of job indices with distinct renders."""
-    distinct = list({j.render_key: j for j in plan.jobs}.values())
-    if not distinct:
+    """A seeded sample of job indices with distinct renders: renders drawn at random, then one of
+    each render's jobs at random (not always the last: with a post control such as blur, that
+    would sample only its last value)."""
+    by_render: dict[str, list[int]] = {}
+    for job in plan.jobs:
+        by_render.setdefault(job.render_key, []).append(job.index)
+    if not by_render:
         raise UserError("bench: the spec plans no job that can be rendered")
+    renders = list(by_render.values())
     rng = np.random.default_rng(seed)
-    chosen = rng.choice(len(distinct), size=min(jobs, len(distinct)), replace=False)
-    return sorted(distinct[i].index for i in chosen)
+    chosen = rng.choice(len(renders), size=min(jobs, len(renders)), replace=False)
+    pick = np.random.default_rng([seed, 1])
+    return sorted(int(pick.choice(renders[i])) for i in chosen)
 
 
 def _as_seen(image: np.ndarray, plan: Plan, side: int | None = None) -> np.ndarray:
