@@ -148,3 +148,17 @@ def test_a_model_framed_run_reports_sheets_and_benches(tmp_path: Path) -> None:
     assert "1spp plain model" in spec_row, bench.output
     assert "recommended:" in bench.output
 
+
+
+def test_bench_grid_repeats_no_setting_when_the_spec_renders_at_the_model_framing() -> None:
+    import json
+
+    from sweep3d.bench.measure import Setting, default_settings
+
+    for current in (Setting(4, "fast", resolution="model"), Setting(4, "fast")):
+        spec_resolution = current.resolution or 224
+        grid = default_settings(current, model_view=True, full_frame=224)
+        effects = {json.dumps(s.render_update(spec_resolution), sort_keys=True) for s in grid}
+        assert len(effects) == len(grid), [s.label() for s in grid]
+        assert current in grid
+        assert {s.render_update(spec_resolution)["resolution"] for s in grid} >= {224, "model"}

@@ -98,12 +98,18 @@ class BenchRow:
         return not (self.is_reference or self.is_floor)
 
 
-def default_settings(current: Setting, model_view: bool = True) -> list[Setting]:
+def default_settings(current: Setting, model_view: bool = True, full_frame: int | None = None) -> list[Setting]:
     """The grid: samples × denoiser, adaptive sampling, bounces, resolutions, the model's view
-    (when its input size is known), and the spec's own setting."""
-    grid = [Setting(s, d) for s in (1, 4, 16) for d in ("off", "fast", "accurate")]
-    grid += [Setting(64, "fast"), Setting(64, "fast", adaptive=0.05)]
-    grid += [Setting(4, "fast", max_bounces=b) for b in (2, 4)]
+    (when its input size is known), and the spec's own setting.
+
+    Args:
+        full_frame: the pixel size of the grid's full-frame settings when the spec itself renders
+            at the model's framing (they would otherwise repeat the model-framed ones).
+    """
+    side = full_frame if current.resolution == "model" else None
+    grid = [Setting(s, d, resolution=side) for s in (1, 4, 16) for d in ("off", "fast", "accurate")]
+    grid += [Setting(64, "fast", resolution=side), Setting(64, "fast", resolution=side, adaptive=0.05)]
+    grid += [Setting(4, "fast", max_bounces=b, resolution=side) for b in (2, 4)]
     grid += [Setting(4, "fast", resolution=160)]
     if model_view:
         grid += [Setting(s, d, resolution="model") for s, d in ((1, "fast"), (4, "fast"), (4, "accurate"), (16, "fast"))]

@@ -117,15 +117,16 @@ def bench(
     loaded = load_spec(spec)
     r = loaded.spec.render
     try:
-        input_geometry(loaded.spec.model.name)
+        full_frame = input_geometry(loaded.spec.model.name)[1]  # the model's crop, as a plain frame
         model_view = True
     except UserError:  # a user's own preprocessing: no model framing, compare at the spec's resolution
-        model_view = False
+        model_view, full_frame = False, None
     current = Setting(r.samples, r.denoise_prefilter if r.denoise else "off", r.max_bounces,
                       "model" if r.resolution == "model" else None, r.adaptive_threshold)
     reference, twin = reference_settings(reference_samples, reference_denoise, current, model_view)
     with RunProgress(console) as progress:
-        rows = measure(loaded, default_settings(current, model_view), reference, twin if floor else None, jobs, progress)
+        settings = default_settings(current, model_view, full_frame)
+        rows = measure(loaded, settings, reference, twin if floor else None, jobs, progress)
     best = recommend(rows, agreement)
     print_bench(console, rows, best, current, agreement)
     plot = write_pareto_plot(rows, best, Store(loaded.store).report_path(loaded.name, "-bench.html"),
