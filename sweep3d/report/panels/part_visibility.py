@@ -40,6 +40,7 @@ UNSEEN = (0.93, 0.93, 0.93)  # never shown in an image
 TOO_FEW = (0.72, 0.72, 0.72)  # shown, but in fewer images than the panel's minimum
 PAINT_VERSION = 1  # bump when the coloured renders change for the same colours
 LISTED = 3  # parts named as the worst and best seen
+_SEP = "<br>"  # between lines of a hover text
 
 
 def build(inputs: PanelInputs) -> dict[str, Any] | None:
@@ -152,5 +153,3 @@ def _figure(index: int, name: str, parts: list[dict[str, Any]], minimum: int) ->
     query = f"FROM part_visibility WHERE object = '{name.replace(chr(39), chr(39) * 2)}'"
     return make_figure(f"fig-parts-{index}", traces, figure_layout, query)
 
-
-_SEP = "<br>"
