@@ -94,6 +94,7 @@ def write_jobs(plan: Plan, store: Store) -> None:
     store.write_table_file(store.jobs_path(plan.spec.name), pa.Table.from_pylist(plan.rows()))
 
 
+AUTO_COMPACT_SEGMENTS = 64  # a run ends by merging a table's segments beyond this many
 REPAIR_PASSES = 3  # extra passes over the stages when a damaged blob was found (render → post → infer)
 
 
@@ -180,4 +181,19 @@ def _run_locked(spec: LoadedSpec, store: Store, console: Console | None, wait: f
             "started_at": started_at, "created_at": utc_now(), "seconds": result.seconds,
             **{f"{o.stage}_{k}": v for o in result.outcomes for k, v in o.as_row().items() if k != "stage"},
         }])
+        compact_crowded_tables(store)
     return result
+
+
+def compact_crowded_tables(store: Store, limit: int = AUTO_COMPACT_SEGMENTS) -> list[str]:
+    """Merge the segments of tables that have more than ``limit`` (call it holding the lock).
+
+    Every run adds a few segments per table; readers bind each file, so a store grown over
+    hundreds of runs would take seconds to open. Returns the tables merged.
+    """
+    from sweep3d.cache.maintenance import compact_table
+
+    crowded = [t for t in TABLES if len(store.readable_segments(t)) > limit]
+    for table in crowded:
+        compact_table(store, table)
+    return crowded

@@ -297,3 +297,20 @@ def test_query_mistakes_are_one_line_errors(tiny_run, tmp_path, args, text):
     assert "Traceback" not in result.output
     assert text in result.output
     assert len([line for line in result.output.splitlines() if line.strip()]) == 1
+
+
+def test_a_run_merges_a_table_grown_past_the_segment_limit(tmp_path: Path) -> None:
+    from sweep3d.pipeline import compact_crowded_tables
+
+    store = Store(tmp_path / "store")
+    for i in range(7):
+        store.append("renders", [render_row(f"k{i}")])
+    store.append("images", [])  # nothing written: no segment
+    with store.lock():
+        assert compact_crowded_tables(store, limit=8) == []  # within the limit: left alone
+        assert len(store.readable_segments("renders")) == 7
+        for i in range(7, 12):
+            store.append("renders", [render_row(f"k{i}")])
+        assert compact_crowded_tables(store, limit=8) == ["renders"]
+    assert len(store.readable_segments("renders")) == 1
+    assert store.keys("renders") == {f"k{i}" for i in range(12)}
