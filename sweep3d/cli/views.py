@@ -9,6 +9,7 @@ from rich.table import Table
 from sweep3d.cache.store import Store
 from sweep3d.spec.loader import LoadedSpec
 from sweep3d.stages.plan import Plan, make_plan
+from sweep3d.stages.render.stage import renders_to_do
 
 # Fallback per-image costs on a 2-core CPU (DESIGN.md measurements), when the store has no history.
 SECONDS_PER_SAMPLE_224 = 0.034
@@ -21,10 +22,8 @@ def cache_status(plan: Plan, store: Store) -> list[tuple[str, int, int]]:
     renders = {j.render_key for j in plan.jobs}
     images = {j.image_key for j in plan.jobs if j.image_key != j.render_key}
     preds = {j.pred_key for j in plan.jobs}
-    stored, parts = store.keys("renders"), store.keys("parts")  # a render needs its UV pass if asked for
-    rendered = {j.render_key for j in plan.jobs if j.render_key in stored and j.parts_key in parts | {None}}
     return [
-        ("render", len(renders), len(rendered)),
+        ("render", len(renders), len(renders) - len(renders_to_do(plan, store))),
         ("postprocess", len(images), len(images & store.keys("images"))),
         ("infer", len(preds), len(preds & store.keys("predictions"))),
     ]

@@ -49,6 +49,17 @@ def cached_renders(plan: Plan, store: Store) -> set[str]:
     return {j.render_key for j in plan.jobs if j.render_key in have and store.blob_path(j.render_key).exists()}
 
 
+def renders_to_do(plan: Plan, store: Store, cached: set[str] | None = None) -> list[Job]:
+    """One job per render key the store lacks, or whose UV-pass parts it lacks when asked for."""
+    cached = cached_renders(plan, store) if cached is None else cached
+    have_parts = store.keys("parts") if plan.spec.spec.report.part_visibility else set()
+    unique: dict[str, Job] = {}
+    for job in plan.jobs:
+        unique.setdefault(job.render_key, job)
+    return [job for key, job in unique.items()
+            if key not in cached or (job.parts_key is not None and job.parts_key not in have_parts)]
+
+
 def _stale_rows(plan: Plan, store: Store, cached: set[str]) -> set[str]:
     """Render keys of the plan with a row but no blob (deleted, or moved to quarantine)."""
     have = store.keys("renders")
@@ -82,9 +93,7 @@ def render_stage(plan: Plan, store: Store, progress: RunProgress, executor: Exec
         unique.setdefault(job.render_key, job)
     cached = cached_renders(plan, store)
     store.drop_rows("renders", _stale_rows(plan, store, cached))  # rendered again below, one row each
-    have_parts = store.keys("parts") if plan.spec.spec.report.part_visibility else set()
-    todo = [job for key, job in unique.items()
-            if key not in cached or (job.parts_key is not None and job.parts_key not in have_parts)]
+    todo = renders_to_do(plan, store, cached)
     outcome = StageOutcome("render", total=len(unique), cached=len(unique) - len(todo))
     if todo:
         groups = _groups(plan, store, todo, cached)
