@@ -115,7 +115,7 @@ BARE = textwrap.dedent("""
 
 def bare_loop(n: int, scratch: Path) -> dict:
     """Seconds of a bare bpy loop of ``n`` renders in one process (import + setup, loop)."""
-    from sweep3d.stages.render.assets import builtin_hdris
+    from sweep3d.spec.assets import builtin_hdris
 
     archive, member = MESH.split("#")
     started = time.perf_counter()

@@ -1,10 +1,11 @@
-"""The control plug-in base and its registry, shared by the render and postprocess stages.
+"""The control plug-in base, shared by the render and postprocess stages.
 
 A control declares its parameters as a pydantic model whose defaults are *neutral*: a control
 whose values equal its defaults leaves the image as it was, so it is dropped from the job's
 cache keys (a spec that adds ``yaw = 0`` re-renders nothing). Rendered controls live in
 ``sweep3d.stages.render.controls`` and change the 3D scene; post controls live in
-``sweep3d.stages.postprocess.controls`` and map one image to another.
+``sweep3d.stages.postprocess.controls`` and map one image to another. Each of those stages keeps
+its own registry; the spec loader sees both through the catalogue it is handed.
 """
 
 from __future__ import annotations
@@ -13,8 +14,6 @@ import math
 from typing import Annotated, Any, ClassVar, Literal
 
 from pydantic import BaseModel, ConfigDict
-
-from sweep3d.registry import Registry
 
 
 class _SpecRelativePath:
@@ -91,11 +90,3 @@ def wrap_periodic(value: float, period: float) -> float:
     if math.isclose(result, -half, rel_tol=0, abs_tol=1e-9):
         result = half
     return result + 0.0
-
-
-def _load_builtin_controls() -> None:
-    import sweep3d.stages.postprocess.controls  # noqa: F401  (registers post controls)
-    import sweep3d.stages.render.controls  # noqa: F401  (registers rendered controls)
-
-
-CONTROLS: Registry[type[Control]] = Registry("control", loader=_load_builtin_controls)

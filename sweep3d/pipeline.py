@@ -4,35 +4,33 @@ The process holding the store's lock is its single writer. Each stage computes o
 the store lacks, and flushes rows every few seconds, so a killed run resumes where it stopped.
 
 Before anything is rendered the model is loaded and tried on a blank image (when anything
-needs inferring), so a broken model fails in seconds. A stage that finds a damaged blob
-upstream discards it; the run then repeats the stages (a few passes at most) to recompute it.
-The experiment's jobs table is written once its stages have run, so a run that stops on a
-user error leaves the store's tables as they were.
+needs inferring), so a broken model fails in seconds. The experiment's jobs table is written
+once its stages have run, so a run that stops on a user error leaves the store's tables as they
+were.
 """
 
 from __future__ import annotations
 
-import functools
 import time
 import uuid
 from dataclasses import dataclass, field
 
 from rich.console import Console
 
+from sweep3d.cache.maintenance import compact_table
 from sweep3d.cache.store import TABLES, Store, utc_now
 from sweep3d.errors import SpecError, UserError
 from sweep3d.progress import RunProgress
-from sweep3d.spec.framing import Framing, resolve_framing
+from sweep3d.spec.assets import blender_version
 from sweep3d.spec.loader import LoadedSpec
-from sweep3d.stages.infer import infer_stage
-from sweep3d.stages.infer.stage import ReadyModel, pending_predictions, prepare_model
+from sweep3d.stages.driver import merge_outcomes, run_stages
+from sweep3d.stages.infer import InferStage, ModelHandle, pending_predictions
 from sweep3d.stages.outcome import StageOutcome
-from sweep3d.stages.plan import Plan, make_plan
-from sweep3d.stages.plan.jobs import History
-from sweep3d.stages.plan.policies import Outcome
-from sweep3d.stages.postprocess import postprocess_stage
-from sweep3d.stages.render import render_stage
-from sweep3d.stages.render.stage import LOCAL, Executor
+from sweep3d.stages.plan import History, Outcome, Plan, make_plan
+from sweep3d.stages.postprocess import PostprocessStage
+from sweep3d.stages.render import LOCAL, Executor, RenderStage
+
+AUTO_COMPACT_SEGMENTS = 64  # a run ends by merging a table's segments beyond this many
 
 
 @dataclass
@@ -48,6 +46,13 @@ class RunResult:
 
     def outcome(self, stage: str) -> StageOutcome:
         return next(o for o in self.outcomes if o.stage == stage)
+
+
+def plan_spec(spec: LoadedSpec, model: ModelHandle | None = None, history: History | None = None) -> Plan:
+    """The plan of ``spec`` for this machine's Blender and the spec's model (resolved if not given)."""
+    model = model or ModelHandle.resolve(spec)
+    return make_plan(spec, framing=model.framing, model_digest=model.digest, blender=blender_version(),
+                     history=history)
 
 
 def outcomes_by_scene(plan: Plan, store: Store) -> History:
@@ -71,57 +76,9 @@ def outcomes_by_scene(plan: Plan, store: Store) -> History:
     return history
 
 
-def _merge(before: list[StageOutcome], now: list[StageOutcome]) -> list[StageOutcome]:
-    """Add up a stage's outcomes over the passes of one run (adaptive rounds, repair passes).
-
-    Keys cached from an earlier pass of the same run count as computed, not cached. Each pass
-    covers the whole plan so far and retries what failed, so failures are the last pass's.
-    """
-    if not before:
-        return now
-    merged = []
-    for old, new in zip(before, now):
-        merged.append(StageOutcome(
-            old.stage, total=new.total, cached=old.cached, computed=old.computed + new.computed,
-            failed=new.failed, skipped=new.skipped, seconds=old.seconds + new.seconds, errors=new.errors))
-    return merged
-
-
 def write_jobs(plan: Plan, store: Store) -> None:
     """Record the plan as the experiment's jobs table (what ``results`` joins against)."""
-    import pyarrow as pa
-
-    store.write_table_file(store.jobs_path(plan.spec.name), pa.Table.from_pylist(plan.rows()))
-
-
-AUTO_COMPACT_SEGMENTS = 64  # a run ends by merging a table's segments beyond this many
-REPAIR_PASSES = 3  # extra passes over the stages when a damaged blob was found (render → post → infer)
-
-
-def run_stages(plan: Plan, store: Store, progress: RunProgress, model: ReadyModel | None = None,
-               executor: Executor = LOCAL) -> list[StageOutcome]:
-    """Render, postprocess and infer ``plan``; again while a stage discarded a damaged blob."""
-    outcomes: list[StageOutcome] = []
-    for _ in range(1 + REPAIR_PASSES):
-        discarded = store.discarded
-        stages = (functools.partial(render_stage, executor=executor), postprocess_stage,
-                  functools.partial(infer_stage, model=model, on_ray=executor.kind == "ray"))
-        outcomes = _merge(outcomes, [stage(plan, store, progress) for stage in stages])
-        if store.discarded == discarded:
-            break
-    return outcomes
-
-
-def _model_digest(spec: LoadedSpec, framing: Framing) -> str:
-    """The model's digest for this framing (loads a user's factory), its errors naming ``model.name``."""
-    from sweep3d.stages.infer.models import model_digest
-
-    try:
-        return model_digest(spec.spec.model.name, framing.model)
-    except SpecError:
-        raise
-    except UserError as exc:
-        raise SpecError(str(spec.path), "model.name", str(exc)) from None
+    store.write_table_file(store.jobs_path(plan.spec.name), plan.table())
 
 
 def _writable(spec: LoadedSpec, store: Store) -> None:
@@ -155,20 +112,23 @@ def _run_locked(spec: LoadedSpec, store: Store, console: Console | None, wait: f
         started_at = utc_now()
         for table in TABLES:
             store.sweep_superseded(table)  # segments an earlier compaction merged, past their grace
-        framing = resolve_framing(spec)
-        result = RunResult(uuid.uuid4().hex[:12], make_plan(spec, _model_digest(spec, framing), framing=framing))
-        model = prepare_model(result.plan, store) if pending_predictions(result.plan, store) else None
+        model = ModelHandle.resolve(spec)
+        result = RunResult(uuid.uuid4().hex[:12], plan_spec(spec, model))
+        infer = InferStage(model, on_ray=executor.kind == "ray")
+        if pending_predictions(result.plan, store):
+            infer.prepare(result.plan, store)  # a broken model fails now, before anything renders
+        stages = (RenderStage(executor), PostprocessStage(), infer)
         with RunProgress(console) as progress:
             history: History = {}
             while True:  # one pass for fixed policies; one per round for adaptive ones
-                plan = make_plan(spec, result.plan.model_digest, history, framing) if history else result.plan
+                plan = plan_spec(spec, model, history) if history else result.plan
                 try:
-                    outcomes = run_stages(plan, store, progress, model, executor)
+                    outcomes = run_stages(stages, plan, store, progress)
                 except KeyboardInterrupt:
                     write_jobs(plan, store)  # what finished is stored: let query and report show it
                     raise
                 write_jobs(plan, store)
-                result.outcomes = _merge(result.outcomes, outcomes)
+                result.outcomes = merge_outcomes(result.outcomes, outcomes)
                 grown = len(plan.jobs) > len(result.plan.jobs) or not history
                 result.plan = plan
                 if not spec.policy.adaptive or not grown:
@@ -191,8 +151,6 @@ def compact_crowded_tables(store: Store, limit: int = AUTO_COMPACT_SEGMENTS) -> 
     Every run adds a few segments per table; readers bind each file, so a store grown over
     hundreds of runs would take seconds to open. Returns the tables merged.
     """
-    from sweep3d.cache.maintenance import compact_table
-
     crowded = [t for t in TABLES if len(store.readable_segments(t)) > limit]
     for table in crowded:
         compact_table(store, table)

@@ -19,17 +19,30 @@ T = TypeVar("T")
 class Registry(Generic[T]):
     """Maps short names to plug-ins of one kind.
 
+    Each stage owns the registries of its plug-ins (rendered controls, post controls, policies,
+    models, evaluators); the spec loader is handed them through a catalogue, so the spec layer
+    never imports a stage.
+
     Args:
         kind: what the plug-ins are, for error messages ("control", "policy", ...).
-        loader: a zero-argument callable that imports the built-in plug-ins on first use,
-            so that registering them costs nothing until a registry is read.
     """
 
-    def __init__(self, kind: str, loader: Callable[[], object] | None = None) -> None:
+    def __init__(self, kind: str) -> None:
         self.kind = kind
         self._items: dict[str, T] = {}
-        self._loader = loader
-        self._loaded = loader is None
+
+    @classmethod
+    def union(cls, kind: str, *parts: "Registry[T]") -> "Registry[T]":
+        """One registry holding the plug-ins of ``parts`` (e.g. rendered and post controls).
+
+        Raises:
+            ValueError: if two parts register the same name.
+        """
+        merged: Registry[T] = cls(kind)
+        for part in parts:
+            for name in part.names():
+                merged.register(name)(part.get(name))
+        return merged
 
     def register(self, name: str) -> Callable[[T], T]:
         """Class or function decorator that registers the plug-in under ``name``."""
@@ -43,19 +56,11 @@ class Registry(Generic[T]):
 
         return decorator
 
-    def _ensure_loaded(self) -> None:
-        if not self._loaded:
-            self._loaded = True
-            assert self._loader is not None
-            self._loader()
-
     def names(self) -> list[str]:
-        self._ensure_loaded()
         return sorted(self._items)
 
     def __contains__(self, name: str) -> bool:
         """True for registered short names (``module:Name`` references are checked by :meth:`get`)."""
-        self._ensure_loaded()
         return name in self._items
 
     def __iter__(self) -> Iterator[str]:
@@ -67,7 +72,6 @@ class Registry(Generic[T]):
         Raises:
             UserError: if the name is unknown or the user's module cannot be imported.
         """
-        self._ensure_loaded()
         if name in self._items:
             return self._items[name]
         if ":" in name:

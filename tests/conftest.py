@@ -122,3 +122,17 @@ def blender_scene(tmp_path_factory):
     scene = BlenderScene(settings, folder)
     scene.cube = str(write_cube(folder))
     return scene
+
+
+def plan_for(loaded, model_digest: str | None = None):
+    """Plan ``loaded`` as a run would; a ``model_digest`` stands in for the model's (none is loaded)."""
+    from sweep3d.pipeline import plan_spec
+    from sweep3d.spec.assets import blender_version
+    from sweep3d.spec.framing import Framing
+    from sweep3d.stages.plan import make_plan
+
+    if model_digest is None:
+        return plan_spec(loaded)
+    resolution = loaded.render.resolution
+    assert resolution != "model", "a stand-in digest needs a pixel resolution"
+    return make_plan(loaded, framing=Framing.full(resolution), model_digest=model_digest, blender=blender_version())

@@ -19,7 +19,7 @@ from typer.testing import CliRunner
 
 from sweep3d.cache.store import Store
 from sweep3d.cli import app
-from sweep3d.stages.aggregate import MACROS, VIEWS, register_views, summarise
+from sweep3d.stages.aggregate import MACROS, VIEWS, connect, register_views, summarise
 from sweep3d.stages.aggregate.views import BINS, NOT_APPLIED
 
 T0 = datetime(2024, 1, 1)
@@ -42,7 +42,7 @@ def make_store(folder: Path, rows: list[dict[str, Any]], experiment: str = "e") 
                             "loss": 1.0})
     store.write_table_file(store.jobs_path(experiment), pa.Table.from_pylist(jobs))
     store.append("predictions", predictions)
-    return store.connect(experiment)
+    return connect(store, experiment)
 
 
 def rows_of(con: duckdb.DuckDBPyConnection, sql: str) -> list[dict[str, Any]]:
@@ -194,7 +194,7 @@ def test_views_come_with_every_connection_and_summary_reads_them(tmp_path: Path)
     assert effect["c_a"].count == [15, 15]
     assert effect["c_a"].high[0] == pytest.approx(wilson(0, 15)[1])
 
-    bare = Store(tmp_path / "store").connect()  # no experiment: no results, no views over them
+    bare = connect(Store(tmp_path / "store"))  # no experiment: no results, no views over them
     assert not {r[0] for r in bare.execute("SELECT view_name FROM duckdb_views() WHERE NOT internal").fetchall()} & set(
         VIEWS)
 

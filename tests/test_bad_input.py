@@ -37,7 +37,7 @@ PLY_HEADER = ("ply\nformat binary_little_endian 1.0\nelement vertex {n}\npropert
 
 def _exr_truncated() -> bytes:
     """The first half of a real OpenEXR map (Blender's studio light)."""
-    from sweep3d.stages.render.assets import builtin_hdris
+    from sweep3d.spec.assets import builtin_hdris
 
     data = builtin_hdris()["studio"].read_bytes()
     return data[: len(data) // 2]
@@ -265,7 +265,7 @@ def test_a_non_manifold_mesh_is_not_an_error_it_renders(tmp_path: Path) -> None:
     """Two triangles touching at one vertex (non-manifold, open): legal, and most real meshes are
     open somewhere, so sweep3d renders it rather than refusing it."""
     from sweep3d.pipeline import run
-    from sweep3d.spec import load_spec
+    from sweep3d.stages import load_spec
 
     (tmp_path / "bowtie.obj").write_bytes(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv -1 0 0\nv 0 -1 0\nf 1 2 3\nf 1 4 5\n")
     (tmp_path / "spec.toml").write_text(_one_job(TINY_SPEC).replace('mesh = "cube.obj"', 'mesh = "bowtie.obj"'))

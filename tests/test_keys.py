@@ -13,8 +13,8 @@ from hypothesis import strategies as st
 
 from sweep3d.cache.keys import canonical, digest, file_digest, files_digest
 from sweep3d.controls import wrap_periodic
-from sweep3d.spec import load_spec
-from sweep3d.stages.plan import make_plan
+from sweep3d.stages import load_spec
+from tests.conftest import plan_for
 from sweep3d.stages.render.controls import Camera, Orientation
 from tests.conftest import write_spec
 
@@ -264,7 +264,7 @@ def plan_of(folder: Path, controls: str = "", *, seed: int = 1, samples: int = 1
                             controls=textwrap.dedent(controls), policy=policy) + textwrap.dedent(objects)
     sub = folder / f"spec{len(list(folder.iterdir()))}"
     sub.mkdir()
-    return make_plan(load_spec(write_spec(sub, body)), model_digest=model_digest)
+    return plan_for(load_spec(write_spec(sub, body)), model_digest)
 
 
 def keys_of(plan, which: str = "render_key") -> list[str]:
@@ -383,7 +383,7 @@ def test_mesh_content_is_in_the_render_key(tmp_path):
     a = plan_of(tmp_path, controls)
     sub = sorted(tmp_path.iterdir())[-1]
     (sub / "cube.obj").write_text((sub / "cube.obj").read_text() + "v 2 2 2\n")
-    b = make_plan(load_spec(sub / "spec.toml"), model_digest="model-x")
+    b = plan_for(load_spec(sub / "spec.toml"), "model-x")
     assert all(x != y for x, y in zip(keys_of(a), keys_of(b)))
 
 
@@ -424,12 +424,12 @@ def test_random_policy_draws_differ_per_scene(tmp_path):
 
 
 def test_out_of_frame_jobs_are_flagged_and_not_planned_for_rendering(tmp_path) -> None:
-    from sweep3d.spec import load_spec
-    from sweep3d.stages.plan import make_plan
+    from sweep3d.stages import load_spec
+    from tests.conftest import plan_for
     from tests.conftest import TINY_SPEC, write_spec
 
     body = TINY_SPEC.replace("[policy]", '[[controls]]\ntype = "position"\nx = [0.0, 0.5, 3.0]\n\n[policy]')
-    plan = make_plan(load_spec(write_spec(tmp_path, body)), model_digest="m")
+    plan = plan_for(load_spec(write_spec(tmp_path, body)), "m")
     assert len(plan.jobs) == 16 and len(plan.out_of_frame) == 8
     assert all(j.values["position"]["x"] == 3.0 for j in plan.out_of_frame)
     rows = plan.rows()

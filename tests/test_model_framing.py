@@ -18,10 +18,10 @@ from sweep3d.cache.store import Store
 from sweep3d.cli import app
 from sweep3d.pixels import decode_png
 from sweep3d.progress import RunProgress
-from sweep3d.spec import load_spec
+from sweep3d.stages import load_spec
 from sweep3d.spec.framing import Framing
 from sweep3d.spec.models import RenderSpec
-from sweep3d.stages.plan import make_plan
+from tests.conftest import plan_for
 from sweep3d.stages.render import render_stage
 from tests.conftest import TINY_SPEC, write_spec
 
@@ -45,14 +45,14 @@ def _with_resolution(loaded, resolution):
 
 def test_model_resolution_resolves_to_the_models_resize_and_crop(tmp_path: Path) -> None:
     loaded = load_spec(_spec(tmp_path, '"model"'))
-    plan = make_plan(loaded)
+    plan = plan_for(loaded)
     assert plan.framing == Framing(256, 224, model=True)
     assert plan.render_settings()["resolution"] == 256 and plan.render_settings()["crop"] == 224
 
 
 def test_model_framing_and_full_frames_never_share_keys(tmp_path: Path) -> None:
     loaded = load_spec(_spec(tmp_path, '"model"'))
-    plans = {res: make_plan(_with_resolution(loaded, res)) for res in ("model", 224, 256)}
+    plans = {res: plan_for(_with_resolution(loaded, res)) for res in ("model", 224, 256)}
     for other in (224, 256):
         for a, b in zip(plans["model"].jobs, plans[other].jobs):
             assert a.render_key != b.render_key and a.pred_key != b.pred_key
@@ -87,9 +87,9 @@ def test_infer_only_normalises_model_framed_images(tmp_path: Path) -> None:
 
     loaded = load_spec(_spec(tmp_path, '"model"'))
     image = np.random.default_rng(0).random((1, 224, 224, 3), dtype=np.float32)
-    framed = prepare_model(make_plan(loaded)).model.preprocess(image).numpy()
+    framed = prepare_model(plan_for(loaded)).model.preprocess(image).numpy()
     np.testing.assert_array_equal(framed, ((image - 0.5) / 0.5).transpose(0, 3, 1, 2))
-    full = prepare_model(make_plan(_with_resolution(loaded, 224))).model.preprocess(image).numpy()
+    full = prepare_model(plan_for(_with_resolution(loaded, 224))).model.preprocess(image).numpy()
     assert full.shape == framed.shape and np.abs(full - framed).mean() > 0.1
 
 
@@ -97,7 +97,7 @@ def test_infer_only_normalises_model_framed_images(tmp_path: Path) -> None:
 
 
 def _render(loaded) -> tuple[np.ndarray, dict]:
-    plan = make_plan(loaded)
+    plan = plan_for(loaded)
     plan = dataclasses.replace(plan, jobs=[j for j in plan.jobs if j.environment == "studio"])
     store = Store(loaded.store)
     with store.lock():

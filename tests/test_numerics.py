@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 
 from sweep3d.cache.store import Store
 from sweep3d.pipeline import run
-from sweep3d.spec import load_spec
+from sweep3d.stages import load_spec
 from sweep3d.spec.params import Range
 from sweep3d.stages.aggregate import summarise
 from sweep3d.stages.infer import ClassificationEvaluator, LabelMap
@@ -445,20 +445,20 @@ def test_planned_values_stay_inside_declared_ranges_and_follow_the_seed(tmp_path
                                                                         policy, seed) -> None:
     if len({*zoom}) < 2 or len({*el}) < 2 or len({*scale}) < 2:
         return
-    from sweep3d.stages.plan import make_plan
+    from tests.conftest import plan_for
 
     folder = tmp_path_factory.mktemp("sampling")
     (zl, zh), (el_lo, el_hi), (sl, sh) = sorted(zoom), sorted(el), sorted(scale)
     body = SAMPLING_SPEC.format(seed=seed, zoom_low=zl, zoom_high=zh, el_low=el_lo, el_high=el_hi,
                                 s_low=sl, s_high=sh, policy=policy)
     loaded = load_spec(write_spec(folder, body))
-    jobs = make_plan(loaded, model_digest="m").jobs
+    jobs = plan_for(loaded, "m").jobs
     assert len(jobs) == 7
     for job in jobs:
         camera, factor = job.values["camera"], job.values["scale"]["factor"]
         assert zl <= camera["zoom"] <= zh and el_lo <= camera["elevation"] <= el_hi and sl <= factor <= sh
         assert all(math.isfinite(v) for v in (camera["zoom"], camera["elevation"], factor))
-    again = make_plan(load_spec(folder / "spec.toml"), model_digest="m").jobs
+    again = plan_for(load_spec(folder / "spec.toml"), "m").jobs
     assert [j.render_key for j in again] == [j.render_key for j in jobs]  # the seed decides everything
 
 

@@ -17,7 +17,7 @@ from sweep3d.cli import app
 from sweep3d.parts import AZIMUTH_PARTS, PARTS, part_of, sphere_turns
 from sweep3d.pixels import decode_png
 from sweep3d.report import write_report
-from sweep3d.spec import load_spec
+from sweep3d.stages import load_spec
 from sweep3d.stages.aggregate.parts import VISIBLE_SHARE
 from tests.conftest import TINY_SPEC, write_spec
 from tests.test_parts import direction

@@ -13,7 +13,7 @@ from typer.testing import CliRunner
 from sweep3d.cache.store import Store
 from sweep3d.cli import app
 from sweep3d.pipeline import run
-from sweep3d.spec import load_spec
+from sweep3d.stages import load_spec
 from tests.conftest import REPO, TINY_SPEC, write_cube, write_spec
 
 pytestmark = pytest.mark.slow
@@ -133,7 +133,9 @@ def test_adaptive_policy_runs_rounds_and_resumes_from_the_cache(tmp_path: Path) 
 
 
 def test_the_all_controls_spec_renders_every_control_without_error(tmp_path: Path) -> None:
-    from sweep3d.controls import CONTROLS
+    from sweep3d.stages import catalogue
+
+    CONTROLS = catalogue().controls
 
     text = (REPO / "specs" / "all_controls.toml").read_text()
     listed = set(re.findall(r"^type\s*=\s*\"(\w+)\"", text.split("[policy]")[0], re.M))

@@ -53,7 +53,7 @@ def test_policies_are_registered():
 @FAST
 @given(shapes, st.integers(1, 5))
 def test_grid_is_the_full_product(shape, n):
-    points = grid(n).points(shape, seed=0)
+    points = grid(n).points(shape, seed=0, history={})
     assert len(points) == n ** shape.n_continuous * math.prod(shape.choice_sizes)
     assert len({(p.unit, p.choice) for p in points}) == len(points)  # no point twice
     for point in points:
@@ -65,7 +65,7 @@ def test_grid_is_the_full_product(shape, n):
 @FAST
 @given(shapes.filter(lambda s: s.n_continuous > 0), st.integers(2, 6))
 def test_grid_includes_both_ends_evenly_spaced(shape, n):
-    points = grid(n).points(shape, seed=0)
+    points = grid(n).points(shape, seed=0, history={})
     for axis in range(shape.n_continuous):
         ticks = sorted({p.unit[axis] for p in points})
         assert len(ticks) == n
@@ -75,19 +75,19 @@ def test_grid_includes_both_ends_evenly_spaced(shape, n):
 
 
 def test_grid_of_one_takes_the_middle():
-    points = grid(1).points(SpaceShape(2, (3,)), seed=0)
+    points = grid(1).points(SpaceShape(2, (3,)), seed=0, history={})
     assert [p.unit for p in points] == [(0.5, 0.5)] * 3
     assert [p.choice for p in points] == [(0,), (1,), (2,)]
 
 
 def test_grid_of_an_empty_space_is_one_point():
-    assert grid(4).points(SpaceShape(0, ()), seed=0) == [Point((), ())]
+    assert grid(4).points(SpaceShape(0, ()), seed=0, history={}) == [Point((), ())]
 
 
 @FAST
 @given(shapes, st.integers(0, 2**63 - 1), st.integers(0, 2**63 - 1))
 def test_grid_ignores_the_seed(shape, s1, s2):
-    assert grid(3).points(shape, s1) == grid(3).points(shape, s2)
+    assert grid(3).points(shape, s1, history={}) == grid(3).points(shape, s2, history={})
 
 
 # -- random ----------------------------------------------------------------------------------
@@ -98,8 +98,8 @@ seeds = st.integers(0, 2**63 - 1)
 @FAST
 @given(shapes, seeds, st.integers(1, 40))
 def test_random_is_reproducible_and_in_bounds(shape, seed, samples):
-    first = random_policy(samples).points(shape, seed)
-    again = random_policy(samples).points(shape, seed)
+    first = random_policy(samples).points(shape, seed, history={})
+    again = random_policy(samples).points(shape, seed, history={})
     assert first == again
     assert len(first) == samples
     for point in first:
@@ -110,13 +110,13 @@ def test_random_is_reproducible_and_in_bounds(shape, seed, samples):
 @given(shapes.filter(lambda s: s.n_continuous > 0), seeds, seeds)
 def test_random_differs_across_seeds(shape, s1, s2):
     assume(s1 != s2)
-    a = random_policy(8).points(shape, s1)
-    b = random_policy(8).points(shape, s2)
+    a = random_policy(8).points(shape, s1, history={})
+    b = random_policy(8).points(shape, s2, history={})
     assert [p.unit for p in a] != [p.unit for p in b]
 
 
 def test_random_choices_cover_the_options():
-    points = random_policy(400).points(SpaceShape(1, (3, 2)), seed=1)
+    points = random_policy(400).points(SpaceShape(1, (3, 2)), seed=1, history={})
     assert {p.choice for p in points} == {(i, j) for i in range(3) for j in range(2)}
     units = [p.unit[0] for p in points]
     assert min(units) < 0.1 and max(units) > 0.9  # spread over the cube, not a constant
@@ -197,7 +197,7 @@ def test_point_must_match_the_shape():
 def test_grid_over_a_space_reaches_every_declared_value():
     orientation = instance(Orientation("o", "orientation"), yaw=Range(-90.0, 90.0), pitch=Choice((0.0, 45.0)))
     space = SearchSpace([orientation])
-    values = [space.values(p)["o"] for p in grid(3).points(space.shape, seed=0)]
+    values = [space.values(p)["o"] for p in grid(3).points(space.shape, seed=0, history={})]
     assert sorted({v["yaw"] for v in values}) == [-90.0, 0.0, 90.0]
     assert {v["pitch"] for v in values} == {0.0, 45.0}
     assert len(values) == 6
@@ -205,16 +205,16 @@ def test_grid_over_a_space_reaches_every_declared_value():
 
 def test_grid_over_a_full_turn_does_not_repeat_its_end(tmp_path) -> None:
     """yaw over [-180, 180]: six distinct poses, not five plus -180 and 180 twice."""
-    from sweep3d.spec import load_spec
-    from sweep3d.stages.plan import make_plan
+    from sweep3d.stages import load_spec
+    from tests.conftest import plan_for
     from tests.conftest import write_spec
 
     body = TINY_FULL_TURN
-    plan = make_plan(load_spec(write_spec(tmp_path, body)), model_digest="m")
+    plan = plan_for(load_spec(write_spec(tmp_path, body)), "m")
     yaws = sorted(j.values["orientation"]["yaw"] for j in plan.jobs if j.environment == "white")
     assert yaws == [-180.0, -120.0, -60.0, 0.0, 60.0, 120.0]
     assert len({j.render_key for j in plan.jobs}) == len(plan.jobs)
-    half = make_plan(load_spec(write_spec(tmp_path, body.replace("[-180, 180]", "[0, 180]"))), model_digest="m")
+    half = plan_for(load_spec(write_spec(tmp_path, body.replace("[-180, 180]", "[0, 180]"))), "m")
     assert max(j.values["orientation"]["yaw"] for j in half.jobs) == 180.0  # a partial range keeps both ends
 
 
@@ -233,11 +233,11 @@ def test_sobol_is_reproducible_in_range_and_more_even_than_random() -> None:
     sobol = POLICIES.get("sobol")(POLICIES.get("sobol").Params(samples=256))
     rand = POLICIES.get("random")(POLICIES.get("random").Params(samples=256))
     shape = SpaceShape(2, (3,))
-    points = sobol.points(shape, seed=5)
-    assert points == sobol.points(shape, seed=5) and points != sobol.points(shape, seed=6)
+    points = sobol.points(shape, seed=5, history={})
+    assert points == sobol.points(shape, seed=5, history={}) and points != sobol.points(shape, seed=6, history={})
     assert all(0 <= u <= 1 for p in points for u in p.unit) and {p.choice[0] for p in points} == {0, 1, 2}
     unit = np.array([p.unit for p in points])
-    random_unit = np.array([p.unit for p in rand.points(shape, seed=5)])
+    random_unit = np.array([p.unit for p in rand.points(shape, seed=5, history={})])
     assert qmc.discrepancy(unit) < qmc.discrepancy(random_unit)
 
 

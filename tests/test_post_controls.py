@@ -8,9 +8,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sweep3d.controls import CONTROLS
+from sweep3d.stages import catalogue
 from sweep3d.stages.postprocess import PostControl, apply_post
 from sweep3d.stages.postprocess.controls import CORRUPTIONS
+
+CONTROLS = catalogue().controls
 
 RNG_KEY = "0123456789abcdef0123"
 

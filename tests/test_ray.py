@@ -9,7 +9,7 @@ import pytest
 
 from sweep3d.cache.store import Store
 from sweep3d.pipeline import run
-from sweep3d.spec import load_spec
+from sweep3d.stages import load_spec
 from sweep3d.stages.render.stage import Executor
 from tests.conftest import TINY_SPEC, write_spec
 
@@ -64,13 +64,13 @@ def test_ray_executor_gives_the_local_results(local_cluster, tmp_path: Path, mon
 
 def test_a_killed_actor_loses_no_job_and_duplicates_none(local_cluster, tmp_path: Path) -> None:
     from sweep3d.spec.models import RenderSpec
-    from sweep3d.stages.plan import make_plan
+    from tests.conftest import plan_for
     from sweep3d.stages.render.ray_pool import RayRenderPool
     from sweep3d.stages.render.stage import _groups
 
     spec = write_spec(tmp_path, TINY_SPEC.replace("yaw = [0, 45]", "yaw = [0, 30, 60, 90, 120, 150]"))
     loaded = load_spec(spec)
-    plan = make_plan(loaded, model_digest="m")
+    plan = plan_for(loaded, "m")
     store = Store(loaded.store)
     unique = list({j.render_key: j for j in plan.jobs}.values())  # blur variants share a render
     groups = [[job] for group in _groups(plan, store, unique) for job in group]  # 12 one-job groups

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-from sweep3d.spec import load_spec
-from sweep3d.stages.plan import make_plan
+from sweep3d.stages import load_spec
+from tests.conftest import plan_for
 from sweep3d.stages.postprocess import apply_post
 from tests.conftest import REPO, TINY_SPEC, write_spec
 
@@ -27,11 +27,11 @@ def test_custom_control_from_the_readme(tmp_path: Path, monkeypatch) -> None:
     spec = write_spec(tmp_path, TINY_SPEC.replace(
         "[policy]", '[[controls]]\ntype = "mycontrols:Vignette"\nstrength = [0, 0.5, 1]\n\n[policy]'))
     loaded = load_spec(spec)
-    plan = make_plan(loaded, model_digest="m")
+    plan = plan_for(loaded, "m")
     assert len(plan.jobs) == 24
     # strength 0 is neutral: those jobs share their keys with a spec that lacks the control
     (tmp_path / "plain").mkdir()
-    plain = make_plan(load_spec(write_spec(tmp_path / "plain", TINY_SPEC)), model_digest="m")
+    plain = plan_for(load_spec(write_spec(tmp_path / "plain", TINY_SPEC)), "m")
     neutral = {j.image_key for j in plan.jobs if j.values["Vignette"]["strength"] == 0}
     assert neutral == {j.image_key for j in plain.jobs}
     control = next(c for c in loaded.controls if c.id == "Vignette")

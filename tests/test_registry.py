@@ -7,9 +7,11 @@ import textwrap
 
 import pytest
 
-from sweep3d.controls import CONTROLS
 from sweep3d.errors import UserError
 from sweep3d.registry import Registry
+from sweep3d.stages import catalogue
+
+CONTROLS = catalogue().controls
 
 
 def make_registry() -> Registry:
@@ -61,17 +63,17 @@ def test_unknown_name_without_a_close_match_has_no_suggestion():
     assert "valid: gear, sprocket" in str(caught.value)
 
 
-def test_loader_runs_once_and_only_when_read():
-    calls = []
-    registry: Registry = Registry("thing", loader=lambda: calls.append(1) or registry.register("a")(object))
-    assert calls == []
-    assert registry.names() == ["a"]
-    registry.get("a")
-    assert "a" in registry
-    assert calls == [1]
+def test_union_holds_every_part_and_refuses_a_name_twice():
+    first, second = make_registry(), Registry("widget")
+    second.register("flange")(object)
+    union = Registry.union("widget", first, second)
+    assert union.names() == sorted(first.names() + ["flange"])
+    assert union.get("flange") is object and union.get("gear") is first.get("gear")
+    with pytest.raises(ValueError, match="already registered"):
+        Registry.union("widget", first, make_registry())
 
 
-def test_builtin_controls_register_lazily():
+def test_builtin_controls_come_from_both_stages():
     names = CONTROLS.names()
     assert {"orientation", "camera", "scale", "position", "blur", "noise", "brightness_contrast"} <= set(names)
     with pytest.raises(UserError, match="did you mean 'orientation'"):

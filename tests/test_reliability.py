@@ -32,7 +32,7 @@ from sweep3d.cli import app
 from sweep3d.errors import UserError
 from sweep3d.pipeline import run
 from sweep3d.pixels import encode_png
-from sweep3d.spec import load_spec
+from sweep3d.stages import load_spec
 from tests.conftest import REPO, TINY_SPEC, write_spec
 
 T0 = datetime(2024, 1, 1)

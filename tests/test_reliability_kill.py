@@ -24,7 +24,7 @@ import pytest
 from sweep3d.cache.maintenance import collect_garbage, verify
 from sweep3d.cache.store import KEY_COLUMN, Store
 from sweep3d.pipeline import run
-from sweep3d.spec import load_spec
+from sweep3d.stages import load_spec
 from tests.conftest import REPO, TINY_SPEC, write_spec
 
 pytestmark = pytest.mark.slow

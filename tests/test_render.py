@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from sweep3d.errors import UserError
-from sweep3d.stages.render.assets import builtin_hdris
+from sweep3d.spec.assets import builtin_hdris
 from sweep3d.stages.render.controls import Camera, Orientation, Position
 from sweep3d.stages.render.state import SceneState
 

@@ -28,7 +28,7 @@ from sweep3d.report.page import SCRIPTS, plotly_js, script_json
 from sweep3d.report.panel import Panel
 from sweep3d.report.panels import CORE_PANELS, PANELS, overall
 from sweep3d.report.thumbs import SIZES, Thumbnails, thumbnail_size
-from sweep3d.spec import load_spec
+from sweep3d.stages import load_spec
 from tests.conftest import REPO, TINY_SPEC, write_spec
 
 CHROMIUM = Path("/usr/bin/chromium")

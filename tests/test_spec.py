@@ -14,7 +14,8 @@ from typer.testing import CliRunner
 
 from sweep3d.cli import app
 from sweep3d.errors import SpecError
-from sweep3d.spec import Choice, Fixed, Range, load_spec
+from sweep3d.spec import Choice, Fixed, Range
+from sweep3d.stages import load_spec
 from sweep3d.spec.space import Point, SearchSpace
 from tests.conftest import CUBE_OBJ, TINY_SPEC, write_cube, write_spec
 
@@ -33,6 +34,18 @@ class Tint(PostControl):
     class Params(ControlParams):
         mode: str = "none"
         count: int = Field(0, ge=0, le=100)
+
+    def apply(self, image, params, rng):
+        return image
+
+
+class Pair(PostControl):
+    """Parameters whose columns can collide with the tables' own or with each other's."""
+
+    class Params(ControlParams):
+        key: str = ""
+        a_b: str = ""
+        b: str = ""
 
     def apply(self, image, params, rng):
         return image
@@ -170,6 +183,11 @@ MISTAKES = [
             "report.part_visibility", ("valid boolean",)),
     Mistake("report-key-unknown", append("[report]\npart_visiblity = true\n"), "report.part_visiblity",
             ("unknown key",)),
+    Mistake("column-shadows-a-key", append(f'[[controls]]\ntype = "{USER_MODULE}:Pair"\nid = "render"\nkey = "x"\n'),
+            "controls[2].key", ("'render_key'", "results table's own", "id = ")),
+    Mistake("columns-collide", append(f'[[controls]]\ntype = "{USER_MODULE}:Pair"\nid = "p"\na_b = "x"\n'
+                                      f'[[controls]]\ntype = "{USER_MODULE}:Pair"\nid = "p_a"\nb = "y"\n'),
+            "controls[3].b", ("'p_a_b'", "controls[2]", "id = ")),
     Mistake("model-unknown", edit("[model]\n", '[model]\nname = "efficientnet-lite1"\n'),
             "model.name", ("'efficientnet-lite1'", "efficientnet-lite0", "module:Name")),
 ]

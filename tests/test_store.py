@@ -240,7 +240,7 @@ def test_real_run_tables_open_with_plain_duckdb(tiny_run):
 
 
 def _results_count(folder: Path) -> int:
-    from sweep3d.spec import load_spec
+    from sweep3d.stages import load_spec
 
     loaded = load_spec(folder / "spec.toml")
     return Store(loaded.store).connect(loaded.name).execute("select count(*) from results").fetchone()[0]

@@ -22,12 +22,14 @@ from sweep3d.cache.store import Store
 from sweep3d.errors import UserError
 from sweep3d.pixels import decode_png
 from sweep3d.progress import RunProgress
+from sweep3d.pipeline import plan_spec
 from sweep3d.spec.loader import LoadedSpec
 from sweep3d.stages.aggregate import wilson_interval
-from sweep3d.stages.infer import infer_stage
-from sweep3d.stages.plan import Plan, make_plan
-from sweep3d.stages.postprocess import postprocess_stage
-from sweep3d.stages.render import render_stage
+from sweep3d.stages.driver import run_stages
+from sweep3d.stages.infer import InferStage, ModelHandle, Preprocess
+from sweep3d.stages.plan import Plan
+from sweep3d.stages.postprocess import PostprocessStage
+from sweep3d.stages.render import RenderStage
 
 #: The sample is rendered in this many rounds, every setting taking its turn in each, so that
 #: timings taken on a shared machine whose load changes are comparable (a worker start per turn).
@@ -126,9 +128,12 @@ def measure(loaded: LoadedSpec, settings: list[Setting], reference: Setting, flo
             progress: RunProgress) -> list[BenchRow]:
     """Render the sample under every setting and both references; compare each with the reference."""
     plans: dict[Setting, Plan] = {}
+    models: dict[Setting, ModelHandle] = {}
     indices = None
     for setting in [reference] + ([floor] if floor else []) + settings:
-        plan = make_plan(_with(loaded, setting))
+        variant = _with(loaded, setting)
+        models[setting] = ModelHandle.resolve(variant)
+        plan = plan_spec(variant, models[setting])
         if indices is None:
             indices = _sample(plan, jobs, loaded.spec.experiment.seed)
         by_index = {j.index: j for j in plan.jobs}
@@ -139,19 +144,20 @@ def measure(loaded: LoadedSpec, settings: list[Setting], reference: Setting, flo
             for setting, plan in plans.items():
                 n = len(plan.jobs)  # contiguous: a scene's jobs stay together, as in a run
                 part = dataclasses.replace(plan, jobs=plan.jobs[chunk * n // ROUNDS : (chunk + 1) * n // ROUNDS])
-                for stage in (render_stage, postprocess_stage, infer_stage):
-                    outcome = stage(part, store, progress)
-                    if outcome.failed:
-                        raise UserError(f"bench: {outcome.failed} {outcome.stage} jobs failed at {setting.label()}: "
-                                        f"{outcome.errors[0].splitlines()[0]}")
+                stages = (RenderStage(), PostprocessStage(), InferStage(models[setting]))
+                try:
+                    run_stages(stages, part, store, progress, strict=True)
+                except UserError as exc:
+                    raise UserError(f"bench at {setting.label()}: {exc}") from None
     con = store.connect()
     seconds = dict(con.execute("SELECT render_key, seconds FROM renders").fetchall())
     verdicts = {r[0]: (r[1], r[2]) for r in con.execute("SELECT pred_key, top1, correct FROM predictions").fetchall()}
     ref_plan = plans[reference]
-    ref_images = [_as_seen(decode_png(store.blob_path(j.render_key)), ref_plan) for j in ref_plan.jobs]
+    view = models[reference].view
+    ref_images = [_as_seen(decode_png(store.blob_path(j.render_key)), ref_plan, view) for j in ref_plan.jobs]
     rows = []
     for setting, plan in plans.items():
-        images = [_as_seen(decode_png(store.blob_path(j.render_key)), plan, ref_images[0].shape[0])
+        images = [_as_seen(decode_png(store.blob_path(j.render_key)), plan, view, ref_images[0].shape[0])
                   for j in plan.jobs]
         errors = [_errors(img, ref) for img, ref in zip(images, ref_images)]
         pairs = [(verdicts[j.pred_key], verdicts[r.pred_key]) for j, r in zip(plan.jobs, ref_plan.jobs)]
@@ -210,19 +216,15 @@ def _sample(plan: Plan, jobs: int, seed: int) -> list[int]:
     return sorted(int(pick.choice(renders[i])) for i in chosen)
 
 
-def _as_seen(image: np.ndarray, plan: Plan, side: int | None = None) -> np.ndarray:
+def _as_seen(image: np.ndarray, plan: Plan, view: Preprocess | None, side: int | None = None) -> np.ndarray:
     """The image as the model sees it (its resize and centre crop; nothing for a model-framed
     render), or, when the model's input size is unknown, resized to the reference's ``side``."""
-    from sweep3d.stages.infer.models import Preprocess, input_geometry
-
     framing = plan.framing
     if framing is not None and framing.model:
         return image
-    try:
-        resize, crop = input_geometry(plan.spec.spec.model.name)
-    except UserError:  # a user's own preprocessing: compare at the reference's resolution
+    if view is None:  # a user's own preprocessing: compare at the reference's resolution
         return image if side in (None, image.shape[0]) else _resize(image, side)
-    geometry = Preprocess(resize, crop, mean=(0.0, 0.0, 0.0), std=(1.0, 1.0, 1.0))
+    geometry = Preprocess(view.resize, view.crop, mean=(0.0, 0.0, 0.0), std=(1.0, 1.0, 1.0))
     return geometry(image[None])[0].permute(1, 2, 0).numpy()
 
 

@@ -266,8 +266,8 @@ class Store:
         """An in-memory DuckDB connection with views over this store's Parquet files.
 
         Views: ``renders``, ``images``, ``predictions``, ``runs`` (deduplicated by key), and when
-        ``experiment`` has a plan, ``jobs`` (its latest plan) and ``results`` (jobs ⨝ predictions),
-        with the aggregate views over ``results`` (see :mod:`sweep3d.stages.aggregate.views`).
+        ``experiment`` has a plan, ``jobs`` (its latest plan) and ``results`` (jobs ⨝ predictions).
+        The aggregate stage adds its views on top (``sweep3d.stages.aggregate.connect``).
         Unreadable segments are left out (and quarantined). The views read the segments listed
         now; a compaction keeps the files it replaced for ``SUPERSEDED_GRACE`` seconds, so a
         connection stays good that long whatever happens to the store meanwhile.
@@ -290,11 +290,6 @@ class Store:
                     "CREATE VIEW results AS SELECT j.*, p.* EXCLUDE (pred_key, image_key, created_at) "
                     "FROM jobs j JOIN predictions p USING (pred_key)"
                 )
-        from sweep3d.stages.aggregate import (
-            register_views,  # the report's aggregates, as views
-        )
-
-        register_views(con)
         return con
 
     # -- damage control ----------------------------------------------------------------------

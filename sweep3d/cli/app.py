@@ -30,8 +30,8 @@ SpecArg = typer.Argument(..., help="Path to the experiment's TOML spec.", show_d
 @command
 def plan(spec: Path = SpecArg) -> None:
     """Show the jobs a spec expands to, what is already cached, and an estimated time."""
-    from sweep3d.cli.views import print_plan
-    from sweep3d.spec import load_spec
+    from sweep3d.cli.output import print_plan
+    from sweep3d.stages import load_spec
 
     print_plan(console, load_spec(spec))
 
@@ -46,9 +46,9 @@ def run(
                                                       "start a local one on 127.0.0.1)."),
 ) -> None:
     """Render, postprocess and infer everything the spec needs that the store lacks."""
-    from sweep3d.cli.views import print_run
+    from sweep3d.cli.output import print_run
     from sweep3d.pipeline import run as run_pipeline
-    from sweep3d.spec import load_spec
+    from sweep3d.stages import load_spec
     from sweep3d.stages.render.stage import Executor
 
     loaded = load_spec(spec)
@@ -69,7 +69,7 @@ def report(
     output: Optional[Path] = typer.Option(None, "--output", "-o", help="HTML file to write."),
 ) -> None:
     """Write a self-contained HTML dashboard of the spec's results."""
-    from sweep3d.spec import load_spec
+    from sweep3d.stages import load_spec
 
     _write_report(load_spec(spec), output)
 
@@ -107,20 +107,17 @@ def bench(
     from sweep3d.bench.measure import reference_settings
     from sweep3d.bench.plot import write_pareto_plot
     from sweep3d.cache.store import Store
-    from sweep3d.cli.views import print_bench
+    from sweep3d.cli.output import print_bench
     from sweep3d.progress import RunProgress
-    from sweep3d.spec import load_spec
-    from sweep3d.stages.infer.models import input_geometry
+    from sweep3d.stages import load_spec
+    from sweep3d.stages.infer import ModelHandle
 
     if reference_denoise not in ("off", "accurate", "fast", "none"):
         raise UserError(f"--reference-denoise {reference_denoise!r}: use off, accurate, fast or none")
     loaded = load_spec(spec)
-    r = loaded.spec.render
-    try:
-        full_frame = input_geometry(loaded.spec.model.name)[1]  # the model's crop, as a plain frame
-        model_view = True
-    except UserError:  # a user's own preprocessing: no model framing, compare at the spec's resolution
-        model_view, full_frame = False, None
+    r = loaded.render
+    view = ModelHandle.resolve(loaded).view  # None: a user's own preprocessing, compared at the spec's size
+    model_view, full_frame = view is not None, view.crop if view is not None else None
     current = Setting(r.samples, r.denoise_prefilter if r.denoise else "off", r.max_bounces,
                       "model" if r.resolution == "model" else None, r.adaptive_threshold)
     reference, twin = reference_settings(reference_samples, reference_denoise, current, model_view)
@@ -146,7 +143,7 @@ def sheet(
     from sweep3d.cache.store import Store
     from sweep3d.progress import RunProgress
     from sweep3d.report.sheet import contact_sheet
-    from sweep3d.spec import load_spec
+    from sweep3d.stages import load_spec
 
     loaded = load_spec(spec)
     target = output or Store(loaded.store).report_path(loaded.name, "-controls.png")
@@ -166,10 +163,10 @@ def query(
     import duckdb
 
     from sweep3d.cache.store import Store
-    from sweep3d.spec import load_spec
+    from sweep3d.stages import load_spec
 
     loaded = load_spec(spec)
-    con = Store(loaded.store).connect(loaded.name)
+    con = connect(Store(loaded.store), loaded.name)
     statement = sql.strip().rstrip(";")
     try:
         if output is not None:

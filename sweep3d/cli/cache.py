@@ -28,7 +28,7 @@ command = registrar(cache_app)
 
 
 def _store_root(spec: Path) -> Path:
-    from sweep3d.spec import load_spec
+    from sweep3d.stages import load_spec
 
     loaded = load_spec(spec)
     if not loaded.store.is_dir():

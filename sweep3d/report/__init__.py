@@ -9,6 +9,7 @@ variance explained). Optional panels show only when their data exists.
 Usage::
 
     from sweep3d.report import write_report
+    from sweep3d.stages import load_spec
     path = write_report(load_spec("spec.toml"))  # <store>/reports/<experiment>.html
 """
 

@@ -18,12 +18,12 @@ from sweep3d.cache.store import Store, atomic_write
 from sweep3d.errors import UserError
 from sweep3d.report.figures import pct
 from sweep3d.report.page import render_page
-from sweep3d.report.panel import Panel, PanelInputs, build_panels, control_columns
+from sweep3d.report.panel import Panel, PanelInputs, build_panels
 from sweep3d.report.panels import PANELS
 from sweep3d.report.results import load_results
 from sweep3d.report.thumbs import Thumbnails
 from sweep3d.spec.loader import LoadedSpec
-from sweep3d.stages.aggregate import MACROS, VIEWS, Summary, has_view, summarise
+from sweep3d.stages.aggregate import MACROS, VIEWS, Summary, connect, has_view, summarise
 
 STAGES = ("render", "postprocess", "infer")
 
@@ -42,7 +42,7 @@ def write_report(loaded: LoadedSpec, output: Path | None = None) -> Path:
         UserError: if the store holds no results for the experiment, or the file cannot be written.
     """
     store = Store(loaded.store)
-    con = store.connect(loaded.name)
+    con = connect(store, loaded.name)
     try:
         context = build_context(loaded, con, store)
     finally:
@@ -66,7 +66,7 @@ def build_context(loaded: LoadedSpec, con: duckdb.DuckDBPyConnection, store: Sto
 
     Args:
         loaded: the experiment's spec.
-        con: a connection from :meth:`Store.connect` for this experiment.
+        con: a connection from ``aggregate.connect`` for this experiment.
         store: the store holding the image blobs.
         panels: the panels to build, in page order (those whose data is absent are left out).
 
@@ -75,7 +75,7 @@ def build_context(loaded: LoadedSpec, con: duckdb.DuckDBPyConnection, store: Sto
     """
     if not has_view(con, "results") or not con.execute("SELECT count(*) FROM results").fetchone()[0]:
         raise UserError(f"no results for experiment {loaded.name!r} yet; run: sweep3d run {loaded.path}")
-    columns = control_columns(loaded)
+    columns = loaded.parameter_columns
     summary = summarise(con, columns)
     table = load_results(con, ["object", "environment", *columns])
     images = con.execute("SELECT count(DISTINCT image_key) FROM results").fetchone()[0]

@@ -26,7 +26,7 @@ class PanelInputs:
 
     Attributes:
         loaded: the experiment's spec.
-        con: a connection from :meth:`Store.connect` (``results`` and the aggregate views).
+        con: a connection from ``aggregate.connect`` (``results`` and the aggregate views).
         summary: counts, the worst failures and per-control effects.
         table: every result with its parameter levels.
         thumbs: the page's images; ``thumbs.want(image_key)`` gives an index for a template.
@@ -84,11 +84,6 @@ class BuiltPanel:
     title: str
     template: str
     data: dict[str, Any]
-
-
-def control_columns(loaded: LoadedSpec) -> list[str]:
-    """The spec's control-parameter columns (``<control id>_<param>``), in spec order."""
-    return [f"{c.id}_{p}" for c in loaded.controls for p in c.spaces]
 
 
 def build_panels(panels: tuple[Panel, ...], inputs: PanelInputs) -> list[BuiltPanel]:

@@ -76,7 +76,7 @@ def load_results(con: duckdb.DuckDBPyConnection, names: Sequence[str]) -> Result
     """Read the results and the levels of the parameters ``names`` (unknown names are skipped).
 
     Args:
-        con: a connection from :meth:`Store.connect` (with the aggregate views).
+        con: a connection from ``aggregate.connect`` (with the aggregate views).
         names: parameter names in the order wanted, e.g. ``object``, ``environment``, then the
             spec's control columns.
     """

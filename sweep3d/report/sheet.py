@@ -15,12 +15,14 @@ from PIL import Image, ImageDraw
 from sweep3d.cache.store import Store
 from sweep3d.errors import UserError
 from sweep3d.progress import RunProgress
-from sweep3d.spec.framing import resolve_framing
+from sweep3d.pipeline import plan_spec
 from sweep3d.spec.loader import LoadedSpec
-from sweep3d.stages.plan import Job, Plan, make_plan
+from sweep3d.stages.driver import run_stages
+from sweep3d.stages.infer import ModelHandle
+from sweep3d.stages.plan import Job, Plan
 from sweep3d.stages.plan.policies import GridPolicy
-from sweep3d.stages.postprocess import postprocess_stage
-from sweep3d.stages.render import render_stage
+from sweep3d.stages.postprocess import PostprocessStage
+from sweep3d.stages.render import RenderStage
 
 TILE = 128
 LABEL_WIDTH = 170
@@ -34,21 +36,18 @@ def contact_sheet(loaded: LoadedSpec, output: Path, progress: RunProgress) -> Pa
         raise UserError(f"{loaded.path}: the spec has no [[controls]] to show")
     rows: list[tuple[str, list[Job]]] = []
     jobs: list[Job] = []
-    framing = resolve_framing(loaded)
+    model = ModelHandle.resolve(loaded)
     for inst in loaded.controls:
-        plan = make_plan(_one_control(loaded, inst), model_digest="sheet", framing=framing)
+        plan = plan_spec(_one_control(loaded, inst), model)
         distinct = list({j.image_key: j for j in plan.jobs}.values())
         if len(distinct) > MAX_TILES:  # several ranges: a spread of the grid
             distinct = [distinct[round(i * (len(distinct) - 1) / (MAX_TILES - 1))] for i in range(MAX_TILES)]
         rows.append((inst.id, distinct))
         jobs += distinct
-    plan = Plan(loaded, jobs, "sheet", framing=framing)
+    plan = Plan(loaded, jobs, model.digest, framing=model.framing)
     store = Store(loaded.store)
     with store.lock():
-        for stage in (render_stage, postprocess_stage):
-            outcome = stage(plan, store, progress)
-            if outcome.failed:
-                raise UserError(f"{outcome.failed} {outcome.stage} jobs failed: {outcome.errors[0].splitlines()[0]}")
+        run_stages((RenderStage(), PostprocessStage()), plan, store, progress, strict=True)
     width = LABEL_WIDTH + TILE * max(len(r[1]) for r in rows)
     sheet = Image.new("RGB", (width, TILE * len(rows)), "white")
     draw = ImageDraw.Draw(sheet)
@@ -69,8 +68,7 @@ def contact_sheet(loaded: LoadedSpec, output: Path, progress: RunProgress) -> Pa
 
 def _one_control(loaded: LoadedSpec, inst) -> LoadedSpec:
     """The spec reduced to its first scene and this one control, on a small grid."""
-    spec = loaded.spec.model_copy(update={"objects": loaded.spec.objects[:1],
-                                          "environments": loaded.spec.environments[:1]})
+    spec = loaded.spec.model_copy(update={"objects": loaded.objects[:1], "environments": loaded.environments[:1]})
     policy = GridPolicy(GridPolicy.Params(samples_per_dim=SAMPLES_PER_RANGE))
     return dataclasses.replace(loaded, spec=spec, controls=[inst], policy=policy)
 

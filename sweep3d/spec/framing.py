@@ -2,15 +2,14 @@
 
 "model" renders exactly what the classifier sees: a frame of the model's resize size, of which
 only the centre crop is rendered (Blender's render border, cropped), so the stored image is the
-model's input and inference does no resampling. The sizes come from the model's preprocessing:
-known statically for built-in models, read from the loaded factory for users' models.
+model's input and inference does no resampling. The sizes come from the model's preprocessing
+(the infer stage's ``ModelHandle`` resolves them: statically for built-in models, from the loaded
+factory for users' models), so this module needs no model.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-
-from sweep3d.errors import SpecError, UserError
 
 
 @dataclass(frozen=True)
@@ -36,26 +35,16 @@ class Framing:
             return {"resolution": self.size}
         return {"resolution": self.size, "crop": self.crop}
 
+    @classmethod
+    def full(cls, size: int) -> Framing:
+        """A plain square frame of ``size`` pixels, all of it rendered."""
+        return cls(size, size)
+
+    @classmethod
+    def of_model(cls, resize: int, crop: int) -> Framing:
+        """The model's view: a frame of its resize size whose centre crop is rendered."""
+        return cls(max(resize, crop), crop, model=True)
+
     def settings(self) -> dict[str, int]:
         """What the Blender scene needs (merged over the [render] settings)."""
         return {"resolution": self.size, "crop": self.crop}
-
-
-def resolve_framing(spec) -> Framing:
-    """The frame of a :class:`~sweep3d.spec.loader.LoadedSpec` (loads a user's model for "model").
-
-    Raises:
-        SpecError: naming ``render.resolution`` when the model's input size cannot be known.
-    """
-    resolution = spec.spec.render.resolution
-    if resolution != "model":
-        return Framing(resolution, resolution)
-    from sweep3d.stages.infer.models import input_geometry
-
-    try:
-        resize, crop = input_geometry(spec.spec.model.name)
-    except SpecError:
-        raise
-    except UserError as exc:
-        raise SpecError(str(spec.path), "render.resolution", str(exc)) from None
-    return Framing(max(resize, crop), crop, model=True)

@@ -6,6 +6,7 @@ what is expected, so the CLI can print one line instead of a traceback.
 
 from __future__ import annotations
 
+import difflib
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -13,9 +14,21 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from sweep3d.controls import CONTROLS, Control, is_spec_path
+from sweep3d.controls import Control, is_spec_path
 from sweep3d.errors import SpecError, UserError
-from sweep3d.spec.models import Spec
+from sweep3d.spec.assets import resolve_hdri, resolve_mesh
+from sweep3d.spec.catalogue import Catalogue
+from sweep3d.spec.columns import JOB_COLUMNS, PREDICTION_COLUMNS, parameter_column
+from sweep3d.spec.models import (
+    EnvironmentSpec,
+    EvaluatorSpec,
+    ExperimentSpec,
+    ModelSpec,
+    ObjectSpec,
+    RenderSpec,
+    ReportSpec,
+    Spec,
+)
 from sweep3d.spec.params import (
     Choice,
     Fixed,
@@ -24,6 +37,7 @@ from sweep3d.spec.params import (
     Space,
     parse_space,
 )
+from sweep3d.spec.sniff import check_hdri, check_mesh
 
 RESERVED_CONTROL_KEYS = {"type", "id", "objects", "environments"}
 
@@ -40,6 +54,11 @@ class ControlInstance:
     @property
     def id(self) -> str:
         return self.control.id
+
+    @property
+    def columns(self) -> list[str]:
+        """This control's parameter columns in the jobs and results tables."""
+        return [parameter_column(self.id, param) for param in self.spaces]
 
     def applies_to(self, object_name: str, environment_name: str) -> bool:
         return (self.objects is None or object_name in self.objects) and (
@@ -64,12 +83,50 @@ class LoadedSpec:
     def name(self) -> str:
         return self.spec.experiment.name
 
+    # The spec's tables, so callers write ``loaded.render`` rather than ``loaded.spec.render``.
+    @property
+    def experiment(self) -> ExperimentSpec:
+        return self.spec.experiment
+
+    @property
+    def render(self) -> RenderSpec:
+        return self.spec.render
+
+    @property
+    def model(self) -> ModelSpec:
+        return self.spec.model
+
+    @property
+    def evaluator(self) -> EvaluatorSpec:
+        return self.spec.evaluator
+
+    @property
+    def objects(self) -> list[ObjectSpec]:
+        return self.spec.objects
+
+    @property
+    def environments(self) -> list[EnvironmentSpec]:
+        return self.spec.environments
+
+    @property
+    def report(self) -> ReportSpec:
+        return self.spec.report
+
+    @property
+    def parameter_columns(self) -> list[str]:
+        """Every control parameter's column, in spec order."""
+        return [column for inst in self.controls for column in inst.columns]
+
     def fail(self, key: str, problem: str) -> SpecError:
         return SpecError(str(self.path), key, problem)
 
 
-def load_spec(path: str | Path) -> LoadedSpec:
+def load_spec(path: str | Path, catalogue: Catalogue) -> LoadedSpec:
     """Read, validate and resolve a spec file.
+
+    Args:
+        catalogue: the controls, policies, models and evaluators its names may refer to
+            (``sweep3d.stages.catalogue()`` for the built-in ones).
 
     Raises:
         SpecError: for any mistake in the file, naming the key and the fix.
@@ -82,9 +139,6 @@ def load_spec(path: str | Path) -> LoadedSpec:
         raise _first_error(path, exc) from None
     base = path.resolve().parent
     fail = lambda key, problem: SpecError(str(path), key, problem)  # noqa: E731
-
-    from sweep3d.spec.sniff import check_hdri, check_mesh
-    from sweep3d.stages.render.assets import resolve_hdri, resolve_mesh
 
     meshes = {}
     for i, obj in enumerate(spec.objects):
@@ -102,10 +156,11 @@ def load_spec(path: str | Path) -> LoadedSpec:
         except UserError as exc:
             raise fail(f"environments[{i}].hdri", _naming(env.hdri or "", exc)) from None
 
-    _check_model(spec, fail)
-    labels = _resolve_labels(spec, fail)
-    controls = _load_controls(spec, fail, base)
-    policy = _load_policy(spec, fail)
+    _check_model(spec, fail, catalogue)
+    labels = _resolve_labels(spec, fail, catalogue)
+    controls = _load_controls(spec, fail, base, catalogue)
+    _check_columns(spec, controls, fail, catalogue)
+    policy = _load_policy(spec, fail, catalogue)
     store = Path(spec.experiment.store)
     store = (store if store.is_absolute() else base / store).resolve()
     return LoadedSpec(path, spec, store, meshes, hdris, labels, controls, policy)
@@ -157,11 +212,9 @@ def _key_path(loc: tuple[Any, ...]) -> str:
     return out
 
 
-def _check_model(spec: Spec, fail) -> None:
-    from sweep3d.stages.infer.evaluators import EVALUATORS
-    from sweep3d.stages.infer.models import MODELS
-
-    for key, registry, name in (("model.name", MODELS, spec.model.name), ("evaluator.kind", EVALUATORS, spec.evaluator.kind)):
+def _check_model(spec: Spec, fail, catalogue: Catalogue) -> None:
+    for key, registry, name in (("model.name", catalogue.models, spec.model.name),
+                                ("evaluator.kind", catalogue.evaluators, spec.evaluator.kind)):
         if ":" not in name:
             try:
                 registry.get(name)
@@ -169,26 +222,25 @@ def _check_model(spec: Spec, fail) -> None:
                 raise fail(key, str(exc)) from None
 
 
-def _resolve_labels(spec: Spec, fail) -> dict[str, tuple]:
-    """Check labels against ImageNet for built-in models; a user's model checks its own at run time."""
-    from sweep3d.stages.infer.labels import IMAGENET, LabelError
-
+def _resolve_labels(spec: Spec, fail, catalogue: Catalogue) -> dict[str, tuple]:
+    """Check labels against a built-in model's classes; a user's model checks its own at run time."""
+    classes = catalogue.labels(spec.model.name)
     out: dict[str, tuple] = {}
     for i, obj in enumerate(spec.objects):
-        if ":" in spec.model.name:
+        if classes is None:
             out[obj.name] = tuple(obj.labels)
             continue
         ids = []
         for j, label in enumerate(obj.labels):
             try:
-                ids.append(IMAGENET.index(label))
-            except LabelError as exc:
+                ids.append(classes.index(label))
+            except ValueError as exc:
                 raise fail(f"objects[{i}].labels[{j}]", str(exc)) from None
         out[obj.name] = tuple(sorted(set(ids)))
     return out
 
 
-def _load_controls(spec: Spec, fail, base: Path) -> list[ControlInstance]:
+def _load_controls(spec: Spec, fail, base: Path, catalogue: Catalogue) -> list[ControlInstance]:
     instances: list[ControlInstance] = []
     ids: set[str] = set()
     object_names = {o.name for o in spec.objects}
@@ -197,9 +249,9 @@ def _load_controls(spec: Spec, fail, base: Path) -> list[ControlInstance]:
         where = f"controls[{i}]"
         type_name = entry.get("type")
         if not isinstance(type_name, str):
-            raise fail(f"{where}.type", f"required; one of: {', '.join(CONTROLS.names())}")
+            raise fail(f"{where}.type", f"required; one of: {', '.join(catalogue.controls.names())}")
         try:
-            cls = CONTROLS.get(type_name)
+            cls = catalogue.controls.get(type_name)
         except UserError as exc:
             raise fail(f"{where}.type", str(exc)) from None
         if not (isinstance(cls, type) and issubclass(cls, Control)):
@@ -218,6 +270,24 @@ def _load_controls(spec: Spec, fail, base: Path) -> list[ControlInstance]:
     return instances
 
 
+def _check_columns(spec: Spec, controls: list[ControlInstance], fail, catalogue: Catalogue) -> None:
+    """Refuse a parameter whose column would collide with another column of ``jobs`` or ``results``
+    (``render`` + ``key`` would shadow ``render_key``; ``a`` + ``b_c`` and ``a_b`` + ``c`` would merge)."""
+    evaluator = catalogue.evaluators.get(spec.evaluator.kind) if ":" not in spec.evaluator.kind else None
+    reserved = set(JOB_COLUMNS) | set(PREDICTION_COLUMNS) | set(getattr(getattr(evaluator, "schema", None), "names", ()))
+    seen: dict[str, str] = {}
+    for i, inst in enumerate(controls):
+        for param in inst.spaces:
+            column = parameter_column(inst.id, param)
+            where = f"controls[{i}].{param}"
+            if column in reserved:
+                raise fail(where, f"its column {column!r} is one of the results table's own columns; "
+                                  f"give the control another id = '...'")
+            if column in seen:
+                raise fail(where, f"its column {column!r} is also {seen[column]}'s; give the control another id = '...'")
+            seen[column] = f"controls[{i}] {inst.id}.{param}"
+
+
 def _control_spaces(control: Control, entry: dict[str, Any], where: str, fail, base: Path) -> dict[str, Space]:
     fields = control.Params.model_fields
     spaces: dict[str, Space] = {}
@@ -225,8 +295,6 @@ def _control_spaces(control: Control, entry: dict[str, Any], where: str, fail, b
         if name in RESERVED_CONTROL_KEYS:
             continue
         if name not in fields:
-            import difflib
-
             close = difflib.get_close_matches(name, fields, n=1)
             hint = f" (did you mean {close[0]!r}?)" if close else ""
             raise fail(
@@ -293,12 +361,10 @@ def _name_filter(entry, key, valid: set[str], where: str, fail) -> frozenset[str
     return frozenset(names)
 
 
-def _load_policy(spec: Spec, fail):
-    from sweep3d.stages.plan.policies import POLICIES
-
+def _load_policy(spec: Spec, fail, catalogue: Catalogue):
     params = {k: v for k, v in (spec.policy.model_extra or {}).items()}
     try:
-        cls = POLICIES.get(spec.policy.type)
+        cls = catalogue.policies.get(spec.policy.type)
     except UserError as exc:
         raise fail("policy.type", str(exc)) from None
     try:

@@ -5,13 +5,13 @@ from __future__ import annotations
 from typing import Any
 
 from sweep3d.report.figures import pct
-from sweep3d.report.panel import PanelInputs, control_columns
+from sweep3d.report.panel import PanelInputs
 
 
 def build(inputs: PanelInputs) -> dict[str, Any]:
     """Cards of the summary's failures: thumbnail, scene, control values, top-k, loss."""
     failures = inputs.summary.failures
-    columns = control_columns(inputs.loaded)
+    columns = inputs.loaded.parameter_columns
     selected = "".join(f', "{c}"' for c in columns)
     extra = {row[0]: row[1:] for row in inputs.con.execute(
         f"SELECT job, topk{selected} FROM results WHERE list_contains(?, job)", [[f["job"] for f in failures]]

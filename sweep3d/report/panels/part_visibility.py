@@ -77,7 +77,7 @@ def _colours(parts: list[dict[str, Any]], minimum: int) -> np.ndarray:
 def _attach_renders(inputs: PanelInputs, blocks: list[dict[str, Any]]) -> None:
     """Give each block its coloured renders (``views``: label and data URI), painting what the
     store does not hold yet in one Blender process."""
-    from sweep3d.stages.render.assets import materialise_mesh, mesh_digest
+    from sweep3d.spec.assets import materialise_mesh, mesh_digest
     from sweep3d.stages.render.paint import VIEWS, paint_objects
 
     store, loaded = inputs.store, inputs.loaded

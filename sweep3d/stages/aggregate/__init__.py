@@ -1,8 +1,8 @@
 """Aggregate: accuracy overall, per control value, per scene, and the failures, by SQL over the store.
 
-:func:`register_views` adds the SQL views and macros behind the report's numbers (per-level
-accuracy with Wilson intervals, failure modes, variance explained, …) to a DuckDB connection;
-:meth:`Store.connect` calls it, so ``sweep3d query`` sees them too.
+:func:`connect` opens a store with the SQL views and macros behind the report's numbers
+(per-level accuracy with Wilson intervals, failure modes, variance explained, …), so
+``sweep3d query`` and the report read the same numbers.
 """
 
 from sweep3d.stages.aggregate.summary import (
@@ -16,10 +16,11 @@ from sweep3d.stages.aggregate.summary import (
 from sweep3d.stages.aggregate.views import (
     MACROS,
     VIEWS,
+    connect,
     has_view,
     register_views,
     wilson_interval,
 )
 
-__all__ = ["MACROS", "VIEWS", "ControlEffect", "Region", "Summary", "control_effects", "has_view",
+__all__ = ["MACROS", "VIEWS", "ControlEffect", "Region", "Summary", "connect", "control_effects", "has_view",
            "register_views", "summarise", "weakest_regions", "wilson_interval"]

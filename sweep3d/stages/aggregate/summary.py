@@ -44,7 +44,7 @@ class Summary:
 
 
 def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit: int = 48) -> Summary:
-    """Summarise the ``results`` view of ``con`` (see :meth:`Store.connect`).
+    """Summarise the ``results`` view of ``con`` (see :func:`~sweep3d.stages.aggregate.connect`).
 
     Args:
         columns: the control-parameter columns of the jobs table.
@@ -55,7 +55,7 @@ def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit:
     evaluated, invalid, correct = con.execute(
         "SELECT count(*), count(*) FILTER (WHERE NOT valid), count(*) FILTER (WHERE valid AND correct) FROM results"
     ).fetchone()
-    if not has_view(con, "control_accuracy"):  # a connection made without Store.connect
+    if not has_view(con, "control_accuracy"):  # a connection made without aggregate.connect
         register_views(con)
     valid = evaluated - invalid
     accuracy = correct / valid if valid else None

@@ -1,9 +1,9 @@
 """SQL views and macros over ``results``: the numbers behind every plot of the report.
 
-:func:`register_views` adds them to a connection from :meth:`Store.connect`, so the report reads
-the same numbers that ``sweep3d query`` and the DuckDB CLI see. Every *parameter* is a column of
-the jobs table that varies a scene: ``object``, ``environment`` and each control parameter
-``<control id>_<param>``. A parameter's *levels* are its values, or, for a numeric parameter
+:func:`connect` opens the store with them (:func:`register_views` adds them to a connection from
+:meth:`Store.connect`), so the report reads the same numbers that ``sweep3d query`` sees.
+Every *parameter* is a column of the jobs table that varies a scene: ``object``, ``environment``
+and each control parameter ``<control id>_<param>`` (the plan lists them in the jobs file). A parameter's *levels* are its values, or, for a numeric parameter
 with more than :data:`MAX_LEVELS` distinct values, :data:`BINS` equal-width bins; a job where a
 control does not apply sits in the level ``(not applied)``. Accuracy counts valid predictions
 only (NaN/inf outputs are counted apart, never averaged in).
@@ -45,8 +45,15 @@ Macros:
 
 from __future__ import annotations
 
-import duckdb
+import json
+from pathlib import Path
 
+import duckdb
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from sweep3d.cache.store import Store
+from sweep3d.spec.columns import JOB_COLUMNS, PARAMETERS_METADATA
 from sweep3d.stages.aggregate.parts import register_part_views
 
 MAX_LEVELS = 12  # a numeric parameter with more distinct values is binned
@@ -55,8 +62,6 @@ Z95 = 1.959963984540054  # two-sided 95 % normal quantile
 NOT_APPLIED = "(not applied)"
 SCENE_COLUMNS = ("object", "environment")
 REQUIRED_COLUMNS = frozenset({"job", "object", "environment", "valid", "correct"})
-# bookkeeping columns of the jobs table (in_frame: the plan flags objects wholly outside the frame)
-NON_PARAMETERS = frozenset({"experiment", "job", "render_key", "image_key", "pred_key", "in_frame"})
 _NUMERIC = ("TINYINT", "SMALLINT", "INTEGER", "BIGINT", "HUGEINT", "UTINYINT", "USMALLINT", "UINTEGER",
             "UBIGINT", "FLOAT", "DOUBLE", "DECIMAL")
 
@@ -70,11 +75,34 @@ VIEWS = ("control_values", "control_stats", "control_levels", "control_parameter
 MACROS = ("wilson_low", "wilson_high", "failure_modes")
 
 
-def register_views(con: duckdb.DuckDBPyConnection) -> bool:
+def connect(store: Store, experiment: str | None = None) -> duckdb.DuckDBPyConnection:
+    """:meth:`Store.connect` with the aggregate views and macros over ``experiment``'s results."""
+    con = store.connect(experiment)
+    parameters = None
+    if experiment is not None and store.jobs_path(experiment).exists():
+        parameters = stored_parameters(store.jobs_path(experiment))
+    register_views(con, parameters)
+    return con
+
+
+def stored_parameters(jobs_path: Path) -> list[str] | None:
+    """The parameter columns a jobs file lists in its metadata (None if it lists none: older plans)."""
+    try:
+        metadata = pq.read_schema(jobs_path).metadata or {}
+    except (OSError, ValueError, pa.ArrowException):
+        return None
+    listed = metadata.get(PARAMETERS_METADATA)
+    return json.loads(listed) if listed is not None else None
+
+
+def register_views(con: duckdb.DuckDBPyConnection, parameters: list[str] | None = None) -> bool:
     """Create the aggregate views and macros on ``con`` (idempotent).
 
     Args:
         con: a connection whose ``jobs`` and ``results`` views exist (see :meth:`Store.connect`).
+        parameters: the jobs table's control-parameter columns, as its plan listed them; None
+            for a jobs table written before plans listed them (its parameters are then the
+            columns that are neither keys nor bookkeeping).
 
     Returns:
         True if the views were created; False (and nothing created but the Wilson macros) when
@@ -87,23 +115,24 @@ def register_views(con: duckdb.DuckDBPyConnection) -> bool:
     result_columns = _columns(con, "results")
     if not REQUIRED_COLUMNS <= result_columns.keys():
         return False
-    parameters = control_columns(con)
-    for sql in _view_statements(parameters, "top1_label" in result_columns):
+    for sql in _view_statements(control_columns(con, parameters), "top1_label" in result_columns):
         con.execute(sql)
     register_part_views(con, set(result_columns))
     return True
 
 
-def control_columns(con: duckdb.DuckDBPyConnection) -> list[tuple[str, bool]]:
-    """The jobs table's parameter columns, in table order, each with whether it is numeric.
+def control_columns(con: duckdb.DuckDBPyConnection, parameters: list[str] | None = None) -> list[tuple[str, bool]]:
+    """The jobs table's parameter columns, each with whether it is numeric.
 
-    ``object`` and ``environment`` come first; then every column that is neither a key nor
-    bookkeeping (the control parameters ``<control id>_<param>``).
+    ``object`` and ``environment`` come first; then the control parameters ``<control id>_<param>``:
+    ``parameters`` as the plan listed them, or, for a jobs table from before plans listed them,
+    every column that is neither a key nor bookkeeping.
     """
     columns = _columns(con, "jobs")
     out = [(name, False) for name in SCENE_COLUMNS if name in columns]
-    out += [(name, _is_numeric(kind)) for name, kind in columns.items()
-            if name not in NON_PARAMETERS and name not in SCENE_COLUMNS and not name.endswith("_key")]
+    if parameters is None:
+        parameters = [name for name in columns if name not in JOB_COLUMNS and not name.endswith("_key")]
+    out += [(name, _is_numeric(columns[name])) for name in parameters if name in columns]
     return out
 
 

@@ -80,10 +80,17 @@ class Classifier:
 
     def digest(self, name: str) -> str:
         weights = self.weights_digest or module_digest(self.module)
-        return _model_key(name, weights, self.preprocess)
+        return model_key(name, weights, self.preprocess)
 
 
-def _model_key(name: str, weights_digest: str, preprocess: Any) -> str:
+def builtin_labels(name: str) -> LabelMap | None:
+    """The class names of a registered model (all of them ImageNet classifiers); None for a
+    user's ``module:factory``, whose classes are known only once it is loaded."""
+    return None if ":" in name else IMAGENET  # type: ignore[return-value]
+
+
+def model_key(name: str, weights_digest: str, preprocess: Any) -> str:
+    """The model's part of prediction keys: its name, weights and preprocessing."""
     pre = preprocess.key_part() if hasattr(preprocess, "key_part") else repr(preprocess)
     return digest({"model": name, "weights": weights_digest, "preprocess": pre})
 
@@ -142,29 +149,10 @@ def for_model_framing(preprocess: Any, name: str) -> Preprocess:
     return dataclasses.replace(preprocess, resize=preprocess.crop)
 
 
-def input_geometry(name: str) -> tuple[int, int]:
-    """(resize, crop) of the model's preprocessing; loads the model only for user factories."""
-    if name in _BUILTIN:
-        pre = _BUILTIN[name][1]
-    else:
-        pre = load_model(name).preprocess
-        for_model_framing(pre, name)  # raises when its sizes are unknown
-    return pre.resize, pre.crop
-
-
-def model_digest(name: str, model_framed: bool = False) -> str:
-    """The digest that goes into prediction keys; loads the model only for user factories.
-
-    Args:
-        model_framed: images are rendered at the model's input: the preprocessing only normalises.
-    """
-    if name in _BUILTIN:
-        weights, pre = _BUILTIN[name]
-        return _model_key(name, weights(), for_model_framing(pre, name) if model_framed else pre)
-    model = load_model(name)
-    if model_framed:
-        model.preprocess = for_model_framing(model.preprocess, name)
-    return model.digest(name)
+def builtin_model(name: str) -> tuple[Callable[[], str], Preprocess] | None:
+    """(weights digest, preprocessing) of a built-in model, known without importing torch; None
+    for any other name (a user's factory must be loaded to know them)."""
+    return _BUILTIN.get(name)
 
 
 def load_model(name: str) -> Classifier:

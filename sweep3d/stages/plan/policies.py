@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import ClassVar, Mapping
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
@@ -26,11 +26,11 @@ class Outcome:
 
 
 class Policy:
-    """Base of every policy: ``points`` must be a pure function of the shape and the seed.
+    """Base of every policy: ``points`` must be a pure function of (shape, seed, history).
 
-    An *adaptive* policy also receives the outcomes of the points it proposed before
-    (``history``) and returns them followed by its next round; the pipeline calls it until it
-    proposes nothing new. The result must stay a pure function of (shape, seed, history).
+    ``history`` holds the outcomes of the points already evaluated in this scene. A fixed policy
+    ignores it; an *adaptive* one returns those points followed by its next round, and the
+    pipeline calls it again until it proposes nothing new.
     """
 
     Params: ClassVar[type[PolicyParams]] = PolicyParams
@@ -39,7 +39,7 @@ class Policy:
     def __init__(self, params: PolicyParams) -> None:
         self.params = params
 
-    def points(self, shape: SpaceShape, seed: int) -> list[Point]:
+    def points(self, shape: SpaceShape, seed: int, history: Mapping[Point, Outcome]) -> list[Point]:
         raise NotImplementedError
 
 
@@ -55,7 +55,7 @@ class GridPolicy(Policy):
     class Params(PolicyParams):
         samples_per_dim: int = Field(4, ge=1, le=10_000)
 
-    def points(self, shape: SpaceShape, seed: int) -> list[Point]:
+    def points(self, shape: SpaceShape, seed: int, history: Mapping[Point, Outcome]) -> list[Point]:
         n = self.params.samples_per_dim
         ticks = [0.5] if n == 1 else [i / (n - 1) for i in range(n)]
         around = [0.5] if n == 1 else [i / n for i in range(n)]
@@ -75,7 +75,7 @@ class RandomPolicy(Policy):
     class Params(PolicyParams):
         samples: int = Field(16, ge=1, le=10_000_000)
 
-    def points(self, shape: SpaceShape, seed: int) -> list[Point]:
+    def points(self, shape: SpaceShape, seed: int, history: Mapping[Point, Outcome]) -> list[Point]:
         rng = np.random.default_rng(seed)
         n = self.params.samples
         unit = rng.random((n, shape.n_continuous))
@@ -93,7 +93,7 @@ class SobolPolicy(Policy):
     class Params(PolicyParams):
         samples: int = Field(16, ge=1, le=10_000_000)
 
-    def points(self, shape: SpaceShape, seed: int) -> list[Point]:
+    def points(self, shape: SpaceShape, seed: int, history: Mapping[Point, Outcome]) -> list[Point]:
         import warnings
 
         from scipy.stats import qmc
@@ -131,10 +131,9 @@ class AdaptivePolicy(Policy):
         switch: float = Field(0.2, ge=0.0, le=1.0)
         explore: float = Field(0.25, ge=0.0, le=1.0)
 
-    def points(self, shape: SpaceShape, seed: int, history: dict[Point, Outcome] | None = None) -> list[Point]:
+    def points(self, shape: SpaceShape, seed: int, history: Mapping[Point, Outcome]) -> list[Point]:
         p = self.params
-        history = history or {}
-        first = SobolPolicy(SobolPolicy.Params(samples=min(p.initial, p.samples))).points(shape, seed)
+        first = SobolPolicy(SobolPolicy.Params(samples=min(p.initial, p.samples))).points(shape, seed, history)
         points = list(dict.fromkeys(first))
         round_index = 1
         while len(points) < p.samples and all(q in history for q in points):
@@ -148,7 +147,7 @@ class AdaptivePolicy(Policy):
             round_index += 1
         return points
 
-    def _round(self, shape: SpaceShape, points: list[Point], history: dict[Point, Outcome],
+    def _round(self, shape: SpaceShape, points: list[Point], history: Mapping[Point, Outcome],
                rng: np.random.Generator, n: int, radius: float) -> list[Point]:
         failures = [q for q in points if history[q].failed]
         parents = failures or sorted(points, key=lambda q: -history[q].loss)[: max(1, len(points) // 4)]

@@ -2,13 +2,14 @@
 
 An image is valid only if its render was valid and the post controls left every pixel finite.
 A render blob that is missing or damaged (its bytes do not match the digest its row recorded,
-or it does not decode) is discarded so the next pass of the run renders it again.
+or it does not decode) is reported to the driver, which discards it so the run's next pass
+renders it again.
 """
 
 from __future__ import annotations
 
 import time
-from typing import Any, Sequence
+from typing import Any, Iterator, Sequence
 
 import numpy as np
 import pyarrow as pa
@@ -16,10 +17,9 @@ import pyarrow as pa
 from sweep3d.cache.blobs import load_image, sha256_bytes
 from sweep3d.cache.store import DIGEST_COLUMN, Store, atomic_write, utc_now
 from sweep3d.pixels import encode_png
-from sweep3d.progress import RunProgress
 from sweep3d.spec.loader import ControlInstance
-from sweep3d.stages.outcome import StageOutcome
-from sweep3d.stages.plan.jobs import Job, Plan
+from sweep3d.stages.driver import Computed
+from sweep3d.stages.jobs import Job, Plan
 
 IMAGES_SCHEMA = pa.schema([
     ("image_key", pa.string()), ("render_key", pa.string()), ("valid", pa.bool_()),
@@ -43,45 +43,43 @@ def apply_post(image: np.ndarray, controls: Sequence[ControlInstance], values: d
     return np.asarray(out, dtype=np.float32)
 
 
-def postprocess_stage(plan: Plan, store: Store, progress: RunProgress) -> StageOutcome:
-    started = time.perf_counter()
-    post = [c for c in plan.spec.controls if c.control.stage == "post"]
-    unique: dict[str, Job] = {}
-    for job in plan.jobs:
-        if job.image_key != job.render_key:
-            unique.setdefault(job.image_key, job)
-    have = store.keys("images")
-    cached = {k for k in unique if k in have and store.blob_path(k).exists()}
-    store.drop_rows("images", {k for k in unique if k in have and k not in cached})  # blob gone: redo
-    renders = store.keys("renders")
-    todo = [j for k, j in unique.items() if k not in cached and j.render_key in renders
-            and store.blob_path(j.render_key).exists()]
-    outcome = StageOutcome("postprocess", total=len(unique), cached=len(cached),
-                           skipped=len(unique) - len(cached) - len(todo))
-    if todo:
+class PostprocessStage:
+    """Applies post controls to renders (a job whose image is its render has nothing to do here)."""
+
+    name = "postprocess"
+    table = "images"
+    owns_blobs = True
+    side_tables: dict[str, pa.Schema] = {}
+
+    def schema(self, plan: Plan) -> pa.Schema:
+        return IMAGES_SCHEMA
+
+    def key(self, job: Job) -> str | None:
+        return job.image_key if job.image_key != job.render_key else None
+
+    def upstream(self, job: Job) -> tuple[str, str]:
+        return ("renders", job.render_key)
+
+    def incomplete(self, plan: Plan, store: Store, cached: set[str]) -> set[str]:
+        return set()
+
+    def compute(self, todo: list[Job], plan: Plan, store: Store) -> Iterator[Computed]:
+        post = [c for c in plan.spec.controls if c.control.stage == "post"]
         render_valid = store.column_map("renders", "valid")
         render_digests = store.digests("renders")
         damaged: set[str] = set()
-        with progress.stage("postprocess", len(todo), len(cached)) as bar, \
-                store.segment_writer("images", IMAGES_SCHEMA) as writer:
-            for job in todo:
-                t0 = time.perf_counter()
-                render = None if job.render_key in damaged else \
-                    load_image(store, job.render_key, render_digests.get(job.render_key))
-                if render is None:  # damaged render: discarded below, rendered again next pass
-                    damaged.add(job.render_key)
-                    outcome.skipped += 1
-                    bar.advance()
-                    continue
-                image = apply_post(render, post, job.values, job.image_key)
-                valid = render_valid.get(job.render_key) is not False and bool(np.isfinite(image).all())
-                data = encode_png(image)
-                atomic_write(store.blob_path(job.image_key), data)
-                writer.add({"image_key": job.image_key, "render_key": job.render_key, "valid": valid,
-                            "seconds": time.perf_counter() - t0, "created_at": utc_now(),
-                            DIGEST_COLUMN: sha256_bytes(data)})
-                outcome.computed += 1
-                bar.advance()
-        store.discard("renders", damaged, "are damaged (digest mismatch or undecodable)")
-    outcome.seconds = time.perf_counter() - started
-    return outcome
+        for job in todo:
+            t0 = time.perf_counter()
+            render = None if job.render_key in damaged else \
+                load_image(store, job.render_key, render_digests.get(job.render_key))
+            if render is None:
+                damaged.add(job.render_key)
+                yield Computed(job.image_key, damaged=("renders", job.render_key))
+                continue
+            image = apply_post(render, post, job.values, job.image_key)
+            valid = render_valid.get(job.render_key) is not False and bool(np.isfinite(image).all())
+            data = encode_png(image)
+            atomic_write(store.blob_path(job.image_key), data)
+            yield Computed(job.image_key, {"image_key": job.image_key, "render_key": job.render_key, "valid": valid,
+                                           "seconds": time.perf_counter() - t0, "created_at": utc_now(),
+                                           DIGEST_COLUMN: sha256_bytes(data)})

@@ -3,8 +3,9 @@
 This package's public API never imports bpy; only :mod:`.worker` (in child processes) does.
 """
 
-from sweep3d.stages.render.controls import RenderedControl
-from sweep3d.stages.render.stage import render_stage
+from sweep3d.stages.render.controls import RENDERED_CONTROLS, RenderedControl
+from sweep3d.stages.render.stage import LOCAL, Executor, RenderStage, render_settings
 from sweep3d.stages.render.state import SceneState
 
-__all__ = ["RenderedControl", "SceneState", "render_stage"]
+__all__ = ["LOCAL", "RENDERED_CONTROLS", "Executor", "RenderStage", "RenderedControl", "SceneState",
+           "render_settings"]

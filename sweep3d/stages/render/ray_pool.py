@@ -19,7 +19,7 @@ from typing import Any, Iterator
 from sweep3d.cache.keys import digest
 from sweep3d.cache.store import atomic_write
 from sweep3d.errors import UserError
-from sweep3d.stages.render.assets import bpy_root, mesh_files
+from sweep3d.spec.assets import bpy_root, mesh_files
 from sweep3d.stages.render.pool import RenderResult
 
 MAX_GROUP_RETRIES = 2

@@ -1,8 +1,8 @@
 """The render stage: every render key the plan needs and the store lacks, grouped by scene.
 
-A render counts as stored when it has a row and a blob; a row whose blob has gone is dropped
-and the key rendered again. Each row records the SHA-256 of its blob, so readers can tell a
-damaged blob from a good one. A job that fails because of the user's input (a mesh or HDRI
+A render counts as stored when it has a row and a blob; the driver drops a row whose blob has
+gone and the key is rendered again. Each row records the SHA-256 of its blob, so readers can tell
+a damaged blob from a good one. A job that fails because of the user's input (a mesh or HDRI
 Blender cannot use, a full disk) stops the run with a one-line error naming the spec key.
 
 When the report asks for part visibility, workers also write a UV pass and each render records
@@ -12,11 +12,10 @@ that is cached but lacks that row is rendered again for the pass only: its blob 
 
 from __future__ import annotations
 
-import time
 from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Iterator
 
 import pyarrow as pa
 
@@ -24,11 +23,11 @@ from sweep3d.cache.blobs import sha256_bytes
 from sweep3d.cache.store import DIGEST_COLUMN, Store, utc_now
 from sweep3d.errors import SpecError, UserError
 from sweep3d.parts import PARTS_LAYOUT
-from sweep3d.progress import RunProgress
-from sweep3d.stages.outcome import StageOutcome
-from sweep3d.stages.plan.jobs import Job, Plan
-from sweep3d.stages.render.assets import materialise_mesh
+from sweep3d.spec.assets import materialise_mesh
+from sweep3d.stages.driver import Computed
+from sweep3d.stages.jobs import Job, Plan
 from sweep3d.stages.render.pool import RenderPool
+from sweep3d.stages.render.protocol import EnvironmentRef, RenderExecutor, RenderJob, RenderReply, RenderSettings
 
 GROUP_SIZE = 32  # jobs sent to a worker at once; a scene's jobs stay together in order
 
@@ -43,29 +42,6 @@ PARTS_SCHEMA = pa.schema([
 ])
 
 
-def cached_renders(plan: Plan, store: Store) -> set[str]:
-    """Render keys of the plan that have a complete row and a blob in the store."""
-    have = store.keys("renders")
-    return {j.render_key for j in plan.jobs if j.render_key in have and store.blob_path(j.render_key).exists()}
-
-
-def renders_to_do(plan: Plan, store: Store, cached: set[str] | None = None) -> list[Job]:
-    """One job per render key the store lacks, or whose UV-pass parts it lacks when asked for."""
-    cached = cached_renders(plan, store) if cached is None else cached
-    have_parts = store.keys("parts") if plan.spec.spec.report.part_visibility else set()
-    unique: dict[str, Job] = {}
-    for job in plan.jobs:
-        unique.setdefault(job.render_key, job)
-    return [job for key, job in unique.items()
-            if key not in cached or (job.parts_key is not None and job.parts_key not in have_parts)]
-
-
-def _stale_rows(plan: Plan, store: Store, cached: set[str]) -> set[str]:
-    """Render keys of the plan with a row but no blob (deleted, or moved to quarantine)."""
-    have = store.keys("renders")
-    return {j.render_key for j in plan.jobs if j.render_key in have and j.render_key not in cached}
-
-
 @dataclass(frozen=True)
 class Executor:
     """Where renders run: ``local`` worker processes (the default) or a ``ray`` cluster
@@ -74,7 +50,8 @@ class Executor:
     kind: str = "local"
     address: str | None = None
 
-    def pool(self, settings: dict[str, Any], workers: int, timeout: float):
+    def pool(self, settings: RenderSettings, workers: int, timeout: float) -> RenderExecutor:
+        """A fresh executor of this kind (``timeout`` applies to local workers only)."""
         if self.kind == "ray":
             from sweep3d.stages.render.ray_pool import RayRenderPool
 
@@ -85,79 +62,98 @@ class Executor:
 LOCAL = Executor()
 
 
-def render_stage(plan: Plan, store: Store, progress: RunProgress, executor: Executor = LOCAL) -> StageOutcome:
-    """Render what is missing; rows are flushed every few seconds so a kill loses little."""
-    started = time.perf_counter()
-    unique: dict[str, Job] = {}
-    for job in plan.jobs:
-        unique.setdefault(job.render_key, job)
-    cached = cached_renders(plan, store)
-    store.drop_rows("renders", _stale_rows(plan, store, cached))  # rendered again below, one row each
-    todo = renders_to_do(plan, store, cached)
-    outcome = StageOutcome("render", total=len(unique), cached=len(unique) - len(todo))
-    if todo:
-        groups = _groups(plan, store, todo, cached)
-        settings = plan.render_settings()
-        workers = min(plan.spec.spec.render.workers, len(groups))
-        with progress.stage("render", len(todo), outcome.cached) as bar, \
-                executor.pool(settings, workers, plan.spec.spec.render.timeout) as pool, \
-                store.segment_writer("renders", RENDERS_SCHEMA) as writer, \
-                store.segment_writer("parts", PARTS_SCHEMA) as parts_writer:
-            for result in pool.run(groups):
-                job = unique[result.render_key]
-                if not result.ok and getattr(result, "kind", "internal") == "user":
-                    raise _user_error(plan, job, result.error or "")
-                ok = result.ok and (job.render_key in cached or _record_render(store, writer, result))
-                if ok and job.parts_key is not None:
-                    _record_parts(parts_writer, job, result.info)
-                if ok:
-                    outcome.computed += 1
-                else:
-                    outcome.failed += 1
-                    error = result.error or "the worker reported success but its blob cannot be read"
-                    outcome.errors.append(f"render {result.render_key[:12]}: {error}")
-                bar.advance(failed=not ok)
-    outcome.seconds = time.perf_counter() - started
-    return outcome
+def render_settings(plan: Plan) -> RenderSettings:
+    """The [render] settings with the resolved frame and the passes to write, as workers need them
+    (the UV pass only for the report's part-visibility panel)."""
+    passes = ("uv",) if plan.spec.report.part_visibility else ()
+    return RenderSettings.from_spec(plan.spec.render, plan.framing, passes)
 
 
-def _record_render(store: Store, writer, result) -> bool:
-    """Add a rendered key's row (with its blob's digest); False if the blob cannot be read."""
-    digest = _blob_digest(store.blob_path(result.render_key))
+class RenderStage:
+    """Renders in Blender workers on ``executor`` (local processes, or Ray actors)."""
+
+    name = "render"
+    table = "renders"
+    owns_blobs = True
+    side_tables = {"parts": PARTS_SCHEMA}
+
+    def __init__(self, executor: Executor = LOCAL) -> None:
+        self.executor = executor
+
+    def schema(self, plan: Plan) -> pa.Schema:
+        return RENDERS_SCHEMA
+
+    def key(self, job: Job) -> str:
+        return job.render_key
+
+    def upstream(self, job: Job) -> None:
+        return None
+
+    def incomplete(self, plan: Plan, store: Store, cached: set[str]) -> set[str]:
+        """Cached renders whose UV-pass parts the store lacks (when the report asks for them)."""
+        if not plan.spec.report.part_visibility:
+            return set()
+        have = store.keys("parts")
+        return {j.render_key for j in plan.jobs if j.render_key in cached and j.parts_key not in have}
+
+    def compute(self, todo: list[Job], plan: Plan, store: Store) -> Iterator[Computed]:
+        stored = {j.render_key for j in todo if store.blob_path(j.render_key).exists()} & store.keys("renders")
+        groups = _groups(plan, store, todo, stored)
+        jobs = {j.render_key: j for j in todo}
+        workers = min(plan.spec.render.workers, len(groups))
+        with self.executor.pool(render_settings(plan), workers, plan.spec.render.timeout) as pool:
+            for reply in pool.run(groups):
+                job = jobs[reply.render_key]
+                if not reply.ok:
+                    if reply.kind == "user":
+                        raise _user_error(plan, job, reply.error or "")
+                    yield Computed(job.render_key, error=reply.error or "the render failed")
+                    continue
+                row = None
+                if job.render_key not in stored:  # else it was rendered again for its UV pass only
+                    row = _row(store, reply)
+                    if row is None:
+                        yield Computed(job.render_key, error="the worker reported success but its blob cannot be read")
+                        continue
+                side = {"parts": _parts_row(job, reply)} if job.parts_key is not None else {}
+                yield Computed(job.render_key, row, side)
+
+
+def _row(store: Store, reply: RenderReply) -> dict | None:
+    """A rendered key's row (with its blob's digest); None if the blob cannot be read."""
+    digest = _blob_digest(store.blob_path(reply.render_key))
     if digest is None:
-        return False
-    info = {k: v for k, v in result.info.items() if k != "parts"}
-    writer.add({"render_key": result.render_key, **info, "created_at": utc_now(), DIGEST_COLUMN: digest})
-    return True
+        return None
+    info = reply.info
+    return {"render_key": reply.render_key, "seconds": info.seconds, "valid": info.valid, "width": info.width,
+            "height": info.height, "created_at": utc_now(), DIGEST_COLUMN: digest}
 
 
-def _record_parts(writer, job: Job, info: dict[str, Any]) -> None:
-    """Add the job's visible parts (its worker rendered the UV pass: ``info["parts"]``)."""
-    writer.add({"parts_key": job.parts_key, "render_key": job.render_key, "layout": PARTS_LAYOUT,
-                **info["parts"], "created_at": utc_now()})
+def _parts_row(job: Job, reply: RenderReply) -> dict:
+    """The job's visible parts (its worker rendered the UV pass: ``info.parts``)."""
+    return {"parts_key": job.parts_key, "render_key": job.render_key, "layout": PARTS_LAYOUT,
+            **reply.info.parts, "created_at": utc_now()}
 
 
-def _groups(plan: Plan, store: Store, todo: list[Job], cached: frozenset[str] | set[str] = frozenset()
-            ) -> list[list[dict[str, Any]]]:
-    """Jobs as worker messages, grouped by scene; a job whose render is in ``cached`` (there for
-    its UV pass) carries no blob path."""
+def _groups(plan: Plan, store: Store, todo: list[Job], stored: set[str]) -> list[list[RenderJob]]:
+    """Jobs for the workers, grouped by scene; a job whose render is ``stored`` (there for its UV
+    pass) carries no blob path."""
     spec = plan.spec
-    controls = {c.id: c.control for c in spec.controls if c.control.stage == "render"}
-    ordered = sorted(controls.values(), key=lambda c: c.order)
-    environments = {e.name: e for e in spec.spec.environments}
+    ordered = sorted((c.control for c in spec.controls if c.control.stage == "render"), key=lambda c: c.order)
+    environments = {e.name: e for e in spec.environments}
     meshes: dict[str, str] = {}
-    by_scene: dict[tuple[str, str], list[dict[str, Any]]] = defaultdict(list)
+    by_scene: dict[tuple[str, str], list[RenderJob]] = defaultdict(list)
     for job in todo:
         if job.object not in meshes:
             meshes[job.object] = str(materialise_mesh(spec.meshes[job.object], store.root))
         env = environments[job.environment]
-        by_scene[job.scene].append({
-            "render_key": job.render_key,
-            "mesh": meshes[job.object],
-            "environment": {"hdri": spec.hdris[env.name], "color": env.color, "strength": env.strength},
-            "controls": [(c, c.params(job.values[c.id])) for c in ordered if c.id in job.values],
-            "blob": None if job.render_key in cached else str(store.blob_path(job.render_key)),
-        })
+        by_scene[job.scene].append(RenderJob(
+            render_key=job.render_key,
+            mesh=meshes[job.object],
+            environment=EnvironmentRef(hdri=spec.hdris[env.name], color=env.color, strength=env.strength),
+            controls=tuple((c, c.params(job.values[c.id])) for c in ordered if c.id in job.values),
+            blob=None if job.render_key in stored else str(store.blob_path(job.render_key)),
+        ))
     groups = []
     for scene in sorted(by_scene):
         jobs = by_scene[scene]
@@ -177,8 +173,8 @@ def _user_error(plan: Plan, job: Job, message: str) -> UserError:
     spec = plan.spec
     problem = " ".join(message.split())  # Blender's messages may span lines
     hdri = spec.hdris.get(job.environment)
-    objects = [o.name for o in spec.spec.objects]
-    environments = [e.name for e in spec.spec.environments]
+    objects = [o.name for o in spec.objects]
+    environments = [e.name for e in spec.environments]
     if hdri and hdri in message:
         key = f"environments[{environments.index(job.environment)}].hdri"
         fix = "give an .exr/.hdr image Blender can read"

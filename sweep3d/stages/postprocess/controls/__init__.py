@@ -1,7 +1,7 @@
 """Built-in post-processing controls: pure functions from one image to another."""
 
 from sweep3d.stages.postprocess.controls.artifacts import Cutout, Jpeg
-from sweep3d.stages.postprocess.controls.base import PostControl
+from sweep3d.stages.postprocess.controls.base import POST_CONTROLS, PostControl
 from sweep3d.stages.postprocess.controls.corruptions import CORRUPTIONS, Corruption
 from sweep3d.stages.postprocess.controls.photometric import (
            Blur,
@@ -10,5 +10,5 @@ from sweep3d.stages.postprocess.controls.photometric import (
            Noise,
 )
 
-__all__ = ["CORRUPTIONS", "Blur", "BrightnessContrast", "ColorJitter", "Corruption", "Cutout", "Jpeg", "Noise",
+__all__ = ["CORRUPTIONS", "POST_CONTROLS", "Blur", "BrightnessContrast", "ColorJitter", "Corruption", "Cutout", "Jpeg", "Noise",
            "PostControl"]

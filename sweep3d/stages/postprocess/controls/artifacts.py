@@ -8,12 +8,12 @@ import numpy as np
 from PIL import Image
 from pydantic import Field
 
-from sweep3d.controls import CONTROLS, ControlParams
+from sweep3d.controls import ControlParams
 from sweep3d.pixels import to_uint8
-from sweep3d.stages.postprocess.controls.base import PostControl
+from sweep3d.stages.postprocess.controls.base import POST_CONTROLS, PostControl
 
 
-@CONTROLS.register("jpeg")
+@POST_CONTROLS.register("jpeg")
 class Jpeg(PostControl):
     """JPEG compression at ``quality`` 1..100 (100 = none, the neutral value)."""
 
@@ -30,7 +30,7 @@ class Jpeg(PostControl):
             return np.asarray(decoded.convert("RGB"), dtype=np.float32) / 255.0
 
 
-@CONTROLS.register("cutout")
+@POST_CONTROLS.register("cutout")
 class Cutout(PostControl):
     """A square patch of flat ``value`` (0 black .. 1 white): side ``size`` as a fraction of the
     image side (0 = none), centred at (``x``, ``y``) in -1..1 frame coordinates (+y up)."""

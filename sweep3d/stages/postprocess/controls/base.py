@@ -7,6 +7,7 @@ from typing import ClassVar
 import numpy as np
 
 from sweep3d.controls import Control, ControlParams
+from sweep3d.registry import Registry
 
 
 class PostControl(Control):
@@ -22,3 +23,7 @@ class PostControl(Control):
 
     def apply(self, image: np.ndarray, params: ControlParams, rng: np.random.Generator) -> np.ndarray:
         raise NotImplementedError
+
+
+#: The post-processing controls a spec may name (``[[controls]] type = ...``).
+POST_CONTROLS: Registry[type[PostControl]] = Registry("control")

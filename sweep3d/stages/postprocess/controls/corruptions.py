@@ -11,9 +11,9 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import Field
 
-from sweep3d.controls import CONTROLS, ControlParams
+from sweep3d.controls import ControlParams
 from sweep3d.errors import UserError
-from sweep3d.stages.postprocess.controls.base import PostControl
+from sweep3d.stages.postprocess.controls.base import POST_CONTROLS, PostControl
 
 CORRUPTIONS = (
     "gaussian_noise", "shot_noise", "impulse_noise", "defocus_blur", "glass_blur", "motion_blur",
@@ -24,7 +24,7 @@ _TAKES_SEED = {"impulse_noise", "glass_blur"}
 MIN_SIDE = 32  # the library refuses smaller images
 
 
-@CONTROLS.register("corruption")
+@POST_CONTROLS.register("corruption")
 class Corruption(PostControl):
     """One ImageNet-C corruption: ``name`` (one of the 19) at ``severity`` 1..5 (0 = none)."""
 

@@ -6,11 +6,11 @@ import numpy as np
 from pydantic import Field
 from scipy import ndimage
 
-from sweep3d.controls import CONTROLS, ControlParams
-from sweep3d.stages.postprocess.controls.base import PostControl
+from sweep3d.controls import ControlParams
+from sweep3d.stages.postprocess.controls.base import POST_CONTROLS, PostControl
 
 
-@CONTROLS.register("blur")
+@POST_CONTROLS.register("blur")
 class Blur(PostControl):
     """Gaussian blur; ``sigma`` in pixels (0 = none, typical range 0..4)."""
 
@@ -23,7 +23,7 @@ class Blur(PostControl):
         return ndimage.gaussian_filter(image, sigma=(params.sigma, params.sigma, 0), mode="nearest")
 
 
-@CONTROLS.register("noise")
+@POST_CONTROLS.register("noise")
 class Noise(PostControl):
     """Additive Gaussian pixel noise; ``std`` in units of the [0, 1] range (0 = none)."""
 
@@ -39,7 +39,7 @@ class Noise(PostControl):
         return np.clip(noisy, 0.0, 1.0)
 
 
-@CONTROLS.register("brightness_contrast")
+@POST_CONTROLS.register("brightness_contrast")
 class BrightnessContrast(PostControl):
     """``brightness`` is added (-1..1) and ``contrast`` scales about mid-grey (1 = unchanged)."""
 
@@ -54,7 +54,7 @@ class BrightnessContrast(PostControl):
         return np.clip(out, 0.0, 1.0).astype(np.float32)
 
 
-@CONTROLS.register("color_jitter")
+@POST_CONTROLS.register("color_jitter")
 class ColorJitter(PostControl):
     """Shifts ``hue`` (turns, -0.5..0.5) and scales ``saturation`` (1 = unchanged, 0 = grey)."""
 

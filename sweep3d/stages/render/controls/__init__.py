@@ -1,7 +1,7 @@
 """Built-in rendered controls: they edit a :class:`~sweep3d.stages.render.state.SceneState`."""
 
 from sweep3d.stages.render.controls.appearance import SKINS, Material, Occlusion
-from sweep3d.stages.render.controls.base import RenderedControl
+from sweep3d.stages.render.controls.base import RENDERED_CONTROLS, RenderedControl
 from sweep3d.stages.render.controls.geometry import (
            Camera,
            Orientation,
@@ -17,5 +17,5 @@ from sweep3d.stages.render.controls.lighting import (
            SkyControl,
 )
 
-__all__ = ["SKINS", "Background", "Camera", "Denoiser", "Hdri", "Material", "Occlusion", "Orientation",
+__all__ = ["RENDERED_CONTROLS", "SKINS", "Background", "Camera", "Denoiser", "Hdri", "Material", "Occlusion", "Orientation",
            "PinToGround", "PointLightControl", "Position", "RenderedControl", "Scale", "SkyControl"]

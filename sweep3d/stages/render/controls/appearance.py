@@ -7,15 +7,15 @@ from typing import Any, Literal
 from pydantic import Field
 
 from sweep3d.cache.keys import file_digest
-from sweep3d.controls import CONTROLS, ControlParams, SpecPath
+from sweep3d.controls import ControlParams, SpecPath
 from sweep3d.errors import UserError
-from sweep3d.stages.render.controls.base import RenderedControl
+from sweep3d.stages.render.controls.base import RENDERED_CONTROLS, RenderedControl
 from sweep3d.stages.render.state import Occluder, SceneState
 
 SKINS = ("original", "zebra", "tiger", "cow", "giraffe", "leopard", "image")
 
 
-@CONTROLS.register("material")
+@RENDERED_CONTROLS.register("material")
 class Material(RenderedControl):
     """Swaps the object's material for a procedural animal skin (``zebra``, ``tiger``, ``cow``,
     ``giraffe``, ``leopard``: shader nodes on object coordinates, so no UVs are needed) or an
@@ -52,7 +52,7 @@ class Material(RenderedControl):
         state.skin_image = params.image or None
 
 
-@CONTROLS.register("occlusion")
+@RENDERED_CONTROLS.register("occlusion")
 class Occlusion(RenderedControl):
     """A flat grey plate between camera and object hiding ``coverage`` (0..1) of the object's
     width, coming in from ``direction`` (degrees in the image: 0 = right, 90 = top)."""

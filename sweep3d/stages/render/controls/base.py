@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import ClassVar
 
 from sweep3d.controls import Control, ControlParams
+from sweep3d.registry import Registry
 from sweep3d.stages.render.state import SceneState
 
 
@@ -21,3 +22,7 @@ class RenderedControl(Control):
 
     def apply(self, state: SceneState, params: ControlParams) -> None:
         raise NotImplementedError
+
+
+#: The rendered controls a spec may name (``[[controls]] type = ...``).
+RENDERED_CONTROLS: Registry[type[RenderedControl]] = Registry("control")

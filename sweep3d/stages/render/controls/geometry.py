@@ -4,12 +4,12 @@ from __future__ import annotations
 
 from pydantic import Field
 
-from sweep3d.controls import CONTROLS, ControlParams
-from sweep3d.stages.render.controls.base import RenderedControl
+from sweep3d.controls import ControlParams
+from sweep3d.stages.render.controls.base import RENDERED_CONTROLS, RenderedControl
 from sweep3d.stages.render.state import SceneState
 
 
-@CONTROLS.register("orientation")
+@RENDERED_CONTROLS.register("orientation")
 class Orientation(RenderedControl):
     """Rotates the object about its centre.
 
@@ -29,7 +29,7 @@ class Orientation(RenderedControl):
         state.yaw, state.pitch, state.roll = params.yaw, params.pitch, params.roll
 
 
-@CONTROLS.register("scale")
+@RENDERED_CONTROLS.register("scale")
 class Scale(RenderedControl):
     """Scales the object about its centre (``factor`` 1 = the normalised size, a unit bounding sphere)."""
 
@@ -42,7 +42,7 @@ class Scale(RenderedControl):
         state.scale = params.factor
 
 
-@CONTROLS.register("camera")
+@RENDERED_CONTROLS.register("camera")
 class Camera(RenderedControl):
     """Moves the camera on a sphere around the object, looking at its centre.
 
@@ -68,7 +68,7 @@ class Camera(RenderedControl):
         state.fstop = params.fstop
 
 
-@CONTROLS.register("position")
+@RENDERED_CONTROLS.register("position")
 class Position(RenderedControl):
     """Places the object's centre at (``x``, ``y``) in the image: -1..1 spans the frame
     (fractions of the half-width and half-height; +x right, +y up)."""
@@ -83,7 +83,7 @@ class Position(RenderedControl):
         state.frame_x, state.frame_y = params.x, params.y
 
 
-@CONTROLS.register("pin_to_ground")
+@RENDERED_CONTROLS.register("pin_to_ground")
 class PinToGround(RenderedControl):
     """Sets the object down on a ground plane that catches its shadow (``enabled``), after
     rotation and scaling, so it rests on its lowest point as on a table."""

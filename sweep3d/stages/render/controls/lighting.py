@@ -8,8 +8,8 @@ from typing import Any, Literal
 
 from pydantic import Field
 
-from sweep3d.controls import CONTROLS, ControlParams
-from sweep3d.stages.render.controls.base import RenderedControl
+from sweep3d.controls import ControlParams
+from sweep3d.stages.render.controls.base import RENDERED_CONTROLS, RenderedControl
 from sweep3d.stages.render.state import PointLight, SceneState, Sky
 
 
@@ -24,7 +24,7 @@ def kelvin_to_rgb(kelvin: float) -> tuple[float, float, float]:
     return tuple(c / peak for c in rgb)  # type: ignore[return-value]
 
 
-@CONTROLS.register("point_light")
+@RENDERED_CONTROLS.register("point_light")
 class PointLightControl(RenderedControl):
     """Adds a point light: ``watts`` (0 = none), colour ``temperature`` in kelvin (6500 = white),
     ``distance`` from the object's centre in object radii, ``azimuth``/``elevation`` in degrees
@@ -49,7 +49,7 @@ class PointLightControl(RenderedControl):
                                            params.distance, params.azimuth, params.elevation))
 
 
-@CONTROLS.register("hdri")
+@RENDERED_CONTROLS.register("hdri")
 class Hdri(RenderedControl):
     """Turns the environment map about the vertical axis (``rotation``, degrees) and scales its
     light (``strength``, 1 = as the environment says). Rotating the world rebuilds Cycles'
@@ -66,7 +66,7 @@ class Hdri(RenderedControl):
         state.world_rotation, state.world_strength = params.rotation, params.strength
 
 
-@CONTROLS.register("sky")
+@RENDERED_CONTROLS.register("sky")
 class SkyControl(RenderedControl):
     """Replaces the environment with Blender's procedural sky at a time of day: ``sun_elevation``
     (degrees above the horizon; below it is night) and ``sun_azimuth``; ``enabled`` switches it on."""
@@ -88,7 +88,7 @@ class SkyControl(RenderedControl):
             state.sky = Sky(params.sun_elevation, params.sun_azimuth, params.strength)
 
 
-@CONTROLS.register("background")
+@RENDERED_CONTROLS.register("background")
 class Background(RenderedControl):
     """Shows a plain ``color`` (hex, e.g. "#3366cc") behind the object instead of the
     environment, which still lights it; "" keeps the environment visible."""
@@ -107,7 +107,7 @@ class Background(RenderedControl):
             state.background = tuple(int(h[i : i + 2], 16) / 255.0 for i in (0, 2, 4))  # type: ignore[assignment]
 
 
-@CONTROLS.register("denoiser")
+@RENDERED_CONTROLS.register("denoiser")
 class Denoiser(RenderedControl):
     """Switches OpenImageDenoise ``on`` or ``off`` per job (``mode``; "spec" = as render.denoise)."""
 

@@ -7,32 +7,31 @@ from rich.markup import escape
 from rich.table import Table
 
 from sweep3d.cache.store import Store
+from sweep3d.pipeline import plan_spec
 from sweep3d.spec.loader import LoadedSpec
-from sweep3d.stages.plan import Plan, make_plan
-from sweep3d.stages.render.stage import renders_to_do
+from sweep3d.stages.aggregate import connect, summarise, weakest_regions, wilson_interval
+from sweep3d.stages.driver import plan_status
+from sweep3d.stages.infer import InferStage, ModelHandle
+from sweep3d.stages.plan import Plan
+from sweep3d.stages.postprocess import PostprocessStage
+from sweep3d.stages.render import RenderStage
 
-# Fallback per-image costs on a 2-core CPU (DESIGN.md measurements), when the store has no history.
+# Fallback per-image costs on a 2-core CPU (measured with bench), when the store has no history.
 SECONDS_PER_SAMPLE_224 = 0.034
 DENOISE_SECONDS_224 = {"fast": 0.04, "accurate": 0.3, "none": 0.02}
 INFER_SECONDS = 0.05
 
 
-def cache_status(plan: Plan, store: Store) -> list[tuple[str, int, int]]:
+def cache_status(plan: Plan, store: Store, model: ModelHandle) -> list[tuple[str, int, int]]:
     """(stage, distinct keys needed, keys already stored) for render, postprocess and infer."""
-    renders = {j.render_key for j in plan.jobs}
-    images = {j.image_key for j in plan.jobs if j.image_key != j.render_key}
-    preds = {j.pred_key for j in plan.jobs}
-    return [
-        ("render", len(renders), len(renders) - len(renders_to_do(plan, store))),
-        ("postprocess", len(images), len(images & store.keys("images"))),
-        ("infer", len(preds), len(preds & store.keys("predictions"))),
-    ]
+    return [(stage.name, *plan_status(stage, plan, store))
+            for stage in (RenderStage(), PostprocessStage(), InferStage(model))]
 
 
 def estimate_render_seconds(spec: LoadedSpec, pixels: int) -> float:
     """A rough per-render cost from the settings and the rendered side in pixels (DESIGN.md
     measurements on 2 CPU cores)."""
-    r = spec.spec.render
+    r = spec.render
     scale = (pixels / 224) ** 2
     denoise = DENOISE_SECONDS_224[r.denoise_prefilter] if r.denoise else 0.0
     return (SECONDS_PER_SAMPLE_224 * r.samples + denoise + 0.02) * scale
@@ -40,11 +39,12 @@ def estimate_render_seconds(spec: LoadedSpec, pixels: int) -> float:
 
 def print_plan(console: Console, spec: LoadedSpec) -> None:
     store = Store(spec.store)
-    plan = make_plan(spec)
-    status = cache_status(plan, store)
+    model = ModelHandle.resolve(spec)
+    plan = plan_spec(spec, model)
+    status = cache_status(plan, store, model)
     scenes = len({j.scene for j in plan.jobs})
     console.print(f"[bold]{escape(spec.name)}[/]: {len(plan.jobs) + len(plan.out_of_frame)} jobs over {scenes} scenes "
-                  f"({len(spec.spec.objects)} objects × {len(spec.spec.environments)} environments), "
+                  f"({len(spec.objects)} objects × {len(spec.environments)} environments), "
                   f"policy {spec.spec.policy.type}; store {escape(str(spec.store))}")
     table = Table("stage", "needed", "cached", "to compute", "estimate")
     per_item = {"render": estimate_render_seconds(spec, plan.framing.crop), "postprocess": 0.005, "infer": INFER_SECONDS}
@@ -56,7 +56,7 @@ def print_plan(console: Console, spec: LoadedSpec) -> None:
     console.print(table)
     if plan.out_of_frame:
         console.print(f"{len(plan.out_of_frame)} jobs put the object wholly out of frame: flagged, not rendered")
-    if spec.spec.report.part_visibility:
+    if spec.report.part_visibility:
         console.print("renders carry a UV pass (the report's part-visibility panel); a render cached "
                       "without it is rendered again for the pass only")
     if spec.policy.adaptive:
@@ -84,9 +84,7 @@ def print_run(console: Console, result) -> None:
 
 def print_findings(console: Console, plan: Plan) -> None:
     """Accuracy and where the model fails most (the weakest control values)."""
-    from sweep3d.stages.aggregate import summarise, weakest_regions
-
-    con = Store(plan.spec.store).connect(plan.spec.name)
+    con = connect(Store(plan.spec.store), plan.spec.name)
     summary = summarise(con, plan.columns)
     if summary.accuracy is None:
         return
@@ -156,8 +154,6 @@ def print_bench(console: Console, rows, best, current, agreement: float) -> None
 
 
 def _wilson_low(n: int) -> str:
-    from sweep3d.stages.aggregate import wilson_interval
-
     return f"{wilson_interval(n, n)[0]:.1%}"
 
 

@@ -1,0 +1,21 @@
+"""Column names of the jobs and results tables: built in one place, reserved in one place.
+
+Every control parameter becomes a column ``<control id>_<param>`` of the experiment's jobs table
+(and so of ``results``). The list of those columns is stored with the jobs (Parquet metadata under
+:data:`PARAMETERS_METADATA`), so readers never guess parameters from what a column is not.
+"""
+
+from __future__ import annotations
+
+#: The jobs table's own columns, besides the control parameters.
+JOB_COLUMNS = ("experiment", "job", "object", "environment", "render_key", "image_key", "pred_key",
+               "parts_key", "in_frame")
+#: Bookkeeping columns every prediction row has, besides its evaluator's columns.
+PREDICTION_COLUMNS = ("pred_key", "image_key", "model", "model_digest", "seconds", "created_at")
+#: Parquet metadata key of a jobs file holding its parameter columns (a JSON list, in spec order).
+PARAMETERS_METADATA = b"sweep3d.parameters"
+
+
+def parameter_column(control_id: str, param: str) -> str:
+    """The column of one control parameter in the jobs and results tables."""
+    return f"{control_id}_{param}"

@@ -1,0 +1,34 @@
+"""The render stage's cache keys: what changes a rendered image, and nothing else.
+
+``render_key`` hashes the Blender version, the render settings that change pixels (with the
+resolved frame), the mesh's and the HDRI's *content*, and the rendered controls that apply to the
+job and are not at their neutral values. Extra passes leave the RGB image alone, so they are keyed
+apart: ``parts_key`` names what a UV pass saw in one render.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from sweep3d.cache.keys import digest
+from sweep3d.parts import PARTS_LAYOUT
+
+#: Bumped when rendering changes pixels for the same inputs, so old renders are not reused.
+RENDER_STAGE_VERSION = 1
+
+
+def scene_key(blender: str, settings: dict[str, Any], object_digest: str, environment: dict[str, Any]) -> str:
+    """Everything of a render key that is fixed for one (object, environment) scene, hashed once."""
+    return digest({"stage": "render", "v": RENDER_STAGE_VERSION, "blender": blender, "settings": settings,
+                   "passes": [],  # the RGB image's; extra passes leave it alone and are keyed apart
+                   "object": object_digest, "environment": environment})
+
+
+def render_key(scene: str, controls: list[dict[str, Any]]) -> str:
+    """A job's render key: its scene and the key parts of its effective rendered controls."""
+    return digest({"scene": scene, "controls": controls})
+
+
+def parts_key(render: str) -> str:
+    """The key of the visible parts a UV pass records for one render."""
+    return digest({"stage": "parts", "layout": PARTS_LAYOUT, "render": render})
