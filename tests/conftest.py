@@ -2,17 +2,199 @@
 
 The real run renders with Blender (32×32 pixels, 1 sample) and classifies with the real
 pretrained model, so tests that read results exercise the whole pipeline, not a stand-in.
+
+The fast lane (``pytest -m fast``): every test without a ``blender``, ``browser``, ``slow`` or
+``torch`` marker is marked ``fast`` here (a test using ``tiny_run``, ``tiny_copy`` or
+``blender_scene`` gets those markers from its fixtures). In the lane, importing ``torch`` or
+``bpy`` fails the importing test (with its import chain) and the session, starting a render
+worker fails the test, and property tests run the ``fast`` Hypothesis profile (those that set
+their own ``max_examples`` go through :func:`examples`).
 """
 
 from __future__ import annotations
 
+import re
 import shutil
+import sys
 import textwrap
+import traceback
 from pathlib import Path
 
 import pytest
+from hypothesis import settings as hypothesis_settings
 
 REPO = Path(__file__).resolve().parents[1]
+
+#: Markers of tests that need more than plain Python (the rest are marked ``fast``).
+HEAVY = ("blender", "browser", "slow", "torch")
+#: Markers implied by the fixtures a test uses (directly or through other fixtures).
+FIXTURE_MARKERS = {
+    "tiny_run": ("slow", "blender", "torch"),  # a real `sweep3d run`: renders and classifies
+    "tiny_copy": ("slow", "blender", "torch"),
+    "blender_scene": ("blender",),
+    "parts_run": ("slow", "blender", "torch"),  # test_part_visibility: a real run with the UV pass
+    "lite0": ("torch",),  # test_infer: the pretrained model
+    "large_report": ("slow",),  # test_report_scale: a synthetic store of 10 000 results and its report
+}
+#: Modules the fast lane must never import.
+LANE_FORBIDDEN = ("torch", "bpy")
+
+hypothesis_settings.register_profile("full")  # Hypothesis' defaults: the strength of a full run
+hypothesis_settings.register_profile("fast", max_examples=20)
+LANE_SHARE = 0.2  # fast profile's max_examples / the default's 100
+
+#: True while the session selects the fast lane (set in pytest_configure, before test modules import).
+LANE = False
+
+
+def examples(n: int) -> int:
+    """``max_examples`` for a property test that sets its own: ``n``, or a fifth of it in the fast lane."""
+    return max(5, round(n * LANE_SHARE)) if LANE else n
+
+
+def _selects_lane(markexpr: str) -> bool:
+    return bool(re.search(r"\bfast\b", markexpr)) and not re.search(r"\bnot\s+fast\b", markexpr)
+
+
+class _LaneGuard:
+    """A ``sys.meta_path`` finder that refuses ``torch`` and ``bpy`` and remembers who asked."""
+
+    def __init__(self) -> None:
+        self.test = "(collection)"  # the node id of the running test
+        self.imports: dict[str, list[str]] = {}  # test -> what it tried, with the import chain
+
+    def record(self, what: str, chain: str) -> None:
+        self.imports.setdefault(self.test, []).append(f"{what}: {chain}")
+
+    def find_spec(self, name, path=None, target=None):
+        top = name.partition(".")[0]
+        if top not in LANE_FORBIDDEN or not _importing():  # importlib.util.find_spec only locates
+            return None
+        chain = _chain(traceback.extract_stack()[:-1])
+        self.record(f"imported {top}", chain)
+        raise ImportError(f"the fast lane does not import {top} (mark the test {'torch' if top == 'torch' else 'blender'}"
+                          f" if it needs it); import chain: {chain}", name=name)
+
+
+def _importing() -> bool:
+    """Whether the finder was asked by an import, not by ``importlib.util.find_spec`` (which only locates)."""
+    frame = sys._getframe(2)
+    while frame is not None:
+        code = frame.f_code
+        if code.co_name == "_find_and_load_unlocked":
+            return True
+        if code.co_name == "find_spec" and "importlib" in code.co_filename and "util" in code.co_filename:
+            return False
+        frame = frame.f_back
+    return False
+
+
+def _chain(stack: traceback.StackSummary) -> str:
+    """The frames of this repository (and the direct importer), outermost first."""
+    frames = [f for f in stack if "importlib" not in f.filename and "_pytest" not in f.filename
+              and "pluggy" not in f.filename]
+    keep = [f for f in frames if f.filename.startswith(str(REPO))]
+    if frames and (not keep or frames[-1] is not keep[-1]):
+        keep.append(frames[-1])
+    return " -> ".join(f"{_short(f.filename)}:{f.lineno} {f.name}" for f in keep) or "(unknown)"
+
+
+def _short(filename: str) -> str:
+    path = Path(filename)
+    if path.is_relative_to(REPO):
+        return str(path.relative_to(REPO))
+    parts = path.parts
+    return "/".join(parts[parts.index("site-packages") + 1:]) if "site-packages" in parts else filename
+
+
+def _refuse_workers(guard: _LaneGuard) -> None:
+    """Starting a render worker (which imports bpy in a child process) fails the test in the lane."""
+    import multiprocessing.context
+
+    def refuse(what: str):
+        def start(*args, **kwargs):
+            guard.record(f"started {what}", _chain(traceback.extract_stack()[:-1]))
+            pytest.fail(f"the fast lane starts no {what}: render workers import bpy (mark the test blender)",
+                        pytrace=False)
+        return start
+
+    multiprocessing.context.SpawnProcess.start = refuse("spawned process")
+    for module, cls in (("sweep3d.stages.render.pool", "RenderPool"), ("sweep3d.stages.render.ray_pool", "RayRenderPool")):
+        try:
+            target = getattr(__import__(module, fromlist=[cls]), cls)
+        except (ImportError, AttributeError):
+            continue  # moved: the spawn guard above still covers local workers
+        target.__init__ = refuse(cls)
+
+
+_GUARD = pytest.StashKey[_LaneGuard]()
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    global LANE
+    LANE = _selects_lane(config.getoption("markexpr") or "")
+    if LANE and not config.getoption("hypothesis_profile", None):
+        hypothesis_settings.load_profile("fast")
+    if LANE:
+        loaded = [m for m in LANE_FORBIDDEN if m in sys.modules]
+        if loaded:
+            raise pytest.UsageError(f"the fast lane needs a process without {', '.join(loaded)} imported")
+        guard = _LaneGuard()
+        sys.meta_path.insert(0, guard)
+        _refuse_workers(guard)
+        config.stash[_GUARD] = guard
+
+
+@pytest.hookimpl(tryfirst=True)  # before `-m` deselects by marker
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    for item in items:
+        for fixture, markers in FIXTURE_MARKERS.items():
+            if fixture in item.fixturenames:
+                for marker in markers:
+                    if item.get_closest_marker(marker) is None:
+                        item.add_marker(marker)
+        if not any(item.get_closest_marker(marker) for marker in HEAVY):
+            item.add_marker("fast")
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_protocol(item: pytest.Item, nextitem):
+    guard = item.config.stash.get(_GUARD, None)
+    if guard is not None:
+        guard.test = item.nodeid
+    try:
+        return (yield)
+    finally:
+        if guard is not None:
+            guard.test = "(between tests)"
+
+
+@pytest.fixture(autouse=True)
+def _lane_guard(request: pytest.FixtureRequest):
+    """In the fast lane, a test that tried to import torch or bpy fails even if the ImportError was caught."""
+    yield
+    guard = request.config.stash.get(_GUARD, None)
+    if guard is not None and request.node.nodeid in guard.imports:
+        pytest.fail("in the fast lane this test " + "; ".join(guard.imports[request.node.nodeid]), pytrace=False)
+
+
+def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
+    guard = session.config.stash.get(_GUARD, None)
+    if guard is not None and guard.imports and exitstatus == 0:
+        session.exitstatus = pytest.ExitCode.TESTS_FAILED
+
+
+def pytest_terminal_summary(terminalreporter, exitstatus: int, config: pytest.Config) -> None:
+    guard = config.stash.get(_GUARD, None)
+    if guard is None:
+        return
+    if guard.imports:
+        terminalreporter.section("fast lane: torch / bpy / render workers", red=True)
+        for test, what in guard.imports.items():
+            for line in what:
+                terminalreporter.line(f"{test}: {line}")
+    else:
+        terminalreporter.line("fast lane: no test imported torch or bpy or started a render worker")
 
 CUBE_OBJ = """\
 # unit cube

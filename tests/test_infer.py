@@ -10,6 +10,7 @@ from hypothesis import strategies as st
 from sweep3d.errors import UserError
 from sweep3d.stages.infer import IMAGENET, ClassificationEvaluator, load_model, predict
 from sweep3d.stages.infer.evaluators import log_softmax
+from tests.conftest import examples
 
 
 @pytest.fixture(scope="module")
@@ -45,6 +46,7 @@ def test_labels_match_names_and_synonyms() -> None:
         IMAGENET.index("basket ball")
 
 
+@pytest.mark.torch
 def test_wrong_output_shape_is_a_user_error() -> None:
     import torch
 
@@ -58,7 +60,7 @@ def test_wrong_output_shape_is_a_user_error() -> None:
 finite = st.floats(allow_nan=False, allow_infinity=False, width=32)  # up to ±3.4e38
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=examples(200), deadline=None)
 @given(st.lists(finite, min_size=2, max_size=50), st.integers(0, 1))
 def test_log_softmax_is_stable_for_huge_logits(values, label) -> None:
     logits = np.array([values], dtype=np.float32)

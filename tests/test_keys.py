@@ -16,9 +16,9 @@ from sweep3d.controls import wrap_periodic
 from sweep3d.stages import load_spec
 from tests.conftest import plan_for
 from sweep3d.stages.render.controls import Camera, Orientation
-from tests.conftest import write_spec
+from tests.conftest import examples, write_spec
 
-FAST = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+FAST = settings(max_examples=examples(150), deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 finite = st.floats(allow_nan=False, allow_infinity=False)
 leaves = st.one_of(finite, st.integers(), st.text(max_size=8), st.booleans(), st.none())
@@ -166,7 +166,7 @@ def test_file_digest_follows_content(tmp_path):
 periods = st.sampled_from([360.0, 2 * math.pi, 1.0, 90.0])
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=examples(300), deadline=None)
 @given(st.floats(-1e9, 1e9, allow_nan=False), periods)
 def test_wrap_periodic_lands_in_half_open_interval(x, period):
     y = wrap_periodic(x, period)
@@ -174,14 +174,14 @@ def test_wrap_periodic_lands_in_half_open_interval(x, period):
     assert math.copysign(1.0, y) == 1.0 or y != 0.0  # never -0.0
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=examples(300), deadline=None)
 @given(st.floats(-1e9, 1e9, allow_nan=False), periods)
 def test_wrap_periodic_is_idempotent(x, period):
     y = wrap_periodic(x, period)
     assert wrap_periodic(y, period) == y
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=examples(200), deadline=None)
 @given(st.floats(-179.0, 179.0, allow_nan=False))
 def test_wrap_periodic_keeps_in_range_values(x):
     assert wrap_periodic(x, 360.0) == pytest.approx(x, abs=1e-9)

@@ -81,6 +81,7 @@ def test_a_bad_resolution_is_one_line_naming_the_key(tmp_path: Path, value: str)
 # -- inference: no resampling ----------------------------------------------------------------
 
 
+@pytest.mark.torch
 def test_infer_only_normalises_model_framed_images(tmp_path: Path) -> None:
     """A model-framed 224² image reaches the model pixel for pixel; a full-frame one is resampled."""
     from sweep3d.stages.infer.stage import prepare_model

@@ -24,7 +24,7 @@ from sweep3d.spec.params import Range
 from sweep3d.stages.aggregate import summarise
 from sweep3d.stages.infer import ClassificationEvaluator, LabelMap
 from sweep3d.stages.infer.evaluators import log_softmax
-from tests.conftest import CUBE_OBJ, write_spec
+from tests.conftest import CUBE_OBJ, examples, write_spec
 
 
 def write_exr(path: Path, rgb: np.ndarray) -> None:
@@ -184,6 +184,7 @@ print("pixels", pixels.size // 4, "finite", bool(np.isfinite(pixels).all()), "ma
 """
 
 
+@pytest.mark.blender
 def test_cycles_turns_nan_and_inf_sky_pixels_into_finite_light(tmp_path: Path) -> None:
     """Rendered to a float EXR (not the 8-bit PNG the worker reads back), a world with NaN,
     +inf and -inf pixels at strength 10⁶ is still finite: Blender keeps them out of the image.
@@ -344,6 +345,7 @@ def _synthetic(n: int, seed: int) -> pa.Table:
     })
 
 
+@pytest.mark.slow
 def test_accuracies_over_a_million_rows_equal_exact_fractions() -> None:
     n = 1_000_000
     data = _synthetic(n, seed=3)
@@ -384,7 +386,7 @@ def test_summary_is_the_same_whatever_the_row_order() -> None:
 
 # -- properties ------------------------------------------------------------------------------
 
-PROPS = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+PROPS = settings(max_examples=examples(60), deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 finite = st.floats(allow_nan=False, allow_infinity=False)
 
 
@@ -438,7 +440,7 @@ positive = st.floats(1e-6, 1e6)
 elevation = st.floats(-90.0, 90.0)
 
 
-@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=examples(25), deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(st.tuples(positive, positive), st.tuples(elevation, elevation), st.tuples(positive, positive),
        st.sampled_from(["random", "sobol"]), st.integers(0, 2**32))
 def test_planned_values_stay_inside_declared_ranges_and_follow_the_seed(tmp_path_factory, zoom, el, scale,
@@ -475,7 +477,7 @@ def _table(rows: list[tuple[str, bool, bool]], start: int = 0) -> pa.Table:
     })
 
 
-@settings(max_examples=20, deadline=None)
+@settings(max_examples=examples(20), deadline=None)
 @given(groups, groups, st.randoms(use_true_random=False))
 def test_accuracy_of_a_concatenation_is_the_count_weighted_mean_and_ignores_order(first, second, rnd) -> None:
     both = first + second

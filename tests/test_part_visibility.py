@@ -76,7 +76,7 @@ def test_the_view_agrees_with_a_count_by_hand(parts_run: Path) -> None:
                             "azimuth_from, elevation_to FROM part_visibility WHERE object = 'box'")
     assert {r[0]: (r[1], r[2]) for r in view} == {p: (len(v), sum(v)) for p, v in expected.items()}
     overall = np.mean([int(r[0]) for r in raw])
-    for part, n, n_correct, accuracy, object_n, object_accuracy, lift, *_ in view:
+    for _part, n, n_correct, accuracy, object_n, object_accuracy, lift, *_ in view:
         assert object_n == len(raw) and object_accuracy == pytest.approx(overall)
         assert accuracy == pytest.approx(n_correct / n) and lift == pytest.approx(accuracy - overall)
 
@@ -112,6 +112,7 @@ def test_switching_the_panel_on_renders_the_pass_only(parts_run: Path, tmp_path:
         assert np.abs(a - b).max() <= 1.5 / 255
 
 
+@pytest.mark.blender
 def test_painted_object_takes_the_colour_of_each_side(tmp_path: Path) -> None:
     from sweep3d.stages.render.paint import VIEWS, paint_objects
     from tests.conftest import write_cube

@@ -14,9 +14,9 @@ from sweep3d.spec import Choice, ControlInstance, Fixed, Range
 from sweep3d.spec.space import Point, SearchSpace, SpaceShape
 from sweep3d.stages.plan.policies import POLICIES, GridPolicy, RandomPolicy
 from sweep3d.stages.render.controls import Camera, Orientation
-from tests.conftest import TINY_SPEC
+from tests.conftest import TINY_SPEC, examples
 
-FAST = settings(max_examples=120, deadline=None)
+FAST = settings(max_examples=examples(120), deadline=None)
 
 shapes = st.builds(
     SpaceShape,

@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 from sweep3d.stages import catalogue
 from sweep3d.stages.postprocess import PostControl, apply_post
 from sweep3d.stages.postprocess.controls import CORRUPTIONS
+from tests.conftest import examples
 
 CONTROLS = catalogue().controls
 
@@ -99,7 +100,7 @@ def test_apply_post_skips_identity_controls_and_keeps_order() -> None:
     assert np.array_equal(out[0], image[0])
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=examples(60), deadline=None)
 @given(st.floats(0, 1), st.floats(-1, 1), st.floats(-1, 1), st.floats(0, 1))
 def test_cutout_never_leaves_the_range(size, x, y, value) -> None:
     out = run(post_control("cutout"), photo(), size=size, x=x, y=y, value=value)

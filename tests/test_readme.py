@@ -19,6 +19,11 @@ def readme_block(after: str) -> str:
     return re.search(r"```python\n(.*?)```", text[start:], re.S).group(1)
 
 
+def test_ci_runs_the_readmes_test_command() -> None:
+    command = (REPO / ".ci" / "run").read_text().strip().splitlines()[-1]
+    assert f"\n    {command}\n" in (REPO / "README.md").read_text()
+
+
 def test_custom_control_from_the_readme(tmp_path: Path, monkeypatch) -> None:
     code = readme_block("### Your own control")
     assert len(code.strip().splitlines()) < 30
