@@ -19,7 +19,7 @@ from rich.table import Table
 
 from sweep3d.cache.store import Store
 from sweep3d.pipeline import run
-from sweep3d.spec import load_spec
+from sweep3d.stages import load_spec
 from sweep3d.stages.plan.policies import POLICIES
 
 SPEC = Path(__file__).resolve().parents[1] / "specs" / "failure_search.toml"

@@ -163,7 +163,7 @@ def pipeline(n: int, folder: Path) -> dict:
 
     from sweep3d.cache import store as store_module
     from sweep3d.pipeline import run
-    from sweep3d.spec import load_spec
+    from sweep3d.stages import load_spec
 
     io = {"seconds": 0.0}
 
@@ -197,16 +197,16 @@ def noop_rerun(n: int, folder: Path) -> dict:
     """Seconds for `sweep3d run` when all ``n`` jobs are cached (rows synthesised, blobs tiny)."""
     from sweep3d.cache.store import Store, atomic_write, utc_now
     from sweep3d.pixels import encode_png
-    from sweep3d.spec import load_spec
+    from sweep3d.stages import load_spec
     from sweep3d.stages.infer import ClassificationEvaluator
     from sweep3d.stages.infer.stage import predictions_schema
-    from sweep3d.stages.plan import make_plan
+    from sweep3d.pipeline import plan_spec
 
     (folder / "cube.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
     spec = SPEC.replace(MESH, "cube.obj").replace('samples_per_dim = {n}', "").replace(
         'type = "grid"', f'type = "random"\nsamples = {n}').replace('yaw = {', 'pitch = { range = [-90, 90] }\nyaw = {')
     (folder / "spec.toml").write_text(spec)
-    plan = make_plan(load_spec(folder / "spec.toml"))
+    plan = plan_spec(load_spec(folder / "spec.toml"))
     store = Store(folder / "store")
     png = encode_png(np.zeros((8, 8, 3), np.float32))
     now = utc_now()

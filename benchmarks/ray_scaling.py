@@ -55,7 +55,7 @@ samples_per_dim = {per_scene}
 
 def render_rate(folder: Path, renders: int, executor, workers: int) -> float:
     from sweep3d.pipeline import run
-    from sweep3d.spec import load_spec
+    from sweep3d.stages import load_spec
 
     folder.mkdir(parents=True)
     (folder / "spec.toml").write_text(SPEC.replace("{per_scene}", str(renders // 2)))

@@ -79,7 +79,7 @@ def build_store(folder: Path, results: int, seed: int = 0) -> Path:
     Accuracy depends on the object, the yaw (side views are hard), the blur, the elevation, and
     on one interaction (the orange at night), so every panel of the report has something to show.
     """
-    from sweep3d.spec import load_spec
+    from sweep3d.stages import load_spec
     from sweep3d.stages.infer.evaluators import ClassificationEvaluator
     from sweep3d.stages.infer.stage import predictions_schema
 
@@ -188,7 +188,7 @@ def measure(spec: Path, repeat: int) -> dict[str, float]:
     from playwright.sync_api import sync_playwright
 
     from sweep3d.report import write_report
-    from sweep3d.spec import load_spec
+    from sweep3d.stages import load_spec
 
     started = time.perf_counter()
     path = write_report(load_spec(spec))

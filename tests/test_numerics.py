@@ -21,7 +21,7 @@ from sweep3d.cache.store import Store
 from sweep3d.pipeline import run
 from sweep3d.stages import load_spec
 from sweep3d.spec.params import Range
-from sweep3d.stages.aggregate import summarise
+from sweep3d.stages.aggregate import connect, summarise
 from sweep3d.stages.infer import ClassificationEvaluator, LabelMap
 from sweep3d.stages.infer.evaluators import log_softmax
 from tests.conftest import CUBE_OBJ, examples, write_spec
@@ -139,7 +139,7 @@ def test_extreme_legal_values_finish_and_no_nan_reaches_the_results(tmp_path: Pa
     assert result.failed == 0, [e for o in result.outcomes for e in o.errors]
     assert len(result.plan.jobs) == 10 and result.outcome("infer").computed == 10
 
-    con = Store(tmp_path / "store").connect("extremes")
+    con = connect(Store(tmp_path / "store"), "extremes")
     rows = con.execute(
         "SELECT r.valid, p.valid, p.correct, p.loss, p.label_prob, p.topk_probs FROM results p "
         "JOIN renders r USING (render_key)").fetchall()
@@ -253,7 +253,7 @@ def test_invalid_renders_and_images_make_invalid_predictions_excluded_from_accur
     assert result.failed == 0
     assert result.outcome("render").computed == 0  # the marked render is reused, not redone
 
-    con = Store(tiny_copy / "store").connect("tiny")
+    con = connect(Store(tiny_copy / "store"), "tiny")
     rows = con.execute(
         "SELECT j.render_key, j.Poison_amount, i.valid, p.valid, p.correct, p.loss, p.top1 FROM jobs j "
         "JOIN predictions p USING (pred_key) LEFT JOIN images i ON i.image_key = j.image_key").fetchall()

@@ -56,18 +56,16 @@ def half_then_rest(table, where, **kwargs):
 
 pq.write_table = half_then_rest
 
-import sweep3d.pipeline as pipeline
+import sweep3d.stages.driver as driver
 import sweep3d.stages.infer.stage as infer
 
-def marking(name, func):
-    def wrapper(*args, **kwargs):
-        (markers / name).touch()
-        return func(*args, **kwargs)
-    return wrapper
+_run_stage = driver.run_stage
 
-pipeline.render_stage = marking("render", pipeline.render_stage)
-pipeline.postprocess_stage = marking("postprocess", pipeline.postprocess_stage)
-pipeline.infer_stage = marking("infer", pipeline.infer_stage)
+def run_stage(stage, *args, **kwargs):
+    (markers / stage.name).touch()  # the stage has started
+    return _run_stage(stage, *args, **kwargs)
+
+driver.run_stage = run_stage
 _predict = infer.predict
 
 def predict(model, images, *args, **kwargs):

@@ -22,6 +22,7 @@ from PIL import Image
 from typer.testing import CliRunner
 
 from sweep3d.cache.store import Store
+from sweep3d.stages.aggregate import connect
 from sweep3d.cli import app
 from sweep3d.report import build_context, render_html, write_report
 from sweep3d.report.page import SCRIPTS, plotly_js, script_json
@@ -139,7 +140,7 @@ def test_optional_panels_show_only_with_data(tiny_run: Path) -> None:
     store = Store(loaded.store)
     absent = Panel("parts", "Part visibility", "panels/overall.html.j2", lambda inputs: None)
     present = Panel("extra", "Extra panel", "panels/overall.html.j2", overall.build)
-    html = render_html(build_context(loaded, store.connect(loaded.name), store, PANELS + (absent, present)))
+    html = render_html(build_context(loaded, connect(store, loaded.name), store, PANELS + (absent, present)))
     assert 'id="parts"' not in html and "Part visibility" not in html
     assert '<section id="extra">' in html and '<a href="#extra">Extra panel</a>' in html
 

@@ -14,6 +14,7 @@ import pytest
 
 from benchmarks.report_scale import build_store
 from sweep3d.cache.store import Store
+from sweep3d.stages.aggregate import connect
 from sweep3d.report import write_report
 from sweep3d.stages import load_spec
 from tests.test_report import ARTIFACTS, assert_clean, cell_centre, open_page
@@ -46,7 +47,7 @@ def click_cell(page: Any, x: int, y: int) -> None:
 def test_axis_slider_and_cell_click_change_the_plot_and_the_gallery(tiny_run: Path) -> None:
     loaded = load_spec(tiny_run / "spec.toml")
     path = write_report(loaded)
-    con = Store(loaded.store).connect(loaded.name)
+    con = connect(Store(loaded.store), loaded.name)
     with open_page(path, wait_all=False) as (page, events):
         first = heatmap(page)
         assert first["x"] == ["studio", "white"] and first["y"] == ["box"]
@@ -91,7 +92,7 @@ def test_heat_map_matches_sql_and_shows_right_and_wrong(tmp_path: Path) -> None:
     spec = build_store(tmp_path / "run", 400, seed=3)
     loaded = load_spec(spec)
     path = write_report(loaded)
-    con = Store(loaded.store).connect(loaded.name)
+    con = connect(Store(loaded.store), loaded.name)
     with open_page(path, wait_all=False) as (page, events):
         drawn = heatmap(page)
         assert drawn["x"] == ["city", "forest", "night", "studio"]  # environments across, objects down
