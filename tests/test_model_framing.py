@@ -22,7 +22,8 @@ from sweep3d.stages import load_spec
 from sweep3d.spec.framing import Framing
 from sweep3d.spec.models import RenderSpec
 from tests.conftest import plan_for
-from sweep3d.stages.render import render_stage
+from sweep3d.stages.driver import run_stage
+from sweep3d.stages.render import RenderStage, render_settings
 from tests.conftest import TINY_SPEC, write_spec
 
 
@@ -47,7 +48,8 @@ def test_model_resolution_resolves_to_the_models_resize_and_crop(tmp_path: Path)
     loaded = load_spec(_spec(tmp_path, '"model"'))
     plan = plan_for(loaded)
     assert plan.framing == Framing(256, 224, model=True)
-    assert plan.render_settings()["resolution"] == 256 and plan.render_settings()["crop"] == 224
+    settings = render_settings(plan)
+    assert settings.resolution == 256 and settings.crop == 224
 
 
 def test_model_framing_and_full_frames_never_share_keys(tmp_path: Path) -> None:
@@ -84,13 +86,13 @@ def test_a_bad_resolution_is_one_line_naming_the_key(tmp_path: Path, value: str)
 @pytest.mark.torch
 def test_infer_only_normalises_model_framed_images(tmp_path: Path) -> None:
     """A model-framed 224² image reaches the model pixel for pixel; a full-frame one is resampled."""
-    from sweep3d.stages.infer.stage import prepare_model
+    from sweep3d.stages.infer import ModelHandle
 
     loaded = load_spec(_spec(tmp_path, '"model"'))
     image = np.random.default_rng(0).random((1, 224, 224, 3), dtype=np.float32)
-    framed = prepare_model(plan_for(loaded)).model.preprocess(image).numpy()
+    framed = ModelHandle.resolve(loaded).classifier().preprocess(image).numpy()
     np.testing.assert_array_equal(framed, ((image - 0.5) / 0.5).transpose(0, 3, 1, 2))
-    full = prepare_model(plan_for(_with_resolution(loaded, 224))).model.preprocess(image).numpy()
+    full = ModelHandle.resolve(_with_resolution(loaded, 224)).classifier().preprocess(image).numpy()
     assert full.shape == framed.shape and np.abs(full - framed).mean() > 0.1
 
 
@@ -102,9 +104,9 @@ def _render(loaded) -> tuple[np.ndarray, dict]:
     plan = dataclasses.replace(plan, jobs=[j for j in plan.jobs if j.environment == "studio"])
     store = Store(loaded.store)
     with store.lock():
-        outcome = render_stage(plan, store, RunProgress(None))
+        outcome = run_stage(RenderStage(), plan, store, RunProgress(None))
     assert outcome.failed == 0, outcome.errors
-    return decode_png(store.blob_path(plan.jobs[0].render_key)), plan.render_settings()
+    return decode_png(store.blob_path(plan.jobs[0].render_key)), render_settings(plan)
 
 
 @pytest.mark.blender
@@ -113,7 +115,7 @@ def test_a_model_framed_render_is_the_centre_crop_of_the_full_frame(tmp_path: Pa
     framed, settings = _render(loaded)
     full, _ = _render(_with_resolution(loaded, 256))
     assert framed.shape == (224, 224, 3) and full.shape == (256, 256, 3)
-    assert settings["crop"] == 224
+    assert settings.crop == 224
 
     def diff(dy: int, dx: int) -> float:
         return float(np.abs(framed - full[16 + dy : 240 + dy, 16 + dx : 240 + dx]).mean())
