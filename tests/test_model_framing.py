@@ -47,7 +47,7 @@ def test_model_resolution_resolves_to_the_models_resize_and_crop(tmp_path: Path)
     loaded = load_spec(_spec(tmp_path, '"model"'))
     plan = make_plan(loaded)
     assert plan.framing == Framing(256, 224, model=True)
-    assert plan.render_settings()["resolution"] == 256 and plan.render_settings()["crop"] == 224
+    assert plan.render_settings().resolution == 256 and plan.render_settings().crop == 224
 
 
 def test_model_framing_and_full_frames_never_share_keys(tmp_path: Path) -> None:
@@ -112,7 +112,7 @@ def test_a_model_framed_render_is_the_centre_crop_of_the_full_frame(tmp_path: Pa
     framed, settings = _render(loaded)
     full, _ = _render(_with_resolution(loaded, 256))
     assert framed.shape == (224, 224, 3) and full.shape == (256, 256, 3)
-    assert settings["crop"] == 224
+    assert settings.crop == 224
 
     def diff(dy: int, dx: int) -> float:
         return float(np.abs(framed - full[16 + dy : 240 + dy, 16 + dx : 240 + dx]).mean())

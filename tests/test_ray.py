@@ -63,8 +63,8 @@ def test_ray_executor_gives_the_local_results(local_cluster, tmp_path: Path, mon
 
 
 def test_a_killed_actor_loses_no_job_and_duplicates_none(local_cluster, tmp_path: Path) -> None:
-    from sweep3d.spec.models import RenderSpec
     from sweep3d.stages.plan import make_plan
+    from sweep3d.stages.render.protocol import RenderSettings
     from sweep3d.stages.render.ray_pool import RayRenderPool
     from sweep3d.stages.render.stage import _groups
 
@@ -74,7 +74,7 @@ def test_a_killed_actor_loses_no_job_and_duplicates_none(local_cluster, tmp_path
     store = Store(loaded.store)
     unique = list({j.render_key: j for j in plan.jobs}.values())  # blur variants share a render
     groups = [[job] for group in _groups(plan, store, unique) for job in group]  # 12 one-job groups
-    settings = RenderSpec(resolution=32, samples=1, denoise=False).model_dump()
+    settings = RenderSettings(resolution=32, samples=1, denoise=False)
     seen = []
     with RayRenderPool(settings, workers=2) as pool:
         for result in pool.run(groups):

@@ -36,10 +36,6 @@ class Framing:
             return {"resolution": self.size}
         return {"resolution": self.size, "crop": self.crop}
 
-    def settings(self) -> dict[str, int]:
-        """What the Blender scene needs (merged over the [render] settings)."""
-        return {"resolution": self.size, "crop": self.crop}
-
 
 def resolve_framing(spec) -> Framing:
     """The frame of a :class:`~sweep3d.spec.loader.LoadedSpec` (loads a user's model for "model").

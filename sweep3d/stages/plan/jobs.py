@@ -15,7 +15,7 @@ Each key hashes exactly what changes its stage's output (see DESIGN.md §2):
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sweep3d.cache.keys import digest, file_digest
 from sweep3d.parts import PARTS_LAYOUT
@@ -23,6 +23,9 @@ from sweep3d.spec.framing import Framing, resolve_framing
 from sweep3d.spec.loader import ControlInstance, LoadedSpec
 from sweep3d.spec.space import Point, SearchSpace
 from sweep3d.stages.plan.policies import Outcome
+
+if TYPE_CHECKING:
+    from sweep3d.stages.render.protocol import RenderSettings
 
 RENDER_STAGE_VERSION = 1
 POST_STAGE_VERSION = 1
@@ -57,12 +60,15 @@ class Plan:
     #: The resolved frame (``resolution = "model"`` becomes the model's resize and crop sizes).
     framing: Framing | None = None
 
-    def render_settings(self) -> dict[str, Any]:
+    def render_settings(self) -> RenderSettings:
         """The [render] settings with the resolved frame and the passes to write, as render
         workers need them (the UV pass only for the report's part-visibility panel)."""
+        # imported here, not above: the render package imports this module
+        from sweep3d.stages.render.protocol import RenderSettings
+
         framing = self.framing or resolve_framing(self.spec)
-        passes = ["uv"] if self.spec.spec.report.part_visibility else []
-        return {**self.spec.spec.render.model_dump(), **framing.settings(), "passes": passes}
+        passes = ("uv",) if self.spec.spec.report.part_visibility else ()
+        return RenderSettings.from_spec(self.spec.spec.render, framing, passes)
 
     def rows(self) -> list[dict[str, Any]]:
         """The jobs table: one row per job with its scene, control values, keys and ``in_frame``."""

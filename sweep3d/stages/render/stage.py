@@ -16,7 +16,6 @@ import time
 from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import pyarrow as pa
 
@@ -29,6 +28,14 @@ from sweep3d.stages.outcome import StageOutcome
 from sweep3d.stages.plan.jobs import Job, Plan
 from sweep3d.stages.render.assets import materialise_mesh
 from sweep3d.stages.render.pool import RenderPool
+from sweep3d.stages.render.protocol import (
+    EnvironmentRef,
+    RenderExecutor,
+    RenderInfo,
+    RenderJob,
+    RenderReply,
+    RenderSettings,
+)
 
 GROUP_SIZE = 32  # jobs sent to a worker at once; a scene's jobs stay together in order
 
@@ -74,7 +81,8 @@ class Executor:
     kind: str = "local"
     address: str | None = None
 
-    def pool(self, settings: dict[str, Any], workers: int, timeout: float):
+    def pool(self, settings: RenderSettings, workers: int, timeout: float) -> RenderExecutor:
+        """A fresh executor of this kind (``timeout`` applies to local workers only)."""
         if self.kind == "ray":
             from sweep3d.stages.render.ray_pool import RayRenderPool
 
@@ -103,61 +111,62 @@ def render_stage(plan: Plan, store: Store, progress: RunProgress, executor: Exec
                 executor.pool(settings, workers, plan.spec.spec.render.timeout) as pool, \
                 store.segment_writer("renders", RENDERS_SCHEMA) as writer, \
                 store.segment_writer("parts", PARTS_SCHEMA) as parts_writer:
-            for result in pool.run(groups):
-                job = unique[result.render_key]
-                if not result.ok and getattr(result, "kind", "internal") == "user":
-                    raise _user_error(plan, job, result.error or "")
-                ok = result.ok and (job.render_key in cached or _record_render(store, writer, result))
+            for reply in pool.run(groups):
+                job = unique[reply.render_key]
+                if not reply.ok and reply.kind == "user":
+                    raise _user_error(plan, job, reply.error or "")
+                ok = reply.ok and (job.render_key in cached or _record_render(store, writer, reply))
                 if ok and job.parts_key is not None:
-                    _record_parts(parts_writer, job, result.info)
+                    _record_parts(parts_writer, job, reply.info)
                 if ok:
                     outcome.computed += 1
                 else:
                     outcome.failed += 1
-                    error = result.error or "the worker reported success but its blob cannot be read"
-                    outcome.errors.append(f"render {result.render_key[:12]}: {error}")
+                    error = reply.error or "the worker reported success but its blob cannot be read"
+                    outcome.errors.append(f"render {reply.render_key[:12]}: {error}")
                 bar.advance(failed=not ok)
     outcome.seconds = time.perf_counter() - started
     return outcome
 
 
-def _record_render(store: Store, writer, result) -> bool:
+def _record_render(store: Store, writer, reply: RenderReply) -> bool:
     """Add a rendered key's row (with its blob's digest); False if the blob cannot be read."""
-    digest = _blob_digest(store.blob_path(result.render_key))
+    digest = _blob_digest(store.blob_path(reply.render_key))
     if digest is None:
         return False
-    info = {k: v for k, v in result.info.items() if k != "parts"}
-    writer.add({"render_key": result.render_key, **info, "created_at": utc_now(), DIGEST_COLUMN: digest})
+    info = reply.info
+    writer.add({"render_key": reply.render_key, "seconds": info.seconds, "valid": info.valid, "width": info.width,
+                "height": info.height, "created_at": utc_now(), DIGEST_COLUMN: digest})
     return True
 
 
-def _record_parts(writer, job: Job, info: dict[str, Any]) -> None:
-    """Add the job's visible parts (its worker rendered the UV pass: ``info["parts"]``)."""
+def _record_parts(writer, job: Job, info: RenderInfo) -> None:
+    """Add the job's visible parts (its worker rendered the UV pass: ``info.parts``)."""
     writer.add({"parts_key": job.parts_key, "render_key": job.render_key, "layout": PARTS_LAYOUT,
-                **info["parts"], "created_at": utc_now()})
+                **info.parts, "created_at": utc_now()})
 
 
 def _groups(plan: Plan, store: Store, todo: list[Job], cached: frozenset[str] | set[str] = frozenset()
-            ) -> list[list[dict[str, Any]]]:
-    """Jobs as worker messages, grouped by scene; a job whose render is in ``cached`` (there for
+            ) -> list[list[RenderJob]]:
+    """Jobs for the workers, grouped by scene; a job whose render is in ``cached`` (there for
     its UV pass) carries no blob path."""
     spec = plan.spec
     controls = {c.id: c.control for c in spec.controls if c.control.stage == "render"}
     ordered = sorted(controls.values(), key=lambda c: c.order)
     environments = {e.name: e for e in spec.spec.environments}
     meshes: dict[str, str] = {}
-    by_scene: dict[tuple[str, str], list[dict[str, Any]]] = defaultdict(list)
+    by_scene: dict[tuple[str, str], list[RenderJob]] = defaultdict(list)
     for job in todo:
         if job.object not in meshes:
             meshes[job.object] = str(materialise_mesh(spec.meshes[job.object], store.root))
         env = environments[job.environment]
-        by_scene[job.scene].append({
-            "render_key": job.render_key,
-            "mesh": meshes[job.object],
-            "environment": {"hdri": spec.hdris[env.name], "color": env.color, "strength": env.strength},
-            "controls": [(c, c.params(job.values[c.id])) for c in ordered if c.id in job.values],
-            "blob": None if job.render_key in cached else str(store.blob_path(job.render_key)),
-        })
+        by_scene[job.scene].append(RenderJob(
+            render_key=job.render_key,
+            mesh=meshes[job.object],
+            environment=EnvironmentRef(hdri=spec.hdris[env.name], color=env.color, strength=env.strength),
+            controls=tuple((c, c.params(job.values[c.id])) for c in ordered if c.id in job.values),
+            blob=None if job.render_key in cached else str(store.blob_path(job.render_key)),
+        ))
     groups = []
     for scene in sorted(by_scene):
         jobs = by_scene[scene]
