@@ -296,12 +296,11 @@ def tiny_copy(tiny_run: Path, tmp_path: Path) -> Path:
 def blender_scene(tmp_path_factory):
     """One Blender scene per test session (bpy holds one scene per process), 32×32, 1 sample,
     with ``.cube`` the path of a cube mesh. Tests call ``prepare`` for the object they need."""
-    from sweep3d.spec.models import RenderSpec
+    from sweep3d.stages.render.protocol import RenderSettings
     from sweep3d.stages.render.scene import BlenderScene
 
     folder = tmp_path_factory.mktemp("scene")
-    settings = RenderSpec(resolution=32, samples=1, denoise=False).model_dump()
-    scene = BlenderScene(settings, folder)
+    scene = BlenderScene(RenderSettings(resolution=32, samples=1, denoise=False), folder)
     scene.cube = str(write_cube(folder))
     return scene
 

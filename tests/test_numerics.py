@@ -166,13 +166,13 @@ from pathlib import Path
 
 import numpy as np
 
-from sweep3d.spec.models import RenderSpec
+from sweep3d.stages.render.protocol import EnvironmentRef, RenderSettings
 from sweep3d.stages.render.scene import BlenderScene
 from sweep3d.stages.render.state import SceneState
 
 folder, hdri, mesh = Path(sys.argv[1]), sys.argv[2], sys.argv[3]
-scene = BlenderScene(RenderSpec(resolution=32, samples=1, denoise=False).model_dump(), folder)
-scene.prepare(mesh, {"hdri": hdri, "color": None, "strength": 1e6})
+scene = BlenderScene(RenderSettings(resolution=32, samples=1, denoise=False), folder)
+scene.prepare(mesh, EnvironmentRef(hdri=hdri, strength=1e6))
 scene.pose_scene(SceneState())
 out = scene.scene.render.image_settings
 out.file_format, out.color_depth, out.color_mode = "OPEN_EXR", "32", "RGBA"

@@ -63,18 +63,18 @@ def test_ray_executor_gives_the_local_results(local_cluster, tmp_path: Path, mon
 
 
 def test_a_killed_actor_loses_no_job_and_duplicates_none(local_cluster, tmp_path: Path) -> None:
-    from sweep3d.spec.models import RenderSpec
-    from tests.conftest import plan_for
+    from sweep3d.stages.render.protocol import RenderSettings
     from sweep3d.stages.render.ray_pool import RayRenderPool
     from sweep3d.stages.render.stage import _groups
+    from tests.conftest import plan_for
 
     spec = write_spec(tmp_path, TINY_SPEC.replace("yaw = [0, 45]", "yaw = [0, 30, 60, 90, 120, 150]"))
     loaded = load_spec(spec)
     plan = plan_for(loaded, "m")
     store = Store(loaded.store)
     unique = list({j.render_key: j for j in plan.jobs}.values())  # blur variants share a render
-    groups = [[job] for group in _groups(plan, store, unique) for job in group]  # 12 one-job groups
-    settings = RenderSpec(resolution=32, samples=1, denoise=False).model_dump()
+    groups = [[job] for group in _groups(plan, store, unique, set()) for job in group]  # 12 one-job groups
+    settings = RenderSettings(resolution=32, samples=1, denoise=False)
     seen = []
     with RayRenderPool(settings, workers=2) as pool:
         for result in pool.run(groups):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -10,11 +11,12 @@ import pytest
 from sweep3d.errors import UserError
 from sweep3d.spec.assets import builtin_hdris
 from sweep3d.stages.render.controls import Camera, Orientation, Position
+from sweep3d.stages.render.protocol import EnvironmentRef
 from sweep3d.stages.render.state import SceneState
 
 pytestmark = pytest.mark.blender
 
-WHITE = {"hdri": None, "color": (1.0, 1.0, 1.0), "strength": 1.0}
+WHITE = EnvironmentRef(color=(1.0, 1.0, 1.0))
 
 
 @pytest.fixture
@@ -73,7 +75,7 @@ def test_each_control_changes_the_image(scene, control, params) -> None:
 
 
 def test_hdri_environment_fills_the_background(scene) -> None:
-    env = {"hdri": str(builtin_hdris()["forest"]), "color": None, "strength": 1.0}
+    env = EnvironmentRef(hdri=str(builtin_hdris()["forest"]))
     image = render(scene, SceneState(), env)
     assert not np.allclose(image[0, 0], 1.0, atol=0.05)
     assert scene.scene.render.film_transparent is False
@@ -140,7 +142,7 @@ def _triangle_formats(folder: Path) -> dict[str, Path]:
 @pytest.mark.parametrize("fmt", ["ply", "stl", "gltf"])
 def test_other_mesh_formats_load_and_are_normalised(scene, tmp_path: Path, fmt: str) -> None:
     path = _triangle_formats(tmp_path)[fmt]
-    scene.prepare(str(path), {**WHITE, "color": (0.0, 0.0, 0.0)})  # a lit grey object on black
+    scene.prepare(str(path), replace(WHITE, color=(0.0, 0.0, 0.0)))  # a lit grey object on black
     scene.pose_scene(SceneState())
     image = scene.render()
     meshes = [o for o in scene.pose.children_recursive if o.type == "MESH"]

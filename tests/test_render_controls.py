@@ -11,6 +11,7 @@ import pytest
 from sweep3d.stages import catalogue
 from sweep3d.spec.assets import builtin_hdris
 from sweep3d.stages.render.controls import RenderedControl
+from sweep3d.stages.render.protocol import EnvironmentRef
 from sweep3d.stages.render.state import SceneState
 
 CONTROLS = catalogue().controls
@@ -18,13 +19,13 @@ CONTROLS = catalogue().controls
 pytestmark = pytest.mark.blender
 
 
-def environment(kind: str) -> dict:
+def environment(kind: str) -> EnvironmentRef:
     if kind == "hdri":
-        return {"hdri": str(builtin_hdris()["sunset"]), "color": None, "strength": 1.0}
-    return {"hdri": None, "color": (0.7, 0.75, 0.8), "strength": 1.0}
+        return EnvironmentRef(hdri=str(builtin_hdris()["sunset"]))
+    return EnvironmentRef(color=(0.7, 0.75, 0.8))
 
 
-def render(scene, mesh: str, env: dict, controls: list[tuple[str, dict]]) -> np.ndarray:
+def render(scene, mesh: str, env: EnvironmentRef, controls: list[tuple[str, dict]]) -> np.ndarray:
     state = SceneState()
     for name, values in sorted(controls, key=lambda c: CONTROLS.get(c[0]).order):
         control = CONTROLS.get(name)(name, name)
@@ -95,7 +96,7 @@ def test_control_changes_the_image_and_its_range_ends_are_finite(blender_scene, 
 
 
 def test_occlusion_covers_the_side_it_comes_from(blender_scene) -> None:
-    env = {"hdri": None, "color": (1.0, 1.0, 1.0), "strength": 1.0}
+    env = EnvironmentRef(color=(1.0, 1.0, 1.0))
     base = render(blender_scene, blender_scene.cube, env, [])
     right = render(blender_scene, blender_scene.cube, env, [("occlusion", {"coverage": 0.5, "direction": 0.0, "grey": 0.0})])
     diff = np.abs(right - base).mean(axis=2)

@@ -45,6 +45,3 @@ class Framing:
         """The model's view: a frame of its resize size whose centre crop is rendered."""
         return cls(max(resize, crop), crop, model=True)
 
-    def settings(self) -> dict[str, int]:
-        """What the Blender scene needs (merged over the [render] settings)."""
-        return {"resolution": self.size, "crop": self.crop}

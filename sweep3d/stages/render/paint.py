@@ -40,17 +40,17 @@ def paint_objects(items: list[tuple[str, np.ndarray]], resolution: int = 160, sa
 def _paint_in_this_process(items: list[tuple[str, np.ndarray]], resolution: int, samples: int) -> list[list[bytes]]:
     os.dup2(os.open(os.devnull, os.O_WRONLY), 1)  # Blender prints progress straight to fd 1
     from sweep3d.pixels import encode_png
-    from sweep3d.spec.models import RenderSpec
+    from sweep3d.stages.render.protocol import EnvironmentRef, RenderSettings
     from sweep3d.stages.render.scene import BlenderScene
     from sweep3d.stages.render.state import SceneState
 
-    settings = RenderSpec(resolution=resolution, samples=samples, denoise=True).model_dump()
-    settings["passes"] = ["uv"]  # builds the parts UV map the paint is laid on
+    # the UV pass builds the parts UV map the paint is laid on
+    settings = RenderSettings(resolution=resolution, samples=samples, denoise=True, passes=("uv",))
     out = []
     with tempfile.TemporaryDirectory(prefix="sweep3d-paint-") as scratch:
         scene = BlenderScene(settings, Path(scratch))
         for mesh, colours in items:
-            scene.prepare(mesh, {"hdri": None, "color": BACKGROUND, "strength": 1.0})
+            scene.prepare(mesh, EnvironmentRef(color=BACKGROUND))
             material = _paint_material(scene.bpy, colours)
             images = []
             for _, azimuth, elevation in VIEWS:

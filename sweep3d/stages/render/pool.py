@@ -19,34 +19,35 @@ from pathlib import Path
 from typing import Any, Iterator
 
 from sweep3d.errors import RenderError
+from sweep3d.stages.render.protocol import (
+    Fatal,
+    Idle,
+    Ready,
+    RenderJob,
+    RenderReply,
+    RenderSettings,
+    Started,
+)
 from sweep3d.stages.render.worker import worker_main
 
 SCRATCH_PREFIX = "sweep3d-"  # + the parent's pid: a later run can tell a killed run's folder
 
 
 @dataclass
-class RenderResult:
-    render_key: str
-    ok: bool
-    info: dict[str, Any] = field(default_factory=dict)
-    error: str | None = None
-    kind: str = "internal"  # "user": the job failed because of the spec's input (see worker.py)
-
-
-@dataclass
 class _Worker:
     process: Any
     conn: Connection
-    task: list[dict[str, Any]] | None = None
+    task: list[RenderJob] | None = None
     done: set[str] = field(default_factory=set)
     current: str | None = None
     started: float = 0.0
 
 
 class RenderPool:
-    """Persistent workers; use as a context manager and call :meth:`run`."""
+    """Persistent worker processes (a :class:`RenderExecutor`); use as a context manager and call
+    :meth:`run`."""
 
-    def __init__(self, settings: dict[str, Any], workers: int = 1, timeout: float = 600.0) -> None:
+    def __init__(self, settings: RenderSettings, workers: int = 1, timeout: float = 600.0) -> None:
         self.settings = settings
         self.n_workers = workers
         self.timeout = timeout
@@ -69,15 +70,15 @@ class RenderPool:
         )
         process.start()
         child.close()
-        message = parent.recv() if parent.poll(120) else ("fatal", "worker did not start within 120 s")
-        if message[0] != "ready":
+        message = parent.recv() if parent.poll(120) else Fatal("worker did not start within 120 s")
+        if not isinstance(message, Ready):
             process.kill()
-            raise RenderError(f"render worker failed to start: {message[1]}")
+            raise RenderError(f"render worker failed to start: {message.message}")
         return _Worker(process, parent)
 
-    def run(self, groups: list[list[dict[str, Any]]]) -> Iterator[RenderResult]:
-        """Render every job of every group, yielding one result per job as it finishes."""
-        queue: deque[list[dict[str, Any]]] = deque(g for g in groups if g)
+    def run(self, groups: list[list[RenderJob]]) -> Iterator[RenderReply]:
+        """Render every job of every group, yielding one reply per job as it finishes."""
+        queue: deque[list[RenderJob]] = deque(g for g in groups if g)
         retried: set[str] = set()
         while len(self.workers) < min(self.n_workers, len(queue)):
             self.workers.append(self._spawn())
@@ -99,35 +100,31 @@ class RenderPool:
                 if worker.task is not None and (not worker.process.is_alive() or timed_out):
                     yield from self._replace(worker, queue, retried, timed_out)
 
-    def _handle(self, worker: _Worker, message: tuple) -> Iterator[RenderResult]:
-        kind = message[0]
-        if kind == "start":
-            worker.current, worker.started = message[1], time.monotonic()
-        elif kind == "done":
-            worker.done.add(message[1])
+    def _handle(self, worker: _Worker, message: Started | RenderReply | Idle) -> Iterator[RenderReply]:
+        if isinstance(message, Started):
+            worker.current, worker.started = message.render_key, time.monotonic()
+        elif isinstance(message, RenderReply):
+            worker.done.add(message.render_key)
             worker.current = None
-            yield RenderResult(message[1], True, message[2])
-        elif kind == "error":
-            worker.done.add(message[1])
-            worker.current = None
-            yield RenderResult(message[1], False, error=message[2], kind=message[3] if len(message) > 3 else "internal")
-        elif kind == "idle":
+            yield message
+        elif isinstance(message, Idle):
             worker.task = None
 
-    def _replace(self, worker: _Worker, queue, retried: set[str], timed_out: bool) -> Iterator[RenderResult]:
+    def _replace(self, worker: _Worker, queue: deque[list[RenderJob]], retried: set[str],
+                 timed_out: bool) -> Iterator[RenderReply]:
         """Replace a dead or stuck worker; retry its unfinished jobs once, fail the culprit twice."""
         culprit = worker.current
         reason = f"render took longer than {self.timeout:g} s" if timed_out else (
             f"render worker died (exit code {worker.process.exitcode})")
         worker.process.kill()
         worker.process.join(5)
-        leftover = [job for job in worker.task or [] if job["render_key"] not in worker.done]
+        leftover = [job for job in worker.task or [] if job.render_key not in worker.done]
         self.workers.remove(worker)
         retry = []
         for job in leftover:
-            key = job["render_key"]
+            key = job.render_key
             if key == culprit and key in retried:
-                yield RenderResult(key, False, error=reason)
+                yield RenderReply(key, False, error=reason)
             else:
                 if key == culprit:
                     retried.add(key)

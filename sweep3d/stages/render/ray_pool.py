@@ -13,6 +13,7 @@ from __future__ import annotations
 import io
 import tarfile
 from collections import deque
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -20,7 +21,7 @@ from sweep3d.cache.keys import digest
 from sweep3d.cache.store import atomic_write
 from sweep3d.errors import UserError
 from sweep3d.spec.assets import bpy_root, mesh_files
-from sweep3d.stages.render.pool import RenderResult
+from sweep3d.stages.render.protocol import RenderJob, RenderReply, RenderSettings
 
 MAX_GROUP_RETRIES = 2
 
@@ -49,7 +50,7 @@ def connect(address: str | None) -> bool:
 class RenderActor:
     """A Ray actor holding one Blender scene (created remotely through ``ray.remote``)."""
 
-    def __init__(self, settings: dict[str, Any]) -> None:
+    def __init__(self, settings: RenderSettings) -> None:
         import os
         import tempfile
 
@@ -65,17 +66,16 @@ class RenderActor:
 
         return os.getpid()
 
-    def render_group(self, jobs: list[dict[str, Any]], packs: dict[str, bytes]) -> list[tuple[tuple, bytes | None]]:
+    def render_group(self, jobs: list[RenderJob], packs: dict[str, bytes]) -> list[RenderReply]:
+        """Render a group with its shipped assets unpacked here; replies carry the PNG bytes."""
         from sweep3d.stages.render.worker import render_job
 
         out = []
         for job in jobs:
-            job = dict(job)
-            job["mesh"] = self._local(job["mesh"], packs)
-            env = dict(job["environment"])
-            if env.get("hdri"):
-                env["hdri"] = self._local(env["hdri"], packs)
-            job["environment"] = env
+            env = job.environment
+            if env.hdri:
+                env = replace(env, hdri=self._local(env.hdri, packs))
+            job = replace(job, mesh=self._local(job.mesh, packs), environment=env)
             out.append(render_job(self.scene, job, keep_pixels=True))
         return out
 
@@ -93,9 +93,10 @@ class RenderActor:
 
 
 class RayRenderPool:
-    """Ray actors as render workers; use as a context manager and call :meth:`run`."""
+    """Ray actors as render workers (a :class:`RenderExecutor`); use as a context manager and call
+    :meth:`run`."""
 
-    def __init__(self, settings: dict[str, Any], workers: int = 1, address: str | None = None) -> None:
+    def __init__(self, settings: RenderSettings, workers: int = 1, address: str | None = None) -> None:
         ray = self.ray = _ray()
         self._owns_ray = connect(address)
         cpus = max(1, int(ray.cluster_resources().get("CPU", 1)) // max(workers, 1))
@@ -111,22 +112,22 @@ class RayRenderPool:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-    def run(self, groups: list[list[dict[str, Any]]]) -> Iterator[RenderResult]:
-        """Render every group, yielding one result per job as each group finishes."""
+    def run(self, groups: list[list[RenderJob]]) -> Iterator[RenderReply]:
+        """Render every group, yielding one reply per job as each group finishes."""
         ray = self.ray
         queue = deque(self._shippable(g) for g in groups if g)
         self.actors = [self.actor_cls.remote(self.settings) for _ in range(min(self.n_workers, len(queue)))]
         packs_ref = ray.put(self.packs)
-        running: dict[Any, tuple[Any, list[dict[str, Any]], int]] = {}
+        running: dict[Any, tuple[Any, list[RenderJob], int]] = {}
         last_scene: dict[Any, str] = {}
 
         def submit(actor, group, tries: int) -> None:
             running[actor.render_group.remote(group, packs_ref)] = (actor, group, tries)
-            last_scene[actor] = group[0]["mesh"]
+            last_scene[actor] = group[0].mesh
 
-        def next_group(actor) -> list[dict[str, Any]]:
+        def next_group(actor) -> list[RenderJob]:
             for i, group in enumerate(queue):  # keep the actor on the scene it has loaded
-                if group[0]["mesh"] == last_scene.get(actor):
+                if group[0].mesh == last_scene.get(actor):
                     del queue[i]
                     return group
             return queue.popleft()
@@ -138,43 +139,39 @@ class RayRenderPool:
             done, _ = ray.wait(list(running), num_returns=1)
             actor, group, tries = running.pop(done[0])
             try:
-                results = ray.get(done[0])
+                replies = ray.get(done[0])
             except (ray.exceptions.RayActorError, ray.exceptions.WorkerCrashedError) as exc:
                 self.actors.remove(actor)
                 if tries >= MAX_GROUP_RETRIES:
                     for job in group:
-                        yield RenderResult(job["render_key"], False, error=f"render actor died: {exc}")
+                        yield RenderReply(job.render_key, False, error=f"render actor died: {exc}")
                 else:  # a new actor takes the group; its results were never yielded
                     replacement = self.actor_cls.remote(self.settings)
                     self.actors.append(replacement)
                     submit(replacement, group, tries + 1)
                 continue
-            for job, (message, png) in zip(group, results):
-                yield self._result(job, message, png)
+            for job, reply in zip(group, replies):
+                yield self._written(job, reply)
             if queue:
                 submit(actor, next_group(actor), 0)
 
     @staticmethod
-    def _result(job: dict[str, Any], message: tuple, png: bytes | None) -> RenderResult:
-        if message[0] == "done":
-            if job["blob"] is not None:  # None: only the UV pass was wanted
-                atomic_write(Path(job["blob"]), png or b"")  # the driver writes the store
-            return RenderResult(message[1], True, message[2])
-        return RenderResult(message[1], False, error=message[2], kind=message[3])
+    def _written(job: RenderJob, reply: RenderReply) -> RenderReply:
+        """The reply, once its pixels are in the store: the driver writes every blob."""
+        if reply.ok and job.blob is not None:  # None: only the UV pass was wanted
+            atomic_write(Path(job.blob), reply.png or b"")
+        return reply
 
-    def _shippable(self, group: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    def _shippable(self, group: list[RenderJob]) -> list[RenderJob]:
         """Replace local asset paths by packs in the object store (built-in HDRIs stay: every
         node with bpy has them)."""
         out = []
         builtin = str(bpy_root())
         for job in group:
-            job = dict(job)
-            job["mesh"] = self._pack(Path(job["mesh"]), mesh_files(Path(job["mesh"])))
-            env = dict(job["environment"])
-            if env.get("hdri") and not env["hdri"].startswith(builtin):
-                env["hdri"] = self._pack(Path(env["hdri"]), [Path(env["hdri"])])
-            job["environment"] = env
-            out.append(job)
+            env = job.environment
+            if env.hdri and not env.hdri.startswith(builtin):
+                env = replace(env, hdri=self._pack(Path(env.hdri), [Path(env.hdri)]))
+            out.append(replace(job, mesh=self._pack(Path(job.mesh), mesh_files(Path(job.mesh))), environment=env))
         return out
 
     def _pack(self, main: Path, files: list[Path]) -> str:

@@ -19,6 +19,7 @@ from sweep3d.errors import UserError
 from sweep3d.stages.render._bpy import import_bpy
 from sweep3d.stages.render._rna import assign
 from sweep3d.stages.render.props import PropsView
+from sweep3d.stages.render.protocol import EnvironmentRef, RenderSettings
 from sweep3d.stages.render.skins import SkinView
 from sweep3d.stages.render.state import SENSOR_WIDTH_MM, SceneState
 from sweep3d.stages.render.uv_pass import UVPass
@@ -36,7 +37,7 @@ IMPORTERS = {
 class BlenderScene:
     """One Blender scene in this process, configured from the spec's render settings."""
 
-    def __init__(self, settings: dict[str, Any], scratch: Path) -> None:
+    def __init__(self, settings: RenderSettings, scratch: Path) -> None:
         self.bpy = bpy = import_bpy()
         self.settings = settings
         self.scratch = scratch
@@ -60,32 +61,32 @@ class BlenderScene:
         self.world = WorldView(bpy, world)
         self.skins = SkinView(bpy)
         self.props = PropsView(bpy, scene)
-        self.environment: dict[str, Any] = {}
+        self.environment = EnvironmentRef()
         self.frame = scratch / f"frame-{os.getpid()}.png"
-        self.uv_pass = UVPass(bpy, scene, scratch) if "uv" in settings.get("passes", ()) else None
+        self.uv_pass = UVPass(bpy, scene, scratch) if "uv" in settings.passes else None
         self.parts: dict[str, Any] | None = None  # what the UV pass saw in the latest render
 
     @staticmethod
-    def _configure(scene, s: dict[str, Any]) -> None:
+    def _configure(scene, s: RenderSettings) -> None:
         scene.render.engine = "CYCLES"
         cycles = scene.cycles
         cycles.device = "CPU"
-        cycles.samples = s["samples"]
-        cycles.use_adaptive_sampling = bool(s.get("adaptive_threshold"))
+        cycles.samples = s.samples
+        cycles.use_adaptive_sampling = bool(s.adaptive_threshold)
         if cycles.use_adaptive_sampling:
-            cycles.adaptive_threshold = s["adaptive_threshold"]
-        cycles.seed = s.get("seed", 0)
-        cycles.max_bounces = s["max_bounces"]
-        cycles.use_denoising = bool(s["denoise"])
-        if s["denoise"]:
+            cycles.adaptive_threshold = s.adaptive_threshold
+        cycles.seed = s.seed
+        cycles.max_bounces = s.max_bounces
+        cycles.use_denoising = bool(s.denoise)
+        if s.denoise:
             cycles.denoiser = "OPENIMAGEDENOISE"
-            cycles.denoising_prefilter = {"fast": "FAST", "accurate": "ACCURATE", "none": "NONE"}[s["denoise_prefilter"]]
-        scene.render.resolution_x = scene.render.resolution_y = s["resolution"]
+            cycles.denoising_prefilter = {"fast": "FAST", "accurate": "ACCURATE", "none": "NONE"}[s.denoise_prefilter]
+        scene.render.resolution_x = scene.render.resolution_y = s.resolution
         scene.render.resolution_percentage = 100
-        _crop_to_centre(scene.render, s["resolution"], s.get("crop") or s["resolution"])
+        _crop_to_centre(scene.render, s.resolution, s.crop or s.resolution)
         scene.render.use_persistent_data = True  # world importance map built once per world
         scene.render.threads_mode = "FIXED"
-        scene.render.threads = s["threads"] or os.cpu_count() or 1
+        scene.render.threads = s.threads or os.cpu_count() or 1
         scene.view_settings.view_transform = "Standard"
         scene.view_settings.look = "None"
         scene.render.image_settings.file_format = "PNG"
@@ -94,7 +95,7 @@ class BlenderScene:
         scene.render.image_settings.compression = 0
 
     # -- loading -------------------------------------------------------------------------------
-    def prepare(self, mesh_path: str, environment: dict[str, Any]) -> None:
+    def prepare(self, mesh_path: str, environment: EnvironmentRef) -> None:
         """Make ``mesh_path`` the loaded object and ``environment`` the job's world (lazily synced)."""
         self.environment = environment
         if mesh_path != self.object_ref:
@@ -195,11 +196,11 @@ class BlenderScene:
         if dof.use_dof:
             assign(dof, "aperture_fstop", state.fstop)
             assign(dof, "focus_distance", float(np.linalg.norm(state.object_location() - position)))
-        denoise = self.settings["denoise"] if state.denoise is None else state.denoise
+        denoise = self.settings.denoise if state.denoise is None else state.denoise
         assign(self.scene.cycles, "use_denoising", denoise)
         env = self.environment
         self.world.sync(env, state)
-        self.background = state.background or (tuple(env["color"]) if env.get("color") and state.sky is None else None)
+        self.background = state.background or (tuple(env.color) if env.color and state.sky is None else None)
         assign(self.scene.render, "film_transparent", self.background is not None)
         self.skins.sync(state.skin, state.skin_scale, state.skin_image)
         self.props.sync_lights(state)

@@ -1,9 +1,9 @@
 """The render worker process: imports bpy once, keeps its scene, renders job after job.
 
-It talks to the parent over one pipe: it receives a list of jobs (one scene group) or None
-to stop, and sends ``("start", key)``, ``("done", key, info)``, ``("error", key, message, kind)``
-(kind "user" for a UserError, which the run reports as a user error; "internal" otherwise)
-and finally ``("idle",)`` for each list.
+It talks to the parent over one pipe with the messages of :mod:`.protocol`: it receives a list
+of :class:`RenderJob` (one scene group) or None to stop, and sends :class:`Ready` (or
+:class:`Fatal`) once, then :class:`Started` and a :class:`RenderReply` per job, and :class:`Idle`
+after each list.
 """
 
 from __future__ import annotations
@@ -14,12 +14,22 @@ import time
 import traceback
 from multiprocessing.connection import Connection
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
+from sweep3d.stages.render.protocol import (
+    Fatal,
+    Idle,
+    Ready,
+    RenderInfo,
+    RenderJob,
+    RenderReply,
+    RenderSettings,
+    Started,
+)
 
-def worker_main(conn: Connection, settings: dict[str, Any], scratch: str) -> None:
+
+def worker_main(conn: Connection, settings: RenderSettings, scratch: str) -> None:
     """Entry point of a spawned worker process."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides when workers stop
     devnull = os.open(os.devnull, os.O_WRONLY)
@@ -29,9 +39,9 @@ def worker_main(conn: Connection, settings: dict[str, Any], scratch: str) -> Non
     try:
         scene = BlenderScene(settings, Path(scratch))
     except Exception as exc:  # noqa: BLE001  (reported to the parent, which fails the run)
-        conn.send(("fatal", f"{type(exc).__name__}: {exc}"))
+        conn.send(Fatal(f"{type(exc).__name__}: {exc}"))
         return
-    conn.send(("ready", os.getpid()))
+    conn.send(Ready(os.getpid()))
     while True:
         try:
             jobs = conn.recv()
@@ -40,48 +50,46 @@ def worker_main(conn: Connection, settings: dict[str, Any], scratch: str) -> Non
         if jobs is None:
             return
         for job in jobs:
-            conn.send(("start", job["render_key"]))
-            message, _ = render_job(scene, job)
-            conn.send(message)
-        conn.send(("idle",))
+            conn.send(Started(job.render_key))
+            conn.send(render_job(scene, job))
+        conn.send(Idle())
 
 
-def render_job(scene, job: dict[str, Any], keep_pixels: bool = False) -> tuple[tuple, bytes | None]:
+def render_job(scene, job: RenderJob, keep_pixels: bool = False) -> RenderReply:
     """Render one job in ``scene`` (a BlenderScene); shared by process workers and Ray actors.
 
     Returns:
-        The message for the parent (``("done", key, info)`` or ``("error", key, message, kind)``)
-        and, when ``keep_pixels``, the PNG bytes instead of writing them to ``job["blob"]`` (so a
-        remote worker needs no shared file system: the driver writes the store). A job whose
-        ``blob`` is None is rendered only for its UV pass: no pixels are written or returned.
-        With the UV pass on, ``info["parts"]`` holds what it saw (see ``parts.part_counts``).
+        The reply for the parent. With ``keep_pixels`` it carries the PNG bytes instead of
+        writing them to ``job.blob`` (so a remote worker needs no shared file system: the driver
+        writes the store). A job whose ``blob`` is None is rendered only for its UV pass: no
+        pixels are written or returned. With the UV pass on, ``info.parts`` holds what it saw.
+        A :class:`UserError` (the spec's input, a full disk) gives kind "user"; any other
+        failure "internal", so one bad job does not kill the sweep.
     """
     from sweep3d.cache.store import atomic_write
     from sweep3d.errors import UserError
     from sweep3d.pixels import encode_png
     from sweep3d.stages.render.state import SceneState
 
-    key = job["render_key"]
+    key = job.render_key
     started = time.perf_counter()
     try:
-        scene.prepare(job["mesh"], job["environment"])
+        scene.prepare(job.mesh, job.environment)
         state = SceneState()
-        for control, params in job["controls"]:
+        for control, params in job.controls:
             control.apply(state, params)
         scene.pose_scene(state)
         rgb = scene.render()
         finite = bool(np.isfinite(rgb).all())
         png = None
-        if job["blob"] is not None:  # None: the render is cached, the job is here for its UV pass
+        if job.blob is not None:  # None: the render is cached, the job is here for its UV pass
             png = encode_png(rgb)
             if not keep_pixels:
-                atomic_write(Path(job["blob"]), png)
-        info = {"seconds": time.perf_counter() - started, "valid": finite,
-                "width": rgb.shape[1], "height": rgb.shape[0]}
-        if scene.parts is not None:
-            info["parts"] = scene.parts
-        return ("done", key, info), (png if keep_pixels else None)
+                atomic_write(Path(job.blob), png)
+        info = RenderInfo(seconds=time.perf_counter() - started, valid=finite,
+                          width=rgb.shape[1], height=rgb.shape[0], parts=scene.parts)
+        return RenderReply(key, True, info, png=png if keep_pixels else None)
     except UserError as exc:  # the spec's input (a mesh, an HDRI) or a full disk: exit 2
-        return ("error", key, str(exc), "user"), None
+        return RenderReply(key, False, error=str(exc), kind="user")
     except Exception as exc:  # noqa: BLE001  (one bad job must not kill the sweep)
-        return ("error", key, f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=3)}", "internal"), None
+        return RenderReply(key, False, error=f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=3)}")

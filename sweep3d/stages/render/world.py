@@ -12,6 +12,7 @@ from typing import Any
 
 from sweep3d.errors import UserError
 from sweep3d.stages.render._rna import assign
+from sweep3d.stages.render.protocol import EnvironmentRef
 from sweep3d.stages.render.state import SceneState
 
 GROUND_ALBEDO = 0.3  # below the horizon of a procedural sky
@@ -23,14 +24,14 @@ class WorldView:
         self.structure: tuple | None = None
         self.nodes: dict[str, Any] = {}
 
-    def sync(self, env: dict[str, Any], state: SceneState) -> None:
+    def sync(self, env: EnvironmentRef, state: SceneState) -> None:
         """Make the world show ``env`` (or the state's sky) with the state's rotation and strength."""
         sky = state.sky
-        structure = ("sky",) if sky is not None else ("hdri", env["hdri"]) if env.get("hdri") else ("plain",)
+        structure = ("sky",) if sky is not None else ("hdri", env.hdri) if env.hdri else ("plain",)
         if structure != self.structure:
             self._build(structure, env)
             self.structure = structure
-        strength = env["strength"] * state.world_strength
+        strength = env.strength * state.world_strength
         if sky is not None:
             strength = sky.strength * state.world_strength
             node = self.nodes["sky"]
@@ -42,7 +43,7 @@ class WorldView:
             assign(self.nodes["mapping"].inputs["Rotation"], "default_value", (0.0, 0.0, math.radians(state.world_rotation)))
         assign(self.nodes["background"].inputs["Strength"], "default_value", strength)
 
-    def _build(self, structure: tuple, env: dict[str, Any]) -> None:
+    def _build(self, structure: tuple, env: EnvironmentRef) -> None:
         self.world.use_nodes = True
         tree = self.world.node_tree
         nodes, links = tree.nodes, tree.links
@@ -56,11 +57,11 @@ class WorldView:
             mapping = nodes.new("ShaderNodeMapping")
             texture = nodes.new("ShaderNodeTexEnvironment")
             try:
-                texture.image = self.bpy.data.images.load(env["hdri"], check_existing=True)
+                texture.image = self.bpy.data.images.load(env.hdri, check_existing=True)
             except RuntimeError as exc:
-                raise UserError(f"Blender cannot read the HDRI {env['hdri']!r}: {exc}") from None
+                raise UserError(f"Blender cannot read the HDRI {env.hdri!r}: {exc}") from None
             if texture.image.size[0] == 0:  # Blender loads unreadable images silently (a magenta world)
-                raise UserError(f"Blender cannot read the HDRI {env['hdri']!r}; save it again as .exr or .hdr")
+                raise UserError(f"Blender cannot read the HDRI {env.hdri!r}; save it again as .exr or .hdr")
             links.new(coords.outputs["Generated"], mapping.inputs["Vector"])
             links.new(mapping.outputs["Vector"], texture.inputs["Vector"])
             links.new(texture.outputs["Color"], background.inputs["Color"])

@@ -1,0 +1,157 @@
+"""What crosses the boundary between the render stage and its workers (processes or Ray actors).
+
+Settings, jobs and replies are frozen dataclasses rather than dicts and positional tuples, so a
+new field is one edit and no reader depends on a position. Everything here pickles (a job's
+control instances and pydantic params included) and imports neither bpy nor torch: the parent
+process never loads Blender.
+
+A local worker receives a list of :class:`RenderJob` (one scene group) or None to stop, and
+answers :class:`Ready` (or :class:`Fatal`) once, then per job :class:`Started` and a
+:class:`RenderReply`, and :class:`Idle` after each list.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, fields
+from typing import TYPE_CHECKING, Any, Literal, Protocol, Self
+
+from sweep3d.spec.models import RenderSpec
+
+if TYPE_CHECKING:
+    from pydantic import BaseModel
+
+    from sweep3d.spec.framing import Framing
+    from sweep3d.stages.render.controls.base import RenderedControl
+
+_SPEC = RenderSpec()  # the defaults below are the spec's, so a test's settings render as a spec's
+
+
+@dataclass(frozen=True)
+class RenderSettings:
+    """How every render of a run is made; a worker's Blender scene is configured from it once.
+
+    Args:
+        resolution: the square frame's side in pixels.
+        crop: the centre square actually rendered and stored (None: the whole frame).
+        passes: extra passes beside the RGB image ("uv": the parts seen, for part visibility).
+        threads: Cycles threads per worker; 0 = all cores.
+    """
+
+    resolution: int
+    crop: int | None = None
+    samples: int = _SPEC.samples
+    denoise: bool = _SPEC.denoise
+    denoise_prefilter: Literal["fast", "accurate", "none"] = _SPEC.denoise_prefilter
+    max_bounces: int = _SPEC.max_bounces
+    adaptive_threshold: float = _SPEC.adaptive_threshold
+    seed: int = _SPEC.seed
+    threads: int = _SPEC.threads
+    passes: tuple[str, ...] = ()
+
+    @classmethod
+    def from_spec(cls, spec: RenderSpec, framing: Framing, passes: Iterable[str] = ()) -> RenderSettings:
+        """The ``[render]`` settings of the same name, with the resolved frame and the passes.
+
+        The frame replaces ``resolution`` because the spec's may be "model", resolved elsewhere.
+        """
+        shared = {f.name: getattr(spec, f.name) for f in fields(cls) if f.name in RenderSpec.model_fields}
+        return cls(**{**shared, "resolution": framing.size, "crop": framing.crop, "passes": tuple(passes)})
+
+
+@dataclass(frozen=True)
+class EnvironmentRef:
+    """A job's world: an HDRI file (a local path, or a Ray pack reference) or a plain colour."""
+
+    hdri: str | None = None
+    color: tuple[float, float, float] | None = None
+    strength: float = 1.0
+
+
+@dataclass(frozen=True)
+class RenderJob:
+    """One render: the scene, the rendered controls in application order, and where it goes.
+
+    Args:
+        blob: the store path the PNG is written to; None when the render is already stored and
+            the job is here only for its UV pass.
+    """
+
+    render_key: str
+    mesh: str
+    environment: EnvironmentRef
+    controls: tuple[tuple[RenderedControl, BaseModel], ...] = ()
+    blob: str | None = None
+
+
+@dataclass(frozen=True)
+class RenderInfo:
+    """What a finished render reports; ``parts`` is what the UV pass saw (see ``parts.part_counts``)."""
+
+    seconds: float
+    valid: bool
+    width: int
+    height: int
+    parts: dict[str, Any] | None = None
+
+
+@dataclass(frozen=True)
+class RenderReply:
+    """The outcome of one job.
+
+    Args:
+        info: set when ``ok``.
+        kind: "user" when the spec's input (a mesh, an HDRI) or a full disk failed the job, which
+            stops the run with a user error; "internal" otherwise.
+        png: the pixels, when the worker keeps them for the caller to write (Ray: the driver
+            writes every blob, so workers need no shared file system).
+    """
+
+    render_key: str
+    ok: bool
+    info: RenderInfo | None = None
+    error: str | None = None
+    kind: Literal["user", "internal"] = "internal"
+    png: bytes | None = None
+
+
+@dataclass(frozen=True)
+class Ready:
+    """A worker has its Blender scene and waits for jobs."""
+
+    pid: int
+
+
+@dataclass(frozen=True)
+class Fatal:
+    """A worker could not build its scene; the run fails."""
+
+    message: str
+
+
+@dataclass(frozen=True)
+class Started:
+    """A worker began a job: the pool times it from now and blames it if the worker dies."""
+
+    render_key: str
+
+
+@dataclass(frozen=True)
+class Idle:
+    """A worker finished its list of jobs and can take another."""
+
+
+class RenderExecutor(Protocol):
+    """Runs render jobs somewhere (local processes, a Ray cluster); the render stage needs no more."""
+
+    def __enter__(self) -> Self: ...
+
+    def __exit__(self, *exc: object) -> None: ...
+
+    def run(self, groups: list[list[RenderJob]]) -> Iterator[RenderReply]:
+        """Render every job of every group (a group shares one scene), yielding one reply per job."""
+        ...
+
+    def close(self) -> None:
+        """Stop the workers and remove their scratch files."""
+        ...
