@@ -196,11 +196,11 @@ def pipeline(n: int, folder: Path) -> dict:
 def noop_rerun(n: int, folder: Path) -> dict:
     """Seconds for `sweep3d run` when all ``n`` jobs are cached (rows synthesised, blobs tiny)."""
     from sweep3d.cache.store import Store, atomic_write, utc_now
+    from sweep3d.pipeline import plan_spec
     from sweep3d.pixels import encode_png
     from sweep3d.stages import load_spec
     from sweep3d.stages.infer import ClassificationEvaluator
     from sweep3d.stages.infer.stage import predictions_schema
-    from sweep3d.pipeline import plan_spec
 
     (folder / "cube.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
     spec = SPEC.replace(MESH, "cube.obj").replace('samples_per_dim = {n}', "").replace(

@@ -14,9 +14,8 @@ from hypothesis import strategies as st
 from sweep3d.cache.keys import canonical, digest, file_digest, files_digest
 from sweep3d.controls import wrap_periodic
 from sweep3d.stages import load_spec
-from tests.conftest import plan_for
 from sweep3d.stages.render.controls import Camera, Orientation
-from tests.conftest import examples, write_spec
+from tests.conftest import examples, plan_for, write_spec
 
 FAST = settings(max_examples=examples(150), deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
@@ -425,8 +424,7 @@ def test_random_policy_draws_differ_per_scene(tmp_path):
 
 def test_out_of_frame_jobs_are_flagged_and_not_planned_for_rendering(tmp_path) -> None:
     from sweep3d.stages import load_spec
-    from tests.conftest import plan_for
-    from tests.conftest import TINY_SPEC, write_spec
+    from tests.conftest import TINY_SPEC, plan_for, write_spec
 
     body = TINY_SPEC.replace("[policy]", '[[controls]]\ntype = "position"\nx = [0.0, 0.5, 3.0]\n\n[policy]')
     plan = plan_for(load_spec(write_spec(tmp_path, body)), "m")

@@ -18,13 +18,12 @@ from sweep3d.cache.store import Store
 from sweep3d.cli import app
 from sweep3d.pixels import decode_png
 from sweep3d.progress import RunProgress
-from sweep3d.stages import load_spec
 from sweep3d.spec.framing import Framing
 from sweep3d.spec.models import RenderSpec
-from tests.conftest import plan_for
+from sweep3d.stages import load_spec
 from sweep3d.stages.driver import run_stage
 from sweep3d.stages.render import RenderStage, render_settings
-from tests.conftest import TINY_SPEC, write_spec
+from tests.conftest import TINY_SPEC, plan_for, write_spec
 
 
 def _spec(folder: Path, resolution: str, *, one_job: bool = False) -> Path:

@@ -19,8 +19,8 @@ from hypothesis import strategies as st
 
 from sweep3d.cache.store import Store
 from sweep3d.pipeline import run
-from sweep3d.stages import load_spec
 from sweep3d.spec.params import Range
+from sweep3d.stages import load_spec
 from sweep3d.stages.aggregate import connect, summarise
 from sweep3d.stages.infer import ClassificationEvaluator, LabelMap
 from sweep3d.stages.infer.evaluators import log_softmax

@@ -206,8 +206,7 @@ def test_grid_over_a_space_reaches_every_declared_value():
 def test_grid_over_a_full_turn_does_not_repeat_its_end(tmp_path) -> None:
     """yaw over [-180, 180]: six distinct poses, not five plus -180 and 180 twice."""
     from sweep3d.stages import load_spec
-    from tests.conftest import plan_for
-    from tests.conftest import write_spec
+    from tests.conftest import plan_for, write_spec
 
     body = TINY_FULL_TURN
     plan = plan_for(load_spec(write_spec(tmp_path, body)), "m")

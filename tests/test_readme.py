@@ -8,9 +8,8 @@ from pathlib import Path
 import numpy as np
 
 from sweep3d.stages import load_spec
-from tests.conftest import plan_for
 from sweep3d.stages.postprocess import apply_post
-from tests.conftest import REPO, TINY_SPEC, write_spec
+from tests.conftest import REPO, TINY_SPEC, plan_for, write_spec
 
 
 def readme_block(after: str) -> str:

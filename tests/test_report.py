@@ -22,7 +22,6 @@ from PIL import Image
 from typer.testing import CliRunner
 
 from sweep3d.cache.store import Store
-from sweep3d.stages.aggregate import connect
 from sweep3d.cli import app
 from sweep3d.report import build_context, render_html, write_report
 from sweep3d.report.page import SCRIPTS, plotly_js, script_json
@@ -30,6 +29,7 @@ from sweep3d.report.panel import Panel
 from sweep3d.report.panels import CORE_PANELS, PANELS, overall
 from sweep3d.report.thumbs import SIZES, Thumbnails, thumbnail_size
 from sweep3d.stages import load_spec
+from sweep3d.stages.aggregate import connect
 from tests.conftest import REPO, TINY_SPEC, write_spec
 
 CHROMIUM = Path("/usr/bin/chromium")

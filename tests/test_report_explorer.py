@@ -14,9 +14,9 @@ import pytest
 
 from benchmarks.report_scale import build_store
 from sweep3d.cache.store import Store
-from sweep3d.stages.aggregate import connect
 from sweep3d.report import write_report
 from sweep3d.stages import load_spec
+from sweep3d.stages.aggregate import connect
 from tests.test_report import ARTIFACTS, assert_clean, cell_centre, open_page
 
 pytestmark = pytest.mark.browser

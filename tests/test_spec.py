@@ -15,8 +15,8 @@ from typer.testing import CliRunner
 from sweep3d.cli import app
 from sweep3d.errors import SpecError
 from sweep3d.spec import Choice, Fixed, Range
-from sweep3d.stages import load_spec
 from sweep3d.spec.space import Point, SearchSpace
+from sweep3d.stages import load_spec
 from tests.conftest import CUBE_OBJ, TINY_SPEC, write_cube, write_spec
 
 BASE = TINY_SPEC.replace('name = "tiny"\nseed = 7\nstore = "store"', 'name = "mistakes"\nseed = 3')

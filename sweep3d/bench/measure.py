@@ -20,9 +20,9 @@ import numpy as np
 
 from sweep3d.cache.store import Store
 from sweep3d.errors import UserError
+from sweep3d.pipeline import plan_spec
 from sweep3d.pixels import decode_png
 from sweep3d.progress import RunProgress
-from sweep3d.pipeline import plan_spec
 from sweep3d.spec.loader import LoadedSpec
 from sweep3d.stages.aggregate import wilson_interval
 from sweep3d.stages.driver import run_stages

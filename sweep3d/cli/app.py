@@ -164,6 +164,7 @@ def query(
 
     from sweep3d.cache.store import Store
     from sweep3d.stages import load_spec
+    from sweep3d.stages.aggregate import connect
 
     loaded = load_spec(spec)
     con = connect(Store(loaded.store), loaded.name)

@@ -14,8 +14,8 @@ from PIL import Image, ImageDraw
 
 from sweep3d.cache.store import Store
 from sweep3d.errors import UserError
-from sweep3d.progress import RunProgress
 from sweep3d.pipeline import plan_spec
+from sweep3d.progress import RunProgress
 from sweep3d.spec.loader import LoadedSpec
 from sweep3d.stages.driver import run_stages
 from sweep3d.stages.infer import ModelHandle
