@@ -114,7 +114,7 @@ def test_switching_the_panel_on_renders_the_pass_only(parts_run: Path, tmp_path:
 
 @pytest.mark.blender
 def test_painted_object_takes_the_colour_of_each_side(tmp_path: Path) -> None:
-    from sweep3d.stages.render.paint import VIEWS, paint_objects
+    from sweep3d.stages.render.paint import SIDES, paint_objects
     from tests.conftest import write_cube
 
     colours = np.tile([[0.9, 0.1, 0.1]], (PARTS, 1))  # red all round ...
@@ -122,8 +122,8 @@ def test_painted_object_takes_the_colour_of_each_side(tmp_path: Path) -> None:
         if part % AZIMUTH_PARTS in (AZIMUTH_PARTS // 2 - 1, AZIMUTH_PARTS // 2):  # ... green in front
             colours[part] = [0.1, 0.8, 0.1]
     (images,) = paint_objects([(str(write_cube(tmp_path)), colours)], resolution=48, samples=4)
-    assert len(images) == len(VIEWS)
-    by_view = {label: decode_png_bytes(png) for (label, _, _), png in zip(VIEWS, images)}
+    assert len(images) == len(SIDES)
+    by_view = {label: decode_png_bytes(png) for (label, _, _), png in zip(SIDES, images)}
     centre = {label: img[24, 24] for label, img in by_view.items()}
     assert centre["front"][1] > centre["front"][0] + 0.2  # green
     for side in ("back", "left", "right"):
@@ -162,7 +162,7 @@ def test_part_visibility_panel_draws_in_chromium(parts_run: Path, tmp_path: Path
     with open_page(path) as (page, events):
         panel = page.locator("#part-visibility")
         assert panel.locator("h3").first.inner_text().startswith("<b>box</b>")
-        widths = panel.evaluate("p => Array.from(p.querySelectorAll('.part-views img')).map(i => i.naturalWidth)")
+        widths = panel.evaluate("p => Array.from(p.querySelectorAll('.part-sides img')).map(i => i.naturalWidth)")
         assert widths == [160] * 6
         traces = page.evaluate("document.getElementById('fig-parts-0').data.map(t => t.type)")
         assert traces == ["heatmap", "heatmap"] and panel.locator("svg.main-svg").count() >= 1

@@ -69,7 +69,6 @@ class Store:
         self.warn = warn
         self._checked: dict[tuple[str, int, int], list[str]] = {}  # (path, size, mtime) read whole once -> columns
         self._bad: dict[str, str] = {}  # unreadable files already reported -> why
-        self.discarded = 0  # rows dropped because their blob was missing or corrupt
 
     # -- paths -------------------------------------------------------------------------------
     def blob_path(self, key: str, ext: str = "png") -> Path:
@@ -365,7 +364,6 @@ class Store:
             blob = self.blob_path(key)
             if blob.exists():
                 self.quarantine(blob)
-        self.discarded += len(keys)
         sample = ", ".join(sorted(k[:12] for k in keys)[:3])
         log.warning(f"warning: {len(keys)} {table} blob(s) {why} ({sample}{', …' if len(keys) > 3 else ''}); "
                     "recomputing them")

@@ -29,8 +29,8 @@ def cache_status(plan: Plan, store: Store, model: ModelHandle) -> list[tuple[str
 
 
 def estimate_render_seconds(spec: LoadedSpec, pixels: int) -> float:
-    """A rough per-render cost from the settings and the rendered side in pixels (DESIGN.md
-    measurements on 2 CPU cores)."""
+    """A rough per-render cost from the settings and the rendered side in pixels (measured on 2
+    CPU cores; see docs/architecture.md)."""
     r = spec.render
     scale = (pixels / 224) ** 2
     denoise = DENOISE_SECONDS_224[r.denoise_prefilter] if r.denoise else 0.0

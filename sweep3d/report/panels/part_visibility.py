@@ -34,7 +34,9 @@ from sweep3d.report.figures import (
     pct,
 )
 from sweep3d.report.panel import PanelInputs
+from sweep3d.spec.assets import materialise_mesh, mesh_digest
 from sweep3d.stages.aggregate.views import has_view
+from sweep3d.stages.render.paint import SIDES, paint_objects
 
 UNSEEN = (0.93, 0.93, 0.93)  # never shown in an image
 TOO_FEW = (0.72, 0.72, 0.72)  # shown, but in fewer images than the panel's minimum
@@ -75,28 +77,26 @@ def _colours(parts: list[dict[str, Any]], minimum: int) -> np.ndarray:
 
 
 def _attach_renders(inputs: PanelInputs, blocks: list[dict[str, Any]]) -> None:
-    """Give each block its coloured renders (``views``: label and data URI), painting what the
+    """Give each block its coloured renders (``sides``: label and data URI), painting what the
     store does not hold yet in one Blender process."""
-    from sweep3d.spec.assets import materialise_mesh, mesh_digest
-    from sweep3d.stages.render.paint import VIEWS, paint_objects
 
     store, loaded = inputs.store, inputs.loaded
     todo: list[tuple[str, np.ndarray, list[Path]]] = []
     for block in blocks:
         ref, colours = loaded.meshes[block["object"]], block.pop("colours")
         key = digest({"paint": PAINT_VERSION, "layout": PARTS_LAYOUT, "mesh": mesh_digest(ref, store.root),
-                      "colours": np.round(colours, 3).tolist(), "views": VIEWS})
-        paths = [_paint_path(store, key, label) for label, _, _ in VIEWS]
+                      "colours": np.round(colours, 3).tolist(), "views": SIDES})  # "views": as keyed before
+        paths = [_paint_path(store, key, label) for label, _, _ in SIDES]
         if not all(p.exists() for p in paths):
             todo.append((ref, colours, paths))
-        block["views"] = list(zip([label for label, _, _ in VIEWS], paths))
+        block["sides"] = list(zip([label for label, _, _ in SIDES], paths))
     if todo:
         painted = paint_objects([(str(materialise_mesh(ref, store.root)), colours) for ref, colours, _ in todo])
         for (_, _, paths), images in zip(todo, painted):
             for path, png in zip(paths, images):
                 atomic_write(path, png)
     for block in blocks:
-        block["views"] = [{"label": label, "uri": _data_uri(path)} for label, path in block["views"]]
+        block["sides"] = [{"label": label, "uri": _data_uri(path)} for label, path in block["sides"]]
 
 
 def _paint_path(store: Store, key: str, view: str) -> Path:

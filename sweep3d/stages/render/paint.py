@@ -20,13 +20,13 @@ import numpy as np
 from sweep3d.parts import AZIMUTH_PARTS, ELEVATION_PARTS, PARTS, UV_MAP
 
 #: (label, camera azimuth, camera elevation): the sides shown, as the camera control names them.
-VIEWS = (("front", 0.0, 15.0), ("right", 90.0, 15.0), ("back", 180.0, 15.0), ("left", 270.0, 15.0),
+SIDES = (("front", 0.0, 15.0), ("right", 90.0, 15.0), ("back", 180.0, 15.0), ("left", 270.0, 15.0),
          ("top", 0.0, 80.0), ("bottom", 0.0, -80.0))
 BACKGROUND = (1.0, 1.0, 1.0)
 
 
 def paint_objects(items: list[tuple[str, np.ndarray]], resolution: int = 160, samples: int = 16) -> list[list[bytes]]:
-    """PNG renders of each ``(mesh, colours)`` (colours: PARTS × 3, sRGB in [0, 1]), one per view.
+    """PNG renders of each ``(mesh, colours)`` (colours: PARTS × 3, sRGB in [0, 1]), one per side.
 
     Runs Blender once, in a fresh spawned process, for all the items.
     """
@@ -53,7 +53,7 @@ def _paint_in_this_process(items: list[tuple[str, np.ndarray]], resolution: int,
             scene.prepare(mesh, EnvironmentRef(color=BACKGROUND))
             material = _paint_material(scene.bpy, colours)
             images = []
-            for _, azimuth, elevation in VIEWS:
+            for _, azimuth, elevation in SIDES:
                 scene.pose_scene(SceneState(azimuth=azimuth, elevation=elevation, zoom=0.95))
                 for obj in scene.meshes:
                     if not obj.material_slots:

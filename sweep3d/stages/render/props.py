@@ -13,7 +13,7 @@ from sweep3d.stages.render.state import SceneState
 OCCLUDER_DEPTH = 0.5  # the plate sits at this fraction of the way from camera to object
 
 
-class PropsView:
+class Props:
     def __init__(self, bpy, scene) -> None:
         self.bpy, self.scene = bpy, scene
         self.lights: list[Any] = []

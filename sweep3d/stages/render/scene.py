@@ -1,4 +1,4 @@
-"""The Blender view of a :class:`SceneState`: builds a scene once, then re-poses it per job.
+"""Blender's copy of a :class:`SceneState`: builds a scene once, then re-poses it per job.
 
 A :class:`BlenderScene` keeps one object and one world loaded and swaps only what changes:
 a new environment reloads the world, a new object reloads the mesh, and a job that changes
@@ -18,12 +18,12 @@ import numpy as np
 from sweep3d.errors import UserError
 from sweep3d.stages.render._bpy import import_bpy
 from sweep3d.stages.render._rna import assign
-from sweep3d.stages.render.props import PropsView
+from sweep3d.stages.render.props import Props
 from sweep3d.stages.render.protocol import EnvironmentRef, RenderSettings
-from sweep3d.stages.render.skins import SkinView
+from sweep3d.stages.render.skins import SkinMaterials
 from sweep3d.stages.render.state import SENSOR_WIDTH_MM, SceneState
 from sweep3d.stages.render.uv_pass import UVPass
-from sweep3d.stages.render.world import WorldView
+from sweep3d.stages.render.world import WorldNodes
 
 IMPORTERS = {
     ".obj": ("wm.obj_import", {}),
@@ -58,9 +58,9 @@ class BlenderScene:
         scene.collection.objects.link(self.pose)
         world = bpy.data.worlds.new("sweep3d_world")
         scene.world = world
-        self.world = WorldView(bpy, world)
-        self.skins = SkinView(bpy)
-        self.props = PropsView(bpy, scene)
+        self.world = WorldNodes(bpy, world)
+        self.skins = SkinMaterials(bpy)
+        self.props = Props(bpy, scene)
         self.environment = EnvironmentRef()
         self.frame = scratch / f"frame-{os.getpid()}.png"
         self.uv_pass = UVPass(bpy, scene, scratch) if "uv" in settings.passes else None

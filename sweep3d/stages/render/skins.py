@@ -28,7 +28,7 @@ RECIPES: dict[str, tuple[str, dict[str, Any], list[tuple[float, tuple[float, flo
 _OUTPUTS = {"ShaderNodeTexWave": "Fac", "ShaderNodeTexNoise": "Fac", "ShaderNodeTexVoronoi": "Distance"}
 
 
-class SkinView:
+class SkinMaterials:
     def __init__(self, bpy) -> None:
         self.bpy = bpy
         self.materials: dict[tuple, Any] = {}

@@ -1,4 +1,4 @@
-"""The scene as plain Python: what rendered controls change and what the Blender view draws.
+"""The scene as plain Python: what rendered controls change and what Blender draws.
 
 Rendered controls edit a :class:`SceneState`; :mod:`sweep3d.stages.render.scene` turns a state
 into Blender objects. Keeping the state free of bpy makes controls testable without Blender

@@ -18,7 +18,7 @@ from sweep3d.stages.render.state import SceneState
 GROUND_ALBEDO = 0.3  # below the horizon of a procedural sky
 
 
-class WorldView:
+class WorldNodes:
     def __init__(self, bpy, world) -> None:
         self.bpy, self.world = bpy, world
         self.structure: tuple | None = None
