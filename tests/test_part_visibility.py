@@ -18,6 +18,7 @@ from sweep3d.parts import AZIMUTH_PARTS, PARTS, part_of, sphere_turns
 from sweep3d.pixels import decode_png
 from sweep3d.report import write_report
 from sweep3d.stages import load_spec
+from sweep3d.stages.aggregate import connect
 from sweep3d.stages.aggregate.parts import VISIBLE_SHARE
 from tests.conftest import TINY_SPEC, write_spec
 from tests.test_parts import direction
@@ -41,7 +42,7 @@ def parts_run(tmp_path_factory) -> Path:
 
 
 def query(folder: Path, sql: str) -> list[tuple]:
-    return Store(folder / "store").connect("tiny").execute(sql).fetchall()
+    return connect(Store(folder / "store"), "tiny").execute(sql).fetchall()
 
 
 def part_at(azimuth: float, elevation: float) -> int:

@@ -164,11 +164,9 @@ def wilson_interval(k: int, n: int) -> tuple[float, float]:
     return float(low), float(high)
 
 
-def _view_statements(parameters: list[tuple[str, bool]], has_predictions: bool) -> list[str]:
-    """The CREATE statements, in dependency order."""
-    accuracy = _ACCURACY
-    statements = [
-        "CREATE OR REPLACE VIEW control_values AS " + _values_sql(parameters),
+#: The views that do not depend on the experiment's parameters, in dependency order, after
+#: ``control_values`` (built per experiment by :func:`_values_sql`).
+_FIXED_VIEWS = (
         f"""CREATE OR REPLACE VIEW control_stats AS
             SELECT *, (hi - lo) / {BINS} AS width,
                    CASE WHEN binned THEN greatest(0, 1 - floor(log10((hi - lo) / {BINS})))::INTEGER END AS digits
@@ -200,7 +198,7 @@ def _view_statements(parameters: list[tuple[str, bool]], has_predictions: bool) 
             FROM control_levels l JOIN control_stats s USING (parameter, position)
             GROUP BY l.parameter, l.position ORDER BY l.position""",
         f"""CREATE OR REPLACE VIEW control_accuracy AS
-            SELECT *, {accuracy} FROM (
+            SELECT *, {_ACCURACY} FROM (
                 SELECT parameter, position, level, any_value(label) AS label,
                        count(*) FILTER (WHERE valid) AS n, count(*) FILTER (WHERE valid AND correct) AS n_correct
                 FROM control_levels GROUP BY parameter, position, level)
@@ -208,7 +206,7 @@ def _view_statements(parameters: list[tuple[str, bool]], has_predictions: bool) 
         f"""CREATE OR REPLACE VIEW pair_accuracy AS
             WITH varied AS (SELECT l.* FROM control_levels l
                             SEMI JOIN control_parameters p ON p.parameter = l.parameter AND p.levels > 1)
-            SELECT *, {accuracy} FROM (
+            SELECT *, {_ACCURACY} FROM (
                 SELECT a.parameter AS parameter_a, a.position AS position_a, a.level AS level_a,
                        any_value(a.label) AS label_a,
                        b.parameter AS parameter_b, b.position AS position_b, b.level AS level_b,
@@ -218,7 +216,7 @@ def _view_statements(parameters: list[tuple[str, bool]], has_predictions: bool) 
                 GROUP BY a.parameter, a.position, a.level, b.parameter, b.position, b.level)
             ORDER BY position_a, position_b, level_a, level_b""",
         f"""CREATE OR REPLACE VIEW scene_accuracy AS
-            SELECT *, {accuracy} FROM (
+            SELECT *, {_ACCURACY} FROM (
                 SELECT object, environment, count(*) FILTER (WHERE valid) AS n,
                        count(*) FILTER (WHERE valid AND correct) AS n_correct
                 FROM results GROUP BY object, environment)
@@ -289,16 +287,20 @@ def _view_statements(parameters: list[tuple[str, bool]], has_predictions: bool) 
                 WHERE p.wilson_high < least(a.accuracy, b.accuracy))
             WHERE n >= min_count AND accuracy < (SELECT avg(correct::DOUBLE) FROM results WHERE valid)
             ORDER BY wilson_high, accuracy, n DESC, size, position_a, level_a, position_b, level_b""",
-    ]
-    if has_predictions:
-        statements.append(
-            """CREATE OR REPLACE VIEW object_confusions AS
+)
+_CONFUSIONS_VIEW = """CREATE OR REPLACE VIEW object_confusions AS
                 SELECT object, top1_label AS prediction, count(*) AS n,
                        count(*) / sum(count(*)) OVER (PARTITION BY object) AS share,
                        row_number() OVER (PARTITION BY object ORDER BY count(*) DESC, top1_label) AS rank
                 FROM results WHERE valid AND NOT correct GROUP BY object, top1_label
                 ORDER BY object, rank"""
-        )
+
+
+def _view_statements(parameters: list[tuple[str, bool]], has_predictions: bool) -> list[str]:
+    """The CREATE statements, in dependency order."""
+    statements = ["CREATE OR REPLACE VIEW control_values AS " + _values_sql(parameters), *_FIXED_VIEWS]
+    if has_predictions:
+        statements.append(_CONFUSIONS_VIEW)
     return statements
 
 
