@@ -19,7 +19,7 @@ import pyarrow.parquet as pq
 import pytest
 from typer.testing import CliRunner
 
-from sweep3d.cache.blobs import sha256_bytes
+from sweep3d.cache.blobs import damaged_blobs, memo_path, sha256_bytes
 from sweep3d.cache.maintenance import (
     collect_garbage,
     compact_table,
@@ -150,6 +150,69 @@ def test_a_full_disk_while_writing_a_blob_leaves_no_temp_file(tmp_path, monkeypa
     with pytest.raises(StoreWriteError, match="No space left"):
         atomic_write(target, b"x" * 1000)
     assert [p.name for p in tmp_path.rglob("*") if p.is_file()] == []
+
+
+# -- blobs a run counts as cached ------------------------------------------------------------
+
+
+class HashCounter:
+    """Counts the blobs :func:`damaged_blobs` hashes (stands in for ``sha256_bytes``)."""
+
+    def __init__(self, monkeypatch) -> None:
+        import sweep3d.cache.blobs as blobs
+
+        self.calls = 0
+        self.real = blobs.sha256_bytes
+        monkeypatch.setattr(blobs, "sha256_bytes", self)
+
+    def __call__(self, data: bytes) -> str:
+        self.calls += 1
+        return self.real(data)
+
+
+def test_a_run_hashes_a_blob_again_only_when_its_file_changed(tmp_path, monkeypatch):
+    store = Store(tmp_path / "store")
+    keys = {f"{i:02x}" * 20 for i in range(6)}
+    for i, key in enumerate(sorted(keys)):
+        add_render(store, key, i)
+    time.sleep(0.05)  # the blobs' change time is a clock tick or more behind what follows
+    hashed = HashCounter(monkeypatch)
+    assert damaged_blobs(store, "renders", keys) == set() and hashed.calls == 6
+    assert damaged_blobs(store, "renders", keys) == set() and hashed.calls == 6  # remembered: nothing hashed
+
+    flipped, rewritten = sorted(keys)[:2]
+    stat = store.blob_path(flipped).stat()
+    flip_bytes(store.blob_path(flipped), n=8)  # in place: same size, same inode
+    os.utime(store.blob_path(flipped), ns=(stat.st_atime_ns, stat.st_mtime_ns))  # and the mtime put back
+    atomic_write(store.blob_path(rewritten), store.blob_path(rewritten).read_bytes())  # same bytes, new file
+    assert damaged_blobs(store, "renders", keys) == {flipped}
+    assert hashed.calls == 8  # only the two changed files
+    assert damaged_blobs(store, "renders", keys) == {flipped} and hashed.calls == 9  # not remembered as good
+
+
+def test_the_memo_forgets_dropped_keys_and_survives_its_own_damage(tmp_path, monkeypatch):
+    store = Store(tmp_path / "store")
+    keys = {"aa" * 20, "bb" * 20}
+    for key in keys:
+        add_render(store, key)
+    assert damaged_blobs(store, "renders", keys) == set()
+    store.drop_rows("renders", {"aa" * 20})
+    assert damaged_blobs(store, "renders", {"bb" * 20}) == set()
+    assert pq.read_table(memo_path(store, "renders")).column("key").to_pylist() == ["bb" * 20]
+
+    memo_path(store, "renders").write_bytes(b"not parquet")
+    hashed = HashCounter(monkeypatch)
+    assert damaged_blobs(store, "renders", {"bb" * 20}) == set() and hashed.calls == 1  # hashed again, no error
+    assert pq.read_table(memo_path(store, "renders")).num_rows == 1
+
+
+def test_a_damaged_blob_without_a_recorded_digest_is_found_by_decoding(tmp_path):
+    store = Store(tmp_path / "store")
+    store.append("renders", [render_row("aa" * 20), render_row("bb" * 20)])  # old rows: no digest
+    add_render(store, "cc" * 20)
+    atomic_write(store.blob_path("aa" * 20), add_render(Store(tmp_path / "other"), "aa" * 20))  # a good PNG
+    atomic_write(store.blob_path("bb" * 20), b"\x89PNG\r\n\x1a\n not really")
+    assert damaged_blobs(store, "renders", {"aa" * 20, "bb" * 20, "cc" * 20, "dd" * 20}) == {"bb" * 20}
 
 
 # -- verify, repair, gc, compact, stats --------------------------------------------------------
@@ -316,6 +379,47 @@ def test_damaged_blobs_and_segments_are_recomputed_not_fatal(tiny_copy: Path, ca
     _same_results(_results(tiny_copy), want)
     assert verify(root).ok
     assert Store(root).keys("renders") >= {render} and len(Store(root).keys("renders")) == 4
+
+
+@pytest.mark.slow
+def test_a_plain_rerun_repairs_damaged_renders_whose_results_are_cached(tiny_copy: Path, caplog) -> None:
+    """The issue's reproduction: 8 bytes flipped in the middle of two render blobs of a finished
+    store. The report shows them as damaged, not as pictures; the next plain run warns once,
+    renders those two again and nothing else; the store then verifies clean."""
+    import json
+
+    from sweep3d.report import write_report
+
+    spec, root = tiny_copy / "spec.toml", tiny_copy / "store"
+    want = _results(tiny_copy)
+    con = Store(root).connect("tiny")
+    damaged = [k for (k,) in con.execute(
+        "SELECT DISTINCT render_key FROM jobs WHERE image_key = render_key ORDER BY 1 LIMIT 2").fetchall()]
+    for key in damaged:  # each is also the image of a job: the report shows it
+        flip_bytes(Store(root).blob_path(key), 0.5, n=8)
+
+    html = write_report(load_spec(spec)).read_text(encoding="utf-8")
+    problems = json.loads(re.search(r'id="thumb-problems">(.*?)</script>', html, re.S).group(1))
+    assert sorted(problems.values()) == ["damaged", "damaged"] and "2 damaged" in html
+    assert CliRunner().invoke(app, ["cache", "verify", str(spec)]).exit_code == 1
+
+    with caplog.at_level(logging.WARNING, logger="sweep3d.store"):
+        result = run(load_spec(spec))
+    warnings = [r.getMessage() for r in caplog.records if r.levelno >= logging.WARNING]
+    assert len(warnings) == 1 and "\n" not in warnings[0], warnings
+    assert "2 renders blob(s) are damaged" in warnings[0] and "recomputing" in warnings[0]
+    assert {o.stage: (o.computed, o.failed) for o in result.outcomes} == {
+        "render": (2, 0), "postprocess": (0, 0), "infer": (0, 0)}
+    assert sorted(p.name for p in (root / "quarantine").rglob("*.png")) == sorted(f"{k}.png" for k in damaged)
+    verified = CliRunner().invoke(app, ["cache", "verify", str(spec)])
+    assert verified.exit_code == 0, verified.output
+    assert _results(tiny_copy) == want  # the predictions were cached: exactly the same rows
+
+    caplog.clear()
+    again = run(load_spec(spec))
+    assert sum(o.computed for o in again.outcomes) == 0 and not caplog.records
+    html = write_report(load_spec(spec)).read_text(encoding="utf-8")
+    assert "damaged" not in re.search(r'id="thumb-problems">(.*?)</script>', html, re.S).group(1)
 
 
 @pytest.mark.slow

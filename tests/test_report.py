@@ -135,6 +135,29 @@ def test_thumbnails_are_shared_by_key_downscaled_and_kept_within_the_budget(tmp_
     assert thumbnail_size(100) == 96 and thumbnail_size(10_000) == 64
 
 
+def test_a_damaged_image_is_never_embedded_and_the_page_says_why(tmp_path: Path) -> None:
+    from sweep3d.cache.blobs import sha256_bytes
+
+    store = Store(tmp_path / "store")
+    rows = []
+    for key, shade in (("aa1", 40), ("bb2", 200)):
+        path = store.blob_path(key)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        Image.new("RGB", (32, 32), (shade, 90, 30)).save(path)
+        rows.append({"image_key": key, "sha256": sha256_bytes(path.read_bytes())})
+    store.append("images", rows)
+    data = bytearray(store.blob_path("bb2").read_bytes())
+    data[len(data) // 2] ^= 0xFF  # still a PNG that may decode: only its digest tells
+    store.blob_path("bb2").write_bytes(bytes(data))
+    thumbs = Thumbnails(store, expected=3)
+    for key in ("aa1", "bb2", "gone"):
+        thumbs.want(key)
+    uris = thumbs.data_uris()
+    assert uris[0] is not None and uris[1:] == [None, None]
+    assert thumbs.problems == {1: "damaged", 2: "not in the store"}
+    assert (thumbs.damaged, thumbs.missing, thumbs.left_out) == (1, 1, 0)
+
+
 def test_optional_panels_show_only_with_data(tiny_run: Path) -> None:
     loaded = load_spec(tiny_run / "spec.toml")
     store = Store(loaded.store)

@@ -314,3 +314,135 @@ def test_a_run_merges_a_table_grown_past_the_segment_limit(tmp_path: Path) -> No
         assert compact_crowded_tables(store, limit=8) == ["renders"]
     assert len(store.readable_segments("renders")) == 1
     assert store.keys("renders") == {f"k{i}" for i in range(12)}
+
+
+# -- sweep3d query is read-only ----------------------------------------------------------------
+
+RESULTS = 40  # synthetic results in the store of the query tests (no Blender, no model)
+
+
+@pytest.fixture(scope="module")
+def synthetic(tmp_path_factory) -> Path:
+    """A spec and its store holding synthetic results (see benchmarks/report_scale.py)."""
+    from benchmarks.report_scale import build_store
+
+    return build_store(tmp_path_factory.mktemp("query"), RESULTS)
+
+
+def store_tree(root: Path) -> dict[str, tuple[int, int]]:
+    """Every file under ``root`` with its size and mtime: what a query must leave as it was."""
+    return {str(p.relative_to(root)): (p.stat().st_size, p.stat().st_mtime_ns) for p in root.rglob("*") if p.is_file()}
+
+
+def one_line(output: str) -> str:
+    lines = [line for line in output.splitlines() if line.strip()]
+    assert len(lines) == 1, output
+    return lines[0]
+
+
+@pytest.mark.parametrize("sql, text", [
+    ("COPY (SELECT 42) TO '{store}/x.csv'", "refused COPY:"),
+    ("COPY results TO '{store}/tables/predictions/x.parquet'", "refused COPY:"),
+    ("ATTACH '{store}/x.duckdb' AS db", "refused ATTACH:"),
+    ("EXPORT DATABASE '{store}/dump'", "refused EXPORT:"),
+    ("INSTALL httpfs", "refused LOAD:"),
+    ("LOAD httpfs", "refused LOAD:"),
+    ("SET enable_external_access = true", "refused SET:"),
+    ("SELECT 1; COPY (SELECT 42) TO '{store}/x.csv'", "refused 2 statements"),
+    ("SELECT * FROM read_csv('/etc/passwd')", "file system operations are disabled"),
+    ("SELECT * FROM read_text('{spec}')", "file system operations are disabled"),
+    ("SELECT * FROM glob('{store}/*')", "file system operations are disabled"),
+    ("SELECT count(*) FROM read_parquet('{store}/../*.parquet')", "file system operations are disabled"),
+])
+def test_query_refuses_to_write_or_read_outside_the_store_in_one_line(synthetic: Path, sql: str, text: str) -> None:
+    store = synthetic.parent / "store"
+    before = store_tree(store)
+    result = CliRunner().invoke(app, ["query", str(synthetic), sql.format(store=store, spec=synthetic)])
+    assert result.exit_code == 2, result.output
+    assert text in one_line(result.output) and "Traceback" not in result.output
+    assert store_tree(store) == before
+    assert sorted(p.name for p in synthetic.parent.iterdir()) == ["cube.obj", "spec.toml", "store"]
+
+
+def test_query_reads_the_views_and_the_stores_own_segments(synthetic: Path) -> None:
+    segment = Store(synthetic.parent / "store").segments("predictions")[0]
+    sql = f"SELECT (SELECT count(*) FROM results) AS n, (SELECT count(*) FROM read_parquet('{segment}')) AS m"
+    result = CliRunner().invoke(app, ["query", str(synthetic), sql])
+    assert result.exit_code == 0, result.output
+    assert f"│ {RESULTS} │ {RESULTS} │" in result.output
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".json", ".parquet"])
+def test_query_output_still_writes_every_row_and_nothing_else(synthetic: Path, tmp_path: Path, suffix: str) -> None:
+    store = synthetic.parent / "store"
+    before = store_tree(store)
+    out = tmp_path / "out" / f"rows{suffix}"
+    sql = "SELECT job, object, correct FROM results ORDER BY job -- a comment ends the statement;"
+    result = CliRunner().invoke(app, ["query", str(synthetic), sql, "--output", str(out)])
+    assert result.exit_code == 0, result.output
+    if suffix == ".csv":
+        with open(out, newline="") as fh:
+            rows = list(csv.DictReader(fh))
+    elif suffix == ".json":
+        rows = json.loads(out.read_text())
+    else:
+        rows = pq.read_table(out).to_pylist()
+    assert len(rows) == RESULTS and set(rows[0]) == {"job", "object", "correct"}
+    assert [p.name for p in out.parent.iterdir()] == [out.name]  # no temp file left beside it
+    assert store_tree(store) == before
+
+
+@pytest.mark.parametrize("sql", [
+    "COPY (SELECT 42) TO '{store}/x.csv'",
+    "ATTACH '{store}/x.duckdb' AS db",
+    "SET allowed_directories = ['/']",
+    "SELECT * FROM read_csv('/etc/passwd')",
+])
+def test_a_read_only_connection_refuses_what_the_query_filter_lets_through(synthetic: Path, sql: str) -> None:
+    """The second line of defence: the connection itself, should a statement get past the filter.
+    (It cannot stop writes to the files the views read: DuckDB's allow-list is for both.)"""
+    from sweep3d.stages.aggregate import connect
+
+    store = Store(synthetic.parent / "store")
+    before = store_tree(store.root)
+    con = connect(store, "scale", read_only=True)
+    assert con.execute("SELECT count(*) FROM results").fetchone()[0] == RESULTS
+    with pytest.raises(duckdb.Error, match="disabled by configuration|configuration has been locked"):
+        con.execute(sql.format(store=store.root))
+    assert store_tree(store.root) == before
+
+
+def test_a_failed_export_leaves_no_file(synthetic: Path, tmp_path: Path) -> None:
+    out = tmp_path / "rows.csv"
+    result = CliRunner().invoke(app, ["query", str(synthetic), "SELECT nope FROM results", "--output", str(out)])
+    assert result.exit_code == 2 and "query failed" in one_line(result.output)
+    assert list(tmp_path.iterdir()) == []
+
+
+# -- no results yet ----------------------------------------------------------------------------
+
+
+def first_seconds_of_a_run(folder: Path) -> Path:
+    """A spec whose store holds what a first run writes in its first seconds: renders, no results."""
+    from tests.conftest import TINY_SPEC, write_spec
+
+    spec = write_spec(folder, TINY_SPEC)
+    store = Store(folder / "store")
+    atomic_write(store.blob_path("ab" * 20), b"png")
+    store.append("renders", [render_row("ab" * 20)])
+    return spec
+
+
+@pytest.mark.parametrize("command", [["report"], ["query", "SELECT count(*) FROM results"],
+                                     ["query", "SELECT * FROM failure_modes()"]])
+@pytest.mark.parametrize("started", [False, True], ids=["never-run", "first-seconds"])
+def test_query_and_report_before_any_result_say_so_in_one_line(tmp_path: Path, command: list[str],
+                                                               started: bool) -> None:
+    from tests.conftest import TINY_SPEC, write_spec
+
+    spec = first_seconds_of_a_run(tmp_path) if started else write_spec(tmp_path, TINY_SPEC)
+    result = CliRunner().invoke(app, [command[0], str(spec), *command[1:]])
+    assert result.exit_code == 2, result.output
+    line = one_line(result.output)
+    assert f"no results for experiment 'tiny' yet in {tmp_path / 'store'}" in line
+    assert f"run: sweep3d run {spec}" in line and "does not exist" not in line

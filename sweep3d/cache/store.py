@@ -27,7 +27,7 @@ import uuid
 from contextlib import contextmanager
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any, Iterable, Iterator
 
 import duckdb
 import pyarrow as pa
@@ -72,7 +72,12 @@ class Store:
 
     # -- paths -------------------------------------------------------------------------------
     def blob_path(self, key: str, ext: str = "png") -> Path:
-        return self.root / "blobs" / key[:2] / f"{key}.{ext}"
+        return Path(self.blob_file(key, ext))
+
+    def blob_file(self, key: str, ext: str = "png") -> str:
+        """:meth:`blob_path` as a string: a run checks every cached blob, and pathlib's joins
+        cost more than the ``stat`` itself."""
+        return f"{self.root}{os.sep}blobs{os.sep}{key[:2]}{os.sep}{key}.{ext}"
 
     def table_dir(self, table: str) -> Path:
         return self.root / "tables" / table
@@ -261,7 +266,17 @@ class Store:
                 entry.add(d)
         return out
 
-    def connect(self, experiment: str | None = None) -> duckdb.DuckDBPyConnection:
+    def view_files(self, experiment: str | None = None) -> dict[str, list[Path]]:
+        """The files each view of :meth:`connect` reads: a table's readable segments, and under
+        ``jobs`` the experiment's jobs file when it reads (tables without files are left out)."""
+        files = {table: segments for table in TABLES if (segments := self.readable_segments(table))}
+        jobs_path = self.jobs_path(experiment) if experiment is not None else None
+        if jobs_path is not None and jobs_path.exists() and self.read_segment(jobs_path, ["pred_key"]) is not None:
+            files["jobs"] = [jobs_path]
+        return files
+
+    def connect(self, experiment: str | None = None,
+                files: dict[str, list[Path]] | None = None) -> duckdb.DuckDBPyConnection:
         """An in-memory DuckDB connection with views over this store's Parquet files.
 
         Views: ``renders``, ``images``, ``predictions``, ``runs`` (deduplicated by key), and when
@@ -270,21 +285,23 @@ class Store:
         Unreadable segments are left out (and quarantined). The views read the segments listed
         now; a compaction keeps the files it replaced for ``SUPERSEDED_GRACE`` seconds, so a
         connection stays good that long whatever happens to the store meanwhile.
+
+        Args:
+            files: the listing from :meth:`view_files`, when the caller needs to know exactly
+                which files the views read (to :func:`lock_down` the connection to them).
         """
+        files = self.view_files(experiment) if files is None else files
         con = duckdb.connect()
         for table in TABLES:
-            files = self.readable_segments(table)
-            key = KEY_COLUMN[table]
-            if files:
-                listing = ", ".join(_sql_str(str(p)) for p in files)
+            if table in files:
+                listing = ", ".join(_sql_str(str(p)) for p in files[table])
                 con.execute(
                     f"CREATE VIEW {table} AS SELECT * FROM read_parquet([{listing}], union_by_name = true) "
-                    f"QUALIFY row_number() OVER (PARTITION BY {key} ORDER BY created_at) = 1"
+                    f"QUALIFY row_number() OVER (PARTITION BY {KEY_COLUMN[table]} ORDER BY created_at) = 1"
                 )
-        jobs_path = self.jobs_path(experiment) if experiment is not None else None
-        if jobs_path is not None and jobs_path.exists() and self.read_segment(jobs_path, ["pred_key"]) is not None:
-            con.execute(f"CREATE VIEW jobs AS SELECT * FROM read_parquet({_sql_str(str(jobs_path))})")
-            if self.readable_segments("predictions"):
+        if "jobs" in files:
+            con.execute(f"CREATE VIEW jobs AS SELECT * FROM read_parquet({_sql_str(str(files['jobs'][0]))})")
+            if "predictions" in files:
                 con.execute(
                     "CREATE VIEW results AS SELECT j.*, p.* EXCLUDE (pred_key, image_key, created_at) "
                     "FROM jobs j JOIN predictions p USING (pred_key)"
@@ -429,6 +446,28 @@ class SegmentWriter:
 
     def __exit__(self, *exc: object) -> None:
         self.flush()
+
+
+def lock_down(con: duckdb.DuckDBPyConnection, readable: Iterable[Path], writable: Iterable[Path] = ()) -> None:
+    """Let ``con`` open only the files ``readable`` and ``writable`` from now on, and change no setting.
+
+    For SQL from users (``sweep3d query``): a statement then cannot read other files, attach a
+    database file, install or load an extension, spill to a temp folder or undo this. DuckDB's
+    allow-list does not tell reading from writing, so a ``COPY`` or ``ATTACH`` could still write
+    the listed files themselves: run only user statements that :func:`is_select` accepts.
+    """
+    allowed = sorted({variant for p in [*readable, *writable] for variant in (os.path.abspath(p), os.path.realpath(p))})
+    con.execute("SET temp_directory = ''")  # its folder would be allowed, writes included
+    con.execute(f"SET allowed_paths = [{', '.join(_sql_str(p) for p in allowed)}]")
+    con.execute("SET enable_external_access = false")
+    con.execute("SET lock_configuration = true")
+
+
+def is_select(statement: str) -> bool:
+    """Whether ``statement`` is exactly one read-only query (SELECT, WITH, FROM, VALUES, SHOW, …),
+    as DuckDB's own parser reads it; a parse error raises ``duckdb.Error``."""
+    parsed = duckdb.extract_statements(statement)
+    return len(parsed) == 1 and parsed[0].type == duckdb.StatementType.SELECT
 
 
 def safe_filename(name: str) -> str:

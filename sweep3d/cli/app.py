@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import os
 import signal
+import uuid
 from pathlib import Path
 from typing import Optional
 
@@ -155,32 +157,39 @@ def sheet(
 @command
 def query(
     spec: Path = SpecArg,
-    sql: str = typer.Argument(..., help="SQL over the views results, jobs, predictions, renders, images, runs."),
+    sql: str = typer.Argument(..., help="A SELECT over the views results, jobs, predictions, renders, images, runs."),
     output: Optional[Path] = typer.Option(None, "--output", "-o", help="Write all rows to .csv, .json or .parquet."),
     limit: int = typer.Option(50, help="Rows to print (all rows go to --output)."),
 ) -> None:
-    """Answer SQL over the store with DuckDB."""
+    """Answer SQL over the store with DuckDB, read-only: only --output writes a file."""
     import duckdb
 
     from sweep3d.cache.store import Store
     from sweep3d.stages import load_spec
-    from sweep3d.stages.aggregate import connect
+    from sweep3d.stages.aggregate import connect, has_view, no_results
 
     loaded = load_spec(spec)
-    con = connect(Store(loaded.store), loaded.name)
-    statement = sql.strip().rstrip(";")
+    store = Store(loaded.store)
+    statement = _select_only(sql)
+    export = _export_target(output) if output is not None else None
+    con = connect(store, loaded.name, read_only=True, writable=[export[0]] if export else [])
     try:
-        if output is not None:
-            _export(con, statement, output)
-            console.print(f"wrote {output}")
-            return
-        cursor = con.execute(statement)
-        columns = [d[0] for d in cursor.description or []]
-        rows = cursor.fetchmany(limit + 1)
+        if export is not None:
+            _export(con, statement, output, *export)
+        else:
+            _print_rows(con.execute(statement), limit)
     except duckdb.Error as exc:
-        raise UserError(
-            f"query failed: {str(exc).splitlines()[0]} (views: results, jobs, predictions, renders, images, runs)"
-        ) from None
+        if isinstance(exc, duckdb.CatalogException) and not has_view(con, "results"):
+            raise no_results(store, loaded.name, spec) from None
+        raise UserError(f"query failed: {str(exc).splitlines()[0]} ({QUERY_HINT})") from None
+    if export is not None:
+        console.print(f"wrote {output}")
+
+
+def _print_rows(cursor, limit: int) -> None:
+    """The first ``limit`` rows of ``cursor`` as a table, saying so when there are more."""
+    columns = [d[0] for d in cursor.description or []]
+    rows = cursor.fetchmany(limit + 1)
     table = Table(*columns)
     for row in rows[:limit]:
         table.add_row(*[_cell(v) for v in row])
@@ -189,14 +198,62 @@ def query(
         console.print(f"[dim]first {limit} rows shown; --limit N or --output FILE for more[/]")
 
 
-def _export(con, statement: str, output: Path) -> None:
+QUERY_HINT = "sweep3d query runs one SELECT over the views results, jobs, predictions, renders, images, runs"
+EXPORT_FORMATS = {".csv": "FORMAT CSV, HEADER", ".json": "FORMAT JSON, ARRAY true", ".parquet": "FORMAT PARQUET"}
+
+
+def _select_only(sql: str) -> str:
+    """``sql`` without its trailing semicolons, if DuckDB parses it as one read-only query.
+
+    A query shared in a notebook or a script must not change or leak files: COPY, ATTACH,
+    INSTALL, SET and the like are refused here, before the connection (locked to the store's
+    files) would refuse most of them anyway.
+    """
+    import duckdb
+
+    from sweep3d.cache.store import is_select
+
+    statement = sql.strip().rstrip(";").strip()
+    try:
+        if is_select(statement):
+            return statement
+        kinds = [s.type.name for s in duckdb.extract_statements(statement)]
+    except duckdb.Error as exc:
+        raise UserError(f"query failed: {str(exc).splitlines()[0]} ({QUERY_HINT})") from None
+    what = kinds[0] if len(kinds) == 1 else f"{len(kinds)} statements" if kinds else "an empty query"
+    raise UserError(f"query refused {what}: {QUERY_HINT}; write rows to a file with --output FILE")
+
+
+def _export_target(output: Path) -> tuple[Path, str]:
+    """(the temp file an export writes before it is renamed to ``output``, its COPY options).
+
+    Raises:
+        UserError: the suffix is not a format we write, or the folder cannot be created.
+    """
     suffix = output.suffix.lower()
-    formats = {".csv": "FORMAT CSV, HEADER", ".json": "FORMAT JSON, ARRAY true", ".parquet": "FORMAT PARQUET"}
-    if suffix not in formats:
+    if suffix not in EXPORT_FORMATS:
         raise UserError(f"--output {output}: unsupported format {suffix or '(none)'!r}; use .csv, .json or .parquet")
-    output.parent.mkdir(parents=True, exist_ok=True)
-    target = str(output).replace("'", "''")
-    con.execute(f"COPY ({statement}) TO '{target}' ({formats[suffix]})")
+    try:
+        output.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise UserError(f"--output {output}: cannot create its folder ({exc.strerror})") from None
+    return output.with_name(f".{output.name}.{uuid.uuid4().hex}.tmp").absolute(), EXPORT_FORMATS[suffix]
+
+
+def _export(con, statement: str, output: Path, tmp: Path, options: str) -> None:
+    """Write every row of ``statement`` to ``output``, whole or not at all (temp file, rename).
+
+    The connection may write only ``tmp``; the newlines keep a trailing ``--`` comment in the
+    statement from swallowing the closing parenthesis.
+    """
+    target = str(tmp).replace("'", "''")
+    try:
+        con.execute(f"COPY (\n{statement}\n) TO '{target}' ({options}, USE_TMP_FILE false)")
+        os.replace(tmp, output)
+    except OSError as exc:
+        raise UserError(f"--output {output}: cannot write it ({exc.strerror})") from None
+    finally:
+        tmp.unlink(missing_ok=True)
 
 
 def _interrupt(signum, frame) -> None:

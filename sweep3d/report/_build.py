@@ -23,7 +23,7 @@ from sweep3d.report.panels import PANELS
 from sweep3d.report.results import load_results
 from sweep3d.report.thumbs import Thumbnails
 from sweep3d.spec.loader import LoadedSpec
-from sweep3d.stages.aggregate import MACROS, VIEWS, Summary, connect, has_view, summarise
+from sweep3d.stages.aggregate import MACROS, VIEWS, Summary, connect, has_view, no_results, summarise
 
 STAGES = ("render", "postprocess", "infer")
 
@@ -74,7 +74,7 @@ def build_context(loaded: LoadedSpec, con: duckdb.DuckDBPyConnection, store: Sto
         UserError: if there are no results for the experiment yet.
     """
     if not has_view(con, "results") or not con.execute("SELECT count(*) FROM results").fetchone()[0]:
-        raise UserError(f"no results for experiment {loaded.name!r} yet; run: sweep3d run {loaded.path}")
+        raise no_results(store, loaded.name, loaded.path)
     columns = loaded.parameter_columns
     summary = summarise(con, columns)
     table = load_results(con, ["object", "environment", *columns])
@@ -94,9 +94,10 @@ def build_context(loaded: LoadedSpec, con: duckdb.DuckDBPyConnection, store: Sto
         "run": _latest_run(con, loaded.name),
         "panels": built,
         "thumbs": json.dumps(uris, separators=(",", ":")),
+        "thumb_problems": json.dumps(thumbs.problems, separators=(",", ":")),
         "thumb_size": thumbs.size,
-        "images": {"shown": len(uris) - thumbs.missing - thumbs.left_out, "missing": thumbs.missing,
-                   "left_out": thumbs.left_out},
+        "images": {"shown": len(uris) - thumbs.missing - thumbs.damaged - thumbs.left_out,
+                   "missing": thumbs.missing, "damaged": thumbs.damaged, "left_out": thumbs.left_out},
         "views": [v for v in VIEWS if has_view(con, v)],
         "macros": MACROS,
     }

@@ -4,6 +4,8 @@ Panels ask for an image with :meth:`Thumbnails.want` and get its index in the pa
 list of data URIs (``<script id="thumbs">``), so an image shown by several panels travels once.
 Images are encoded in the order first asked for; once the budget is spent, later ones are left
 out (``null`` in the list; the page shows a placeholder), so a report stays small at any scale.
+A blob is embedded only if it matches a SHA-256 its rows recorded: a damaged one is shown as a
+placeholder saying so (:attr:`Thumbnails.problems`), never as the picture it no longer is.
 """
 
 from __future__ import annotations
@@ -16,13 +18,16 @@ from pathlib import Path
 
 from PIL import Image
 
-from sweep3d.cache.store import Store
+from sweep3d.cache.blobs import sha256_bytes
+from sweep3d.cache.store import BLOB_TABLES, Store
 
 #: Longest side of a thumbnail by the number of distinct images in the report: 96 px up to
 #: 2500 images, else 64 px (a 64 px render is about 2 kB as JPEG).
 SIZES = ((2500, 96), (None, 64))
 BUDGET = 16_000_000  # characters of data URIs at most (plotly.js adds ~4.6 MB to the page)
 JPEG_QUALITY = 80
+MISSING = "not in the store"
+DAMAGED = "damaged"  # fails its SHA-256 check
 
 
 class Thumbnails:
@@ -40,7 +45,9 @@ class Thumbnails:
         self.budget = budget
         self._index: dict[str, int] = {}
         self.missing = 0  # blobs not in the store
+        self.damaged = 0  # blobs that fail their SHA-256 check
         self.left_out = 0  # images beyond the budget
+        self.problems: dict[int, str] = {}  # index -> why it has no image (MISSING or DAMAGED)
 
     def want(self, key: str) -> int:
         """The index of ``key``'s thumbnail in :meth:`data_uris`, registering it if new."""
@@ -53,25 +60,40 @@ class Thumbnails:
         """Encode every image asked for, in the order first asked for.
 
         Returns:
-            One data URI per index (None for a blob missing from the store or beyond the budget).
+            One data URI per index (None for a blob missing, damaged or beyond the budget; see
+            :attr:`problems` for why).
         """
-        paths = [self.store.blob_path(key) for key in self._index]
+        digests = recorded_digests(self.store)
+        jobs = [(self.store.blob_path(key), digests.get(key, set())) for key in self._index]
         workers = workers or min(8, os.cpu_count() or 1)
         with ThreadPoolExecutor(workers) as pool:  # PIL releases the GIL while decoding and encoding
-            encoded = list(pool.map(lambda p: encode_thumbnail(p, self.size), paths))
+            encoded = list(pool.map(lambda job: encode_thumbnail(*job, self.size), jobs))
         uris: list[str | None] = []
         spent = 0
-        self.missing = self.left_out = 0
-        for uri in encoded:
-            if uri is None:
-                self.missing += 1
-            elif spent + len(uri) > self.budget:
+        self.missing = self.damaged = self.left_out = 0
+        self.problems = {}
+        for index, (uri, problem) in enumerate(encoded):
+            if problem is not None:
+                self.problems[index] = problem
+                self.missing += problem == MISSING
+                self.damaged += problem == DAMAGED
+            elif spent + len(uri or "") > self.budget:
                 self.left_out += 1
                 uri = None
             else:
-                spent += len(uri)
+                spent += len(uri or "")
             uris.append(uri)
         return uris
+
+
+def recorded_digests(store: Store) -> dict[str, set[str]]:
+    """Key → the SHA-256 digests its rows recorded, over the tables whose rows own a blob (an
+    image key is a render key when no post control changes the render)."""
+    digests: dict[str, set[str]] = {}
+    for table in BLOB_TABLES:
+        for key, found in store.digests(table).items():
+            digests.setdefault(key, set()).update(found)
+    return digests
 
 
 def thumbnail_size(images: int) -> int:
@@ -79,18 +101,30 @@ def thumbnail_size(images: int) -> int:
     return next(size for limit, size in SIZES if limit is None or images <= limit)
 
 
-def encode_thumbnail(path: Path, size: int) -> str | None:
-    """A JPEG data URI of the image at ``path`` downscaled to ``size`` (longest side).
+def encode_thumbnail(path: Path, digests: set[str], size: int) -> tuple[str | None, str | None]:
+    """A JPEG data URI of the image at ``path`` downscaled to ``size`` (longest side), checked first.
+
+    Args:
+        digests: the SHA-256 digests its rows recorded (empty: it only has to decode).
 
     Returns:
-        None if the file is missing or not an image (the page shows a placeholder instead).
+        (the data URI, None), or (None, :data:`MISSING` or :data:`DAMAGED`) when the file is
+        not there, does not match a recorded digest or is not an image.
     """
     try:
-        with Image.open(path) as img:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        return None, MISSING
+    except OSError:
+        return None, DAMAGED
+    if digests and sha256_bytes(data) not in digests:
+        return None, DAMAGED
+    try:
+        with Image.open(io.BytesIO(data)) as img:
             img = img.convert("RGB")
             img.thumbnail((size, size), Image.Resampling.LANCZOS)
     except (OSError, ValueError):
-        return None
+        return None, DAMAGED
     buf = io.BytesIO()
     img.save(buf, format="JPEG", quality=JPEG_QUALITY, optimize=True)
-    return "data:image/jpeg;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
+    return "data:image/jpeg;base64," + base64.b64encode(buf.getvalue()).decode("ascii"), None

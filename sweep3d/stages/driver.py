@@ -2,10 +2,11 @@
 
 A stage says what its key is, which table and schema its rows go to, what it reads from upstream
 and how to compute a batch of jobs; the driver does the rest the same way for each: it finds what
-is cached (a row, and its blob where rows own one), drops rows whose blob has gone, counts what is
-waiting on upstream, shows progress, writes rows in segments every few seconds (so a kill loses
-little) and discards damaged upstream blobs. :func:`run_stages` repeats the stages while one of
-them discarded something, so a damaged blob is recomputed within the same run.
+is cached (a row, and its blob where rows own one), drops rows whose blob has gone, discards
+cached blobs that fail their digest (so they are recomputed), counts what is waiting on upstream,
+shows progress, writes rows in segments every few seconds (so a kill loses little) and discards
+damaged upstream blobs. :func:`run_stages` repeats the stages while one of them discarded an
+upstream blob, so a damaged blob is recomputed within the same run.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from typing import Any, Iterable, Iterator, Protocol, Sequence
 
 import pyarrow as pa
 
+from sweep3d.cache.blobs import damaged_blobs
 from sweep3d.cache.store import Store
 from sweep3d.errors import UserError
 from sweep3d.progress import RunProgress
@@ -122,6 +124,18 @@ def plan_status(stage: Stage, plan: Plan, store: Store) -> tuple[int, int]:
     return len(unique_jobs(stage, plan.jobs)), len(cached - stage.incomplete(plan, store, cached))
 
 
+def discard_damaged(stage: Stage, store: Store, cached: set[str]) -> set[str]:
+    """The ``cached`` blobs of ``stage`` found damaged, discarded with one warning.
+
+    A stage reading a blob checks its digest, but a blob whose downstream results are all cached
+    is never read again: without this a damaged one would stay in the store until ``cache
+    verify``. Discarded here, it is recomputed in the same pass (downstream keys are unchanged).
+    """
+    damaged = damaged_blobs(store, stage.table, cached)
+    store.discard(stage.table, damaged, DAMAGED)
+    return damaged
+
+
 def run_stage(stage: Stage, plan: Plan, store: Store, progress: RunProgress) -> StageOutcome:
     """Compute what ``plan`` needs at ``stage`` and the store lacks; record it as it comes."""
     started = time.perf_counter()
@@ -129,6 +143,7 @@ def run_stage(stage: Stage, plan: Plan, store: Store, progress: RunProgress) -> 
     cached = cached_keys(stage, plan, store)
     if stage.owns_blobs:  # rows whose blob has gone (deleted, quarantined): computed again, one row each
         store.drop_rows(stage.table, (store.keys(stage.table) & set(unique)) - cached)
+        cached -= discard_damaged(stage, store, cached)
     todo = to_do(stage, plan, store, cached)
     redo = {stage.key(job) for job in todo} & cached
     outcome = StageOutcome(stage.name, total=len(unique), cached=len(cached - redo))

@@ -14,6 +14,7 @@
     modeBarButtonsToRemove: ['select2d', 'lasso2d', 'sendChartToCloud'],  // nothing leaves the page
   };
   var thumbs = JSON.parse(document.getElementById('thumbs').textContent);
+  var thumbProblems = JSON.parse(document.getElementById('thumb-problems').textContent);  // index -> why none
   var figures = Array.prototype.map.call(document.querySelectorAll('script.fig-data'), function (node) {
     return {source: node, target: document.getElementById(node.dataset.target), drawn: null};
   });
@@ -36,17 +37,18 @@
     return figure.drawn;
   }
 
-  /* Give an <img data-thumb="i"> its image, or swap it for a placeholder when there is none. */
+  /* Give an <img data-thumb="i"> its image, or swap it for a placeholder saying why there is none. */
   function fillThumb(img) {
     var uri = thumbs[Number(img.dataset.thumb)];
     if (uri) {
       img.src = uri;
       return;
     }
+    var problem = thumbProblems[img.dataset.thumb];
     var missing = document.createElement('div');
     missing.className = 'missing';
-    missing.textContent = 'no image';
-    missing.title = img.alt;
+    missing.textContent = problem || 'no image';
+    missing.title = problem ? img.alt + ': image ' + problem : img.alt;
     img.replaceWith(missing);
   }
 

@@ -18,9 +18,10 @@ from sweep3d.stages.aggregate.views import (
     VIEWS,
     connect,
     has_view,
+    no_results,
     register_views,
     wilson_interval,
 )
 
 __all__ = ["MACROS", "VIEWS", "ControlEffect", "Region", "Summary", "connect", "control_effects", "has_view",
-           "register_views", "summarise", "weakest_regions", "wilson_interval"]
+           "no_results", "register_views", "summarise", "weakest_regions", "wilson_interval"]

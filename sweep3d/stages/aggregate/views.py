@@ -47,12 +47,14 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Sequence
 
 import duckdb
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from sweep3d.cache.store import Store
+from sweep3d.cache.store import Store, lock_down
+from sweep3d.errors import UserError
 from sweep3d.spec.columns import JOB_COLUMNS, PARAMETERS_METADATA
 from sweep3d.stages.aggregate.parts import register_part_views
 
@@ -75,13 +77,24 @@ VIEWS = ("control_values", "control_stats", "control_levels", "control_parameter
 MACROS = ("wilson_low", "wilson_high", "failure_modes")
 
 
-def connect(store: Store, experiment: str | None = None) -> duckdb.DuckDBPyConnection:
-    """:meth:`Store.connect` with the aggregate views and macros over ``experiment``'s results."""
-    con = store.connect(experiment)
+def connect(store: Store, experiment: str | None = None, read_only: bool = False,
+            writable: Sequence[Path] = ()) -> duckdb.DuckDBPyConnection:
+    """:meth:`Store.connect` with the aggregate views and macros over ``experiment``'s results.
+
+    Args:
+        read_only: once the views exist, let the connection open only the files they read (and
+            ``writable``) and change no setting (see :func:`~sweep3d.cache.store.lock_down`), for
+            SQL that a user wrote.
+        writable: files the caller itself will write through the connection (an export).
+    """
+    files = store.view_files(experiment)
+    con = store.connect(experiment, files)
     parameters = None
     if experiment is not None and store.jobs_path(experiment).exists():
         parameters = stored_parameters(store.jobs_path(experiment))
     register_views(con, parameters)
+    if read_only:
+        lock_down(con, [path for paths in files.values() for path in paths], writable)
     return con
 
 
@@ -322,6 +335,14 @@ def _values_sql(parameters: list[tuple[str, bool]]) -> str:
 
 
 # -- helpers ----------------------------------------------------------------------------------
+def no_results(store: Store, experiment: str, spec: str | Path) -> UserError:
+    """The one line for a query or report that finds no results: the experiment never ran, or
+    its first run is still going (a run records its jobs table, which ``results`` joins, once
+    its stages are through)."""
+    return UserError(f"no results for experiment {experiment!r} yet in {store.root}; run: sweep3d run {spec} "
+                     "(a run in progress shows its results when its stages finish)")
+
+
 def has_view(con: duckdb.DuckDBPyConnection, name: str) -> bool:
     """Whether ``con`` has a (user) view called ``name``."""
     return bool(con.execute(
