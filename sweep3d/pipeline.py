@@ -16,6 +16,7 @@ import uuid
 from dataclasses import dataclass, field
 
 from rich.console import Console
+from rich.markup import escape
 
 from sweep3d.cache.maintenance import compact_table
 from sweep3d.cache.store import TABLES, Store, utc_now
@@ -23,12 +24,13 @@ from sweep3d.errors import SpecError, UserError
 from sweep3d.progress import RunProgress
 from sweep3d.spec.assets import blender_version
 from sweep3d.spec.loader import LoadedSpec
-from sweep3d.stages.driver import merge_outcomes, run_stages
+from sweep3d.stages.driver import merge_outcomes, plan_status, run_stages
 from sweep3d.stages.infer import InferStage, ModelHandle, pending_predictions
 from sweep3d.stages.outcome import StageOutcome
 from sweep3d.stages.plan import History, Outcome, Plan, make_plan
 from sweep3d.stages.postprocess import PostprocessStage
 from sweep3d.stages.render import LOCAL, Executor, RenderStage
+from sweep3d.stages.render.estimate import slow_render_warning
 
 AUTO_COMPACT_SEGMENTS = 64  # a run ends by merging a table's segments beyond this many
 
@@ -114,6 +116,7 @@ def _run_locked(spec: LoadedSpec, store: Store, console: Console | None, wait: f
             store.sweep_superseded(table)  # segments an earlier compaction merged, past their grace
         model = ModelHandle.resolve(spec)
         result = RunResult(uuid.uuid4().hex[:12], plan_spec(spec, model))
+        _warn_if_slow(result.plan, store, executor, console)
         infer = InferStage(model, on_ray=executor.kind == "ray")
         if pending_predictions(result.plan, store):
             infer.prepare(result.plan, store)  # a broken model fails now, before anything renders
@@ -143,6 +146,14 @@ def _run_locked(spec: LoadedSpec, store: Store, console: Console | None, wait: f
         }])
         compact_crowded_tables(store)
     return result
+
+
+def _warn_if_slow(plan: Plan, store: Store, executor: Executor, console: Console | None) -> None:
+    """One warning line before a run whose renders would take hours at the spec's settings."""
+    needed, cached = plan_status(RenderStage(executor), plan, store)
+    line = slow_render_warning(plan.spec.render, plan.framing.crop, needed - cached)
+    if line and console is not None:
+        console.print(f"[bold yellow]warning:[/] {escape(line)}", highlight=False, soft_wrap=True)
 
 
 def compact_crowded_tables(store: Store, limit: int = AUTO_COMPACT_SEGMENTS) -> list[str]:

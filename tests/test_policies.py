@@ -292,3 +292,109 @@ def test_adaptive_wraps_periodic_dims_instead_of_clipping() -> None:
         points = policy.points(shape, seed=2, history=history)
         history = _evaluate(points, fails)
     assert not any(p.unit[0] in (0.0, 1.0) for p in points[16:])  # clipping would pile points on the ends
+
+
+# -- counting jobs before making them --------------------------------------------------------
+
+
+@FAST
+@given(shapes, st.integers(1, 4), st.integers(1, 12), seeds)
+def test_grid_and_random_count_their_points_without_making_them(shape, n, samples, seed):
+    for policy in (grid(n), random_policy(samples)):
+        assert policy.count(shape) == len(policy.points(shape, seed, history={}))
+
+
+@pytest.mark.parametrize("shape", [SpaceShape(0, ()), SpaceShape(2, (3,)), SpaceShape(1, (), wraps=(True,))])
+def test_sobol_and_adaptive_count_their_points_without_making_them(shape):
+    sobol = POLICIES.get("sobol")
+    assert sobol(sobol.Params(samples=12)).count(shape) == len(sobol(sobol.Params(samples=12)).points(shape, 5, {}))
+    adaptive = _adaptive(samples=12, initial=4, batch=4)
+    history: dict = {}
+    points: list = []
+    while not points or len(history) < len(points):  # round after round, failing everywhere, until it stops
+        points = adaptive.points(shape, 5, history)
+        history = _evaluate(points, lambda p: True)
+    assert len(points) <= adaptive.count(shape)
+    assert adaptive.count(shape) == (12 if shape.n_continuous or shape.choice_sizes else 1)
+
+
+def test_a_users_policy_that_cannot_count_says_so():
+    from sweep3d.stages.plan.policies import Policy, PolicyParams
+
+    assert Policy(PolicyParams()).count(SpaceShape(2, (3,))) is None
+
+
+FILTERED = TINY_SPEC.replace("yaw = [0, 45]", 'yaw = { range = [0, 90] }\nenvironments = ["studio"]').replace(
+    '[policy]\ntype = "grid"', '[[controls]]\ntype = "camera"\nelevation = [0, 10, 20]\nobjects = ["box"]\n\n'
+                               '[policy]\ntype = "grid"\nsamples_per_dim = 3')
+
+
+def test_the_job_count_matches_the_plan_with_controls_limited_to_some_scenes(tmp_path) -> None:
+    from sweep3d.stages import load_spec
+    from sweep3d.stages.plan import count_jobs
+    from tests.conftest import plan_for, write_spec
+
+    loaded = load_spec(write_spec(tmp_path, FILTERED))
+    plan = plan_for(loaded, "m")
+    assert count_jobs(loaded) == len(plan.jobs) + len(plan.out_of_frame) == 2 * 3 + 2 * 3 * 3  # white: no yaw
+
+
+HUGE_GRID = TINY_SPEC.replace("yaw = [0, 45]", "yaw = { range = [0, 90] }\npitch = { range = [0, 90] }").replace(
+    "sigma = [0.0, 1.5]", "sigma = { range = [0, 2] }").replace(
+    '[policy]\ntype = "grid"', '[policy]\ntype = "grid"\nsamples_per_dim = 1000')  # 2 scenes × 1000³ = 2·10⁹
+
+
+def test_a_billion_job_grid_is_refused_in_one_line_before_anything_is_made(tmp_path) -> None:
+    import resource
+    import time
+
+    from sweep3d.errors import SpecError
+    from sweep3d.stages import load_spec
+    from tests.conftest import plan_for, write_spec
+
+    loaded = load_spec(write_spec(tmp_path, HUGE_GRID))
+    memory = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    started = time.perf_counter()
+    with pytest.raises(SpecError) as caught:
+        plan_for(loaded, "m")
+    assert time.perf_counter() - started < 0.5
+    assert resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - memory < 50_000  # KiB: nothing big was allocated
+    assert caught.value.key == "policy"
+    message = str(caught.value)
+    assert "\n" not in message
+    for text in ("2,000,000,000 jobs", "limit of 100,000", "policy.samples_per_dim", "[experiment] max_jobs"):
+        assert text in message, message
+
+
+def test_max_jobs_raises_or_lowers_the_limit(tmp_path) -> None:
+    from sweep3d.errors import SpecError
+    from sweep3d.stages import load_spec
+    from tests.conftest import plan_for, write_spec
+
+    body = FILTERED.replace('seed = 7', 'seed = 7\nmax_jobs = 23')
+    with pytest.raises(SpecError, match=r"expands to 24 jobs, over the limit of 23"):
+        plan_for(load_spec(write_spec(tmp_path, body)), "m")
+    assert len(plan_for(load_spec(write_spec(tmp_path, body.replace("max_jobs = 23", "max_jobs = 24"))), "m").jobs)
+    random = body.replace('type = "grid"\nsamples_per_dim = 3', 'type = "random"\nsamples = 12')
+    with pytest.raises(SpecError, match=r"24 jobs, over the limit of 23; lower policy.samples"):
+        plan_for(load_spec(write_spec(tmp_path, random)), "m")
+
+
+class Uncounted(GridPolicy):
+    """A user's policy that does not override ``count``."""
+
+    def count(self, shape):
+        return None
+
+
+def test_a_policy_that_cannot_count_is_stopped_as_its_points_come(tmp_path) -> None:
+    import dataclasses
+
+    from sweep3d.errors import SpecError
+    from sweep3d.stages import load_spec
+    from tests.conftest import plan_for, write_spec
+
+    loaded = load_spec(write_spec(tmp_path, FILTERED.replace('seed = 7', 'seed = 7\nmax_jobs = 20')))
+    loaded = dataclasses.replace(loaded, policy=Uncounted(loaded.policy.params))
+    with pytest.raises(SpecError, match=r"expands to more than 20 jobs, over the limit of 20"):
+        plan_for(loaded, "m")

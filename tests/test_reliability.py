@@ -470,6 +470,16 @@ def test_cache_commands_on_a_store_that_does_not_exist_are_one_line_errors(tmp_p
     assert len(lines) == 1 and "does not exist yet" in lines[0] and "sweep3d run" in lines[0]
 
 
+@pytest.mark.parametrize("wait", ["-5", "nan", "inf"])
+@pytest.mark.parametrize("command", [["run"], ["cache", "verify"], ["cache", "gc"], ["cache", "compact"]])
+def test_wait_must_be_a_finite_number_of_seconds(tmp_path, command, wait) -> None:
+    spec = write_spec(tmp_path, TINY_SPEC)
+    result = CliRunner().invoke(app, [*command, str(spec), "--wait", wait])
+    assert result.exit_code == 2, result.output
+    lines = [line for line in result.output.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith(f"error: --wait {wait}: ") and ">= 0" in lines[0], lines
+
+
 # -- two runs at once ------------------------------------------------------------------------
 
 CONCURRENT_SPEC = TINY_SPEC.replace("yaw = [0, 45]", "yaw = { range = [-180, 180] }").replace(

@@ -2,6 +2,12 @@
 
 from __future__ import annotations
 
+import io
+import json
+import math
+import os
+import shutil
+import subprocess
 import sys
 import textwrap
 import zipfile
@@ -9,6 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
+import numpy as np
 import pytest
 from typer.testing import CliRunner
 
@@ -17,6 +24,7 @@ from sweep3d.errors import SpecError
 from sweep3d.spec import Choice, Fixed, Range
 from sweep3d.spec.space import Point, SearchSpace
 from sweep3d.stages import load_spec
+from tests import files
 from tests.conftest import CUBE_OBJ, TINY_SPEC, write_cube, write_spec
 
 BASE = TINY_SPEC.replace('name = "tiny"\nseed = 7\nstore = "store"', 'name = "mistakes"\nseed = 3')
@@ -93,6 +101,32 @@ def _zip_with_other_member(folder: Path) -> None:
 
 def _text_mesh(folder: Path) -> None:
     (folder / "cube.txt").write_text("v 0 0 0\n")
+
+
+def mesh_mistake(name: str, mesh: str, expect: tuple[str, ...], setup: Callable[[Path], None] | None = None) -> Mistake:
+    return Mistake(f"mesh-{name}", edit('mesh = "cube.obj"', f'mesh = "{mesh}"'), "objects[0].mesh", expect, setup)
+
+
+def hdri_mistake(name: str, data: bytes, expect: tuple[str, ...]) -> Mistake:
+    return Mistake(f"hdri-{name}", edit('"builtin:studio"', f'"{name}"'), "environments[1].hdri", (name, *expect),
+                   writes(name, data))
+
+
+def writes(name: str, data: bytes) -> Callable[[Path], None]:
+    return lambda folder: (folder / name).write_bytes(data)
+
+
+def _zip(path: Path, member: str, text: str) -> None:
+    with zipfile.ZipFile(path, "w") as zf:
+        zf.writestr(member, text)
+
+
+def _png(pixels: np.ndarray) -> bytes:
+    from PIL import Image
+
+    buffer = io.BytesIO()
+    Image.fromarray(pixels).save(buffer, format="PNG")
+    return buffer.getvalue()
 
 
 USER_TYPE = f'type = "{USER_MODULE}:Tint"'
@@ -178,7 +212,7 @@ MISTAKES = [
             "environments", ("duplicate environment name 'white'", "[2]")),
     Mistake("material-image-missing",
             append('[[controls]]\ntype = "material"\nskin = "image"\nimage = ["textures/none.png"]\n'),
-            "controls[2].image", ("textures/none.png", "no such file", "relative to the spec file")),
+            "controls[2].image", ("textures/none.png", "does not exist", "relative to the spec file")),
     Mistake("part-visibility-not-a-bool", append('[report]\npart_visibility = "yes please"\n'),
             "report.part_visibility", ("valid boolean",)),
     Mistake("report-key-unknown", append("[report]\npart_visiblity = true\n"), "report.part_visiblity",
@@ -190,6 +224,54 @@ MISTAKES = [
             "controls[3].b", ("'p_a_b'", "controls[2]", "id = ")),
     Mistake("model-unknown", edit("[model]\n", '[model]\nname = "efficientnet-lite1"\n'),
             "model.name", ("'efficientnet-lite1'", "efficientnet-lite0", "module:Name")),
+    # the store and the size of the plan
+    Mistake("store-empty", edit("seed = 3", 'seed = 3\nstore = ""'), "experiment.store",
+            ("must name the store's folder", "spec's own folder")),
+    Mistake("store-blank", edit("seed = 3", 'seed = 3\nstore = "  "'), "experiment.store", ("must name",)),
+    Mistake("max-jobs-zero", edit("seed = 3", "seed = 3\nmax_jobs = 0"), "experiment.max_jobs",
+            ("greater than or equal to 1",)),
+    # paths that are not files: said as what they are, and never opened (a FIFO would block)
+    mesh_mistake("directory", "meshes.obj", ("is a directory", "not a file"),
+                 lambda folder: (folder / "meshes.obj").mkdir()),
+    mesh_mistake("fifo", "pipe.obj", ("is a FIFO",), lambda folder: os.mkfifo(folder / "pipe.obj")),
+    mesh_mistake("device", "/dev/zero", ("/dev/zero", "is a device file")),
+    Mistake("hdri-directory", edit('"builtin:studio"', '"maps"'), "environments[1].hdri", ("is a directory",),
+            lambda folder: (folder / "maps").mkdir()),
+    Mistake("hdri-fifo", edit('"builtin:studio"', '"sky.hdr"'), "environments[1].hdri", ("is a FIFO",),
+            lambda folder: os.mkfifo(folder / "sky.hdr")),
+    Mistake("material-image-fifo", append('[[controls]]\ntype = "material"\nskin = "image"\nimage = "wood.png"\n'),
+            "controls[2].image", ("wood.png", "is a FIFO"), lambda folder: os.mkfifo(folder / "wood.png")),
+    # vertices Blender would silently replace
+    mesh_mistake("obj-nan", "nan.obj", ("vertex 7 of the OBJ file (line 8)", "nan", "not a finite number"),
+                 writes("nan.obj", CUBE_OBJ.replace("v 1 1 1", "v 1 nan 1").encode())),
+    mesh_mistake("obj-inf", "inf.obj", ("vertex 1", "-inf", "not a finite number"),
+                 writes("inf.obj", CUBE_OBJ.replace("v -1 -1 -1", "v -inf -1 -1").encode())),
+    mesh_mistake("obj-float32-overflow", "far.obj", ("1e39", "not a finite number"),
+                 writes("far.obj", CUBE_OBJ.replace("v 1 1 1", "v 1 1e39 1").encode())),
+    mesh_mistake("ply-ascii-nan", "nan.ply", ("vertex 2 of the PLY file", "NaN"),
+                 writes("nan.ply", b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+                                   b"property float z\nelement face 1\nproperty list uchar int vertex_indices\n"
+                                   b"end_header\n0 0 0\n1 NaN 0\n0 1 0\n3 0 1 2\n")),
+    mesh_mistake("ply-binary-inf", "inf.ply", ("vertex 3 of the PLY file", "inf"),
+                 writes("inf.ply", files.ply_binary([(0, 0, 0), (1, 0, 0), (0, math.inf, 0)]))),
+    mesh_mistake("stl-binary-nan", "nan.stl", ("triangle 2 of the STL file", "nan"),
+                 writes("nan.stl", files.stl_binary([[(0, 0, 0), (1, 0, 0), (0, 1, 0)],
+                                                     [(0, 0, 0), (1, 0, 0), (0, math.nan, 0)]]))),
+    mesh_mistake("stl-ascii-inf", "inf.stl", ("vertex 3 of the STL file", "inf"),
+                 writes("inf.stl", b"solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\n"
+                                   b"vertex 0 inf 0\nendloop\nendfacet\nendsolid t\n")),
+    mesh_mistake("glb-nan", "nan.glb", ("vertex 3 of mesh 0 of the .glb file", "nan"),
+                 writes("nan.glb", files.glb([(0, 0, 0), (1, 0, 0), (0, math.nan, 0)]))),
+    Mistake("zip-member-obj-nan", edit('mesh = "cube.obj"', 'mesh = "kit.zip#box/box.obj"'), "objects[0].mesh",
+            ("kit.zip#box/box.obj", "vertex 7", "nan"), lambda folder: _zip(folder / "kit.zip", "box/box.obj",
+                                                                             CUBE_OBJ.replace("v 1 1 1", "v nan 1 1"))),
+    # maps that hold no light: every render would be black
+    hdri_mistake("black.hdr", files.hdr(np.zeros((4, 64, 3))), ("black (every pixel is 0)",)),
+    hdri_mistake("black.exr", files.exr(np.zeros((4, 8, 3))), ("holds no light", "every pixel is 0")),
+    hdri_mistake("negative.exr", files.exr(-np.ones((4, 8, 3))), ("holds no light", "96 of its 96", "negative")),
+    hdri_mistake("negative-zip.exr", files.exr(np.full((40, 8, 3), -0.5), zip_compressed=True),
+                 ("holds no light", "negative")),
+    hdri_mistake("black.png", _png(np.zeros((8, 8, 3), np.uint8)), ("black (every pixel is 0)",)),
 ]
 
 
@@ -373,3 +455,141 @@ def test_control_filters_are_kept(tmp_path):
     assert scale.applies_to("box", "studio")
     assert not scale.applies_to("box", "white")
     assert loaded.controls[0].applies_to("box", "white")
+
+
+# -- maps with light, and the size of a plan ---------------------------------------------------
+
+
+def test_maps_with_light_load_and_a_few_negative_pixels_only_warn(tmp_path, caplog):
+    sky = np.full((40, 16, 3), 0.8)
+    sky[3, 5] = -0.01  # filtering rings around a sun are legal, but not physical: 3 of 1920 values
+    (tmp_path / "sky.exr").write_bytes(files.exr(sky, zip_compressed=True))
+    (tmp_path / "lit.hdr").write_bytes(files.hdr(np.random.default_rng(0).random((6, 64, 3))))
+    (tmp_path / "lit.exr").write_bytes(files.exr(np.full((4, 8, 3), 2.0)))
+    warnings = {}
+    for name in ("sky.exr", "lit.hdr", "lit.exr"):
+        caplog.clear()
+        path = write_spec(tmp_path, BASE.replace('"builtin:studio"', f'"{name}"'))
+        assert load_spec(path).hdris["studio"] == str(tmp_path / name)
+        warnings[name] = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
+    assert warnings["lit.hdr"] == warnings["lit.exr"] == []
+    (line,) = warnings["sky.exr"]
+    assert line.startswith(f"warning: {path}: environments[1].hdri: sky.exr: 0.16% of the map's colour values")
+    assert "negative" in line and "clamp them to 0" in line
+
+
+def test_plan_refuses_a_billion_jobs_in_one_line_and_warns_of_hours_of_rendering(tmp_path):
+    huge = BASE.replace("yaw = [0, 45]", "yaw = { range = [0, 90] }\npitch = { range = [0, 90] }").replace(
+        "sigma = [0.0, 1.5]", "sigma = { range = [0, 2] }").replace('type = "grid"', 'type = "grid"\nsamples_per_dim = 800')
+    result = CliRunner().invoke(app, ["plan", str(write_spec(tmp_path, huge))])
+    assert result.exit_code == 2
+    (line,) = [line for line in result.output.splitlines() if line.strip()]
+    assert "policy: the spec expands to 1,024,000,000 jobs, over the limit of 100,000" in line
+
+    slow = BASE.replace("resolution = 32", "resolution = 224").replace("samples = 1", "samples = 65536")
+    result = CliRunner().invoke(app, ["plan", str(write_spec(tmp_path, slow))])
+    assert result.exit_code == 0, result.output
+    warning = [line for line in result.output.splitlines() if line.startswith("warning:")]
+    assert len(warning) == 1 and "4 renders at about 37.1 min each" in result.output
+    assert "over render.timeout = 600 s" in result.output and "lower [render] samples" in result.output
+
+
+# -- files this user may not read ------------------------------------------------------------
+#
+# Root reads any file whatever its mode, so these run `sweep3d plan` in a child process without
+# the capabilities that let root ignore permissions (setpriv), or as they are for any other user.
+
+UNREADABLE_SCRIPT = """
+import json, sys
+from typer.testing import CliRunner
+from sweep3d.cli import app
+try:
+    open(sys.argv[1], "rb").close()
+    print(json.dumps({"skip": "this process reads a chmod 000 file: permissions cannot be tested here"}))
+except PermissionError:
+    print(json.dumps({case: [r.exit_code, r.output] for case, spec in json.loads(sys.argv[2]).items()
+                      for r in [CliRunner().invoke(app, ["plan", spec])]}))
+"""
+TEXTURED_OBJ = "mtllib box.mtl\nusemtl skin\n" + CUBE_OBJ
+UNREADABLE = {  # case: (mesh, HDRI, extra controls, the path made unreadable, the key named)
+    "mesh": ("cube.obj", "builtin:studio", "", "cube.obj", "objects[0].mesh"),
+    "mesh-folder": ("private/cube.obj", "builtin:studio", "", "private", "objects[0].mesh"),
+    "zip-archive": ("kit.zip#box/box.obj", "builtin:studio", "", "kit.zip", "objects[0].mesh"),
+    "mtl-library": ("textured.obj", "builtin:studio", "", "box.mtl", "objects[0].mesh"),
+    "texture-of-the-mesh": ("textured.obj", "builtin:studio", "", "skin.png", "objects[0].mesh"),
+    "hdri": ("cube.obj", "sky.hdr", "", "sky.hdr", "environments[1].hdri"),
+    "material-image": ("cube.obj", "builtin:studio", '[[controls]]\ntype = "material"\nskin = "image"\n'
+                       'image = "wood.png"\n', "wood.png", "controls[2].image"),
+}
+
+
+def _unreadable_case(folder: Path, mesh: str, hdri: str, controls: str, hidden: str) -> Path:
+    folder.mkdir()
+    write_cube(folder)
+    (folder / "private").mkdir()
+    write_cube(folder / "private")
+    _zip(folder / "kit.zip", "box/box.obj", CUBE_OBJ)
+    (folder / "textured.obj").write_text(TEXTURED_OBJ)
+    (folder / "box.mtl").write_text("newmtl skin\nmap_Kd skin.png\n")
+    (folder / "skin.png").write_bytes(_png(np.full((4, 4, 3), 200, np.uint8)))
+    (folder / "wood.png").write_bytes(_png(np.full((4, 4, 3), 120, np.uint8)))
+    (folder / "sky.hdr").write_bytes(files.hdr(np.full((4, 16, 3), 0.5)))
+    spec = write_spec(folder, BASE.replace('mesh = "cube.obj"', f'mesh = "{mesh}"')
+                      .replace('"builtin:studio"', f'"{hdri}"') + controls, cube=False)
+    (folder / hidden).chmod(0)
+    return spec
+
+
+@pytest.fixture(scope="module")
+def unreadable(tmp_path_factory) -> dict[str, tuple[Path, int, str]]:
+    """case -> (spec, exit code, output) of `sweep3d plan` by a user who may not read one of its files."""
+    root = tmp_path_factory.mktemp("unreadable")
+    specs = {case: _unreadable_case(root / case, *setup[:4]) for case, setup in UNREADABLE.items()}
+    probe = root / "probe"
+    probe.write_bytes(b"")
+    probe.chmod(0)
+    command = [sys.executable, "-c", UNREADABLE_SCRIPT, str(probe), json.dumps({c: str(s) for c, s in specs.items()})]
+    if os.geteuid() == 0:
+        if shutil.which("setpriv") is None:
+            pytest.skip("running as root without setpriv: cannot drop the right to read any file")
+        command = ["setpriv", "--bounding-set", "-dac_override,-dac_read_search", *command]
+    done = subprocess.run(command, capture_output=True, text=True, timeout=300,
+                          env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])})
+    if done.returncode != 0 and "setpriv" in done.stderr:
+        pytest.skip(f"setpriv cannot drop capabilities here: {done.stderr.strip()}")
+    assert done.returncode == 0, done.stderr
+    results = json.loads(done.stdout.strip().splitlines()[-1])
+    if "skip" in results:
+        pytest.skip(results["skip"])
+    return {case: (specs[case], *results[case]) for case in specs}
+
+
+@pytest.mark.parametrize("case", UNREADABLE)
+def test_a_file_this_user_cannot_read_is_one_line_naming_the_key_and_the_file(unreadable, case):
+    spec, code, output = unreadable[case]
+    key, hidden = UNREADABLE[case][4], UNREADABLE[case][3]
+    assert code == 2, output
+    assert "Traceback" not in output
+    (line,) = [line for line in output.splitlines() if line.strip()]
+    assert line.startswith(f"error: {spec}: {key}: ") and "permission denied" in line, line
+    fix = "chmod a+x" if case == "mesh-folder" else "chmod a+r"  # a folder that may not be searched
+    assert str(spec.parent / hidden) in line and fix in line, line
+
+
+def test_run_warns_before_hours_of_rendering_but_not_before_minutes(tmp_path):
+    from rich.console import Console
+
+    from sweep3d.cache.store import Store
+    from sweep3d.pipeline import _warn_if_slow
+    from sweep3d.stages.render import LOCAL
+    from tests.conftest import plan_for
+
+    console = Console(record=True, width=400)
+    big = BASE.replace("resolution = 32", "resolution = 4096").replace("samples = 1", "samples = 4")
+    _warn_if_slow(plan_for(load_spec(write_spec(tmp_path, big)), "m"), Store(tmp_path / "store"), LOCAL, console)
+    assert console.export_text() == ""  # 4 renders of about a minute: no warning
+    slow = BASE.replace("resolution = 32", "resolution = 1024").replace("samples = 1", "samples = 2048")
+    _warn_if_slow(plan_for(load_spec(write_spec(tmp_path, slow)), "m"), Store(tmp_path / "store"), LOCAL, console)
+    (line,) = console.export_text().splitlines()
+    assert line.startswith("warning: 4 renders at about 24.3 min each (1024² pixels, 2048 samples) would take "
+                           "about 1.6 h on 2 CPU cores, and each is over render.timeout = 600 s"), line

@@ -126,7 +126,20 @@ def test_segment_writer_flushes_on_exit(tmp_path):
 def test_blob_paths_shard_by_key_prefix(tmp_path):
     store = Store(tmp_path)
     assert store.blob_path("abcdef") == tmp_path / "blobs" / "ab" / "abcdef.png"
-    assert store.jobs_path("my exp/1").name == "my_exp_1.parquet"
+    assert store.jobs_path("quickstart").name == "quickstart.parquet"  # safe names keep their paths
+
+
+def test_experiment_names_never_share_a_jobs_file(tmp_path):
+    """``a/b`` and ``a_b`` once both wrote jobs/a_b.parquet; a name is its own file name only when safe."""
+    store = Store(tmp_path)
+    names = ["a/b", "a_b", "a b", "a\\b", "a_b~", "A_b", "x" * 200, "x" * 199 + "y", "é/1", "é_1", ".", ".."]
+    paths = {store.jobs_path(name) for name in names}
+    assert len(paths) == len(names)
+    assert all(p.parent == tmp_path / "jobs" and len(p.name.encode()) < 160 for p in paths)
+    assert store.jobs_path("my-exp_1.0").name == "my-exp_1.0.parquet"
+    assert store.jobs_path("my exp/1").name.startswith("my_exp_1~")
+    assert store.jobs_path("a/b") == store.jobs_path("a/b")  # and the same name always the same file
+    assert len({store.report_path(name) for name in names}) == len(names)
 
 
 # -- the writer lock -------------------------------------------------------------------------

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import errno
 import fcntl
+import hashlib
 import json
 import logging
 import os
@@ -49,6 +50,7 @@ WRITE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES,
 READ_ERRORS = (OSError, ValueError, pa.ArrowException)
 
 log = logging.getLogger("sweep3d.store")
+MAX_FILENAME_BYTES = 120  # of an experiment's name in file names: with suffixes, well under 255
 
 
 class StoreWriteError(UserError):
@@ -471,8 +473,18 @@ def is_select(statement: str) -> bool:
 
 
 def safe_filename(name: str) -> str:
-    """``name`` with every character outside letters, digits, ``-_.`` replaced by ``_``."""
-    return "".join(c if c.isalnum() or c in "-_." else "_" for c in name)
+    """A file name for ``name`` that no other name maps to.
+
+    A short name of letters, digits and ``-_.`` is its own file name (existing stores keep their
+    paths). Any other keeps those characters, replaces the rest with ``_`` and adds ``~`` and a
+    hash of the exact name: ``a/b`` and ``a_b`` once shared a jobs file, and ``~`` never appears
+    in a name that is its own file name.
+    """
+    safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in name)
+    if safe == name and len(name.encode()) <= MAX_FILENAME_BYTES:
+        return name
+    short = safe.encode()[:MAX_FILENAME_BYTES].decode(errors="ignore")
+    return f"{short}~{hashlib.sha256(name.encode()).hexdigest()[:16]}"
 
 
 def utc_now() -> datetime:

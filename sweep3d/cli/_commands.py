@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import math
 from typing import Callable
 
 import typer
@@ -32,3 +33,11 @@ def registrar(app: typer.Typer) -> Callable[[Callable], Callable]:
         return app.command()(wrapper)
 
     return command
+
+
+def check_wait(seconds: float) -> float:
+    """``--wait``, refused when negative or not finite (typer reads ``-5`` and ``nan`` as floats)."""
+    if not (math.isfinite(seconds) and seconds >= 0):
+        raise UserError(f"--wait {seconds:g}: give the seconds to wait for the store's lock, a finite number >= 0 "
+                        "(0: do not wait)")
+    return seconds

@@ -13,7 +13,7 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
-from sweep3d.cli._commands import registrar
+from sweep3d.cli._commands import check_wait, registrar
 from sweep3d.errors import UserError
 
 app = typer.Typer(
@@ -53,6 +53,7 @@ def run(
     from sweep3d.stages import load_spec
     from sweep3d.stages.render.stage import Executor
 
+    check_wait(wait)
     loaded = load_spec(spec)
     signal.signal(signal.SIGTERM, _interrupt)  # clean up workers and scratch files as on Ctrl-C
     if executor not in ("local", "ray"):

@@ -13,7 +13,7 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
-from sweep3d.cli._commands import registrar
+from sweep3d.cli._commands import check_wait, registrar
 from sweep3d.errors import UserError
 
 cache_app = typer.Typer(no_args_is_help=True, help="Check and tidy a spec's store: verify, gc, compact, stats.")
@@ -48,6 +48,7 @@ def verify(
     from sweep3d.cache.maintenance import verify as verify_store
     from sweep3d.cache.store import Store
 
+    check_wait(wait)
     root = _store_root(spec)
     report = verify_store(root)
     console.print(f"checked {report.segments} segments ({report.rows} rows) and {report.blobs} blobs in "
@@ -81,6 +82,7 @@ def gc(
     from sweep3d.cache.maintenance import collect_garbage
     from sweep3d.cache.store import Store
 
+    check_wait(wait)
     root = _store_root(spec)
     with Store(root).lock(wait):
         out = collect_garbage(root, older_than, purge_quarantine)
@@ -95,6 +97,7 @@ def compact(spec: Path = SpecArg, wait: float = WaitOption) -> None:
     from sweep3d.cache.maintenance import compact_table
     from sweep3d.cache.store import TABLES, Store
 
+    check_wait(wait)
     root = _store_root(spec)
     store = Store(root)
     with store.lock(wait):

@@ -15,26 +15,15 @@ from sweep3d.stages.infer import InferStage, ModelHandle
 from sweep3d.stages.plan import Plan
 from sweep3d.stages.postprocess import PostprocessStage
 from sweep3d.stages.render import RenderStage
+from sweep3d.stages.render.estimate import duration, estimate_render_seconds, slow_render_warning
 
-# Fallback per-image costs on a 2-core CPU (measured with bench), when the store has no history.
-SECONDS_PER_SAMPLE_224 = 0.034
-DENOISE_SECONDS_224 = {"fast": 0.04, "accurate": 0.3, "none": 0.02}
-INFER_SECONDS = 0.05
+INFER_SECONDS = 0.05  # per image on a 2-core CPU (render costs: stages/render/estimate.py)
 
 
 def cache_status(plan: Plan, store: Store, model: ModelHandle) -> list[tuple[str, int, int]]:
     """(stage, distinct keys needed, keys already stored) for render, postprocess and infer."""
     return [(stage.name, *plan_status(stage, plan, store))
             for stage in (RenderStage(), PostprocessStage(), InferStage(model))]
-
-
-def estimate_render_seconds(spec: LoadedSpec, pixels: int) -> float:
-    """A rough per-render cost from the settings and the rendered side in pixels (measured on 2
-    CPU cores; see docs/architecture.md)."""
-    r = spec.render
-    scale = (pixels / 224) ** 2
-    denoise = DENOISE_SECONDS_224[r.denoise_prefilter] if r.denoise else 0.0
-    return (SECONDS_PER_SAMPLE_224 * r.samples + denoise + 0.02) * scale
 
 
 def print_plan(console: Console, spec: LoadedSpec) -> None:
@@ -47,12 +36,13 @@ def print_plan(console: Console, spec: LoadedSpec) -> None:
                   f"({len(spec.objects)} objects × {len(spec.environments)} environments), "
                   f"policy {spec.spec.policy.type}; store {escape(str(spec.store))}")
     table = Table("stage", "needed", "cached", "to compute", "estimate")
-    per_item = {"render": estimate_render_seconds(spec, plan.framing.crop), "postprocess": 0.005, "infer": INFER_SECONDS}
+    per_item = {"render": estimate_render_seconds(spec.render, plan.framing.crop), "postprocess": 0.005,
+                "infer": INFER_SECONDS}
     total = 0.0
     for stage, needed, cached in status:
         seconds = (needed - cached) * per_item[stage]
         total += seconds
-        table.add_row(stage, str(needed), str(cached), str(needed - cached), _duration(seconds))
+        table.add_row(stage, str(needed), str(cached), str(needed - cached), duration(seconds))
     console.print(table)
     if plan.out_of_frame:
         console.print(f"{len(plan.out_of_frame)} jobs put the object wholly out of frame: flagged, not rendered")
@@ -62,7 +52,9 @@ def print_plan(console: Console, spec: LoadedSpec) -> None:
     if spec.policy.adaptive:
         console.print(f"adaptive policy: this is its first round; it proposes up to "
                       f"{spec.policy.params.samples} jobs per scene as results come in")
-    console.print(f"estimated time: {_duration(total)} (plus ~5 s start-up when anything needs rendering)")
+    console.print(f"estimated time: {duration(total)} (plus ~5 s start-up when anything needs rendering)")
+    to_render = {stage: needed - cached for stage, needed, cached in status}["render"]
+    print_warning(console, slow_render_warning(spec.render, plan.framing.crop, to_render))
 
 
 def print_run(console: Console, result) -> None:
@@ -97,12 +89,10 @@ def print_findings(console: Console, plan: Plan) -> None:
             f"{escape(r.column)} = {escape(r.label)} ({r.accuracy:.0%} of {r.count})" for r in regions))
 
 
-def _duration(seconds: float) -> str:
-    if seconds < 60:
-        return f"{seconds:.0f} s"
-    if seconds < 3600:
-        return f"{seconds / 60:.1f} min"
-    return f"{seconds / 3600:.1f} h"
+def print_warning(console: Console, line: str | None) -> None:
+    """A warning as one yellow line (nothing for None)."""
+    if line:
+        console.print(f"[bold yellow]warning:[/] {escape(line)}", highlight=False, soft_wrap=True)
 
 
 def print_bench(console: Console, rows, best, current, agreement: float) -> None:

@@ -18,6 +18,7 @@ from pathlib import Path
 
 from sweep3d.cache.keys import digest, files_digest
 from sweep3d.errors import UserError
+from sweep3d.spec.sniff import check_file, unreadable
 
 MESH_SUFFIXES = {".obj", ".gltf", ".glb", ".ply", ".stl"}
 HDRI_SUFFIXES = {".exr", ".hdr", ".png", ".jpg", ".jpeg", ".tif", ".tiff"}
@@ -56,8 +57,7 @@ def resolve_hdri(ref: str, base: Path) -> str:
         return str(maps[name])
     path = Path(ref).expanduser()
     path = path if path.is_absolute() else base / path
-    if not path.is_file():
-        raise UserError(f"HDRI file {str(path)!r} does not exist; give a path relative to the spec, or builtin:NAME")
+    check_file(path, "HDRI file", "give a path relative to the spec, or builtin:NAME")
     if path.suffix.lower() not in HDRI_SUFFIXES:
         raise UserError(f"{path.name!r} is not an image Blender reads as an HDRI ({', '.join(sorted(HDRI_SUFFIXES))})")
     return str(path.resolve())
@@ -68,8 +68,7 @@ def resolve_mesh(ref: str, base: Path) -> str:
     archive, sep, member = ref.partition("#")
     path = Path(archive).expanduser()
     path = path if path.is_absolute() else base / path
-    if not path.is_file():
-        raise UserError(f"mesh file {str(path)!r} does not exist; give a path relative to the spec file")
+    check_file(path, "mesh file", "give a path relative to the spec file")
     suffix = Path(member if sep else archive).suffix.lower()
     if suffix not in MESH_SUFFIXES:
         raise UserError(f"unsupported mesh format {suffix or '(none)'!r}; use one of {', '.join(sorted(MESH_SUFFIXES))}")
@@ -80,6 +79,8 @@ def resolve_mesh(ref: str, base: Path) -> str:
                     raise UserError(f"{path.name} has no member {member!r}")
         except zipfile.BadZipFile:
             raise UserError(f"{str(path)!r} is not a zip archive, so '#member' cannot be read from it") from None
+        except OSError as exc:
+            raise unreadable(exc, "mesh archive", path) from None
         return f"{path.resolve()}#{member}"
     return str(path.resolve())
 
@@ -93,12 +94,23 @@ def materialise_mesh(ref: str, scratch: Path) -> Path:
     target = scratch / "assets" / digest([archive, member])[:16]
     done = target / ".complete"
     if not done.exists():
-        with zipfile.ZipFile(archive) as zf:
-            for name in zf.namelist():
-                if name.startswith(folder) and not name.endswith("/") and name.count("/") == member.count("/"):
-                    zf.extract(name, target)
-        done.write_text("ok")
+        try:
+            _extract(archive, member, folder, target)
+            done.write_text("ok")
+        except OSError as exc:
+            if not str(exc.filename or "").startswith(str(scratch)):
+                raise  # reading the archive: the caller names the file
+            raise UserError(f"cannot extract {member} into {str(target)!r}: {exc.strerror}; the store must be "
+                            "writable") from None
     return target / member
+
+
+def _extract(archive: str, member: str, folder: str, target: Path) -> None:
+    """Extract ``member``'s folder (its materials and textures) from ``archive`` into ``target``."""
+    with zipfile.ZipFile(archive) as zf:
+        for name in zf.namelist():
+            if name.startswith(folder) and not name.endswith("/") and name.count("/") == member.count("/"):
+                zf.extract(name, target)
 
 
 def mesh_files(path: Path) -> list[Path]:
@@ -136,5 +148,12 @@ def _referenced(path: Path, pattern: str) -> list[str]:
 
 
 def mesh_digest(ref: str, scratch: Path) -> str:
-    """Content digest of a mesh and everything it references."""
-    return files_digest(mesh_files(materialise_mesh(ref, scratch)))
+    """Content digest of a mesh and everything it references.
+
+    Raises:
+        UserError: one of those files cannot be read, or a zip member cannot be extracted.
+    """
+    try:
+        return files_digest(mesh_files(materialise_mesh(ref, scratch)))
+    except OSError as exc:
+        raise unreadable(exc, "the mesh's file") from None

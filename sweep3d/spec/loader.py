@@ -7,6 +7,7 @@ what is expected, so the CLI can print one line instead of a traceback.
 from __future__ import annotations
 
 import difflib
+import logging
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -37,9 +38,10 @@ from sweep3d.spec.params import (
     Space,
     parse_space,
 )
-from sweep3d.spec.sniff import check_hdri, check_mesh
+from sweep3d.spec.sniff import check_file, check_hdri, check_mesh
 
 RESERVED_CONTROL_KEYS = {"type", "id", "objects", "environments"}
+log = logging.getLogger("sweep3d.spec")
 
 
 @dataclass(frozen=True)
@@ -151,10 +153,12 @@ def load_spec(path: str | Path, catalogue: Catalogue) -> LoadedSpec:
     for i, env in enumerate(spec.environments):
         try:
             hdris[env.name] = resolve_hdri(env.hdri, base) if env.hdri else None
-            if hdris[env.name]:
-                check_hdri(hdris[env.name])
+            # the built-in maps are known to be good (and DWA-compressed, which radiance does not read)
+            warning = check_hdri(hdris[env.name], pixels=not env.hdri.startswith("builtin:")) if env.hdri else None
         except UserError as exc:
             raise fail(f"environments[{i}].hdri", _naming(env.hdri or "", exc)) from None
+        if warning:
+            log.warning(f"warning: {path}: environments[{i}].hdri: {_naming(env.hdri or '', warning)}")
 
     _check_model(spec, fail, catalogue)
     labels = _resolve_labels(spec, fail, catalogue)
@@ -166,9 +170,9 @@ def load_spec(path: str | Path, catalogue: Catalogue) -> LoadedSpec:
     return LoadedSpec(path, spec, store, meshes, hdris, labels, controls, policy)
 
 
-def _naming(ref: str, exc: UserError) -> str:
-    """The error's message, prefixed with the file as the spec gives it unless it already says it."""
-    message = str(exc)
+def _naming(ref: str, problem: UserError | str) -> str:
+    """The problem's message, prefixed with the file as the spec gives it unless it already says it."""
+    message = str(problem)
     name = Path(ref.partition("#")[2] or ref).name
     return message if name and name in message else f"{ref}: {message}"
 
@@ -319,8 +323,10 @@ def _resolve_paths(space: Space, base: Path, key: str, fail) -> Space:
             return value
         path = Path(value).expanduser()
         path = path if path.is_absolute() else base / path
-        if not path.is_file():
-            raise fail(key, f"no such file {value!r} (paths are relative to the spec file)")
+        try:
+            check_file(path, "file", "paths are relative to the spec file")
+        except UserError as exc:
+            raise fail(key, _naming(value, exc)) from None
         return str(path.resolve())
 
     if isinstance(space, Choice):

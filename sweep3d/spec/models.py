@@ -25,6 +25,17 @@ class ExperimentSpec(StrictModel):
     name: Name = Field(description="Shown in the report; names the run's jobs table.")
     seed: int = Field(0, ge=0, le=2**63 - 1, description="Drives random policies and noise.")
     store: str = Field(".sweep3d", description="Content-addressed store; relative to the spec file.")
+    max_jobs: int = Field(100_000, ge=1, description="Refuse a spec that expands to more jobs (counted before "
+                                                     "any is made); raise it for a bigger sweep.")
+
+    @field_validator("store")
+    @classmethod
+    def _names_a_folder(cls, store: str) -> str:
+        """An empty path would make the spec's own folder the store, filling it with blobs and tables."""
+        if not store.strip():
+            raise ValueError("must name the store's folder (relative to the spec file), e.g. \".sweep3d\"; "
+                             "an empty path would make the spec's own folder the store")
+        return store
 
 
 class RenderSpec(StrictModel):

@@ -8,12 +8,14 @@ the model: the Blender version and the model's digest are inputs.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Callable
 
 from sweep3d.cache.keys import digest, file_digest
+from sweep3d.errors import SpecError, UserError
 from sweep3d.spec.assets import mesh_digest
 from sweep3d.spec.framing import Framing
 from sweep3d.spec.loader import ControlInstance, LoadedSpec
+from sweep3d.spec.sniff import unreadable
 from sweep3d.spec.space import Point, SearchSpace
 from sweep3d.stages.infer.keys import infer_base, pred_key
 from sweep3d.stages.jobs import Job, Plan
@@ -37,6 +39,7 @@ def make_plan(spec: LoadedSpec, *, framing: Framing, model_digest: str, blender:
         history: for adaptive policies, the outcomes so far per (object, environment); the
             policy then proposes its next round on top of the points already evaluated.
     """
+    check_size(spec)
     rendered = sorted((c for c in spec.controls if c.control.stage == "render"),
                       key=lambda c: (c.control.order, spec.controls.index(c)))
     post = [c for c in spec.controls if c.control.stage == "post"]
@@ -45,18 +48,21 @@ def make_plan(spec: LoadedSpec, *, framing: Framing, model_digest: str, blender:
                       spec.model.backend)
     jobs: list[Job] = []
     out_of_frame: list[Job] = []
-    for obj in spec.objects:
-        object_digest = mesh_digest(spec.meshes[obj.name], spec.store)
+    hdri_digests = _hdri_digests(spec)
+    for i, obj in enumerate(spec.objects):
+        object_digest = _asset_digest(spec, f"objects[{i}].mesh", mesh_digest, spec.meshes[obj.name], spec.store)
         truth = list(spec.labels[obj.name])
         for env in spec.environments:
-            hdri = spec.hdris[env.name]
             scene = scene_key(blender, settings, object_digest,
-                              {"hdri": file_digest(hdri) if hdri else None,
+                              {"hdri": hdri_digests[env.name],
                                "color": list(env.color) if env.color else None, "strength": env.strength})
             scene_controls = [c for c in spec.controls if c.applies_to(obj.name, env.name)]
             space = SearchSpace(scene_controls)
             seed = int(digest([spec.experiment.seed, obj.name, env.name])[:15], 16)
-            for point in spec.policy.points(space.shape, seed, (history or {}).get((obj.name, env.name), {})):
+            points = spec.policy.points(space.shape, seed, (history or {}).get((obj.name, env.name), {}))
+            if len(jobs) + len(out_of_frame) + len(points) > spec.experiment.max_jobs:  # a policy that cannot count
+                raise _too_many(spec, f"more than {spec.experiment.max_jobs:,}")
+            for point in points:
                 values = space.values(point)
                 models = {c.id: c.control.params(values[c.id]) for c in scene_controls}
                 params = {key: model.model_dump() for key, model in models.items()}
@@ -67,6 +73,60 @@ def make_plan(spec: LoadedSpec, *, framing: Framing, model_digest: str, blender:
                           parts_key(render) if spec.report.part_visibility else None)
                 (jobs if _in_frame(rendered, models) else out_of_frame).append(job)
     return Plan(spec, jobs, model_digest, out_of_frame, framing)
+
+
+def _hdri_digests(spec: LoadedSpec) -> dict[str, str | None]:
+    """Each environment's HDRI content digest (None for a plain colour)."""
+    out: dict[str, str | None] = {}
+    for i, env in enumerate(spec.environments):
+        hdri = spec.hdris[env.name]
+        out[env.name] = _asset_digest(spec, f"environments[{i}].hdri", file_digest, hdri) if hdri else None
+    return out
+
+
+def _asset_digest(spec: LoadedSpec, key: str, compute: Callable[..., str], *args: Any) -> str:
+    """``compute(*args)``, with a file that cannot be read (since the spec was loaded) as one line naming ``key``."""
+    try:
+        return compute(*args)
+    except UserError as exc:
+        raise spec.fail(key, str(exc)) from None
+    except OSError as exc:
+        raise spec.fail(key, str(unreadable(exc, "file"))) from None
+
+
+def count_jobs(spec: LoadedSpec) -> int | None:
+    """How many jobs ``spec`` expands to (out-of-frame ones included), from the policy and each
+    scene's space alone, without making any; None when the policy cannot count its points."""
+    per_space: dict[tuple[int, ...], int | None] = {}  # scenes share a space when the same controls apply
+    total = 0
+    for obj in spec.objects:
+        for env in spec.environments:
+            applying = tuple(i for i, c in enumerate(spec.controls) if c.applies_to(obj.name, env.name))
+            if applying not in per_space:
+                per_space[applying] = spec.policy.count(SearchSpace([spec.controls[i] for i in applying]).shape)
+            if per_space[applying] is None:
+                return None
+            total += per_space[applying]
+    return total
+
+
+def check_size(spec: LoadedSpec) -> None:
+    """Refuse a spec that expands to more than ``[experiment] max_jobs`` jobs, before anything is made.
+
+    Raises:
+        SpecError: naming the count, the limit and what to lower.
+    """
+    jobs = count_jobs(spec)
+    if jobs is not None and jobs > spec.experiment.max_jobs:
+        raise _too_many(spec, f"{jobs:,}")
+
+
+def _too_many(spec: LoadedSpec, jobs: str) -> SpecError:
+    kind = spec.spec.policy.type
+    knob = ("policy.samples_per_dim or the number of listed values" if kind == "grid" else
+            "policy.samples" if kind in ("random", "sobol", "adaptive") else "the policy's parameters")
+    return spec.fail("policy", f"the spec expands to {jobs} jobs, over the limit of {spec.experiment.max_jobs:,}; "
+                               f"lower {knob} (or the objects and environments), or raise [experiment] max_jobs")
 
 
 def _post_seed(spec: LoadedSpec, post: list[ControlInstance], params: dict[str, dict[str, Any]]) -> int | None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import math
 from dataclasses import dataclass
 from typing import ClassVar, Mapping
 
@@ -42,6 +43,13 @@ class Policy:
     def points(self, shape: SpaceShape, seed: int, history: Mapping[Point, Outcome]) -> list[Point]:
         raise NotImplementedError
 
+    def count(self, shape: SpaceShape) -> int | None:
+        """How many points ``points`` returns for ``shape`` (at most, over all rounds of an adaptive
+        policy), known without making them, so a plan too big to hold is refused before it is
+        expanded. None: this policy cannot say (the planner then counts points as they come).
+        """
+        return None
+
 
 POLICIES: Registry[type[Policy]] = Registry("policy")
 
@@ -67,6 +75,9 @@ class GridPolicy(Policy):
             out.append(Point(unit, tuple(int(c) for c in combo[shape.n_continuous :])))
         return out
 
+    def count(self, shape: SpaceShape) -> int:
+        return self.params.samples_per_dim ** shape.n_continuous * math.prod(shape.choice_sizes)
+
 
 @POLICIES.register("random")
 class RandomPolicy(Policy):
@@ -83,6 +94,9 @@ class RandomPolicy(Policy):
         return [
             Point(tuple(float(u) for u in unit[i]), tuple(int(c[i]) for c in choice)) for i in range(n)
         ]
+
+    def count(self, shape: SpaceShape) -> int:
+        return self.params.samples
 
 
 @POLICIES.register("sobol")
@@ -107,6 +121,9 @@ class SobolPolicy(Policy):
             unit = qmc.Sobol(d=dims, scramble=True, seed=np.random.default_rng(seed)).random(n)
         choice = [np.minimum((unit[:, k + j] * size).astype(int), size - 1) for j, size in enumerate(shape.choice_sizes)]
         return [Point(tuple(float(u) for u in unit[i, :k]), tuple(int(c[i]) for c in choice)) for i in range(n)]
+
+    def count(self, shape: SpaceShape) -> int:
+        return self.params.samples if shape.n_continuous or shape.choice_sizes else 1
 
 
 @POLICIES.register("adaptive")
@@ -146,6 +163,10 @@ class AdaptivePolicy(Policy):
             points += fresh
             round_index += 1
         return points
+
+    def count(self, shape: SpaceShape) -> int:
+        """The budget: the most points its rounds can reach (one in a space with nothing to vary)."""
+        return self.params.samples if shape.n_continuous or shape.choice_sizes else 1
 
     def _round(self, shape: SpaceShape, points: list[Point], history: Mapping[Point, Outcome],
                rng: np.random.Generator, n: int, radius: float) -> list[Point]:
