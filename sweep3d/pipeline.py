@@ -18,9 +18,9 @@ from dataclasses import dataclass, field
 from rich.console import Console
 from rich.markup import escape
 
-from sweep3d.cache.maintenance import compact_table
+from sweep3d.cache.maintenance import compact_table, remove_killed_writers_temp_files
 from sweep3d.cache.store import TABLES, Store, utc_now
-from sweep3d.errors import SpecError, UserError
+from sweep3d.errors import RenderError, SpecError, UserError
 from sweep3d.progress import RunProgress
 from sweep3d.spec.assets import blender_version
 from sweep3d.spec.loader import LoadedSpec
@@ -31,6 +31,7 @@ from sweep3d.stages.plan import History, Outcome, Plan, make_plan
 from sweep3d.stages.postprocess import PostprocessStage
 from sweep3d.stages.render import LOCAL, Executor, RenderStage
 from sweep3d.stages.render.estimate import slow_render_warning
+from sweep3d.stages.render.pool import remove_stale_scratch, scratch_root
 
 AUTO_COMPACT_SEGMENTS = 64  # a run ends by merging a table's segments beyond this many
 
@@ -112,8 +113,7 @@ def _run_locked(spec: LoadedSpec, store: Store, console: Console | None, wait: f
     with store.lock(wait):
         started = time.perf_counter()  # time spent waiting for the lock is not the run's
         started_at = utc_now()
-        for table in TABLES:
-            store.sweep_superseded(table)  # segments an earlier compaction merged, past their grace
+        remove_leftovers(store)
         model = ModelHandle.resolve(spec)
         result = RunResult(uuid.uuid4().hex[:12], plan_spec(spec, model))
         _warn_if_slow(result.plan, store, executor, console)
@@ -130,6 +130,9 @@ def _run_locked(spec: LoadedSpec, store: Store, console: Console | None, wait: f
                 except KeyboardInterrupt:
                     write_jobs(plan, store)  # what finished is stored: let query and report show it
                     raise
+                except RenderError as exc:  # a worker died while starting: Blender or the machine
+                    write_jobs(plan, store)
+                    raise RenderError(f"{exc}; what finished is stored: run again to resume") from None
                 write_jobs(plan, store)
                 result.outcomes = merge_outcomes(result.outcomes, outcomes)
                 grown = len(plan.jobs) > len(result.plan.jobs) or not history
@@ -154,6 +157,16 @@ def _warn_if_slow(plan: Plan, store: Store, executor: Executor, console: Console
     line = slow_render_warning(plan.spec.render, plan.framing.crop, needed - cached)
     if line and console is not None:
         console.print(f"[bold yellow]warning:[/] {escape(line)}", highlight=False, soft_wrap=True)
+
+
+def remove_leftovers(store: Store) -> None:
+    """Remove what killed runs left (call it holding the lock, before writing): their temp files,
+    segments an earlier compaction merged (past their grace), and workers' scratch folders, which
+    SIGKILL keeps from cleaning up and which no pool would remove on a run that renders nothing."""
+    remove_killed_writers_temp_files(store.root)
+    for table in TABLES:
+        store.sweep_superseded(table)
+    remove_stale_scratch(scratch_root())
 
 
 def compact_crowded_tables(store: Store, limit: int = AUTO_COMPACT_SEGMENTS) -> list[str]:

@@ -23,6 +23,7 @@ from sweep3d.cache.blobs import damaged_blobs, memo_path, sha256_bytes
 from sweep3d.cache.maintenance import (
     collect_garbage,
     compact_table,
+    remove_killed_writers_temp_files,
     repair,
     store_stats,
     verify,
@@ -546,3 +547,45 @@ def test_scratch_of_a_killed_run_is_removed_by_the_next_pool(tmp_path: Path) -> 
         (folder / "frame.png").write_bytes(b"x")
     assert remove_stale_scratch(tmp_path) == 1
     assert not dead.exists() and live.exists() and other.exists()
+
+
+def test_a_run_removes_every_temp_file_killed_writers_left_but_not_a_report_s(tmp_path: Path) -> None:
+    root = tmp_path / "store"
+    store = Store(root)
+    add_render(store, "aa01")
+    kept = tree(root)
+    killed = [store.table_dir("renders") / ".0001.parquet.dead.tmp", store.blob_path("bb02").with_name(".bb02.png.dead.tmp"),
+              root / "jobs" / ".tiny.parquet.dead.tmp", root / "models" / ".m.onnx.dead.tmp",
+              store.table_dir("runs") / ".compacted-0001.json.dead.tmp"]
+    unlocked = [store.report_path("tiny").with_name(".tiny.html.live.tmp"),  # `sweep3d report` takes no lock
+                root / "cache" / "paint" / "cc" / ".cc03-front.png.live.tmp"]
+    for path in killed + unlocked:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(b"half")  # just written: gc would keep them for an hour
+    assert remove_killed_writers_temp_files(root) == len(killed)
+    assert not any(p.exists() for p in killed) and all(p.exists() for p in unlocked)
+    for path in unlocked:
+        path.unlink()
+    assert tree(root) == kept
+
+
+def test_a_run_that_renders_nothing_still_removes_what_killed_runs_left(tiny_copy: Path) -> None:
+    from sweep3d.stages.render.pool import SCRATCH_PREFIX, scratch_root
+
+    root = tiny_copy / "store"
+    gone = subprocess.Popen([sys.executable, "-c", "pass"])
+    gone.wait()  # its pid names the scratch folder of a run killed with its workers
+    scratch = scratch_root() / f"{SCRATCH_PREFIX}{gone.pid}-killed"
+    temps = [Store(root).table_dir("renders") / ".0001.parquet.dead.tmp", root / "jobs" / ".tiny.parquet.dead.tmp"]
+    try:
+        (scratch / "uv").mkdir(parents=True)
+        (scratch / "frame.png").write_bytes(b"x")
+        for path in temps:
+            path.write_bytes(b"half")
+        result = run(load_spec(tiny_copy / "spec.toml"))
+        assert {o.stage: o.computed for o in result.outcomes} == {"render": 0, "postprocess": 0, "infer": 0}
+        assert not scratch.exists()
+        assert not any(p.exists() for p in temps)
+        assert verify(root).ok
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)

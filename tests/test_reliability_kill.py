@@ -6,12 +6,16 @@ The killed runs are real ``sweep3d run`` processes (real Blender, real model) st
 small harness that (a) drops marker files when a stage starts, so a kill can be aimed at a
 stage, and (b) pauses 0.4 s halfway through writing each Parquet segment, so a kill can land
 while a segment is half on disk. The product code runs unchanged.
+
+Also: a run killed alone (its workers are not) takes its render workers with it, and a worker
+killed while starting ends the run with one line, keeping what was rendered.
 """
 
 from __future__ import annotations
 
 import os
 import random
+import shutil
 import signal
 import subprocess
 import sys
@@ -81,9 +85,18 @@ main()
 '''
 
 
-def _tmp_files(store: Path, table: str) -> list[Path]:
+def _tmp_files(store: Path, table: str, since: float) -> list[Path]:
+    """Temp files of ``table`` written since ``since`` (a wall-clock time): a segment being written
+    now, not one an earlier kill left (which the run removes once it holds the lock)."""
     folder = store / "tables" / table
-    return list(folder.glob(".*.tmp")) if folder.is_dir() else []
+    out = []
+    for path in folder.glob(".*.tmp") if folder.is_dir() else []:
+        try:
+            if path.stat().st_mtime >= since:
+                out.append(path)
+        except FileNotFoundError:
+            pass
+    return out
 
 
 def _blobs_since(store: Path, since: float) -> int:
@@ -144,10 +157,10 @@ class Killer:
                 landed = "render"
             elif target == "infer-late" and _segments(self.store, "predictions") > predictions:
                 landed = "infer"  # just after a segment of predictions was committed
-            elif target == "segment" and any(_tmp_files(self.store, t) for t in ("renders", "images", "predictions")):
+            elif target == "segment" and any(_tmp_files(self.store, t, wall) for t in ("renders", "images", "predictions")):
                 landed = "segment"
             elif target == "infer":
-                if _tmp_files(self.store, "predictions"):
+                if _tmp_files(self.store, "predictions", wall):
                     landed = "segment"  # the inference's segment write came first: a kill mid-write
                 elif (self.markers / "predict").exists():
                     predicting_since = predicting_since or now
@@ -235,3 +248,135 @@ def test_twenty_kills_lose_nothing_and_the_resumed_run_equals_an_uninterrupted_o
     for a, b in zip(got, want):
         assert a[:8] == b[:8]  # job, scene, keys, top-1 label, correct
         assert a[8] == pytest.approx(b[8], abs=0.05)  # loss (renders may differ by 1 LSB across processes)
+
+
+# -- the parent alone killed; a worker killed while starting -------------------------------------
+
+ORPHAN_SPEC = SPEC.replace("samples_per_dim = 24", "samples_per_dim = 12")  # 24 renders
+
+
+def _session(sid: int) -> list[str]:
+    """The live processes of session ``sid`` ("pid state command"), as ``ps`` lists them (zombies,
+    dead and waiting for init to reap them, left out)."""
+    out = subprocess.run(["ps", "-s", str(sid), "-o", "pid=,stat=,args="], capture_output=True, text=True).stdout
+    return [line.strip() for line in out.splitlines() if line.strip() and line.split()[1][0] != "Z"]
+
+
+def _kill_session(sid: int) -> None:
+    """SIGKILL what is left of the test's session ``sid``, so a failing test leaves no orphan."""
+    for line in _session(sid):
+        try:
+            os.kill(int(line.split()[0]), signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+
+
+def _files(root: Path) -> dict[str, tuple[int, int]]:
+    """Every file under ``root`` with its size and modification time (ns)."""
+    out = {}
+    for path in root.rglob("*"):
+        try:
+            stat = path.stat()
+        except FileNotFoundError:
+            continue
+        if path.is_file():
+            out[str(path.relative_to(root))] = (stat.st_size, stat.st_mtime_ns)
+    return out
+
+
+def test_a_run_killed_alone_takes_its_render_workers_with_it(tmp_path: Path) -> None:
+    """``setsid sweep3d run & kill -9 $!``: no worker renders on, nor writes the store unlocked."""
+    from sweep3d.stages.render.pool import SCRATCH_PREFIX, scratch_root
+
+    write_spec(tmp_path, ORPHAN_SPEC)
+    store = tmp_path / "store"
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    with open(tmp_path / "stderr.txt", "w") as err:
+        proc = subprocess.Popen([sys.executable, "-m", "sweep3d", "run", "spec.toml", "--no-report"], cwd=tmp_path,
+                                env=env, start_new_session=True, stdout=subprocess.DEVNULL, stderr=err)
+    try:
+        deadline = time.monotonic() + 240
+        while _blobs_since(store, 0) < 2:  # rendering, with most of the 24 renders to go
+            assert proc.poll() is None and time.monotonic() < deadline, (tmp_path / "stderr.txt").read_text()
+            time.sleep(0.02)
+        assert len(_session(proc.pid)) >= 2, "a render worker runs beside the parent"
+        proc.kill()  # the parent only
+        proc.wait()
+        at_kill = _files(store)
+        deadline = time.monotonic() + 5
+        while _session(proc.pid) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not _session(proc.pid), f"still running 5 s after the kill: {_session(proc.pid)}"
+        assert _files(store) == at_kill, "the store changed after its run was killed"
+        assert "Traceback" not in (tmp_path / "stderr.txt").read_text()
+        assert list(scratch_root().glob(f"{SCRATCH_PREFIX}{proc.pid}-*")), "SIGKILL left the scratch folder"
+        assert verify(store).ok
+    finally:
+        _kill_session(proc.pid)
+        for folder in scratch_root().glob(f"{SCRATCH_PREFIX}{proc.pid}-*"):
+            shutil.rmtree(folder, ignore_errors=True)
+
+
+DYING_WORKERS = '''
+"""Render workers for the test: the first is SIGKILLed before its fourth render, every later one
+while starting (as the OOM killer does during `import bpy`)."""
+import os
+import signal
+from pathlib import Path
+
+from sweep3d.stages.render import worker
+
+
+def worker_main(conn, settings, scratch):
+    starts = Path(os.environ["SWEEP3D_TEST_STARTS"])
+    with open(starts, "a") as fh:
+        fh.write("started\\n")
+    if len(starts.read_text().splitlines()) > 1:
+        os.kill(os.getpid(), signal.SIGKILL)
+    render, rendered = worker.render_job, []
+
+    def render_three(scene, job, *args, **kwargs):
+        if len(rendered) == 3:
+            os.kill(os.getpid(), signal.SIGKILL)
+        rendered.append(job.render_key)
+        return render(scene, job, *args, **kwargs)
+
+    worker.render_job = render_three
+    worker.worker_main(conn, settings, scratch)
+'''
+
+DYING_HARNESS = """
+import sys
+
+import dying_workers
+import sweep3d.stages.render.pool as pool
+
+pool.worker_main = dying_workers.worker_main
+from sweep3d.cli import main
+sys.argv = ["sweep3d", "run", "spec.toml", "--no-report"]
+main()
+"""
+
+
+def test_a_worker_killed_while_starting_ends_the_run_in_one_line_keeping_what_was_rendered(tmp_path: Path) -> None:
+    write_spec(tmp_path, TINY_SPEC)  # 4 renders, one worker
+    hooks = tmp_path / "hooks"
+    hooks.mkdir()
+    (hooks / "dying_workers.py").write_text(DYING_WORKERS)
+    env = {**os.environ, "PYTHONPATH": f"{REPO}{os.pathsep}{hooks}", "SWEEP3D_TEST_STARTS": str(tmp_path / "starts")}
+    proc = subprocess.run([sys.executable, "-c", DYING_HARNESS], cwd=tmp_path, env=env, capture_output=True,
+                          text=True, timeout=300)
+    assert (tmp_path / "starts").read_text().count("started") == 2, "a worker was started for the retry"
+    assert proc.returncode == 1, proc.stderr
+    lines = [line for line in proc.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1, proc.stderr
+    assert "render worker died while starting (killed by SIGKILL: out of memory?)" in lines[0]
+    assert "run again to resume" in lines[0]
+    assert "Traceback" not in proc.stdout + proc.stderr and "Aborted" not in proc.stdout + proc.stderr
+
+    store = Store(tmp_path / "store")
+    assert len(store.keys("renders")) == 3, "the three finished renders are stored"
+    assert verify(tmp_path / "store").ok
+    resumed = run(load_spec(tmp_path / "spec.toml"))
+    assert resumed.failed == 0
+    assert (resumed.outcome("render").cached, resumed.outcome("render").computed) == (3, 1)

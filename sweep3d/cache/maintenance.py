@@ -28,6 +28,9 @@ from sweep3d.cache.store import (
 )
 
 TEMP_AGE = 3600.0  # seconds after which gc removes temp files (a live run's are younger)
+#: Folders that only the writer lock's holder writes (``reports/`` and ``cache/`` are not:
+#: ``sweep3d report`` writes them without the lock).
+LOCKED_FOLDERS = ("tables", "blobs", "jobs", "models")
 
 
 # -- verify ------------------------------------------------------------------------------------
@@ -174,6 +177,24 @@ def collect_garbage(root: Path, older_than: float = TEMP_AGE, purge_quarantine: 
     for folder in (blobs, scratch, quarantine):
         _remove_empty_dirs(folder)
     return out
+
+
+def remove_killed_writers_temp_files(root: Path) -> int:
+    """Remove every temp file in the folders only the lock's holder writes; returns how many.
+
+    Call it holding the writer lock, before writing: any temp file there then is a killed
+    writer's (a live one would hold the lock), so unlike gc it need not wait for it to age.
+    """
+    removed = 0
+    for name in LOCKED_FOLDERS:
+        folder = root / name
+        for path in folder.rglob(".*.tmp") if folder.is_dir() else []:
+            try:
+                path.unlink()
+            except OSError:
+                continue
+            removed += 1
+    return removed
 
 
 def _remove_empty_dirs(folder: Path) -> None:

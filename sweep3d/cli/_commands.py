@@ -1,4 +1,5 @@
-"""How every command reports a user's mistake: one red line on stderr and exit code 2."""
+"""How every command reports a user's mistake (one red line on stderr, exit code 2) and a failed
+render worker (one line, exit code 1)."""
 
 from __future__ import annotations
 
@@ -10,13 +11,14 @@ import typer
 from rich.console import Console
 from rich.markup import escape
 
-from sweep3d.errors import UserError
+from sweep3d.errors import RenderError, UserError
 
 err_console = Console(stderr=True)
 
 
 def registrar(app: typer.Typer) -> Callable[[Callable], Callable]:
-    """A decorator registering commands on ``app`` whose user errors print one line and exit 2."""
+    """A decorator registering commands on ``app`` whose user errors print one line and exit 2
+    (render errors: exit 1)."""
 
     def command(func: Callable) -> Callable:
         @functools.wraps(func)
@@ -26,6 +28,9 @@ def registrar(app: typer.Typer) -> Callable[[Callable], Callable]:
             except UserError as exc:
                 err_console.print(f"[bold red]error:[/] {escape(str(exc))}", highlight=False, soft_wrap=True)
                 raise typer.Exit(exc.exit_code) from None
+            except RenderError as exc:  # not the user's mistake, but one line all the same
+                err_console.print(f"[bold red]error:[/] {escape(str(exc))}", highlight=False, soft_wrap=True)
+                raise typer.Exit(1) from None
             except KeyboardInterrupt:
                 err_console.print("[yellow]interrupted[/]: everything finished so far is stored; run again to resume")
                 raise typer.Exit(130) from None

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from sweep3d.parts import AZIMUTH_PARTS, ELEVATION_PARTS, PARTS, UV_MAP
+from sweep3d.stages.render.worker import die_with_parent
 
 #: (label, camera azimuth, camera elevation): the sides shown, as the camera control names them.
 SIDES = (("front", 0.0, 15.0), ("right", 90.0, 15.0), ("back", 180.0, 15.0), ("left", 270.0, 15.0),
@@ -33,7 +34,7 @@ def paint_objects(items: list[tuple[str, np.ndarray]], resolution: int = 160, sa
     items = [(mesh, np.asarray(colours, dtype=np.float32).reshape(PARTS, 3)) for mesh, colours in items]
     if not items:
         return []
-    with mp.get_context("spawn").Pool(1) as pool:
+    with mp.get_context("spawn").Pool(1, initializer=die_with_parent) as pool:  # no orphan if the report is killed
         return pool.apply(_paint_in_this_process, (items, resolution, samples))
 
 

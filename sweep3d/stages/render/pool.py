@@ -2,7 +2,8 @@
 
 Jobs arrive grouped by scene (object, environment); a group goes to one worker so the scene is
 loaded once. A worker that dies or exceeds the per-job timeout is replaced and its unfinished
-jobs are retried once; scratch files are removed when the pool closes, also on Ctrl-C.
+jobs are retried once; scratch files are removed when the pool closes, also on Ctrl-C, and a
+killed run's by the next run (:func:`remove_stale_scratch`). Workers die with their parent.
 """
 
 from __future__ import annotations
@@ -10,6 +11,7 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 import shutil
+import signal
 import tempfile
 import time
 from collections import deque
@@ -31,6 +33,7 @@ from sweep3d.stages.render.protocol import (
 from sweep3d.stages.render.worker import worker_main
 
 SCRATCH_PREFIX = "sweep3d-"  # + the parent's pid: a later run can tell a killed run's folder
+START_TIMEOUT = 120.0  # seconds a worker may take to import bpy and build its scene
 
 
 @dataclass
@@ -52,8 +55,8 @@ class RenderPool:
         self.n_workers = workers
         self.timeout = timeout
         self.ctx = mp.get_context("spawn")
-        root = _scratch_root()
-        remove_stale_scratch(Path(root or tempfile.gettempdir()))
+        root = scratch_root()
+        remove_stale_scratch(root)
         self.scratch = Path(tempfile.mkdtemp(prefix=f"{SCRATCH_PREFIX}{os.getpid()}-", dir=root))
         self.workers: list[_Worker] = []
 
@@ -70,10 +73,11 @@ class RenderPool:
         )
         process.start()
         child.close()
-        message = parent.recv() if parent.poll(120) else Fatal("worker did not start within 120 s")
+        message = _first_message(parent, process)
         if not isinstance(message, Ready):
             process.kill()
-            raise RenderError(f"render worker failed to start: {message.message}")
+            process.join(5)
+            raise RenderError(f"render worker {message.message}")
         return _Worker(process, parent)
 
     def run(self, groups: list[list[RenderJob]]) -> Iterator[RenderReply]:
@@ -115,7 +119,7 @@ class RenderPool:
         """Replace a dead or stuck worker; retry its unfinished jobs once, fail the culprit twice."""
         culprit = worker.current
         reason = f"render took longer than {self.timeout:g} s" if timed_out else (
-            f"render worker died (exit code {worker.process.exitcode})")
+            f"render worker died ({death_cause(worker.process.exitcode)})")
         worker.process.kill()
         worker.process.join(5)
         leftover = [job for job in worker.task or [] if job.render_key not in worker.done]
@@ -147,6 +151,36 @@ class RenderPool:
         shutil.rmtree(self.scratch, ignore_errors=True)
 
 
+def _first_message(conn: Connection, process: Any) -> Ready | Fatal:
+    """The worker's first message, or a :class:`Fatal` saying why none came: it died while
+    starting (the OOM killer during ``import bpy``, say) or took longer than ``START_TIMEOUT``."""
+    if not wait([conn, process.sentinel], timeout=START_TIMEOUT):
+        return Fatal(f"did not start within {START_TIMEOUT:g} s")
+    try:
+        if conn.poll(1.0):  # a message sent just before dying is still there to read
+            message = conn.recv()
+            if isinstance(message, Fatal):
+                return Fatal(f"failed to start: {message.message}")
+            return message
+    except (EOFError, OSError):
+        pass  # the pipe closed without a message: the process died
+    process.join(5)
+    return Fatal(f"died while starting ({death_cause(process.exitcode)})")
+
+
+def death_cause(exitcode: int | None) -> str:
+    """How a worker process ended, in words: its exit code, or the signal that killed it."""
+    if exitcode is None:
+        return "still running, not answering"
+    if exitcode >= 0:
+        return f"exit code {exitcode}"
+    try:
+        name = signal.Signals(-exitcode).name
+    except ValueError:
+        name = f"signal {-exitcode}"
+    return f"killed by {name}: out of memory?" if -exitcode == signal.SIGKILL else f"killed by {name}"
+
+
 def remove_stale_scratch(root: Path) -> int:
     """Remove scratch folders left by runs that were killed (SIGKILL skips every clean-up):
     each is named after its process, which no longer exists. Returns how many were removed."""
@@ -169,6 +203,7 @@ def _alive(pid: int) -> bool:
     return True
 
 
-def _scratch_root() -> str | None:
+def scratch_root() -> Path:
+    """Where workers' scratch folders go: memory (``/dev/shm``) where there is one."""
     shm = Path("/dev/shm")
-    return str(shm) if shm.is_dir() else None
+    return shm if shm.is_dir() else Path(tempfile.gettempdir())

@@ -4,12 +4,18 @@ It talks to the parent over one pipe with the messages of :mod:`.protocol`: it r
 of :class:`RenderJob` (one scene group) or None to stop, and sends :class:`Ready` (or
 :class:`Fatal`) once, then :class:`Started` and a :class:`RenderReply` per job, and :class:`Idle`
 after each list.
+
+A worker dies with its run: it asks the kernel for SIGKILL when its parent dies, and it never
+writes a blob once its parent has gone (a new run may hold the store's lock by then).
 """
 
 from __future__ import annotations
 
+import ctypes
+import multiprocessing as mp
 import os
 import signal
+import sys
 import time
 import traceback
 from multiprocessing.connection import Connection
@@ -28,9 +34,45 @@ from sweep3d.stages.render.protocol import (
     Started,
 )
 
+PR_SET_PDEATHSIG = 1  # from <linux/prctl.h>
+_parent_pid: int | None = None  # set in a spawned child: the process it renders for
+
+
+def die_with_parent() -> None:
+    """Make this spawned child die when its parent does, and exit now if the parent has already gone.
+
+    An orphan would render on for minutes and write blobs into a store whose lock it does not
+    hold. Linux sends the signal when the parent's *thread* that spawned the child exits: pools
+    are started from the main thread. Elsewhere, :func:`orphaned` before each write is the guard.
+    """
+    global _parent_pid
+    parent = mp.parent_process()
+    if parent is None:  # not a multiprocessing child (a test calling render_job in-process)
+        return
+    _parent_pid = parent.pid
+    if sys.platform.startswith("linux"):
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+    if orphaned():  # the parent died before the request: no signal will come
+        os._exit(1)
+
+
+def orphaned() -> bool:
+    """Whether this worker's parent has died (it was re-parented to init or a subreaper)."""
+    return _parent_pid is not None and os.getppid() != _parent_pid
+
 
 def worker_main(conn: Connection, settings: RenderSettings, scratch: str) -> None:
     """Entry point of a spawned worker process."""
+    die_with_parent()
+    try:
+        _serve(conn, settings, scratch)
+    except (BrokenPipeError, ConnectionResetError, EOFError):
+        pass  # the parent has gone: nobody to report to, and nothing may be written
+
+
+def _serve(conn: Connection, settings: RenderSettings, scratch: str) -> None:
+    """Build the scene, then render the lists of jobs the parent sends until it sends None."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides when workers stop
     devnull = os.open(os.devnull, os.O_WRONLY)
     os.dup2(devnull, 1)  # Blender prints progress straight to fd 1
@@ -43,10 +85,7 @@ def worker_main(conn: Connection, settings: RenderSettings, scratch: str) -> Non
         return
     conn.send(Ready(os.getpid()))
     while True:
-        try:
-            jobs = conn.recv()
-        except EOFError:
-            return
+        jobs = conn.recv()
         if jobs is None:
             return
         for job in jobs:
@@ -85,6 +124,8 @@ def render_job(scene, job: RenderJob, keep_pixels: bool = False) -> RenderReply:
         if job.blob is not None:  # None: the render is cached, the job is here for its UV pass
             png = encode_png(rgb)
             if not keep_pixels:
+                if orphaned():  # its run was killed: the store is no longer ours to write
+                    os._exit(1)
                 atomic_write(Path(job.blob), png)
         info = RenderInfo(seconds=time.perf_counter() - started, valid=finite,
                           width=rgb.shape[1], height=rgb.shape[0], parts=scene.parts)
