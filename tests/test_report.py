@@ -132,6 +132,10 @@ def test_thumbnails_are_shared_by_key_downscaled_and_kept_within_the_budget(tmp_
         small.want(key)
     kept = small.data_uris()
     assert kept[0] == uris[0] and kept[1:] == [None, None] and small.left_out == 2  # first asked, first kept
+    few = Thumbnails(store, expected=3, limit=2)
+    assert [few.want(k) for k in ("aa1", "bb2")] == [0, 1] and few.remaining == 0
+    few.want("cc3")  # beyond the count budget: left out, never read
+    assert few.data_uris() == [uris[0], uris[1], None] and few.left_out == 1 and few.keys() == ["aa1", "bb2", "cc3"]
     assert thumbnail_size(100) == 96 and thumbnail_size(10_000) == 64
 
 

@@ -1,13 +1,16 @@
 """Build the report: read the store, build each panel, write one self-contained HTML file.
 
 The page runs offline: plotly.js and the report's scripts are inlined, figures and the
-explorer's rows travel as JSON, thumbnails as data URIs (see :mod:`sweep3d.report.page` for
-the Content-Security-Policy that keeps it so).
+explorer's counts travel as JSON, a sample of thumbnails as data URIs (see
+:mod:`sweep3d.report.page` for the Content-Security-Policy that keeps it so). What the page
+carries grows with the numbers of parameter levels, not of results (see
+:mod:`sweep3d.report.panels.explorer` and :mod:`sweep3d.report.thumbs`).
 """
 
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
@@ -18,9 +21,9 @@ from sweep3d.cache.store import Store, atomic_write
 from sweep3d.errors import UserError
 from sweep3d.report.figures import pct
 from sweep3d.report.page import render_page
-from sweep3d.report.panel import Panel, PanelInputs, build_panels
+from sweep3d.report.panel import BuiltPanel, Panel, PanelInputs, build_panels
 from sweep3d.report.panels import PANELS
-from sweep3d.report.results import load_results
+from sweep3d.report.results import Results, materialise_views
 from sweep3d.report.thumbs import Thumbnails
 from sweep3d.spec.loader import LoadedSpec
 from sweep3d.stages.aggregate import MACROS, VIEWS, Summary, connect, has_view, no_results, summarise
@@ -66,22 +69,16 @@ def build_context(loaded: LoadedSpec, con: duckdb.DuckDBPyConnection, store: Sto
 
     Args:
         loaded: the experiment's spec.
-        con: a connection from ``aggregate.connect`` for this experiment.
+        con: a connection from ``aggregate.connect`` for this experiment (the views the report
+            reads often are computed once on it: see :func:`~sweep3d.report.results.materialise_views`).
         store: the store holding the image blobs.
         panels: the panels to build, in page order (those whose data is absent are left out).
 
     Raises:
         UserError: if there are no results for the experiment yet.
     """
-    if not has_view(con, "results") or not con.execute("SELECT count(*) FROM results").fetchone()[0]:
-        raise no_results(store, loaded.name, loaded.path)
-    columns = loaded.parameter_columns
-    summary = summarise(con, columns)
-    table = load_results(con, ["object", "environment", *columns])
-    images = con.execute("SELECT count(DISTINCT image_key) FROM results").fetchone()[0]
-    thumbs = Thumbnails(store, images)
-    inputs = PanelInputs(loaded, con, summary, table, thumbs, min_count(summary), store)
-    built = build_panels(panels, inputs)
+    page = gather(loaded, con, store, panels)
+    summary, thumbs = page.summary, page.thumbs
     uris = thumbs.data_uris()
     return {
         "name": loaded.name,
@@ -92,15 +89,55 @@ def build_context(loaded: LoadedSpec, con: duckdb.DuckDBPyConnection, store: Sto
         "accuracy": pct(summary.accuracy),
         "wrong": summary.evaluated - summary.invalid - summary.correct,
         "run": _latest_run(con, loaded.name),
-        "panels": built,
+        "panels": page.panels,
         "thumbs": json.dumps(uris, separators=(",", ":")),
         "thumb_problems": json.dumps(thumbs.problems, separators=(",", ":")),
         "thumb_size": thumbs.size,
-        "images": {"shown": len(uris) - thumbs.missing - thumbs.damaged - thumbs.left_out,
+        "images": {"shown": len(uris) - thumbs.missing - thumbs.damaged - thumbs.left_out, "of": page.images,
                    "missing": thumbs.missing, "damaged": thumbs.damaged, "left_out": thumbs.left_out},
         "views": [v for v in VIEWS if has_view(con, v)],
         "macros": MACROS,
     }
+
+
+@dataclass(frozen=True)
+class Gathered:
+    """The page's panels before its images are encoded."""
+
+    summary: Summary
+    panels: list[BuiltPanel]
+    thumbs: Thumbnails  # the images the panels asked for
+    images: int  # distinct images in the results
+
+
+def gather(loaded: LoadedSpec, con: duckdb.DuckDBPyConnection, store: Store,
+           panels: tuple[Panel, ...] = PANELS) -> Gathered:
+    """Read the store and build ``panels`` (see :func:`build_context`); no image is read yet."""
+    if not has_view(con, "results") or not con.execute("SELECT count(*) FROM results").fetchone()[0]:
+        raise no_results(store, loaded.name, loaded.path)
+    materialise_views(con)
+    columns = loaded.parameter_columns
+    summary = summarise(con, columns)
+    results = Results(con, ["object", "environment", *columns])
+    images = con.execute("SELECT count(DISTINCT image_key) FROM results").fetchone()[0]
+    thumbs = Thumbnails(store, images)
+    inputs = PanelInputs(loaded, con, summary, results, thumbs, min_count(summary), store)
+    return Gathered(summary, build_panels(panels, inputs), thumbs, images)
+
+
+def image_keys(loaded: LoadedSpec, panels: tuple[Panel, ...] = PANELS) -> list[str]:
+    """The image keys whose thumbnails the report of ``loaded`` embeds, in page order.
+
+    A bounded sample, whatever the number of results; a tool that writes a synthetic store
+    (``benchmarks/report_scale.py``) needs image blobs for these only.
+    """
+    store = Store(loaded.store)
+    con = connect(store, loaded.name)
+    try:
+        thumbs = gather(loaded, con, store, panels).thumbs
+    finally:
+        con.close()
+    return thumbs.keys()[:thumbs.limit]
 
 
 def render_html(context: dict[str, Any]) -> str:
@@ -131,3 +168,4 @@ def _latest_run(con: duckdb.DuckDBPyConnection, experiment: str) -> dict[str, An
     ]
     started = datetime.fromtimestamp(row["started"], timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     return {"id": row["run_id"], "started": started, "seconds": f"{row['seconds']:.1f} s", "stages": stages}
+

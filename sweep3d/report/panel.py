@@ -3,7 +3,9 @@
 A panel is data plus a template: ``build(inputs)`` returns what ``templates/<template>`` shows
 (as ``data``), or None when the experiment has nothing for it, and then the page leaves the
 panel out. Optional panels (e.g. part visibility, which needs a UV render pass) use this to show
-only when their data exists; see :data:`sweep3d.report.panels.OPTIONAL_PANELS`.
+only when their data exists; see :data:`sweep3d.report.panels.OPTIONAL_PANELS`. A ``late`` panel
+is built after the others, whatever its place on the page: the explorer fills the image budget
+the others leave.
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ from typing import Any, Callable
 import duckdb
 
 from sweep3d.cache.store import Store
-from sweep3d.report.results import OUTCOME_NAMES, ResultTable
+from sweep3d.report.results import OUTCOME_NAMES, Parameter, ResultRow, Results
 from sweep3d.report.thumbs import Thumbnails
 from sweep3d.spec.loader import LoadedSpec
 from sweep3d.stages.aggregate import Summary
@@ -28,7 +30,8 @@ class PanelInputs:
         loaded: the experiment's spec.
         con: a connection from ``aggregate.connect`` (``results`` and the aggregate views).
         summary: counts, the worst failures and per-control effects.
-        table: every result with its parameter levels.
+        results: every result with its parameter levels (kept by DuckDB; ask it for examples
+            or counts, never for every row).
         thumbs: the page's images; ``thumbs.want(image_key)`` gives an index for a template.
         min_count: the fewest valid results a region needs to be ranked as a failure mode.
         store: the experiment's store (panels that cache what they draw keep it there).
@@ -37,7 +40,7 @@ class PanelInputs:
     loaded: LoadedSpec
     con: duckdb.DuckDBPyConnection
     summary: Summary
-    table: ResultTable
+    results: Results
     thumbs: Thumbnails
     min_count: int
     store: Store
@@ -48,15 +51,17 @@ class PanelInputs:
         names = [d[0] for d in cursor.description]
         return [dict(zip(names, row)) for row in cursor.fetchall()]
 
-    def tile(self, row: int) -> dict[str, Any]:
-        """A gallery tile for result ``row`` of :attr:`table`: thumbnail, outcome, prediction, details."""
-        table = self.table
-        outcome = OUTCOME_NAMES[int(table.outcome[row])]
-        values = " · ".join(f"{p.name} = {p.labels[level]}" for p, level in zip(table.parameters, table.levels[:, row])
-                            if level >= 0)
-        prediction = table.prediction[row] or "no prediction"
-        return {"thumb": self.thumbs.want(table.image_key[row]), "outcome": outcome, "caption": prediction,
-                "title": f"job {int(table.job[row])} · {values} · predicted {prediction} ({outcome})"}
+    @property
+    def parameters(self) -> list[Parameter]:
+        """The parameters (object, environment, then the spec's controls) with their levels."""
+        return self.results.parameters
+
+    def tile(self, row: ResultRow) -> dict[str, Any]:
+        """A gallery tile for one result: thumbnail, outcome, prediction, details."""
+        outcome = OUTCOME_NAMES[row.outcome]
+        prediction = row.prediction or "no prediction"
+        return {"thumb": self.thumbs.want(row.image_key), "outcome": outcome, "caption": prediction,
+                "title": f"{self.results.describe(row)} · predicted {prediction} ({outcome})"}
 
 
 @dataclass(frozen=True)
@@ -68,12 +73,14 @@ class Panel:
         title: the section's heading and navigation label.
         template: the Jinja template under ``templates/`` that draws ``data``.
         build: returns the template's ``data``, or None to leave the panel out.
+        late: build it after the panels that are not (it uses what they leave, e.g. images).
     """
 
     id: str
     title: str
     template: str
     build: Callable[[PanelInputs], dict[str, Any] | None]
+    late: bool = False
 
 
 @dataclass(frozen=True)
@@ -87,10 +94,7 @@ class BuiltPanel:
 
 
 def build_panels(panels: tuple[Panel, ...], inputs: PanelInputs) -> list[BuiltPanel]:
-    """Build ``panels`` in order, leaving out those whose ``build`` returns None."""
-    built = []
-    for panel in panels:
-        data = panel.build(inputs)
-        if data is not None:
-            built.append(BuiltPanel(panel.id, panel.title, panel.template, data))
-    return built
+    """Build ``panels`` (``late`` ones last), in page order, leaving out those whose ``build`` returns None."""
+    data = {i: panels[i].build(inputs) for i in sorted(range(len(panels)), key=lambda i: panels[i].late)}
+    return [BuiltPanel(panel.id, panel.title, panel.template, data[i])
+            for i, panel in enumerate(panels) if data[i] is not None]

@@ -1,20 +1,39 @@
-"""The experiment's results as columns: what the explorer and the example galleries draw from.
+"""The experiment's results as the report reads them, with work bounded by levels, not results.
 
-Rows are ordered wrong first (highest loss first), then correct, then invalid, so the first
-rows of any slice are its most telling failures. Each parameter's value is its *level* in the
-``control_levels`` view (a value, or a bin of a many-valued numeric parameter).
+Two things make a report of 10^6 results cheap to build:
+
+- :func:`materialise_views` computes once the aggregate views the report reads many times
+  (``results``, ``control_stats``, ``control_levels``, ``control_parameters``,
+  ``control_accuracy``, ``pair_accuracy``) into temp tables that those views then read. The
+  SQL and the rows are the views' own (a connection's views read a fixed set of immutable
+  segments, so nothing goes stale); without it each of the report's queries recomputes their
+  ranks and self-joins (at 10^6 results, minutes per query).
+- :class:`Results` keeps one row per result (job, outcome, loss, top-1 prediction, image key
+  and its *level* of each parameter, from ``control_levels``) in a temp table and answers what
+  the panels ask: a region's examples, the joint counts the explorer aggregates, the images to
+  embed. Nothing here holds a Python object per result.
+
+Examples come wrong first (highest loss first), then correct, then invalid, so the first rows
+of any slice are its most telling failures.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 import duckdb
-import numpy as np
+
+from sweep3d.stages.aggregate.views import has_view
 
 WRONG, CORRECT, INVALID = 0, 1, 2  # outcome codes
 OUTCOME_NAMES = ("wrong", "correct", "invalid")
+TABLE = "report_levels"  # the temp table of one row per result
+#: Views read many times by one report, in dependency order.
+MATERIALISED = ("results", "control_stats", "control_levels", "control_parameters", "control_accuracy",
+                "pair_accuracy")
+#: The order examples come in: most telling first.
+EXAMPLE_ORDER = "outcome, loss DESC NULLS LAST, job"
 
 
 @dataclass(frozen=True)
@@ -31,66 +50,126 @@ class Parameter:
         return len(self.labels) > 1
 
 
-@dataclass
-class ResultTable:
-    """Every result of the experiment (N rows), column by column.
+@dataclass(frozen=True)
+class ResultRow:
+    """One result as a gallery shows it."""
 
-    Attributes:
-        parameters: the parameters, in spec order.
-        levels: int32 array (P, N): the level of each result in each parameter.
-        job: int64 array (N,): job index.
-        outcome: int8 array (N,): :data:`WRONG`, :data:`CORRECT` or :data:`INVALID`.
-        loss: float64 array (N,): the evaluator's loss (NaN where there is none).
-        prediction: N top-1 labels (None where the prediction is invalid).
-        image_key: N image keys.
-    """
-
-    parameters: list[Parameter]
-    levels: np.ndarray
-    job: np.ndarray
-    outcome: np.ndarray
-    loss: np.ndarray
-    prediction: list[str | None]
-    image_key: list[str]
-
-    def __len__(self) -> int:
-        return len(self.job)
-
-    def parameter(self, name: str) -> int:
-        """The row of ``levels`` that holds parameter ``name``."""
-        return next(i for i, p in enumerate(self.parameters) if p.name == name)
-
-    def mask(self, where: Mapping[str, int]) -> np.ndarray:
-        """Boolean (N,) array of the results at the given level of each named parameter."""
-        selected = np.ones(len(self), dtype=bool)
-        for name, level in where.items():
-            selected &= self.levels[self.parameter(name)] == level
-        return selected
-
-    def examples(self, selected: np.ndarray, limit: int, outcome: int = WRONG) -> list[int]:
-        """Up to ``limit`` row indices among ``selected`` with ``outcome``, most telling first."""
-        return np.flatnonzero(selected & (self.outcome == outcome))[:limit].tolist()
+    job: int
+    outcome: int  # WRONG, CORRECT or INVALID
+    prediction: str | None
+    image_key: str
+    levels: tuple[int, ...]  # its level of each of :attr:`Results.parameters` (-1: none)
 
 
-def load_results(con: duckdb.DuckDBPyConnection, names: Sequence[str]) -> ResultTable:
-    """Read the results and the levels of the parameters ``names`` (unknown names are skipped).
+def materialise_views(con: duckdb.DuckDBPyConnection) -> None:
+    """Compute the views of :data:`MATERIALISED` once; they then read the stored rows (idempotent)."""
+    for view in MATERIALISED:
+        table = f"report_{view}"
+        if not has_view(con, view) or _has_table(con, table):
+            continue
+        con.execute(f"CREATE TEMP TABLE {table} AS FROM {view}")
+        con.execute(f"CREATE OR REPLACE VIEW {view} AS FROM {table}")
+
+
+class Results:
+    """Every result with its level of each parameter, kept by DuckDB (see the module's doc).
 
     Args:
         con: a connection from ``aggregate.connect`` (with the aggregate views).
         names: parameter names in the order wanted, e.g. ``object``, ``environment``, then the
-            spec's control columns.
+            spec's control columns (names with no levels are skipped).
     """
-    columns = {row[0] for row in con.execute("DESCRIBE results").fetchall()}
-    prediction = "top1_label" if "top1_label" in columns else "NULL::VARCHAR"
-    loss = "loss" if "loss" in columns else "NULL::DOUBLE"
-    rows = con.execute(
-        f"SELECT job, CASE WHEN NOT valid THEN {INVALID} WHEN correct THEN {CORRECT} ELSE {WRONG} END AS outcome, "
-        f"{loss} AS loss, {prediction} AS prediction, image_key FROM results "
-        f"ORDER BY outcome = {INVALID}, outcome, loss DESC NULLS LAST, job"
-    ).fetchnumpy()
-    job = np.asarray(rows["job"], dtype=np.int64)
 
-    known = {r[0]: r[1:] for r in con.execute(
+    def __init__(self, con: duckdb.DuckDBPyConnection, names: Sequence[str]) -> None:
+        self.con = con
+        self.parameters = read_parameters(con, names)
+        columns = {row[0] for row in con.execute("DESCRIBE results").fetchall()}
+        con.execute(_table_sql(columns, [p.name for p in self.parameters]))
+        #: ORDER BY putting rows of ``results`` in example order (for SQL shown to the user).
+        self.example_order_sql = "ORDER BY NOT valid, correct" + (", loss DESC" if "loss" in columns else "") + ", job"
+
+    def __len__(self) -> int:
+        return int(self.con.execute(f"SELECT count(*) FROM {TABLE}").fetchone()[0])
+
+    def index(self, name: str) -> int:
+        """The position of parameter ``name`` in :attr:`parameters`."""
+        return next(i for i, p in enumerate(self.parameters) if p.name == name)
+
+    def examples(self, where: Mapping[str, int], limit: int, outcome: int = WRONG,
+                 prediction: str | None = None) -> list[ResultRow]:
+        """Up to ``limit`` results with ``outcome`` at the given level of each named parameter
+        (and top-1 ``prediction`` if given), highest loss first."""
+        terms = [f"{_level(self.index(name))} = ?" for name in where] + ["outcome = ?"]
+        values: list[Any] = [*where.values(), outcome]
+        if prediction is not None:
+            terms.append("prediction = ?")
+            values.append(prediction)
+        return self._rows(" AND ".join(terms), values, limit)
+
+    def rows(self, jobs: Sequence[int]) -> list[ResultRow]:
+        """The results of ``jobs``, most telling first."""
+        return self._rows("list_contains(?, job)", [list(jobs)], None)
+
+    def cells(self, parameters: Sequence[int]) -> int:
+        """How many combinations of levels of ``parameters`` hold at least one result."""
+        columns = ", ".join(_level(p) for p in parameters) or "NULL"
+        return int(self.con.execute(f"SELECT count(*) FROM (SELECT DISTINCT {columns} FROM {TABLE})").fetchone()[0])
+
+    def counts(self, parameters: Sequence[int]) -> dict[str, list]:
+        """The non-empty cells of the contingency table over ``parameters``, column by column.
+
+        Returns:
+            ``level`` (one list per parameter: each cell's level), ``n`` (valid results),
+            ``k`` (correct ones) and ``total`` (with the invalid ones), cells in level order.
+        """
+        columns = [_level(p) for p in parameters]
+        keys = ", ".join(columns)
+        found = self.con.execute(
+            f"SELECT {keys + ', ' if keys else ''}count(*) FILTER (WHERE outcome <> {INVALID}) AS n, "
+            f"count(*) FILTER (WHERE outcome = {CORRECT}) AS k, count(*) AS total FROM {TABLE}"
+            + (f" GROUP BY {keys} ORDER BY {keys}" if keys else "")
+        ).fetchnumpy()
+        return {"level": [found[c].tolist() for c in columns],
+                **{name: found[name].tolist() for name in ("n", "k", "total")}}
+
+    def sample(self, cells: Sequence[Sequence[int]], first: Sequence[int], first_count: int,
+               limit: int) -> list[int]:
+        """Jobs whose images to embed: a few from every cell, failures first.
+
+        Args:
+            cells: groups of parameters, each defining cells (the joint table's, or each pair's).
+                Results are taken round by round: the most telling result of every cell, then
+                the second, … (within a round, wrong before right, highest loss first).
+            first: parameters of the first view (its axes); its cells get ``first_count``
+                results each before any round.
+            limit: the most jobs returned.
+        """
+        ranks = [_rank(group) for group in cells] or ["1"]
+        in_cell = f"least({', '.join(ranks)})" if len(ranks) > 1 else ranks[0]
+        found = self.con.execute(
+            f"SELECT job FROM (SELECT job, outcome, loss, {in_cell} AS in_cell, {_rank(first)} AS in_view "
+            f"FROM {TABLE}) ORDER BY in_view > ?, in_cell, {EXAMPLE_ORDER} LIMIT ?", [first_count, limit]
+        ).fetchnumpy()
+        return found["job"].tolist()
+
+    def describe(self, row: ResultRow) -> str:
+        """``job 3 · object = mug · …`` for a gallery tile's title."""
+        values = [f"{p.name} = {p.labels[level]}" for p, level in zip(self.parameters, row.levels) if level >= 0]
+        return " · ".join([f"job {row.job}", *values])
+
+    def _rows(self, where: str, values: list[Any], limit: int | None) -> list[ResultRow]:
+        levels = "".join(f", {_level(p)}" for p in range(len(self.parameters)))
+        found = self.con.execute(
+            f"SELECT job, outcome, prediction, image_key{levels} FROM {TABLE} WHERE {where} ORDER BY {EXAMPLE_ORDER}"
+            + (f" LIMIT {int(limit)}" if limit is not None else ""), values
+        ).fetchall()
+        return [ResultRow(int(job), int(outcome), prediction, str(key), tuple(int(v) for v in rest))
+                for job, outcome, prediction, key, *rest in found]
+
+
+def read_parameters(con: duckdb.DuckDBPyConnection, names: Sequence[str]) -> list[Parameter]:
+    """The parameters of ``names`` that have levels, in that order, with their level labels."""
+    known = {row[0]: row[1:] for row in con.execute(
         "SELECT parameter, numeric, binned FROM control_parameters").fetchall()}
     order = [name for name in names if name in known]
     labels: dict[str, list[str]] = {name: [] for name in order}
@@ -98,31 +177,43 @@ def load_results(con: duckdb.DuckDBPyConnection, names: Sequence[str]) -> Result
             "SELECT parameter, label FROM control_accuracy WHERE list_contains(?, parameter) ORDER BY level",
             [order]).fetchall():
         labels[name].append(label)
-    parameters = [Parameter(name, labels[name], bool(known[name][0]), bool(known[name][1])) for name in order]
-
-    levels = np.full((len(order), len(job)), -1, dtype=np.int32)
-    if order and len(job):
-        found = con.execute(
-            "SELECT job, parameter, level FROM control_levels WHERE list_contains(?, parameter)", [order]
-        ).fetchnumpy()
-        by_job = np.argsort(job)
-        rows_of = by_job[np.searchsorted(job[by_job], np.asarray(found["job"], dtype=np.int64))]
-        index = {name: i for i, name in enumerate(order)}
-        params = np.array([index[p] for p in found["parameter"]], dtype=np.int64)
-        levels[params, rows_of] = np.asarray(found["level"], dtype=np.int32)
-    return ResultTable(
-        parameters=parameters,
-        levels=levels,
-        job=job,
-        outcome=np.asarray(rows["outcome"], dtype=np.int8),
-        loss=np.asarray([np.nan if v is None else v for v in _values(rows["loss"])], dtype=np.float64),
-        prediction=[None if v is None else str(v) for v in _values(rows["prediction"])],
-        image_key=[str(v) for v in _values(rows["image_key"])],
-    )
+    return [Parameter(name, labels[name], bool(known[name][0]), bool(known[name][1])) for name in order]
 
 
-def _values(column: np.ndarray) -> list:
-    """A fetched column as a Python list, masked entries as None."""
-    if isinstance(column, np.ma.MaskedArray):
-        return column.astype(object).filled(None).tolist()
-    return column.tolist()
+def _table_sql(columns: set[str], names: list[str]) -> str:
+    """The CREATE statement of :data:`TABLE` (``columns``: those of ``results``): results joined
+    with their levels, one column per parameter."""
+    prediction = "r.top1_label" if "top1_label" in columns else "NULL::VARCHAR"
+    loss = "r.loss" if "loss" in columns else "NULL::DOUBLE"
+    select = (f"SELECT r.job, (CASE WHEN NOT r.valid THEN {INVALID} WHEN r.correct THEN {CORRECT} ELSE {WRONG} END)"
+              f"::TINYINT AS outcome, {loss}::DOUBLE AS loss, {prediction} AS prediction, r.image_key")
+    if not names:
+        return f"CREATE OR REPLACE TEMP TABLE {TABLE} AS {select} FROM results r"
+    pivot = ", ".join(f"max(level) FILTER (WHERE parameter = {_literal(n)}) AS {_level(i)}" for i, n in enumerate(names))
+    levels = "".join(f", coalesce(l.{_level(i)}, -1)::INTEGER AS {_level(i)}" for i in range(len(names)))
+    return (f"CREATE OR REPLACE TEMP TABLE {TABLE} AS {select}{levels} FROM results r LEFT JOIN "
+            f"(SELECT job, {pivot} FROM control_levels WHERE list_contains({_list(names)}, parameter) GROUP BY job) l "
+            "USING (job)")
+
+
+def _rank(parameters: Sequence[int]) -> str:
+    """Each result's rank in its cell of ``parameters``, most telling first."""
+    partition = ", ".join(_level(p) for p in parameters)
+    return f"row_number() OVER ({'PARTITION BY ' + partition + ' ' if partition else ''}ORDER BY {EXAMPLE_ORDER})"
+
+
+def _level(index: int) -> str:
+    return f"l{index}"
+
+
+def _literal(text: str) -> str:
+    return "'" + text.replace("'", "''") + "'"
+
+
+def _list(texts: list[str]) -> str:
+    return "[" + ", ".join(_literal(t) for t in texts) + "]"
+
+
+def _has_table(con: duckdb.DuckDBPyConnection, name: str) -> bool:
+    return bool(con.execute("SELECT count(*) FROM duckdb_tables() WHERE table_name = ? AND temporary",
+                            [name]).fetchone()[0])

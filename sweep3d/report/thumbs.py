@@ -1,9 +1,12 @@
-"""Thumbnails embedded in the report: one per image key, downscaled, within a size budget.
+"""Thumbnails embedded in the report: one per image key, downscaled, within a count and a size budget.
 
 Panels ask for an image with :meth:`Thumbnails.want` and get its index in the page's single
 list of data URIs (``<script id="thumbs">``), so an image shown by several panels travels once.
-Images are encoded in the order first asked for; once the budget is spent, later ones are left
-out (``null`` in the list; the page shows a placeholder), so a report stays small at any scale.
+The page embeds a sample, never one image per result: the panels ask for the images they show
+(the worst failures, failure-mode and confusion examples), then the explorer fills what is left
+of :data:`MAX_IMAGES` (see :attr:`Thumbnails.remaining`). Images are encoded in the order first
+asked for; beyond either budget, later ones are left out (``null`` in the list; the page shows a
+placeholder), so a report stays small at any scale.
 A blob is embedded only if it matches a SHA-256 its rows recorded: a damaged one is shown as a
 placeholder saying so (:attr:`Thumbnails.problems`), never as the picture it no longer is.
 """
@@ -16,15 +19,18 @@ import os
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
+import pyarrow as pa
+import pyarrow.compute as pc
 from PIL import Image
 
 from sweep3d.cache.blobs import sha256_bytes
-from sweep3d.cache.store import BLOB_TABLES, Store
+from sweep3d.cache.store import BLOB_TABLES, DIGEST_COLUMN, KEY_COLUMN, Store
 
 #: Longest side of a thumbnail by the number of distinct images in the report: 96 px up to
 #: 2500 images, else 64 px (a 64 px render is about 2 kB as JPEG).
 SIZES = ((2500, 96), (None, 64))
 BUDGET = 16_000_000  # characters of data URIs at most (plotly.js adds ~4.6 MB to the page)
+MAX_IMAGES = 2000  # distinct images at most
 JPEG_QUALITY = 80
 MISSING = "not in the store"
 DAMAGED = "damaged"  # fails its SHA-256 check
@@ -37,12 +43,14 @@ class Thumbnails:
         store: the store holding the image blobs.
         expected: how many distinct images the report will show (chooses the thumbnail size).
         budget: the most characters of data URIs to embed.
+        limit: the most images to embed.
     """
 
-    def __init__(self, store: Store, expected: int, budget: int = BUDGET) -> None:
+    def __init__(self, store: Store, expected: int, budget: int = BUDGET, limit: int = MAX_IMAGES) -> None:
         self.store = store
-        self.size = thumbnail_size(expected)
+        self.size = thumbnail_size(min(expected, limit))
         self.budget = budget
+        self.limit = limit
         self._index: dict[str, int] = {}
         self.missing = 0  # blobs not in the store
         self.damaged = 0  # blobs that fail their SHA-256 check
@@ -56,6 +64,15 @@ class Thumbnails:
     def __len__(self) -> int:
         return len(self._index)
 
+    @property
+    def remaining(self) -> int:
+        """How many more images fit in :attr:`limit`."""
+        return max(0, self.limit - len(self._index))
+
+    def keys(self) -> list[str]:
+        """The image keys asked for, in the order first asked for."""
+        return list(self._index)
+
     def data_uris(self, workers: int | None = None) -> list[str | None]:
         """Encode every image asked for, in the order first asked for.
 
@@ -63,8 +80,9 @@ class Thumbnails:
             One data URI per index (None for a blob missing, damaged or beyond the budget; see
             :attr:`problems` for why).
         """
-        digests = recorded_digests(self.store)
-        jobs = [(self.store.blob_path(key), digests.get(key, set())) for key in self._index]
+        keys = self.keys()[:self.limit]
+        digests = recorded_digests(self.store, keys)
+        jobs = [(self.store.blob_path(key), digests.get(key, set())) for key in keys]
         workers = workers or min(8, os.cpu_count() or 1)
         with ThreadPoolExecutor(workers) as pool:  # PIL releases the GIL while decoding and encoding
             encoded = list(pool.map(lambda job: encode_thumbnail(*job, self.size), jobs))
@@ -83,16 +101,26 @@ class Thumbnails:
             else:
                 spent += len(uri or "")
             uris.append(uri)
-        return uris
+        self.left_out += len(self._index) - len(keys)
+        return uris + [None] * (len(self._index) - len(keys))
 
 
-def recorded_digests(store: Store) -> dict[str, set[str]]:
-    """Key → the SHA-256 digests its rows recorded, over the tables whose rows own a blob (an
-    image key is a render key when no post control changes the render)."""
+def recorded_digests(store: Store, keys: list[str]) -> dict[str, set[str]]:
+    """Key → the SHA-256 digests its rows recorded, for ``keys``, over the tables whose rows own a
+    blob (an image key is a render key when no post control changes the render). Filtered before
+    it becomes Python objects: a store of 10^6 images is read as one column, not a dict."""
     digests: dict[str, set[str]] = {}
+    wanted = pa.array(keys, pa.string())
     for table in BLOB_TABLES:
-        for key, found in store.digests(table).items():
-            digests.setdefault(key, set()).update(found)
+        key = KEY_COLUMN[table]
+        data = store.table(table, [key, DIGEST_COLUMN])
+        if data is None or DIGEST_COLUMN not in data.column_names:
+            continue
+        data = data.filter(pc.is_in(data.column(key), value_set=wanted))
+        for k, d in zip(data.column(key).to_pylist(), data.column(DIGEST_COLUMN).to_pylist()):
+            entry = digests.setdefault(k, set())
+            if d:
+                entry.add(d)
     return digests
 
 

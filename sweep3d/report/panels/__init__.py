@@ -6,6 +6,8 @@ template ``templates/panels/<name>.html.j2`` that draws ``data`` (figures as
 ``templates/_macros.html.j2``; images through ``inputs.thumbs.want(key)`` or ``inputs.tile(row)``),
 then list it below. A panel whose data may be absent returns None and is left out of the page.
 
+The explorer is ``late``: built after the others, it fills the image budget they leave.
+
 ``OPTIONAL_PANELS`` is where such panels go: the part-visibility panel (accuracy conditioned on
 which parts of the object's surface are visible, from a UV render pass) returns None when the
 spec did not ask for the pass.
@@ -26,7 +28,7 @@ from sweep3d.report.panels import (
 
 CORE_PANELS: tuple[Panel, ...] = (
     Panel("overall", "Overall accuracy", "panels/overall.html.j2", overall.build),
-    Panel("explorer", "Explorer", "panels/explorer.html.j2", explorer.build),
+    Panel("explorer", "Explorer", "panels/explorer.html.j2", explorer.build, late=True),
     Panel("failure-modes", "Failure modes", "panels/failure_modes.html.j2", failure_modes.build),
     Panel("failures", "Worst failures", "panels/failures.html.j2", failures.build),
     Panel("objects", "Per object", "panels/objects.html.j2", objects.build),

@@ -23,7 +23,7 @@ EFFECTS = 16  # bars in the variance chart
 
 def build(inputs: PanelInputs) -> dict[str, Any]:
     """Per-parameter accuracy figures, the two box plots and the variance chart."""
-    parameters = [p for p in inputs.table.parameters if p.varies and p.name != "object"]
+    parameters = [p for p in inputs.parameters if p.varies and p.name != "object"]
     levels = defaultdict(list)
     for row in inputs.rows("SELECT parameter, label, n, accuracy, wilson_low, wilson_high FROM control_accuracy "
                            "ORDER BY position, level"):
@@ -91,7 +91,7 @@ def _box_figure(scenes: list[dict[str, Any]], group: str, over: str) -> Figure:
 
 def _variance_figure(inputs: PanelInputs) -> Figure | None:
     """Horizontal bars: eta² of each main effect and interaction, and its part beyond chance."""
-    known = [p.name for p in inputs.table.parameters]
+    known = [p.name for p in inputs.parameters]
     rows = inputs.rows(
         "SELECT kind, effect, eta2, eta2_adjusted, df FROM variance_explained WHERE eta2 IS NOT NULL "
         "AND list_contains(?, parameter_a) AND (parameter_b IS NULL OR list_contains(?, parameter_b)) LIMIT ?",

@@ -31,7 +31,7 @@ def build(inputs: PanelInputs) -> dict[str, Any]:
     """The ranked regions, each with examples, and a dot plot of their accuracy and interval."""
     sql = f"FROM failure_modes(min_count := {inputs.min_count}) LIMIT {TOP}"
     modes = inputs.rows(sql)
-    known = {p.name for p in inputs.table.parameters}
+    known = {p.name for p in inputs.parameters}
     rows = []
     for mode in modes:
         terms = [(mode[f"parameter_{s}"], mode[f"level_{s}"], mode[f"label_{s}"]) for s in "ab"
@@ -39,7 +39,7 @@ def build(inputs: PanelInputs) -> dict[str, Any]:
         where = {parameter: level for parameter, level, _ in terms}
         examples = []
         if set(where) <= known:
-            examples = [inputs.tile(row) for row in inputs.table.examples(inputs.table.mask(where), EXAMPLES)]
+            examples = [inputs.tile(row) for row in inputs.results.examples(where, EXAMPLES)]
         rows.append({
             "terms": [(parameter, label) for parameter, _, label in terms], "accuracy": pct(mode["accuracy"], 0),
             "interval": interval(mode["wilson_low"], mode["wilson_high"]),

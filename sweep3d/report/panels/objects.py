@@ -10,8 +10,6 @@ from __future__ import annotations
 from collections import defaultdict
 from typing import Any
 
-import numpy as np
-
 from sweep3d.report.figures import Figure, interval, layout, make_figure, pct, plot_text
 from sweep3d.report.panel import PanelInputs
 from sweep3d.stages.aggregate.views import has_view
@@ -22,8 +20,8 @@ CONFUSIONS = 3  # wrong predictions listed per object
 
 def build(inputs: PanelInputs) -> dict[str, Any]:
     """One row per object, and a heat map of eta² per (object, parameter)."""
-    con, table = inputs.con, inputs.table
-    known = [p.name for p in table.parameters if p.name != "object"]
+    con = inputs.con
+    known = [p.name for p in inputs.parameters if p.name != "object"]
     sensitivity: dict[str, list[dict[str, Any]]] = defaultdict(list)
     for row in inputs.rows("SELECT object, parameter, eta2, accuracy_min, worst_level, accuracy_max, best_level "
                            "FROM object_sensitivity WHERE list_contains(?, parameter)", [known]):
@@ -54,9 +52,7 @@ def _sensitivity(row: dict[str, Any]) -> dict[str, Any]:
 
 def _confusion(inputs: PanelInputs, level: int, row: dict[str, Any]) -> dict[str, Any]:
     """A wrong prediction with its count, share and its highest-loss example."""
-    table = inputs.table
-    selected = table.mask({"object": level}) & (np.asarray(table.prediction, dtype=object) == row["prediction"])
-    example = table.examples(selected, 1)
+    example = inputs.results.examples({"object": level}, 1, prediction=row["prediction"])
     return {"prediction": row["prediction"], "count": row["n"], "share": pct(row["share"], 0),
             "example": inputs.tile(example[0]) if example else None}
 

@@ -1,6 +1,8 @@
 /* sweep3d report, explorer: each parameter is a heat-map axis, a slider (one value) or pooled.
-   The heat map (accuracy and count per cell) is computed here from the rows in
-   #explorer-data; clicking a cell shows its images, wrong ones first. */
+   The heat map (accuracy and count per cell) is summed here from the counts in #explorer-data:
+   the non-empty cells of the joint table over every parameter (mode "joint"), or one table per
+   pair of parameters (mode "pairs": no sliders). Clicking a cell shows its sampled images,
+   wrong ones first, how many more it holds, and the SQL that lists them all. */
 (function () {
   'use strict';
 
@@ -12,9 +14,13 @@
   }
   var data = JSON.parse(source.textContent);
   var params = data.params;
-  var N = data.outcome.length;
+  var sample = data.sample;
+  var SAMPLED = sample.job.length;
+  var PAIRS = data.mode === 'pairs';
+  data.tables.forEach(function (t) {  // where each parameter's column is in each table
+    t.pos = params.map(function (_, p) { return t.params.indexOf(p); });
+  });
   var OUTCOMES = ['wrong', 'correct', 'invalid'];
-  var INVALID = 2;
   var ROLES = [['x', 'x axis'], ['y', 'y axis'], ['slider', 'slider'], ['pooled', 'pooled']];
   var MAX_CELL_TEXT = 400; // cells beyond which the numbers are left to the hover
 
@@ -49,6 +55,7 @@
       var option = document.createElement('option');
       option.value = role[0];
       option.textContent = role[1];
+      option.disabled = PAIRS && role[0] === 'slider';  // the page carries no counts to slice by
       select.appendChild(option);
     });
     var range = document.createElement('input');
@@ -109,28 +116,38 @@
     return out;
   }
 
-  function matchesSliders(i, active) {
-    for (var s = 0; s < active.length; s++) {
-      if (data.level[active[s]][i] !== state.slider[active[s]]) return false;
-    }
-    return true;
+  /* The first table holding every parameter in `needed` (-1: none). */
+  function tableFor(needed) {
+    return data.tables.find(function (t) {
+      return needed.every(function (p) { return p < 0 || t.pos[p] >= 0; });
+    });
   }
 
-  function levelOf(ax, i) {
-    return ax.p >= 0 ? data.level[ax.p][i] : 0;
-  }
-
-  /* Valid results and correct ones per cell, row-major (y, x). */
+  /* Valid results, correct ones and all results per cell, row-major (y, x): sums of the
+     table's cells that match the sliders. */
   function tally(x, y) {
-    var n = new Int32Array(x.n * y.n), k = new Int32Array(x.n * y.n), active = sliders();
-    for (var i = 0; i < N; i++) {
-      if (data.outcome[i] === INVALID || !matchesSliders(i, active)) continue;
-      var cx = levelOf(x, i), cy = levelOf(y, i);
+    var size = x.n * y.n, active = sliders(), t = tableFor([x.p, y.p].concat(active));
+    var n = new Float64Array(size), k = new Float64Array(size), total = new Float64Array(size);
+    var lx = x.p >= 0 ? t.level[t.pos[x.p]] : null, ly = y.p >= 0 ? t.level[t.pos[y.p]] : null;
+    var fixed = active.map(function (p) { return [t.level[t.pos[p]], state.slider[p]]; });
+    var cells = t.n.length;
+    for (var c = 0; c < cells; c++) {
+      var match = true;
+      for (var s = 0; s < fixed.length && match; s++) match = fixed[s][0][c] === fixed[s][1];
+      if (!match) continue;
+      var cx = lx ? lx[c] : 0, cy = ly ? ly[c] : 0;
       if (cx < 0 || cy < 0) continue;
-      n[cy * x.n + cx] += 1;
-      k[cy * x.n + cx] += data.outcome[i];
+      var at = cy * x.n + cx;
+      n[at] += t.n[c];
+      k[at] += t.k[c];
+      total[at] += t.total[c];
     }
-    return {n: n, k: k};
+    return {n: n, k: k, total: total};
+  }
+
+  /* Whether sampled result i is at `level` of parameter p (any level when p is -1). */
+  function sampledAt(i, p, level) {
+    return p < 0 || sample.level[p][i] === level;
   }
 
   function render() {
@@ -186,7 +203,8 @@
     render().then(function () { timings.click = performance.now() - started; });
   }
 
-  /* The clicked cell's images under the current sliders: wrong first, highest loss first. */
+  /* The clicked cell's sampled images under the current sliders (wrong first, highest loss
+     first), its exact counts, and how many of its results the page does not embed. */
   function showGallery() {
     gallery.replaceChildren();
     if (!state.cell) {
@@ -196,38 +214,55 @@
       gallery.appendChild(hint);
       return;
     }
-    var x = axis('x'), y = axis('y'), active = sliders(), chosen = [], wrong = 0, valid = 0;
-    for (var i = 0; i < N; i++) {
-      if (levelOf(x, i) !== state.cell.x || levelOf(y, i) !== state.cell.y || !matchesSliders(i, active)) continue;
-      chosen.push(i);
-      if (data.outcome[i] !== INVALID) valid += 1;
-      if (data.outcome[i] === 0) wrong += 1;
+    var x = axis('x'), y = axis('y'), active = sliders(), chosen = [];
+    var terms = [[x.p, state.cell.x], [y.p, state.cell.y]].filter(function (t) { return t[0] >= 0; })
+      .concat(active.map(function (p) { return [p, state.slider[p]]; }));
+    for (var i = 0; i < SAMPLED; i++) {
+      if (terms.every(function (t) { return sampledAt(i, t[0], t[1]); })) chosen.push(i);
     }
-    var where = [];
-    if (x.p >= 0) where.push(x.name + ' = ' + x.labels[state.cell.x]);
-    if (y.p >= 0) where.push(y.name + ' = ' + y.labels[state.cell.y]);
-    active.forEach(function (p) { where.push(params[p].name + ' = ' + params[p].labels[state.slider[p]]); });
+    var counts = tally(x, y), at = state.cell.y * x.n + state.cell.x;
+    var valid = counts.n[at], correct = counts.k[at], total = counts.total[at];
     var heading = document.createElement('h3');
-    heading.textContent = where.length ? where.join(' · ') : 'all results';
+    heading.textContent = terms.length ? terms.map(function (t) {
+      return params[t[0]].name + ' = ' + params[t[0]].labels[t[1]];
+    }).join(' · ') : 'all results';
+    var shown = Math.min(chosen.length, data.limit);
     var note = document.createElement('p');
     note.className = 'note';
-    note.textContent = (valid - wrong) + ' of ' + valid + ' correct (' + S.percent((valid - wrong) / valid) + ')' +
-      (chosen.length > data.limit ? ' · showing ' + data.limit + ' of ' + chosen.length + ', wrong ones first' : '');
+    note.textContent = correct + ' of ' + valid + ' correct (' + S.percent(correct / valid) + ')' +
+      (shown < total ? ' · showing ' + shown + ' of ' + total + ', wrong ones first' : '') +
+      (total > chosen.length ? ' · ' + (total - chosen.length) + ' more not embedded in this page' : '');
     var tiles = document.createElement('div');
     tiles.className = 'tiles';
-    chosen.slice(0, data.limit).forEach(function (i) {
-      var caption = data.pred[i] >= 0 ? data.preds[data.pred[i]] : 'no prediction';
-      tiles.appendChild(S.tile(data.thumb[i], OUTCOMES[data.outcome[i]], caption, describe(i, caption)));
+    chosen.slice(0, shown).forEach(function (i) {
+      var caption = sample.pred[i] >= 0 ? data.preds[sample.pred[i]] : 'no prediction';
+      tiles.appendChild(S.tile(sample.thumb[i], OUTCOMES[sample.outcome[i]], caption, describe(i, caption)));
     });
     gallery.append(heading, note, tiles);
+    if (shown < total) gallery.append(listing(terms));
+  }
+
+  /* "List them all": the `sweep3d query` printing every result of the cell, in gallery order. */
+  function listing(terms) {
+    var where = terms.map(function (t) {
+      return 'job IN (SELECT job FROM control_levels WHERE parameter = \'' +
+        params[t[0]].name.replace(/'/g, "''") + '\' AND level = ' + t[1] + ')';
+    });
+    var box = document.createElement('p');
+    box.className = 'note listing';
+    var code = document.createElement('code');
+    code.textContent = 'sweep3d query ' + data.query.spec + ' "SELECT * FROM results' +
+      (where.length ? ' WHERE ' + where.join(' AND ') : '') + ' ' + data.query.order + '"';
+    box.append('Every result of this cell: ', code);
+    return box;
   }
 
   function describe(i, caption) {
-    var parts = ['job ' + data.job[i]];
+    var parts = ['job ' + sample.job[i]];
     params.forEach(function (param, p) {
-      if (data.level[p][i] >= 0) parts.push(param.name + ' = ' + param.labels[data.level[p][i]]);
+      if (sample.level[p][i] >= 0) parts.push(param.name + ' = ' + param.labels[sample.level[p][i]]);
     });
-    return parts.join(' · ') + ' · predicted ' + caption + ' (' + OUTCOMES[data.outcome[i]] + ')';
+    return parts.join(' · ') + ' · predicted ' + caption + ' (' + OUTCOMES[sample.outcome[i]] + ')';
   }
 
   function range(n) {
