@@ -7,6 +7,13 @@
 5. Peak memory per render worker (and of the parent, which holds the model).
 
     .venv/bin/python benchmarks/pipeline.py [--renders 40] [--cold 4] [--cached 10000]
+
+`--multi-scene` instead measures the render stage against a bare bpy loop on the quickstart's
+240 distinct renders (5 objects × 4 environments): a hand-written bpy process that imports every
+mesh and builds every world once and renders world by world, object by object, and sweep3d's
+render stage on a fresh store, in one run (`--rounds 2` runs them bare, stage, stage, bare).
+
+    .venv/bin/python benchmarks/pipeline.py --multi-scene [--rounds 2]
 """
 
 from __future__ import annotations
@@ -226,13 +233,231 @@ def noop_rerun(n: int, folder: Path) -> dict:
     return {"jobs": len(plan.jobs), "wall": wall}
 
 
+# -- multi-scene: the quickstart's jobs, bare bpy loop against the render stage ---------------------
+QUICKSTART = REPO / "specs" / "quickstart.toml"
+
+# What a careful user would write by hand: every mesh imported once under its own empty (shown
+# with hide_render), one world per environment (scene.world), jobs world by world, object by
+# object; the render settings and framing are sweep3d's, so both render the same pictures.
+BARE_MULTI = textwrap.dedent("""
+    import json, math, os, resource, sys, time
+    t0 = time.perf_counter()
+    import bpy
+    import numpy as np
+    spec, out = json.load(open(sys.argv[1])), sys.argv[2]
+    s = spec["settings"]
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    scene.render.engine = "CYCLES"
+    c = scene.cycles
+    c.device, c.samples, c.use_adaptive_sampling, c.seed = "CPU", s["samples"], False, s["seed"]
+    c.use_denoising, c.denoiser, c.denoising_prefilter = True, "OPENIMAGEDENOISE", "FAST"
+    c.max_bounces = s["max_bounces"]
+    r = scene.render
+    r.resolution_x = r.resolution_y = s["size"]
+    r.resolution_percentage = 100
+    lo, hi = (s["size"] - s["crop"]) // 2 + 0.25, (s["size"] - s["crop"]) // 2 + s["crop"] + 0.25
+    r.use_border = r.use_crop_to_border = True
+    r.border_min_x, r.border_max_x, r.border_min_y, r.border_max_y = (lo / s["size"], hi / s["size"]) * 2
+    r.use_persistent_data = True
+    r.threads_mode, r.threads = "FIXED", os.cpu_count()
+    scene.view_settings.view_transform = "Standard"
+    r.image_settings.file_format, r.image_settings.color_mode, r.image_settings.compression = "PNG", "RGB", 0
+
+    def load(path):  # under a pose empty, normalised to a unit bounding sphere at the origin
+        before = set(bpy.data.objects)
+        bpy.ops.wm.obj_import(filepath=path)
+        new = [o for o in bpy.data.objects if o not in before]
+        meshes = [o for o in new if o.type == "MESH"]
+        pts = []
+        for o in meshes:
+            co = np.empty(len(o.data.vertices) * 3)
+            o.data.vertices.foreach_get("co", co)
+            m = np.array(o.matrix_world)
+            pts.append(co.reshape(-1, 3) @ m[:3, :3].T + m[:3, 3])
+        pts = np.concatenate(pts)
+        centre = (pts.min(0) + pts.max(0)) / 2
+        radius = float(np.sqrt(((pts - centre) ** 2).sum(1).max()))
+        pose = bpy.data.objects.new("pose", None)
+        norm = bpy.data.objects.new("norm", None)
+        for empty in (pose, norm):
+            scene.collection.objects.link(empty)
+        norm.parent, norm.scale, norm.location = pose, (1 / radius,) * 3, tuple(-centre / radius)
+        for o in new:
+            if o.parent is None:
+                o.parent = norm
+        return pose, meshes
+
+    def world(env):
+        w = bpy.data.worlds.new("w")
+        w.use_nodes = True
+        bg = w.node_tree.nodes["Background"]
+        if env["hdri"]:
+            tex = w.node_tree.nodes.new("ShaderNodeTexEnvironment")
+            tex.image = bpy.data.images.load(env["hdri"])
+            w.node_tree.links.new(tex.outputs["Color"], bg.inputs["Color"])
+        else:
+            bg.inputs["Color"].default_value = (*env["color"], 1.0)
+        bg.inputs["Strength"].default_value = env["strength"]
+        return w
+
+    objects = {path: load(path) for path in spec["meshes"]}
+    worlds = {name: world(env) for name, env in spec["environments"].items()}
+    cam = bpy.data.objects.new("cam", bpy.data.cameras.new("cam"))
+    cam.data.sensor_fit, cam.data.sensor_width, cam.data.lens = "HORIZONTAL", 36.0, 50.0
+    scene.collection.objects.link(cam)
+    scene.camera = cam
+    d = 1 / (0.8 * math.sin(math.atan(18 / 50)))
+    t1 = time.perf_counter()
+    devnull = os.open(os.devnull, os.O_WRONLY); saved = os.dup(1); os.dup2(devnull, 1)
+    shown = None
+    for job in spec["jobs"]:  # world by world, object by object
+        if scene.world != worlds[job["environment"]]:
+            scene.world = worlds[job["environment"]]
+        if job["mesh"] != shown:
+            for path, (_, meshes) in objects.items():
+                for o in meshes:
+                    o.hide_render = path != job["mesh"]
+            shown = job["mesh"]
+        objects[job["mesh"]][0].rotation_euler = (0.0, 0.0, math.radians(job["yaw"]))
+        e = math.radians(job["elevation"])
+        cam.location = (0.0, -d * math.cos(e), d * math.sin(e))
+        cam.rotation_euler = (math.pi / 2 - e, 0.0, 0.0)
+        r.filepath = f"{out}/{job['key']}.png"
+        bpy.ops.render.render(write_still=True)
+    os.dup2(saved, 1)
+    t2 = time.perf_counter()
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    print(json.dumps({"setup": t1 - t0, "loop": t2 - t1, "peak_mb": peak}))
+""")
+
+
+def quickstart_spec(folder: Path) -> Path:
+    """The quickstart spec in ``folder``, with its store there."""
+    folder.mkdir(parents=True, exist_ok=True)
+    text = QUICKSTART.read_text().replace('store = "../.sweep3d"', 'store = "store"')
+    assert 'store = "store"' in text
+    (folder / "spec.toml").write_text(text)
+    return folder / "spec.toml"
+
+
+def bare_jobs(folder: Path) -> tuple[Path, int]:
+    """The quickstart's distinct renders as the bare loop's input (world, object, pose order)."""
+    from sweep3d.pipeline import plan_spec
+    from sweep3d.spec.assets import materialise_mesh
+    from sweep3d.stages import load_spec
+    from sweep3d.stages.render import render_settings
+
+    plan = plan_spec(load_spec(quickstart_spec(folder)))
+    spec = plan.spec
+    rendered = {c.control.id for c in spec.controls if c.control.stage == "render"}
+    assert rendered == {"orientation", "camera"}, f"the bare loop poses only these controls, not {rendered}"
+    settings = render_settings(plan)
+    meshes = {o.name: str(materialise_mesh(spec.meshes[o.name], folder / "assets")) for o in spec.objects}
+    unique = {j.render_key: j for j in plan.jobs}.values()
+    jobs = [{"key": j.render_key, "mesh": meshes[j.object], "environment": j.environment,
+             "yaw": j.values["orientation"]["yaw"], "elevation": j.values["camera"]["elevation"]}
+            for j in sorted(unique, key=lambda j: (j.environment, j.object, j.index))]
+    environments = {e.name: {"hdri": spec.hdris[e.name], "color": e.color, "strength": e.strength}
+                    for e in spec.environments}
+    path = folder / "bare.json"
+    path.write_text(json.dumps({"settings": {"size": settings.resolution, "crop": settings.crop or settings.resolution,
+                                             "samples": settings.samples, "seed": settings.seed,
+                                             "max_bounces": settings.max_bounces},
+                                "meshes": list(meshes.values()), "environments": environments, "jobs": jobs}))
+    return path, len(jobs)
+
+
+def bare_multi(folder: Path) -> dict:
+    """Seconds and peak memory of the hand-written loop over the quickstart's renders."""
+    spec, n = bare_jobs(folder)
+    out = folder / "frames"
+    out.mkdir()
+    started = time.perf_counter()
+    done = subprocess.run([sys.executable, "-c", BARE_MULTI, str(spec), str(out)], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr[-3000:]
+    timing = json.loads(done.stdout.strip().splitlines()[-1])
+    return {**timing, "wall": time.perf_counter() - started, "n": n, "frames": out}
+
+
+def stage_multi(folder: Path) -> dict:
+    """Seconds of sweep3d's render stage over the quickstart on a fresh store, and worker memory."""
+    from sweep3d.cache.store import Store
+    from sweep3d.pipeline import plan_spec
+    from sweep3d.progress import RunProgress
+    from sweep3d.stages import load_spec
+    from sweep3d.stages.driver import run_stage
+    from sweep3d.stages.render import RenderStage
+
+    plan = plan_spec(load_spec(quickstart_spec(folder)))
+    store = Store(folder / "store")
+    watch = MemoryWatch()
+    watch.start()
+    outcome = run_stage(RenderStage(), plan, store, RunProgress(None))
+    watch.stop.set()
+    assert outcome.failed == 0 and outcome.computed == outcome.total, outcome
+    return {"seconds": outcome.seconds, "n": outcome.computed, "store": store,
+            "worker_peak_mb": max(watch.peaks.values(), default=0) / 1024}
+
+
+def agreement(bare: dict, stage: dict) -> tuple[float, float]:
+    """Mean |difference| in 8-bit levels between the two sides' images, and the share of pixels
+    more than 2 levels apart (edges against a plain background are blended differently)."""
+    from sweep3d.pixels import decode_png
+
+    means, far = [], []
+    for frame in sorted(bare["frames"].glob("*.png")):
+        diff = np.abs(decode_png(frame) - decode_png(stage["store"].blob_path(frame.stem))) * 255
+        means.append(diff.mean())
+        far.append((diff.max(axis=2) > 2.5).mean())
+    return float(np.mean(means)), float(np.mean(far))
+
+
+def multi_scene(rounds: int, console: Console) -> None:
+    """Bare loop and render stage on the quickstart's renders, interleaved (bare, stage, stage, bare, ...)."""
+    bare, stage = [], []
+    with tempfile.TemporaryDirectory(prefix="sweep3d-bench-", dir="/dev/shm" if Path("/dev/shm").is_dir() else None) as tmp:
+        for i in range(rounds):
+            for side in ("bare", "stage") if i % 2 == 0 else ("stage", "bare"):
+                console.print(f"round {i + 1}: {side} ...")
+                folder = Path(tmp) / f"{side}{i}"
+                (bare if side == "bare" else stage).append((bare_multi if side == "bare" else stage_multi)(folder))
+        mean_diff, far = agreement(bare[0], stage[0])
+    n = stage[0]["n"]
+    bare_rate = n / np.mean([b["wall"] for b in bare])
+    loop_rate = n / np.mean([b["loop"] for b in bare])
+    stage_rate = n / np.mean([s["seconds"] for s in stage])
+    table = Table(title=f"render stage against a bare bpy loop: the quickstart's {n} renders, 5 objects × 4 "
+                        f"environments (rounds: {rounds}, bare and stage interleaved)")
+    for column in ("measure", "value", "target", "met"):
+        table.add_column(column, justify="right" if column != "measure" else "left")
+    table.add_row("bare bpy loop, whole process (img/s)", f"{bare_rate:.2f}", "", "")
+    table.add_row("bare bpy loop, render loop only (img/s)", f"{loop_rate:.2f}", "", "")
+    table.add_row("   its set-up: import bpy, meshes, worlds (s)", f"{np.mean([b['setup'] for b in bare]):.1f}", "", "")
+    table.add_row("sweep3d render stage, incl. worker start (img/s)", f"{stage_rate:.2f}", "", "")
+    ratio = stage_rate / bare_rate
+    table.add_row("render stage / bare process", f"{ratio:.2f}", "≥ 0.9", "yes" if ratio >= 0.9 else "NO")
+    table.add_row("render stage / bare render loop only", f"{stage_rate / loop_rate:.2f}", "", "")
+    table.add_row("peak memory: render worker / bare process (MB)",
+                  f"{max(s['worker_peak_mb'] for s in stage):.0f} / {max(b['peak_mb'] for b in bare):.0f}", "", "")
+    table.add_row("images, bare vs stage: mean |Δ| (8-bit levels)", f"{mean_diff:.2f}", "", "")
+    table.add_row("images, bare vs stage: pixels > 2 levels apart", f"{far:.2%}", "", "")
+    console.print(table)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--renders", type=int, default=40, help="renders in the throughput comparison")
     parser.add_argument("--cold", type=int, default=4, help="renders for the one-process-per-render baseline")
     parser.add_argument("--cached", type=int, default=10_000, help="jobs in the no-op rerun")
+    parser.add_argument("--multi-scene", action="store_true",
+                        help="only the quickstart's renders: bare bpy loop against the render stage")
+    parser.add_argument("--rounds", type=int, default=1, help="with --multi-scene: rounds of each side")
     args = parser.parse_args()
     console = Console()
+    if args.multi_scene:
+        multi_scene(args.rounds, console)
+        return
     with tempfile.TemporaryDirectory(prefix="sweep3d-bench-", dir="/dev/shm" if Path("/dev/shm").is_dir() else None) as tmp:
         tmp = Path(tmp)
         for sub in ("bare", "cold", "pipe", "noop"):

@@ -132,6 +132,26 @@ def test_painted_object_takes_the_colour_of_each_side(tmp_path: Path) -> None:
     assert np.allclose(by_view["front"][0, 0], 1.0, atol=0.02)  # the plain white background
 
 
+@pytest.mark.blender
+def test_one_worker_switching_objects_sees_each_objects_own_parts(tmp_path: Path) -> None:
+    """A worker keeps both objects loaded: the UV pass of each is its own, also after a switch."""
+    from sweep3d.stages.render.pool import RenderPool
+    from sweep3d.stages.render.protocol import EnvironmentRef, RenderJob, RenderSettings
+    from tests.conftest import write_cube
+
+    cube = str(write_cube(tmp_path))
+    slab = tmp_path / "slab.obj"  # a flat box: far fewer of the cube's parts face the camera
+    slab.write_text("".join(f"v {x} {y} {z}\n" for x in (-1, 1) for y in (-1, 1) for z in (-0.1, 0.1))
+                    + "f 1 2 4 3\nf 5 7 8 6\nf 1 5 6 2\nf 3 4 8 7\nf 1 3 7 5\nf 2 6 8 4\n")
+    white = EnvironmentRef(color=(1.0, 1.0, 1.0))
+    jobs = [RenderJob(key, mesh, white) for key, mesh in (("a", cube), ("b", str(slab)), ("c", cube))]
+    settings = RenderSettings(resolution=48, samples=1, denoise=False, passes=("uv",))
+    with RenderPool(settings, workers=1) as pool:
+        parts = {reply.render_key: reply.info.parts for reply in pool.run([jobs])}
+    assert parts["a"] == parts["c"] and parts["a"]["object_pixels"] > 100
+    assert parts["b"] != parts["a"]
+
+
 def decode_png_bytes(png: bytes) -> np.ndarray:
     import io
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from dataclasses import replace
 from pathlib import Path
 
@@ -41,7 +42,7 @@ def test_render_returns_finite_rgb_with_the_object_on_the_background(scene) -> N
 
 def test_object_is_normalised_to_a_unit_sphere_at_the_origin(scene) -> None:
     render(scene, SceneState())
-    points = scene._world_vertices([o for o in scene.pose.children_recursive if o.type == "MESH"])
+    points = scene._world_vertices(scene.meshes)
     centre = (points.min(axis=0) + points.max(axis=0)) / 2
     radius = np.sqrt(((points - centre) ** 2).sum(axis=1)).max()
     assert np.allclose(centre, 0, atol=1e-6) and radius == pytest.approx(1.0, rel=1e-6)
@@ -83,18 +84,20 @@ def test_hdri_environment_fills_the_background(scene) -> None:
 
 def test_pose_change_does_not_reload_the_scene(scene) -> None:
     render(scene, SceneState())
-    mesh = next(o for o in scene.pose.children_recursive if o.type == "MESH")
+    mesh = scene.meshes[0]
     state = SceneState(yaw=90.0)
     render(scene, state)
-    assert next(o for o in scene.pose.children_recursive if o.type == "MESH") == mesh
+    assert scene.meshes[0] == mesh
 
 
-def test_a_mesh_without_geometry_is_a_user_error(scene, tmp_path: Path) -> None:
+def test_a_mesh_without_geometry_is_a_user_error_that_leaves_the_scene_as_it_was(scene, tmp_path: Path) -> None:
+    render(scene, SceneState())
+    before = set(scene.bpy.data.objects)
     empty = tmp_path / "empty.obj"
     empty.write_text("# nothing\n")
     with pytest.raises(UserError, match="no mesh"):
         scene.prepare(str(empty), WHITE)
-    scene.object_ref = None  # let the next test reload the cube
+    assert set(scene.bpy.data.objects) == before and scene.object_ref == scene.cube
 
 
 def _triangle_formats(folder: Path) -> dict[str, Path]:
@@ -145,12 +148,10 @@ def test_other_mesh_formats_load_and_are_normalised(scene, tmp_path: Path, fmt: 
     scene.prepare(str(path), replace(WHITE, color=(0.0, 0.0, 0.0)))  # a lit grey object on black
     scene.pose_scene(SceneState())
     image = scene.render()
-    meshes = [o for o in scene.pose.children_recursive if o.type == "MESH"]
-    points = scene._world_vertices(meshes)
+    points = scene._world_vertices(scene.meshes)
     radius = np.sqrt(((points - (points.min(0) + points.max(0)) / 2) ** 2).sum(axis=1)).max()
     assert radius == pytest.approx(1.0, rel=1e-5)
     assert image.max() > 0.3 and image[0, 0].max() < 0.01, "the tetrahedron is visible on black"
-    scene.object_ref = None
 
 
 @pytest.mark.parametrize("state", [
@@ -169,3 +170,96 @@ def test_out_of_frame_detection_agrees_with_the_render(scene, state) -> None:
         assert not visible, "flagged out of frame, but the object shows"
     if visible:
         assert predicted
+
+
+# -- a worker keeps what it has loaded ------------------------------------------------------------
+def _shown(scene) -> list:
+    """The meshes Cycles renders: those under the pose empty not hidden for render."""
+    return [o for o in scene.pose.children_recursive if o.type == "MESH" and not o.hide_render]
+
+
+def _render_mesh(scene, mesh: Path | str, state: SceneState, env=WHITE) -> np.ndarray:
+    scene.prepare(str(mesh), env)
+    scene.pose_scene(state)
+    return scene.render()
+
+
+def test_switching_objects_shows_one_and_keeps_the_others_loaded(scene, tmp_path: Path) -> None:
+    tetra = _triangle_formats(tmp_path)["ply"]
+    cube = render(scene, SceneState(yaw=30.0, pin_to_ground=True))
+    cube_meshes = list(scene.meshes)
+    other = _render_mesh(scene, tetra, SceneState(yaw=30.0, pin_to_ground=True))
+    assert _shown(scene) == scene.meshes and not set(scene.meshes) & set(cube_meshes)
+    assert np.abs(other - cube).mean() > 0.01
+    ground = scene.props.ground.location.z
+    assert ground == pytest.approx(scene._world_vertices(scene.meshes)[:, 2].min(), abs=1e-5), "pinned: this object's feet"
+    again = render(scene, SceneState(yaw=30.0, pin_to_ground=True))
+    assert scene.meshes == cube_meshes and _shown(scene) == cube_meshes, "shown again, not imported again"
+    assert np.array_equal(again, cube), "renders are bit-identical within a process"
+
+
+def test_a_skin_stays_with_its_job_not_with_the_object_it_was_on(scene, tmp_path: Path) -> None:
+    tetra = _triangle_formats(tmp_path)["ply"]
+    plain_tetra = _render_mesh(scene, tetra, SceneState())
+    plain_cube = render(scene, SceneState())
+    zebra = render(scene, SceneState(skin="zebra"))
+    assert np.abs(zebra - plain_cube).mean() > 0.002
+    assert np.array_equal(_render_mesh(scene, tetra, SceneState()), plain_tetra)
+    assert np.array_equal(render(scene, SceneState()), plain_cube), "the cube has its own material back"
+
+
+def test_each_environment_keeps_its_own_world(scene) -> None:
+    forest = EnvironmentRef(hdri=str(builtin_hdris()["forest"]))
+    first = render(scene, SceneState(), forest)
+    world, nodes = scene.scene.world, dict(scene.world.nodes)
+    render(scene, SceneState(), WHITE)
+    assert scene.scene.world != world
+    back = render(scene, SceneState(), forest)
+    assert scene.scene.world == world and scene.world.nodes == nodes, "switched back, node tree not rebuilt"
+    assert np.array_equal(back, first)
+
+
+def test_hdri_rotation_and_strength_follow_the_job_across_world_switches(scene) -> None:
+    forest, city = (EnvironmentRef(hdri=str(builtin_hdris()[name])) for name in ("forest", "city"))
+    turned = SceneState(world_rotation=120.0, world_strength=2.0)
+    base = render(scene, SceneState(), forest)
+    changed = render(scene, turned, forest)
+    assert np.abs(changed - base).mean() > 0.01
+    render(scene, turned, city)
+    assert np.array_equal(render(scene, SceneState(), forest), base)
+    render(scene, SceneState(), city)
+    assert np.array_equal(render(scene, turned, forest), changed)
+
+
+def test_objects_beyond_the_budget_are_removed_and_skins_survive_the_purge(scene, tmp_path: Path, monkeypatch) -> None:
+    tetra = _triangle_formats(tmp_path)["stl"]
+    zebra = render(scene, SceneState(skin="zebra"))
+    monkeypatch.setattr(scene.objects, "max_count", 1)
+    _render_mesh(scene, tetra, SceneState(skin="zebra"))
+    assert scene.cube not in scene.objects and len(scene.objects) == 1
+    assert [o for o in scene.pose.children_recursive if o.type == "MESH"] == scene.meshes, "the others are gone"
+    again = render(scene, SceneState(skin="zebra"))  # imported again; the zebra material was kept
+    assert str(tetra) not in scene.objects and len(_shown(scene)) == len(scene.meshes)
+    assert np.abs(again - zebra).max() <= 1.5 / 255
+
+
+class _KillsTheWorker:
+    """Stands in for a control: applying it kills the render worker, as the OOM killer would."""
+
+    def apply(self, state: SceneState, params: object) -> None:
+        os._exit(1)
+
+
+def test_a_worker_dying_on_the_last_job_of_its_share_leaves_no_group_unrendered(tmp_path: Path) -> None:
+    """The culprit fails after its retry; the groups still queued get a new worker (none waits forever)."""
+    from sweep3d.stages.render.pool import RenderPool
+    from sweep3d.stages.render.protocol import RenderJob, RenderSettings
+    from tests.conftest import write_cube
+
+    cube = str(write_cube(tmp_path))
+    fine = [RenderJob(key, cube, WHITE) for key in ("a", "b")]
+    dies = RenderJob("x", cube, WHITE, controls=((_KillsTheWorker(), None),))
+    with RenderPool(RenderSettings(resolution=32, samples=1, denoise=False), workers=1, timeout=120) as pool:
+        replies = {reply.render_key: reply for reply in pool.run([[fine[0], dies], [fine[1]]])}
+    assert replies["a"].ok and replies["b"].ok
+    assert not replies["x"].ok and "render worker died" in (replies["x"].error or "")

@@ -1,9 +1,11 @@
 """A pool of persistent render worker processes, driven from the parent (which never imports bpy).
 
-Jobs arrive grouped by scene (object, environment); a group goes to one worker so the scene is
-loaded once. A worker that dies or exceeds the per-job timeout is replaced and its unfinished
-jobs are retried once; scratch files are removed when the pool closes, also on Ctrl-C, and a
-killed run's by the next run (:func:`remove_stale_scratch`). Workers die with their parent.
+Jobs arrive grouped by scene, ordered world by world; a group goes to one worker so the scene is
+loaded once, and each worker takes its groups from its own contiguous share of that order
+(:class:`Shares`), so it changes world as rarely as the order allows. A worker that dies or
+exceeds the per-job timeout is replaced and its unfinished jobs are retried once; scratch files
+are removed when the pool closes, also on Ctrl-C, and a killed run's by the next run
+(:func:`remove_stale_scratch`). Workers die with their parent.
 """
 
 from __future__ import annotations
@@ -36,10 +38,42 @@ SCRATCH_PREFIX = "sweep3d-"  # + the parent's pid: a later run can tell a killed
 START_TIMEOUT = 120.0  # seconds a worker may take to import bpy and build its scene
 
 
+class Shares:
+    """Groups split into one contiguous share per worker slot, balanced by job count.
+
+    A worker takes the next group of its own share; once its share is done it takes the last
+    group of the largest share left, the one that share's owner would reach last.
+    """
+
+    def __init__(self, groups: list[list[RenderJob]], slots: int) -> None:
+        total = sum(len(g) for g in groups)
+        self.shares: list[deque[list[RenderJob]]] = [deque() for _ in range(max(slots, 1))]
+        done = 0
+        for group in groups:  # a group goes to the share its middle job falls in
+            slot = int((done + len(group) / 2) * len(self.shares) / max(total, 1))
+            self.shares[min(slot, len(self.shares) - 1)].append(group)
+            done += len(group)
+
+    def __bool__(self) -> bool:
+        return any(self.shares)
+
+    def take(self, slot: int) -> list[RenderJob] | None:
+        """The next group for the worker in ``slot``, or None when every share is done."""
+        if self.shares[slot]:
+            return self.shares[slot].popleft()
+        largest = max(self.shares, key=lambda share: sum(len(g) for g in share))
+        return largest.pop() if largest else None
+
+    def put_back(self, slot: int, group: list[RenderJob]) -> None:
+        """Return ``group`` to the front of ``slot``'s share (a dead worker's unfinished jobs)."""
+        self.shares[slot].appendleft(group)
+
+
 @dataclass
 class _Worker:
     process: Any
     conn: Connection
+    slot: int
     task: list[RenderJob] | None = None
     done: set[str] = field(default_factory=set)
     current: str | None = None
@@ -66,7 +100,7 @@ class RenderPool:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-    def _spawn(self) -> _Worker:
+    def _spawn(self, slot: int) -> _Worker:
         parent, child = self.ctx.Pipe()
         process = self.ctx.Process(
             target=worker_main, args=(child, self.settings, str(self.scratch)), daemon=True, name="sweep3d-render"
@@ -78,18 +112,19 @@ class RenderPool:
             process.kill()
             process.join(5)
             raise RenderError(f"render worker {message.message}")
-        return _Worker(process, parent)
+        return _Worker(process, parent, slot)
 
     def run(self, groups: list[list[RenderJob]]) -> Iterator[RenderReply]:
         """Render every job of every group, yielding one reply per job as it finishes."""
-        queue: deque[list[RenderJob]] = deque(g for g in groups if g)
+        groups = [g for g in groups if g]
+        queue = Shares(groups, min(self.n_workers, len(groups)))
         retried: set[str] = set()
-        while len(self.workers) < min(self.n_workers, len(queue)):
-            self.workers.append(self._spawn())
+        while len(self.workers) < len(queue.shares) and groups:
+            self.workers.append(self._spawn(len(self.workers)))
         while queue or any(w.task is not None for w in self.workers):
             for worker in self.workers:
                 if worker.task is None and queue:
-                    worker.task, worker.done, worker.current = queue.popleft(), set(), None
+                    worker.task, worker.done, worker.current = queue.take(worker.slot), set(), None
                     worker.conn.send(worker.task)
             busy = [w for w in self.workers if w.task is not None]
             ready = wait([w.conn for w in busy] + [w.process.sentinel for w in busy], timeout=1.0)
@@ -114,7 +149,7 @@ class RenderPool:
         elif isinstance(message, Idle):
             worker.task = None
 
-    def _replace(self, worker: _Worker, queue: deque[list[RenderJob]], retried: set[str],
+    def _replace(self, worker: _Worker, queue: Shares, retried: set[str],
                  timed_out: bool) -> Iterator[RenderReply]:
         """Replace a dead or stuck worker; retry its unfinished jobs once, fail the culprit twice."""
         culprit = worker.current
@@ -134,8 +169,9 @@ class RenderPool:
                     retried.add(key)
                 retry.append(job)
         if retry:
-            queue.appendleft(retry)
-            self.workers.append(self._spawn())
+            queue.put_back(worker.slot, retry)
+        if queue:  # also when only other groups are left: a pool never runs out of workers
+            self.workers.append(self._spawn(worker.slot))
 
     def close(self) -> None:
         for worker in self.workers:

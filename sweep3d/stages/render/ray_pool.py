@@ -119,17 +119,21 @@ class RayRenderPool:
         self.actors = [self.actor_cls.remote(self.settings) for _ in range(min(self.n_workers, len(queue)))]
         packs_ref = ray.put(self.packs)
         running: dict[Any, tuple[Any, list[RenderJob], int]] = {}
-        last_scene: dict[Any, str] = {}
+        last_scene: dict[Any, tuple[Any, str]] = {}
 
         def submit(actor, group, tries: int) -> None:
             running[actor.render_group.remote(group, packs_ref)] = (actor, group, tries)
-            last_scene[actor] = group[0].mesh
+            last_scene[actor] = (group[0].environment, group[0].mesh)
 
         def next_group(actor) -> list[RenderJob]:
-            for i, group in enumerate(queue):  # keep the actor on the scene it has loaded
-                if group[0].mesh == last_scene.get(actor):
-                    del queue[i]
-                    return group
+            """The actor's scene if more of it is queued, else its world (a world switch rebuilds
+            Cycles' importance map; an object it has loaded is only shown), else the next."""
+            world, mesh = last_scene.get(actor, (None, ""))
+            for same in ((world, mesh), (world,)):
+                for i, group in enumerate(queue):
+                    if (group[0].environment, group[0].mesh)[: len(same)] == same:
+                        del queue[i]
+                        return group
             return queue.popleft()
 
         for actor in self.actors:

@@ -1,15 +1,19 @@
 """Blender's copy of a :class:`SceneState`: builds a scene once, then re-poses it per job.
 
-A :class:`BlenderScene` keeps one object and one world loaded and swaps only what changes:
-a new environment reloads the world, a new object reloads the mesh, and a job that changes
-only pose or camera just moves things (persistent render data keeps Cycles' scene and the
-world's importance map between renders).
+A :class:`BlenderScene` keeps every object and every world it has loaded (up to a budget,
+least recently used first out): each object sits under its own normalising empty and is hidden
+for render and viewport while another is current; each environment has its own bpy World and
+``scene.world`` points at the job's. Going back to a scene is a switch, not a re-import. A job
+that changes only pose or camera just moves things (persistent render data keeps Cycles' scene
+and the world's importance map between renders; Cycles does rebuild the map when
+``scene.world`` changes, so the render stage orders jobs world by world).
 """
 
 from __future__ import annotations
 
 import math
 import os
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -18,6 +22,7 @@ import numpy as np
 from sweep3d.errors import UserError
 from sweep3d.stages.render._bpy import import_bpy
 from sweep3d.stages.render._rna import assign
+from sweep3d.stages.render.kept import Kept
 from sweep3d.stages.render.props import Props
 from sweep3d.stages.render.protocol import EnvironmentRef, RenderSettings
 from sweep3d.stages.render.skins import SkinMaterials
@@ -32,6 +37,36 @@ IMPORTERS = {
     ".gltf": ("import_scene.gltf", {}),
     ".glb": ("import_scene.gltf", {}),
 }
+
+
+#: What a worker keeps loaded besides the current scene (see :class:`Kept`). Hidden objects cost
+#: only Blender's mesh data (~0.2 kB per face; Cycles drops them); kept worlds cost their HDRI's
+#: float RGBA buffer (16 bytes per pixel: 32 Mpx is one 8k map, or eight 2k ones).
+MAX_KEPT_OBJECTS = 16
+MAX_KEPT_FACES = 2_000_000
+MAX_KEPT_WORLDS = 8
+MAX_KEPT_HDRI_PIXELS = 32 * 2**20
+
+
+@dataclass
+class LoadedObject:
+    """An imported mesh file under its own normalising empty (a child of the pose empty)."""
+
+    normaliser: Any
+    objects: list[Any]  # everything the import made
+    meshes: list[Any]
+    radius: float
+    own: list[tuple[bool, bool]]  # each object's own (hide_render, hide_viewport), restored when shown
+
+    @property
+    def faces(self) -> int:
+        return sum(len(o.data.polygons) for o in self.meshes)
+
+    def show(self, visible: bool) -> None:
+        """Show the object as imported, or hide it from render and viewport (Cycles drops it)."""
+        for obj, (render, viewport) in zip(self.objects, self.own):
+            assign(obj, "hide_render", render or not visible)
+            assign(obj, "hide_viewport", viewport or not visible)
 
 
 class BlenderScene:
@@ -56,12 +91,14 @@ class BlenderScene:
         scene.camera = self.camera
         self.pose = bpy.data.objects.new("sweep3d_pose", None)  # controls move this empty
         scene.collection.objects.link(self.pose)
-        world = bpy.data.worlds.new("sweep3d_world")
-        scene.world = world
-        self.world = WorldNodes(bpy, world)
+        self.objects: Kept[str, LoadedObject] = Kept(MAX_KEPT_OBJECTS, MAX_KEPT_FACES, lambda o: o.faces)
+        self.meshes: list[Any] = []  # the current object's
+        self.worlds: Kept[EnvironmentRef, WorldNodes] = Kept(MAX_KEPT_WORLDS, MAX_KEPT_HDRI_PIXELS, lambda w: w.pixels)
+        self.environment = EnvironmentRef()
+        self.world = self._world(self.environment)
+        scene.world = self.world.world
         self.skins = SkinMaterials(bpy)
         self.props = Props(bpy, scene)
-        self.environment = EnvironmentRef()
         self.frame = scratch / f"frame-{os.getpid()}.png"
         self.uv_pass = UVPass(bpy, scene, scratch) if "uv" in settings.passes else None
         self.parts: dict[str, Any] | None = None  # what the UV pass saw in the latest render
@@ -84,7 +121,7 @@ class BlenderScene:
         scene.render.resolution_x = scene.render.resolution_y = s.resolution
         scene.render.resolution_percentage = 100
         _crop_to_centre(scene.render, s.resolution, s.crop or s.resolution)
-        scene.render.use_persistent_data = True  # world importance map built once per world
+        scene.render.use_persistent_data = True  # keeps the BVH and the importance map while they stay
         scene.render.threads_mode = "FIXED"
         scene.render.threads = s.threads or os.cpu_count() or 1
         scene.view_settings.view_transform = "Standard"
@@ -96,27 +133,94 @@ class BlenderScene:
 
     # -- loading -------------------------------------------------------------------------------
     def prepare(self, mesh_path: str, environment: EnvironmentRef) -> None:
-        """Make ``mesh_path`` the loaded object and ``environment`` the job's world (lazily synced)."""
+        """Make ``mesh_path`` the shown object and ``environment``'s world the scene's (its values
+        are synced by :meth:`pose_scene`); each is loaded only the first time it is needed."""
         self.environment = environment
+        self.world = self._world(environment)
+        if self.scene.world != self.world.world:
+            self.scene.world = self.world.world
         if mesh_path != self.object_ref:
-            self._load_object(mesh_path)
+            self._show(mesh_path)
             self.object_ref = mesh_path
 
-    def _load_object(self, mesh_path: str) -> None:
+    def _world(self, environment: EnvironmentRef) -> WorldNodes:
+        """The environment's own World (one per environment, so a switch rebuilds no node tree)."""
+        nodes = self.worlds.get(environment)
+        if nodes is None:
+            world = self.bpy.data.worlds.new("sweep3d_world")
+            world.use_fake_user = True  # out of use while another is current: not an orphan to purge
+            nodes = WorldNodes(self.bpy, world)
+            self.worlds.add(environment, nodes)
+        return nodes
+
+    def _evict_worlds(self) -> None:
+        """Remove the least recently used worlds beyond the budget, and their HDRIs."""
+        evicted = self.worlds.evict()
+        for old in evicted:
+            self.bpy.data.worlds.remove(old.world)
+        if evicted:
+            self.bpy.data.orphans_purge(do_recursive=True)
+
+    def _show(self, mesh_path: str) -> None:
+        """Show ``mesh_path``'s object (importing it the first time) and hide every other one."""
+        loaded = self.objects.get(mesh_path)
+        if loaded is None:
+            loaded = self._load_object(mesh_path)  # a UserError leaves the scene as it was
+            self.objects.add(mesh_path, loaded)
+        self.skins.restore()  # the object going out of sight gets its own materials back
+        for other in self.objects.values():
+            other.show(other is loaded)
+        self.meshes = loaded.meshes
+        self.skins.reset(loaded.meshes, loaded.radius)
+        evicted = self.objects.evict()
+        for old in evicted:
+            for obj in old.objects + [old.normaliser]:
+                self.bpy.data.objects.remove(obj, do_unlink=True)
+        if evicted:
+            self.bpy.data.orphans_purge(do_recursive=True)  # their meshes, materials, textures
+
+    def _load_object(self, mesh_path: str) -> LoadedObject:
+        """Import ``mesh_path`` under a new normalising empty (unit bounding sphere at the origin)."""
         bpy = self.bpy
-        for child in list(self.pose.children_recursive):
-            bpy.data.objects.remove(child, do_unlink=True)
-        bpy.data.orphans_purge(do_recursive=True)
         before = set(bpy.data.objects)
-        suffix = Path(mesh_path).suffix.lower()
-        op_name, kwargs = IMPORTERS[suffix]
+        try:
+            self._import(mesh_path)
+            imported = [o for o in bpy.data.objects if o not in before]
+            meshes = [o for o in imported if o.type == "MESH"]
+            centre, radius = self._check(mesh_path, meshes)
+        except UserError:
+            for obj in [o for o in bpy.data.objects if o not in before]:
+                bpy.data.objects.remove(obj, do_unlink=True)
+            bpy.data.orphans_purge(do_recursive=True)
+            raise
+        normaliser = bpy.data.objects.new("sweep3d_normaliser", None)
+        self.scene.collection.objects.link(normaliser)
+        normaliser.parent = self.pose
+        normaliser.scale = (1.0 / radius,) * 3
+        normaliser.location = tuple(-centre / radius)
+        for obj in imported:
+            if obj.parent is None:
+                world = obj.matrix_world.copy()
+                obj.parent = normaliser
+                obj.matrix_parent_inverse.identity()
+                obj.matrix_basis = world
+        if self.uv_pass is not None:
+            bpy.context.view_layer.update()
+            to_pose = self.pose.matrix_world.inverted()
+            self.uv_pass.prepare(meshes, lambda obj: to_pose @ obj.matrix_world)
+        own = [(o.hide_render, o.hide_viewport) for o in imported]
+        return LoadedObject(normaliser, imported, meshes, radius, own)
+
+    def _import(self, mesh_path: str) -> None:
+        op_name, kwargs = IMPORTERS[Path(mesh_path).suffix.lower()]
         module, _, name = op_name.partition(".")
         try:
-            getattr(getattr(bpy.ops, module), name)(filepath=str(mesh_path), **kwargs)
+            getattr(getattr(self.bpy.ops, module), name)(filepath=str(mesh_path), **kwargs)
         except RuntimeError as exc:
             raise UserError(f"Blender cannot import {mesh_path!r}: {exc}") from None
-        imported = [o for o in bpy.data.objects if o not in before]
-        meshes = [o for o in imported if o.type == "MESH"]
+
+    def _check(self, mesh_path: str, meshes: list[Any]) -> tuple[np.ndarray, float]:
+        """The imported meshes' bounding-sphere centre and radius; a UserError if they cannot render."""
         if not meshes:
             raise UserError(f"{mesh_path!r} contains no mesh objects")
         points = self._world_vertices(meshes)
@@ -131,23 +235,7 @@ class BlenderScene:
             raise UserError(f"{mesh_path!r} has no faces to render (are its face indices valid?)")
         if self._surface_area(meshes) <= 1e-12 * radius**2:
             raise UserError(f"{mesh_path!r} has zero area (its faces are degenerate: all points on a line)")
-        normaliser = bpy.data.objects.new("sweep3d_normaliser", None)
-        self.scene.collection.objects.link(normaliser)
-        normaliser.parent = self.pose
-        normaliser.scale = (1.0 / radius,) * 3
-        normaliser.location = tuple(-centre / radius)
-        for obj in imported:
-            if obj.parent is None:
-                world = obj.matrix_world.copy()
-                obj.parent = normaliser
-                obj.matrix_parent_inverse.identity()
-                obj.matrix_basis = world
-        self.meshes = meshes
-        self.skins.reset(meshes, radius)
-        if self.uv_pass is not None:
-            bpy.context.view_layer.update()
-            to_pose = self.pose.matrix_world.inverted()
-            self.uv_pass.prepare(meshes, lambda obj: to_pose @ obj.matrix_world)
+        return centre, radius
 
     @staticmethod
     def _surface_area(meshes) -> float:
@@ -200,6 +288,7 @@ class BlenderScene:
         assign(self.scene.cycles, "use_denoising", denoise)
         env = self.environment
         self.world.sync(env, state)
+        self._evict_worlds()  # now that the job's HDRI is loaded, and its size known
         self.background = state.background or (tuple(env.color) if env.color and state.sky is None else None)
         assign(self.scene.render, "film_transparent", self.background is not None)
         self.skins.sync(state.skin, state.skin_scale, state.skin_image)

@@ -2,7 +2,9 @@
 
 Each skin is a small shader graph: a texture (wave bands, noise, Voronoi cells) driven by the
 object-space position, a colour ramp, and a Principled BSDF. Materials are built once per
-(skin, scale, image) and swapped onto every mesh slot; the originals are restored afterwards.
+(skin, scale, image) and swapped onto every mesh slot of the current object; its own materials
+are restored when a job wants them, or when another object becomes current (a worker keeps
+every object it has loaded, and a hidden one must come back as it was imported).
 """
 
 from __future__ import annotations
@@ -29,19 +31,27 @@ _OUTPUTS = {"ShaderNodeTexWave": "Fac", "ShaderNodeTexNoise": "Fac", "ShaderNode
 
 
 class SkinMaterials:
+    """The skin materials built so far, and which one the current object wears."""
+
     def __init__(self, bpy) -> None:
         self.bpy = bpy
         self.materials: dict[tuple, Any] = {}
+        self.meshes: list[Any] = []
+        self.radius = 1.0
         self.originals: dict[str, list[Any]] = {}
         self.current: tuple = ("original",)
 
     def reset(self, meshes, radius: float) -> None:
-        """A new object was loaded: remember its own materials, and its size so patterns scale
+        """Another object is current: remember its own materials, and its size so patterns scale
         with the object (object coordinates are in the mesh's own units)."""
         self.meshes = list(meshes)
         self.radius = radius
         self.originals = {o.name: [slot.material for slot in o.material_slots] for o in self.meshes}
         self.current = ("original",)
+
+    def restore(self) -> None:
+        """Give the current object its own materials back."""
+        self.sync("original", 1.0, None)
 
     def sync(self, skin: str, scale: float, image: str | None) -> None:
         key = ("original",) if skin == "original" else (skin, scale / self.radius, image)
@@ -70,6 +80,7 @@ class SkinMaterials:
         """A material for ``skin``; ``scale`` is pattern repeats per unit of object coordinates."""
         bpy = self.bpy
         material = bpy.data.materials.new(f"sweep3d_skin_{skin}")
+        material.use_fake_user = True  # kept for reuse while no object wears it: not an orphan to purge
         material.use_nodes = True
         nodes, links = material.node_tree.nodes, material.node_tree.links
         bsdf = nodes["Principled BSDF"]

@@ -5,6 +5,9 @@ gone and the key is rendered again. Each row records the SHA-256 of its blob, so
 a damaged blob from a good one. A job that fails because of the user's input (a mesh or HDRI
 Blender cannot use, a full disk) stops the run with a one-line error naming the spec key.
 
+Workers keep what they have loaded, so the stage orders scenes world by world and the pool
+gives each worker a contiguous share of that order (see :func:`_groups`).
+
 When the report asks for part visibility, workers also write a UV pass and each render records
 which parts of the object it shows (the ``parts`` table, one row per ``parts_key``). A render
 that is cached but lacks that row is rendered again for the pass only: its blob is kept.
@@ -136,8 +139,11 @@ def _parts_row(job: Job, reply: RenderReply) -> dict:
 
 
 def _groups(plan: Plan, store: Store, todo: list[Job], stored: set[str]) -> list[list[RenderJob]]:
-    """Jobs for the workers, grouped by scene; a job whose render is ``stored`` (there for its UV
-    pass) carries no blob path."""
+    """Jobs for the workers, grouped by scene and ordered world by world (then object by object):
+    a worker keeps every object and world it has loaded, but Cycles rebuilds the world's
+    importance map whenever the world changes, so a worker given a contiguous share of this order
+    changes world as rarely as it can. A job whose render is ``stored`` (there for its UV pass)
+    carries no blob path."""
     spec = plan.spec
     ordered = sorted((c.control for c in spec.controls if c.control.stage == "render"), key=lambda c: c.order)
     environments = {e.name: e for e in spec.environments}
@@ -147,7 +153,7 @@ def _groups(plan: Plan, store: Store, todo: list[Job], stored: set[str]) -> list
         if job.object not in meshes:
             meshes[job.object] = str(materialise_mesh(spec.meshes[job.object], store.root))
         env = environments[job.environment]
-        by_scene[job.scene].append(RenderJob(
+        by_scene[job.environment, job.object].append(RenderJob(
             render_key=job.render_key,
             mesh=meshes[job.object],
             environment=EnvironmentRef(hdri=spec.hdris[env.name], color=env.color, strength=env.strength),

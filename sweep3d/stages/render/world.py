@@ -1,8 +1,9 @@
 """The Blender world: an HDRI (rotatable, scalable), a plain colour's neutral light, or a sky.
 
-The world node tree is rebuilt only when its structure changes (another map, a sky) and its
-values are written only when they differ, because any change makes Cycles rebuild the world's
-importance map (~0.75 s at 224² on 2 cores).
+A render worker keeps one :class:`WorldNodes` (one bpy World) per environment. Its node tree is
+rebuilt only when its structure changes (a sky instead of the map) and its values are written
+only when they differ, because any change makes Cycles rebuild the world's importance map
+(~0.75 s at 224² on 2 cores).
 """
 
 from __future__ import annotations
@@ -19,6 +20,8 @@ GROUND_ALBEDO = 0.3  # below the horizon of a procedural sky
 
 
 class WorldNodes:
+    """One bpy World and the nodes :meth:`sync` writes to."""
+
     def __init__(self, bpy, world) -> None:
         self.bpy, self.world = bpy, world
         self.structure: tuple | None = None
@@ -65,7 +68,7 @@ class WorldNodes:
             links.new(coords.outputs["Generated"], mapping.inputs["Vector"])
             links.new(mapping.outputs["Vector"], texture.inputs["Vector"])
             links.new(texture.outputs["Color"], background.inputs["Color"])
-            self.nodes["mapping"] = mapping
+            self.nodes["mapping"], self.nodes["texture"] = mapping, texture
         elif structure[0] == "sky":
             sky = nodes.new("ShaderNodeTexSky")
             sky.sky_type = "NISHITA"
@@ -75,6 +78,12 @@ class WorldNodes:
         else:
             # A plain background is composited after rendering; the world only lights the object.
             background.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+
+    @property
+    def pixels(self) -> int:
+        """Pixels of the HDRI this world holds in memory (0 for a plain colour or a sky)."""
+        texture = self.nodes.get("texture")
+        return 0 if texture is None else int(texture.image.size[0]) * int(texture.image.size[1])
 
     @staticmethod
     def _ground(nodes, links, sky, background) -> Any:
