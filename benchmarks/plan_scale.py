@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -200,23 +201,39 @@ con = connect(Store(spec.store), spec.name, read_only=True)
 opened = time.perf_counter() - t
 t = time.perf_counter()
 rows = con.execute(sys.argv[1]).fetchall()
-print(json.dumps({"open": opened, "query": time.perf_counter() - t, "rows": sum(r[1] for r in rows)}))
+queried = time.perf_counter() - t
+from sweep3d.stages.aggregate import summarise
+from sweep3d.stages.aggregate.views import stored_parameters
+t, c = time.perf_counter(), time.process_time()
+summarise(connect(Store(spec.store), spec.name), stored_parameters(Store(spec.store).jobs_path(spec.name)))
+print("RESULT", json.dumps({"open": opened, "query": queried, "rows": sum(r[1] for r in rows),
+                            "summary": time.perf_counter() - t, "summary_cpu": time.process_time() - c}))
 """
 
 
-def measure_noop(repo: Path, folder: Path, jobs: int) -> dict:
+def measure_noop(repo: Path, folder: Path, jobs: int, first_run: bool = True) -> dict:
     started = time.perf_counter()
-    synthesise_store(folder, jobs)
+    if not (folder / "store").exists():  # a --keep folder from an earlier run is used again
+        synthesise_store(folder, jobs)
     setup = time.perf_counter() - started
-    first = cli(repo, folder, "run", "spec.toml", "--no-report")
+    first = None
+    if first_run:
+        shutil.rmtree(folder / "store" / "verified", ignore_errors=True)  # the first run hashes every blob
+        first = cli(repo, folder, "run", "spec.toml", "--no-report")
     second = cli(repo, folder, "run", "spec.toml", "--no-report")
+    print("no-op run:", {k: v for k, v in second.items() if k != "stdout"}, flush=True)
     assert f"{jobs} jobs" in second["stdout"], second["stdout"]
     query = cli(repo, folder, "query", "spec.toml", GROUP_BY)
     inside = subprocess.run([sys.executable, "-c", QUERY, GROUP_BY], cwd=folder, env=child_env(repo),
                             capture_output=True, text=True, check=True)
-    timing = json.loads(inside.stdout.strip().splitlines()[-1])
+    out = inside.stdout  # after DuckDB's progress bars, which end without a new line
+    timing = json.loads(out[out.rindex("RESULT ") + 7:].splitlines()[0])
     assert timing["rows"] == jobs, timing
     return {"setup": setup, "first": first, "second": second, "query_cli": query, "query": timing}
+
+
+def _usage(result: dict) -> tuple[str, str, str]:
+    return f"{result['wall']:.1f} s", f"{result['cpu']:.1f} s", f"{result['maxrss_mb']:,.0f} MB"
 
 
 def count(text: str) -> int:
@@ -228,35 +245,39 @@ def main() -> None:
     parser.add_argument("--plan", nargs="*", type=count, default=[10_000, 100_000, 1_000_000], help="plan sizes")
     parser.add_argument("--noop", nargs="*", type=count, default=[1_000_000], help="no-op rerun sizes")
     parser.add_argument("--repo", type=Path, default=REPO, help="the sweep3d checkout to time")
-    parser.add_argument("--scratch", type=Path, default=None, help="where stores go (default: a temp folder)")
+    parser.add_argument("--steady-only", action="store_true",
+                        help="skip the first no-op run (which hashes every blob once) on a kept store")
+    parser.add_argument("--keep", type=Path, default=None,
+                        help="keep the stores in this folder (and use those already there) instead of a temp folder")
     args = parser.parse_args()
     repo = args.repo.resolve()
     sys.path.insert(0, str(repo))
     rows = []
-    with tempfile.TemporaryDirectory(prefix="sweep3d-scale-", dir=args.scratch) as tmp:
+    with tempfile.TemporaryDirectory(prefix="sweep3d-scale-") as tmp:
+        scratch = args.keep or Path(tmp)
         for target in args.plan:
-            folder = Path(tmp) / f"plan{target}"
-            folder.mkdir()
+            folder = scratch / f"plan{target}"
+            folder.mkdir(parents=True, exist_ok=True)
             r = measure_plan(repo, folder, target)
-            rows.append((f"plan, grid of {r['jobs']:,} jobs ({r['jobs'] - r['in_frame']:,} out of frame)",
-                         f"{r['cli']['wall']:.1f} s", f"{r['cli']['maxrss_mb']:,.0f} MB",
-                         f"make_plan {r['plan']:.1f} s, jobs table {r['table']:.1f} s"))
+            rows.append((f"`plan`, grid of {r['jobs']:,} jobs ({r['jobs'] - r['in_frame']:,} out of frame)",
+                         *_usage(r["cli"]), f"make_plan {r['plan']:.1f} s (CPU {r['plan_cpu']:.1f} s), "
+                                            f"jobs table {r['table']:.1f} s"))
             print(rows[-1], flush=True)
         for jobs in args.noop:
-            folder = Path(tmp) / f"noop{jobs}"
-            folder.mkdir()
-            r = measure_noop(repo, folder, jobs)
-            rows.append((f"no-op run of {jobs:,} cached jobs, first (hashes every blob once)",
-                         f"{r['first']['wall']:.1f} s", f"{r['first']['maxrss_mb']:,.0f} MB",
-                         f"store made in {r['setup']:.0f} s"))
-            rows.append((f"no-op run of {jobs:,} cached jobs, again", f"{r['second']['wall']:.1f} s",
-                         f"{r['second']['maxrss_mb']:,.0f} MB", ""))
-            rows.append((f"GROUP BY over {jobs:,} results (`sweep3d query`)", f"{r['query_cli']['wall']:.1f} s",
-                         f"{r['query_cli']['maxrss_mb']:,.0f} MB",
+            folder = scratch / f"noop{jobs}"
+            folder.mkdir(parents=True, exist_ok=True)
+            r = measure_noop(repo, folder, jobs, not args.steady_only)
+            if r["first"] is not None:
+                rows.append((f"no-op `run` of {jobs:,} cached jobs, first (hashes every blob once)",
+                             *_usage(r["first"]), f"store made in {r['setup']:.0f} s"))
+            rows.append((f"no-op `run` of {jobs:,} cached jobs, again", *_usage(r["second"]),
+                         f"of which the findings it prints (aggregate views): {r['query']['summary']:.1f} s "
+                         f"(CPU {r['query']['summary_cpu']:.1f} s)"))
+            rows.append((f"GROUP BY over {jobs:,} results (`sweep3d query`)", *_usage(r["query_cli"]),
                          f"in-process: open {r['query']['open']:.2f} s, query {r['query']['query']:.2f} s"))
             print(rows[-3:], flush=True)
     print(f"\nsweep3d at {repo}\n")
-    print("| measure | wall | peak RSS | notes |\n|---|---|---|---|")
+    print("| measure | wall | CPU | peak RSS | notes |\n|---|---|---|---|---|")
     for row in rows:
         print("| " + " | ".join(row) + " |")
 

@@ -60,18 +60,9 @@ def digest(value: Any) -> str:
     return hashlib.sha256(canonical(value).encode("utf-8")).hexdigest()[:KEY_LENGTH]
 
 
-def digests(texts: Iterable[str], repeats: bool = False) -> list[str]:
-    """The cache key of each canonical text: :func:`digest` for values already written out.
-
-    Args:
-        repeats: the texts repeat a lot (each is then hashed once).
-    """
+def digests(texts: Iterable[str]) -> list[str]:
+    """The cache key of each canonical text: :func:`digest` for values already written out."""
     sha = hashlib.sha256
-    if repeats:
-        texts = list(texts)
-        once = dict.fromkeys(texts)
-        keys = dict(zip(once, digests(once)))
-        return [keys[text] for text in texts]
     return [sha(text.encode("utf-8")).hexdigest()[:KEY_LENGTH] for text in texts]
 
 

@@ -27,6 +27,7 @@ import time
 import uuid
 from contextlib import contextmanager
 from datetime import datetime, timezone
+from operator import methodcaller
 from pathlib import Path
 from typing import Any, Iterable, Iterator
 
@@ -94,14 +95,14 @@ class Store:
         entries = sum(_folder_entries(self.root / "blobs" / f) for f in folders) if len(keys) > 1000 else None
         if entries is None or entries > LISTING_ADVANTAGE * len(keys):
             return {key for key in keys if os.path.exists(self.blob_file(key, ext))}
-        suffix = f".{ext}"
         names: set[str] = set()
+        strip = methodcaller("removesuffix", f".{ext}")
         for folder in folders:
             try:
-                names.update(os.listdir(self.root / "blobs" / folder))
+                names.update(map(strip, os.listdir(self.root / "blobs" / folder)))
             except FileNotFoundError:
                 continue
-        return {key for key in keys if key + suffix in names}
+        return keys & names  # a name of another kind keeps its suffix and matches no key
 
     def table_dir(self, table: str) -> Path:
         return self.root / "tables" / table

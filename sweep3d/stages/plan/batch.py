@@ -65,20 +65,24 @@ class ControlBatch:
             dump[param] = Hole(f"{self.id}.{param}")
         return self.inst.control.key_part(dump)
 
-    def patterns(self, lo: int, hi: int) -> list[np.ndarray]:
-        """Codes that are equal for jobs ``lo`` .. ``hi - 1`` whose key parts share a :meth:`part`."""
-        effective = ~self.identity[lo:hi]
-        return [self.values.group[lo:hi], effective] if self.plain else [effective]
+    def patterns(self, rows: np.ndarray) -> list[np.ndarray]:
+        """Codes that are equal for jobs (of ``rows``) whose key parts share a :meth:`part`."""
+        effective = ~self.identity[rows]
+        return [self.values.group[rows], effective] if self.plain else [effective]
 
-    def hole_texts(self, lo: int, hi: int) -> dict[str, np.ndarray]:
-        """The canonical text filling each hole of :meth:`part`, per job ``lo`` .. ``hi - 1``."""
+    def codes(self, rows: np.ndarray) -> list[np.ndarray]:
+        """Codes that are equal for jobs (of ``rows``) whose values are equal."""
+        return [self.values.group[rows]] + [_codes(numbers[rows]) for numbers in self.values.numbers.values()]
+
+    def hole_texts(self, rows: np.ndarray) -> dict[str, np.ndarray]:
+        """The canonical text filling each hole of :meth:`part`, per job of ``rows``."""
         if not self.plain:
-            return {self.id: self.texts[self.values.group[lo:hi]]}  # type: ignore[index]
-        return {f"{self.id}.{param}": self._number_texts(param, lo, hi) for param in self.values.numbers}
+            return {self.id: self.texts[self.values.group[rows]]}  # type: ignore[index]
+        return {f"{self.id}.{param}": self._number_texts(param, rows) for param in self.values.numbers}
 
-    def _number_texts(self, param: str, lo: int, hi: int) -> np.ndarray:
+    def _number_texts(self, param: str, rows: np.ndarray) -> np.ndarray:
         """Canonical texts of a range parameter's numbers, as ``key_part`` would write them."""
-        numbers = self.values.numbers[param][lo:hi]
+        numbers = self.values.numbers[param][rows]
         period = self.inst.control.periodic.get(param)
         if period is not None:
             return float_texts(wrap_periodic_many(numbers, period))
@@ -91,11 +95,11 @@ class ControlBatch:
         return _raw(self.columns, row)
 
 
-def keyed_texts(batches: list[ControlBatch], lo: int, hi: int,
+def keyed_texts(batches: list[ControlBatch], rows: np.ndarray,
                 make: Callable[[list[ControlBatch], list[Any]], Template | None],
                 strings: dict[str, Sequence[str]] | None = None) -> list[str | None]:
-    """For jobs ``lo`` .. ``hi - 1``, the canonical text of a key's value built by ``make`` from
-    the controls in ``batches`` that change the job's image and their key parts (in that order).
+    """For the jobs of ``rows``, the canonical text of a key's value built by ``make`` from the
+    controls in ``batches`` that change the job's image and their key parts (in that order).
 
     Jobs whose effective controls share their parts (a *pattern*) share one :class:`Template`,
     filled per job; ``make`` returns None where the key is not hashed (no effective control).
@@ -103,29 +107,29 @@ def keyed_texts(batches: list[ControlBatch], lo: int, hi: int,
     Args:
         strings: other holes of ``make``'s value, filled with plain strings (keys), per job.
     """
-    n = hi - lo
+    n = len(rows)
     strings = strings or {}
-    first, pattern = groups([code for b in batches for code in b.patterns(lo, hi)], n)
+    first, pattern = groups([code for b in batches for code in b.patterns(rows)], n)
     holes: dict[str, np.ndarray] = {}
     for b in batches:
-        holes.update(b.hole_texts(lo, hi))
+        holes.update(b.hole_texts(rows))
     holes.update({name: np.array(column, dtype=object) for name, column in strings.items()})
     order = np.argsort(pattern, kind="stable")
     bounds = np.searchsorted(pattern[order], np.arange(len(first) + 1))
     out = np.empty(n, dtype=object)
-    for p, row in enumerate(first.tolist()):
-        effective = [b for b in batches if not b.identity[lo + row]]
-        template = make(effective, [b.part(b.values.group[lo + row]) for b in effective])
+    for p, at in enumerate(rows[first].tolist()):
+        effective = [b for b in batches if not b.identity[at]]
+        template = make(effective, [b.part(b.values.group[at]) for b in effective])
         if template is None:
             continue
-        rows = order[bounds[p]:bounds[p + 1]] if len(first) > 1 else slice(None)
+        chosen = order[bounds[p]:bounds[p + 1]] if len(first) > 1 else slice(None)
         if not template.names:
-            out[rows] = template.pieces[0]
+            out[chosen] = template.pieces[0]
             continue
-        texts = template.fill(list(strings), **{name: holes[name][rows].tolist() for name in template.names})
+        texts = template.fill(list(strings), **{name: holes[name][chosen].tolist() for name in template.names})
         if len(first) == 1:
             return texts
-        out[rows] = texts
+        out[chosen] = texts
     return out.tolist()
 
 

@@ -22,7 +22,7 @@ from sweep3d.spec.sniff import unreadable
 from sweep3d.spec.space import Point, SearchSpace
 from sweep3d.stages.infer.keys import infer_base, pred_keys
 from sweep3d.stages.jobs import JobList, Plan, PlanColumns, SceneBlock
-from sweep3d.stages.plan.batch import ControlBatch, control_batch, keyed_texts
+from sweep3d.stages.plan.batch import ControlBatch, control_batch, groups, keyed_texts
 from sweep3d.stages.plan.policies import Outcome
 from sweep3d.stages.postprocess.keys import image_template
 from sweep3d.stages.render.controls.base import frame_fields
@@ -104,23 +104,34 @@ def make_plan(spec: LoadedSpec, *, framing: Framing, model_digest: str, blender:
 def _scene_keys(spec: LoadedSpec, keys: _Keys, scene: str, rendered: list[ControlBatch], post: list[ControlBatch],
                 base: dict[str, Any], truth: list[Any], lo: int, hi: int) -> None:
     """Append the keys of a scene's jobs ``lo`` .. ``hi - 1`` to ``keys``."""
-    texts = keyed_texts(rendered, lo, hi, lambda effective, parts: render_template(scene, parts))
-    renders = digests(texts, repeats=bool(post))  # jobs that differ after rendering share a render
+    rows = np.arange(lo, hi)
+    renders = _render_keys(scene, rendered, rows, repeats=bool(post))
 
     def image(effective: list[ControlBatch], parts: list[Any]) -> Template | None:
         random = any(getattr(b.inst.control, "stochastic", False) for b in effective)
         return image_template(parts, spec.experiment.seed if random else None) if parts else None
 
-    texts = keyed_texts(post, lo, hi, image, strings={"render": renders})
-    rows = [i for i, text in enumerate(texts) if text is not None]
+    texts = keyed_texts(post, rows, image, strings={"render": renders})
+    changed = [i for i, text in enumerate(texts) if text is not None]
     images = list(renders)
-    for i, key in zip(rows, digests(texts[i] for i in rows)):
+    for i, key in zip(changed, digests(texts[i] for i in changed)):
         images[i] = key
     keys.render += renders
     keys.image += images
     keys.pred += pred_keys(base, images, truth)
     if keys.parts is not None:
         keys.parts += parts_keys(renders)
+
+
+def _render_keys(scene: str, rendered: list[ControlBatch], rows: np.ndarray, repeats: bool) -> list[str]:
+    """The render keys of the jobs of ``rows``; with ``repeats`` (jobs that differ only after
+    rendering share a render), each distinct render is written and hashed once."""
+    make = lambda effective, parts: render_template(scene, parts)  # noqa: E731
+    if not repeats:
+        return digests(keyed_texts(rendered, rows, make))
+    first, inverse = groups([code for b in rendered for code in b.codes(rows)], len(rows))
+    once = np.array(digests(keyed_texts(rendered, rows[first], make)), dtype=object)
+    return once[inverse].tolist()
 
 
 def _in_frame(rendered: list[ControlInstance], batches: dict[str, ControlBatch], n: int) -> np.ndarray:
