@@ -145,6 +145,8 @@ def _in_frame(rendered: list[ControlInstance], batches: dict[str, ControlBatch],
     for inst, mapping in zip(applying, known):
         for param, name in mapping.items():  # type: ignore[union-attr]
             fields[name] = batches[inst.id].values.floats(param)
+    if not fields:  # nothing moves the object or the camera: one answer for every job
+        return np.full(n, _in_frame_one(applying, batches, 0), dtype=bool)
     inside, unsure = in_frame_many(fields, n)
     for r in np.flatnonzero(unsure).tolist():
         inside[r] = _in_frame_one(applying, batches, r)
