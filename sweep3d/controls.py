@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 from typing import Annotated, Any, ClassVar, Literal
 
+import numpy as np
 from pydantic import BaseModel, ConfigDict
 
 
@@ -90,3 +91,14 @@ def wrap_periodic(value: float, period: float) -> float:
     if math.isclose(result, -half, rel_tol=0, abs_tol=1e-9):
         result = half
     return result + 0.0
+
+
+def wrap_periodic_many(values: np.ndarray, period: float) -> np.ndarray:
+    """:func:`wrap_periodic` of each value (float64), bit for bit: values already in range are
+    folded with numpy, the few outside it go through the scalar function."""
+    values = np.asarray(values).astype(np.float64)
+    half = period / 2.0
+    out = values + 0.0
+    for i in np.flatnonzero(~((-half < values) & (values <= half))).tolist():
+        out[i] = wrap_periodic(float(values[i]), period)
+    return out

@@ -362,7 +362,7 @@ def test_a_billion_job_grid_is_refused_in_one_line_before_anything_is_made(tmp_p
     assert caught.value.key == "policy"
     message = str(caught.value)
     assert "\n" not in message
-    for text in ("2,000,000,000 jobs", "limit of 100,000", "policy.samples_per_dim", "[experiment] max_jobs"):
+    for text in ("2,000,000,000 jobs", "limit of 1,000,000", "policy.samples_per_dim", "[experiment] max_jobs"):
         assert text in message, message
 
 

@@ -484,7 +484,7 @@ def test_plan_refuses_a_billion_jobs_in_one_line_and_warns_of_hours_of_rendering
     result = CliRunner().invoke(app, ["plan", str(write_spec(tmp_path, huge))])
     assert result.exit_code == 2
     (line,) = [line for line in result.output.splitlines() if line.strip()]
-    assert "policy: the spec expands to 1,024,000,000 jobs, over the limit of 100,000" in line
+    assert "policy: the spec expands to 1,024,000,000 jobs, over the limit of 1,000,000" in line
 
     slow = BASE.replace("resolution = 32", "resolution = 224").replace("samples = 1", "samples = 65536")
     result = CliRunner().invoke(app, ["plan", str(write_spec(tmp_path, slow))])

@@ -22,9 +22,10 @@ from typing import Iterable, Literal
 
 import numpy as np
 import pyarrow as pa
+import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
-from sweep3d.cache.store import DIGEST_COLUMN, READ_ERRORS, Store
+from sweep3d.cache.store import DIGEST_COLUMN, KEY_COLUMN, READ_ERRORS, Store
 
 #: Columns of a ``verified/<table>.parquet`` memo: a blob's key, its file state when it was last
 #: hashed, and the digest it had then.
@@ -89,21 +90,122 @@ def damaged_blobs(store: Store, table: str, keys: Iterable[str]) -> set[str]:
     disk, writes to the raw device) or a clock set back by an administrator; stage reads still
     check digests, and ``sweep3d cache verify`` hashes every blob. A copied store hashes each
     blob once (new inodes). Call it holding the writer lock.
+
+    A rerun of a million cached jobs costs one ``stat`` per blob: the memo and the table's rows
+    are compared as Arrow columns, never as a dict per blob.
     """
-    recorded = store.digests(table)
-    memo = read_memo(store, table)
+    keys = pa.array(list(set(keys)), type=pa.string())
+    rows = store.table(table, [KEY_COLUMN[table], DIGEST_COLUMN])
+    recorded = _recorded(rows, table)
+    memo = _read_memo_table(store, table)
+    states = file_states(store, keys.to_pylist())
+    trusted = _trusted(keys, states, memo, recorded, rows, table)
     damaged: set[str] = set()
     fresh: dict[str, Verified] = {}
-    for key in keys:
-        verdict = check_blob(store.blob_file(key), recorded.get(key, set()), memo.get(key))
+    again = keys.take(pa.array(np.flatnonzero(~trusted & (states[:, 0] != MISSING)))).to_pylist()  # changed, new
+    digests = _digests_of(rows, table, again)
+    for key in again:
+        verdict = check_blob(store.blob_file(key), digests.get(key, set()), None)
         if verdict == "damaged":
             damaged.add(key)
-        elif isinstance(verdict, Verified) and memo.get(key) != verdict:
+        elif isinstance(verdict, Verified):
             fresh[key] = verdict
-    kept = {k: v for k, v in memo.items() if k in recorded and k not in damaged}
-    if fresh or len(kept) != len(memo):
-        write_memo(store, table, kept | fresh)
+    kept = memo.filter(pc.and_(pc.is_in(memo.column("key"), value_set=recorded["keys"]),
+                               pc.invert(pc.is_in(memo.column("key"), value_set=pa.array(sorted(damaged | set(fresh)),
+                                                                                          type=pa.string())))))
+    if fresh or kept.num_rows != memo.num_rows:
+        store.write_table_file(memo_path(store, table), _memo_rows(kept, fresh))
     return damaged
+
+
+MISSING = -1  # a file state's size when the file is not there
+_UNREADABLE = -2  # ... when stat failed otherwise
+
+
+def file_states(store: Store, keys: list[str]) -> np.ndarray:
+    """(size, mtime_ns, ctime_ns, inode) of each key's blob as an int64 array (n, 4); the size is
+    :data:`MISSING` for a blob that is not there and negative for one that cannot be stat'ed."""
+    out = []
+    stat = os.stat
+    for key in keys:
+        try:
+            st = stat(store.blob_file(key))
+            out.append((st.st_size, st.st_mtime_ns, st.st_ctime_ns, st.st_ino))
+        except FileNotFoundError:
+            out.append((MISSING, 0, 0, 0))
+        except OSError:
+            out.append((_UNREADABLE, 0, 0, 0))
+    return np.array(out, dtype=np.int64).reshape(len(keys), 4)
+
+
+def _recorded(rows: pa.Table | None, table: str) -> dict[str, pa.Array]:
+    """What ``table``'s rows recorded: each row's key, and its digest (null where none)."""
+    if rows is None:
+        return {"keys": pa.array([], type=pa.string()), "digests": pa.array([], type=pa.string())}
+    keys = rows.column(KEY_COLUMN[table])
+    if DIGEST_COLUMN not in rows.column_names:
+        return {"keys": keys, "digests": pa.nulls(len(keys), type=pa.string())}
+    digests = rows.column(DIGEST_COLUMN)
+    return {"keys": keys, "digests": pc.if_else(pc.equal(pc.fill_null(digests, ""), ""), None, digests)}
+
+
+def _trusted(keys: pa.Array, states: np.ndarray, memo: pa.Table, recorded: dict[str, pa.Array],
+             rows: pa.Table | None, table: str) -> np.ndarray:
+    """Per key, whether its memo entry vouches for it: same file state, and its digest one its
+    rows recorded (or they recorded none)."""
+    where = pc.index_in(keys, value_set=memo.column("key"))
+    found = _flags(pc.is_valid(where))
+    if not found.any():
+        return found
+    at = pc.fill_null(where, 0).to_numpy(zero_copy_only=False)
+    remembered = np.stack([memo.column(c).to_numpy()[at] for c in ("size", "mtime_ns", "ctime_ns", "inode")], axis=1)
+    same = found & (remembered == states).all(axis=1)
+    digest = pc.take(memo.column(DIGEST_COLUMN), pa.array(at))
+    first = pc.take(recorded["digests"], pc.index_in(keys, value_set=recorded["keys"]))  # the key's first row's
+    trusted = same & _flags(pc.equal(digest, first))
+    unsure = np.flatnonzero(same & ~trusted)  # another row's digest, or none recorded: as the rows say
+    if len(unsure):
+        recorded_digests = _digests_of(rows, table, keys.take(pa.array(unsure)).to_pylist())
+        for i in unsure.tolist():
+            digests = recorded_digests.get(keys[i].as_py(), set())
+            trusted[i] = digest[i].as_py() in digests or not digests
+    return trusted
+
+
+def _flags(values: pa.Array) -> np.ndarray:
+    return pc.fill_null(values, False).to_numpy(zero_copy_only=False).astype(bool)
+
+
+def _digests_of(rows: pa.Table | None, table: str, keys: list[str]) -> dict[str, set[str]]:
+    """The digests the rows of ``keys`` recorded (for blobs hashed again)."""
+    out: dict[str, set[str]] = {}
+    if rows is None or DIGEST_COLUMN not in rows.column_names or not keys:
+        return out
+    mine = rows.filter(pc.is_in(rows.column(KEY_COLUMN[table]), value_set=pa.array(keys, type=pa.string())))
+    for key, digest in zip(mine.column(KEY_COLUMN[table]).to_pylist(), mine.column(DIGEST_COLUMN).to_pylist()):
+        if digest:
+            out.setdefault(key, set()).add(digest)
+    return out
+
+
+def _read_memo_table(store: Store, table: str) -> pa.Table:
+    """The memo of ``table`` (empty when there is none or it does not read: every blob is then
+    hashed again and the memo rewritten; nothing to quarantine)."""
+    try:
+        memo = pq.read_table(memo_path(store, table), page_checksum_verification=True)
+        return memo.select(MEMO_SCHEMA.names).cast(MEMO_SCHEMA)
+    except (*READ_ERRORS, KeyError):
+        return MEMO_SCHEMA.empty_table()
+
+
+def _memo_rows(kept: pa.Table, fresh: dict[str, Verified]) -> pa.Table:
+    """``kept`` memo rows and ``fresh`` entries as one memo, sorted by key."""
+    keys = sorted(fresh)
+    added = pa.table({"key": keys, **{name: [fresh[k].state[i] for k in keys]
+                                      for i, name in enumerate(("size", "mtime_ns", "ctime_ns", "inode"))},
+                      DIGEST_COLUMN: [fresh[k].digest for k in keys]}, schema=MEMO_SCHEMA)
+    both = pa.concat_tables([kept.cast(MEMO_SCHEMA), added])
+    return both.take(pc.sort_indices(both, sort_keys=[("key", "ascending")]))
 
 
 def check_blob(path: str, digests: set[str], last: Verified | None) -> Verified | Literal["missing", "damaged"]:
@@ -131,23 +233,3 @@ def check_blob(path: str, digests: set[str], last: Verified | None) -> Verified 
 def memo_path(store: Store, table: str) -> Path:
     """Where the blobs of ``table`` that runs verified are remembered."""
     return store.root / "verified" / f"{table}.parquet"
-
-
-def read_memo(store: Store, table: str) -> dict[str, Verified]:
-    """Key → :class:`Verified` for ``table``; empty when there is no memo or it does not read
-    (then every blob is hashed again and the memo rewritten: nothing to quarantine)."""
-    try:
-        data = pq.read_table(memo_path(store, table), page_checksum_verification=True).to_pydict()
-        rows = zip(data["key"], data["size"], data["mtime_ns"], data["ctime_ns"], data["inode"], data[DIGEST_COLUMN])
-        return {key: Verified((size, mtime, ctime, inode), digest) for key, size, mtime, ctime, inode, digest in rows}
-    except (*READ_ERRORS, KeyError):
-        return {}
-
-
-def write_memo(store: Store, table: str, entries: dict[str, Verified]) -> None:
-    """Replace the memo of ``table`` with ``entries`` (atomically: temp file, fsync, rename)."""
-    keys = sorted(entries)
-    columns = {"key": keys, **{name: [entries[k].state[i] for k in keys]
-                               for i, name in enumerate(("size", "mtime_ns", "ctime_ns", "inode"))},
-               DIGEST_COLUMN: [entries[k].digest for k in keys]}
-    store.write_table_file(memo_path(store, table), pa.table(columns, schema=MEMO_SCHEMA))

@@ -25,8 +25,8 @@ class ExperimentSpec(StrictModel):
     name: Name = Field(description="Shown in the report; names the run's jobs table.")
     seed: int = Field(0, ge=0, le=2**63 - 1, description="Drives random policies and noise.")
     store: str = Field(".sweep3d", description="Content-addressed store; relative to the spec file.")
-    max_jobs: int = Field(100_000, ge=1, description="Refuse a spec that expands to more jobs (counted before "
-                                                     "any is made); raise it for a bigger sweep.")
+    max_jobs: int = Field(1_000_000, ge=1, description="Refuse a spec that expands to more jobs (counted before "
+                                                       "any is made); raise it for a bigger sweep.")
 
     @field_validator("store")
     @classmethod

@@ -12,6 +12,8 @@ import math
 from dataclasses import dataclass
 from typing import Any, Union
 
+import numpy as np
+
 Scalar = Union[bool, int, float, str]
 
 
@@ -42,7 +44,7 @@ class Range:
         """The physical value at unit coordinate ``u`` in [0, 1]."""
         u = min(max(float(u), 0.0), 1.0)
         if self.log:
-            value = math.exp(math.log(self.low) + u * (math.log(self.high) - math.log(self.low)))
+            value = self._log(u)
         else:
             value = self.low + u * (self.high - self.low)
             if not math.isfinite(value):  # high - low overflowed (a range near ±1.8e308)
@@ -51,6 +53,30 @@ class Range:
         if u in (0.0, 1.0):  # the declared bounds exactly (low + (high - low) can round off high)
             value = self.high if u == 1.0 else self.low
         return int(round(value)) if self.integer else value
+
+    def at_many(self, u: np.ndarray) -> np.ndarray:
+        """:meth:`at` of each unit coordinate, bit for bit (float64; an object array of ints for
+        an integer range). Linear maps use numpy's correctly rounded arithmetic in the same order;
+        logarithmic ones call :mod:`math` once per distinct coordinate, as numpy's exp may differ
+        from it in the last bit."""
+        u = np.asarray(u, dtype=np.float64)
+        u = np.where(1.0 < u, 1.0, np.where(0.0 > u, 0.0, u))  # min(max(u, 0), 1), keeping -0.0 as max does
+        if self.log:
+            distinct, inverse = np.unique(u, return_inverse=True)
+            value = np.array([self._log(x) for x in distinct.tolist()], dtype=np.float64)[inverse.reshape(-1)]
+        else:
+            value = self.low + u * (self.high - self.low)
+            if not np.isfinite(value).all():  # high - low overflowed
+                value = np.where(np.isfinite(value), value, self.low * (1.0 - u) + self.high * u)
+        value = np.where(self.low > value, self.low, value)  # max(value, low)
+        value = np.where(self.high < value, self.high, value)  # min(value, high)
+        value = np.where(u == 0.0, self.low, np.where(u == 1.0, self.high, value))
+        if self.integer:
+            return np.array([int(round(v)) for v in value.tolist()], dtype=object)
+        return value.astype(np.float64)
+
+    def _log(self, u: float) -> float:
+        return math.exp(math.log(self.low) + u * (math.log(self.high) - math.log(self.low)))
 
     def values(self) -> list[Any]:
         return [self.low, self.high]

@@ -10,6 +10,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Sequence
 
+import numpy as np
+
 from sweep3d.spec.loader import ControlInstance
 from sweep3d.spec.params import Choice, Fixed, Range
 
@@ -54,6 +56,28 @@ class Point:
     choice: tuple[int, ...]
 
 
+def as_points(unit: np.ndarray, choice: np.ndarray) -> list[Point]:
+    """Points from a policy's arrays: unit coordinates (n, continuous dims), choices (n, discrete dims)."""
+    return [Point(tuple(u), tuple(c)) for u, c in zip(unit.tolist(), choice.tolist())]
+
+
+def as_arrays(points: Sequence[Point], shape: SpaceShape) -> tuple[np.ndarray, np.ndarray]:
+    """The arrays of :func:`as_points` for ``points`` (float64 and int64, one row per point)."""
+    unit = np.array([p.unit for p in points], dtype=np.float64).reshape(len(points), shape.n_continuous)
+    choice = np.array([p.choice for p in points], dtype=np.int64).reshape(len(points), len(shape.choice_sizes))
+    return unit, choice
+
+
+@dataclass(frozen=True)
+class Column:
+    """One parameter's values over a batch of points, unvalidated: for a list, the option each
+    point picks (``index``; None when there is one option, a fixed value); for a range, ``numbers``."""
+
+    options: tuple[Any, ...] = ()
+    index: np.ndarray | None = None
+    numbers: np.ndarray | None = None
+
+
 class SearchSpace:
     """The dimensions that the controls applying to one scene leave open."""
 
@@ -84,4 +108,21 @@ class SearchSpace:
             out[dim.control_id][dim.param] = dim.space.at(u)
         for dim, index in zip(self.discrete, point.choice):
             out[dim.control_id][dim.param] = dim.space.options[index]
+        return out
+
+    def columns(self, unit: np.ndarray, choice: np.ndarray) -> dict[str, dict[str, Column]]:
+        """:meth:`values` of many points at once: control id → parameter → :class:`Column`.
+
+        Args:
+            unit: (points, continuous dims) unit coordinates; choice: (points, discrete dims) indices.
+        """
+        if unit.shape[1:] != (len(self.continuous),) or choice.shape[1:] != (len(self.discrete),):
+            raise ValueError("points do not match the space's shape")
+        out: dict[str, dict[str, Column]] = {}
+        for inst in self.controls:
+            out[inst.id] = {p: Column((s.value,)) for p, s in inst.spaces.items() if isinstance(s, Fixed)}
+        for d, dim in enumerate(self.continuous):
+            out[dim.control_id][dim.param] = Column(numbers=dim.space.at_many(unit[:, d]))
+        for d, dim in enumerate(self.discrete):
+            out[dim.control_id][dim.param] = Column(tuple(dim.space.options), index=choice[:, d])
         return out

@@ -22,7 +22,7 @@ from sweep3d.cache.blobs import damaged_blobs
 from sweep3d.cache.store import Store
 from sweep3d.errors import UserError
 from sweep3d.progress import RunProgress
-from sweep3d.stages.jobs import Job, Plan
+from sweep3d.stages.jobs import Job, JobList, Plan
 from sweep3d.stages.outcome import StageOutcome
 
 #: Extra passes over the stages when one discarded a damaged blob (render → post → infer).
@@ -69,7 +69,7 @@ class Stage(Protocol):
         """The columns of :attr:`table`."""
 
     def key(self, job: Job) -> str | None:
-        """The job's key at this stage; None when the job has nothing to do here."""
+        """The job's key at this stage (a function of the job alone); None when it has nothing to do here."""
 
     def upstream(self, job: Job) -> tuple[str, str] | None:
         """(table, key) of the stored blob the job reads, or None when it reads none."""
@@ -82,7 +82,10 @@ class Stage(Protocol):
 
 
 def unique_jobs(stage: Stage, jobs: Iterable[Job]) -> dict[str, Job]:
-    """The first job of each distinct key at ``stage``, in plan order."""
+    """The first job of each distinct key at ``stage``, in plan order (read-only: a planned plan's
+    jobs remember it per key function, as a run asks for it several times per stage)."""
+    if isinstance(jobs, JobList):
+        return jobs.unique_by(stage.key)
     unique: dict[str, Job] = {}
     for job in jobs:
         key = stage.key(job)
@@ -94,7 +97,7 @@ def unique_jobs(stage: Stage, jobs: Iterable[Job]) -> dict[str, Job]:
 def cached_keys(stage: Stage, plan: Plan, store: Store) -> set[str]:
     """Keys of ``plan`` at ``stage`` that have a row (and a blob, where rows own one)."""
     have = store.keys(stage.table) & set(unique_jobs(stage, plan.jobs))
-    return {k for k in have if store.blob_path(k).exists()} if stage.owns_blobs else have
+    return store.existing_blobs(have) if stage.owns_blobs else have
 
 
 def to_do(stage: Stage, plan: Plan, store: Store, cached: set[str] | None = None) -> list[Job]:

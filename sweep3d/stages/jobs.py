@@ -1,14 +1,25 @@
 """Jobs and plans: what the plan stage produces and every later stage reads.
 
+The planner keeps a plan as columns (:class:`PlanColumns`: keys as lists, control values as
+arrays per scene), so a plan of a million jobs holds no million dicts; :attr:`Plan.jobs` is a
+sequence of :class:`Job` s made from them on first use, whose ``values`` and ``point`` are built
+only when read. A plan made by hand from a list of jobs works the same way.
+
 This module imports no stage, so every stage can import it without a cycle.
 """
 
 from __future__ import annotations
 
+import bisect
+import gc
 import json
+from contextlib import contextmanager
 from dataclasses import dataclass, field
-from typing import Any
+from itertools import repeat
+from operator import itemgetter
+from typing import Any, Callable, Iterator, Sequence, overload
 
+import numpy as np
 import pyarrow as pa
 
 from sweep3d.spec.columns import PARAMETERS_METADATA, parameter_column
@@ -16,28 +27,290 @@ from sweep3d.spec.framing import Framing
 from sweep3d.spec.loader import LoadedSpec
 from sweep3d.spec.space import Point
 
+_FIELDS = ("index", "object", "environment", "values", "render_key", "image_key", "pred_key", "point", "parts_key")
 
-@dataclass(frozen=True)
-class Job:
+
+class Job(tuple):
     """One configuration of one scene, with the cache key of each stage it passes through.
 
     ``image_key`` equals ``render_key`` when no post control changes the image; ``parts_key`` is
-    set only when the report asks for part visibility (a UV pass).
+    set only when the report asks for part visibility (a UV pass). ``values`` is control id →
+    parameter → value for the controls that apply; ``point`` is where the policy put the job (for
+    policies that learn from results).
+
+    Immutable. A tuple underneath, so that a plan makes a million of them in a fraction of a
+    second; a planned job reads ``values`` and ``point`` from its scene's columns when asked.
     """
 
-    index: int
-    object: str
-    environment: str
-    values: dict[str, dict[str, Any]]  # control id -> parameter -> value, for controls that apply
-    render_key: str
-    image_key: str
-    pred_key: str
-    point: Point | None = None  # where the policy put it (for policies that learn from results)
-    parts_key: str | None = None  # the UV pass's visible parts, when the report asks for them
+    __slots__ = ()
+
+    def __new__(cls, index: int, object: str, environment: str, values: dict[str, dict[str, Any]],
+                render_key: str, image_key: str, pred_key: str, point: Point | None = None,
+                parts_key: str | None = None) -> Job:
+        return tuple.__new__(cls, (index, object, environment, values, render_key, image_key, pred_key, point,
+                                   parts_key, None))
+
+    index: int = property(itemgetter(0))  # type: ignore[assignment]
+    object: str = property(itemgetter(1))  # type: ignore[assignment]
+    environment: str = property(itemgetter(2))  # type: ignore[assignment]
+    render_key: str = property(itemgetter(4))  # type: ignore[assignment]
+    image_key: str = property(itemgetter(5))  # type: ignore[assignment]
+    pred_key: str = property(itemgetter(6))  # type: ignore[assignment]
+    parts_key: str | None = property(itemgetter(8))  # type: ignore[assignment]
+
+    @property
+    def values(self) -> dict[str, dict[str, Any]]:
+        block = self[9]
+        return self[3] if block is None else block.values(self[0] - block.start)
+
+    @property
+    def point(self) -> Point | None:
+        block = self[9]
+        return self[7] if block is None else block.point(self[0] - block.start)
 
     @property
     def scene(self) -> tuple[str, str]:
-        return (self.object, self.environment)
+        return (self[1], self[2])
+
+    def _fields(self) -> tuple:
+        return tuple(getattr(self, name) for name in _FIELDS)
+
+    def __eq__(self, other: object) -> bool:
+        return self._fields() == other._fields() if isinstance(other, Job) else NotImplemented
+
+    def __ne__(self, other: object) -> bool:
+        return not self == other if isinstance(other, Job) else NotImplemented
+
+    __hash__ = None  # type: ignore[assignment]  (values is a dict, as it always was)
+
+    def __getnewargs__(self) -> tuple:  # type: ignore[override]
+        return self._fields()
+
+    def __repr__(self) -> str:
+        return "Job(" + ", ".join(f"{name}={getattr(self, name)!r}" for name in _FIELDS) + ")"
+
+
+@dataclass
+class ControlValues:
+    """One control's validated values over a scene's jobs.
+
+    Jobs that share their listed values form a group: ``dumps[g]`` is the control's parameters
+    as its ``Params`` model dumps them for group ``g`` (defaults included), ``group`` each job's
+    group. Range parameters of a control whose validation cannot change a number are kept apart
+    as ``numbers`` (one per job), so groups stay few.
+    """
+
+    dumps: list[dict[str, Any]]
+    group: np.ndarray
+    numbers: dict[str, np.ndarray] = field(default_factory=dict)
+
+    def at(self, row: int) -> dict[str, Any]:
+        """The parameters of the job in ``row`` (as ``Params(...).model_dump()`` gives them)."""
+        out = dict(self.dumps[self.group[row]])
+        for param, numbers in self.numbers.items():
+            out[param] = numbers[row].item() if numbers.dtype != object else numbers[row]
+        return out
+
+    def column(self, param: str) -> np.ndarray | list[Any]:
+        """Every job's value of ``param`` (an array only where a list of Python values would
+        become the same Arrow column)."""
+        if param in self.numbers:
+            numbers = self.numbers[param]
+            return numbers if numbers.dtype == np.float64 else numbers.tolist()
+        options = [dump[param] for dump in self.dumps]
+        if all(type(v) is float for v in options):
+            return np.array(options, dtype=np.float64)[self.group]
+        return _objects(options)[self.group].tolist()
+
+    def floats(self, param: str) -> np.ndarray:
+        """Every job's value of a numeric ``param`` as float64."""
+        if param in self.numbers:
+            return self.numbers[param].astype(np.float64)
+        return np.array([float(dump[param]) for dump in self.dumps], dtype=np.float64)[self.group]
+
+
+@dataclass
+class SceneBlock:
+    """The jobs of one (object, environment) scene, indices ``start`` .. ``start + size - 1``.
+
+    ``controls`` holds the values of the controls that apply, in spec order; ``unit`` and
+    ``choice`` the policy's points (one row per job).
+    """
+
+    object: str
+    environment: str
+    start: int
+    size: int
+    controls: dict[str, ControlValues]
+    unit: np.ndarray
+    choice: np.ndarray
+
+    def values(self, row: int) -> dict[str, dict[str, Any]]:
+        return {control_id: values.at(row) for control_id, values in self.controls.items()}
+
+    def point(self, row: int) -> Point:
+        return Point(tuple(self.unit[row].tolist()), tuple(self.choice[row].tolist()))
+
+    def parameters(self) -> dict[str, tuple[str, str]]:
+        """Column name → (control id, parameter) of every parameter its jobs carry, in the order
+        a row of the jobs table sets them (a later one wins a shared name, as in :meth:`Plan.rows`)."""
+        out: dict[str, tuple[str, str]] = {}
+        for control_id, values in self.controls.items():
+            for param in values.dumps[0]:
+                out[parameter_column(control_id, param)] = (control_id, param)
+        return out
+
+
+@dataclass
+class PlanColumns:
+    """A whole plan as columns: every job's keys by index, whether it is in frame, its scene's block."""
+
+    blocks: list[SceneBlock]
+    render_keys: list[str]
+    image_keys: list[str]
+    pred_keys: list[str]
+    parts_keys: list[str] | None
+    in_frame: np.ndarray
+
+    @property
+    def size(self) -> int:
+        return len(self.render_keys)
+
+    def jobs(self, indices: np.ndarray) -> list[Job]:
+        """The jobs at ``indices`` (ascending), made block by block."""
+        out: list[Job] = []
+        make = tuple.__new__
+        with paused_gc():
+            for block in self.blocks:
+                out += self._block_jobs(block, indices, make)
+        return out
+
+    def _block_jobs(self, block: SceneBlock, indices: np.ndarray, make: Callable) -> list[Job]:
+        """The jobs of ``block`` among ``indices``: their values and point come from the block."""
+        lo, hi = np.searchsorted(indices, [block.start, block.start + block.size])
+        rows = indices[lo:hi].tolist()
+        keys = [[column[i] for i in rows] for column in (self.render_keys, self.image_keys, self.pred_keys)]
+        parts = [self.parts_keys[i] for i in rows] if self.parts_keys is not None else repeat(None)
+        fields = zip(rows, repeat(block.object), repeat(block.environment), repeat(None), *keys, repeat(None),
+                     parts, repeat(block))
+        return [make(Job, f) for f in fields]
+
+    def block_of(self, index: int) -> SceneBlock:
+        return self.blocks[bisect.bisect_right([b.start for b in self.blocks], index) - 1]
+
+    def table(self, experiment: str, parameter_columns: list[str]) -> pa.Table:
+        """The jobs table, column for column what ``pa.Table.from_pylist(plan.rows())`` makes."""
+        names = list(_first_row_names(self.blocks[0], parameter_columns)) if self.blocks else []
+        keys = {"render_key": self.render_keys, "image_key": self.image_keys, "pred_key": self.pred_keys,
+                "parts_key": self.parts_keys if self.parts_keys is not None else [None] * self.size,
+                "in_frame": self.in_frame}
+        fixed = {"experiment": lambda: [experiment] * self.size, "job": lambda: np.arange(self.size, dtype=np.int64),
+                 "object": lambda: self._repeat("object"), "environment": lambda: self._repeat("environment")}
+        arrays = []
+        for name in names:
+            if name in keys:
+                arrays.append(keys[name])
+            elif name in fixed:
+                arrays.append(fixed[name]())
+            else:
+                arrays.append(self._parameter(name))
+        return pa.Table.from_arrays([pa.array(a) for a in arrays], names)
+
+    def _repeat(self, attribute: str) -> list[str]:
+        return [value for b in self.blocks for value in [getattr(b, attribute)] * b.size]
+
+    def _parameter(self, name: str) -> np.ndarray | list[Any]:
+        parts: list[np.ndarray | list[Any]] = []
+        for block in self.blocks:
+            where = block.parameters().get(name)
+            parts.append(block.controls[where[0]].column(where[1]) if where else [None] * block.size)
+        if all(isinstance(p, np.ndarray) for p in parts):
+            return np.concatenate(parts) if parts else np.zeros(0)
+        return [v for p in parts for v in (p.tolist() if isinstance(p, np.ndarray) else p)]
+
+
+def _objects(values: list[Any]) -> np.ndarray:
+    """``values`` as a 1-d object array (numpy would make rows of equal-length lists a 2-d one)."""
+    out = np.empty(len(values), dtype=object)
+    for i, value in enumerate(values):
+        out[i] = value
+    return out
+
+
+def _first_row_names(block: SceneBlock, parameter_columns: list[str]) -> dict[str, None]:
+    """The keys of the first row of :meth:`Plan.rows`, in order (what ``from_pylist`` takes as columns)."""
+    names = dict.fromkeys(["experiment", "job", "object", "environment", *parameter_columns])
+    names.update(dict.fromkeys(block.parameters()))
+    names.update(dict.fromkeys(["render_key", "image_key", "pred_key", "parts_key", "in_frame"]))
+    return names
+
+
+@contextmanager
+def paused_gc() -> Iterator[None]:
+    """Pause the cyclic garbage collector while a million acyclic objects are made: it would
+    otherwise walk the growing heap again and again (three quarters of the time, measured)."""
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if enabled:
+            gc.enable()
+
+
+class JobList(Sequence[Job]):
+    """Some jobs of a :class:`PlanColumns` (those in frame, or those out of it), made on first use."""
+
+    def __init__(self, columns: PlanColumns, indices: np.ndarray) -> None:
+        self.columns = columns
+        self.indices = indices
+        self._jobs: list[Job] | None = None
+        self._unique: dict[Callable, dict[str, Job]] = {}
+
+    def unique_by(self, key: Callable[[Job], str | None]) -> dict[str, Job]:
+        """The first job of each distinct ``key`` (None left out), in order; remembered per key
+        function, as a run asks each stage's several times. Do not change the dict returned."""
+        function = getattr(key, "__func__", key)  # a stage's bound method: the same for every instance
+        if function not in self._unique:
+            unique: dict[str, Job] = {}
+            for job in self._all():
+                k = key(job)
+                if k is not None:
+                    unique.setdefault(k, job)
+            self._unique[function] = unique
+        return self._unique[function]
+
+    def _all(self) -> list[Job]:
+        if self._jobs is None:
+            self._jobs = self.columns.jobs(self.indices)
+        return self._jobs
+
+    def __len__(self) -> int:
+        return len(self.indices)
+
+    @overload
+    def __getitem__(self, i: int) -> Job: ...
+
+    @overload
+    def __getitem__(self, i: slice) -> list[Job]: ...
+
+    def __getitem__(self, i: int | slice) -> Job | list[Job]:
+        return self._all()[i]
+
+    def __iter__(self) -> Iterator[Job]:
+        return iter(self._all())
+
+    def __add__(self, other: Sequence[Job]) -> list[Job]:
+        return self._all() + list(other)
+
+    def __radd__(self, other: Sequence[Job]) -> list[Job]:
+        return list(other) + self._all()
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Sequence) and self._all() == list(other)
+
+    def __repr__(self) -> str:
+        return f"JobList({len(self)} jobs)"
 
 
 @dataclass
@@ -51,9 +324,9 @@ class Plan:
     """
 
     spec: LoadedSpec
-    jobs: list[Job]
+    jobs: Sequence[Job]
     model_digest: str
-    out_of_frame: list[Job] = field(default_factory=list)
+    out_of_frame: Sequence[Job] = field(default_factory=list)
     framing: Framing | None = None
 
     @property
@@ -79,6 +352,19 @@ class Plan:
         return out
 
     def table(self) -> pa.Table:
-        """:meth:`rows` as a table whose metadata lists the parameter columns (see spec.columns)."""
-        table = pa.Table.from_pylist(self.rows())
+        """:meth:`rows` as a table whose metadata lists the parameter columns (see spec.columns).
+
+        A plan as the planner made it is written from its columns, without a row per job.
+        """
+        whole = _whole(self)
+        table = whole.table(self.spec.name, self.columns) if whole else pa.Table.from_pylist(self.rows())
         return table.replace_schema_metadata({PARAMETERS_METADATA: json.dumps(self.columns).encode()})
+
+
+def _whole(plan: Plan) -> PlanColumns | None:
+    """The columns behind ``plan`` when its jobs are exactly theirs (not a subset picked by hand)."""
+    jobs, out = plan.jobs, plan.out_of_frame
+    if isinstance(jobs, JobList) and (isinstance(out, JobList) and out.columns is jobs.columns or not out):
+        if len(jobs) + len(out) == jobs.columns.size and jobs.columns.size:
+            return jobs.columns
+    return None

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Sequence
 
-from sweep3d.cache.keys import digest
+from sweep3d.cache.keys import Hole, Template, digest, digests
 
 #: Bumped when inference or evaluation changes results for the same inputs.
 INFER_STAGE_VERSION = 1
@@ -20,4 +20,13 @@ def infer_base(model_digest: str, evaluator: dict[str, Any], backend: str) -> di
 
 def pred_key(base: dict[str, Any], image: str, truth: list[Any]) -> str:
     """A job's prediction key: ``base`` plus its image and its ground truth."""
-    return digest({**base, "image": image, "truth": truth})
+    return digest(_pred_value(base, image, truth))
+
+
+def pred_keys(base: dict[str, Any], images: Sequence[str], truth: list[Any]) -> list[str]:
+    """:func:`pred_key` of many jobs that share ``base`` and ``truth`` (one object's jobs)."""
+    return digests(Template(_pred_value(base, Hole("image"), truth)).fill(["image"], image=images))
+
+
+def _pred_value(base: dict[str, Any], image: str | Hole, truth: list[Any]) -> dict[str, Any]:
+    return {**base, "image": image, "truth": truth}

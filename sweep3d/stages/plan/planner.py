@@ -8,29 +8,52 @@ the model: the Blender version and the model's digest are inputs.
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from typing import Any, Callable
 
-from sweep3d.cache.keys import digest, file_digest
+import numpy as np
+
+from sweep3d.cache.keys import Template, digest, digests, file_digest
 from sweep3d.errors import SpecError, UserError
 from sweep3d.spec.assets import mesh_digest
 from sweep3d.spec.framing import Framing
 from sweep3d.spec.loader import ControlInstance, LoadedSpec
 from sweep3d.spec.sniff import unreadable
 from sweep3d.spec.space import Point, SearchSpace
-from sweep3d.stages.infer.keys import infer_base, pred_key
-from sweep3d.stages.jobs import Job, Plan
+from sweep3d.stages.infer.keys import infer_base, pred_keys
+from sweep3d.stages.jobs import JobList, Plan, PlanColumns, SceneBlock
+from sweep3d.stages.plan.batch import ControlBatch, control_batch, groups, keyed_texts
 from sweep3d.stages.plan.policies import Outcome
-from sweep3d.stages.postprocess.keys import image_key
-from sweep3d.stages.render.keys import parts_key, render_key, scene_key
-from sweep3d.stages.render.state import SceneState, in_frame
+from sweep3d.stages.postprocess.keys import image_template
+from sweep3d.stages.render.controls.base import frame_fields
+from sweep3d.stages.render.keys import parts_keys, render_template, scene_key
+from sweep3d.stages.render.state import SceneState, in_frame, in_frame_many
 
 #: What an adaptive policy learns per scene: the outcome of each point already evaluated.
 History = dict[tuple[str, str], dict[Point, Outcome]]
+#: Jobs whose key texts are written at once: bounds the memory a big scene takes while planned.
+KEY_CHUNK = 1 << 16
+
+
+@dataclass
+class _Keys:
+    """Every job's keys, by job index, as the scenes are planned."""
+
+    render: list[str] = field(default_factory=list)
+    image: list[str] = field(default_factory=list)
+    pred: list[str] = field(default_factory=list)
+    parts: list[str] | None = None
+    in_frame: list[np.ndarray] = field(default_factory=list)
 
 
 def make_plan(spec: LoadedSpec, *, framing: Framing, model_digest: str, blender: str,
               history: History | None = None) -> Plan:
     """Expand ``spec`` into jobs, sorted by scene so workers reload as little as possible.
+
+    Each scene's jobs are made as columns (see :mod:`sweep3d.stages.plan.batch`): values and
+    key parts per control over arrays, keys hashed from canonical texts written per job, the
+    in-frame test over arrays; the keys are those the per-job recipes in each stage's
+    ``keys`` module give.
 
     Args:
         framing: the resolved frame (see ``infer.ModelHandle``).
@@ -46,8 +69,8 @@ def make_plan(spec: LoadedSpec, *, framing: Framing, model_digest: str, blender:
     settings = spec.render.key_part(framing.key_part())
     base = infer_base(model_digest, {"kind": spec.evaluator.kind, "top_k": spec.evaluator.top_k},
                       spec.model.backend)
-    jobs: list[Job] = []
-    out_of_frame: list[Job] = []
+    keys = _Keys(parts=[] if spec.report.part_visibility else None)
+    blocks: list[SceneBlock] = []
     hdri_digests = _hdri_digests(spec)
     for i, obj in enumerate(spec.objects):
         object_digest = _asset_digest(spec, f"objects[{i}].mesh", mesh_digest, spec.meshes[obj.name], spec.store)
@@ -59,20 +82,83 @@ def make_plan(spec: LoadedSpec, *, framing: Framing, model_digest: str, blender:
             scene_controls = [c for c in spec.controls if c.applies_to(obj.name, env.name)]
             space = SearchSpace(scene_controls)
             seed = int(digest([spec.experiment.seed, obj.name, env.name])[:15], 16)
-            points = spec.policy.points(space.shape, seed, (history or {}).get((obj.name, env.name), {}))
-            if len(jobs) + len(out_of_frame) + len(points) > spec.experiment.max_jobs:  # a policy that cannot count
+            unit, choice = spec.policy.arrays(space.shape, seed, (history or {}).get((obj.name, env.name), {}))
+            n = len(unit)
+            if len(keys.render) + n > spec.experiment.max_jobs:  # a policy that cannot count
                 raise _too_many(spec, f"more than {spec.experiment.max_jobs:,}")
-            for point in points:
-                values = space.values(point)
-                models = {c.id: c.control.params(values[c.id]) for c in scene_controls}
-                params = {key: model.model_dump() for key, model in models.items()}
-                render = render_key(scene, _key_parts(rendered, params))
-                image = image_key(render, _key_parts(post, params), _post_seed(spec, post, params))
-                job = Job(len(jobs) + len(out_of_frame), obj.name, env.name, params, render, image,
-                          pred_key(base, image, truth), point,
-                          parts_key(render) if spec.report.part_visibility else None)
-                (jobs if _in_frame(rendered, models) else out_of_frame).append(job)
-    return Plan(spec, jobs, model_digest, out_of_frame, framing)
+            if n == 0:
+                continue
+            columns = space.columns(unit, choice)
+            batches = {c.id: control_batch(c, columns[c.id], n) for c in scene_controls}
+            blocks.append(SceneBlock(obj.name, env.name, len(keys.render), n,
+                                     {cid: b.values for cid, b in batches.items()}, unit, choice))
+            for lo in range(0, n, KEY_CHUNK):
+                _scene_keys(spec, keys, scene, [batches[c.id] for c in rendered if c.id in batches],
+                            [batches[c.id] for c in post if c.id in batches], base, truth, lo, min(n, lo + KEY_CHUNK))
+            keys.in_frame.append(_in_frame(rendered, batches, n))
+    mask = np.concatenate(keys.in_frame) if keys.in_frame else np.zeros(0, bool)
+    plan = PlanColumns(blocks, keys.render, keys.image, keys.pred, keys.parts, mask)
+    return Plan(spec, JobList(plan, np.flatnonzero(mask)), model_digest, JobList(plan, np.flatnonzero(~mask)), framing)
+
+
+def _scene_keys(spec: LoadedSpec, keys: _Keys, scene: str, rendered: list[ControlBatch], post: list[ControlBatch],
+                base: dict[str, Any], truth: list[Any], lo: int, hi: int) -> None:
+    """Append the keys of a scene's jobs ``lo`` .. ``hi - 1`` to ``keys``."""
+    rows = np.arange(lo, hi)
+    renders = _render_keys(scene, rendered, rows, repeats=bool(post))
+
+    def image(effective: list[ControlBatch], parts: list[Any]) -> Template | None:
+        random = any(getattr(b.inst.control, "stochastic", False) for b in effective)
+        return image_template(parts, spec.experiment.seed if random else None) if parts else None
+
+    texts = keyed_texts(post, rows, image, strings={"render": renders})
+    changed = [i for i, text in enumerate(texts) if text is not None]
+    images = list(renders)
+    for i, key in zip(changed, digests(texts[i] for i in changed)):
+        images[i] = key
+    keys.render += renders
+    keys.image += images
+    keys.pred += pred_keys(base, images, truth)
+    if keys.parts is not None:
+        keys.parts += parts_keys(renders)
+
+
+def _render_keys(scene: str, rendered: list[ControlBatch], rows: np.ndarray, repeats: bool) -> list[str]:
+    """The render keys of the jobs of ``rows``; with ``repeats`` (jobs that differ only after
+    rendering share a render), each distinct render is written and hashed once."""
+    make = lambda effective, parts: render_template(scene, parts)  # noqa: E731
+    if not repeats:
+        return digests(keyed_texts(rendered, rows, make))
+    first, inverse = groups([code for b in rendered for code in b.codes(rows)], len(rows))
+    once = np.array(digests(keyed_texts(rendered, rows[first], make)), dtype=object)
+    return once[inverse].tolist()
+
+
+def _in_frame(rendered: list[ControlInstance], batches: dict[str, ControlBatch], n: int) -> np.ndarray:
+    """Per job, whether its object can appear in its image, from geometry alone (no rendering):
+    over arrays when every rendered control says which geometry it sets, else job by job."""
+    applying = [c for c in rendered if c.id in batches]
+    known = [frame_fields(c.control) for c in applying]
+    if any(f is None for f in known):
+        return np.array([_in_frame_one(applying, batches, r) for r in range(n)], dtype=bool)
+    fields: dict[str, np.ndarray] = {}
+    for inst, mapping in zip(applying, known):
+        for param, name in mapping.items():  # type: ignore[union-attr]
+            fields[name] = batches[inst.id].values.floats(param)
+    if not fields:  # nothing moves the object or the camera: one answer for every job
+        return np.full(n, _in_frame_one(applying, batches, 0), dtype=bool)
+    inside, unsure = in_frame_many(fields, n)
+    for r in np.flatnonzero(unsure).tolist():
+        inside[r] = _in_frame_one(applying, batches, r)
+    return inside
+
+
+def _in_frame_one(applying: list[ControlInstance], batches: dict[str, ControlBatch], row: int) -> bool:
+    """The in-frame test of one job through a :class:`SceneState` its controls edit."""
+    state = SceneState()
+    for inst in applying:
+        inst.control.apply(state, inst.control.params(batches[inst.id].raw(row)))
+    return in_frame(state)
 
 
 def _hdri_digests(spec: LoadedSpec) -> dict[str, str | None]:
@@ -127,28 +213,3 @@ def _too_many(spec: LoadedSpec, jobs: str) -> SpecError:
             "policy.samples" if kind in ("random", "sobol", "adaptive") else "the policy's parameters")
     return spec.fail("policy", f"the spec expands to {jobs} jobs, over the limit of {spec.experiment.max_jobs:,}; "
                                f"lower {knob} (or the objects and environments), or raise [experiment] max_jobs")
-
-
-def _post_seed(spec: LoadedSpec, post: list[ControlInstance], params: dict[str, dict[str, Any]]) -> int | None:
-    """The experiment's seed when an effective post control draws random numbers, else None."""
-    stochastic = any(getattr(c.control, "stochastic", False) for c in post
-                     if c.id in params and not c.control.is_identity(params[c.id]))
-    return spec.experiment.seed if stochastic else None
-
-
-def _in_frame(rendered: list[ControlInstance], models: dict[str, Any]) -> bool:
-    """Whether the job's object can appear in its image, from geometry alone (no rendering)."""
-    state = SceneState()
-    for inst in rendered:
-        if inst.id in models:
-            inst.control.apply(state, models[inst.id])
-    return in_frame(state)
-
-
-def _key_parts(controls: list[ControlInstance], params: dict[str, dict[str, Any]]) -> list[dict[str, Any]]:
-    """Key parts of the controls that apply to this job and change its image, in application order."""
-    parts = []
-    for inst in controls:
-        if inst.id in params and not inst.control.is_identity(params[inst.id]):
-            parts.append(inst.control.key_part(params[inst.id]))
-    return parts

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import itertools
 import math
 from dataclasses import dataclass
 from typing import ClassVar, Mapping
@@ -11,7 +10,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from sweep3d.registry import Registry
-from sweep3d.spec.space import Point, SpaceShape
+from sweep3d.spec.space import Point, SpaceShape, as_arrays, as_points
 
 
 class PolicyParams(BaseModel):
@@ -43,6 +42,14 @@ class Policy:
     def points(self, shape: SpaceShape, seed: int, history: Mapping[Point, Outcome]) -> list[Point]:
         raise NotImplementedError
 
+    def arrays(self, shape: SpaceShape, seed: int, history: Mapping[Point, Outcome]) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`points` as arrays: unit coordinates (n, continuous dims), choices (n, discrete dims).
+
+        The planner reads these; a policy that makes its points as arrays overrides this (and
+        builds :meth:`points` from it) so a million points never exist as objects.
+        """
+        return as_arrays(self.points(shape, seed, history), shape)
+
     def count(self, shape: SpaceShape) -> int | None:
         """How many points ``points`` returns for ``shape`` (at most, over all rounds of an adaptive
         policy), known without making them, so a plan too big to hold is refused before it is
@@ -64,16 +71,21 @@ class GridPolicy(Policy):
         samples_per_dim: int = Field(4, ge=1, le=10_000)
 
     def points(self, shape: SpaceShape, seed: int, history: Mapping[Point, Outcome]) -> list[Point]:
+        return as_points(*self.arrays(shape, seed, history))
+
+    def arrays(self, shape: SpaceShape, seed: int, history: Mapping[Point, Outcome]) -> tuple[np.ndarray, np.ndarray]:
+        """The product in ``itertools.product`` order: the last dimension varies fastest."""
         n = self.params.samples_per_dim
-        ticks = [0.5] if n == 1 else [i / (n - 1) for i in range(n)]
-        around = [0.5] if n == 1 else [i / n for i in range(n)]
+        ticks = np.array([0.5]) if n == 1 else np.arange(n) / (n - 1)
+        around = np.array([0.5]) if n == 1 else np.arange(n) / n
         axes = [around if shape.wrapping(d) else ticks for d in range(shape.n_continuous)]
-        choices = [range(size) for size in shape.choice_sizes]
-        out = []
-        for combo in itertools.product(*axes, *choices):
-            unit = tuple(float(u) for u in combo[: shape.n_continuous])
-            out.append(Point(unit, tuple(int(c) for c in combo[shape.n_continuous :])))
-        return out
+        sizes = [len(a) for a in axes] + list(shape.choice_sizes)
+        if not sizes:
+            return np.zeros((1, 0)), np.zeros((1, 0), np.int64)
+        index = np.indices(sizes).reshape(len(sizes), -1)  # (dims, points), C order
+        unit = np.stack([axis[i] for axis, i in zip(axes, index)], axis=1) if axes else np.zeros((index.shape[1], 0))
+        choice = index[len(axes):].T.astype(np.int64)
+        return unit, choice
 
     def count(self, shape: SpaceShape) -> int:
         return self.params.samples_per_dim ** shape.n_continuous * math.prod(shape.choice_sizes)
@@ -87,13 +99,14 @@ class RandomPolicy(Policy):
         samples: int = Field(16, ge=1, le=10_000_000)
 
     def points(self, shape: SpaceShape, seed: int, history: Mapping[Point, Outcome]) -> list[Point]:
+        return as_points(*self.arrays(shape, seed, history))
+
+    def arrays(self, shape: SpaceShape, seed: int, history: Mapping[Point, Outcome]) -> tuple[np.ndarray, np.ndarray]:
         rng = np.random.default_rng(seed)
         n = self.params.samples
         unit = rng.random((n, shape.n_continuous))
         choice = [rng.integers(0, size, n) for size in shape.choice_sizes]
-        return [
-            Point(tuple(float(u) for u in unit[i]), tuple(int(c[i]) for c in choice)) for i in range(n)
-        ]
+        return unit, np.stack(choice, axis=1).astype(np.int64) if choice else np.zeros((n, 0), np.int64)
 
     def count(self, shape: SpaceShape) -> int:
         return self.params.samples
@@ -108,6 +121,9 @@ class SobolPolicy(Policy):
         samples: int = Field(16, ge=1, le=10_000_000)
 
     def points(self, shape: SpaceShape, seed: int, history: Mapping[Point, Outcome]) -> list[Point]:
+        return as_points(*self.arrays(shape, seed, history))
+
+    def arrays(self, shape: SpaceShape, seed: int, history: Mapping[Point, Outcome]) -> tuple[np.ndarray, np.ndarray]:
         import warnings
 
         from scipy.stats import qmc
@@ -115,12 +131,12 @@ class SobolPolicy(Policy):
         n, k = self.params.samples, shape.n_continuous
         dims = k + len(shape.choice_sizes)
         if dims == 0:
-            return [Point((), ())]
+            return np.zeros((1, 0)), np.zeros((1, 0), np.int64)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)  # "balance properties" for n not a power of 2
             unit = qmc.Sobol(d=dims, scramble=True, seed=np.random.default_rng(seed)).random(n)
         choice = [np.minimum((unit[:, k + j] * size).astype(int), size - 1) for j, size in enumerate(shape.choice_sizes)]
-        return [Point(tuple(float(u) for u in unit[i, :k]), tuple(int(c[i]) for c in choice)) for i in range(n)]
+        return unit[:, :k], np.stack(choice, axis=1).astype(np.int64) if choice else np.zeros((n, 0), np.int64)
 
     def count(self, shape: SpaceShape) -> int:
         return self.params.samples if shape.n_continuous or shape.choice_sizes else 1

@@ -8,9 +8,9 @@ apart: ``parts_key`` names what a UV pass saw in one render.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Sequence
 
-from sweep3d.cache.keys import digest
+from sweep3d.cache.keys import Hole, Template, digest, digests
 from sweep3d.parts import PARTS_LAYOUT
 
 #: Bumped when rendering changes pixels for the same inputs, so old renders are not reused.
@@ -26,9 +26,27 @@ def scene_key(blender: str, settings: dict[str, Any], object_digest: str, enviro
 
 def render_key(scene: str, controls: list[dict[str, Any]]) -> str:
     """A job's render key: its scene and the key parts of its effective rendered controls."""
-    return digest({"scene": scene, "controls": controls})
+    return digest(_render_value(scene, controls))
+
+
+def render_template(scene: str, controls: list[Any]) -> Template:
+    """:func:`render_key`'s value with holes (in ``controls``), to hash many jobs' keys at once."""
+    return Template(_render_value(scene, controls))
+
+
+def _render_value(scene: str, controls: list[Any]) -> dict[str, Any]:
+    return {"scene": scene, "controls": controls}
 
 
 def parts_key(render: str) -> str:
     """The key of the visible parts a UV pass records for one render."""
-    return digest({"stage": "parts", "layout": PARTS_LAYOUT, "render": render})
+    return digest(_parts_value(render))
+
+
+def parts_keys(renders: Sequence[str]) -> list[str]:
+    """:func:`parts_key` of many renders."""
+    return digests(Template(_parts_value(Hole("render"))).fill(["render"], render=renders))
+
+
+def _parts_value(render: str | Hole) -> dict[str, Any]:
+    return {"stage": "parts", "layout": PARTS_LAYOUT, "render": render}

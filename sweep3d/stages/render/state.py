@@ -9,11 +9,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Mapping
 
 import numpy as np
 
 SENSOR_WIDTH_MM = 36.0
 FRAME_FILL = 0.8  # at zoom 1 the object's bounding sphere spans this share of the frame
+#: The :class:`SceneState` fields :func:`in_frame` reads.
+FRAME_FIELDS = ("scale", "azimuth", "elevation", "zoom", "focal_length", "frame_x", "frame_y")
+EDGE_TOLERANCE = 1e-9  # relative: states this close to the frame's edge are tested one by one
 
 
 @dataclass(frozen=True)
@@ -131,3 +135,34 @@ def in_frame(state: SceneState) -> bool:
     half = state.half_fov()
     cos_a, sin_a = math.cos(half), math.sin(half)
     return all(side * cos_a - z * sin_a <= radius for side in (x, -x, y, -y))
+
+
+def in_frame_many(fields: Mapping[str, np.ndarray | float], n: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`in_frame` of ``n`` states at once, from the :data:`FRAME_FIELDS` as arrays (a
+    missing field keeps :class:`SceneState`'s default).
+
+    Returns:
+        (in frame, unsure): ``unsure`` marks states within rounding of the frame's edge, where
+        numpy's sines may round differently from the scalar test: the caller tests those with
+        :func:`in_frame`, so the answer is the scalar test's for every state.
+    """
+    neutral = SceneState()
+    f = {name: np.broadcast_to(np.asarray(fields.get(name, getattr(neutral, name)), dtype=np.float64), (n,))
+         for name in FRAME_FIELDS}
+    half = np.arctan(SENSOR_WIDTH_MM / (2.0 * f["focal_length"]))
+    distance = 1.0 / (f["zoom"] * FRAME_FILL * np.sin(half))
+    az, el = np.radians(f["azimuth"]), np.radians(f["elevation"])
+    forward = np.stack([-np.cos(el) * np.sin(az), np.cos(el) * np.cos(az), -np.sin(el)])
+    up = np.stack([-np.sin(el) * np.sin(az), np.sin(el) * np.cos(az), np.cos(el)])
+    right = np.cross(forward, up, axis=0)
+    reach = distance * np.tan(half)
+    rel = reach * (f["frame_x"] * right + f["frame_y"] * up) + distance * forward  # object - camera
+    x, y, z = (rel * right).sum(0), (rel * up).sum(0), (rel * forward).sum(0)
+    radius = f["scale"]
+    behind = z + radius  # < 0: wholly behind the camera
+    outside = np.maximum(np.abs(x), np.abs(y)) * np.cos(half) - z * np.sin(half) - radius  # > 0: beyond a side
+    inside = (behind >= 0) & (outside <= 0)
+    tolerance = EDGE_TOLERANCE * (np.abs(x) + np.abs(y) + np.abs(z) + radius + distance)
+    unsure = (np.abs(behind) <= tolerance) | (np.abs(outside) <= tolerance)
+    unsure |= ~(np.isfinite(behind) & np.isfinite(outside))
+    return inside & ~unsure, unsure

@@ -23,6 +23,7 @@ class Material(RenderedControl):
     ``scale`` sets the pattern size (1 = a few stripes/spots across the object)."""
 
     order = 40
+    frame_fields = {}
     version = 2  # 2: patterns scale with the object's size
 
     class Params(ControlParams):
@@ -58,6 +59,7 @@ class Occlusion(RenderedControl):
     width, coming in from ``direction`` (degrees in the image: 0 = right, 90 = top)."""
 
     order = 40
+    frame_fields = {}
     periodic = {"direction": 360.0}
 
     class Params(ControlParams):

@@ -19,6 +19,10 @@ class RenderedControl(Control):
 
     stage = "render"
     order: ClassVar[int] = 50
+    #: What ``apply`` sets of the fields the planner's in-frame test reads (``state.FRAME_FIELDS``),
+    #: as parameter → field, for an ``apply`` that copies parameters to fields; ``{}`` when it
+    #: sets none of them. None (unknown): the planner applies the control job by job instead.
+    frame_fields: ClassVar[dict[str, str] | None] = None
 
     def apply(self, state: SceneState, params: ControlParams) -> None:
         raise NotImplementedError
@@ -26,3 +30,12 @@ class RenderedControl(Control):
 
 #: The rendered controls a spec may name (``[[controls]] type = ...``).
 RENDERED_CONTROLS: Registry[type[RenderedControl]] = Registry("control")
+
+
+def frame_fields(control: RenderedControl) -> dict[str, str] | None:
+    """``control.frame_fields``, trusted only when the class that declares it also defines ``apply``
+    (a subclass that overrides ``apply`` may move the object in other ways: None)."""
+    mro = type(control).__mro__
+    declares = next((c for c in mro if "frame_fields" in c.__dict__), None)
+    applies = next((c for c in mro if "apply" in c.__dict__), None)
+    return control.frame_fields if declares is not None and declares is applies else None

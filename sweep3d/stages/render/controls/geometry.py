@@ -18,6 +18,7 @@ class Orientation(RenderedControl):
     """
 
     order = 10
+    frame_fields = {}
     periodic = {"yaw": 360.0, "pitch": 360.0, "roll": 360.0}
 
     class Params(ControlParams):
@@ -34,6 +35,7 @@ class Scale(RenderedControl):
     """Scales the object about its centre (``factor`` 1 = the normalised size, a unit bounding sphere)."""
 
     order = 10
+    frame_fields = {"factor": "scale"}
 
     class Params(ControlParams):
         factor: float = Field(1.0, gt=0, le=1e6)
@@ -53,6 +55,7 @@ class Camera(RenderedControl):
     """
 
     order = 20
+    frame_fields = {"azimuth": "azimuth", "elevation": "elevation", "zoom": "zoom", "focal_length": "focal_length"}
     periodic = {"azimuth": 360.0}
 
     class Params(ControlParams):
@@ -74,6 +77,7 @@ class Position(RenderedControl):
     (fractions of the half-width and half-height; +x right, +y up)."""
 
     order = 30
+    frame_fields = {"x": "frame_x", "y": "frame_y"}
 
     class Params(ControlParams):
         x: float = Field(0.0, ge=-100.0, le=100.0)
@@ -89,6 +93,7 @@ class PinToGround(RenderedControl):
     rotation and scaling, so it rests on its lowest point as on a table."""
 
     order = 15
+    frame_fields = {}  # the in-frame test ignores the ground
 
     class Params(ControlParams):
         enabled: bool = False

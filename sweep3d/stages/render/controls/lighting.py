@@ -31,6 +31,7 @@ class PointLightControl(RenderedControl):
     (as for the camera: azimuth 0 is in front). Use two ids for two lights."""
 
     order = 60
+    frame_fields = {}
     periodic = {"azimuth": 360.0}
 
     class Params(ControlParams):
@@ -56,6 +57,7 @@ class Hdri(RenderedControl):
     importance map (~0.75 s per distinct rotation), so orientation/camera are cheaper to vary."""
 
     order = 60
+    frame_fields = {}
     periodic = {"rotation": 360.0}
 
     class Params(ControlParams):
@@ -72,6 +74,7 @@ class SkyControl(RenderedControl):
     (degrees above the horizon; below it is night) and ``sun_azimuth``; ``enabled`` switches it on."""
 
     order = 60
+    frame_fields = {}
     periodic = {"sun_azimuth": 360.0}
 
     class Params(ControlParams):
@@ -94,6 +97,7 @@ class Background(RenderedControl):
     environment, which still lights it; "" keeps the environment visible."""
 
     order = 60
+    frame_fields = {}
 
     class Params(ControlParams):
         color: str = Field("", pattern=r"^(#[0-9a-fA-F]{6})?$")
@@ -112,6 +116,7 @@ class Denoiser(RenderedControl):
     """Switches OpenImageDenoise ``on`` or ``off`` per job (``mode``; "spec" = as render.denoise)."""
 
     order = 60
+    frame_fields = {}
 
     class Params(ControlParams):
         mode: Literal["spec", "on", "off"] = "spec"
