@@ -186,11 +186,13 @@ class InferStage:
         model, labels = self.model.classifier(), self._labels
         truths = _truths(plan, labels)
         evaluator = self._evaluator(plan)
-        torch.set_num_threads(threads)
         if self.backend == STAND_IN and self._runner is None:
             self._runner = self._stand_in(plan, store, threads)
         if self._runner is not None:
             self._runner.use_threads(threads)
+        # Beside ONNX Runtime, torch only normalises batches and runs the odd near tie: with more
+        # threads, its idle ones would spin on the cores ONNX Runtime's threads are working on.
+        torch.set_num_threads(threads if self._runner is None else 1)
         remote = None
         if self.on_ray and self.backend == "torch":  # batches go to an inference actor (GPU if any)
             from sweep3d.stages.infer.ray_actor import remote_runner
