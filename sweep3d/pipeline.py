@@ -2,6 +2,8 @@
 
 The process holding the store's lock is its single writer. Each stage computes only the keys
 the store lacks, and flushes rows every few seconds, so a killed run resumes where it stopped.
+The stages overlap (``stages.driver``): images are postprocessed and inferred in this process
+while the Blender workers render the next ones.
 
 Before anything is rendered the model is loaded and tried on a blank image (when anything
 needs inferring), so a broken model fails in seconds. The experiment's jobs table is written
@@ -91,8 +93,14 @@ def _writable(spec: LoadedSpec, store: Store) -> None:
         raise SpecError(str(spec.path), "experiment.store", str(exc)) from None
 
 
-def run(spec: LoadedSpec, console: Console | None = None, wait: float = 0.0, executor: Executor = LOCAL) -> RunResult:
-    """Run every stage of ``spec`` and return what each did (renders on ``executor``)."""
+def run(spec: LoadedSpec, console: Console | None = None, wait: float = 0.0, executor: Executor = LOCAL,
+        overlap: bool = True) -> RunResult:
+    """Run every stage of ``spec`` and return what each did (renders on ``executor``).
+
+    Args:
+        overlap: postprocess and infer while Blender renders (else one stage after the other:
+            the same results, for comparison).
+    """
     store = Store(spec.store)
     _writable(spec, store)
     owns_ray = False
@@ -101,7 +109,7 @@ def run(spec: LoadedSpec, console: Console | None = None, wait: float = 0.0, exe
 
         owns_ray = connect(executor.address)
     try:
-        return _run_locked(spec, store, console, wait, executor)
+        return _run_locked(spec, store, console, wait, executor, overlap)
     finally:
         if owns_ray:
             import ray
@@ -109,7 +117,8 @@ def run(spec: LoadedSpec, console: Console | None = None, wait: float = 0.0, exe
             ray.shutdown()
 
 
-def _run_locked(spec: LoadedSpec, store: Store, console: Console | None, wait: float, executor: Executor) -> RunResult:
+def _run_locked(spec: LoadedSpec, store: Store, console: Console | None, wait: float, executor: Executor,
+                overlap: bool) -> RunResult:
     with store.lock(wait):
         started = time.perf_counter()  # time spent waiting for the lock is not the run's
         started_at = utc_now()
@@ -126,7 +135,7 @@ def _run_locked(spec: LoadedSpec, store: Store, console: Console | None, wait: f
             while True:  # one pass for fixed policies; one per round for adaptive ones
                 plan = plan_spec(spec, model, history) if history else result.plan
                 try:
-                    outcomes = run_stages(stages, plan, store, progress)
+                    outcomes = run_stages(stages, plan, store, progress, overlap=overlap)
                 except KeyboardInterrupt:
                     write_jobs(plan, store)  # what finished is stored: let query and report show it
                     raise

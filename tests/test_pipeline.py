@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+import shutil
 import time
 from pathlib import Path
 
@@ -157,6 +158,33 @@ def test_onnx_backend_reinfers_but_renders_nothing_and_agrees(tiny_copy: Path) -
     assert computed(tiny_copy) == {"render": 0, "postprocess": 0, "infer": 8}
     con = Store(tiny_copy / "store").connect("tiny")
     assert con.execute("SELECT job, top1_label, correct FROM results ORDER BY job").fetchall() == torch_rows
+
+
+RESULT_COLUMNS = "SELECT job, render_key, image_key, pred_key, top1_label, correct FROM results ORDER BY job"
+
+
+def test_the_default_backend_keeps_torch_s_keys_and_answers(tiny_copy: Path) -> None:
+    """tiny_copy was inferred by ONNX Runtime standing in for torch (the default); eager torch
+    finds every prediction cached under the same keys, and computed again gives the same answers."""
+    stand_in = Store(tiny_copy / "store").connect("tiny").execute(RESULT_COLUMNS).fetchall()
+    edit_spec(tiny_copy, "[model]\n", '[model]\nbackend = "torch"\n')
+    assert computed(tiny_copy) == {"render": 0, "postprocess": 0, "infer": 0}
+    shutil.rmtree(tiny_copy / "store" / "tables" / "predictions")
+    assert computed(tiny_copy) == {"render": 0, "postprocess": 0, "infer": 8}
+    assert Store(tiny_copy / "store").connect("tiny").execute(RESULT_COLUMNS).fetchall() == stand_in
+
+
+def test_overlapped_stages_give_what_stages_one_after_the_other_give(tmp_path: Path) -> None:
+    results = {}
+    for overlap in (True, False):
+        folder = tmp_path / str(overlap)
+        folder.mkdir()
+        write_spec(folder, TINY_SPEC)
+        result = run(load_spec(folder / "spec.toml"), overlap=overlap)
+        counts = [(o.stage, o.total, o.cached, o.computed, o.failed, o.skipped) for o in result.outcomes]
+        results[overlap] = (counts, Store(folder / "store").connect("tiny").execute(RESULT_COLUMNS).fetchall())
+    assert results[True] == results[False]
+    assert results[True][0] == [("render", 4, 0, 4, 0, 0), ("postprocess", 4, 0, 4, 0, 0), ("infer", 8, 0, 8, 0, 0)]
 
 
 def test_bench_measures_settings_and_applies_the_recommendation(tiny_copy: Path) -> None:

@@ -3,8 +3,8 @@ nothing: each rerun resumes, no file is ever read half-written, no committed row
 duplicated, and the final results equal an uninterrupted run's.
 
 The killed runs are real ``sweep3d run`` processes (real Blender, real model) started through a
-small harness that (a) drops marker files when a stage starts, so a kill can be aimed at a
-stage, and (b) pauses 0.4 s halfway through writing each Parquet segment, so a kill can land
+small harness that (a) drops marker files when a stage starts and ends, so a kill can be aimed
+at a stage (the stages overlap: a kill aimed at inference mostly lands while Blender renders), and (b) pauses 0.4 s halfway through writing each Parquet segment, so a kill can land
 while a segment is half on disk. The product code runs unchanged.
 
 Also: a run killed alone (its workers are not) takes its render workers with it, and a worker
@@ -60,16 +60,21 @@ def half_then_rest(table, where, **kwargs):
 
 pq.write_table = half_then_rest
 
-import sweep3d.stages.driver as driver
 import sweep3d.stages.infer.stage as infer
+from sweep3d.stages.postprocess import PostprocessStage
+from sweep3d.stages.render import RenderStage
 
-_run_stage = driver.run_stage
+def marked(compute):
+    def wrapped(self, *args, **kwargs):
+        (markers / self.name).touch()  # the stage has started (stages overlap: others may run too)
+        try:
+            yield from compute(self, *args, **kwargs)
+        finally:
+            (markers / f"{self.name}.done").touch()
+    return wrapped
 
-def run_stage(stage, *args, **kwargs):
-    (markers / stage.name).touch()  # the stage has started
-    return _run_stage(stage, *args, **kwargs)
-
-driver.run_stage = run_stage
+for stage in (RenderStage, PostprocessStage, infer.InferStage):
+    stage.compute = marked(stage.compute)
 _predict = infer.predict
 
 def predict(model, images, *args, **kwargs):
@@ -150,7 +155,7 @@ class Killer:
                 landed = "finished"
                 break
             now = time.monotonic()
-            rendering = (self.markers / "render").exists() and not (self.markers / "postprocess").exists()
+            rendering = (self.markers / "render").exists() and not (self.markers / "render.done").exists()
             if target == "random" and now - started >= anywhere:
                 landed = "random"
             elif target == "render" and rendering and _blobs_since(self.store, wall) >= aim:

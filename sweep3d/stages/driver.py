@@ -1,33 +1,48 @@
 """One driver for the render, postprocess and infer stages, and for every caller that runs them.
 
 A stage says what its key is, which table and schema its rows go to, what it reads from upstream
-and how to compute a batch of jobs; the driver does the rest the same way for each: it finds what
-is cached (a row, and its blob where rows own one), drops rows whose blob has gone, discards
-cached blobs that fail their digest (so they are recomputed), counts what is waiting on upstream,
-shows progress, writes rows in segments every few seconds (so a kill loses little) and discards
-damaged upstream blobs. :func:`run_stages` repeats the stages while one of them discarded an
-upstream blob, so a damaged blob is recomputed within the same run.
+and how to compute its jobs; the driver does the rest the same way for each: it finds what is
+cached (a row, and its blob where rows own one), drops rows whose blob has gone, discards cached
+blobs that fail their digest (so they are recomputed), counts what is waiting on upstream, shows
+progress, writes rows in segments every few seconds (so a kill loses little) and discards damaged
+upstream blobs. :func:`run_stages` repeats the stages while one of them discarded an upstream
+blob, so a damaged blob is recomputed within the same run.
+
+The stages of a pass overlap: the first runs in the calling thread (the render stage, whose
+Blender workers are other processes, so this thread mostly waits on their pipes) and each later
+stage in a thread of its own, fed through a :class:`Feed` with the jobs whose input has just been
+stored. Only the calling thread records: it counts outcomes, writes every row and hands each
+stored key to the stages waiting for it, and it flushes the tables together in stage order, so a
+row on disk never lacks the upstream rows it was computed from, whenever the run is killed.
 """
 
 from __future__ import annotations
 
+import queue
+import threading
 import time
-from collections import defaultdict
+from collections import ChainMap, defaultdict
+from contextlib import ExitStack, closing
 from dataclasses import dataclass, field
-from typing import Any, Iterable, Iterator, Protocol, Sequence
+from typing import Any, Callable, Iterable, Iterator, Mapping, Protocol, Sequence
 
 import pyarrow as pa
 
 from sweep3d.cache.blobs import damaged_blobs
-from sweep3d.cache.store import Store
+from sweep3d.cache.store import DIGEST_COLUMN, SegmentWriter, Store
 from sweep3d.errors import UserError
-from sweep3d.progress import RunProgress
+from sweep3d.progress import RunProgress, StageProgress
 from sweep3d.stages.jobs import Job, JobList, Plan
 from sweep3d.stages.outcome import StageOutcome
 
 #: Extra passes over the stages when one discarded a damaged blob (render → post → infer).
 REPAIR_PASSES = 3
 DAMAGED = "are damaged (digest mismatch or undecodable)"
+#: A pass writes its tables' rows every this many seconds, or when one has this many waiting.
+FLUSH_SECONDS = 3.0
+FLUSH_ROWS = 64
+#: How long a failed or interrupted pass waits for a stage's thread to stop (it ends its item first).
+JOIN_SECONDS = 60.0
 
 
 @dataclass
@@ -41,7 +56,7 @@ class Computed:
         side: rows for other tables, by table (e.g. ``parts`` for the UV pass).
         error: why the key failed (then nothing is recorded).
         damaged: the upstream blob found damaged, as (table, key): the job is skipped, the blob
-            discarded after the stage, and recomputed by the run's next pass.
+            discarded after the pass, and recomputed by the run's next pass.
     """
 
     key: str
@@ -49,6 +64,100 @@ class Computed:
     side: dict[str, dict[str, Any]] = field(default_factory=dict)
     error: str | None = None
     damaged: tuple[str, str] | None = None
+
+
+class Cancelled(Exception):
+    """Raised in a stage's thread by its :class:`Feed` when the pass stops (a stage failed, Ctrl-C)."""
+
+
+class Feed:
+    """The jobs one stage computes in a pass, handed over as their inputs are stored.
+
+    Iterating waits for more jobs until the stages upstream are done, so a stage computes while
+    they still run; iterating again replays what came so far (the render stage walks its jobs
+    more than once, all of them there from the start). :meth:`column` and :meth:`digests` read
+    upstream rows: the ones this pass recorded, else the store's, because a job may arrive before
+    its input's row is flushed.
+    """
+
+    def __init__(self, store: Store, recorded: Mapping[str, dict[str, dict[str, Any]]], jobs: Iterable[Job] = (),
+                 more: bool = False) -> None:
+        self._store, self._recorded = store, recorded
+        self._jobs = list(jobs)
+        self._open, self._cancelled = more, False
+        self._changed = threading.Condition()
+
+    def put(self, job: Job) -> None:
+        with self._changed:
+            self._jobs.append(job)
+            self._changed.notify_all()
+
+    def close(self) -> None:
+        """No more jobs will come: iteration ends once it has yielded the ones here."""
+        with self._changed:
+            self._open = False
+            self._changed.notify_all()
+
+    def cancel(self) -> None:
+        """Stop the stage: iterating raises :class:`Cancelled`."""
+        with self._changed:
+            self._cancelled = True
+            self._changed.notify_all()
+
+    def __iter__(self) -> Iterator[Job]:
+        i = 0
+        while True:
+            with self._changed:
+                while i >= len(self._jobs) and self._open and not self._cancelled:
+                    self._changed.wait()
+                if self._cancelled:
+                    raise Cancelled
+                if i >= len(self._jobs):
+                    return
+                job = self._jobs[i]
+            i += 1
+            yield job
+
+    def __len__(self) -> int:
+        return len(self._jobs)
+
+    @property
+    def more(self) -> bool:
+        """Whether more jobs may still come (stages upstream are still computing)."""
+        return self._open
+
+    def column(self, table: str, column: str) -> Mapping[str, Any]:
+        """Key → ``column`` of its row in ``table`` (live: rows recorded later show up too)."""
+        return ChainMap(_Recorded(self._recorded.get(table, {}), lambda row: row[column]),
+                        self._store.column_map(table, column))
+
+    def digests(self, table: str) -> Mapping[str, set[str]]:
+        """Key → the blob digests its rows in ``table`` record (live, as :meth:`column`)."""
+        return ChainMap(_Recorded(self._recorded.get(table, {}), lambda row: {row[DIGEST_COLUMN]}),
+                        self._store.digests(table))
+
+
+class _Recorded(Mapping[str, Any]):
+    """A read-only view of one value of the rows a pass recorded (missing value: missing key)."""
+
+    def __init__(self, rows: dict[str, dict[str, Any]], value: Callable[[dict[str, Any]], Any]) -> None:
+        self._rows, self._value = rows, value
+
+    def __getitem__(self, key: str) -> Any:
+        return self._value(self._rows[key])
+
+    def __contains__(self, key: object) -> bool:
+        try:
+            self[key]  # type: ignore[index]
+        except KeyError:
+            return False
+        return True
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(list(self._rows))
+
+    def __len__(self) -> int:
+        return len(self._rows)
 
 
 class Stage(Protocol):
@@ -77,8 +186,9 @@ class Stage(Protocol):
     def incomplete(self, plan: Plan, store: Store, cached: set[str]) -> set[str]:
         """Cached keys to compute again for something of theirs the store lacks (e.g. a pass)."""
 
-    def compute(self, todo: list[Job], plan: Plan, store: Store) -> Iterator[Computed]:
-        """Compute ``todo`` (one job per key), yielding one :class:`Computed` per job."""
+    def compute(self, todo: Feed, plan: Plan, store: Store) -> Iterator[Computed]:
+        """Compute ``todo`` (one job per key, coming as their inputs land), yielding one
+        :class:`Computed` per job; it may run in a thread of its own."""
 
 
 def unique_jobs(stage: Stage, jobs: Iterable[Job]) -> dict[str, Job]:
@@ -102,11 +212,27 @@ def cached_keys(stage: Stage, plan: Plan, store: Store) -> set[str]:
 
 def to_do(stage: Stage, plan: Plan, store: Store, cached: set[str] | None = None) -> list[Job]:
     """One job per key the stage must compute now: missing or incomplete, with its input stored."""
+    return split_to_do(stage, plan, store, cached)[0]
+
+
+def split_to_do(stage: Stage, plan: Plan, store: Store, cached: set[str] | None = None,
+                coming: Mapping[str, set[str]] | None = None) -> tuple[list[Job], dict[tuple[str, str], list[Job]]]:
+    """The jobs the stage must compute: (those whose input is stored, those waiting for theirs).
+
+    Args:
+        coming: keys that stages upstream will store in this pass, by table; a job whose input
+            is neither stored nor coming is skipped (its input failed or was never made).
+    Returns:
+        one job per key: the ready ones in plan order, and the waiting ones by their input's
+        (table, key).
+    """
     unique = unique_jobs(stage, plan.jobs)
     cached = cached_keys(stage, plan, store) if cached is None else cached
     needed = (set(unique) - cached) | stage.incomplete(plan, store, cached)
+    coming = coming or {}
     inputs: dict[str, set[str]] = {}
-    todo = []
+    ready: list[Job] = []
+    waiting: dict[tuple[str, str], list[Job]] = defaultdict(list)
     for key, job in unique.items():
         if key not in needed:
             continue
@@ -116,9 +242,11 @@ def to_do(stage: Stage, plan: Plan, store: Store, cached: set[str] | None = None
             if table not in inputs:
                 inputs[table] = store.keys(table)
             if upstream_key not in inputs[table] or not store.blob_path(upstream_key).exists():
-                continue  # its input failed or was never made: skipped
-        todo.append(job)
-    return todo
+                if upstream_key in coming.get(table, ()):
+                    waiting[source].append(job)
+                continue  # else skipped
+        ready.append(job)
+    return ready, dict(waiting)
 
 
 def plan_status(stage: Stage, plan: Plan, store: Store) -> tuple[int, int]:
@@ -139,62 +267,240 @@ def discard_damaged(stage: Stage, store: Store, cached: set[str]) -> set[str]:
     return damaged
 
 
-def run_stage(stage: Stage, plan: Plan, store: Store, progress: RunProgress) -> StageOutcome:
-    """Compute what ``plan`` needs at ``stage`` and the store lacks; record it as it comes."""
+@dataclass
+class StagePass:
+    """One stage's share of a pass: its outcome so far, and the jobs it has to compute.
+
+    Attributes:
+        ready: jobs whose input is stored (or that read none).
+        waiting: jobs whose input an upstream stage of the pass has still to store, by (table, key).
+        damaged: upstream blobs its compute found damaged, by table.
+    """
+
+    stage: Stage
+    outcome: StageOutcome
+    ready: list[Job]
+    waiting: dict[tuple[str, str], list[Job]]
+    seconds: float = 0.0  # spent before computing (finding what is cached, discarding damaged blobs)
+    damaged: dict[str, set[str]] = field(default_factory=lambda: defaultdict(set))
+
+    @property
+    def keys(self) -> set[str]:
+        """The keys this stage computes in the pass."""
+        return {self.stage.key(j) for j in self.ready} | {self.stage.key(j) for js in self.waiting.values() for j in js}
+
+
+def begin(stage: Stage, plan: Plan, store: Store, coming: Mapping[str, set[str]]) -> StagePass:
+    """What ``stage`` must compute in a pass whose earlier stages will store ``coming`` (by table)."""
     started = time.perf_counter()
     unique = unique_jobs(stage, plan.jobs)
     cached = cached_keys(stage, plan, store)
     if stage.owns_blobs:  # rows whose blob has gone (deleted, quarantined): computed again, one row each
         store.drop_rows(stage.table, (store.keys(stage.table) & set(unique)) - cached)
         cached -= discard_damaged(stage, store, cached)
-    todo = to_do(stage, plan, store, cached)
-    redo = {stage.key(job) for job in todo} & cached
-    outcome = StageOutcome(stage.name, total=len(unique), cached=len(cached - redo))
-    outcome.skipped = outcome.total - outcome.cached - len(todo)
-    damaged: dict[str, set[str]] = defaultdict(set)
-    if todo:
-        writers = {stage.table: store.segment_writer(stage.table, stage.schema(plan))}
-        writers |= {table: store.segment_writer(table, schema) for table, schema in stage.side_tables.items()}
-        with progress.stage(stage.name, len(todo), outcome.cached) as bar:
+    ready, waiting = split_to_do(stage, plan, store, cached, coming)
+    run = StagePass(stage, StageOutcome(stage.name, total=len(unique)), ready, waiting)
+    keys = run.keys
+    run.outcome.cached = len(cached - keys)
+    run.outcome.skipped = run.outcome.total - run.outcome.cached - len(keys)
+    run.seconds = time.perf_counter() - started
+    return run
+
+
+class Writers:
+    """The segment writers of a pass, flushed together in stage order every few seconds.
+
+    Flushing upstream tables first means that a row on disk always has its upstream rows on disk
+    too: a kill at any moment never leaves a prediction whose image row was lost with the kill
+    (the image would be made again, from pixels the prediction never saw).
+    """
+
+    def __init__(self, store: Store, schemas: Sequence[tuple[str, pa.Schema]]) -> None:
+        never = float("inf")  # the writers never flush on their own: this class orders flushes
+        self._writers: dict[str, SegmentWriter] = {
+            table: store.segment_writer(table, schema, every=never, max_rows=2**62) for table, schema in schemas}
+        self._waiting = 0
+        self._last = time.monotonic()
+
+    def add(self, table: str, row: dict[str, Any]) -> None:
+        self._writers[table].add(row)
+        self._waiting = max(self._waiting, len(self._writers[table].rows))
+        if self._waiting >= FLUSH_ROWS or time.monotonic() - self._last >= FLUSH_SECONDS:
+            self.flush()
+
+    def flush(self) -> None:
+        for writer in self._writers.values():  # in stage order (dicts keep insertion order)
+            writer.flush()
+        self._waiting, self._last = 0, time.monotonic()
+
+
+_DONE = object()  # a stage's thread has yielded its last item
+
+
+class _Pass:
+    """Runs the stages of one pass together; everything it records, it records in one thread."""
+
+    def __init__(self, runs: list[StagePass], plan: Plan, store: Store, bars: list[StageProgress],
+                 writers: Writers) -> None:
+        self.runs, self.plan, self.store, self.bars, self.writers = runs, plan, store, bars, writers
+        self.recorded: dict[str, dict[str, dict[str, Any]]] = {r.stage.table: {} for r in runs}
+        self.feeds = [Feed(store, self.recorded, r.ready, more=bool(r.waiting)) for r in runs]
+        self.events: queue.Queue = queue.Queue()
+        self.running = [bool(r.ready or r.waiting) for r in runs]  # stages still computing
+        self.threads: list[threading.Thread] = []
+        self.started = time.perf_counter()
+
+    def run(self) -> None:
+        """Compute every stage's jobs: the first stage here, the others in threads, fed as inputs land."""
+        for i in range(1, len(self.runs)):
+            if self.running[i]:
+                thread = threading.Thread(target=self._produce, args=(i,), name=f"sweep3d-{self.runs[i].stage.name}",
+                                          daemon=True)
+                self.threads.append(thread)
+                thread.start()
+        try:
+            if self.running[0]:
+                with closing(self.runs[0].stage.compute(self.feeds[0], self.plan, self.store)) as items:
+                    for item in items:
+                        self._record(0, item)
+                        self._drain(block=False)
+                self._done(0)
+            while any(self.running):
+                self._drain(block=True)
+        finally:
+            for feed in self.feeds:
+                feed.cancel()  # a no-op for the stages that are done
+            for thread in self.threads:
+                thread.join(JOIN_SECONDS)
+
+    def _produce(self, index: int) -> None:
+        """A stage's thread: compute its feed, passing each item to the recording thread."""
+        run = self.runs[index]
+        try:
+            for item in run.stage.compute(self.feeds[index], self.plan, self.store):
+                self.events.put((index, item))
+        except Cancelled:
+            return
+        except BaseException as exc:  # noqa: BLE001  (raised again in the recording thread)
+            self.events.put((index, exc))
+            return
+        self.events.put((index, _DONE))
+
+    def _drain(self, block: bool) -> None:
+        """Record what the stages' threads have computed (waiting for something when ``block``)."""
+        while True:
             try:
-                for item in stage.compute(todo, plan, store):
-                    if item.error is not None:
-                        outcome.failed += 1
-                        outcome.errors.append(f"{stage.name} {item.key[:12]}: {item.error}")
-                    elif item.damaged is not None:
-                        damaged[item.damaged[0]].add(item.damaged[1])
-                        outcome.skipped += 1
-                    else:
-                        outcome.computed += 1
-                        if item.row is not None:
-                            writers[stage.table].add(item.row)
-                        for table, row in item.side.items():
-                            writers[table].add(row)
-                    bar.advance(failed=item.error is not None)
-            finally:
-                for writer in writers.values():
-                    writer.flush()
-    for table, keys in damaged.items():
-        store.discard(table, keys, DAMAGED)
-        outcome.repaired += len(keys)
-    outcome.seconds = time.perf_counter() - started
-    return outcome
+                index, item = self.events.get(block=block, timeout=0.25 if block else None)
+            except queue.Empty:
+                return
+            if isinstance(item, BaseException):
+                raise item
+            if item is _DONE:
+                self._done(index)
+            else:
+                self._record(index, item)
+            block = False  # then take whatever else is there
+
+    def _record(self, index: int, item: Computed) -> None:
+        """Count one item, write its rows, and hand its key to the stages waiting for it."""
+        run = self.runs[index]
+        outcome, stage = run.outcome, run.stage
+        if item.error is not None:
+            outcome.failed += 1
+            outcome.errors.append(f"{stage.name} {item.key[:12]}: {item.error}")
+        elif item.damaged is not None:
+            run.damaged[item.damaged[0]].add(item.damaged[1])
+            outcome.skipped += 1
+        else:
+            outcome.computed += 1
+            if item.row is not None:
+                self.recorded[stage.table][item.key] = item.row
+                self.writers.add(stage.table, item.row)
+            for table, row in item.side.items():
+                self.writers.add(table, row)
+            for later, feed in zip(self.runs[index + 1:], self.feeds[index + 1:]):
+                for job in later.waiting.pop((stage.table, item.key), ()):
+                    feed.put(job)
+        self.bars[index].advance(failed=item.error is not None)
+
+    def _done(self, index: int) -> None:
+        """Stage ``index`` has computed everything: what still waits for it is skipped, and a
+        stage whose upstream stages are all done gets no more jobs."""
+        run = self.runs[index]
+        self.running[index] = False
+        run.seconds += time.perf_counter() - self.started
+        for later in range(index + 1, len(self.runs)):
+            waiting = self.runs[later].waiting
+            for source in [s for s in waiting if s[0] == run.stage.table]:
+                self.runs[later].outcome.skipped += len(waiting.pop(source))
+            if not any(self.running[:later]):
+                for jobs in waiting.values():  # inputs from a table no stage of the pass writes
+                    self.runs[later].outcome.skipped += len(jobs)
+                waiting.clear()
+                self.feeds[later].close()
+
+
+def run_pass(stages: Sequence[Stage], plan: Plan, store: Store, progress: RunProgress) -> list[StageOutcome]:
+    """Run ``stages`` once over ``plan``, overlapped: each computes what the store lacks as its
+    inputs land, and records it as it comes. Returns each stage's outcome."""
+    runs: list[StagePass] = []
+    coming: dict[str, set[str]] = {}
+    for stage in stages:
+        runs.append(begin(stage, plan, store, coming))
+        coming[stage.table] = runs[-1].keys
+    busy = [bool(r.ready or r.waiting) for r in runs]
+    schemas = [item for r, b in zip(runs, busy) if b
+               for item in [(r.stage.table, r.stage.schema(plan)), *r.stage.side_tables.items()]]
+    with ExitStack() as stack:
+        bars = [stack.enter_context(progress.stage(r.stage.name, len(r.keys), r.outcome.cached))
+                if b else StageProgress(None, None) for r, b in zip(runs, busy)]
+        writers = Writers(store, schemas)
+        stack.callback(writers.flush)
+        _Pass(runs, plan, store, bars, writers).run()
+    _discard_damaged_inputs(runs, store)
+    for run in runs:
+        run.outcome.seconds = run.seconds
+    return [r.outcome for r in runs]
+
+
+def _discard_damaged_inputs(runs: list[StagePass], store: Store) -> None:
+    """Discard the upstream blobs the stages found damaged (each counted once, by the first
+    stage that found it), so the run's next pass computes them again."""
+    seen: set[tuple[str, str]] = set()
+    for run in runs:
+        for table, keys in run.damaged.items():
+            new = {k for k in keys if (table, k) not in seen}
+            if new:
+                seen |= {(table, k) for k in new}
+                store.discard(table, new, DAMAGED)
+                run.outcome.repaired += len(new)
+
+
+def run_stage(stage: Stage, plan: Plan, store: Store, progress: RunProgress) -> StageOutcome:
+    """Compute what ``plan`` needs at ``stage`` and the store lacks; record it as it comes."""
+    return run_pass([stage], plan, store, progress)[0]
 
 
 def run_stages(stages: Sequence[Stage], plan: Plan, store: Store, progress: RunProgress,
-               strict: bool = False) -> list[StageOutcome]:
-    """Run ``stages`` in order over ``plan``; again while one repaired a damaged blob.
+               strict: bool = False, overlap: bool = False) -> list[StageOutcome]:
+    """Run ``stages`` over ``plan``; again while one repaired a damaged blob.
 
     Args:
         strict: raise on a failed key instead of reporting it (for callers that need every
             result, such as the bench and the contact sheet).
+        overlap: run the stages together, each on what the ones before have stored so far (as
+            a run does); else one after the other, each over the whole plan: the same keys, rows
+            and counts, and renders timed without inference beside them (as the bench needs).
 
     Raises:
         UserError: with ``strict``, naming the stage, the setting's first error and the count.
     """
     outcomes: list[StageOutcome] = []
     for _ in range(1 + REPAIR_PASSES):
-        now = [run_stage(stage, plan, store, progress) for stage in stages]
+        if overlap:
+            now = run_pass(stages, plan, store, progress)
+        else:
+            now = [run_stage(stage, plan, store, progress) for stage in stages]
         outcomes = merge_outcomes(outcomes, now)
         if not any(o.repaired for o in now):
             break

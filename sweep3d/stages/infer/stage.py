@@ -1,5 +1,9 @@
 """The infer stage: batched forward passes over every image whose prediction is not cached.
 
+Which backend computes the predictions is :func:`choose_backend`'s choice: by default ONNX Runtime
+standing in for torch, whose answers are torch's (``onnx_backend``), so prediction keys do not
+change with it.
+
 A prediction is valid only if its image was valid (no NaN/inf in the render or after post
 controls) and the model's outputs are finite; an invalid image is not shown to the model and
 gets a row with ``valid = false``, so it is counted as invalid and never averaged. An image blob
@@ -8,9 +12,11 @@ that is missing or damaged is discarded so the next pass of the run computes it 
 
 from __future__ import annotations
 
+import itertools
+import logging
 import os
 import time
-from typing import Callable, Iterator
+from typing import TYPE_CHECKING, Any, Callable, Iterable, Iterator, Mapping
 
 import numpy as np
 import pyarrow as pa
@@ -19,12 +25,18 @@ from sweep3d.cache.blobs import load_image
 from sweep3d.cache.store import Store, utc_now
 from sweep3d.errors import SpecError, UserError
 from sweep3d.spec.columns import PREDICTION_COLUMNS
-from sweep3d.stages.driver import Computed
+from sweep3d.spec.loader import LoadedSpec
+from sweep3d.stages.driver import Computed, Feed
 from sweep3d.stages.infer.evaluators import EVALUATORS, Evaluator
 from sweep3d.stages.infer.handle import ModelHandle
 from sweep3d.stages.infer.labels import LabelMap
-from sweep3d.stages.infer.models import Classifier
+from sweep3d.stages.infer.models import Classifier, builtin_model
 from sweep3d.stages.jobs import Job, Plan
+
+if TYPE_CHECKING:
+    from sweep3d.stages.infer.onnx_backend import OnnxRunner
+
+log = logging.getLogger("sweep3d.infer")
 
 #: The bookkeeping columns of every prediction row (named in ``spec.columns``, which reserves them).
 BASE_COLUMNS = list(zip(PREDICTION_COLUMNS, (pa.string(), pa.string(), pa.string(), pa.string(), pa.float64(),
@@ -65,8 +77,31 @@ def predict(model: Classifier, images: np.ndarray, name: str = "the model", runn
     return out.detach().float().cpu().numpy()
 
 
+#: The backend name of ONNX Runtime standing in for torch (see ``onnx_backend``): torch's keys.
+STAND_IN = "onnx-as-torch"
+
+
+def choose_backend(spec: LoadedSpec, on_ray: bool = False) -> str:
+    """What computes the run's predictions: "torch", "onnx" (ONNX Runtime's own answers, keyed
+    apart) or :data:`STAND_IN` (ONNX Runtime giving torch's answers, under torch's keys).
+
+    A backend written in the spec is used as written. Left out, the built-in model with the
+    built-in evaluator gets ONNX Runtime standing in for torch, the fastest on CPU
+    (benchmarks/RESULTS.md); a user's model, or inference on Ray (a GPU), gets torch.
+    """
+    model = spec.model
+    if "backend" in model.model_fields_set or on_ray:
+        return model.backend
+    if builtin_model(model.name) is None or spec.evaluator.kind != "classification":
+        return "torch"
+    return STAND_IN
+
+
 class InferStage:
     """Predicts every image of the plan that has no prediction yet, with the run's model.
+
+    Images arrive while the stages upstream go on (see ``stages.driver``); a batch is inferred
+    once ``batch_size`` images are there, or the last ones are.
 
     Args:
         model: the run's model (resolved once, loaded on first use).
@@ -81,7 +116,9 @@ class InferStage:
     def __init__(self, model: ModelHandle, on_ray: bool = False) -> None:
         self.model = model
         self.on_ray = on_ray
-        self._ready: tuple[LabelMap, Callable | None] | None = None
+        self.backend: str | None = None  # chosen by ``prepare``
+        self._labels: LabelMap | None = None
+        self._runner: OnnxRunner | None = None
 
     def schema(self, plan: Plan) -> pa.Schema:
         return predictions_schema(self._evaluator(plan))
@@ -105,8 +142,7 @@ class InferStage:
         import torch
 
         spec = plan.spec
-        threads = spec.model.threads or os.cpu_count() or 1
-        torch.set_num_threads(threads)
+        torch.set_num_threads(_threads(plan))
         try:
             model = self.model.classifier()
             labels = model.label_map()
@@ -118,57 +154,85 @@ class InferStage:
         except UserError as exc:
             raise SpecError(str(spec.path), "model.name", str(exc)) from None
         _truths(plan, labels)  # a label the model lacks fails now, naming the object
-        runner = None
-        if spec.model.backend == "onnx":
-            from sweep3d.stages.infer.onnx_backend import OnnxRunner
+        self.backend = choose_backend(spec, self.on_ray)
+        if self.backend == "onnx":  # asked for: its failure is the user's to see now
+            self._runner = self._onnx(plan, store, _threads(plan))
+        self._labels = labels
 
-            runner = OnnxRunner(model, store.root / "models", self.model.digest, threads)
-        self._ready = (labels, runner)
-
-    def compute(self, todo: list[Job], plan: Plan, store: Store) -> Iterator[Computed]:
-        spec = plan.spec
-        if self._ready is None:
+    def compute(self, todo: Feed, plan: Plan, store: Store) -> Iterator[Computed]:
+        if self._labels is None:
             self.prepare(plan, store)
-        labels, runner = self._ready
-        model = self.model.classifier()
+        valid = {t: todo.column(t, "valid") for t in ("renders", "images")}  # live: see Feed
+        digests = {t: todo.digests(t) for t in ("renders", "images")}
+        jobs = iter(todo)
+        first = next(jobs, None)
+        if first is None:
+            return  # nothing came (its inputs failed): nothing to load
+        infer = self._inferrer(plan, store, _threads(plan, beside=todo.more))  # while the next images are made
+        for batch_jobs in _batches(itertools.chain([first], jobs), plan.spec.model.batch_size):
+            t0 = time.perf_counter()
+            batch, pixels, invalid, damaged = _load(store, batch_jobs, valid, digests)
+            rows = infer(batch, pixels) if batch else []
+            per_image = (time.perf_counter() - t0) / max(len(batch) + len(invalid), 1)
+            yield from self._computed(plan, batch, rows, invalid, per_image)
+            for job in damaged:
+                yield Computed(job.pred_key, damaged=(_table(job), job.image_key))
+
+    def _inferrer(self, plan: Plan, store: Store, threads: int) -> Callable[[list[Job], list[np.ndarray]], list[dict]]:
+        """A function from a batch's jobs and pixels to their evaluator rows, on the run's backend
+        with ``threads`` threads."""
+        import torch
+
+        model, labels = self.model.classifier(), self._labels
         truths = _truths(plan, labels)
+        evaluator = self._evaluator(plan)
+        if self.backend == STAND_IN and self._runner is None:
+            self._runner = self._stand_in(plan, store, threads)
+        if self._runner is not None:
+            self._runner.use_threads(threads)
+        # Beside ONNX Runtime, torch only normalises batches and runs the odd near tie: with more
+        # threads, its idle ones would spin on the cores ONNX Runtime's threads are working on.
+        torch.set_num_threads(threads if self._runner is None else 1)
         remote = None
-        if self.on_ray and spec.model.backend == "torch":  # batches go to an inference actor (GPU if any)
+        if self.on_ray and self.backend == "torch":  # batches go to an inference actor (GPU if any)
             from sweep3d.stages.infer.ray_actor import remote_runner
 
             remote = remote_runner(self.model.name, self.model.framing.model)
-        evaluator = self._evaluator(plan)
-        schema = predictions_schema(evaluator)
-        valid = {**store.column_map("renders", "valid"), **store.column_map("images", "valid")}
-        digests = {t: store.digests(t) for t in ("renders", "images")}
-        size = spec.model.batch_size
-        for start in range(0, len(todo), size):
-            t0 = time.perf_counter()
-            batch, pixels, invalid, damaged = [], [], [], []
-            for job in todo[start : start + size]:
-                if valid.get(job.image_key) is False:  # NaN/inf upstream: not shown to the model
-                    invalid.append(job)
-                    continue
-                image = load_image(store, job.image_key, digests[_table(job)].get(job.image_key))
-                if image is None:  # damaged: discarded by the driver, recomputed by the next pass
-                    damaged.append(job)
-                    continue
-                batch.append(job)
-                pixels.append(image)
-            rows = []
-            if batch:
-                stacked = np.stack(pixels)
-                logits = remote(stacked) if remote is not None else predict(model, stacked, self.model.name, runner)
-                _check_classes(logits, labels, self.model.name)
-                rows = evaluator.evaluate(logits, [truths[j.object] for j in batch], labels)
-            per_image = (time.perf_counter() - t0) / max(len(batch) + len(invalid), 1)
-            now = utc_now()
-            for job, row in [*zip(batch, rows), *((j, _invalid_row(schema)) for j in invalid)]:
-                yield Computed(job.pred_key, {"pred_key": job.pred_key, "image_key": job.image_key,
-                                              "model": self.model.name, "model_digest": plan.model_digest,
-                                              "seconds": per_image, "created_at": now, **row})
-            for job in damaged:
-                yield Computed(job.pred_key, damaged=(_table(job), job.image_key))
+
+        def infer(jobs: list[Job], pixels: list[np.ndarray]) -> list[dict]:
+            stacked = np.stack(pixels)
+            logits = remote(stacked) if remote is not None else predict(model, stacked, self.model.name, self._runner)
+            _check_classes(logits, labels, self.model.name)
+            return evaluator.evaluate(logits, [truths[j.object] for j in jobs], labels)
+
+        return infer
+
+    def _computed(self, plan: Plan, batch: list[Job], rows: list[dict], invalid: list[Job],
+                  per_image: float) -> Iterator[Computed]:
+        """The prediction rows of a batch: evaluated images, then those with invalid pixels."""
+        schema = predictions_schema(self._evaluator(plan))
+        now = utc_now()
+        for job, row in [*zip(batch, rows), *((j, _invalid_row(schema)) for j in invalid)]:
+            yield Computed(job.pred_key, {"pred_key": job.pred_key, "image_key": job.image_key,
+                                          "model": self.model.name, "model_digest": plan.model_digest,
+                                          "seconds": per_image, "created_at": now, **row})
+
+    def _onnx(self, plan: Plan, store: Store, threads: int, exact_ranks: int | None = None) -> OnnxRunner:
+        from sweep3d.stages.infer.onnx_backend import OnnxRunner
+
+        return OnnxRunner(self.model.classifier(), store.root / "models", self.model.digest, threads,
+                          exact_ranks, scratch=store.root / "tmp")
+
+    def _stand_in(self, plan: Plan, store: Store, threads: int) -> OnnxRunner | None:
+        """ONNX Runtime standing in for torch, or None (torch) when it cannot: its answers must be
+        torch's, so an export that fails or disagrees means torch, with a warning."""
+        try:
+            return self._onnx(plan, store, threads, exact_ranks=plan.spec.evaluator.top_k)
+        except Exception as exc:  # noqa: BLE001  (whatever stops ONNX Runtime, torch gives the same answers)
+            log.warning(f"warning: ONNX Runtime cannot stand in for torch ({str(exc).split(';')[0]}); "
+                        "inferring with torch")
+            self.backend = "torch"
+            return None
 
     @staticmethod
     def _evaluator(plan: Plan) -> Evaluator:
@@ -179,6 +243,42 @@ class InferStage:
 def pending_predictions(plan: Plan, store: Store) -> set[str]:
     """Prediction keys of the plan that the store lacks."""
     return {j.pred_key for j in plan.jobs} - store.keys("predictions")
+
+
+def _load(store: Store, jobs: list[Job], valid: dict[str, Mapping[str, Any]],
+          digests: dict[str, Mapping[str, set[str]]]) -> tuple[list[Job], list[np.ndarray], list[Job], list[Job]]:
+    """A batch's pixels: (jobs with a good image, their pixels, jobs whose image has NaN/inf
+    upstream and is not shown to the model, jobs whose image blob is damaged or missing)."""
+    batch, pixels, invalid, damaged = [], [], [], []
+    for job in jobs:
+        if valid[_table(job)].get(job.image_key) is False:
+            invalid.append(job)
+            continue
+        image = load_image(store, job.image_key, digests[_table(job)].get(job.image_key))
+        if image is None:  # discarded by the driver, recomputed by the run's next pass
+            damaged.append(job)
+            continue
+        batch.append(job)
+        pixels.append(image)
+    return batch, pixels, invalid, damaged
+
+
+def _threads(plan: Plan, beside: bool = False) -> int:
+    """Inference threads: the spec's, else one ``beside`` stages that still compute (Blender renders
+    on every core: one thread gave the shortest runs, benchmarks/RESULTS.md), else every core."""
+    return plan.spec.model.threads or (1 if beside else os.cpu_count() or 1)
+
+
+def _batches(jobs: Iterable[Job], size: int) -> Iterator[list[Job]]:
+    """``jobs`` in lists of ``size`` (the last may be shorter), each as soon as it is full."""
+    batch: list[Job] = []
+    for job in jobs:
+        batch.append(job)
+        if len(batch) == size:
+            yield batch
+            batch = []
+    if batch:
+        yield batch
 
 
 def _table(job: Job) -> str:

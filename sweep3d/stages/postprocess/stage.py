@@ -3,7 +3,8 @@
 An image is valid only if its render was valid and the post controls left every pixel finite.
 A render blob that is missing or damaged (its bytes do not match the digest its row recorded,
 or it does not decode) is reported to the driver, which discards it so the run's next pass
-renders it again.
+renders it again. Renders arrive while the render stage goes on (see ``stages.driver``), so
+their rows are read through the feed, which knows the rows of this pass before they are flushed.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from sweep3d.cache.blobs import load_image, sha256_bytes
 from sweep3d.cache.store import DIGEST_COLUMN, Store, atomic_write, utc_now
 from sweep3d.pixels import encode_png
 from sweep3d.spec.loader import ControlInstance
-from sweep3d.stages.driver import Computed
+from sweep3d.stages.driver import Computed, Feed
 from sweep3d.stages.jobs import Job, Plan
 
 IMAGES_SCHEMA = pa.schema([
@@ -63,10 +64,10 @@ class PostprocessStage:
     def incomplete(self, plan: Plan, store: Store, cached: set[str]) -> set[str]:
         return set()
 
-    def compute(self, todo: list[Job], plan: Plan, store: Store) -> Iterator[Computed]:
+    def compute(self, todo: Feed, plan: Plan, store: Store) -> Iterator[Computed]:
         post = [c for c in plan.spec.controls if c.control.stage == "post"]
-        render_valid = store.column_map("renders", "valid")
-        render_digests = store.digests("renders")
+        render_valid = todo.column("renders", "valid")  # live: renders of this pass arrive with their jobs
+        render_digests = todo.digests("renders")
         damaged: set[str] = set()
         for job in todo:
             t0 = time.perf_counter()

@@ -27,7 +27,7 @@ from sweep3d.cache.store import DIGEST_COLUMN, Store, utc_now
 from sweep3d.errors import SpecError, UserError
 from sweep3d.parts import PARTS_LAYOUT
 from sweep3d.spec.assets import materialise_mesh
-from sweep3d.stages.driver import Computed
+from sweep3d.stages.driver import Computed, Feed
 from sweep3d.stages.jobs import Job, Plan
 from sweep3d.stages.render.pool import RenderPool
 from sweep3d.stages.render.protocol import EnvironmentRef, RenderExecutor, RenderJob, RenderReply, RenderSettings
@@ -99,7 +99,7 @@ class RenderStage:
         have = store.keys("parts")
         return {j.render_key for j in plan.jobs if j.render_key in cached and j.parts_key not in have}
 
-    def compute(self, todo: list[Job], plan: Plan, store: Store) -> Iterator[Computed]:
+    def compute(self, todo: Feed, plan: Plan, store: Store) -> Iterator[Computed]:
         stored = {j.render_key for j in todo if store.blob_path(j.render_key).exists()} & store.keys("renders")
         groups = _groups(plan, store, todo, stored)
         jobs = {j.render_key: j for j in todo}
