@@ -8,12 +8,18 @@ before PSNR and SSIM, so full-frame and model-framed settings are compared like 
 Agreement is measured on the predictions (same top-1 class; same correct/incorrect verdict),
 with a 95 % Wilson interval, against a noise floor: the reference rendered again with
 another Cycles seed (a near-tie job can flip between two references too).
+
+Time is steady-state: each worker reports what switching to a job's scene cost (a mesh import,
+a world, Cycles' BVH and importance map: ``RenderInfo.load_seconds``), and a setting's s/img is
+the median of its renders' time without it, so a spec with many scenes gives the same speed-ups
+as one cut to a single scene. The loads are reported beside it.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import statistics
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -30,6 +36,7 @@ from sweep3d.stages.infer import InferStage, ModelHandle, Preprocess
 from sweep3d.stages.plan import Plan
 from sweep3d.stages.postprocess import PostprocessStage
 from sweep3d.stages.render import RenderStage
+from sweep3d.stages.render.protocol import RenderInfo
 
 #: The sample is rendered in this many rounds, every setting taking its turn in each, so that
 #: timings taken on a shared machine whose load changes are comparable (a worker start per turn).
@@ -72,7 +79,7 @@ class Setting:
 @dataclass
 class BenchRow:
     setting: Setting
-    seconds: float  # median render seconds per image
+    seconds: float  # median steady-state render seconds per image (scene loads left out)
     psnr: float  # dB against the reference, mean over jobs, in the model's view
     ssim: float
     top1: int  # jobs whose top-1 class matches the reference's
@@ -81,6 +88,15 @@ class BenchRow:
     is_reference: bool = False
     is_floor: bool = False  # the reference again with another seed: the noise floor
     passes: bool = False  # set by :func:`recommend`
+    load_seconds: float | None = None  # mean seconds per scene load in this run (None: none timed)
+    loads: int = 0  # renders of this run that switched scene first
+    timed: int = 0  # renders made in this run (the rest were cached: their stored time holds any load)
+    render_total: float = 0.0  # steady-state seconds of this run's renders, loads left out
+
+    @property
+    def load_total(self) -> float:
+        """Seconds this run's renders of the setting spent loading scenes."""
+        return (self.load_seconds or 0.0) * self.loads
 
     @property
     def top1_agreement(self) -> float:
@@ -124,9 +140,14 @@ def reference_settings(samples: int, denoise: str, current: Setting, model_view:
     return reference, dataclasses.replace(reference, seed=1)
 
 
-def measure(loaded: LoadedSpec, settings: list[Setting], reference: Setting, floor: Setting | None, jobs: int,
-            progress: RunProgress) -> list[BenchRow]:
-    """Render the sample under every setting and both references; compare each with the reference."""
+def measure(loaded: LoadedSpec, settings: list[Setting], reference: Setting, floor: Setting | None,
+            jobs: int | Callable[[Plan], int], progress: RunProgress) -> list[BenchRow]:
+    """Render the sample under every setting and both references; compare each with the reference.
+
+    Args:
+        jobs: the sample's size, or a function choosing it from the reference's whole plan
+            (``--budget``: see :mod:`sweep3d.bench.budget`), called before anything renders.
+    """
     plans: dict[Setting, Plan] = {}
     models: dict[Setting, ModelHandle] = {}
     indices = None
@@ -135,16 +156,18 @@ def measure(loaded: LoadedSpec, settings: list[Setting], reference: Setting, flo
         models[setting] = ModelHandle.resolve(variant)
         plan = plan_spec(variant, models[setting])
         if indices is None:
-            indices = _sample(plan, jobs, loaded.spec.experiment.seed)
+            count = jobs(plan) if callable(jobs) else jobs
+            indices = _sample(plan, count, loaded.spec.experiment.seed)
         by_index = {j.index: j for j in plan.jobs}
         plans[setting] = dataclasses.replace(plan, jobs=[by_index[i] for i in indices], out_of_frame=[])
     store = Store(loaded.store)
+    timings: dict[str, RenderInfo] = {}  # the renders made in this run, with their scene loads
     with store.lock():
         for chunk in range(ROUNDS):  # settings take turns, so a machine's changing load hits all alike
             for setting, plan in plans.items():
                 n = len(plan.jobs)  # contiguous: a scene's jobs stay together, as in a run
                 part = dataclasses.replace(plan, jobs=plan.jobs[chunk * n // ROUNDS : (chunk + 1) * n // ROUNDS])
-                stages = (RenderStage(), PostprocessStage(), InferStage(models[setting]))
+                stages = (RenderStage(timings=timings), PostprocessStage(), InferStage(models[setting]))
                 try:
                     run_stages(stages, part, store, progress, strict=True)
                 except UserError as exc:
@@ -162,11 +185,30 @@ def measure(loaded: LoadedSpec, settings: list[Setting], reference: Setting, flo
         errors = [_errors(img, ref) for img, ref in zip(images, ref_images)]
         pairs = [(verdicts[j.pred_key], verdicts[r.pred_key]) for j, r in zip(plan.jobs, ref_plan.jobs)]
         rows.append(BenchRow(
-            setting, statistics.median(seconds[j.render_key] for j in plan.jobs),
-            float(np.mean([e[0] for e in errors])), float(np.mean([e[1] for e in errors])),
-            sum(a[0] == b[0] for a, b in pairs), sum(a[1] == b[1] for a, b in pairs), len(pairs),
-            is_reference=setting == reference, is_floor=setting == floor))
+            setting=setting, psnr=float(np.mean([e[0] for e in errors])), ssim=float(np.mean([e[1] for e in errors])),
+            top1=sum(a[0] == b[0] for a, b in pairs), verdicts=sum(a[1] == b[1] for a, b in pairs), jobs=len(pairs),
+            is_reference=setting == reference, is_floor=setting == floor,
+            **split_times([j.render_key for j in plan.jobs], timings, seconds)))
     return rows
+
+
+def split_times(keys: list[str], timings: dict[str, RenderInfo], stored: dict[str, float]) -> dict:
+    """One setting's times over its render ``keys``, as :class:`BenchRow` fields: ``seconds``
+    (median steady-state seconds per render), ``load_seconds`` (mean seconds per scene load, None
+    without one), ``loads``, ``timed`` (renders made in this run) and ``render_total``.
+
+    The steady time is taken over the renders made in this run (``timings``: each without its
+    scene load); when all were cached, over their ``stored`` seconds, which hold whatever load
+    the run that made them paid.
+    """
+    fresh = [timings[k] for k in keys if k in timings]
+    if fresh:
+        steady = statistics.median(info.render_seconds for info in fresh)
+    else:
+        steady = statistics.median(stored[k] for k in keys)
+    loads = [info.load_seconds for info in fresh if info.load_seconds > 0]
+    return {"seconds": steady, "load_seconds": statistics.fmean(loads) if loads else None, "loads": len(loads),
+            "timed": len(fresh), "render_total": sum(info.render_seconds for info in fresh)}
 
 
 def recommend(rows: list[BenchRow], agreement: float = 0.99) -> BenchRow | None:

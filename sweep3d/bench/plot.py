@@ -28,7 +28,7 @@ def write_pareto_plot(rows: list[BenchRow], recommended: BenchRow | None, path: 
     if recommended is not None:
         fig.add_trace(go.Scatter(x=[recommended.seconds], y=[recommended.psnr], mode="markers", name="recommended",
                                  marker={"size": 20, "symbol": "circle-open", "line": {"width": 3, "color": "#1f5fbf"}}))
-    fig.update_layout(title=title, xaxis={"title": "render seconds per image (log)", "type": "log"},
+    fig.update_layout(title=title, xaxis={"title": "steady-state render seconds per image (log)", "type": "log"},
                       yaxis={"title": "PSNR against the reference (dB)"}, template="plotly_white", height=640)
     atomic_write(path, fig.to_html(include_plotlyjs=True, full_html=True).encode("utf-8"))
     return path

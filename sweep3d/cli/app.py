@@ -80,8 +80,14 @@ def report(
 @command
 def bench(
     spec: Path = SpecArg,
-    jobs: int = typer.Option(100, min=1, help="Jobs sampled (seeded) from the spec's plan; agreement is known to "
-                                              "about ±1/sqrt(jobs), so a few dozen at least."),
+    jobs: Optional[int] = typer.Option(None, min=1, show_default=False,
+                                       help="Jobs sampled (seeded) from the spec's plan: 100 unless --budget "
+                                            "chooses; agreement is known to about ±1/sqrt(jobs), so a few dozen at "
+                                            "least."),
+    budget: Optional[float] = typer.Option(None, show_default=False,
+                                           help="Minutes the bench may take: it samples the most jobs whose bench "
+                                                "is estimated to fit, and says how many and why (instead of --jobs; "
+                                                "not with it)."),
     reference_samples: int = typer.Option(512, min=1, help="Samples per pixel of the reference renders."),
     reference_denoise: str = typer.Option("off", help="The reference's denoiser: off, or OIDN with the "
                                                       "accurate/fast/none prefilter."),
@@ -98,8 +104,11 @@ def bench(
     stages. A setting passes when the top of the 95 % Wilson interval of its top-1 agreement
     with the reference reaches --agreement (or the floor's agreement, if lower): it is not
     clearly worse. The fastest passing setting is recommended, with its speed-up over the
-    spec's setting measured in the same run.
+    spec's setting measured in the same run. Times are steady-state: what a worker spends
+    switching scene (mesh, world, importance map) is reported apart, as load.
     """
+    import time
+
     from sweep3d.bench import (
         Setting,
         apply_setting,
@@ -107,6 +116,7 @@ def bench(
         measure,
         recommend,
     )
+    from sweep3d.bench.budget import budget_chooser, check_budget
     from sweep3d.bench.measure import reference_settings
     from sweep3d.bench.plot import write_pareto_plot
     from sweep3d.cache.store import Store
@@ -114,7 +124,13 @@ def bench(
     from sweep3d.progress import RunProgress
     from sweep3d.stages import load_spec
     from sweep3d.stages.infer import ModelHandle
+    from sweep3d.stages.render.estimate import duration
 
+    if budget is not None:
+        check_budget(budget)
+        if jobs is not None:
+            raise UserError(f"--budget {budget:g} and --jobs {jobs} together: give one (--jobs: that many jobs; "
+                            "--budget: as many as are estimated to fit in the minutes)")
     if reference_denoise not in ("off", "accurate", "fast", "none"):
         raise UserError(f"--reference-denoise {reference_denoise!r}: use off, accurate, fast or none")
     loaded = load_spec(spec)
@@ -124,11 +140,19 @@ def bench(
     current = Setting(r.samples, r.denoise_prefilter if r.denoise else "off", r.max_bounces,
                       "model" if r.resolution == "model" else None, r.adaptive_threshold)
     reference, twin = reference_settings(reference_samples, reference_denoise, current, model_view)
+    settings = default_settings(current, model_view, full_frame)
+    references = [reference] + ([twin] if floor else [])
+    sample = 100 if jobs is None else jobs
+    if budget is not None:
+        sample = budget_chooser(loaded, references + settings, budget,
+                                lambda choice: console.print(escape(choice.line()), soft_wrap=True))
+    started = time.perf_counter()
     with RunProgress(console) as progress:
-        settings = default_settings(current, model_view, full_frame)
-        rows = measure(loaded, settings, reference, twin if floor else None, jobs, progress)
+        rows = measure(loaded, settings, reference, twin if floor else None, sample, progress)
     best = recommend(rows, agreement)
     print_bench(console, rows, best, current, agreement)
+    if budget is not None:
+        console.print(f"the bench took {duration(time.perf_counter() - started)} (--budget {budget:g} min)")
     plot = write_pareto_plot(rows, best, Store(loaded.store).report_path(loaded.name, "-bench.html"),
                              f"{loaded.name}: render time against error ({rows[0].jobs} jobs)")
     console.print(f"Pareto plot: [bold]{plot}[/]")

@@ -109,11 +109,13 @@ def print_bench(console: Console, rows, best, current, agreement: float) -> None
                f"a setting passes when the interval reaches {target:.1%} (--agreement {agreement:.0%}"
                + (f", lowered to the noise floor: a second reference at another seed agrees on {floor.top1}/{n}"
                   if floor and target < agreement else "") + f"). With {n} jobs even full agreement only shows "
-               f"≥ {_wilson_low(n)}. PSNR/SSIM: in the model's view, against the reference. speed-up: median "
+               f"≥ {_wilson_low(n)}. s/img: median steady-state render seconds per image, scene loads left "
+               "out; load: mean seconds per scene load (mesh, world, BVH and importance map) × loads in this run. "
+               "PSNR/SSIM: in the model's view, against the reference. speed-up: median "
                "s/img of the spec's setting over this one's, in this run.")
     table = Table(caption=caption, caption_justify="left")
     table.add_column("setting")
-    for name in ("s/img", "speed-up", "PSNR", "SSIM", "top-1 = (95 %)", "verdict ="):
+    for name in ("s/img", "load", "speed-up", "PSNR", "SSIM", "top-1 = (95 %)", "verdict ="):
         table.add_column(name, justify="right")
     table.add_column("note")
     for row in sorted(rows, key=lambda r: (not r.is_setting, r.is_floor, r.seconds)):
@@ -123,9 +125,10 @@ def print_bench(console: Console, rows, best, current, agreement: float) -> None
                                  ("Pareto", id(row) in front)) if on]
         speed = f"{base.seconds / row.seconds:.2f}×" if base and row.seconds > 0 else ""
         interval = "" if row.is_reference else f" ({low:.0%}–{high:.0%})"
-        table.add_row(row.setting.label(), f"{row.seconds:.3f}", speed, _db(row.psnr), f"{row.ssim:.3f}",
+        table.add_row(row.setting.label(), f"{row.seconds:.3f}", _load(row), speed, _db(row.psnr), f"{row.ssim:.3f}",
                       f"{row.top1}/{row.jobs}{interval}", f"{row.verdicts}/{row.jobs}", ", ".join(notes))
     console.print(table)
+    console.print(_load_line(rows), soft_wrap=True)
     if best is None:
         console.print("no setting reached the required agreement with the reference; keep the spec's")
     elif base is not None and best.setting == base.setting:
@@ -141,6 +144,26 @@ def print_bench(console: Console, rows, best, current, agreement: float) -> None
                     f"which does not pass (top-1 agreement {base.top1}/{base.jobs})")
         console.print(f"recommended: [bold]{best.setting.label()}[/] ({best.seconds:.3f} s/image, {_db(best.psnr)} dB, "
                       f"top-1 agreement {best.top1}/{best.jobs}{gain})")
+
+
+def _load(row) -> str:
+    """The load cell: mean seconds per scene load × loads; "cached" when nothing was rendered."""
+    if row.timed == 0:
+        return "cached"
+    return "–" if row.load_seconds is None else f"{row.load_seconds:.3g} ×{row.loads}"
+
+
+def _load_line(rows) -> str:
+    """Scene loads against steady-state rendering over the whole bench, in one line."""
+    timed = sum(r.timed for r in rows)
+    if timed == 0:
+        return "every render was cached: s/img are the times stored when they were made (scene loads included)"
+    cached = sum(r.jobs for r in rows) - timed
+    note = (f"; {cached} renders were cached (a setting with none made in this run shows their stored times, "
+            "loads included)") if cached else ""
+    return (f"scene loads: {sum(r.loads for r in rows)} of {timed} renders in this run switched scene first, "
+            f"{sum(r.load_total for r in rows):.1f} s in all, beside {sum(r.render_total for r in rows):.1f} s of "
+            f"steady-state rendering; s/img leaves the loads out{note}")
 
 
 def _wilson_low(n: int) -> str:

@@ -86,13 +86,26 @@ class RenderJob:
 
 @dataclass(frozen=True)
 class RenderInfo:
-    """What a finished render reports; ``parts`` is what the UV pass saw (see ``parts.part_counts``)."""
+    """What a finished render reports; ``parts`` is what the UV pass saw (see ``parts.part_counts``).
+
+    Args:
+        seconds: the whole job, as the renders table records it.
+        load_seconds: the part of ``seconds`` spent switching to the job's scene (a mesh import,
+            a world and its HDRI, Cycles' BVH and importance map before the first sample); 0 when
+            the worker already showed it. For reporting only (``bench``): in no key, no table.
+    """
 
     seconds: float
     valid: bool
     width: int
     height: int
     parts: dict[str, Any] | None = None
+    load_seconds: float = 0.0
+
+    @property
+    def render_seconds(self) -> float:
+        """The steady-state part: ``seconds`` without the scene load."""
+        return max(self.seconds - self.load_seconds, 0.0)
 
 
 @dataclass(frozen=True)

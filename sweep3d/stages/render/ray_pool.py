@@ -51,14 +51,14 @@ class RenderActor:
     """A Ray actor holding one Blender scene (created remotely through ``ray.remote``)."""
 
     def __init__(self, settings: RenderSettings) -> None:
-        import os
         import tempfile
 
-        os.dup2(os.open(os.devnull, os.O_WRONLY), 1)  # Blender prints progress straight to fd 1
+        from sweep3d.stages.render.render_log import RenderLog
         from sweep3d.stages.render.scene import BlenderScene
 
         self.scratch = Path(tempfile.mkdtemp(prefix="sweep3d-ray-"))
-        self.scene = BlenderScene(settings, self.scratch)
+        log = RenderLog(self.scratch / "blender.log")  # Blender prints progress straight to fd 1
+        self.scene = BlenderScene(settings, self.scratch, log)
         self.unpacked: dict[str, str] = {}
 
     def pid(self) -> int:

@@ -7,12 +7,18 @@ for render and viewport while another is current; each environment has its own b
 that changes only pose or camera just moves things (persistent render data keeps Cycles' scene
 and the world's importance map between renders; Cycles does rebuild the map when
 ``scene.world`` changes, so the render stage orders jobs world by world).
+
+A job that switches object or world (and a worker's first job) is a *scene load*: its set-up
+here and, where a :class:`RenderLog` reads Blender's progress, Cycles' preparation of its render
+(BVH, importance map) are timed apart in :attr:`BlenderScene.load_seconds`, so that ``bench``
+reports steady-state render time beside the cost of a switch.
 """
 
 from __future__ import annotations
 
 import math
 import os
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -25,6 +31,7 @@ from sweep3d.stages.render._rna import assign
 from sweep3d.stages.render.kept import Kept
 from sweep3d.stages.render.props import Props
 from sweep3d.stages.render.protocol import EnvironmentRef, RenderSettings
+from sweep3d.stages.render.render_log import RenderLog
 from sweep3d.stages.render.skins import SkinMaterials
 from sweep3d.stages.render.state import SENSOR_WIDTH_MM, SceneState
 from sweep3d.stages.render.uv_pass import UVPass
@@ -70,12 +77,20 @@ class LoadedObject:
 
 
 class BlenderScene:
-    """One Blender scene in this process, configured from the spec's render settings."""
+    """One Blender scene in this process, configured from the spec's render settings.
 
-    def __init__(self, settings: RenderSettings, scratch: Path) -> None:
+    Args:
+        log: where this process's fd 1 (Blender's progress) goes, read to time Cycles' set-up of
+            a render after a scene switch; None (fd 1 elsewhere) times only the loading here.
+    """
+
+    def __init__(self, settings: RenderSettings, scratch: Path, log: RenderLog | None = None) -> None:
         self.bpy = bpy = import_bpy()
         self.settings = settings
         self.scratch = scratch
+        self.log = log
+        self.loading = False  # the current job switched object or world (or is the first)
+        self.load_seconds = 0.0  # what that switch cost the current job (0 when it did not switch)
         self.object_ref: str | None = None
         self.background: tuple[float, float, float] | None = None
         bpy.ops.wm.read_factory_settings(use_empty=True)
@@ -134,14 +149,22 @@ class BlenderScene:
     # -- loading -------------------------------------------------------------------------------
     def prepare(self, mesh_path: str, environment: EnvironmentRef) -> None:
         """Make ``mesh_path`` the shown object and ``environment``'s world the scene's (its values
-        are synced by :meth:`pose_scene`); each is loaded only the first time it is needed."""
+        are synced by :meth:`pose_scene`); each is loaded only the first time it is needed.
+
+        Starts the job's :attr:`load_seconds`: the time spent here when the object or the world
+        changed (or nothing was shown yet), else 0."""
+        started = time.perf_counter()
+        self.loading = self.object_ref is None
         self.environment = environment
         self.world = self._world(environment)
         if self.scene.world != self.world.world:
             self.scene.world = self.world.world
+            self.loading = True
         if mesh_path != self.object_ref:
             self._show(mesh_path)
             self.object_ref = mesh_path
+            self.loading = True
+        self.load_seconds = time.perf_counter() - started if self.loading else 0.0
 
     def _world(self, environment: EnvironmentRef) -> WorldNodes:
         """The environment's own World (one per environment, so a switch rebuilds no node tree)."""
@@ -287,8 +310,11 @@ class BlenderScene:
         denoise = self.settings.denoise if state.denoise is None else state.denoise
         assign(self.scene.cycles, "use_denoising", denoise)
         env = self.environment
-        self.world.sync(env, state)
+        started = time.perf_counter()
+        self.world.sync(env, state)  # a new world builds its nodes and loads its HDRI here
         self._evict_worlds()  # now that the job's HDRI is loaded, and its size known
+        if self.loading:
+            self.load_seconds += time.perf_counter() - started
         self.background = state.background or (tuple(env.color) if env.color and state.sky is None else None)
         assign(self.scene.render, "film_transparent", self.background is not None)
         self.skins.sync(state.skin, state.skin_scale, state.skin_image)
@@ -303,6 +329,9 @@ class BlenderScene:
     def render(self) -> np.ndarray:
         """Render the current scene.
 
+        After a scene switch, adds Cycles' set-up of this render (before its first sample: the
+        BVH, the world's importance map) to :attr:`load_seconds`, when a :class:`RenderLog` has it.
+
         Returns:
             float32 array of shape (H, W, 3) with sRGB values in [0, 1], composited onto the
             plain background colour when the environment has one.
@@ -310,7 +339,11 @@ class BlenderScene:
         from PIL import Image  # noqa: PLC0415
 
         self.scene.render.filepath = str(self.frame)
+        if self.log is not None:
+            self.log.clear()
         self.bpy.ops.render.render(write_still=True)
+        if self.loading and self.log is not None:
+            self.load_seconds += self.log.setup_seconds() or 0.0
         if self.uv_pass is not None:
             self.parts = self.uv_pass.read()
         with Image.open(self.frame) as img:

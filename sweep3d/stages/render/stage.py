@@ -30,7 +30,14 @@ from sweep3d.spec.assets import materialise_mesh
 from sweep3d.stages.driver import Computed, Feed
 from sweep3d.stages.jobs import Job, Plan
 from sweep3d.stages.render.pool import RenderPool
-from sweep3d.stages.render.protocol import EnvironmentRef, RenderExecutor, RenderJob, RenderReply, RenderSettings
+from sweep3d.stages.render.protocol import (
+    EnvironmentRef,
+    RenderExecutor,
+    RenderInfo,
+    RenderJob,
+    RenderReply,
+    RenderSettings,
+)
 
 GROUP_SIZE = 32  # jobs sent to a worker at once; a scene's jobs stay together in order
 
@@ -73,15 +80,22 @@ def render_settings(plan: Plan) -> RenderSettings:
 
 
 class RenderStage:
-    """Renders in Blender workers on ``executor`` (local processes, or Ray actors)."""
+    """Renders in Blender workers on ``executor`` (local processes, or Ray actors).
+
+    Args:
+        timings: when given, each render made here adds its worker's :class:`RenderInfo` under
+            its key (``bench`` reads scene-load time apart from render time there; the renders
+            table keeps only the whole job's seconds).
+    """
 
     name = "render"
     table = "renders"
     owns_blobs = True
     side_tables = {"parts": PARTS_SCHEMA}
 
-    def __init__(self, executor: Executor = LOCAL) -> None:
+    def __init__(self, executor: Executor = LOCAL, timings: dict[str, RenderInfo] | None = None) -> None:
         self.executor = executor
+        self.timings = timings
 
     def schema(self, plan: Plan) -> pa.Schema:
         return RENDERS_SCHEMA
@@ -112,6 +126,8 @@ class RenderStage:
                         raise _user_error(plan, job, reply.error or "")
                     yield Computed(job.render_key, error=reply.error or "the render failed")
                     continue
+                if self.timings is not None:
+                    self.timings[job.render_key] = reply.info
                 row = None
                 if job.render_key not in stored:  # else it was rendered again for its UV pass only
                     row = _row(store, reply)

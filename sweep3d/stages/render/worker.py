@@ -74,12 +74,13 @@ def worker_main(conn: Connection, settings: RenderSettings, scratch: str) -> Non
 def _serve(conn: Connection, settings: RenderSettings, scratch: str) -> None:
     """Build the scene, then render the lists of jobs the parent sends until it sends None."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides when workers stop
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    os.dup2(devnull, 1)  # Blender prints progress straight to fd 1
+    from sweep3d.stages.render.render_log import RenderLog
     from sweep3d.stages.render.scene import BlenderScene
 
     try:
-        scene = BlenderScene(settings, Path(scratch))
+        # Blender prints progress straight to fd 1: into scratch, where a scene load's set-up is read
+        log = RenderLog(Path(scratch) / f"blender-{os.getpid()}.log")
+        scene = BlenderScene(settings, Path(scratch), log)
     except Exception as exc:  # noqa: BLE001  (reported to the parent, which fails the run)
         conn.send(Fatal(f"{type(exc).__name__}: {exc}"))
         return
@@ -102,6 +103,8 @@ def render_job(scene, job: RenderJob, keep_pixels: bool = False) -> RenderReply:
         writing them to ``job.blob`` (so a remote worker needs no shared file system: the driver
         writes the store). A job whose ``blob`` is None is rendered only for its UV pass: no
         pixels are written or returned. With the UV pass on, ``info.parts`` holds what it saw.
+        ``info.load_seconds`` is the part of ``info.seconds`` its scene switch took (see
+        ``BlenderScene.load_seconds``; 0 when the scene was already shown).
         A :class:`UserError` (the spec's input, a full disk) gives kind "user"; any other
         failure "internal", so one bad job does not kill the sweep.
     """
@@ -127,8 +130,8 @@ def render_job(scene, job: RenderJob, keep_pixels: bool = False) -> RenderReply:
                 if orphaned():  # its run was killed: the store is no longer ours to write
                     os._exit(1)
                 atomic_write(Path(job.blob), png)
-        info = RenderInfo(seconds=time.perf_counter() - started, valid=finite,
-                          width=rgb.shape[1], height=rgb.shape[0], parts=scene.parts)
+        info = RenderInfo(seconds=time.perf_counter() - started, valid=finite, width=rgb.shape[1],
+                          height=rgb.shape[0], parts=scene.parts, load_seconds=scene.load_seconds)
         return RenderReply(key, True, info, png=png if keep_pixels else None)
     except UserError as exc:  # the spec's input (a mesh, an HDRI) or a full disk: exit 2
         return RenderReply(key, False, error=str(exc), kind="user")
