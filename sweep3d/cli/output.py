@@ -20,30 +20,32 @@ from sweep3d.stages.render.estimate import duration, estimate_render_seconds, sl
 INFER_SECONDS = 0.05  # per image on a 2-core CPU (render costs: stages/render/estimate.py)
 
 
-def cache_status(plan: Plan, store: Store, model: ModelHandle) -> list[tuple[str, int, int]]:
+def cache_status(plan: Plan, store: Store, model: ModelHandle, several: bool = False) -> list[tuple[str, int, int]]:
     """(stage, distinct keys needed, keys already stored) for render, postprocess and infer."""
-    return [(stage.name, *plan_status(stage, plan, store))
-            for stage in (RenderStage(), PostprocessStage(), InferStage(model))]
+    return [(getattr(stage, "title", stage.name), *plan_status(stage, plan, store))
+            for stage in (RenderStage(), PostprocessStage(), InferStage(model, several=several))]
 
 
 def print_plan(console: Console, spec: LoadedSpec) -> None:
     store = Store(spec.store)
-    model = ModelHandle.resolve(spec)
-    plan = plan_spec(spec, model)
-    status = cache_status(plan, store, model)
+    models = [ModelHandle.resolve(spec, settings) for settings in spec.models]
+    plans = [plan_spec(spec, model) for model in models]
+    plan = plans[0]
+    status = _models_status(plans, models, store)
     scenes = len({j.scene for j in plan.jobs})
     console.print(f"[bold]{escape(spec.name)}[/]: {len(plan.jobs) + len(plan.out_of_frame)} jobs over {scenes} scenes "
                   f"({len(spec.objects)} objects × {len(spec.environments)} environments), "
                   f"policy {spec.spec.policy.type}; store {escape(str(spec.store))}")
     table = Table("stage", "needed", "cached", "to compute", "estimate")
-    per_item = {"render": estimate_render_seconds(spec.render, plan.framing.crop), "postprocess": 0.005,
-                "infer": INFER_SECONDS}
     total = 0.0
-    for stage, needed, cached in status:
-        seconds = (needed - cached) * per_item[stage]
+    for stage, needed, cached, crop in status:
+        per_item = {"render": estimate_render_seconds(spec.render, crop), "postprocess": 0.005}.get(stage, INFER_SECONDS)
+        seconds = (needed - cached) * per_item
         total += seconds
         table.add_row(stage, str(needed), str(cached), str(needed - cached), duration(seconds))
     console.print(table)
+    if len(models) > 1:
+        console.print(_sharing(models))
     if plan.out_of_frame:
         console.print(f"{len(plan.out_of_frame)} jobs put the object wholly out of frame: flagged, not rendered")
     if spec.report.part_visibility:
@@ -53,8 +55,34 @@ def print_plan(console: Console, spec: LoadedSpec) -> None:
         console.print(f"adaptive policy: this is its first round; it proposes up to "
                       f"{spec.policy.params.samples} jobs per scene as results come in")
     console.print(f"estimated time: {duration(total)} (plus ~5 s start-up when anything needs rendering)")
-    to_render = {stage: needed - cached for stage, needed, cached in status}["render"]
-    print_warning(console, slow_render_warning(spec.render, plan.framing.crop, to_render))
+    to_render = sum(needed - cached for stage, needed, cached, _ in status if stage.startswith("render"))
+    print_warning(console, slow_render_warning(spec.render, max(p.framing.crop for p in plans), to_render))
+
+
+def _models_status(plans: list[Plan], models: list[ModelHandle], store: Store) -> list[tuple[str, int, int, int]]:
+    """(stage, needed, cached, frame side): render and postprocess once per distinct framing (models
+    framed alike share them), then infer once per model."""
+    several = len(models) > 1
+    framed: dict[object, list[tuple[str, int, int, int]]] = {}
+    infers = []
+    for plan, model in zip(plans, models):
+        rows = [(*row, plan.framing.crop) for row in cache_status(plan, store, model, several)]
+        framed.setdefault(plan.framing, rows[:2])
+        infers.append(rows[2])
+    if len(framed) > 1:  # say whose frame each render row is
+        framed = {f: [(f"{stage} ({f.crop}²)", *rest) for stage, *rest in rows] for f, rows in framed.items()}
+    return [row for rows in framed.values() for row in rows] + infers
+
+
+def _sharing(models: list[ModelHandle]) -> str:
+    """One line on which models share renders."""
+    sides = {m.framing: [] for m in models}
+    for m in models:
+        sides[m.framing].append(m.label)
+    if len(sides) == 1:
+        return f"{len(models)} models infer the same renders: {', '.join(escape(m.label) for m in models)}"
+    return ("resolution = \"model\": each distinct model input is rendered apart ("
+            + "; ".join(f"{f.crop}²: {', '.join(escape(n) for n in names)}" for f, names in sides.items()) + ")")
 
 
 def print_run(console: Console, result) -> None:
