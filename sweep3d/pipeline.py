@@ -13,6 +13,7 @@ were.
 
 from __future__ import annotations
 
+import json
 import time
 import uuid
 from dataclasses import dataclass, field
@@ -26,6 +27,7 @@ from sweep3d.cache.store import TABLES, Store, utc_now
 from sweep3d.errors import RenderError, SpecError, UserError
 from sweep3d.progress import RunProgress
 from sweep3d.spec.assets import blender_version
+from sweep3d.spec.columns import MODELS_METADATA
 from sweep3d.spec.loader import LoadedSpec
 from sweep3d.stages.driver import merge_outcomes, plan_status, run_stages
 from sweep3d.stages.infer import InferStage, ModelHandle, pending_predictions
@@ -96,6 +98,8 @@ def write_jobs(plans: Plan | list[Plan], store: Store) -> None:
     plans = [plans] if isinstance(plans, Plan) else plans
     tables = [plan.table() for plan in plans]
     table = tables[0] if len(tables) == 1 else pa.concat_tables(tables, promote_options="default")
+    models = json.dumps([plan.model for plan in plans]).encode()
+    table = table.replace_schema_metadata({**(tables[0].schema.metadata or {}), MODELS_METADATA: models})
     store.write_table_file(store.jobs_path(plans[0].spec.name), table)
 
 
