@@ -181,6 +181,19 @@ def test_plan_lists_each_model_and_says_renders_are_shared(tmp_path: Path) -> No
     assert "2 models infer the same renders" in result.output
 
 
+def test_models_framed_apart_get_renders_of_their_own(tmp_path: Path) -> None:
+    """resolution = "model" with Lite0 (224²) and Lite2 (260²): each input size is rendered once."""
+    two = TWO_MODELS.replace('name = "efficientnet-lite0"\nid = "lite0-onnx"\nbackend = "onnx"',
+                             'name = "efficientnet-lite2"\nid = "lite2"')
+    spec = write_spec(tmp_path, TINY_SPEC.replace("[model]\nbatch_size = 8\n", two)
+                      .replace("resolution = 32", 'resolution = "model"'))
+    result = CliRunner().invoke(app, ["plan", str(spec)], env={"COLUMNS": "200"})
+    assert result.exit_code == 0, result.output
+    lines = {line.split("│")[1].strip(): line for line in result.output.splitlines() if line.startswith("│")}
+    assert {"render (224²)", "render (260²)", "infer efficientnet-lite0", "infer lite2"} <= set(lines)
+    assert "224²: efficientnet-lite0; 260²: lite2" in " ".join(result.output.split())
+
+
 def test_adding_a_model_renders_nothing_and_infers_only_it(tiny_copy: Path) -> None:
     from sweep3d.pipeline import run
     from sweep3d.stages import load_spec

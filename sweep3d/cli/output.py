@@ -39,7 +39,8 @@ def print_plan(console: Console, spec: LoadedSpec) -> None:
     table = Table("stage", "needed", "cached", "to compute", "estimate")
     total = 0.0
     for stage, needed, cached, crop in status:
-        per_item = {"render": estimate_render_seconds(spec.render, crop), "postprocess": 0.005}.get(stage, INFER_SECONDS)
+        per_item = {"render": estimate_render_seconds(spec.render, crop),
+                    "postprocess": 0.005}.get(stage.split(" ")[0], INFER_SECONDS)
         seconds = (needed - cached) * per_item
         total += seconds
         table.add_row(stage, str(needed), str(cached), str(needed - cached), duration(seconds))
