@@ -29,7 +29,7 @@ from sweep3d.progress import RunProgress
 from sweep3d.spec.assets import blender_version
 from sweep3d.spec.columns import MODELS_METADATA
 from sweep3d.spec.loader import LoadedSpec
-from sweep3d.stages.driver import merge_outcomes, plan_status, run_stages
+from sweep3d.stages.driver import add_outcomes, merge_outcomes, plan_status, run_stages
 from sweep3d.stages.infer import InferStage, ModelHandle, pending_predictions
 from sweep3d.stages.outcome import StageOutcome
 from sweep3d.stages.plan import History, Outcome, Plan, make_plan
@@ -158,9 +158,11 @@ def _run_locked(spec: LoadedSpec, store: Store, console: Console | None, wait: f
                     # Models share renders (same framing: the later passes find them cached) and
                     # the first model's outcomes steer adaptive policies.
                     outcomes: list[StageOutcome] = []
-                    for plan, infer in zip(plans, infers):
+                    for i, (plan, infer) in enumerate(zip(plans, infers)):
                         now = run_stages((render, post, infer), plan, store, progress, overlap=overlap)
-                        outcomes = merge_outcomes(outcomes[:2], now[:2]) + outcomes[2:] + now[2:]
+                        shared = any(p.framing == plan.framing for p in plans[:i])  # the same renders again
+                        both = merge_outcomes if shared else add_outcomes
+                        outcomes = both(outcomes[:2], now[:2]) + outcomes[2:] + now[2:]
                 except KeyboardInterrupt:
                     write_jobs(plans, store)  # what finished is stored: let query and report show it
                     raise

@@ -109,7 +109,8 @@ def print_findings(console: Console, plan: Plan) -> None:
     summary = summarise(con, plan.columns)
     if summary.accuracy is None:
         return
-    console.print(f"accuracy {summary.accuracy:.1%} ({summary.correct} of {summary.evaluated - summary.invalid}); "
+    which = f"{escape(plan.model)}: " if len(plan.spec.models) > 1 else ""
+    console.print(f"{which}accuracy {summary.accuracy:.1%} ({summary.correct} of {summary.evaluated - summary.invalid}); "
                   f"{summary.evaluated - summary.invalid - summary.correct} failures"
                   + (f", {summary.invalid} invalid (NaN/inf) excluded" if summary.invalid else ""))
     regions = weakest_regions(summary)

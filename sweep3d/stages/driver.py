@@ -523,3 +523,15 @@ def merge_outcomes(before: list[StageOutcome], now: list[StageOutcome]) -> list[
                          failed=new.failed, skipped=new.skipped, seconds=old.seconds + new.seconds,
                          errors=new.errors, repaired=old.repaired + new.repaired)
             for old, new in zip(before, now)]
+
+
+def add_outcomes(before: list[StageOutcome], now: list[StageOutcome]) -> list[StageOutcome]:
+    """Sum each stage's outcomes over passes on different keys (models framed apart render
+    their own images): unlike :func:`merge_outcomes`, totals and cached keys add up."""
+    if not before:
+        return now
+    return [StageOutcome(old.stage, total=old.total + new.total, cached=old.cached + new.cached,
+                         computed=old.computed + new.computed, failed=old.failed + new.failed,
+                         skipped=old.skipped + new.skipped, seconds=old.seconds + new.seconds,
+                         errors=old.errors + new.errors, repaired=old.repaired + new.repaired)
+            for old, new in zip(before, now)]
