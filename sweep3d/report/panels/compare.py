@@ -39,8 +39,9 @@ def _pair(inputs: PanelInputs, pair: dict[str, Any], index: int) -> dict[str, An
     where = "WHERE model_a = ? AND model_b = ?"
     regions = inputs.rows(f"SELECT * FROM model_regions {where} LIMIT {REGIONS}", [a, b])
     levels = inputs.rows(f"SELECT * FROM model_comparison {where} ORDER BY position, level", [a, b])
-    changes = {change: inputs.rows(f"SELECT * FROM model_changes {where} AND change = ? ORDER BY job LIMIT {EXAMPLES}",
-                                   [a, b, change]) for change in ("fixed", "broken")}
+    spread = "ORDER BY row_number() OVER (PARTITION BY object, environment ORDER BY job), object, environment, job"
+    changes = {change: inputs.rows(f"SELECT * FROM model_changes {where} AND change = ? {spread} LIMIT {EXAMPLES}",
+                                   [a, b, change]) for change in ("fixed", "broken")}  # a few of every scene
     return {
         "a": a, "b": b, "n": pair["n"], "fixed": pair["fixed"], "broken": pair["broken"],
         "accuracy_a": pct(pair["accuracy_a"]), "accuracy_b": pct(pair["accuracy_b"]),
