@@ -13,10 +13,12 @@ were.
 
 from __future__ import annotations
 
+import json
 import time
 import uuid
 from dataclasses import dataclass, field
 
+import pyarrow as pa
 from rich.console import Console
 from rich.markup import escape
 
@@ -25,8 +27,9 @@ from sweep3d.cache.store import TABLES, Store, utc_now
 from sweep3d.errors import RenderError, SpecError, UserError
 from sweep3d.progress import RunProgress
 from sweep3d.spec.assets import blender_version
+from sweep3d.spec.columns import MODELS_METADATA
 from sweep3d.spec.loader import LoadedSpec
-from sweep3d.stages.driver import merge_outcomes, plan_status, run_stages
+from sweep3d.stages.driver import add_outcomes, merge_outcomes, plan_status, run_stages
 from sweep3d.stages.infer import InferStage, ModelHandle, pending_predictions
 from sweep3d.stages.outcome import StageOutcome
 from sweep3d.stages.plan import History, Outcome, Plan, make_plan
@@ -40,8 +43,11 @@ AUTO_COMPACT_SEGMENTS = 64  # a run ends by merging a table's segments beyond th
 
 @dataclass
 class RunResult:
+    """What a run did. ``plan`` is its first model's plan; ``plans`` has one per model."""
+
     run_id: str
     plan: Plan
+    plans: list[Plan] = field(default_factory=list)
     outcomes: list[StageOutcome] = field(default_factory=list)
     seconds: float = 0.0
 
@@ -54,10 +60,16 @@ class RunResult:
 
 
 def plan_spec(spec: LoadedSpec, model: ModelHandle | None = None, history: History | None = None) -> Plan:
-    """The plan of ``spec`` for this machine's Blender and the spec's model (resolved if not given)."""
+    """The plan of ``spec`` for this machine's Blender and one of its models (default: the first,
+    resolved if not given)."""
     model = model or ModelHandle.resolve(spec)
     return make_plan(spec, framing=model.framing, model_digest=model.digest, blender=blender_version(),
-                     history=history)
+                     history=history, model=model.settings)
+
+
+def plan_models(spec: LoadedSpec) -> list[Plan]:
+    """One plan per model of ``spec``, in spec order (their renders are shared when framed alike)."""
+    return [plan_spec(spec, ModelHandle.resolve(spec, settings)) for settings in spec.models]
 
 
 def outcomes_by_scene(plan: Plan, store: Store) -> History:
@@ -81,9 +93,14 @@ def outcomes_by_scene(plan: Plan, store: Store) -> History:
     return history
 
 
-def write_jobs(plan: Plan, store: Store) -> None:
-    """Record the plan as the experiment's jobs table (what ``results`` joins against)."""
-    store.write_table_file(store.jobs_path(plan.spec.name), plan.table())
+def write_jobs(plans: Plan | list[Plan], store: Store) -> None:
+    """Record the plans (one per model) as the experiment's jobs table (what ``results`` joins against)."""
+    plans = [plans] if isinstance(plans, Plan) else plans
+    tables = [plan.table() for plan in plans]
+    table = tables[0] if len(tables) == 1 else pa.concat_tables(tables, promote_options="default")
+    models = json.dumps([plan.model for plan in plans]).encode()
+    table = table.replace_schema_metadata({**(tables[0].schema.metadata or {}), MODELS_METADATA: models})
+    store.write_table_file(store.jobs_path(plans[0].spec.name), table)
 
 
 def _writable(spec: LoadedSpec, store: Store) -> None:
@@ -123,36 +140,46 @@ def _run_locked(spec: LoadedSpec, store: Store, console: Console | None, wait: f
         started = time.perf_counter()  # time spent waiting for the lock is not the run's
         started_at = utc_now()
         remove_leftovers(store)
-        model = ModelHandle.resolve(spec)
-        result = RunResult(uuid.uuid4().hex[:12], plan_spec(spec, model))
-        _warn_if_slow(result.plan, store, executor, console)
-        infer = InferStage(model, on_ray=executor.kind == "ray")
-        if pending_predictions(result.plan, store):
-            infer.prepare(result.plan, store)  # a broken model fails now, before anything renders
-        stages = (RenderStage(executor), PostprocessStage(), infer)
+        models = [ModelHandle.resolve(spec, settings) for settings in spec.models]
+        plans = [plan_spec(spec, model) for model in models]
+        result = RunResult(uuid.uuid4().hex[:12], plans[0], plans=plans)
+        _warn_if_slow(plans, store, executor, console)
+        infers = [InferStage(model, on_ray=executor.kind == "ray", several=len(models) > 1) for model in models]
+        for plan, infer in zip(plans, infers):
+            if pending_predictions(plan, store):
+                infer.prepare(plan, store)  # a broken model fails now, before anything renders
+        render, post = RenderStage(executor), PostprocessStage()
         with RunProgress(console) as progress:
             history: History = {}
             while True:  # one pass for fixed policies; one per round for adaptive ones
-                plan = plan_spec(spec, model, history) if history else result.plan
+                if history:
+                    plans = [plan_spec(spec, model, history) for model in models]
                 try:
-                    outcomes = run_stages(stages, plan, store, progress, overlap=overlap)
+                    # Models share renders (same framing: the later passes find them cached) and
+                    # the first model's outcomes steer adaptive policies.
+                    outcomes: list[StageOutcome] = []
+                    for i, (plan, infer) in enumerate(zip(plans, infers)):
+                        now = run_stages((render, post, infer), plan, store, progress, overlap=overlap)
+                        shared = any(p.framing == plan.framing for p in plans[:i])  # the same renders again
+                        both = merge_outcomes if shared else add_outcomes
+                        outcomes = both(outcomes[:2], now[:2]) + outcomes[2:] + now[2:]
                 except KeyboardInterrupt:
-                    write_jobs(plan, store)  # what finished is stored: let query and report show it
+                    write_jobs(plans, store)  # what finished is stored: let query and report show it
                     raise
                 except RenderError as exc:  # a worker died while starting: Blender or the machine
-                    write_jobs(plan, store)
+                    write_jobs(plans, store)
                     raise RenderError(f"{exc}; what finished is stored: run again to resume") from None
-                write_jobs(plan, store)
+                write_jobs(plans, store)
                 result.outcomes = merge_outcomes(result.outcomes, outcomes)
-                grown = len(plan.jobs) > len(result.plan.jobs) or not history
-                result.plan = plan
+                grown = len(plans[0].jobs) > len(result.plan.jobs) or not history
+                result.plan, result.plans = plans[0], plans
                 if not spec.policy.adaptive or not grown:
                     break
-                history = outcomes_by_scene(plan, store)
+                history = outcomes_by_scene(plans[0], store)
         result.seconds = time.perf_counter() - started
         store.append("runs", [{
             "run_id": result.run_id, "experiment": spec.name, "spec_path": str(spec.path),
-            "spec": spec.path.read_text(encoding="utf-8"), "jobs": len(plan.jobs),
+            "spec": spec.path.read_text(encoding="utf-8"), "jobs": len(result.plan.jobs),
             "started_at": started_at, "created_at": utc_now(), "seconds": result.seconds,
             **{f"{o.stage}_{k}": v for o in result.outcomes for k, v in o.as_row().items() if k != "stage"},
         }])
@@ -160,10 +187,13 @@ def _run_locked(spec: LoadedSpec, store: Store, console: Console | None, wait: f
     return result
 
 
-def _warn_if_slow(plan: Plan, store: Store, executor: Executor, console: Console | None) -> None:
+def _warn_if_slow(plans: list[Plan], store: Store, executor: Executor, console: Console | None) -> None:
     """One warning line before a run whose renders would take hours at the spec's settings."""
-    needed, cached = plan_status(RenderStage(executor), plan, store)
-    line = slow_render_warning(plan.spec.render, plan.framing.crop, needed - cached)
+    missing = {}  # renders to make, by frame side (models framed alike share them)
+    for plan in plans:
+        needed, cached = plan_status(RenderStage(executor), plan, store)
+        missing[plan.framing.crop] = needed - cached
+    line = slow_render_warning(plans[0].spec.render, max(missing), sum(missing.values()))
     if line and console is not None:
         console.print(f"[bold yellow]warning:[/] {escape(line)}", highlight=False, soft_wrap=True)
 

@@ -20,6 +20,7 @@ from typer.testing import CliRunner
 from sweep3d.cache.store import Store
 from sweep3d.cli import app
 from sweep3d.stages.aggregate import MACROS, VIEWS, connect, register_views, summarise
+from sweep3d.stages.aggregate.compare import COMPARE_VIEWS
 from sweep3d.stages.aggregate.views import BINS, NOT_APPLIED
 
 T0 = datetime(2024, 1, 1)
@@ -181,8 +182,9 @@ def test_per_object_sensitivity_and_confusions(tmp_path: Path) -> None:
 def test_views_come_with_every_connection_and_summary_reads_them(tmp_path: Path) -> None:
     con = make_store(tmp_path, _grid(lambda a, b: a == 1))
     present = {r[0] for r in con.execute("SELECT view_name FROM duckdb_views() WHERE NOT internal").fetchall()}
-    assert set(VIEWS) - {"part_visibility"} <= present
+    assert set(VIEWS) - {"part_visibility", *COMPARE_VIEWS} <= present
     assert "part_visibility" not in present  # only with a UV pass (tests/test_part_visibility.py)
+    assert not set(COMPARE_VIEWS) & present  # only with several models (tests/test_compare_models.py)
     macros = {r[0] for r in con.execute("SELECT function_name FROM duckdb_functions() WHERE function_type IN "
                                         "('macro', 'table_macro')").fetchall()}
     assert set(MACROS) <= macros

@@ -163,4 +163,5 @@ def test_the_backend_is_the_spec_s_or_onnx_standing_in_for_the_built_in_model(tm
 
     (tmp_path / "my_models.py").write_text("def make():\n    raise NotImplementedError\n")
     write_spec(tmp_path, TINY_SPEC.replace("[model]\n", "[model]\n" + model))
-    assert choose_backend(load_spec(tmp_path / "spec.toml"), on_ray) == backend
+    loaded = load_spec(tmp_path / "spec.toml")
+    assert choose_backend(loaded, loaded.model, on_ray) == backend

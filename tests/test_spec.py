@@ -222,8 +222,8 @@ MISTAKES = [
     Mistake("columns-collide", append(f'[[controls]]\ntype = "{USER_MODULE}:Pair"\nid = "p"\na_b = "x"\n'
                                       f'[[controls]]\ntype = "{USER_MODULE}:Pair"\nid = "p_a"\nb = "y"\n'),
             "controls[3].b", ("'p_a_b'", "controls[2]", "id = ")),
-    Mistake("model-unknown", edit("[model]\n", '[model]\nname = "efficientnet-lite1"\n'),
-            "model.name", ("'efficientnet-lite1'", "efficientnet-lite0", "module:Name")),
+    Mistake("model-unknown", edit("[model]\n", '[model]\nname = "efficientnet-lite3"\n'),
+            "model.name", ("'efficientnet-lite3'", "efficientnet-lite2", "module:Name")),
     # the store and the size of the plan
     Mistake("store-empty", edit("seed = 3", 'seed = 3\nstore = ""'), "experiment.store",
             ("must name the store's folder", "spec's own folder")),
@@ -586,10 +586,10 @@ def test_run_warns_before_hours_of_rendering_but_not_before_minutes(tmp_path):
 
     console = Console(record=True, width=400)
     big = BASE.replace("resolution = 32", "resolution = 4096").replace("samples = 1", "samples = 4")
-    _warn_if_slow(plan_for(load_spec(write_spec(tmp_path, big)), "m"), Store(tmp_path / "store"), LOCAL, console)
+    _warn_if_slow([plan_for(load_spec(write_spec(tmp_path, big)), "m")], Store(tmp_path / "store"), LOCAL, console)
     assert console.export_text() == ""  # 4 renders of about a minute: no warning
     slow = BASE.replace("resolution = 32", "resolution = 1024").replace("samples = 1", "samples = 2048")
-    _warn_if_slow(plan_for(load_spec(write_spec(tmp_path, slow)), "m"), Store(tmp_path / "store"), LOCAL, console)
+    _warn_if_slow([plan_for(load_spec(write_spec(tmp_path, slow)), "m")], Store(tmp_path / "store"), LOCAL, console)
     (line,) = console.export_text().splitlines()
     assert line.startswith("warning: 4 renders at about 24.3 min each (1024² pixels, 2048 samples) would take "
                            "about 1.6 h on 2 CPU cores, and each is over render.timeout = 600 s"), line

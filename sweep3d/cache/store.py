@@ -348,8 +348,12 @@ class Store:
         if "jobs" in files:
             con.execute(f"CREATE VIEW jobs AS SELECT * FROM read_parquet({_sql_str(str(files['jobs'][0]))})")
             if "predictions" in files:
+                # A job row names its model (a spec may test several); a prediction row is shared by
+                # every experiment whose job has its key, so its own ``model`` is what the first called it.
+                jobs_name_models = "model" in {row[0] for row in con.execute("DESCRIBE jobs").fetchall()}
+                own = ", model" if jobs_name_models else ""
                 con.execute(
-                    "CREATE VIEW results AS SELECT j.*, p.* EXCLUDE (pred_key, image_key, created_at) "
+                    f"CREATE VIEW results AS SELECT j.*, p.* EXCLUDE (pred_key, image_key, created_at{own}) "
                     "FROM jobs j JOIN predictions p USING (pred_key)"
                 )
         return con

@@ -27,6 +27,8 @@ command = registrar(app)
 
 
 SpecArg = typer.Argument(..., help="Path to the experiment's TOML spec.", show_default=False)
+ModelOption = typer.Option(None, "--model", help="Which of the spec's models results and the views show (its id; "
+                                                   "default: the first). results_all holds every model's.")
 
 
 @command
@@ -60,6 +62,10 @@ def run(
         raise UserError(f"--executor {executor!r}: use local or ray")
     result = run_pipeline(loaded, console, wait=wait, executor=Executor(executor, address))
     print_run(console, result)
+    if len(loaded.models) > 1:
+        from sweep3d.cli.output import print_comparison
+
+        print_comparison(console, loaded)
     if report:
         _write_report(loaded, None)
     if result.failed:
@@ -70,11 +76,24 @@ def run(
 def report(
     spec: Path = SpecArg,
     output: Optional[Path] = typer.Option(None, "--output", "-o", help="HTML file to write."),
+    model: Optional[str] = ModelOption,
 ) -> None:
     """Write a self-contained HTML dashboard of the spec's results."""
     from sweep3d.stages import load_spec
 
-    _write_report(load_spec(spec), output)
+    _write_report(load_spec(spec), output, model)
+
+
+@command
+def compare(spec: Path = SpecArg) -> None:
+    """Compare the spec's models on the same jobs: accuracy, McNemar's test, where each is better."""
+    from sweep3d.cli.output import print_comparison
+    from sweep3d.stages import load_spec
+
+    loaded = load_spec(spec)
+    if len(loaded.models) < 2:
+        raise UserError(f"{spec}: the spec tests one model; list two or more under [[models]] to compare them")
+    print_comparison(console, loaded)
 
 
 @command
@@ -185,6 +204,7 @@ def query(
     sql: str = typer.Argument(..., help="A SELECT over the views results, jobs, predictions, renders, images, runs."),
     output: Optional[Path] = typer.Option(None, "--output", "-o", help="Write all rows to .csv, .json or .parquet."),
     limit: int = typer.Option(50, help="Rows to print (all rows go to --output)."),
+    model: Optional[str] = ModelOption,
 ) -> None:
     """Answer SQL over the store with DuckDB, read-only: only --output writes a file."""
     import duckdb
@@ -197,7 +217,7 @@ def query(
     store = Store(loaded.store)
     statement = _select_only(sql)
     export = _export_target(output) if output is not None else None
-    con = connect(store, loaded.name, read_only=True, writable=[export[0]] if export else [])
+    con = connect(store, loaded.name, read_only=True, writable=[export[0]] if export else [], model=model)
     try:
         if export is not None:
             _export(con, statement, output, *export)
@@ -291,10 +311,10 @@ def _cell(value) -> str:
     return "" if value is None else str(value)
 
 
-def _write_report(loaded, output: Optional[Path]) -> None:
+def _write_report(loaded, output: Optional[Path], model: Optional[str] = None) -> None:
     from sweep3d.report import write_report
 
-    path = write_report(loaded, output)
+    path = write_report(loaded, output, model)
     console.print(f"report: [bold]{path}[/]")
 
 

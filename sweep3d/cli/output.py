@@ -9,7 +9,7 @@ from rich.table import Table
 from sweep3d.cache.store import Store
 from sweep3d.pipeline import plan_spec
 from sweep3d.spec.loader import LoadedSpec
-from sweep3d.stages.aggregate import connect, summarise, weakest_regions, wilson_interval
+from sweep3d.stages.aggregate import connect, has_view, summarise, weakest_regions, wilson_interval
 from sweep3d.stages.driver import plan_status
 from sweep3d.stages.infer import InferStage, ModelHandle
 from sweep3d.stages.plan import Plan
@@ -20,30 +20,33 @@ from sweep3d.stages.render.estimate import duration, estimate_render_seconds, sl
 INFER_SECONDS = 0.05  # per image on a 2-core CPU (render costs: stages/render/estimate.py)
 
 
-def cache_status(plan: Plan, store: Store, model: ModelHandle) -> list[tuple[str, int, int]]:
+def cache_status(plan: Plan, store: Store, model: ModelHandle, several: bool = False) -> list[tuple[str, int, int]]:
     """(stage, distinct keys needed, keys already stored) for render, postprocess and infer."""
-    return [(stage.name, *plan_status(stage, plan, store))
-            for stage in (RenderStage(), PostprocessStage(), InferStage(model))]
+    return [(getattr(stage, "title", stage.name), *plan_status(stage, plan, store))
+            for stage in (RenderStage(), PostprocessStage(), InferStage(model, several=several))]
 
 
 def print_plan(console: Console, spec: LoadedSpec) -> None:
     store = Store(spec.store)
-    model = ModelHandle.resolve(spec)
-    plan = plan_spec(spec, model)
-    status = cache_status(plan, store, model)
+    models = [ModelHandle.resolve(spec, settings) for settings in spec.models]
+    plans = [plan_spec(spec, model) for model in models]
+    plan = plans[0]
+    status = _models_status(plans, models, store)
     scenes = len({j.scene for j in plan.jobs})
     console.print(f"[bold]{escape(spec.name)}[/]: {len(plan.jobs) + len(plan.out_of_frame)} jobs over {scenes} scenes "
                   f"({len(spec.objects)} objects × {len(spec.environments)} environments), "
                   f"policy {spec.spec.policy.type}; store {escape(str(spec.store))}")
     table = Table("stage", "needed", "cached", "to compute", "estimate")
-    per_item = {"render": estimate_render_seconds(spec.render, plan.framing.crop), "postprocess": 0.005,
-                "infer": INFER_SECONDS}
     total = 0.0
-    for stage, needed, cached in status:
-        seconds = (needed - cached) * per_item[stage]
+    for stage, needed, cached, crop in status:
+        per_item = {"render": estimate_render_seconds(spec.render, crop),
+                    "postprocess": 0.005}.get(stage.split(" ")[0], INFER_SECONDS)
+        seconds = (needed - cached) * per_item
         total += seconds
         table.add_row(stage, str(needed), str(cached), str(needed - cached), duration(seconds))
     console.print(table)
+    if len(models) > 1:
+        console.print(_sharing(models))
     if plan.out_of_frame:
         console.print(f"{len(plan.out_of_frame)} jobs put the object wholly out of frame: flagged, not rendered")
     if spec.report.part_visibility:
@@ -53,8 +56,34 @@ def print_plan(console: Console, spec: LoadedSpec) -> None:
         console.print(f"adaptive policy: this is its first round; it proposes up to "
                       f"{spec.policy.params.samples} jobs per scene as results come in")
     console.print(f"estimated time: {duration(total)} (plus ~5 s start-up when anything needs rendering)")
-    to_render = {stage: needed - cached for stage, needed, cached in status}["render"]
-    print_warning(console, slow_render_warning(spec.render, plan.framing.crop, to_render))
+    to_render = sum(needed - cached for stage, needed, cached, _ in status if stage.startswith("render"))
+    print_warning(console, slow_render_warning(spec.render, max(p.framing.crop for p in plans), to_render))
+
+
+def _models_status(plans: list[Plan], models: list[ModelHandle], store: Store) -> list[tuple[str, int, int, int]]:
+    """(stage, needed, cached, frame side): render and postprocess once per distinct framing (models
+    framed alike share them), then infer once per model."""
+    several = len(models) > 1
+    framed: dict[object, list[tuple[str, int, int, int]]] = {}
+    infers = []
+    for plan, model in zip(plans, models):
+        rows = [(*row, plan.framing.crop) for row in cache_status(plan, store, model, several)]
+        framed.setdefault(plan.framing, rows[:2])
+        infers.append(rows[2])
+    if len(framed) > 1:  # say whose frame each render row is
+        framed = {f: [(f"{stage} ({f.crop}²)", *rest) for stage, *rest in rows] for f, rows in framed.items()}
+    return [row for rows in framed.values() for row in rows] + infers
+
+
+def _sharing(models: list[ModelHandle]) -> str:
+    """One line on which models share renders."""
+    sides = {m.framing: [] for m in models}
+    for m in models:
+        sides[m.framing].append(m.label)
+    if len(sides) == 1:
+        return f"{len(models)} models infer the same renders: {', '.join(escape(m.label) for m in models)}"
+    return ("resolution = \"model\": each distinct model input is rendered apart ("
+            + "; ".join(f"{f.crop}²: {', '.join(escape(n) for n in names)}" for f, names in sides.items()) + ")")
 
 
 def print_run(console: Console, result) -> None:
@@ -80,7 +109,8 @@ def print_findings(console: Console, plan: Plan) -> None:
     summary = summarise(con, plan.columns)
     if summary.accuracy is None:
         return
-    console.print(f"accuracy {summary.accuracy:.1%} ({summary.correct} of {summary.evaluated - summary.invalid}); "
+    which = f"{escape(plan.model)}: " if len(plan.spec.models) > 1 else ""
+    console.print(f"{which}accuracy {summary.accuracy:.1%} ({summary.correct} of {summary.evaluated - summary.invalid}); "
                   f"{summary.evaluated - summary.invalid - summary.correct} failures"
                   + (f", {summary.invalid} invalid (NaN/inf) excluded" if summary.invalid else ""))
     regions = weakest_regions(summary)
@@ -172,3 +202,45 @@ def _wilson_low(n: int) -> str:
 
 def _db(psnr: float) -> str:
     return "∞" if psnr >= 100 else f"{psnr:.1f}"
+
+
+def print_comparison(console: Console, spec: LoadedSpec, limit: int = 3) -> None:
+    """One screen comparing the spec's models: each one's accuracy, then each later model against
+    the first (McNemar, agreement) with the regions where it is significantly better or worse."""
+    con = connect(Store(spec.store), spec.name)
+    try:
+        if not has_view(con, "model_agreement"):
+            return
+        models = con.execute("SELECT model, accuracy, wilson_low, wilson_high, n FROM model_accuracy").fetchall()
+        console.print("models: " + " · ".join(
+            f"{escape(m)} {_pct(acc)} [{_pct(lo)}–{_pct(hi)}] of {n}" for m, acc, lo, hi, n in models))
+        first = models[0][0]
+        for a, b, n, diff, fixed, broken, p, same, kappa in con.execute(
+                "SELECT model_a, model_b, n, difference, fixed, broken, p_value, same_top1, kappa FROM model_agreement "
+                "WHERE model_a = ?", [first]).fetchall():
+            agreement = f"same top-1 {_pct(same)}, κ " + ("–" if kappa is None else f"{kappa:.2f}")
+            console.print(f"[bold]{escape(b)}[/] against {escape(a)}: {_points(diff)} on {n} jobs both answered; "
+                          f"{fixed} fixed, {broken} broken, McNemar p = {_p_text(p)}; {agreement}")
+            for verdict in ("better", "worse"):
+                rows = con.execute(
+                    "SELECT parameter_a, label_a, parameter_b, label_b, difference, p_holm, n FROM model_regions "
+                    "WHERE model_a = ? AND model_b = ? AND verdict = ? ORDER BY p_holm, abs(difference) DESC LIMIT ?",
+                    [a, b, verdict, limit]).fetchall()
+                regions = "; ".join(
+                    " & ".join(f"{escape(p)} = {escape(str(v))}" for p, v in ((pa, la), (pb, lb)) if p is not None)
+                    + f" ({_points(d)}, p_holm {_p_text(ph)}, {count} jobs)" for pa, la, pb, lb, d, ph, count in rows)
+                console.print(f"  significantly {verdict}: " + (regions or "nowhere, after Holm's correction"))
+    finally:
+        con.close()
+
+
+def _pct(value: float | None) -> str:
+    return "–" if value is None else f"{value:.1%}"
+
+
+def _points(value: float | None) -> str:
+    return "–" if value is None else f"{value * 100:+.1f} pts"
+
+
+def _p_text(value: float | None) -> str:
+    return "–" if value is None else ("< 0.001" if value < 0.001 else f"{value:.3f}")

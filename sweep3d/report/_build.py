@@ -31,12 +31,15 @@ from sweep3d.stages.aggregate import MACROS, VIEWS, Summary, connect, has_view, 
 STAGES = ("render", "postprocess", "infer")
 
 
-def write_report(loaded: LoadedSpec, output: Path | None = None) -> Path:
+def write_report(loaded: LoadedSpec, output: Path | None = None, model: str | None = None) -> Path:
     """Write the experiment's HTML report and return its path.
 
     Args:
         loaded: the experiment's spec.
-        output: the HTML file to write; default ``<store>/reports/<experiment>.html``.
+        output: the HTML file to write; default ``<store>/reports/<experiment>.html`` (with
+            ``-<model>`` before the suffix for a model other than the spec's first).
+        model: the model whose results the page shows (default: the spec's first); a spec with
+            several models gets the comparison panel either way.
 
     Returns:
         The path written (atomically: a temp file renamed into place).
@@ -45,12 +48,12 @@ def write_report(loaded: LoadedSpec, output: Path | None = None) -> Path:
         UserError: if the store holds no results for the experiment, or the file cannot be written.
     """
     store = Store(loaded.store)
-    con = connect(store, loaded.name)
+    con = connect(store, loaded.name, model=model)
     try:
-        context = build_context(loaded, con, store)
+        context = build_context(loaded, con, store, model=model)
     finally:
         con.close()
-    path = Path(output) if output is not None else default_path(loaded)
+    path = Path(output) if output is not None else default_path(loaded, model)
     try:
         atomic_write(path, render_html(context).encode("utf-8"))
     except OSError as exc:
@@ -58,13 +61,15 @@ def write_report(loaded: LoadedSpec, output: Path | None = None) -> Path:
     return path
 
 
-def default_path(loaded: LoadedSpec) -> Path:
-    """``<store>/reports/<experiment>.html``, the name made safe for any file system."""
-    return Store(loaded.store).report_path(loaded.name)
+def default_path(loaded: LoadedSpec, model: str | None = None) -> Path:
+    """``<store>/reports/<experiment>.html`` (``<experiment>-<model>.html`` for a model other than
+    the first), the name made safe for any file system."""
+    name = loaded.name if model in (None, loaded.model.label) else f"{loaded.name}-{model}"
+    return Store(loaded.store).report_path(name)
 
 
 def build_context(loaded: LoadedSpec, con: duckdb.DuckDBPyConnection, store: Store,
-                  panels: tuple[Panel, ...] = PANELS) -> dict[str, Any]:
+                  panels: tuple[Panel, ...] = PANELS, model: str | None = None) -> dict[str, Any]:
     """Everything the page shows, as plain values (strings are escaped by the templates).
 
     Args:
@@ -73,6 +78,7 @@ def build_context(loaded: LoadedSpec, con: duckdb.DuckDBPyConnection, store: Sto
             reads often are computed once on it: see :func:`~sweep3d.report.results.materialise_views`).
         store: the store holding the image blobs.
         panels: the panels to build, in page order (those whose data is absent are left out).
+        model: the model ``con`` shows (default: the spec's first).
 
     Raises:
         UserError: if there are no results for the experiment yet.
@@ -82,7 +88,7 @@ def build_context(loaded: LoadedSpec, con: duckdb.DuckDBPyConnection, store: Sto
     uris = thumbs.data_uris()
     return {
         "name": loaded.name,
-        "model": loaded.spec.model.name,
+        "model": model or loaded.model.label,
         "spec_path": str(loaded.path),
         "store": str(loaded.store),
         "summary": summary,

@@ -9,11 +9,13 @@ from __future__ import annotations
 
 #: The jobs table's own columns, besides the control parameters.
 JOB_COLUMNS = ("experiment", "job", "object", "environment", "render_key", "image_key", "pred_key",
-               "parts_key", "in_frame")
+               "parts_key", "in_frame", "model")
 #: Bookkeeping columns every prediction row has, besides its evaluator's columns.
 PREDICTION_COLUMNS = ("pred_key", "image_key", "model", "model_digest", "seconds", "created_at")
 #: Parquet metadata key of a jobs file holding its parameter columns (a JSON list, in spec order).
 PARAMETERS_METADATA = b"sweep3d.parameters"
+#: Parquet metadata key of a jobs file holding the models its rows name (a JSON list, in spec order).
+MODELS_METADATA = b"sweep3d.models"
 
 
 def parameter_column(control_id: str, param: str) -> str:

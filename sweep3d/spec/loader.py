@@ -96,7 +96,13 @@ class LoadedSpec:
 
     @property
     def model(self) -> ModelSpec:
-        return self.spec.model
+        """The first model (the one the views and report show unless asked for another)."""
+        return self.spec.all_models[0]
+
+    @property
+    def models(self) -> list[ModelSpec]:
+        """Every model the experiment tests, in spec order."""
+        return self.spec.all_models
 
     @property
     def evaluator(self) -> EvaluatorSpec:
@@ -217,18 +223,29 @@ def _key_path(loc: tuple[Any, ...]) -> str:
 
 
 def _check_model(spec: Spec, fail, catalogue: Catalogue) -> None:
-    for key, registry, name in (("model.name", catalogue.models, spec.model.name),
-                                ("evaluator.kind", catalogue.evaluators, spec.evaluator.kind)):
-        if ":" not in name:
-            try:
-                registry.get(name)
-            except UserError as exc:
-                raise fail(key, str(exc)) from None
+    where = [f"models[{i}]" for i in range(len(spec.models))] or ["model"]
+    for key, model in zip(where, spec.all_models):
+        _check_name(f"{key}.name", catalogue.models, model.name, fail)
+    _check_name("evaluator.kind", catalogue.evaluators, spec.evaluator.kind, fail)
+    first = catalogue.labels(spec.all_models[0].name)
+    for key, model in zip(where[1:], spec.all_models[1:]):
+        classes = catalogue.labels(model.name)  # None: a user's model, checked once loaded
+        if first is not None and classes is not None and classes != first:
+            raise fail(f"{key}.name", f"{model.name!r} names other classes than {spec.all_models[0].name!r}; "
+                       "models compared in one spec must share their class names (objects' labels are theirs)")
+
+
+def _check_name(key: str, registry: Any, name: str, fail) -> None:
+    if ":" not in name:
+        try:
+            registry.get(name)
+        except UserError as exc:
+            raise fail(key, str(exc)) from None
 
 
 def _resolve_labels(spec: Spec, fail, catalogue: Catalogue) -> dict[str, tuple]:
     """Check labels against a built-in model's classes; a user's model checks its own at run time."""
-    classes = catalogue.labels(spec.model.name)
+    classes = catalogue.labels(spec.all_models[0].name)
     out: dict[str, tuple] = {}
     for i, obj in enumerate(spec.objects):
         if classes is None:

@@ -85,9 +85,16 @@ class RenderSpec(StrictModel):
 
 class ModelSpec(StrictModel):
     name: str = Field("efficientnet-lite0", description="A built-in model or 'module:factory'.")
+    id: Name | None = Field(None, description="What results call this model (their `model` column); "
+                                              "default: its name. Needed when two entries share a name.")
     backend: Literal["torch", "onnx"] = Field("torch", description="onnx: ONNX Runtime, checked against torch.")
     batch_size: int = Field(32, ge=1, le=4096)
     threads: int = Field(0, ge=0, le=1024, description="torch threads; 0 = all cores.")
+
+    @property
+    def label(self) -> str:
+        """The model's name in results: its ``id``, else its ``name``."""
+        return self.id or self.name
 
 
 class EvaluatorSpec(StrictModel):
@@ -151,12 +158,31 @@ class Spec(StrictModel):
     experiment: ExperimentSpec
     render: RenderSpec = RenderSpec()
     model: ModelSpec = ModelSpec()
+    models: list[ModelSpec] = Field(default_factory=list, description="Several models on the same renders "
+                                    "(instead of [model]): each is inferred, results carry a `model` column.")
     evaluator: EvaluatorSpec = EvaluatorSpec()
     objects: list[ObjectSpec] = Field(min_length=1)
     environments: list[EnvironmentSpec] = Field(min_length=1)
     controls: list[dict[str, Any]] = Field(default_factory=list)
     policy: PolicySpec = PolicySpec()
     report: ReportSpec = ReportSpec()
+
+    @model_validator(mode="after")
+    def _model_or_models(self) -> Spec:
+        if self.models and "model" in self.model_fields_set:
+            raise ValueError("give either [model] or [[models]], not both")
+        seen: set[str] = set()
+        for i, model in enumerate(self.models):
+            if model.label in seen:
+                raise ValueError(f"models[{i}] is called {model.label!r} like an earlier one: give it its own "
+                                 "id = \"...\"")
+            seen.add(model.label)
+        return self
+
+    @property
+    def all_models(self) -> list[ModelSpec]:
+        """The models the experiment tests, in spec order (the first is the one views show by default)."""
+        return list(self.models) or [self.model]
 
     @field_validator("objects", "environments")
     @classmethod

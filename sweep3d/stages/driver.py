@@ -299,7 +299,7 @@ def begin(stage: Stage, plan: Plan, store: Store, coming: Mapping[str, set[str]]
         store.drop_rows(stage.table, (store.keys(stage.table) & set(unique)) - cached)
         cached -= discard_damaged(stage, store, cached)
     ready, waiting = split_to_do(stage, plan, store, cached, coming)
-    run = StagePass(stage, StageOutcome(stage.name, total=len(unique)), ready, waiting)
+    run = StagePass(stage, StageOutcome(getattr(stage, "title", stage.name), total=len(unique)), ready, waiting)
     keys = run.keys
     run.outcome.cached = len(cached - keys)
     run.outcome.skipped = run.outcome.total - run.outcome.cached - len(keys)
@@ -452,7 +452,7 @@ def run_pass(stages: Sequence[Stage], plan: Plan, store: Store, progress: RunPro
     schemas = [item for r, b in zip(runs, busy) if b
                for item in [(r.stage.table, r.stage.schema(plan)), *r.stage.side_tables.items()]]
     with ExitStack() as stack:
-        bars = [stack.enter_context(progress.stage(r.stage.name, len(r.keys), r.outcome.cached))
+        bars = [stack.enter_context(progress.stage(getattr(r.stage, "title", r.stage.name), len(r.keys), r.outcome.cached))
                 if b else StageProgress(None, None) for r, b in zip(runs, busy)]
         writers = Writers(store, schemas)
         stack.callback(writers.flush)
@@ -522,4 +522,16 @@ def merge_outcomes(before: list[StageOutcome], now: list[StageOutcome]) -> list[
     return [StageOutcome(old.stage, total=new.total, cached=old.cached, computed=old.computed + new.computed,
                          failed=new.failed, skipped=new.skipped, seconds=old.seconds + new.seconds,
                          errors=new.errors, repaired=old.repaired + new.repaired)
+            for old, new in zip(before, now)]
+
+
+def add_outcomes(before: list[StageOutcome], now: list[StageOutcome]) -> list[StageOutcome]:
+    """Sum each stage's outcomes over passes on different keys (models framed apart render
+    their own images): unlike :func:`merge_outcomes`, totals and cached keys add up."""
+    if not before:
+        return now
+    return [StageOutcome(old.stage, total=old.total + new.total, cached=old.cached + new.cached,
+                         computed=old.computed + new.computed, failed=old.failed + new.failed,
+                         skipped=old.skipped + new.skipped, seconds=old.seconds + new.seconds,
+                         errors=old.errors + new.errors, repaired=old.repaired + new.repaired)
             for old, new in zip(before, now)]

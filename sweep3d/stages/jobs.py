@@ -321,6 +321,7 @@ class Plan:
         model_digest: the model's part of every prediction key.
         out_of_frame: jobs whose object is wholly outside the frame: flagged, never rendered.
         framing: the resolved frame (``resolution = "model"`` becomes the model's sizes).
+        model: what results call the model the plan infers (its ``id`` or name).
     """
 
     spec: LoadedSpec
@@ -328,6 +329,7 @@ class Plan:
     model_digest: str
     out_of_frame: Sequence[Job] = field(default_factory=list)
     framing: Framing | None = None
+    model: str = ""
 
     @property
     def columns(self) -> list[str]:
@@ -347,7 +349,7 @@ class Plan:
                 for param, value in values.items():
                     row[parameter_column(control_id, param)] = value
             row.update(render_key=job.render_key, image_key=job.image_key, pred_key=job.pred_key,
-                       parts_key=job.parts_key, in_frame=id(job) not in flagged)
+                       parts_key=job.parts_key, in_frame=id(job) not in flagged, model=self.model or self.spec.model.label)
             out.append(row)
         return out
 
@@ -357,7 +359,12 @@ class Plan:
         A plan as the planner made it is written from its columns, without a row per job.
         """
         whole = _whole(self)
-        table = whole.table(self.spec.name, self.columns) if whole else pa.Table.from_pylist(self.rows())
+        if whole:
+            table = whole.table(self.spec.name, self.columns)
+            table = table.append_column("model", pa.array([self.model or self.spec.model.label] * table.num_rows,
+                                                          pa.string()))
+        else:
+            table = pa.Table.from_pylist(self.rows())
         return table.replace_schema_metadata({PARAMETERS_METADATA: json.dumps(self.columns).encode()})
 
 

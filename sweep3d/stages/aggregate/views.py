@@ -55,7 +55,8 @@ import pyarrow.parquet as pq
 
 from sweep3d.cache.store import Store, lock_down
 from sweep3d.errors import UserError
-from sweep3d.spec.columns import JOB_COLUMNS, PARAMETERS_METADATA
+from sweep3d.spec.columns import JOB_COLUMNS, MODELS_METADATA, PARAMETERS_METADATA
+from sweep3d.stages.aggregate.compare import COMPARE_MACROS, COMPARE_VIEWS, register_compare_views
 from sweep3d.stages.aggregate.parts import register_part_views
 
 MAX_LEVELS = 12  # a numeric parameter with more distinct values is binned
@@ -73,26 +74,40 @@ _ACCURACY = ("n_correct / nullif(n, 0) AS accuracy, wilson_low(n_correct, n) AS 
 
 VIEWS = ("control_values", "control_stats", "control_levels", "control_parameters", "control_accuracy",
          "pair_accuracy", "scene_accuracy", "variance_explained", "object_sensitivity", "object_confusions",
-         "part_visibility")
-MACROS = ("wilson_low", "wilson_high", "failure_modes")
+         "part_visibility", *COMPARE_VIEWS)
+MACROS = ("wilson_low", "wilson_high", "failure_modes", *COMPARE_MACROS)
 
 
 def connect(store: Store, experiment: str | None = None, read_only: bool = False,
-            writable: Sequence[Path] = ()) -> duckdb.DuckDBPyConnection:
+            writable: Sequence[Path] = (), model: str | None = None) -> duckdb.DuckDBPyConnection:
     """:meth:`Store.connect` with the aggregate views and macros over ``experiment``'s results.
+
+    An experiment may test several models: ``results_all`` then holds every model's results,
+    ``results`` (and every view above it) one model's, and the ``model_*`` views compare them
+    (see :mod:`sweep3d.stages.aggregate.compare`).
 
     Args:
         read_only: once the views exist, let the connection open only the files they read (and
             ``writable``) and change no setting (see :func:`~sweep3d.cache.store.lock_down`), for
             SQL that a user wrote.
         writable: files the caller itself will write through the connection (an export).
+        model: the model ``results`` and the views show (its id); default the spec's first.
+
+    Raises:
+        UserError: when ``model`` is not one of the experiment's models.
     """
     files = store.view_files(experiment)
     con = store.connect(experiment, files)
-    parameters = None
+    parameters, models = None, []
     if experiment is not None and store.jobs_path(experiment).exists():
         parameters = stored_parameters(store.jobs_path(experiment))
-    register_views(con, parameters)
+        models = stored_models(store.jobs_path(experiment))
+    if has_view(con, "results"):
+        _select_model(con, models, model)
+    elif model is not None:
+        raise UserError(f"--model {model}: the experiment has no results yet")
+    if register_views(con, parameters) and has_view(con, "results_all"):
+        register_compare_views(con, models, "top1_label" in _columns(con, "results"))
     if read_only:
         lock_down(con, [path for paths in files.values() for path in paths], writable)
     return con
@@ -106,6 +121,26 @@ def stored_parameters(jobs_path: Path) -> list[str] | None:
         return None
     listed = metadata.get(PARAMETERS_METADATA)
     return json.loads(listed) if listed is not None else None
+
+
+def stored_models(jobs_path: Path) -> list[str]:
+    """The models a jobs file's rows name, in spec order ([] for a plan from before specs named several)."""
+    try:
+        metadata = pq.read_schema(jobs_path).metadata or {}
+    except (OSError, ValueError, pa.ArrowException):
+        return []
+    listed = metadata.get(MODELS_METADATA)
+    return json.loads(listed) if listed is not None else []
+
+
+def _select_model(con: duckdb.DuckDBPyConnection, models: list[str], model: str | None) -> None:
+    """Keep every model's results as ``results_all`` and one model's as ``results``."""
+    if model is not None and model not in models:
+        raise UserError(f"--model {model}: the experiment's models are {', '.join(models) or 'not recorded'}")
+    con.execute("ALTER VIEW results RENAME TO results_all")
+    chosen = model or (models[0] if models else None)
+    where = f" WHERE model = {_literal(chosen)}" if chosen is not None and len(models) > 1 else ""
+    con.execute(f"CREATE VIEW results AS SELECT * FROM results_all{where}")
 
 
 def register_views(con: duckdb.DuckDBPyConnection, parameters: list[str] | None = None) -> bool:

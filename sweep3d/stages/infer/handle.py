@@ -15,6 +15,7 @@ from typing import Any
 from sweep3d.errors import SpecError, UserError
 from sweep3d.spec.framing import Framing
 from sweep3d.spec.loader import LoadedSpec
+from sweep3d.spec.models import ModelSpec
 from sweep3d.stages.infer.models import (
     Classifier,
     Preprocess,
@@ -32,26 +33,31 @@ class ModelHandle:
 
     Attributes:
         name: the model's name in the spec (built-in, or ``module:factory``).
+        settings: its entry in the spec (``[model]`` or one of ``[[models]]``).
         framing: the frame renders are made in (the model's view for ``resolution = "model"``).
         digest: the model's part of prediction keys (weights and the preprocessing for this framing).
         preprocess: the model's own preprocessing, as its factory gives it (before framing).
     """
 
     name: str
+    settings: ModelSpec
     framing: Framing
     digest: str
     preprocess: Any
     _classifier: Classifier | None = field(default=None, repr=False)
 
     @classmethod
-    def resolve(cls, spec: LoadedSpec) -> ModelHandle:
-        """Resolve ``spec``'s model and frame; a user's factory is called here, once.
+    def resolve(cls, spec: LoadedSpec, settings: ModelSpec | None = None) -> ModelHandle:
+        """Resolve one of ``spec``'s models (default: its first) and its frame; a user's factory is
+        called here, once.
 
         Raises:
-            SpecError: naming ``model.name`` when the factory fails, or ``render.resolution`` when
-                the model's input size cannot be known.
+            SpecError: naming the model's ``name`` key when the factory fails, or
+                ``render.resolution`` when the model's input size cannot be known.
         """
-        name = spec.model.name
+        settings = settings or spec.model
+        name = settings.name
+        key = model_key_path(spec, settings)
         builtin = builtin_model(name)
         loaded = None
         try:
@@ -63,7 +69,7 @@ class ModelHandle:
         except SpecError:
             raise
         except UserError as exc:
-            raise SpecError(str(spec.path), "model.name", str(exc)) from None
+            raise SpecError(str(spec.path), key, str(exc)) from None
         own = preprocess
         framing = Framing.full(spec.render.resolution) if spec.render.resolution != "model" else None
         if framing is None:
@@ -74,7 +80,12 @@ class ModelHandle:
             framing, preprocess = Framing.of_model(preprocess.resize, preprocess.crop), framed
             if loaded is not None:
                 loaded = dataclasses.replace(loaded, preprocess=framed)
-        return cls(name, framing, model_key(name, weights, preprocess), own, loaded)
+        return cls(name, settings, framing, model_key(name, weights, preprocess), own, loaded)
+
+    @property
+    def label(self) -> str:
+        """What results call the model (its ``id``, else its name)."""
+        return self.settings.label
 
     @property
     def view(self) -> Preprocess | None:
@@ -89,3 +100,11 @@ class ModelHandle:
                 model = dataclasses.replace(model, preprocess=for_model_framing(model.preprocess, self.name))
             self._classifier = model
         return self._classifier
+
+
+def model_key_path(spec: LoadedSpec, settings: ModelSpec) -> str:
+    """The spec key naming ``settings``' model: ``model.name`` or ``models[i].name``."""
+    for i, model in enumerate(spec.spec.models):
+        if model is settings:
+            return f"models[{i}].name"
+    return "model.name"

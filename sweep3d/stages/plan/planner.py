@@ -18,6 +18,7 @@ from sweep3d.errors import SpecError, UserError
 from sweep3d.spec.assets import mesh_digest
 from sweep3d.spec.framing import Framing
 from sweep3d.spec.loader import ControlInstance, LoadedSpec
+from sweep3d.spec.models import ModelSpec
 from sweep3d.spec.sniff import unreadable
 from sweep3d.spec.space import Point, SearchSpace
 from sweep3d.stages.infer.keys import infer_base, pred_keys
@@ -47,7 +48,7 @@ class _Keys:
 
 
 def make_plan(spec: LoadedSpec, *, framing: Framing, model_digest: str, blender: str,
-              history: History | None = None) -> Plan:
+              history: History | None = None, model: ModelSpec | None = None) -> Plan:
     """Expand ``spec`` into jobs, sorted by scene so workers reload as little as possible.
 
     Each scene's jobs are made as columns (see :mod:`sweep3d.stages.plan.batch`): values and
@@ -61,14 +62,16 @@ def make_plan(spec: LoadedSpec, *, framing: Framing, model_digest: str, blender:
         blender: the Blender version renders are made with (part of every render key).
         history: for adaptive policies, the outcomes so far per (object, environment); the
             policy then proposes its next round on top of the points already evaluated.
+        model: which of the spec's models the plan infers (default: the first).
     """
+    model = model or spec.model
     check_size(spec)
     rendered = sorted((c for c in spec.controls if c.control.stage == "render"),
                       key=lambda c: (c.control.order, spec.controls.index(c)))
     post = [c for c in spec.controls if c.control.stage == "post"]
     settings = spec.render.key_part(framing.key_part())
     base = infer_base(model_digest, {"kind": spec.evaluator.kind, "top_k": spec.evaluator.top_k},
-                      spec.model.backend)
+                      model.backend)
     keys = _Keys(parts=[] if spec.report.part_visibility else None)
     blocks: list[SceneBlock] = []
     hdri_digests = _hdri_digests(spec)
@@ -98,7 +101,8 @@ def make_plan(spec: LoadedSpec, *, framing: Framing, model_digest: str, blender:
             keys.in_frame.append(_in_frame(rendered, batches, n))
     mask = np.concatenate(keys.in_frame) if keys.in_frame else np.zeros(0, bool)
     plan = PlanColumns(blocks, keys.render, keys.image, keys.pred, keys.parts, mask)
-    return Plan(spec, JobList(plan, np.flatnonzero(mask)), model_digest, JobList(plan, np.flatnonzero(~mask)), framing)
+    return Plan(spec, JobList(plan, np.flatnonzero(mask)), model_digest, JobList(plan, np.flatnonzero(~mask)), framing,
+                model.label)
 
 
 def _scene_keys(spec: LoadedSpec, keys: _Keys, scene: str, rendered: list[ControlBatch], post: list[ControlBatch],
