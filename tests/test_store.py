@@ -459,3 +459,23 @@ def test_query_and_report_before_any_result_say_so_in_one_line(tmp_path: Path, c
     line = one_line(result.output)
     assert f"no results for experiment 'tiny' yet in {tmp_path / 'store'}" in line
     assert f"run: sweep3d run {spec}" in line and "does not exist" not in line
+
+
+def test_query_never_cuts_values_whatever_the_terminal_width(synthetic: Path) -> None:
+    """Many wide columns in 80 columns: records instead of a table of "…"; csv and json whole."""
+    long = "x" * 150
+    sql = (f"SELECT '{long}' AS long_value, 1.0/3 AS third, job, object, environment, correct, valid, "
+           "render_key, image_key, pred_key FROM results ORDER BY job LIMIT 2")
+    result = CliRunner().invoke(app, ["query", str(synthetic), sql], env={"COLUMNS": "80"})
+    assert result.exit_code == 0, result.output
+    assert "…" not in result.output and long in result.output.replace("\n", "")
+    assert result.output.count("-- row ") == 2 and "render_key: " in result.output
+    wide = CliRunner().invoke(app, ["query", str(synthetic), sql, "--format", "table"], env={"COLUMNS": "400"})
+    assert "┃ long_value" in wide.output and "…" not in wide.output
+    as_csv = CliRunner().invoke(app, ["query", str(synthetic), sql, "--format", "csv"], env={"COLUMNS": "80"})
+    header, first, second = as_csv.output.strip().splitlines()
+    assert header.startswith("long_value,third,job") and first.startswith(f"{long},0.333333")
+    as_json = CliRunner().invoke(app, ["query", str(synthetic), sql, "--format", "json"])
+    assert [row["long_value"] for row in json.loads(as_json.output)] == [long, long]
+    bad = CliRunner().invoke(app, ["query", str(synthetic), "SELECT 1", "--format", "xml"])
+    assert bad.exit_code == 2 and "--format 'xml': use one of" in one_line(bad.output)

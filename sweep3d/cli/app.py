@@ -205,6 +205,9 @@ def query(
     output: Optional[Path] = typer.Option(None, "--output", "-o", help="Write all rows to .csv, .json or .parquet."),
     limit: int = typer.Option(50, help="Rows to print (all rows go to --output)."),
     model: Optional[str] = ModelOption,
+    form: str = typer.Option("auto", "--format", help="How rows print: table, records (one 'column: value' "
+                                                          "block per row), csv, json; auto: a table when it fits "
+                                                          "the terminal, else records. Values are never cut."),
 ) -> None:
     """Answer SQL over the store with DuckDB, read-only: only --output writes a file."""
     import duckdb
@@ -222,7 +225,7 @@ def query(
         if export is not None:
             _export(con, statement, output, *export)
         else:
-            _print_rows(con.execute(statement), limit)
+            _print_rows(con.execute(statement), limit, form)
     except duckdb.Error as exc:
         if isinstance(exc, duckdb.CatalogException) and not has_view(con, "results"):
             raise no_results(store, loaded.name, spec) from None
@@ -231,16 +234,59 @@ def query(
         console.print(f"wrote {output}")
 
 
-def _print_rows(cursor, limit: int) -> None:
-    """The first ``limit`` rows of ``cursor`` as a table, saying so when there are more."""
+PRINT_FORMATS = ("auto", "table", "records", "csv", "json")
+
+
+def _print_rows(cursor, limit: int, form: str = "auto") -> None:
+    """The first ``limit`` rows of ``cursor`` in ``form`` (see ``query --format``), every value
+    whole, saying so when there are more."""
+    if form not in PRINT_FORMATS:
+        raise UserError(f"--format {form!r}: use one of {', '.join(PRINT_FORMATS)}")
     columns = [d[0] for d in cursor.description or []]
     rows = cursor.fetchmany(limit + 1)
-    table = Table(*columns)
-    for row in rows[:limit]:
-        table.add_row(*[_cell(v) for v in row])
-    console.print(table)
+    shown = rows[:limit]
+    if form in ("csv", "json"):
+        _print_plain(columns, shown, form)
+    else:
+        table = Table(*columns)
+        for column in table.columns:
+            column.overflow = "fold"  # long values wrap instead of being cut with "…"
+        for row in shown:
+            table.add_row(*[_cell(v) for v in row])
+        fits = console.measure(table).minimum <= console.width and all(
+            len(c) <= max(console.width // max(len(columns), 1) - 3, 1) for c in columns)
+        if form == "table" or (form == "auto" and fits):
+            console.print(table)
+        else:
+            _print_records(columns, shown)
     if len(rows) > limit:
         console.print(f"[dim]first {limit} rows shown; --limit N or --output FILE for more[/]")
+
+
+def _print_records(columns: list[str], rows: list[tuple]) -> None:
+    """One block per row, ``column: value`` per line (for rows wider than the terminal)."""
+    width = max((len(c) for c in columns), default=0)
+    for i, row in enumerate(rows):
+        console.print(f"[dim]-- row {i + 1}[/]", highlight=False)
+        for column, value in zip(columns, row):
+            console.print(f"{escape(column.rjust(width))}: {escape(_cell(value, whole=True))}", highlight=False,
+                          soft_wrap=True)
+
+
+def _print_plain(columns: list[str], rows: list[tuple], form: str) -> None:
+    """Rows as CSV or JSON on stdout, full precision, for pipes."""
+    import csv
+    import io
+    import json
+
+    if form == "json":
+        typer.echo(json.dumps([dict(zip(columns, row)) for row in rows], default=str, indent=1))
+        return
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(columns)
+    writer.writerows(["" if v is None else v for v in row] for row in rows)
+    typer.echo(buffer.getvalue(), nl=False)
 
 
 QUERY_HINT = "sweep3d query runs one SELECT over the views results, jobs, predictions, renders, images, runs"
@@ -305,9 +351,10 @@ def _interrupt(signum, frame) -> None:
     raise KeyboardInterrupt
 
 
-def _cell(value) -> str:
+def _cell(value, whole: bool = False) -> str:
+    """A value as the table shows it: floats to 4 significant digits (``whole``: all of them)."""
     if isinstance(value, float):
-        return f"{value:.4g}"
+        return repr(value) if whole else f"{value:.4g}"
     return "" if value is None else str(value)
 
 
