@@ -44,6 +44,7 @@ class RunResult:
     plan: Plan
     outcomes: list[StageOutcome] = field(default_factory=list)
     seconds: float = 0.0
+    store: Store | None = None  # the run's store object (what it read stays checked for the findings)
 
     @property
     def failed(self) -> int:
@@ -82,8 +83,9 @@ def outcomes_by_scene(plan: Plan, store: Store) -> History:
 
 
 def write_jobs(plan: Plan, store: Store) -> None:
-    """Record the plan as the experiment's jobs table (what ``results`` joins against)."""
-    store.write_table_file(store.jobs_path(plan.spec.name), plan.table())
+    """Record the plan as the experiment's jobs table (what ``results`` joins against); an
+    unchanged plan leaves the file as it is."""
+    store.write_table_file(store.jobs_path(plan.spec.name), plan.table(), keep_same=True)
 
 
 def _writable(spec: LoadedSpec, store: Store) -> None:
@@ -124,10 +126,10 @@ def _run_locked(spec: LoadedSpec, store: Store, console: Console | None, wait: f
         started_at = utc_now()
         remove_leftovers(store)
         model = ModelHandle.resolve(spec)
-        result = RunResult(uuid.uuid4().hex[:12], plan_spec(spec, model))
+        result = RunResult(uuid.uuid4().hex[:12], plan_spec(spec, model), store=store)
         _warn_if_slow(result.plan, store, executor, console)
         infer = InferStage(model, on_ray=executor.kind == "ray")
-        if pending_predictions(result.plan, store):
+        if pending_predictions(result.plan, store, infer):
             infer.prepare(result.plan, store)  # a broken model fails now, before anything renders
         stages = (RenderStage(executor), PostprocessStage(), infer)
         with RunProgress(console) as progress:
@@ -172,7 +174,7 @@ def remove_leftovers(store: Store) -> None:
     """Remove what killed runs left (call it holding the lock, before writing): their temp files,
     segments an earlier compaction merged (past their grace), and workers' scratch folders, which
     SIGKILL keeps from cleaning up and which no pool would remove on a run that renders nothing."""
-    remove_killed_writers_temp_files(store.root)
+    remove_killed_writers_temp_files(store.root, store)
     for table in TABLES:
         store.sweep_superseded(table)
     remove_stale_scratch(scratch_root())
