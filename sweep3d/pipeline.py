@@ -50,6 +50,7 @@ class RunResult:
     plans: list[Plan] = field(default_factory=list)
     outcomes: list[StageOutcome] = field(default_factory=list)
     seconds: float = 0.0
+    store: Store | None = None  # the run's store object (what it read stays checked for the findings)
 
     @property
     def failed(self) -> int:
@@ -94,13 +95,14 @@ def outcomes_by_scene(plan: Plan, store: Store) -> History:
 
 
 def write_jobs(plans: Plan | list[Plan], store: Store) -> None:
-    """Record the plans (one per model) as the experiment's jobs table (what ``results`` joins against)."""
+    """Record the plans (one per model) as the experiment's jobs table (what ``results`` joins
+    against); an unchanged table leaves the file as it is."""
     plans = [plans] if isinstance(plans, Plan) else plans
     tables = [plan.table() for plan in plans]
     table = tables[0] if len(tables) == 1 else pa.concat_tables(tables, promote_options="default")
     models = json.dumps([plan.model for plan in plans]).encode()
     table = table.replace_schema_metadata({**(tables[0].schema.metadata or {}), MODELS_METADATA: models})
-    store.write_table_file(store.jobs_path(plans[0].spec.name), table)
+    store.write_table_file(store.jobs_path(plans[0].spec.name), table, keep_same=True)
 
 
 def _writable(spec: LoadedSpec, store: Store) -> None:
@@ -142,11 +144,11 @@ def _run_locked(spec: LoadedSpec, store: Store, console: Console | None, wait: f
         remove_leftovers(store)
         models = [ModelHandle.resolve(spec, settings) for settings in spec.models]
         plans = [plan_spec(spec, model) for model in models]
-        result = RunResult(uuid.uuid4().hex[:12], plans[0], plans=plans)
+        result = RunResult(uuid.uuid4().hex[:12], plans[0], plans=plans, store=store)
         _warn_if_slow(plans, store, executor, console)
         infers = [InferStage(model, on_ray=executor.kind == "ray", several=len(models) > 1) for model in models]
         for plan, infer in zip(plans, infers):
-            if pending_predictions(plan, store):
+            if pending_predictions(plan, store, infer):
                 infer.prepare(plan, store)  # a broken model fails now, before anything renders
         render, post = RenderStage(executor), PostprocessStage()
         with RunProgress(console) as progress:
@@ -202,7 +204,7 @@ def remove_leftovers(store: Store) -> None:
     """Remove what killed runs left (call it holding the lock, before writing): their temp files,
     segments an earlier compaction merged (past their grace), and workers' scratch folders, which
     SIGKILL keeps from cleaning up and which no pool would remove on a run that renders nothing."""
-    remove_killed_writers_temp_files(store.root)
+    remove_killed_writers_temp_files(store.root, store)
     for table in TABLES:
         store.sweep_superseded(table)
     remove_stale_scratch(scratch_root())

@@ -17,10 +17,12 @@ import pyarrow as pa
 import pytest
 from typer.testing import CliRunner
 
+import sweep3d.stages.aggregate.summary as summary_module
 from sweep3d.cache.store import Store
 from sweep3d.cli import app
-from sweep3d.stages.aggregate import MACROS, VIEWS, connect, register_views, summarise
+from sweep3d.stages.aggregate import MACROS, VIEWS, connect, register_views, stored_summary, summarise
 from sweep3d.stages.aggregate.compare import COMPARE_VIEWS
+from sweep3d.stages.aggregate.summary import summary_path
 from sweep3d.stages.aggregate.views import BINS, NOT_APPLIED
 
 T0 = datetime(2024, 1, 1)
@@ -199,6 +201,143 @@ def test_views_come_with_every_connection_and_summary_reads_them(tmp_path: Path)
     bare = connect(Store(tmp_path / "store"))  # no experiment: no results, no views over them
     assert not {r[0] for r in bare.execute("SELECT view_name FROM duckdb_views() WHERE NOT internal").fetchall()} & set(
         VIEWS)
+
+
+#: control_levels as it was written before it ranked each distinct level once: every
+#: (result, parameter) row ranked and labelled on its own (the reference for the levels).
+PER_ROW_LEVELS = f"""
+    WITH placed AS (
+        SELECT v.*, s.lo, s.width, s.digits,
+               CASE WHEN s.binned AND v.number IS NOT NULL
+                    THEN least(floor((v.number - s.lo) / s.width), {BINS - 1})::INTEGER END AS bin
+        FROM control_values v JOIN control_stats s USING (parameter, position))
+    SELECT job, object, environment, valid, correct, parameter, position,
+           (dense_rank() OVER (PARTITION BY parameter ORDER BY raw IS NULL, coalesce(bin::DOUBLE, number),
+                               CASE WHEN bin IS NULL THEN raw END) - 1)::INTEGER AS level,
+           CASE WHEN raw IS NULL THEN '{NOT_APPLIED}'
+                WHEN bin IS NOT NULL THEN level_number_label(round(lo + bin * width, digits)) || '–'
+                                          || level_number_label(round(lo + (bin + 1) * width, digits))
+                WHEN number IS NOT NULL THEN level_number_label(number)
+                ELSE raw END AS label
+    FROM placed"""
+
+
+def _varied_rows(n: int, seed: int = 0) -> list[dict[str, Any]]:
+    """Results over every kind of parameter: few integers, many floats (binned) with gaps and
+    jobs where the control does not apply, 0.0 beside -0.0, strings with an empty one, booleans."""
+    import random
+
+    rng = random.Random(seed)
+    rows = []
+    for i in range(n):
+        rows.append({"object": rng.choice(["mug", "ball"]), "environment": rng.choice(["white", "forest"]),
+                     "c_int": rng.randrange(4), "c_float": None if i % 9 == 0 else rng.choice([-90.0, 90.0]) * rng.random(),
+                     "c_zero": rng.choice([0.0, -0.0, 1.5]), "c_str": rng.choice(["a", "b", "", None]),
+                     "c_many": rng.randrange(20), "c_bool": rng.random() < 0.5, "c_tiny": rng.randrange(14) / 2000,
+                     "correct": rng.random() < 0.6, "valid": rng.random() > 0.05})
+    return rows
+
+
+def test_levels_ranked_once_per_level_are_the_levels_of_ranking_every_row(tmp_path: Path) -> None:
+    con = make_store(tmp_path, _varied_rows(400))
+    columns = "job, object, environment, valid, correct, parameter, position, level, label"
+    ranked_once = con.execute(f"SELECT {columns} FROM control_levels ORDER BY job, position").fetchall()
+    per_row = con.execute(f"SELECT {columns} FROM ({PER_ROW_LEVELS}) ORDER BY job, position").fetchall()
+    assert ranked_once == per_row
+    assert {r[0] for r in con.execute("DESCRIBE control_levels").fetchall()} == set(columns.split(", "))
+    labels = dict(con.execute("SELECT parameter, list(DISTINCT label ORDER BY label) FROM control_levels "
+                              "WHERE parameter IN ('c_zero', 'c_str') GROUP BY parameter").fetchall())
+    assert labels["c_zero"] == ["0", "1.5"]  # 0.0 and -0.0 are two levels, both labelled 0, as before
+    assert labels["c_str"] == ["", NOT_APPLIED, "a", "b"]
+
+
+def test_object_sensitivity_names_the_first_level_of_a_tie_whatever_duckdb_s_threads(tmp_path: Path) -> None:
+    rows = [{"object": "mug", "c_x": x, "correct": x in (1, 2)} for x in (0, 1, 2, 3) for _ in range(4)]
+    con = make_store(tmp_path, rows)
+    answers = set()
+    for threads in (1, 4):
+        con.execute(f"SET threads = {threads}")
+        answers.add(tuple(con.execute("FROM object_sensitivity").fetchall()))
+    assert len(answers) == 1
+    (row,) = [r for r in answers.pop() if r[1] == "c_x"]
+    assert (row[5], row[7]) == ("0", "1")  # worst: 0 and 3 tie at 0 %; best: 1 and 2 at 100 %
+
+
+def test_summary_reads_results_once_and_leaves_the_views_answering_the_same(tmp_path: Path) -> None:
+    con = make_store(tmp_path, _varied_rows(200))
+    before = {view: con.execute(f"FROM {view}").fetchall() for view in ("results", "control_accuracy", "scene_accuracy")}
+    first = summarise(con, ["c_int", "c_float", "c_str"])
+    assert con.execute("SELECT count(*) FROM duckdb_tables() WHERE table_name = 'report_results'").fetchone()[0] == 1
+    assert {view: con.execute(f"FROM {view}").fetchall() for view in before} == before
+    assert summarise(con, ["c_int", "c_float", "c_str"]) == first == summarise(
+        connect(Store(tmp_path / "store"), "e"), ["c_int", "c_float", "c_str"])
+    assert [e.column for e in first.effects] == ["c_int", "c_float", "c_str"]
+
+
+def _count_summaries(monkeypatch) -> list[int]:
+    calls = [0]
+    real = summary_module.summarise
+
+    def counted(*args, **kwargs):
+        calls[0] += 1
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(summary_module, "summarise", counted)
+    return calls
+
+
+def test_a_stored_summary_is_the_summary_and_an_unchanged_store_gives_it_again(tmp_path: Path, monkeypatch) -> None:
+    make_store(tmp_path, _varied_rows(300))
+    store, columns = Store(tmp_path / "store"), ["c_int", "c_float", "c_str", "c_zero"]
+    computed = summarise(connect(store, "e"), columns)
+    calls = _count_summaries(monkeypatch)
+    assert stored_summary(store, "e", columns) == computed and calls[0] == 1
+    assert summary_path(store, "e").exists()
+    again = stored_summary(Store(tmp_path / "store"), "e", columns)
+    assert again == computed and calls[0] == 1  # read back: the same numbers, not computed
+    assert repr(again) == repr(computed)
+    assert stored_summary(store, "e", columns[:2]) == summarise(connect(store, "e"), columns[:2]) and calls[0] == 2
+    assert stored_summary(store, "e", columns, failure_limit=3).failures == computed.failures[:3] and calls[0] == 3
+
+
+def test_a_new_segment_a_new_plan_or_a_damaged_file_computes_the_summary_again(tmp_path: Path, monkeypatch) -> None:
+    rows = _varied_rows(100)
+    make_store(tmp_path, rows)
+    store, columns = Store(tmp_path / "store"), ["c_int"]
+    first = stored_summary(store, "e", columns)
+    calls = _count_summaries(monkeypatch)
+
+    # a new prediction segment: computed again, whether it changes the numbers (an earlier row of
+    # a key, which the views show instead) or not (a later row)
+    key = "k0"
+    store.append("predictions", [{"pred_key": key, "image_key": key, "created_at": datetime(2030, 1, 1),
+                                  "valid": True, "correct": True, "top1_label": "thing", "topk": [0],
+                                  "topk_labels": ["thing"], "topk_probs": [0.9], "loss": 1.0}])
+    assert stored_summary(store, "e", columns) == first and calls[0] == 1
+    store.append("predictions", [{"pred_key": "k1", "image_key": "k1", "created_at": datetime(2020, 1, 1),
+                                  "valid": False, "correct": None, "top1_label": "thing", "topk": [0],
+                                  "topk_labels": ["thing"], "topk_probs": [0.9], "loss": 1.0}])
+    changed = stored_summary(store, "e", columns)
+    assert calls[0] == 2 and changed.invalid == first.invalid + (1 if rows[1]["valid"] else 0)
+    assert changed == summarise(connect(store, "e"), columns)
+
+    # the plan written again with other jobs
+    make_store(tmp_path, rows[:50])
+    assert stored_summary(store, "e", columns).evaluated == 50 and calls[0] == 3
+
+    # a summary file that does not read back, or one of another key, is computed again
+    summary_path(store, "e").write_text("{not json")
+    assert stored_summary(store, "e", columns).evaluated == 50 and calls[0] == 4
+    summary_path(store, "e").write_text(json.dumps({"key": "0" * 64, "summary": {}}))
+    assert stored_summary(store, "e", columns).evaluated == 50 and calls[0] == 5
+    assert stored_summary(store, "e", columns).evaluated == 50 and calls[0] == 5
+
+
+def test_a_summary_that_cannot_be_stored_is_still_given(tmp_path: Path, monkeypatch) -> None:
+    make_store(tmp_path, _varied_rows(50))
+    store = Store(tmp_path / "store")
+    (store.root / "cache").write_text("a file where the folder would go")
+    assert stored_summary(store, "e", ["c_int"]) == summarise(connect(store, "e"), ["c_int"])
 
 
 def test_query_sees_the_views(tiny_run: Path, tmp_path: Path) -> None:

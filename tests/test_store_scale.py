@@ -4,6 +4,7 @@ memo compared as columns vouches for exactly what it vouched for before."""
 
 from __future__ import annotations
 
+import os
 import time
 from pathlib import Path
 
@@ -69,3 +70,96 @@ def test_a_missing_or_unremembered_blob_among_many_is_told_apart(tmp_path: Path,
     atomic_write(store.blob_path(keys[1]), b"not a png")  # a new file: hashed again, found damaged
     hashed = HashCounter(monkeypatch)
     assert damaged_blobs(store, "renders", keys) == {keys[1]} and hashed.calls == 1
+
+
+class _Clock:
+    """The store's ``time`` module, with its clock ``ahead`` seconds ahead: every folder then
+    changed long before a listing is taken (``os.utime`` cannot date a change back, it moves the
+    change time on)."""
+
+    def __init__(self, monkeypatch) -> None:
+        self.ahead = 0.0
+        monkeypatch.setattr(store_module, "time", self)
+
+    def __getattr__(self, name: str):
+        return getattr(time, name)
+
+    def time_ns(self) -> int:
+        return time.time_ns() + int(self.ahead * 1e9)
+
+
+def _count_listings(monkeypatch) -> list[int]:
+    calls = [0]
+    real = os.listdir
+
+    def counted(path):
+        calls[0] += 1
+        return real(path)
+
+    monkeypatch.setattr(store_module.os, "listdir", counted)
+    return calls
+
+
+def test_a_blob_folder_is_listed_once_while_it_stays_the_same(tmp_path: Path, monkeypatch) -> None:
+    store = Store(tmp_path)
+    keys = [f"aa{i:038x}" for i in range(1200)]
+    for key in keys[:1000]:
+        store.blob_path(key).parent.mkdir(parents=True, exist_ok=True)
+        store.blob_path(key).write_bytes(b"x")
+    folder = store.blob_path(keys[0]).parent
+    clock, listings = _Clock(monkeypatch), _count_listings(monkeypatch)
+    assert store.existing_blobs(keys) == set(keys[:1000]) and listings[0] == 1
+    assert store.existing_blobs(keys) == set(keys[:1000]) and listings[0] == 2  # it just changed: listed again
+    clock.ahead = 60.0
+    assert store.existing_blobs(keys) == set(keys[:1000]) and listings[0] == 3
+    assert store.existing_blobs(keys) == set(keys[:1000]) and listings[0] == 3  # settled: remembered
+    assert Store(tmp_path).existing_blobs(keys) == set(keys[:1000]) and listings[0] == 4  # per store object
+    store.blob_path(keys[1000]).write_bytes(b"x")  # a new blob moves the folder's times on
+    assert store.existing_blobs(keys) == set(keys[:1001]) and listings[0] == 5
+    store.quarantine(store.blob_path(keys[0]))  # so does one moved away
+    assert store.existing_blobs(keys) == set(keys[1:1001]) and listings[0] == 6
+    remembered_mtime = folder.stat().st_mtime_ns
+    (folder / f"{keys[1]}.png").unlink()
+    os.utime(folder, ns=(folder.stat().st_atime_ns, remembered_mtime))  # mtime set back: the change time moved
+    assert store.existing_blobs(keys) == set(keys[2:1001]) and listings[0] == 7
+
+
+def test_a_run_sweeps_temp_files_and_checks_blobs_from_one_listing(tmp_path: Path, monkeypatch) -> None:
+    from sweep3d.cache.maintenance import remove_killed_writers_temp_files
+
+    store = Store(tmp_path)
+    keys = [f"{f}{i:038x}" for f in ("ab", "cd") for i in range(800)]
+    for key in keys:
+        store.blob_path(key).parent.mkdir(parents=True, exist_ok=True)
+        store.blob_path(key).write_bytes(b"x")
+    temp = store.blob_path(keys[0]).with_name(f".{keys[0]}.png.dead.tmp")
+    stray = store.blob_path(keys[0]).parent / "stray" / ".deep.tmp"  # rglob found these too
+    stray.parent.mkdir()
+    for path in (temp, stray):
+        path.write_bytes(b"half")
+    clock, listings = _Clock(monkeypatch), _count_listings(monkeypatch)
+    clock.ahead = 60.0
+    assert remove_killed_writers_temp_files(tmp_path, store) == 2
+    assert not temp.exists() and not stray.exists() and listings[0] == 2
+    assert store.existing_blobs(keys) == set(keys)
+    assert listings[0] == 3  # "ab" changed (its temp file went): listed again; "cd" was not
+
+
+def test_a_table_file_written_again_with_the_same_rows_keeps_its_state(tmp_path: Path) -> None:
+    import pyarrow as pa
+
+    store = Store(tmp_path)
+    path = store.jobs_path("e")
+    table = pa.table({"job": list(range(1000)), "pred_key": [f"k{i}" for i in range(1000)]})
+    assert store.write_table_file(path, table, keep_same=True)
+    before = path.stat()
+    assert not store.write_table_file(path, table, keep_same=True)
+    assert (path.stat().st_ino, path.stat().st_mtime_ns) == (before.st_ino, before.st_mtime_ns)
+    changed = table.set_column(1, "pred_key", pa.array([f"k{i + 1}" for i in range(1000)]))
+    assert store.write_table_file(path, changed, keep_same=True)
+    assert store.read_segment(path).equals(changed)
+    flipped = bytearray(path.read_bytes())
+    flipped[len(flipped) // 2] ^= 0xFF
+    path.write_bytes(bytes(flipped))  # damaged: rewritten whole
+    assert store.write_table_file(path, changed, keep_same=True)
+    assert Store(tmp_path).read_segment(path).equals(changed)

@@ -94,11 +94,12 @@ def damaged_blobs(store: Store, table: str, keys: Iterable[str]) -> set[str]:
     A rerun of a million cached jobs costs one ``stat`` per blob: the memo and the table's rows
     are compared as Arrow columns, never as a dict per blob.
     """
-    keys = pa.array(list(set(keys)), type=pa.string())
+    listed = list(keys if isinstance(keys, (set, frozenset)) else set(keys))
+    keys = pa.array(listed, type=pa.string())
     rows = store.table(table, [KEY_COLUMN[table], DIGEST_COLUMN])
     recorded = _recorded(rows, table)
     memo = _read_memo_table(store, table)
-    states = file_states(store, keys.to_pylist())
+    states = file_states(store, listed)
     trusted = _trusted(keys, states, memo, recorded, rows, table)
     damaged: set[str] = set()
     fresh: dict[str, Verified] = {}

@@ -10,9 +10,11 @@ so a reader sees every row exactly once before, during and after them.
 from __future__ import annotations
 
 import json
+import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Iterator
 
 import pyarrow as pa
 import pyarrow.compute as pc
@@ -31,6 +33,7 @@ TEMP_AGE = 3600.0  # seconds after which gc removes temp files (a live run's are
 #: Folders that only the writer lock's holder writes (``reports/`` and ``cache/`` are not:
 #: ``sweep3d report`` writes them without the lock).
 LOCKED_FOLDERS = ("tables", "blobs", "jobs", "models")
+TEMP_PATTERN = ".*.tmp"  # how atomic_write names its temp files (a dot, the file's name, a tag, .tmp)
 
 
 # -- verify ------------------------------------------------------------------------------------
@@ -179,22 +182,55 @@ def collect_garbage(root: Path, older_than: float = TEMP_AGE, purge_quarantine: 
     return out
 
 
-def remove_killed_writers_temp_files(root: Path) -> int:
+def remove_killed_writers_temp_files(root: Path, store: Store | None = None) -> int:
     """Remove every temp file in the folders only the lock's holder writes; returns how many.
 
     Call it holding the writer lock, before writing: any temp file there then is a killed
     writer's (a live one would hold the lock), so unlike gc it need not wait for it to age.
+
+    Args:
+        store: the caller's store object: the blob folders are read through its listings
+            (:meth:`Store.blob_listing`), which it then remembers for its own existence checks,
+            so a run lists its million blobs once.
     """
+    store = store if store is not None else Store(root)
     removed = 0
     for name in LOCKED_FOLDERS:
         folder = root / name
-        for path in folder.rglob(".*.tmp") if folder.is_dir() else []:
+        if not folder.is_dir():
+            continue
+        for path in _blob_temp_files(store) if name == "blobs" else folder.rglob(TEMP_PATTERN):
             try:
                 path.unlink()
             except OSError:
                 continue
             removed += 1
     return removed
+
+
+def _is_temp(name: str) -> bool:
+    """Whether ``name`` matches :data:`TEMP_PATTERN`."""
+    return len(name) >= 5 and name.startswith(".") and name.endswith(".tmp")
+
+
+def _blob_temp_files(store: Store) -> Iterator[Path]:
+    """What ``blobs/`` holds that matches :data:`TEMP_PATTERN`, at any depth (as ``rglob`` finds
+    it), read from the store's listings of the blob folders: what a blob folder holds besides
+    blobs (few names, if any) is looked at closer, and searched if it is a folder."""
+    blobs = store.root / "blobs"
+    with os.scandir(blobs) as listing:
+        entries = list(listing)
+    for entry in entries:
+        if _is_temp(entry.name):
+            yield Path(entry.path)
+        if not entry.is_dir() or entry.is_symlink():
+            continue
+        for name in store.blob_listing(entry.name).others:
+            path = blobs / entry.name / name
+            if _is_temp(name):
+                yield path
+            if path.is_dir() and not path.is_symlink():
+                yield from path.rglob(TEMP_PATTERN)
 
 
 def _remove_empty_dirs(folder: Path) -> None:

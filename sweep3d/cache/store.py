@@ -27,9 +27,8 @@ import time
 import uuid
 from contextlib import contextmanager
 from datetime import datetime, timezone
-from operator import methodcaller
 from pathlib import Path
-from typing import Any, Iterable, Iterator
+from typing import Any, Iterable, Iterator, NamedTuple
 
 import duckdb
 import pyarrow as pa
@@ -43,7 +42,9 @@ KEY_COLUMN = {"renders": "render_key", "images": "image_key", "predictions": "pr
               "parts": "parts_key"}
 BLOB_TABLES = ("renders", "images")  # tables whose rows each own the blob named by their key
 DIGEST_COLUMN = "sha256"  # hex SHA-256 of a blob's bytes, recorded in its row when written
+BLOB_EXT = "png"  # the file type of the blobs a run makes
 LISTING_ADVANTAGE = 4  # listing a folder's entries costs about a quarter of a stat per entry
+LISTING_SETTLED = 2.0  # seconds since a blob folder last changed before its listing is remembered
 SUPERSEDED_GRACE = 600.0  # seconds a compaction keeps the segments it merged, for readers that listed them
 
 #: Write failures the user can fix (free space, permissions), reported as one line, not a traceback.
@@ -59,6 +60,15 @@ class StoreWriteError(UserError):
     """The store cannot be written: a full disk, a quota, a read-only or forbidden folder."""
 
 
+class BlobListing(NamedTuple):
+    """What one blob folder holds: ``keys``, each of whose blob (``<key>.png``, the key
+    beginning with the folder's name) is there, and the ``others``: every other name in it
+    (a killed writer's temp file, a blob of another kind)."""
+
+    keys: frozenset[str]
+    others: frozenset[str]
+
+
 class Store:
     """A store rooted at ``root``; cheap to construct, creates directories on first write."""
 
@@ -69,11 +79,14 @@ class Store:
             warn: log one warning per unreadable file (``cache verify`` lists them itself).
         """
         self.root = Path(root)
+        self._blobs = f"{self.root}{os.sep}blobs{os.sep}"  # blob_file's prefix, made once
         self.quarantine_bad = quarantine
         self.warn = warn
         self._checked: dict[tuple[str, int, int], list[str]] = {}  # (path, size, mtime) read whole once -> columns
         self._bad: dict[str, str] = {}  # unreadable files already reported -> why
         self._keys: dict[str, tuple[tuple, frozenset[str]]] = {}  # table -> (segment state, its keys)
+        self._listed: dict[str, tuple[tuple[int, ...], BlobListing]] = {}  # blob folder -> (its state, listing)
+        self._joined: tuple[list[BlobListing], frozenset[str]] | None = None  # listings, their keys together
 
     # -- paths -------------------------------------------------------------------------------
     def blob_path(self, key: str, ext: str = "png") -> Path:
@@ -82,27 +95,58 @@ class Store:
     def blob_file(self, key: str, ext: str = "png") -> str:
         """:meth:`blob_path` as a string: a run checks every cached blob, and pathlib's joins
         cost more than the ``stat`` itself."""
-        return f"{self.root}{os.sep}blobs{os.sep}{key[:2]}{os.sep}{key}.{ext}"
+        return f"{self._blobs}{key[:2]}{os.sep}{key}.{ext}"
 
     def existing_blobs(self, keys: Iterable[str], ext: str = "png") -> set[str]:
         """The ``keys`` whose blob is there.
 
-        Many keys are looked up in a listing of the blob folders, which reads a name where a
-        check per key costs a ``stat`` (about five times as much); few are checked one by one.
+        Many keys are looked up in a listing of the blob folders (:meth:`blob_listing`), which
+        reads a name where a check per key costs a ``stat`` (about five times as much); few are
+        checked one by one.
         """
         keys = keys if isinstance(keys, (set, frozenset)) else set(keys)
         folders = sorted({key[:2] for key in keys})
         entries = sum(_folder_entries(self.root / "blobs" / f) for f in folders) if len(keys) > 1000 else None
         if entries is None or entries > LISTING_ADVANTAGE * len(keys):
             return {key for key in keys if os.path.exists(self.blob_file(key, ext))}
-        names: set[str] = set()
-        strip = methodcaller("removesuffix", f".{ext}")
-        for folder in folders:
-            try:
-                names.update(map(strip, os.listdir(self.root / "blobs" / folder)))
-            except FileNotFoundError:
-                continue
-        return keys & names  # a name of another kind keeps its suffix and matches no key
+        listings = [self.blob_listing(folder) for folder in folders]
+        if ext != BLOB_EXT:
+            return keys & {key for folder, listing in zip(folders, listings)
+                           for key in _split_listing(listing.others, folder, f".{ext}")[0]}
+        joined = self._joined  # the same listings as last time: their keys joined then
+        if joined is None or len(joined[0]) != len(listings) or any(a is not b for a, b in zip(joined[0], listings)):
+            self._joined = joined = (listings, frozenset().union(*(listing.keys for listing in listings)))
+        return keys & joined[1]
+
+    def blob_listing(self, folder: str) -> BlobListing:
+        """What the blob folder ``blobs/<folder>`` holds (nothing when it is not there).
+
+        A run asks several times (the temp-file sweep, the warning before rendering, each
+        stage's pass), so a listing is remembered while the folder stays the same: same inode,
+        change and modification times. Adding, removing or renaming an entry moves a folder's
+        times on, but only to the file system's clock tick: a listing is remembered only when
+        the folder last changed a while (:data:`LISTING_SETTLED`) before it was taken, so a
+        change in the same tick as an earlier one is never missed.
+        """
+        path = f"{self._blobs}{folder}"
+        try:
+            st = os.stat(path)
+            state = (st.st_dev, st.st_ino, st.st_mtime_ns, st.st_ctime_ns, st.st_size)
+            remembered = self._listed.get(folder)
+            if remembered is not None and remembered[0] == state:
+                return remembered[1]
+            listed_at = time.time_ns()
+            names = os.listdir(path)
+        except FileNotFoundError:
+            self._listed.pop(folder, None)
+            return BlobListing(frozenset(), frozenset())
+        keys, others = _split_listing(names, folder, f".{BLOB_EXT}")
+        listing = BlobListing(frozenset(keys), frozenset(others))
+        if listed_at - max(st.st_mtime_ns, st.st_ctime_ns) >= LISTING_SETTLED * 1e9:
+            self._listed[folder] = (state, listing)
+        else:
+            self._listed.pop(folder, None)
+        return listing
 
     def table_dir(self, table: str) -> Path:
         return self.root / "tables" / table
@@ -132,12 +176,28 @@ class Store:
             ) from None
 
     # -- writes ------------------------------------------------------------------------------
-    def write_table_file(self, path: Path, table: pa.Table) -> None:
+    def write_table_file(self, path: Path, table: pa.Table, keep_same: bool = False) -> bool:
         """Write ``table`` to ``path`` atomically (temp file, fsync, rename), with page checksums.
+
+        Args:
+            keep_same: leave ``path`` alone when it holds exactly the bytes it would be written
+                with (a run writes its unchanged plan again: the file then keeps its state, which
+                :func:`~sweep3d.stages.aggregate.stored_summary` keys on).
+
+        Returns:
+            whether ``path`` was written.
 
         Raises:
             StoreWriteError: the disk is full or the folder is not writable (no temp file is left).
         """
+        if keep_same:
+            sink = pa.BufferOutputStream()
+            pq.write_table(table, sink, compression="zstd", write_page_checksum=True)
+            data = sink.getvalue()
+            if _holds(path, data):
+                return False
+            atomic_write(path, data)  # type: ignore[arg-type]  (a pyarrow Buffer is bytes-like)
+            return True
         tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
@@ -150,6 +210,7 @@ class Store:
             if _is_write_error(exc):
                 raise _as_write_error(exc, path) from None
             raise
+        return True
 
     def append(self, table: str, rows: list[dict[str, Any]], schema: pa.Schema | None = None) -> Path | None:
         """Write ``rows`` as one new segment of ``table``; returns its path (None if no rows)."""
@@ -261,7 +322,11 @@ class Store:
         return pa.concat_tables(parts, promote_options="permissive")
 
     def keys(self, table: str) -> set[str]:
-        """Every key with a complete row in ``table`` (a new set: the caller may change it).
+        """Every key with a complete row in ``table`` (a new set: the caller may change it)."""
+        return set(self.key_set(table))
+
+    def key_set(self, table: str) -> frozenset[str]:
+        """Every key with a complete row in ``table``, read-only (:meth:`keys` without the copy).
 
         Remembered while the table's segments stay the same files, as a run asks several times
         (a million keys take a second to read).
@@ -273,7 +338,7 @@ class Store:
             data = self.table(table, [column])
             keys = frozenset(data.column(column).to_pylist()) if data is not None else frozenset()
             self._keys[table] = remembered = (state, keys)  # as listed before reading: a change since shows
-        return set(remembered[1])
+        return remembered[1]
 
     def _segment_state(self, table: str) -> tuple[tuple[str, int, int, int], ...]:
         """Which files ``table``'s segments are now (path, size, mtime, inode): segments are only
@@ -583,6 +648,32 @@ def _folder_entries(folder: Path) -> int:
         return os.stat(folder).st_size // 32  # ext4: 8 bytes + a 44-character name per entry; tmpfs: 20
     except OSError:
         return 0
+
+
+def _holds(path: Path, data: pa.Buffer) -> bool:
+    """Whether the file at ``path`` holds exactly ``data``."""
+    try:
+        if os.stat(path).st_size != data.size:
+            return False
+        with open(path, "rb") as fh:
+            return pa.py_buffer(fh.read()).equals(data)
+    except OSError:
+        return False
+
+
+def _split_listing(names: Iterable[str], folder: str, suffix: str) -> tuple[list[str], list[str]]:
+    """``names`` of the blob folder ``folder`` as (the keys whose blob they are, the rest): a
+    blob is ``<key><suffix>``, its key beginning with the folder's name (as :meth:`Store.blob_file`
+    places it)."""
+    cut = -len(suffix)
+    keys: list[str] = []
+    others: list[str] = []
+    for name in names:
+        if name.endswith(suffix) and name[:cut][:2] == folder:
+            keys.append(name[:cut])
+        else:
+            others.append(name)
+    return keys, others
 
 
 def _unlink_quietly(path: Path) -> None:

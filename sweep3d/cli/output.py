@@ -9,7 +9,7 @@ from rich.table import Table
 from sweep3d.cache.store import Store
 from sweep3d.pipeline import plan_spec
 from sweep3d.spec.loader import LoadedSpec
-from sweep3d.stages.aggregate import connect, has_view, summarise, weakest_regions, wilson_interval
+from sweep3d.stages.aggregate import connect, has_view, stored_summary, weakest_regions, wilson_interval
 from sweep3d.stages.driver import plan_status
 from sweep3d.stages.infer import InferStage, ModelHandle
 from sweep3d.stages.plan import Plan
@@ -100,13 +100,17 @@ def print_run(console: Console, result) -> None:
     skipped = len(result.plan.out_of_frame)
     console.print(f"{len(result.plan.jobs) + skipped} jobs in {result.seconds:.1f} s (run {result.run_id})"
                   + (f"; {skipped} out of frame, not rendered" if skipped else ""))
-    print_findings(console, result.plan)
+    print_findings(console, result.plan, result.store)
 
 
-def print_findings(console: Console, plan: Plan) -> None:
-    """Accuracy and where the model fails most (the weakest control values)."""
-    con = connect(Store(plan.spec.store), plan.spec.name)
-    summary = summarise(con, plan.columns)
+def print_findings(console: Console, plan: Plan, store: Store | None = None) -> None:
+    """Accuracy and where the model fails most (the weakest control values).
+
+    Args:
+        store: the run's store object (it has read the segments already), else a new one.
+    """
+    store = store if store is not None else Store(plan.spec.store)
+    summary = stored_summary(store, plan.spec.name, plan.columns)
     if summary.accuracy is None:
         return
     which = f"{escape(plan.model)}: " if len(plan.spec.models) > 1 else ""

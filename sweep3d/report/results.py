@@ -24,7 +24,7 @@ from typing import Any, Mapping, Sequence
 
 import duckdb
 
-from sweep3d.stages.aggregate.views import has_view
+from sweep3d.stages.aggregate.views import materialise
 
 WRONG, CORRECT, INVALID = 0, 1, 2  # outcome codes
 OUTCOME_NAMES = ("wrong", "correct", "invalid")
@@ -63,12 +63,7 @@ class ResultRow:
 
 def materialise_views(con: duckdb.DuckDBPyConnection) -> None:
     """Compute the views of :data:`MATERIALISED` once; they then read the stored rows (idempotent)."""
-    for view in MATERIALISED:
-        table = f"report_{view}"
-        if not has_view(con, view) or _has_table(con, table):
-            continue
-        con.execute(f"CREATE TEMP TABLE {table} AS FROM {view}")
-        con.execute(f"CREATE OR REPLACE VIEW {view} AS FROM {table}")
+    materialise(con, MATERIALISED)
 
 
 class Results:
@@ -212,8 +207,3 @@ def _literal(text: str) -> str:
 
 def _list(texts: list[str]) -> str:
     return "[" + ", ".join(_literal(t) for t in texts) + "]"
-
-
-def _has_table(con: duckdb.DuckDBPyConnection, name: str) -> bool:
-    return bool(con.execute("SELECT count(*) FROM duckdb_tables() WHERE table_name = ? AND temporary",
-                            [name]).fetchone()[0])

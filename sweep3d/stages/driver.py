@@ -206,8 +206,15 @@ def unique_jobs(stage: Stage, jobs: Iterable[Job]) -> dict[str, Job]:
 
 def cached_keys(stage: Stage, plan: Plan, store: Store) -> set[str]:
     """Keys of ``plan`` at ``stage`` that have a row (and a blob, where rows own one)."""
-    have = store.keys(stage.table) & set(unique_jobs(stage, plan.jobs))
-    return store.existing_blobs(have) if stage.owns_blobs else have
+    return _rows_and_cached(stage, plan, store)[1]
+
+
+def _rows_and_cached(stage: Stage, plan: Plan, store: Store) -> tuple[set[str], set[str]]:
+    """(keys of ``plan`` at ``stage`` that have a row, those of them that are cached: with their
+    blob, where rows own one)."""
+    rows = store.key_set(stage.table)
+    have = {key for key in unique_jobs(stage, plan.jobs) if key in rows}
+    return have, (store.existing_blobs(have) if stage.owns_blobs else have)
 
 
 def to_do(stage: Stage, plan: Plan, store: Store, cached: set[str] | None = None) -> list[Job]:
@@ -294,9 +301,9 @@ def begin(stage: Stage, plan: Plan, store: Store, coming: Mapping[str, set[str]]
     """What ``stage`` must compute in a pass whose earlier stages will store ``coming`` (by table)."""
     started = time.perf_counter()
     unique = unique_jobs(stage, plan.jobs)
-    cached = cached_keys(stage, plan, store)
+    have, cached = _rows_and_cached(stage, plan, store)
     if stage.owns_blobs:  # rows whose blob has gone (deleted, quarantined): computed again, one row each
-        store.drop_rows(stage.table, (store.keys(stage.table) & set(unique)) - cached)
+        store.drop_rows(stage.table, have - cached)
         cached -= discard_damaged(stage, store, cached)
     ready, waiting = split_to_do(stage, plan, store, cached, coming)
     run = StagePass(stage, StageOutcome(getattr(stage, "title", stage.name), total=len(unique)), ready, waiting)

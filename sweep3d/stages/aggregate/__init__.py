@@ -10,6 +10,7 @@ from sweep3d.stages.aggregate.summary import (
     Region,
     Summary,
     control_effects,
+    stored_summary,
     summarise,
     weakest_regions,
 )
@@ -18,10 +19,12 @@ from sweep3d.stages.aggregate.views import (
     VIEWS,
     connect,
     has_view,
+    materialise,
     no_results,
     register_views,
     wilson_interval,
 )
 
 __all__ = ["MACROS", "VIEWS", "ControlEffect", "Region", "Summary", "connect", "control_effects", "has_view",
-           "no_results", "register_views", "summarise", "weakest_regions", "wilson_interval"]
+           "materialise", "no_results", "register_views", "stored_summary", "summarise", "weakest_regions",
+           "wilson_interval"]

@@ -2,16 +2,31 @@
 
 Accuracy counts only valid predictions (a render or model output with NaN/inf is excluded and
 counted separately), so no non-finite value is ever averaged in silently.
+
+:func:`stored_summary` remembers a summary in the store, keyed by exactly the files and code it
+was computed from, so a run that changed nothing prints its findings without computing them.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import hashlib
+import json
+import os
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import duckdb
 
-from sweep3d.stages.aggregate.views import has_view, register_views
+from sweep3d.cache.store import Store, atomic_write, safe_filename
+from sweep3d.errors import UserError
+from sweep3d.stages.aggregate.views import connect, has_view, materialise, register_views
+
+FAILURE_LIMIT = 48  # failures a summary lists, worst first
+#: Bump when :func:`summarise` gives other numbers for the same rows without a change to this
+#: module or to the views' module (both are part of a remembered summary's key).
+SUMMARY_FORMAT = 1
 
 
 @dataclass
@@ -43,8 +58,12 @@ class Summary:
     per_object: list[dict[str, Any]] = field(default_factory=list)
 
 
-def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit: int = 48) -> Summary:
+def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit: int = FAILURE_LIMIT) -> Summary:
     """Summarise the ``results`` view of ``con`` (see :func:`~sweep3d.stages.aggregate.connect`).
+
+    ``results`` is computed once into a temp table that the view then reads (as the report
+    does, :func:`~sweep3d.stages.aggregate.views.materialise`): the queries here read it
+    several times.
 
     Args:
         columns: the control-parameter columns of the jobs table.
@@ -52,6 +71,7 @@ def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit:
     jobs = con.execute("SELECT count(*) FROM jobs").fetchone()[0] if has_view(con, "jobs") else 0
     if not has_view(con, "results"):
         return Summary(jobs, 0, 0, 0, None, [], [], [], [])
+    materialise(con, ["results"])
     evaluated, invalid, correct = con.execute(
         "SELECT count(*), count(*) FILTER (WHERE NOT valid), count(*) FILTER (WHERE valid AND correct) FROM results"
     ).fetchone()
@@ -93,12 +113,14 @@ def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit:
 def control_effects(con: duckdb.DuckDBPyConnection, columns: list[str]) -> list[ControlEffect]:
     """Accuracy per level of each of ``columns`` that takes two levels or more, in that order.
 
-    Read from the ``control_accuracy`` view (levels and bins as defined there).
+    Read from the ``control_accuracy`` view (levels and bins as defined there), which has a row
+    per level of each parameter: its rows per parameter are ``control_parameters.levels``,
+    counted here without computing the levels a second time.
     """
     rows = con.execute(
-        "SELECT parameter, level, label, accuracy, n, wilson_low, wilson_high FROM control_accuracy "
-        "WHERE parameter IN (SELECT parameter FROM control_parameters WHERE levels > 1) "
-        "AND list_contains(?, parameter) ORDER BY level", [columns]
+        "SELECT parameter, level, label, accuracy, n, wilson_low, wilson_high FROM ("
+        "SELECT *, count(*) OVER (PARTITION BY parameter) AS levels FROM control_accuracy "
+        "WHERE list_contains(?, parameter)) WHERE levels > 1 ORDER BY level", [columns]
     ).fetchall()
     effects = {c: ControlEffect(c, [], [], [], [], [], []) for c in columns}
     for column, level, label, accuracy, count, low, high in rows:
@@ -125,3 +147,73 @@ def weakest_regions(summary: Summary, min_count: int = 3, top: int = 3) -> list[
                for e in summary.effects for label, acc, n in zip(e.labels, e.accuracy, e.count)
                if n >= min_count and acc is not None]
     return sorted(regions, key=lambda r: (r.accuracy, -r.count))[:top]
+
+
+# -- remembered summaries ---------------------------------------------------------------------
+
+
+def stored_summary(store: Store, experiment: str, columns: list[str], failure_limit: int = FAILURE_LIMIT) -> Summary:
+    """:func:`summarise` of ``experiment``'s results in ``store``, remembered there.
+
+    The summary reads the experiment's jobs file and the ``predictions`` segments (``results``
+    is their join) and nothing else. It is remembered under ``cache/summary/`` with a key of
+    those files' states (name, size, modification and change times, inode: a segment or jobs
+    file rewritten in any way is a new state, as for the blob memo of
+    :func:`sweep3d.cache.blobs.damaged_blobs`), the arguments, this module's and the views'
+    source and DuckDB's version; a remembered summary is used only under the same key, so an
+    unchanged store gives the summary it gave before, and any new segment, compaction or plan
+    computes it again. A summary that cannot be remembered (a full disk, a value JSON does not
+    hold) is computed every time.
+    """
+    key = summary_key(store, experiment, columns, failure_limit)
+    path = summary_path(store, experiment)
+    remembered = _read_summary(path, key)
+    if remembered is not None:
+        return remembered
+    con = connect(store, experiment)
+    try:
+        summary = summarise(con, columns, failure_limit)
+    finally:
+        con.close()
+    try:
+        text = json.dumps({"key": key, "summary": dataclasses.asdict(summary)}, allow_nan=False)
+        atomic_write(path, text.encode())
+    except (TypeError, ValueError, OSError, UserError):
+        pass  # not remembered: computed again next time
+    return summary
+
+
+def summary_path(store: Store, experiment: str) -> Path:
+    """Where the summary of ``experiment`` is remembered."""
+    return store.root / "cache" / "summary" / f"{safe_filename(experiment)}.json"
+
+
+def summary_key(store: Store, experiment: str, columns: list[str], failure_limit: int = FAILURE_LIMIT) -> str:
+    """What a summary of ``experiment`` is computed from, as a hex digest (see :func:`stored_summary`)."""
+    files = [store.jobs_path(experiment), *store.segments("predictions")]
+    states = []
+    for path in files:
+        try:
+            st = os.stat(path)
+            states.append([path.name, st.st_size, st.st_mtime_ns, st.st_ctime_ns, st.st_ino])
+        except OSError:
+            states.append([path.name, None])
+    views_source = Path(__file__).with_name("views.py").read_bytes()
+    code = hashlib.sha256(Path(__file__).read_bytes() + b"\0" + views_source).hexdigest()
+    described = {"format": SUMMARY_FORMAT, "experiment": experiment, "columns": list(columns),
+                 "failure_limit": failure_limit, "files": states, "code": code, "duckdb": duckdb.__version__}
+    return hashlib.sha256(json.dumps(described, sort_keys=True).encode()).hexdigest()
+
+
+def _read_summary(path: Path, key: str) -> Summary | None:
+    """The summary remembered at ``path`` under ``key``; None when there is none, it was
+    remembered under another key, or it does not read back."""
+    try:
+        stored = json.loads(path.read_bytes())
+        if not isinstance(stored, dict) or stored.get("key") != key:
+            return None
+        fields = dict(stored["summary"])
+        effects = [ControlEffect(**effect) for effect in fields.pop("effects")]
+        return Summary(**fields, effects=effects)
+    except (OSError, ValueError, TypeError, KeyError):
+        return None

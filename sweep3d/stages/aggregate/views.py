@@ -26,8 +26,8 @@ Views:
     pair beyond its two main effects (kind ``interaction``): eta² = between-group sum of
     squares / total sum of squares. In an unbalanced design the shares overlap.
 ``object_sensitivity``
-    per (object, other parameter): accuracy range over the levels, worst and best level, and
-    eta² within the object.
+    per (object, other parameter): accuracy range over the levels, worst and best level (the
+    first in level order among equals), and eta² within the object.
 ``object_confusions``
     per object, its wrong top-1 predictions with counts, share of its failures and rank.
 ``part_visibility``
@@ -225,21 +225,33 @@ _FIXED_VIEWS = (
                        count(number) > 0 AND count(number) = count(raw) AND count(DISTINCT raw) > {MAX_LEVELS}
                            AND max(number) > min(number) AS binned
                 FROM control_values GROUP BY parameter, position)""",
+        # Each distinct level of a parameter is ranked and labelled once (a bin, a value, or not
+        # applied: a few per parameter), then joined to the long-form rows: the same levels and
+        # labels as ranking and labelling every (result, parameter) row, which cost several
+        # times as much. A level is the rows that tie on the ranking's order (not applied, bin or
+        # number, value): a bin, or a value's text, which fixes its number.
         f"""CREATE OR REPLACE VIEW control_levels AS
-            WITH placed AS (
-                SELECT v.*, s.lo, s.width, s.digits,
-                       CASE WHEN s.binned AND v.number IS NOT NULL
-                            THEN least(floor((v.number - s.lo) / s.width), {BINS - 1})::INTEGER END AS bin
-                FROM control_values v JOIN control_stats s USING (parameter, position))
-            SELECT job, object, environment, valid, correct, parameter, position,
-                   (dense_rank() OVER (PARTITION BY parameter ORDER BY raw IS NULL, coalesce(bin::DOUBLE, number),
-                                       CASE WHEN bin IS NULL THEN raw END) - 1)::INTEGER AS level,
-                   CASE WHEN raw IS NULL THEN '{NOT_APPLIED}'
-                        WHEN bin IS NOT NULL THEN level_number_label(round(lo + bin * width, digits)) || '–'
-                                                  || level_number_label(round(lo + (bin + 1) * width, digits))
-                        WHEN number IS NOT NULL THEN level_number_label(number)
-                        ELSE raw END AS label
-            FROM placed""",
+            WITH placed AS MATERIALIZED (
+                SELECT job, object, environment, valid, correct, parameter, position, raw IS NULL AS absent, bin,
+                       CASE WHEN bin IS NULL THEN raw END AS value, CASE WHEN bin IS NULL THEN number END AS number,
+                       lo, width, digits
+                FROM (SELECT v.*, s.lo, s.width, s.digits,
+                             CASE WHEN s.binned AND v.number IS NOT NULL
+                                  THEN least(floor((v.number - s.lo) / s.width), {BINS - 1})::INTEGER END AS bin
+                      FROM control_values v JOIN control_stats s USING (parameter, position))),
+            levels AS (
+                SELECT parameter, absent, bin, value,
+                       (dense_rank() OVER (PARTITION BY parameter ORDER BY absent, coalesce(bin::DOUBLE, number), value)
+                        - 1)::INTEGER AS level,
+                       CASE WHEN absent THEN '{NOT_APPLIED}'
+                            WHEN bin IS NOT NULL THEN level_number_label(round(lo + bin * width, digits)) || '–'
+                                                      || level_number_label(round(lo + (bin + 1) * width, digits))
+                            WHEN number IS NOT NULL THEN level_number_label(number)
+                            ELSE value END AS label
+                FROM (SELECT DISTINCT parameter, absent, bin, value, number, lo, width, digits FROM placed))
+            SELECT p.job, p.object, p.environment, p.valid, p.correct, p.parameter, p.position, l.level, l.label
+            FROM placed p JOIN levels l ON p.parameter = l.parameter AND p.absent = l.absent
+                 AND p.bin IS NOT DISTINCT FROM l.bin AND p.value IS NOT DISTINCT FROM l.value""",
         """CREATE OR REPLACE VIEW control_parameters AS
             SELECT l.parameter, l.position, count(DISTINCT l.level)::INTEGER AS levels,
                    any_value(s.numeric) AS numeric, any_value(s.binned) AS binned
@@ -300,6 +312,8 @@ _FIXED_VIEWS = (
                    position_a, position_b
             FROM effects, total t
             ORDER BY eta2_adjusted DESC NULLS LAST, eta2 DESC, position_a, position_b NULLS FIRST""",
+        # Level order fixes the order of the sum and which level a tie names, whatever order the
+        # rows of control_levels come in.
         """CREATE OR REPLACE VIEW object_sensitivity AS
             WITH per_level AS (
                 SELECT object, parameter, position, level, any_value(label) AS label,
@@ -309,10 +323,11 @@ _FIXED_VIEWS = (
             per_object AS (SELECT object, count(*) AS n, avg(correct::DOUBLE) AS p FROM results WHERE valid
                            GROUP BY object)
             SELECT l.object, l.parameter, l.position, count(*)::INTEGER AS levels,
-                   min(l.accuracy) AS accuracy_min, arg_min(l.label, l.accuracy) AS worst_level,
-                   max(l.accuracy) AS accuracy_max, arg_max(l.label, l.accuracy) AS best_level,
+                   min(l.accuracy) AS accuracy_min, arg_min(l.label, l.accuracy ORDER BY l.level) AS worst_level,
+                   max(l.accuracy) AS accuracy_max, arg_max(l.label, l.accuracy ORDER BY l.level) AS best_level,
                    max(l.accuracy) - min(l.accuracy) AS accuracy_range,
-                   sum(l.n * (l.accuracy - o.p) ^ 2) / nullif(any_value(o.n * o.p * (1 - o.p)), 0) AS eta2
+                   sum(l.n * (l.accuracy - o.p) ^ 2 ORDER BY l.level)
+                       / nullif(any_value(o.n * o.p * (1 - o.p)), 0) AS eta2
             FROM per_level l JOIN per_object o USING (object)
             WHERE l.n > 0
             GROUP BY l.object, l.parameter, l.position HAVING count(*) > 1
@@ -353,20 +368,43 @@ def _view_statements(parameters: list[tuple[str, bool]], has_predictions: bool) 
 
 
 def _values_sql(parameters: list[tuple[str, bool]]) -> str:
-    """``control_values``: results in long form, one row per (result, parameter), raw values."""
+    """``control_values``: results in long form, one row per (result, parameter), raw values.
+
+    ``results`` (a join of the jobs with the deduplicated predictions) is computed once, into
+    the columns read here, and each parameter's rows are read from that, not from a scan of
+    ``results`` per parameter."""
+    if not parameters:  # a jobs table without scene columns: an empty view of the right shape
+        return ("SELECT NULL::BIGINT AS job, NULL::VARCHAR AS object, NULL::VARCHAR AS environment, "
+                "NULL::BOOLEAN AS valid, NULL::BOOLEAN AS correct, NULL::VARCHAR AS parameter, "
+                "NULL::INTEGER AS position, NULL::VARCHAR AS raw, NULL::DOUBLE AS number WHERE false")
+    columns = list(dict.fromkeys(["job", "object", "environment", "valid", "correct", *(n for n, _ in parameters)]))
     parts = []
     for position, (name, numeric) in enumerate(parameters):
         column = _identifier(name)
         number = f"CAST({column} AS DOUBLE)" if numeric else "NULL::DOUBLE"
         parts.append(
             f"SELECT job, object, environment, valid, correct, {_literal(name)} AS parameter, "
-            f"{position} AS position, CAST({column} AS VARCHAR) AS raw, {number} AS number FROM results"
+            f"{position} AS position, CAST({column} AS VARCHAR) AS raw, {number} AS number FROM read_once"
         )
-    if not parts:  # a jobs table without scene columns: an empty view of the right shape
-        return ("SELECT NULL::BIGINT AS job, NULL::VARCHAR AS object, NULL::VARCHAR AS environment, "
-                "NULL::BOOLEAN AS valid, NULL::BOOLEAN AS correct, NULL::VARCHAR AS parameter, "
-                "NULL::INTEGER AS position, NULL::VARCHAR AS raw, NULL::DOUBLE AS number WHERE false")
-    return "\nUNION ALL ".join(parts)
+    return (f"WITH read_once AS MATERIALIZED (SELECT {', '.join(map(_identifier, columns))} FROM results)\n"
+            + "\nUNION ALL ".join(parts))
+
+
+def materialise(con: duckdb.DuckDBPyConnection, views: Sequence[str]) -> None:
+    """Compute each of ``views`` (in dependency order) once into a temp table, which the view
+    then reads, for a caller that reads them several times (idempotent; a view the connection
+    lacks is skipped).
+
+    The rows are the view's own: a connection's views read a fixed set of immutable segments,
+    so nothing goes stale. ``results`` alone is worth it for a few queries: each query over the
+    view otherwise joins the jobs with the deduplicated predictions again.
+    """
+    for view in views:
+        table = f"report_{view}"
+        if not has_view(con, view) or _has_table(con, table):
+            continue
+        con.execute(f"CREATE TEMP TABLE {table} AS FROM {_identifier(view)}")
+        con.execute(f"CREATE OR REPLACE VIEW {_identifier(view)} AS FROM {table}")
 
 
 # -- helpers ----------------------------------------------------------------------------------
@@ -382,6 +420,11 @@ def has_view(con: duckdb.DuckDBPyConnection, name: str) -> bool:
     """Whether ``con`` has a (user) view called ``name``."""
     return bool(con.execute(
         "SELECT count(*) FROM duckdb_views() WHERE view_name = ? AND NOT internal", [name]).fetchone()[0])
+
+
+def _has_table(con: duckdb.DuckDBPyConnection, name: str) -> bool:
+    return bool(con.execute("SELECT count(*) FROM duckdb_tables() WHERE table_name = ? AND temporary",
+                            [name]).fetchone()[0])
 
 
 def _columns(con: duckdb.DuckDBPyConnection, view: str) -> dict[str, str]:

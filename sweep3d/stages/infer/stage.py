@@ -27,7 +27,7 @@ from sweep3d.errors import SpecError, UserError
 from sweep3d.spec.columns import PREDICTION_COLUMNS
 from sweep3d.spec.loader import LoadedSpec
 from sweep3d.spec.models import ModelSpec
-from sweep3d.stages.driver import Computed, Feed
+from sweep3d.stages.driver import Computed, Feed, unique_jobs
 from sweep3d.stages.infer.evaluators import EVALUATORS, Evaluator
 from sweep3d.stages.infer.handle import ModelHandle, model_key_path
 from sweep3d.stages.infer.labels import LabelMap
@@ -248,9 +248,15 @@ class InferStage:
         return EVALUATORS.get(spec.evaluator.kind)(top_k=spec.evaluator.top_k)
 
 
-def pending_predictions(plan: Plan, store: Store) -> set[str]:
-    """Prediction keys of the plan that the store lacks."""
-    return {j.pred_key for j in plan.jobs} - store.keys("predictions")
+def pending_predictions(plan: Plan, store: Store, stage: InferStage | None = None) -> set[str]:
+    """Prediction keys of the plan that the store lacks.
+
+    Args:
+        stage: the run's infer stage, whose distinct keys the plan then remembers for its pass.
+    """
+    have = store.key_set("predictions")
+    keys = unique_jobs(stage, plan.jobs) if stage is not None else {j.pred_key for j in plan.jobs}
+    return {key for key in keys if key not in have}
 
 
 def _load(store: Store, jobs: list[Job], valid: dict[str, Mapping[str, Any]],
