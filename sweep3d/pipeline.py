@@ -68,11 +68,6 @@ def plan_spec(spec: LoadedSpec, model: ModelHandle | None = None, history: Histo
                      history=history, model=model.settings)
 
 
-def plan_models(spec: LoadedSpec) -> list[Plan]:
-    """One plan per model of ``spec``, in spec order (their renders are shared when framed alike)."""
-    return [plan_spec(spec, ModelHandle.resolve(spec, settings)) for settings in spec.models]
-
-
 def outcomes_by_scene(plan: Plan, store: Store) -> History:
     """What the model did on each job of ``plan``, per scene, for adaptive policies.
 
