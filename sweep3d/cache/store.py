@@ -358,12 +358,15 @@ class Store:
                 )
         if "jobs" in files:
             con.execute(f"CREATE VIEW jobs AS SELECT * FROM read_parquet({_sql_str(str(files['jobs'][0]))})")
-            con.execute(_ground_truth_sql(con, files["jobs"][0], "truths" in files))
+            truth = _ground_truth_sql(con, files["jobs"][0], "truths" in files)
+            if truth is not None:
+                con.execute(truth)
             if "predictions" in files:
                 con.execute(
-                    "CREATE VIEW results AS SELECT j.*, p.* EXCLUDE (pred_key, image_key, created_at), "
-                    "g.* EXCLUDE (job, truth_key) FROM jobs j JOIN predictions p USING (pred_key) "
-                    "LEFT JOIN ground_truth g ON g.job = j.job"
+                    "CREATE VIEW results AS SELECT j.*, p.* EXCLUDE (pred_key, image_key, created_at)"
+                    + (", g.* EXCLUDE (job, truth_key)" if truth is not None else "")
+                    + " FROM jobs j JOIN predictions p USING (pred_key)"
+                    + (" LEFT JOIN ground_truth g ON g.job = j.job" if truth is not None else "")
                 )
         return con
 
@@ -622,9 +625,12 @@ def _sql_str(text: str) -> str:
     return "'" + text.replace("'", "''") + "'"
 
 
-def _ground_truth_sql(con: duckdb.DuckDBPyConnection, jobs: Path, truths: bool) -> str:
-    """The ``ground_truth`` view: per job of the plan, its truth columns and ``evaluable``."""
+def _ground_truth_sql(con: duckdb.DuckDBPyConnection, jobs: Path, truths: bool) -> str | None:
+    """The ``ground_truth`` view: per job of the plan, its truth columns and ``evaluable``
+    (None for a jobs table without the columns it needs: one written by hand, or very old)."""
     columns = {row[0] for row in con.execute("DESCRIBE jobs").fetchall()}
+    if not {"job", "in_frame"} <= columns:
+        return None
     if "truth_key" not in columns:  # planned without truth passes: the geometric flag alone
         return ("CREATE VIEW ground_truth AS SELECT job, NULL::VARCHAR AS truth_key, NULL::INTEGER AS gt_x0, "
                 "NULL::INTEGER AS gt_y0, NULL::INTEGER AS gt_x1, NULL::INTEGER AS gt_y1, "
