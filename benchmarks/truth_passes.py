@@ -5,9 +5,11 @@ index-only render; otherwise the mask is the whole silhouette).
 Each configuration runs in a fresh worker process (passes are fixed per worker) rendering the
 same jobs: one quickstart object (or ``--cube``) in the studio HDRI, turned to ``--jobs`` yaws,
 at the model's framing (224² crop of 256²), 4 samples + OpenImageDenoise. The first render of
-each process (the scene load) is left out; medians of the rest.
+each process (the scene load) is left out; medians of the rest, then the median over ``--rounds``
+rounds, the configurations taking turns in each (the machine is shared: interleaving spreads its
+load over all of them alike).
 
-    .venv/bin/python benchmarks/truth_passes.py [--jobs 12] [--cube]
+    .venv/bin/python benchmarks/truth_passes.py [--jobs 12] [--rounds 3] [--cube]
 """
 
 from __future__ import annotations
@@ -63,6 +65,7 @@ def _measure(mesh: str, passes: tuple[str, ...], coverage: float, x: float, jobs
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--jobs", type=int, default=12)
+    parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--cube", action="store_true", help="the test cube instead of a quickstart mesh")
     args = parser.parse_args()
     folder = Path(tempfile.mkdtemp(prefix="truth-bench-"))
@@ -77,18 +80,22 @@ def main() -> None:
         spec = load_spec(REPO / "specs" / "quickstart.toml")
         name = spec.objects[0].name
         mesh = str(materialise_mesh(spec.meshes[name], folder))
-    print(f"mesh {Path(mesh).name}, {args.jobs} renders per configuration, load average "
-          f"{' '.join(f'{v:.2f}' for v in os.getloadavg())}")
-    print("| configuration | s/render (median) | of which truth passes | denominator |")
-    print("|---|---|---|---|")
+    print(f"mesh {Path(mesh).name}, {args.jobs} renders per configuration and round, {args.rounds} rounds, "
+          f"load average {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
     ctx = mp.get_context("spawn")
-    for name, passes, coverage, x in CONFIGS:
-        here, there = ctx.Pipe()
-        proc = ctx.Process(target=_measure, args=(mesh, passes, coverage, x, args.jobs, there))
-        proc.start()
-        median, truth, how = here.recv()
-        proc.join()
-        print(f"| {name} | {median:.3f} | {truth:.3f} | {how} |", flush=True)
+    found: dict[str, list[tuple[float, float, str]]] = {name: [] for name, *_ in CONFIGS}
+    for _ in range(args.rounds):
+        for name, passes, coverage, x in CONFIGS:
+            here, there = ctx.Pipe()
+            proc = ctx.Process(target=_measure, args=(mesh, passes, coverage, x, args.jobs, there))
+            proc.start()
+            found[name].append(here.recv())
+            proc.join()
+    print("| configuration | s/render | of which truth passes (read, encode, denominator) | denominator |")
+    print("|---|---|---|---|")
+    for name, rows in found.items():
+        print(f"| {name} | {statistics.median(r[0] for r in rows):.3f} | {statistics.median(r[1] for r in rows):.3f} "
+              f"| {rows[0][2]} |")
     print(f"load average after: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
 
 

@@ -225,3 +225,41 @@ def test_model_framing_gives_passes_in_the_stored_images_grid(tmp_path: Path) ->
     # the mask is in the image's grid: the object's pixels are the ones that differ from the white background
     differs = np.abs(image - 1.0).max(axis=-1) > 0.02
     assert (differs[mask]).mean() > 0.97 and (~differs[~mask]).mean() > 0.99
+
+
+@pytest.mark.slow
+@pytest.mark.blender
+@pytest.mark.torch
+def test_a_killed_run_resumes_its_truth_passes(tmp_path: Path) -> None:
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from sweep3d.cache.maintenance import verify
+    from tests.conftest import REPO
+
+    body = TRUTH_SPEC.replace("x = [0.0, 0.5, 1.6, 2.5]", "x = { range = [-0.6, 0.6] }").replace(
+        '[policy]\ntype = "grid"', '[policy]\ntype = "grid"\nsamples_per_dim = 12').replace(
+        "samples = 1", "samples = 48")  # 24 renders, slow enough that the first segment holds only some
+    spec = write_spec(tmp_path, body)
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    proc = subprocess.Popen([sys.executable, "-m", "sweep3d", "run", str(spec), "--no-report"], env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    segments = tmp_path / "store" / "tables" / "truths"
+    deadline = time.monotonic() + 300
+    while proc.poll() is None and time.monotonic() < deadline and not list(segments.glob("*.parquet")):
+        time.sleep(0.05)
+    os.killpg(proc.pid, signal.SIGKILL)  # mid-run: some renders and their truths recorded, not all
+    proc.wait()
+    store = Store(tmp_path / "store")
+    done = store.keys("truths")
+    assert 0 < len(done) < 24, f"the kill landed with {len(done)} of 24 truth rows recorded"
+    assert store.keys("renders") and verify(tmp_path / "store").ok
+    run_cli(spec)
+    con = store.connect("truth")
+    assert con.execute("SELECT count(*), count(DISTINCT truth_key) FROM truths").fetchone() == (24, 24)
+    assert con.execute("SELECT count(*) FROM results WHERE visible_fraction IS NULL").fetchone()[0] == 0
+    assert verify(tmp_path / "store").ok
+    assert stage_counts(spec) == {"render": 0, "infer": 0}
