@@ -50,6 +50,8 @@ class Control:
     periodic: ClassVar[dict[str, float]] = {}
     #: Bumped when the control's effect on pixels changes, so old cache entries are not reused.
     version: ClassVar[int] = 1
+    #: Render passes the control needs beside the image ("mask", "depth"; see ``sweep3d.truth``).
+    passes: ClassVar[tuple[str, ...]] = ()
 
     def __init__(self, control_id: str, type_name: str) -> None:
         self.id = control_id

@@ -33,6 +33,7 @@ FIXTURE_MARKERS = {
     "tiny_copy": ("slow", "blender", "torch"),
     "blender_scene": ("blender",),
     "parts_run": ("slow", "blender", "torch"),  # test_part_visibility: a real run with the UV pass
+    "truth_run": ("slow", "blender", "torch"),  # test_truth: a real run with the mask and depth passes
     "lite0": ("torch",),  # test_infer: the pretrained model
     "large_report": ("slow",),  # test_report_scale: a synthetic store of 10 000 results and its report
 }

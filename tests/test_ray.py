@@ -37,6 +37,12 @@ def _visible_parts(folder: Path) -> dict[str, list[int]]:
     return {key: [p for p, n in zip(parts, pixels) if n >= 0.05 * total] for key, parts, pixels, total in rows}
 
 
+def _truths(folder: Path) -> dict[str, tuple]:
+    rows = Store(folder / "store").connect("tiny").execute(
+        "SELECT truth_key, gt_x0, gt_y0, gt_x1, gt_y1, round(visible_fraction, 2) FROM truths").fetchall()
+    return {row[0]: row[1:] for row in rows}
+
+
 def test_ray_executor_gives_the_local_results(local_cluster, tmp_path: Path, monkeypatch) -> None:
     from sweep3d.stages.infer import ray_actor
 
@@ -51,13 +57,18 @@ def test_ray_executor_gives_the_local_results(local_cluster, tmp_path: Path, mon
     ray_dir, local_dir = tmp_path / "ray", tmp_path / "local"
     for folder in (ray_dir, local_dir):
         folder.mkdir()
-        write_spec(folder, TINY_SPEC + "\n[report]\npart_visibility = true\n")  # with the UV pass
+        # with the UV pass and the truth passes, whose blobs the driver writes as it writes the images
+        write_spec(folder, TINY_SPEC + "\n[report]\npart_visibility = true\n\n[evaluator]\npasses = [\"mask\", \"depth\"]\n")
     on_ray = run(load_spec(ray_dir / "spec.toml"), executor=Executor("ray"))
     assert sum(batches) == 8, "inference ran on the Ray actor"
     assert on_ray.failed == 0 and on_ray.outcome("render").computed == 4
     assert run(load_spec(local_dir / "spec.toml")).failed == 0
     assert _results(ray_dir) == _results(local_dir)
     assert _visible_parts(ray_dir) == _visible_parts(local_dir) and len(_visible_parts(ray_dir)) == 4
+    assert _truths(ray_dir) == _truths(local_dir) and len(_truths(ray_dir)) == 4
+    store = Store(ray_dir / "store")
+    assert all(store.blob_path(key, "mask.png").exists() and store.blob_path(key, "depth.npz").exists()
+               for key in _truths(ray_dir))
     again = run(load_spec(ray_dir / "spec.toml"), executor=Executor("ray"))  # resumes from the store
     assert again.outcome("render").computed == 0
 

@@ -239,7 +239,9 @@ def pareto(rows: list[BenchRow]) -> list[BenchRow]:
 
 def _with(loaded: LoadedSpec, setting: Setting) -> LoadedSpec:
     render = loaded.spec.render.model_copy(update=setting.render_update(loaded.spec.render.resolution))
-    return dataclasses.replace(loaded, spec=loaded.spec.model_copy(update={"render": render}))
+    # the bench times images: the spec's truth passes (mask, depth) would add their own cost
+    evaluator = loaded.spec.evaluator.model_copy(update={"passes": []})
+    return dataclasses.replace(loaded, spec=loaded.spec.model_copy(update={"render": render, "evaluator": evaluator}))
 
 
 def _sample(plan: Plan, jobs: int, seed: int) -> list[int]:

@@ -9,6 +9,7 @@ so a reader sees every row exactly once before, during and after them.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import time
@@ -24,6 +25,7 @@ from sweep3d.cache.store import (
     BLOB_TABLES,
     KEY_COLUMN,
     TABLES,
+    TRUTH_BLOBS,
     Store,
     atomic_write,
     segment_name,
@@ -93,7 +95,35 @@ def verify(root: Path) -> Verification:
             if not blob_is_intact(data, digests):
                 detail = "content does not match its recorded SHA-256" if digests else "does not decode"
                 report.problems.append(Problem("corrupt blob", table, path, key, detail))
+    _verify_truth_blobs(store, report)
     return report
+
+
+def _verify_truth_blobs(store: Store, report: Verification) -> None:
+    """Re-hash the mask and depth blobs the ``truths`` rows record (truth passes, when used)."""
+    data = store.table("truths")
+    if data is None:
+        return
+    rows = data.to_pylist()
+    for suffix, column in TRUTH_BLOBS.items():
+        digests: dict[str, set[str]] = {}
+        for row in rows:
+            if row.get(column):
+                digests.setdefault(row["truth_key"], set()).add(row[column])
+        for key, wanted in sorted(digests.items()):
+            path = store.blob_path(key, suffix)
+            report.blobs += 1
+            try:
+                ok = hashlib.sha256(path.read_bytes()).hexdigest() in wanted
+            except FileNotFoundError:
+                report.problems.append(Problem("missing blob", "truths", path, key))
+                continue
+            except OSError as exc:
+                report.problems.append(Problem("corrupt blob", "truths", path, key, exc.strerror or str(exc)))
+                continue
+            if not ok:
+                report.problems.append(Problem("corrupt blob", "truths", path, key,
+                                               "content does not match its recorded SHA-256"))
 
 
 def repair(root: Path, report: Verification) -> int:
@@ -118,6 +148,15 @@ def repair(root: Path, report: Verification) -> int:
                 if blob.exists():
                     store.quarantine(blob)
             fixed += len(keys)
+    truths = {p.key for p in report.problems if p.table == "truths" and p.key is not None}
+    if truths:  # the next run that needs them renders the passes again
+        store.drop_rows("truths", truths)
+        for key in truths:
+            for suffix in TRUTH_BLOBS:
+                blob = store.blob_path(key, suffix)
+                if blob.exists():
+                    store.quarantine(blob)
+        fixed += len(truths)
     return fixed
 
 
@@ -139,7 +178,7 @@ def collect_garbage(root: Path, older_than: float = TEMP_AGE, purge_quarantine: 
     """
     store = Store(root)
     referenced: set[str] = set()
-    for table in BLOB_TABLES:
+    for table in (*BLOB_TABLES, "truths"):  # a truth key owns its mask and depth blobs
         referenced |= store.keys(table)
     out = Collected()
     now = time.time()

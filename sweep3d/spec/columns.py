@@ -7,15 +7,22 @@ Every control parameter becomes a column ``<control id>_<param>`` of the experim
 
 from __future__ import annotations
 
+from sweep3d.cache.store import MIN_VISIBLE_METADATA as MIN_VISIBLE_KEY
+
 #: The jobs table's own columns, besides the control parameters.
 JOB_COLUMNS = ("experiment", "job", "object", "environment", "render_key", "image_key", "pred_key",
                "parts_key", "in_frame", "model")
+#: Columns the ground-truth passes add to ``results`` (see ``sweep3d.truth``), reserved even when off.
+TRUTH_RESULT_COLUMNS = ("truth_key", "gt_x0", "gt_y0", "gt_x1", "gt_y1", "visible_pixels", "silhouette_pixels",
+                        "visible_fraction", "evaluable")
 #: Bookkeeping columns every prediction row has, besides its evaluator's columns.
 PREDICTION_COLUMNS = ("pred_key", "image_key", "model", "model_digest", "seconds", "created_at")
 #: Parquet metadata key of a jobs file holding its parameter columns (a JSON list, in spec order).
 PARAMETERS_METADATA = b"sweep3d.parameters"
 #: Parquet metadata key of a jobs file holding the models its rows name (a JSON list, in spec order).
 MODELS_METADATA = b"sweep3d.models"
+#: Parquet metadata key of a jobs file planned with truth passes: ``[evaluator] min_visible``.
+MIN_VISIBLE_METADATA = MIN_VISIBLE_KEY
 
 
 def parameter_column(control_id: str, param: str) -> str:

@@ -19,7 +19,7 @@ from sweep3d.controls import Control, is_spec_path
 from sweep3d.errors import SpecError, UserError
 from sweep3d.spec.assets import resolve_hdri, resolve_mesh
 from sweep3d.spec.catalogue import Catalogue
-from sweep3d.spec.columns import JOB_COLUMNS, PREDICTION_COLUMNS, parameter_column
+from sweep3d.spec.columns import JOB_COLUMNS, PREDICTION_COLUMNS, TRUTH_RESULT_COLUMNS, parameter_column
 from sweep3d.spec.models import (
     EnvironmentSpec,
     EvaluatorSpec,
@@ -295,7 +295,7 @@ def _check_columns(spec: Spec, controls: list[ControlInstance], fail, catalogue:
     """Refuse a parameter whose column would collide with another column of ``jobs`` or ``results``
     (``render`` + ``key`` would shadow ``render_key``; ``a`` + ``b_c`` and ``a_b`` + ``c`` would merge)."""
     evaluator = catalogue.evaluators.get(spec.evaluator.kind) if ":" not in spec.evaluator.kind else None
-    reserved = set(JOB_COLUMNS) | set(PREDICTION_COLUMNS) | set(getattr(getattr(evaluator, "schema", None), "names", ()))
+    reserved = set(JOB_COLUMNS) | set(PREDICTION_COLUMNS) | set(TRUTH_RESULT_COLUMNS) | set(getattr(getattr(evaluator, "schema", None), "names", ()))
     seen: dict[str, str] = {}
     for i, inst in enumerate(controls):
         for param in inst.spaces:

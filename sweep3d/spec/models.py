@@ -100,6 +100,12 @@ class ModelSpec(StrictModel):
 class EvaluatorSpec(StrictModel):
     kind: str = "classification"
     top_k: int = Field(5, ge=1, le=100)
+    passes: list[Literal["mask", "depth"]] = Field(
+        default_factory=list, description="Ground-truth passes to render beside the image: the object's visible "
+                                          "mask (with its box and visible fraction) and depth. Not in the render key.")
+    min_visible: float = Field(
+        0.1, ge=0.0, le=1.0, description="A job whose object shows less than this share of its unoccluded, "
+                                         "unclipped silhouette is not evaluable (needs the mask pass).")
 
 
 class ObjectSpec(StrictModel):

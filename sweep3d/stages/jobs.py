@@ -22,12 +22,13 @@ from typing import Any, Callable, Iterator, Sequence, overload
 import numpy as np
 import pyarrow as pa
 
-from sweep3d.spec.columns import PARAMETERS_METADATA, parameter_column
+from sweep3d.spec.columns import MIN_VISIBLE_METADATA, PARAMETERS_METADATA, parameter_column
 from sweep3d.spec.framing import Framing
 from sweep3d.spec.loader import LoadedSpec
 from sweep3d.spec.space import Point
 
-_FIELDS = ("index", "object", "environment", "values", "render_key", "image_key", "pred_key", "point", "parts_key")
+_FIELDS = ("index", "object", "environment", "values", "render_key", "image_key", "pred_key", "point", "parts_key",
+           "truth_key")
 
 
 class Job(tuple):
@@ -46,9 +47,9 @@ class Job(tuple):
 
     def __new__(cls, index: int, object: str, environment: str, values: dict[str, dict[str, Any]],
                 render_key: str, image_key: str, pred_key: str, point: Point | None = None,
-                parts_key: str | None = None) -> Job:
+                parts_key: str | None = None, truth_key: str | None = None) -> Job:
         return tuple.__new__(cls, (index, object, environment, values, render_key, image_key, pred_key, point,
-                                   parts_key, None))
+                                   parts_key, truth_key, None))
 
     index: int = property(itemgetter(0))  # type: ignore[assignment]
     object: str = property(itemgetter(1))  # type: ignore[assignment]
@@ -57,15 +58,16 @@ class Job(tuple):
     image_key: str = property(itemgetter(5))  # type: ignore[assignment]
     pred_key: str = property(itemgetter(6))  # type: ignore[assignment]
     parts_key: str | None = property(itemgetter(8))  # type: ignore[assignment]
+    truth_key: str | None = property(itemgetter(9))  # type: ignore[assignment]
 
     @property
     def values(self) -> dict[str, dict[str, Any]]:
-        block = self[9]
+        block = self[10]
         return self[3] if block is None else block.values(self[0] - block.start)
 
     @property
     def point(self) -> Point | None:
-        block = self[9]
+        block = self[10]
         return self[7] if block is None else block.point(self[0] - block.start)
 
     @property
@@ -171,6 +173,7 @@ class PlanColumns:
     pred_keys: list[str]
     parts_keys: list[str] | None
     in_frame: np.ndarray
+    truth_keys: list[str] | None = None
 
     @property
     def size(self) -> int:
@@ -191,8 +194,9 @@ class PlanColumns:
         rows = indices[lo:hi].tolist()
         keys = [[column[i] for i in rows] for column in (self.render_keys, self.image_keys, self.pred_keys)]
         parts = [self.parts_keys[i] for i in rows] if self.parts_keys is not None else repeat(None)
+        truths = [self.truth_keys[i] for i in rows] if self.truth_keys is not None else repeat(None)
         fields = zip(rows, repeat(block.object), repeat(block.environment), repeat(None), *keys, repeat(None),
-                     parts, repeat(block))
+                     parts, truths, repeat(block))
         return [make(Job, f) for f in fields]
 
     def block_of(self, index: int) -> SceneBlock:
@@ -201,9 +205,11 @@ class PlanColumns:
     def table(self, experiment: str, parameter_columns: list[str]) -> pa.Table:
         """The jobs table, column for column what ``pa.Table.from_pylist(plan.rows())`` makes."""
         names = list(_first_row_names(self.blocks[0], parameter_columns)) if self.blocks else []
+        if self.truth_keys is not None and names:  # only with truth passes: other plans stay as they were
+            names.append("truth_key")
         keys = {"render_key": self.render_keys, "image_key": self.image_keys, "pred_key": self.pred_keys,
                 "parts_key": self.parts_keys if self.parts_keys is not None else [None] * self.size,
-                "in_frame": self.in_frame}
+                "in_frame": self.in_frame, "truth_key": self.truth_keys}
         fixed = {"experiment": lambda: [experiment] * self.size, "job": lambda: np.arange(self.size, dtype=np.int64),
                  "object": lambda: self._repeat("object"), "environment": lambda: self._repeat("environment")}
         arrays = []
@@ -349,7 +355,10 @@ class Plan:
                 for param, value in values.items():
                     row[parameter_column(control_id, param)] = value
             row.update(render_key=job.render_key, image_key=job.image_key, pred_key=job.pred_key,
-                       parts_key=job.parts_key, in_frame=id(job) not in flagged, model=self.model or self.spec.model.label)
+                       parts_key=job.parts_key, in_frame=id(job) not in flagged)
+            if job.truth_key is not None:  # only with truth passes: other plans' tables stay as they were
+                row["truth_key"] = job.truth_key
+            row["model"] = self.model or self.spec.model.label
             out.append(row)
         return out
 
@@ -365,7 +374,10 @@ class Plan:
                                                           pa.string()))
         else:
             table = pa.Table.from_pylist(self.rows())
-        return table.replace_schema_metadata({PARAMETERS_METADATA: json.dumps(self.columns).encode()})
+        metadata = {PARAMETERS_METADATA: json.dumps(self.columns).encode()}
+        if "truth_key" in table.column_names:  # the validity gate's threshold, for the results view
+            metadata[MIN_VISIBLE_METADATA] = repr(float(self.spec.evaluator.min_visible)).encode()
+        return table.replace_schema_metadata(metadata)
 
 
 def _whole(plan: Plan) -> PlanColumns | None:

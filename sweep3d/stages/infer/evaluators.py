@@ -21,6 +21,8 @@ class Evaluator:
     """Base of evaluators: ``schema`` lists the columns ``evaluate`` returns, one row per image."""
 
     schema: ClassVar[pa.Schema]
+    #: Render passes the evaluator needs beside the image ("mask", "depth"; see ``sweep3d.truth``).
+    passes: ClassVar[tuple[str, ...]] = ()
 
     def __init__(self, top_k: int = 5) -> None:
         self.top_k = top_k

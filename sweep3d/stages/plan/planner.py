@@ -23,11 +23,12 @@ from sweep3d.spec.sniff import unreadable
 from sweep3d.spec.space import Point, SearchSpace
 from sweep3d.stages.infer.keys import infer_base, pred_keys
 from sweep3d.stages.jobs import JobList, Plan, PlanColumns, SceneBlock
+from sweep3d.stages.passes import truth_passes
 from sweep3d.stages.plan.batch import ControlBatch, control_batch, groups, keyed_texts
 from sweep3d.stages.plan.policies import Outcome
 from sweep3d.stages.postprocess.keys import image_template
 from sweep3d.stages.render.controls.base import frame_fields
-from sweep3d.stages.render.keys import parts_keys, render_template, scene_key
+from sweep3d.stages.render.keys import parts_keys, render_template, scene_key, truth_keys
 from sweep3d.stages.render.state import SceneState, in_frame, in_frame_many
 
 #: What an adaptive policy learns per scene: the outcome of each point already evaluated.
@@ -44,6 +45,8 @@ class _Keys:
     image: list[str] = field(default_factory=list)
     pred: list[str] = field(default_factory=list)
     parts: list[str] | None = None
+    truth: list[str] | None = None
+    truth_passes: tuple[str, ...] = ()
     in_frame: list[np.ndarray] = field(default_factory=list)
 
 
@@ -72,7 +75,8 @@ def make_plan(spec: LoadedSpec, *, framing: Framing, model_digest: str, blender:
     settings = spec.render.key_part(framing.key_part())
     base = infer_base(model_digest, {"kind": spec.evaluator.kind, "top_k": spec.evaluator.top_k},
                       model.backend)
-    keys = _Keys(parts=[] if spec.report.part_visibility else None)
+    passes = truth_passes(spec)
+    keys = _Keys(parts=[] if spec.report.part_visibility else None, truth=[] if passes else None, truth_passes=passes)
     blocks: list[SceneBlock] = []
     hdri_digests = _hdri_digests(spec)
     for i, obj in enumerate(spec.objects):
@@ -100,7 +104,7 @@ def make_plan(spec: LoadedSpec, *, framing: Framing, model_digest: str, blender:
                             [batches[c.id] for c in post if c.id in batches], base, truth, lo, min(n, lo + KEY_CHUNK))
             keys.in_frame.append(_in_frame(rendered, batches, n))
     mask = np.concatenate(keys.in_frame) if keys.in_frame else np.zeros(0, bool)
-    plan = PlanColumns(blocks, keys.render, keys.image, keys.pred, keys.parts, mask)
+    plan = PlanColumns(blocks, keys.render, keys.image, keys.pred, keys.parts, mask, keys.truth)
     return Plan(spec, JobList(plan, np.flatnonzero(mask)), model_digest, JobList(plan, np.flatnonzero(~mask)), framing,
                 model.label)
 
@@ -125,6 +129,8 @@ def _scene_keys(spec: LoadedSpec, keys: _Keys, scene: str, rendered: list[Contro
     keys.pred += pred_keys(base, images, truth)
     if keys.parts is not None:
         keys.parts += parts_keys(renders)
+    if keys.truth is not None:
+        keys.truth += truth_keys(renders, keys.truth_passes)
 
 
 def _render_keys(scene: str, rendered: list[ControlBatch], rows: np.ndarray, repeats: bool) -> list[str]:

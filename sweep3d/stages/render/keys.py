@@ -3,7 +3,8 @@
 ``render_key`` hashes the Blender version, the render settings that change pixels (with the
 resolved frame), the mesh's and the HDRI's *content*, and the rendered controls that apply to the
 job and are not at their neutral values. Extra passes leave the RGB image alone, so they are keyed
-apart: ``parts_key`` names what a UV pass saw in one render.
+apart: ``parts_key`` names what a UV pass saw in one render, ``truth_key`` what the truth passes
+(mask, depth) gave it.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from typing import Any, Sequence
 
 from sweep3d.cache.keys import Hole, Template, digest, digests
 from sweep3d.parts import PARTS_LAYOUT
+from sweep3d.truth import TRUTH_VERSION
 
 #: Bumped when rendering changes pixels for the same inputs, so old renders are not reused.
 RENDER_STAGE_VERSION = 1
@@ -50,3 +52,17 @@ def parts_keys(renders: Sequence[str]) -> list[str]:
 
 def _parts_value(render: str | Hole) -> dict[str, Any]:
     return {"stage": "parts", "layout": PARTS_LAYOUT, "render": render}
+
+
+def truth_key(render: str, passes: Sequence[str]) -> str:
+    """The key of the ground truth (mask, depth, box, visibility) the truth passes give one render."""
+    return digest(_truth_value(render, passes))
+
+
+def truth_keys(renders: Sequence[str], passes: Sequence[str]) -> list[str]:
+    """:func:`truth_key` of many renders."""
+    return digests(Template(_truth_value(Hole("render"), passes)).fill(["render"], render=renders))
+
+
+def _truth_value(render: str | Hole, passes: Sequence[str]) -> dict[str, Any]:
+    return {"stage": "truth", "v": TRUTH_VERSION, "passes": sorted(passes), "render": render}

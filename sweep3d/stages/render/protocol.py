@@ -34,7 +34,8 @@ class RenderSettings:
     Args:
         resolution: the square frame's side in pixels.
         crop: the centre square actually rendered and stored (None: the whole frame).
-        passes: extra passes beside the RGB image ("uv": the parts seen, for part visibility).
+        passes: extra passes beside the RGB image ("uv": the parts seen, for part visibility;
+            "mask", "depth": the truth passes, see ``sweep3d.truth``).
         threads: Cycles threads per worker; 0 = all cores.
     """
 
@@ -74,7 +75,7 @@ class RenderJob:
 
     Args:
         blob: the store path the PNG is written to; None when the render is already stored and
-            the job is here only for its UV pass.
+            the job is here only for its UV or truth passes.
     """
 
     render_key: str
@@ -101,6 +102,7 @@ class RenderInfo:
     height: int
     parts: dict[str, Any] | None = None
     load_seconds: float = 0.0
+    truth: dict[str, Any] | None = None  # the truth passes' numbers (``sweep3d.truth.ground_truth``)
 
     @property
     def render_seconds(self) -> float:
@@ -118,6 +120,8 @@ class RenderReply:
             stops the run with a user error; "internal" otherwise.
         png: the pixels, when the worker keeps them for the caller to write (Ray: the driver
             writes every blob, so workers need no shared file system).
+        truth: the truth passes' blobs by pass ("mask", "depth"), always returned: the render
+            stage writes them (and records their digests) in the parent, local or Ray alike.
     """
 
     render_key: str
@@ -126,6 +130,7 @@ class RenderReply:
     error: str | None = None
     kind: Literal["user", "internal"] = "internal"
     png: bytes | None = None
+    truth: dict[str, bytes] | None = None
 
 
 @dataclass(frozen=True)

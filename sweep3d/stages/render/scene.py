@@ -34,8 +34,10 @@ from sweep3d.stages.render.protocol import EnvironmentRef, RenderSettings
 from sweep3d.stages.render.render_log import RenderLog
 from sweep3d.stages.render.skins import SkinMaterials
 from sweep3d.stages.render.state import SENSOR_WIDTH_MM, SceneState
+from sweep3d.stages.render.truth_pass import TruthPass
 from sweep3d.stages.render.uv_pass import UVPass
 from sweep3d.stages.render.world import WorldNodes
+from sweep3d.truth import TRUTH_PASSES
 
 IMPORTERS = {
     ".obj": ("wm.obj_import", {}),
@@ -117,6 +119,8 @@ class BlenderScene:
         self.frame = scratch / f"frame-{os.getpid()}.png"
         self.uv_pass = UVPass(bpy, scene, scratch) if "uv" in settings.passes else None
         self.parts: dict[str, Any] | None = None  # what the UV pass saw in the latest render
+        truth = tuple(p for p in settings.passes if p in TRUTH_PASSES)
+        self.truth_pass = TruthPass(bpy, scene, scratch, truth) if truth else None
 
     @staticmethod
     def _configure(scene, s: RenderSettings) -> None:
@@ -227,6 +231,9 @@ class BlenderScene:
                 obj.parent = normaliser
                 obj.matrix_parent_inverse.identity()
                 obj.matrix_basis = world
+        if self.truth_pass is not None:
+            for obj in meshes:
+                obj.pass_index = 1  # the mask: the object's pixels, not the ground or the occluder
         if self.uv_pass is not None:
             bpy.context.view_layer.update()
             to_pose = self.pose.matrix_world.inverted()
@@ -346,6 +353,8 @@ class BlenderScene:
             self.load_seconds += self.log.setup_seconds() or 0.0
         if self.uv_pass is not None:
             self.parts = self.uv_pass.read()
+        if self.truth_pass is not None:
+            self.truth_pass.read(self)  # may render again, index only, for the visible fraction
         with Image.open(self.frame) as img:
             rgba = np.asarray(img.convert("RGBA"), dtype=np.float32) / 255.0
         rgb, alpha = rgba[..., :3], rgba[..., 3:]

@@ -11,6 +11,13 @@ gives each worker a contiguous share of that order (see :func:`_groups`).
 When the report asks for part visibility, workers also write a UV pass and each render records
 which parts of the object it shows (the ``parts`` table, one row per ``parts_key``). A render
 that is cached but lacks that row is rendered again for the pass only: its blob is kept.
+
+The truth passes (object mask, depth; see :mod:`sweep3d.truth`) work the same way, when
+something needs them (:func:`sweep3d.stages.passes.needed_passes`): each render adds a
+``truths`` row under its ``truth_key`` (box, visible pixels, visible fraction, the digests of
+its blobs), and its blobs go to ``blobs/ab/<truth_key>.mask.png`` / ``.depth.npz``, written here
+in the parent (workers return their bytes, local and Ray alike) before the row is yielded. A
+cached render whose truth row or blobs are missing is rendered again for the passes only.
 """
 
 from __future__ import annotations
@@ -23,12 +30,13 @@ from typing import Iterator
 import pyarrow as pa
 
 from sweep3d.cache.blobs import sha256_bytes
-from sweep3d.cache.store import DIGEST_COLUMN, Store, utc_now
+from sweep3d.cache.store import DIGEST_COLUMN, TRUTH_BLOBS, Store, atomic_write, utc_now
 from sweep3d.errors import SpecError, UserError
 from sweep3d.parts import PARTS_LAYOUT
 from sweep3d.spec.assets import materialise_mesh
 from sweep3d.stages.driver import Computed, Feed
 from sweep3d.stages.jobs import Job, Plan
+from sweep3d.stages.passes import needed_passes, truth_passes
 from sweep3d.stages.render.pool import RenderPool
 from sweep3d.stages.render.protocol import (
     EnvironmentRef,
@@ -38,6 +46,7 @@ from sweep3d.stages.render.protocol import (
     RenderReply,
     RenderSettings,
 )
+from sweep3d.truth import BLOB_SUFFIX
 
 GROUP_SIZE = 32  # jobs sent to a worker at once; a scene's jobs stay together in order
 
@@ -49,6 +58,13 @@ PARTS_SCHEMA = pa.schema([
     ("parts_key", pa.string()), ("render_key", pa.string()), ("layout", pa.string()),
     ("parts", pa.list_(pa.int16())), ("pixels", pa.list_(pa.int32())), ("object_pixels", pa.int32()),
     ("created_at", pa.timestamp("us")),
+])
+TRUTHS_SCHEMA = pa.schema([
+    ("truth_key", pa.string()), ("render_key", pa.string()), ("passes", pa.list_(pa.string())),
+    ("gt_x0", pa.int32()), ("gt_y0", pa.int32()), ("gt_x1", pa.int32()), ("gt_y1", pa.int32()),
+    ("visible_pixels", pa.int64()), ("silhouette_pixels", pa.int64()), ("visible_fraction", pa.float64()),
+    ("silhouette", pa.string()), ("truth_seconds", pa.float64()),
+    ("mask_sha256", pa.string()), ("depth_sha256", pa.string()), ("created_at", pa.timestamp("us")),
 ])
 
 
@@ -74,9 +90,8 @@ LOCAL = Executor()
 
 def render_settings(plan: Plan) -> RenderSettings:
     """The [render] settings with the resolved frame and the passes to write, as workers need them
-    (the UV pass only for the report's part-visibility panel)."""
-    passes = ("uv",) if plan.spec.report.part_visibility else ()
-    return RenderSettings.from_spec(plan.spec.render, plan.framing, passes)
+    (only those something needs: see :func:`needed_passes`)."""
+    return RenderSettings.from_spec(plan.spec.render, plan.framing, needed_passes(plan.spec))
 
 
 class RenderStage:
@@ -91,7 +106,7 @@ class RenderStage:
     name = "render"
     table = "renders"
     owns_blobs = True
-    side_tables = {"parts": PARTS_SCHEMA}
+    side_tables = {"parts": PARTS_SCHEMA, "truths": TRUTHS_SCHEMA}
 
     def __init__(self, executor: Executor = LOCAL, timings: dict[str, RenderInfo] | None = None) -> None:
         self.executor = executor
@@ -107,11 +122,20 @@ class RenderStage:
         return None
 
     def incomplete(self, plan: Plan, store: Store, cached: set[str]) -> set[str]:
-        """Cached renders whose UV-pass parts the store lacks (when the report asks for them)."""
-        if not plan.spec.report.part_visibility:
-            return set()
-        have = store.keys("parts")
-        return {j.render_key for j in plan.jobs if j.render_key in cached and j.parts_key not in have}
+        """Cached renders whose UV-pass parts (when the report asks for them) or truth row and
+        blobs (when something needs the truth passes) the store lacks."""
+        out: set[str] = set()
+        if plan.spec.report.part_visibility:
+            have = store.keys("parts")
+            out |= {j.render_key for j in plan.jobs if j.render_key in cached and j.parts_key not in have}
+        passes = truth_passes(plan.spec)
+        if passes:
+            have = store.keys("truths")
+            wanted = {j.truth_key: j.render_key for j in plan.jobs if j.render_key in cached}
+            for suffix in (BLOB_SUFFIX[p] for p in passes):
+                have &= store.existing_blobs(have & set(wanted), suffix)
+            out |= {render for truth, render in wanted.items() if truth not in have}
+        return out
 
     def compute(self, todo: Feed, plan: Plan, store: Store) -> Iterator[Computed]:
         stored = {j.render_key for j in todo if store.blob_path(j.render_key).exists()} & store.keys("renders")
@@ -135,6 +159,12 @@ class RenderStage:
                         yield Computed(job.render_key, error="the worker reported success but its blob cannot be read")
                         continue
                 side = {"parts": _parts_row(job, reply)} if job.parts_key is not None else {}
+                if job.truth_key is not None:
+                    truth = _truth_row(store, job, reply)
+                    if truth is None:
+                        yield Computed(job.render_key, error="the worker rendered no truth passes")
+                        continue
+                    side["truths"] = truth
                 yield Computed(job.render_key, row, side)
 
 
@@ -152,6 +182,20 @@ def _parts_row(job: Job, reply: RenderReply) -> dict:
     """The job's visible parts (its worker rendered the UV pass: ``info.parts``)."""
     return {"parts_key": job.parts_key, "render_key": job.render_key, "layout": PARTS_LAYOUT,
             **reply.info.parts, "created_at": utc_now()}
+
+
+def _truth_row(store: Store, job: Job, reply: RenderReply) -> dict | None:
+    """Write the job's truth blobs (mask, depth) and return its ``truths`` row with their digests;
+    None when the worker sent none. Blobs first: a row on disk always has its blobs."""
+    if reply.truth is None or reply.info.truth is None:
+        return None
+    row = {"truth_key": job.truth_key, "render_key": job.render_key, "passes": sorted(reply.truth),
+           **{k: v for k, v in reply.info.truth.items() if k in TRUTHS_SCHEMA.names}, "created_at": utc_now()}
+    for name, data in reply.truth.items():
+        suffix = BLOB_SUFFIX[name]
+        atomic_write(store.blob_path(job.truth_key, suffix), data)
+        row[TRUTH_BLOBS[suffix]] = sha256_bytes(data)
+    return row
 
 
 def _groups(plan: Plan, store: Store, todo: list[Job], stored: set[str]) -> list[list[RenderJob]]:

@@ -102,7 +102,8 @@ def render_job(scene, job: RenderJob, keep_pixels: bool = False) -> RenderReply:
         The reply for the parent. With ``keep_pixels`` it carries the PNG bytes instead of
         writing them to ``job.blob`` (so a remote worker needs no shared file system: the driver
         writes the store). A job whose ``blob`` is None is rendered only for its UV pass: no
-        pixels are written or returned. With the UV pass on, ``info.parts`` holds what it saw.
+        pixels are written or returned. With the UV pass on, ``info.parts`` holds what it saw;
+        with truth passes on, ``info.truth`` their numbers and ``reply.truth`` their blobs.
         ``info.load_seconds`` is the part of ``info.seconds`` its scene switch took (see
         ``BlenderScene.load_seconds``; 0 when the scene was already shown).
         A :class:`UserError` (the spec's input, a full disk) gives kind "user"; any other
@@ -130,9 +131,12 @@ def render_job(scene, job: RenderJob, keep_pixels: bool = False) -> RenderReply:
                 if orphaned():  # its run was killed: the store is no longer ours to write
                     os._exit(1)
                 atomic_write(Path(job.blob), png)
+        truth = getattr(scene, "truth_pass", None)
         info = RenderInfo(seconds=time.perf_counter() - started, valid=finite, width=rgb.shape[1],
-                          height=rgb.shape[0], parts=scene.parts, load_seconds=scene.load_seconds)
-        return RenderReply(key, True, info, png=png if keep_pixels else None)
+                          height=rgb.shape[0], parts=scene.parts, load_seconds=scene.load_seconds,
+                          truth=truth.truth if truth is not None else None)
+        return RenderReply(key, True, info, png=png if keep_pixels else None,
+                           truth=dict(truth.blobs) if truth is not None else None)
     except UserError as exc:  # the spec's input (a mesh, an HDRI) or a full disk: exit 2
         return RenderReply(key, False, error=str(exc), kind="user")
     except Exception as exc:  # noqa: BLE001  (one bad job must not kill the sweep)

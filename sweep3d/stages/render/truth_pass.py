@@ -1,0 +1,168 @@
+"""The truth passes (object mask, depth), written only when a consumer asks for them.
+
+Like the UV pass, the passes are part of the worker's settings (with persistent render data a
+pass switched on after the first render comes back empty) and are written by a compositor File
+Output node next to the frame: here as 32-bit float single-channel EXRs, read back through
+``bpy.data.images`` (Blender's Render Result holds no pixels headless). They leave the RGB image
+alone. The object's meshes carry ``pass_index = 1`` (set when loaded), so the object index pass
+is the object's *visible* pixels: the occluder and the ground are index 0. Index passes are not
+anti-aliased: a pixel is the object's or not.
+
+The visible fraction's denominator is the object's silhouette with no occluder and an infinite
+frame. When no prop is shown and the object's projected vertices lie inside the stored image,
+that is the mask itself (no extra render). Otherwise a second, index-only render (1 sample, no
+denoiser, occluder and ground hidden) is made over a frame enlarged around the same camera axis
+with the same pixel pitch, restricted by a render border to the object's projected box; a box
+over :data:`MAX_SILHOUETTE_PIXELS` is rendered at a coarser pitch and its count scaled back.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sweep3d.truth import encode_depth, encode_mask, ground_truth
+
+SLOTS = ("index", "depth")
+#: Pixels of the enlarged silhouette render above which it is rendered at a coarser pitch.
+MAX_SILHOUETTE_PIXELS = 512 * 512
+NO_SURFACE = 1e9  # Cycles writes 1e10 in the depth pass where a ray hits nothing
+
+
+class TruthPass:
+    """Sets up the passes in ``scene`` and reads them back after each render.
+
+    Args:
+        passes: the truth passes to keep ("mask", "depth"); the mask is always read (the
+            ground-truth numbers come from it).
+    """
+
+    def __init__(self, bpy, scene, scratch: Path, passes: tuple[str, ...]) -> None:
+        self.bpy = bpy
+        self.scene = scene
+        self.passes = passes
+        self.folder = scratch / f"truth-{os.getpid()}"
+        layer = scene.view_layers[0]
+        layer.use_pass_object_index = True
+        layer.use_pass_z = True
+        scene.use_nodes = True
+        scene.render.use_compositing = True
+        tree = scene.node_tree
+        layers = next(n for n in tree.nodes if n.bl_idname == "CompositorNodeRLayers")
+        out = tree.nodes.new("CompositorNodeOutputFile")
+        out.base_path = str(self.folder)
+        out.format.file_format = "OPEN_EXR"
+        out.format.color_mode = "BW"
+        out.format.color_depth = "32"
+        out.format.exr_codec = "ZIP"
+        out.format.color_management = "OVERRIDE"
+        out.format.view_settings.view_transform = "Raw"
+        out.file_slots.clear()
+        for name in SLOTS:
+            out.file_slots.new(f"{name}_")
+        tree.links.new(layers.outputs["IndexOB"], out.inputs[0])
+        tree.links.new(layers.outputs["Depth"], out.inputs[1])
+        self.frame = scene.frame_current
+        self.truth: dict[str, Any] | None = None  # the latest render's numbers
+        self.blobs: dict[str, bytes] = {}  # ... and its blobs by pass
+
+    def _read(self, name: str) -> np.ndarray:
+        """One slot of the latest render as a float32 (H, W) array, top row first."""
+        path = self.folder / f"{name}_{self.frame:04d}.exr"
+        image = self.bpy.data.images.load(str(path), check_existing=False)
+        try:
+            image.colorspace_settings.is_data = True
+            w, h = image.size
+            pixels = np.empty(w * h * image.channels, dtype=np.float32)
+            image.pixels.foreach_get(pixels)
+        finally:
+            self.bpy.data.images.remove(image)
+        path.unlink()
+        return pixels.reshape(h, w, -1)[::-1, :, 0].copy()
+
+    def read(self, blender_scene) -> None:
+        """Read the passes of the render just made, then count the unoccluded silhouette."""
+        started = time.perf_counter()
+        mask = self._read("index") > 0.5
+        depth = self._read("depth")
+        self.blobs = {"mask": encode_mask(mask)}
+        if "depth" in self.passes:
+            self.blobs["depth"] = encode_depth(np.where(depth < NO_SURFACE, depth, np.inf))
+        silhouette, how = self._silhouette(blender_scene, mask)
+        self.truth = {**ground_truth(mask, silhouette), "silhouette": how,
+                      "truth_seconds": time.perf_counter() - started}
+
+    # -- the visible fraction's denominator ------------------------------------------------------
+    def _silhouette(self, blender_scene, mask: np.ndarray) -> tuple[float | None, str]:
+        """Pixels the object would cover with no occluder in an infinite frame, and how it was
+        found: "mask" (the mask is the whole silhouette), "render" (a second render at the
+        image's pitch), "coarse" (at a coarser one), "unbounded" (None: the object reaches
+        behind the camera)."""
+        bpy = self.bpy
+        settings = blender_scene.settings
+        size, crop = settings.resolution, settings.crop or settings.resolution
+        bpy.context.view_layer.update()
+        points = blender_scene._world_vertices(blender_scene.meshes)
+        camera = blender_scene.camera
+        inverse = np.array(camera.matrix_world.inverted())
+        local = points @ inverse[:3, :3].T + inverse[:3, 3]
+        depth = -local[:, 2]
+        if not np.all(depth > camera.data.clip_start):
+            return None, "unbounded"
+        pitch = camera.data.lens / camera.data.sensor_width * size  # pixels per unit of x / depth
+        x = size / 2 + local[:, 0] / depth * pitch
+        y = size / 2 - local[:, 1] / depth * pitch  # from the top
+        left = (size - crop) // 2
+        props = [p for p in (blender_scene.props.occluder, blender_scene.props.ground) if not p.hide_render]
+        inside = (x.min() >= left + 1 and y.min() >= left + 1 and x.max() <= left + crop - 1
+                  and y.max() <= left + crop - 1)
+        if inside and not props:
+            return float(np.count_nonzero(mask)), "mask"
+        return self._render_silhouette(blender_scene, props, (x.min(), y.min(), x.max(), y.max()))
+
+    def _render_silhouette(self, blender_scene, props: list[Any], bounds: tuple[float, ...]) -> tuple[float, str]:
+        render, cycles = self.scene.render, self.scene.cycles
+        camera = blender_scene.camera.data
+        size = blender_scene.settings.resolution
+        x0, y0, x1, y1 = (math.floor(bounds[0]) - 1, math.floor(bounds[1]) - 1,
+                          math.ceil(bounds[2]) + 1, math.ceil(bounds[3]) + 1)
+        margin = max(0, -x0, -y0, x1 - size, y1 - size)
+        big = size + 2 * margin  # the frame enlarged around the same axis, same pixel pitch
+        x0, y0, x1, y1 = x0 + margin, y0 + margin, x1 + margin, y1 + margin
+        scale = max(1.0, math.sqrt((x1 - x0) * (y1 - y0) / MAX_SILHOUETTE_PIXELS))
+        side = max(1, int(round(big / scale)))
+        scale = big / side
+        saved = {"resolution": (render.resolution_x, render.resolution_y), "sensor": camera.sensor_width,
+                 "border": (render.use_border, render.use_crop_to_border, render.border_min_x, render.border_max_x,
+                            render.border_min_y, render.border_max_y),
+                 "sampling": (cycles.samples, cycles.use_denoising, cycles.use_adaptive_sampling)}
+        try:
+            for prop in props:
+                prop.hide_render = True
+            camera.sensor_width = saved["sensor"] * big / size
+            render.resolution_x = render.resolution_y = side
+            render.use_border = render.use_crop_to_border = True
+            render.border_min_x, render.border_max_x = (x0 / scale + 0.25) / side, (x1 / scale + 0.25) / side
+            render.border_min_y = max(0.0, (side - y1 / scale + 0.25) / side)
+            render.border_max_y = min(1.0, (side - y0 / scale + 0.25) / side)
+            cycles.samples, cycles.use_denoising, cycles.use_adaptive_sampling = 1, False, False
+            self.bpy.ops.render.render(write_still=False)
+            count = float(np.count_nonzero(self._read("index") > 0.5))
+            self._discard("depth")
+        finally:
+            for prop in props:
+                prop.hide_render = False
+            camera.sensor_width = saved["sensor"]
+            render.resolution_x, render.resolution_y = saved["resolution"]
+            (render.use_border, render.use_crop_to_border, render.border_min_x, render.border_max_x,
+             render.border_min_y, render.border_max_y) = saved["border"]
+            cycles.samples, cycles.use_denoising, cycles.use_adaptive_sampling = saved["sampling"]
+        return count * scale * scale, "render" if scale == 1.0 else "coarse"
+
+    def _discard(self, name: str) -> None:
+        (self.folder / f"{name}_{self.frame:04d}.exr").unlink(missing_ok=True)
