@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 from sweep3d.errors import UserError
 from sweep3d.stages.infer import IMAGENET, ClassificationEvaluator, load_model, predict
-from sweep3d.stages.infer.evaluators import log_softmax
+from sweep3d.stages.infer.evaluators import Truth, log_softmax
 from sweep3d.stages.infer.stage import STAND_IN
 from tests.conftest import TINY_SPEC, examples, write_spec
 
@@ -27,7 +27,7 @@ def test_pretrained_model_recognises_a_real_photo(lite0) -> None:
     assert logits.shape == (1, 1000) and np.isfinite(logits).all()
     top = int(logits[0].argmax())
     assert IMAGENET.names[top] in {"espresso", "cup", "coffee mug"}
-    row = ClassificationEvaluator(top_k=5).evaluate(logits, [(IMAGENET.index("espresso"),)], IMAGENET)[0]
+    row = ClassificationEvaluator(top_k=5).evaluate(logits, [Truth((IMAGENET.index("espresso"),))], IMAGENET)[0]
     assert row["valid"] and row["topk_labels"][0] == IMAGENET.names[top]
     assert row["loss"] == pytest.approx(-np.log(row["label_prob"]), rel=1e-6)
 
@@ -68,14 +68,14 @@ def test_log_softmax_is_stable_for_huge_logits(values, label) -> None:
     logp = log_softmax(logits)
     assert np.isfinite(logp).all()
     assert np.exp(logp).sum() == pytest.approx(1.0, abs=1e-9)
-    row = ClassificationEvaluator(top_k=2).evaluate(logits, [(label,)], _names(len(values)))[0]
+    row = ClassificationEvaluator(top_k=2).evaluate(logits, [Truth((label,))], _names(len(values)))[0]
     assert row["valid"] and np.isfinite(row["loss"]) and row["loss"] >= 0
     assert row["correct"] == (int(np.argmax(logits[0])) == label)  # ties go to the first class
 
 
 def test_non_finite_logits_are_flagged_invalid_not_averaged() -> None:
     logits = np.array([[1.0, np.nan, 0.0], [1.0, 2.0, 3.0]], dtype=np.float32)
-    rows = ClassificationEvaluator(top_k=2).evaluate(logits, [(0,), (2,)], _names(3))
+    rows = ClassificationEvaluator(top_k=2).evaluate(logits, [Truth((0,)), Truth((2,))], _names(3))
     assert rows[0]["valid"] is False and rows[0]["correct"] is None and rows[0]["loss"] is None
     assert rows[1]["valid"] and rows[1]["correct"]
 

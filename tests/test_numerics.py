@@ -23,7 +23,7 @@ from sweep3d.spec.params import Range
 from sweep3d.stages import load_spec
 from sweep3d.stages.aggregate import connect, summarise
 from sweep3d.stages.infer import ClassificationEvaluator, LabelMap
-from sweep3d.stages.infer.evaluators import log_softmax
+from sweep3d.stages.infer.evaluators import Truth, log_softmax
 from tests.conftest import CUBE_OBJ, examples, write_spec
 
 
@@ -296,7 +296,7 @@ def test_softmax_and_loss_are_finite_for_extreme_float32_logits(logits, label, c
     x = np.array([logits], dtype=np.float32)
     logp = log_softmax(x)
     assert np.isfinite(logp).all() and np.exp(logp).sum() == pytest.approx(1.0, abs=1e-12)
-    row = ClassificationEvaluator(top_k=3).evaluate(x, [(label,)], _names(x.shape[1]))[0]
+    row = ClassificationEvaluator(top_k=3).evaluate(x, [Truth((label,))], _names(x.shape[1]))[0]
     assert row["valid"] and row["correct"] is correct
     assert math.isfinite(row["loss"]) and row["loss"] >= 0
     assert 0.0 <= row["label_prob"] <= 1.0 and all(0.0 <= p <= 1.0 for p in row["topk_probs"])
@@ -305,16 +305,16 @@ def test_softmax_and_loss_are_finite_for_extreme_float32_logits(logits, label, c
 
 def test_a_label_set_adds_its_probabilities_without_overflow() -> None:
     x = np.array([[3e38, 3e38, -3e38, 0.0]], dtype=np.float32)
-    row = ClassificationEvaluator(top_k=2).evaluate(x, [(0, 1)], _names(4))[0]
+    row = ClassificationEvaluator(top_k=2).evaluate(x, [Truth((0, 1))], _names(4))[0]
     assert row["label_prob"] == pytest.approx(1.0) and row["loss"] == pytest.approx(0.0, abs=1e-12)
-    row = ClassificationEvaluator(top_k=2).evaluate(x, [(1,)], _names(4))[0]
+    row = ClassificationEvaluator(top_k=2).evaluate(x, [Truth((1,))], _names(4))[0]
     assert row["label_prob"] == pytest.approx(0.5) and row["loss"] == pytest.approx(math.log(2))
 
 
 @pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
 def test_any_non_finite_logit_makes_the_row_invalid_not_nan(bad) -> None:
     x = np.array([[1.0, bad, 0.0], [0.0, 1.0, 2.0]], dtype=np.float32)
-    rows = ClassificationEvaluator(top_k=2).evaluate(x, [(0,), (2,)], _names(3))
+    rows = ClassificationEvaluator(top_k=2).evaluate(x, [Truth((0,)), Truth((2,))], _names(3))
     assert rows[0]["valid"] is False and rows[0]["loss"] is None and rows[0]["correct"] is None
     assert rows[1]["valid"] and rows[1]["correct"] and math.isfinite(rows[1]["loss"])
 

@@ -98,8 +98,14 @@ class ModelSpec(StrictModel):
 
 
 class EvaluatorSpec(StrictModel):
-    kind: str = "classification"
+    kind: str = Field("classification", description="classification | localization | detection | segmentation, "
+                                                     "or 'package.module:Class' for your own.")
     top_k: int = Field(5, ge=1, le=100)
+    iou: float = Field(0.5, gt=0.0, le=1.0, allow_inf_nan=False,
+                       description="Localization, detection, segmentation: the IoU with the true box or mask "
+                                   "that counts as correct.")
+    score: float = Field(0.5, ge=0.0, le=1.0, allow_inf_nan=False,
+                         description="Detection: the score a box needs to count.")
     passes: list[Literal["mask", "depth"]] = Field(
         default_factory=list, description="Ground-truth passes to render beside the image: the object's visible "
                                           "mask (with its box and visible fraction) and depth. Not in the render key.")

@@ -1,0 +1,10 @@
+"""Evaluators: a model's outputs and each image's ground truth in, result columns out.
+
+Each task is a module that registers its evaluator; a user's own is named ``module:Class``.
+"""
+
+from sweep3d.stages.infer.evaluators.base import EVALUATORS, OUTCOMES, TASKS, Evaluator, Truth, box_iou, log_softmax
+from sweep3d.stages.infer.evaluators.classification import ClassificationEvaluator
+
+__all__ = ["EVALUATORS", "OUTCOMES", "TASKS", "ClassificationEvaluator", "Evaluator", "Truth", "box_iou",
+           "log_softmax"]
