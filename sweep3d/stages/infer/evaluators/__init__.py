@@ -5,6 +5,7 @@ Each task is a module that registers its evaluator; a user's own is named ``modu
 
 from sweep3d.stages.infer.evaluators.base import EVALUATORS, OUTCOMES, TASKS, Evaluator, Truth, box_iou, log_softmax
 from sweep3d.stages.infer.evaluators.classification import ClassificationEvaluator
+from sweep3d.stages.infer.evaluators.localization import LocalizationEvaluator
 
-__all__ = ["EVALUATORS", "OUTCOMES", "TASKS", "ClassificationEvaluator", "Evaluator", "Truth", "box_iou",
+__all__ = ["EVALUATORS", "OUTCOMES", "TASKS", "ClassificationEvaluator", "Evaluator", "LocalizationEvaluator", "Truth", "box_iou",
            "log_softmax"]
