@@ -33,6 +33,9 @@ Views:
 ``part_visibility``
     only when the spec asks for it (a UV pass): per (object, part of its surface), accuracy
     over the results that show the part (see :mod:`sweep3d.stages.aggregate.parts`).
+``average_precision``, ``average_precision_by_value``
+    only for a detector (results with ``det_scores``): COCO's AP per object and its mean, overall
+    and per level (see :mod:`sweep3d.stages.aggregate.detection`).
 
 Macros:
 
@@ -57,6 +60,7 @@ from sweep3d.cache.store import Store, lock_down
 from sweep3d.errors import UserError
 from sweep3d.spec.columns import JOB_COLUMNS, MODELS_METADATA, PARAMETERS_METADATA
 from sweep3d.stages.aggregate.compare import COMPARE_MACROS, COMPARE_VIEWS, register_compare_views
+from sweep3d.stages.aggregate.detection import DETECTION_VIEWS, detection_views
 from sweep3d.stages.aggregate.parts import register_part_views
 
 MAX_LEVELS = 12  # a numeric parameter with more distinct values is binned
@@ -74,7 +78,7 @@ _ACCURACY = ("n_correct / nullif(n, 0) AS accuracy, wilson_low(n_correct, n) AS 
 
 VIEWS = ("control_values", "control_stats", "control_levels", "control_parameters", "control_accuracy",
          "pair_accuracy", "scene_accuracy", "variance_explained", "object_sensitivity", "object_confusions",
-         "part_visibility", *COMPARE_VIEWS)
+         "part_visibility", *DETECTION_VIEWS, *COMPARE_VIEWS)
 MACROS = ("wilson_low", "wilson_high", "failure_modes", *COMPARE_MACROS)
 
 
@@ -166,6 +170,7 @@ def register_views(con: duckdb.DuckDBPyConnection, parameters: list[str] | None 
     for sql in _view_statements(control_columns(con, parameters), "top1_label" in result_columns):
         con.execute(sql)
     register_part_views(con, set(result_columns))
+    detection_views(con, set(result_columns))
     return True
 
 
