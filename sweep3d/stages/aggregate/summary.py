@@ -92,18 +92,24 @@ def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit:
     scene_count = [[cells.get((o, e), (None, 0))[1] for e in environments] for o in objects]
 
     effects = control_effects(con, columns)
+    # Other tasks' evaluators (detection, a user's own) may lack the classification columns.
+    have = {row[0] for row in con.execute("DESCRIBE results").fetchall()}
+    shown = ["top1_label", "topk_labels", "topk_probs", "loss"]
+    picked = ", ".join(name if name in have else f"NULL AS {name}" for name in shown)
+    worst = "loss DESC" if "loss" in have else "iou NULLS FIRST" if "iou" in have else "job"
     failures = [
-        dict(zip(["job", "object", "environment", "image_key", "top1_label", "topk_labels", "topk_probs", "loss"], r))
+        dict(zip(["job", "object", "environment", "image_key", *shown], r))
         for r in con.execute(
-            "SELECT job, object, environment, image_key, top1_label, topk_labels, topk_probs, loss "
-            "FROM results WHERE valid AND NOT correct ORDER BY loss DESC, job LIMIT ?", [failure_limit]
+            f"SELECT job, object, environment, image_key, {picked} "
+            f"FROM results WHERE valid AND NOT correct ORDER BY {worst}, job LIMIT ?", [failure_limit]
         ).fetchall()
     ]
+    top1 = "top1_label" if "top1_label" in have else "NULL::VARCHAR"
     per_object = [
         dict(zip(["object", "accuracy", "count", "top_wrong"], r))
         for r in con.execute(
             "SELECT object, avg(correct::DOUBLE), count(*), "
-            "mode(top1_label) FILTER (WHERE NOT correct) FROM results WHERE valid GROUP BY 1 ORDER BY 1"
+            f"mode({top1}) FILTER (WHERE NOT correct) FROM results WHERE valid GROUP BY 1 ORDER BY 1"
         ).fetchall()
     ]
     return Summary(jobs, evaluated, invalid, correct, accuracy, objects, environments, scene_accuracy,
