@@ -7,6 +7,8 @@ from sweep3d.stages.infer.models import (
     MODELS,
     Classifier,
     Detector,
+    ImageTensors,
+    Normalize,
     Preprocess,
     Segmenter,
     builtin_labels,
@@ -16,6 +18,6 @@ from sweep3d.stages.infer.models import (
 from sweep3d.stages.infer.stage import InferStage, pending_predictions
 from sweep3d.stages.infer.tasks import predict
 
-__all__ = ["EVALUATORS", "IMAGENET", "MODELS", "ClassificationEvaluator", "Classifier", "Detector", "Evaluator", "InferStage",
-           "LabelMap", "ModelHandle", "Preprocess", "Segmenter", "builtin_labels", "builtin_model", "load_model", "pending_predictions", "predict"]
+__all__ = ["EVALUATORS", "IMAGENET", "MODELS", "ClassificationEvaluator", "Classifier", "Detector", "Evaluator", "ImageTensors", "InferStage",
+           "LabelMap", "ModelHandle", "Normalize", "Preprocess", "Segmenter", "builtin_labels", "builtin_model", "load_model", "pending_predictions", "predict"]
 
