@@ -157,3 +157,16 @@ def test_a_localization_run_records_boxes_and_splits_its_failures(tmp_path: Path
             assert 0 <= x0 < x1 <= side and 0 <= y0 < y1 <= side
         if x0 is not None and true_box[0] is not None:  # the IoU is the recorded boxes' own
             assert iou == pytest.approx(box_iou([x0, y0, x1, y1], true_box)[0])
+
+
+def test_plan_counts_the_passes_in_its_estimate_and_says_so(tmp_path: Path) -> None:
+    from sweep3d.spec.models import RenderSpec
+    from sweep3d.stages.render.estimate import estimate_render_seconds
+
+    render = RenderSpec()
+    plain, passes, hidden = (estimate_render_seconds(render, 224, *flags) for flags in
+                             ((False, False), (True, False), (True, True)))
+    assert plain < passes < hidden
+    spec = write_spec(tmp_path, LOCALIZE_SPEC)
+    result = CliRunner().invoke(app, ["plan", str(spec)])
+    assert result.exit_code == 0 and "mask passes" in " ".join(result.output.split()), result.output
