@@ -165,3 +165,13 @@ def test_the_backend_is_the_spec_s_or_onnx_standing_in_for_the_built_in_model(tm
     write_spec(tmp_path, TINY_SPEC.replace("[model]\n", "[model]\n" + model))
     loaded = load_spec(tmp_path / "spec.toml")
     assert choose_backend(loaded, loaded.model, on_ray) == backend
+
+
+def test_top5_and_label_ids_whatever_top_k() -> None:
+    logits = np.array([[9.0, 8.0, 7.0, 6.0, 5.0, 4.0, 3.0]])
+    names = _names(7)
+    third = ClassificationEvaluator(top_k=1).evaluate(logits, [Truth((2, 6))], names)[0]
+    assert third["correct"] is False and third["correct_top5"] is True and third["label_ids"] == [2, 6]
+    assert len(third["topk"]) == 1  # top_k still bounds the stored ranking
+    sixth = ClassificationEvaluator(top_k=5).evaluate(logits, [Truth((5,))], names)[0]
+    assert sixth["correct_top5"] is False and sixth["correct"] is False

@@ -7,7 +7,7 @@ from typing import Any, Sequence
 from sweep3d.cache.keys import Hole, Template, digest, digests
 
 #: Bumped when inference or evaluation changes results for the same inputs.
-INFER_STAGE_VERSION = 1
+INFER_STAGE_VERSION = 2  # 2: correct_top5 and label_ids in every classification row
 
 
 def infer_base(model_digest: str, evaluator: dict[str, Any], backend: str) -> dict[str, Any]:

@@ -216,7 +216,7 @@ class InferStage:
         """ONNX Runtime standing in for torch, or None (torch) when it cannot: its answers must be
         torch's, so an export that fails or disagrees means torch, with a warning."""
         try:
-            return self._onnx(plan, store, threads, exact_ranks=plan.spec.evaluator.top_k)
+            return self._onnx(plan, store, threads, exact_ranks=max(plan.spec.evaluator.top_k, 5))  # and top-5
         except Exception as exc:  # noqa: BLE001  (whatever stops ONNX Runtime, torch gives the same answers)
             log.warning(f"warning: ONNX Runtime cannot stand in for torch ({str(exc).split(';')[0]}); "
                         "inferring with torch")

@@ -21,6 +21,8 @@ RANKED_FIELDS = [
     ("topk_probs", pa.list_(pa.float32())),
     ("label_prob", pa.float64()),
     ("loss", pa.float64()),
+    ("correct_top5", pa.bool_()),
+    ("label_ids", pa.list_(pa.int32())),
 ]
 
 
@@ -36,7 +38,7 @@ def ranked_rows(logits: np.ndarray, truths: Sequence[Truth], labels: LabelMap, t
             rows.append({"valid": False, **{name: None for name, _ in RANKED_FIELDS[1:]}})
             continue
         # Rank by the logits themselves: log-probabilities can round distinct logits into ties.
-        order = np.argsort(-scores, kind="stable")[:k]
+        order = np.argsort(-scores, kind="stable")[: max(k, 5)]
         truth_logp = row[list(truth.ids)]
         label_logp = float(truth_logp.max() + np.log(np.exp(truth_logp - truth_logp.max()).sum()))
         rows.append(
@@ -45,11 +47,13 @@ def ranked_rows(logits: np.ndarray, truths: Sequence[Truth], labels: LabelMap, t
                 "correct": bool(int(order[0]) in truth.ids),
                 "top1": int(order[0]),
                 "top1_label": labels.names[int(order[0])],
-                "topk": [int(i) for i in order],
-                "topk_labels": [labels.names[int(i)] for i in order],
-                "topk_probs": [float(np.exp(row[i])) for i in order],
+                "topk": [int(i) for i in order[:k]],
+                "topk_labels": [labels.names[int(i)] for i in order[:k]],
+                "topk_probs": [float(np.exp(row[i])) for i in order[:k]],
                 "label_prob": float(np.exp(label_logp)),
                 "loss": float(-label_logp),
+                "correct_top5": bool(set(int(i) for i in order[:5]) & set(truth.ids)),
+                "label_ids": list(truth.ids),
             }
         )
     return rows
@@ -60,8 +64,10 @@ class ClassificationEvaluator(Evaluator):
     """Correct when the top-1 class is one of the object's labels.
 
     Columns: ``correct``; ``top1``/``top1_label``; the top-k class ids, names and probabilities;
-    ``label_prob``, the probability of the label set; ``loss`` = -log(label_prob); ``valid``
-    is false when the model returned non-finite outputs (then correct/loss are null).
+    ``label_prob``, the probability of the label set; ``loss`` = -log(label_prob);
+    ``correct_top5``, one of the labels among the five highest logits (whatever ``top_k``);
+    ``label_ids``, the object's labels as the model's class ids; ``valid`` is false when the
+    model returned non-finite outputs (then the rest is null).
     """
 
     schema = pa.schema(RANKED_FIELDS)
