@@ -14,7 +14,7 @@ from typing import Mapping
 import numpy as np
 
 SENSOR_WIDTH_MM = 36.0
-FRAME_FILL = 0.8  # at zoom 1 the object's bounding sphere spans this share of the frame
+FRAME_FILL = 0.8  # distance = 1 / (zoom · FRAME_FILL · sin(half fov)): the sphere spans ~78 % at 50 mm (README)
 #: The :class:`SceneState` fields :func:`in_frame` reads.
 FRAME_FIELDS = ("scale", "azimuth", "elevation", "zoom", "focal_length", "frame_x", "frame_y")
 EDGE_TOLERANCE = 1e-9  # relative: states this close to the frame's edge are tested one by one
@@ -90,7 +90,9 @@ class SceneState:
         return math.atan(SENSOR_WIDTH_MM / (2.0 * self.focal_length))
 
     def camera_distance(self) -> float:
-        """Distance at which a unit sphere (scale 1) spans ``FRAME_FILL`` of the frame at zoom 1."""
+        """Distance from which a unit sphere (scale 1) is seen under an angle whose sine is ``FRAME_FILL``
+        times the half field of view's (its outline spans tan(asin(0.8 sin h)) / tan h of the
+        frame: 78 % at zoom 1 and 50 mm; README, "Camera framing")."""
         return 1.0 / (self.zoom * FRAME_FILL * math.sin(self.half_fov()))
 
     def camera_basis(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

@@ -49,7 +49,7 @@ class Camera(RenderedControl):
     """Moves the camera on a sphere around the object, looking at its centre.
 
     ``azimuth`` (degrees, 0 = front), ``elevation`` (degrees, -90..90, 20 by default),
-    ``zoom`` (1 = the object's bounding sphere spans 80 % of the frame; 2 = twice as large),
+    ``zoom`` (1 = the object's bounding sphere spans about 78 % of the frame at 50 mm; 2 = twice as close),
     ``focal_length`` (mm, 36 mm sensor; the distance follows so framing stays, perspective changes)
     and ``fstop`` (aperture for depth of field, focused on the object's centre; 0 = pinhole).
     """
