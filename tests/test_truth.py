@@ -263,3 +263,38 @@ def test_a_killed_run_resumes_its_truth_passes(tmp_path: Path) -> None:
     assert con.execute("SELECT count(*) FROM results WHERE visible_fraction IS NULL").fetchone()[0] == 0
     assert verify(tmp_path / "store").ok
     assert stage_counts(spec) == {"render": 0, "infer": 0}
+
+
+def _uv_sphere(rings: int = 32, segments: int = 64) -> str:
+    """A unit UV sphere as OBJ text."""
+    import math
+
+    vertices = [(math.sin(math.pi * i / rings) * math.cos(2 * math.pi * j / segments), math.cos(math.pi * i / rings),
+                 math.sin(math.pi * i / rings) * math.sin(2 * math.pi * j / segments))
+                for i in range(rings + 1) for j in range(segments)]
+    faces = [(i * segments + j, i * segments + (j + 1) % segments, (i + 1) * segments + (j + 1) % segments,
+              (i + 1) * segments + j) for i in range(rings) for j in range(segments)]
+    return "".join(f"v {x} {y} {z}\n" for x, y, z in vertices) + "".join(
+        "f " + " ".join(str(k + 1) for k in face) + "\n" for face in faces)
+
+
+@pytest.mark.slow
+@pytest.mark.blender
+@pytest.mark.torch
+def test_zoom_frames_the_bounding_sphere_as_the_readme_says(tmp_path: Path) -> None:
+    import math
+
+    (tmp_path / "sphere.obj").write_text(_uv_sphere())
+    side = 100
+    spec = write_spec(tmp_path, TRUTH_SPEC.replace("cube.obj", "sphere.obj").replace(f"resolution = {SIDE}",
+                      f"resolution = {side}").split("[[controls]]")[0]
+                      + '[[controls]]\ntype = "camera"\nzoom = [0.5, 1.0]\nelevation = 0\n\n[policy]\ntype = "grid"\n'
+                      + '\n[evaluator]\npasses = ["mask"]\n', cube=False)
+    run_cli(spec)
+    half = math.atan(18 / 50)
+    spans = Store(tmp_path / "store").connect("truth").execute(
+        "SELECT camera_zoom, gt_x1 - gt_x0, gt_y1 - gt_y0 FROM results ORDER BY 1").fetchall()
+    assert len(spans) == 2
+    for zoom, width, height in spans:
+        expected = math.tan(math.asin(0.8 * zoom * math.sin(half))) / math.tan(half) * side
+        assert abs(width - expected) <= 2 and abs(height - expected) <= 2, (zoom, width, expected)
