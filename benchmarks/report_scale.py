@@ -152,6 +152,7 @@ def synthetic_tables(experiment: str, results: int, seed: int) -> tuple[pa.Table
         "render_key": keys, "image_key": keys, "pred_key": keys,
     })
     topk, probs = _topk(obj, correct, rng)
+    truth = np.where(correct, topk[:, 0], topk[:, 1])  # the truth is first when correct, else second
     names = np.array(_label_names(), dtype=object)
     loss = -np.log(np.maximum(np.where(correct, probs[:, 0], probs[:, 1]), 1e-9))
     columns = {
@@ -163,6 +164,8 @@ def synthetic_tables(experiment: str, results: int, seed: int) -> tuple[pa.Table
         "topk": _lists(topk, valid, pa.int32()), "topk_labels": _lists(names[topk], valid, pa.string()),
         "topk_probs": _lists(probs, valid, pa.float32()),
         "label_prob": pa.array(np.exp(-loss), mask=~valid), "loss": pa.array(loss, mask=~valid),
+        "correct_top5": pa.array(correct | (topk[:, 1] == truth), mask=~valid),
+        "label_ids": _lists(truth[:, None], valid, pa.int32()),
     }
     schema = predictions_schema(ClassificationEvaluator())
     return jobs, pa.table({name: columns[name] for name in schema.names}, schema=schema)
