@@ -22,6 +22,7 @@ from sweep3d.cache.store import Store
 from sweep3d.cli import app
 from sweep3d.stages.aggregate import MACROS, VIEWS, connect, register_views, stored_summary, summarise
 from sweep3d.stages.aggregate.compare import COMPARE_VIEWS
+from sweep3d.stages.aggregate.detection import DETECTION_VIEWS
 from sweep3d.stages.aggregate.summary import summary_path
 from sweep3d.stages.aggregate.tasks import TASK_VIEWS
 from sweep3d.stages.aggregate.views import BINS, NOT_APPLIED
@@ -185,7 +186,8 @@ def test_per_object_sensitivity_and_confusions(tmp_path: Path) -> None:
 def test_views_come_with_every_connection_and_summary_reads_them(tmp_path: Path) -> None:
     con = make_store(tmp_path, _grid(lambda a, b: a == 1))
     present = {r[0] for r in con.execute("SELECT view_name FROM duckdb_views() WHERE NOT internal").fetchall()}
-    assert set(VIEWS) - {"part_visibility", *COMPARE_VIEWS, *TASK_VIEWS} <= present
+    assert set(VIEWS) - {"part_visibility", *DETECTION_VIEWS, *COMPARE_VIEWS, *TASK_VIEWS} <= present
+    assert not set(DETECTION_VIEWS) & present  # only for a detector (tests/test_detection_eval.py)
     assert "part_visibility" not in present  # only with a UV pass (tests/test_part_visibility.py)
     assert not set(TASK_VIEWS) & present  # only with their columns (tests/test_tasks_report.py)
     assert not set(COMPARE_VIEWS) & present  # only with several models (tests/test_compare_models.py)

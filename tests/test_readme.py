@@ -6,6 +6,7 @@ import re
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from sweep3d.stages import load_spec
 from sweep3d.stages.postprocess import apply_post
@@ -42,3 +43,72 @@ def test_custom_control_from_the_readme(tmp_path: Path, monkeypatch) -> None:
     image = np.ones((16, 16, 3), np.float32)
     out = apply_post(image, [control], {"Vignette": {"strength": 1.0}}, "ab" * 10)
     assert out[0, 0].max() < 0.05 and out[8, 8].min() > 0.9
+
+
+DEPTH_MODEL = """
+import torch
+from sweep3d.stages.infer import Classifier, Normalize
+
+
+class Constant(torch.nn.Module):
+    def forward(self, x):
+        return torch.full((x.shape[0], 1, *x.shape[-2:]), 3.0)
+
+
+def constant():
+    return Classifier(Constant(), Normalize())
+"""
+
+
+@pytest.mark.slow
+@pytest.mark.blender
+@pytest.mark.torch
+def test_depth_evaluator_from_the_readme_reads_the_depth_pass(tmp_path: Path, monkeypatch) -> None:
+    from typer.testing import CliRunner
+
+    from sweep3d.cache.blobs import load_pass
+    from sweep3d.cache.store import Store
+    from sweep3d.cli import app
+    from sweep3d.stages.aggregate import connect
+
+    (tmp_path / "mydepth.py").write_text(readme_block("### Your own evaluator"))
+    (tmp_path / "depthmodel.py").write_text(DEPTH_MODEL)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    spec = write_spec(tmp_path, TINY_SPEC.replace("[model]\n", '[model]\nname = "depthmodel:constant"\n').replace(
+        "[policy]", '[evaluator]\nkind = "mydepth:DepthError"\n\n[policy]'))
+    result = CliRunner().invoke(app, ["run", str(spec), "--no-report"])
+    assert result.exit_code == 0, result.output
+    store = Store(tmp_path / "store")
+    rows = connect(store, "tiny").execute("SELECT truth_key, abs_rel, correct, valid FROM results").fetchall()
+    assert len(rows) == 8
+    for truth_key, abs_rel, correct, valid in rows:
+        mask, depth = load_pass(store, truth_key, "mask"), load_pass(store, truth_key, "depth")
+        expected = np.mean(np.abs(3.0 - depth[mask]) / depth[mask])  # by hand, from the passes
+        assert valid and abs_rel == pytest.approx(expected, rel=1e-6) and correct == (expected < 0.1)
+
+
+@pytest.mark.torch
+def test_detector_factory_from_the_readme_loads_a_scripted_detector(tmp_path: Path, monkeypatch) -> None:
+    from typing import Dict, List
+
+    import torch
+
+    from sweep3d.stages.infer import Detector
+    from sweep3d.stages.infer.tasks import check_task, model_outputs
+
+    class Fixed(torch.nn.Module):
+        def forward(self, images: List[torch.Tensor]) -> List[Dict[str, torch.Tensor]]:
+            return [{"boxes": torch.tensor([[1.0, 2.0, 10.0, 12.0]]), "labels": torch.tensor([3]),
+                     "scores": torch.tensor([0.8])} for _ in images]
+
+    torch.jit.save(torch.jit.script(Fixed()), str(tmp_path / "detector.pt"))
+    (tmp_path / "mydetectors.py").write_text(readme_block("A detector or segmenter is a factory"))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.chdir(tmp_path)
+    from sweep3d.stages.infer import load_model
+
+    model = load_model("mydetectors:my_detector")
+    assert isinstance(model, Detector) and model.label_map().index("car") == 3
+    check_task(model, "detection", "mydetectors:my_detector")
+    found = model_outputs(model, np.zeros((2, 16, 16, 3), np.float32), "detection", "mydetectors:my_detector")
+    assert len(found) == 2 and found[0].boxes.tolist() == [[1.0, 2.0, 10.0, 12.0]] and found[1].labels.tolist() == [3]

@@ -194,8 +194,9 @@ def prediction(key: str, image: str, job: Job, kind: str, model: str) -> dict[st
     if job.outcome == "wrong_class":
         label = "hidden thing" if job.fraction is not None and job.fraction < MIN_VISIBLE else "teapot"
     row = {"pred_key": key, "image_key": image, "model": model, "created_at": T0, "valid": job.valid,
-           "correct": job.outcome == "correct" if job.valid else None, "top1_label": label if job.valid else None,
-           "topk": [0], "topk_labels": [label], "topk_probs": [0.9], "loss": 1.0 + job.job / 100}
+           "correct": job.outcome == "correct" if job.valid else None, "top1_label": label if job.valid else None}
+    if kind != "segmentation":  # the segmentation evaluator ranks no classes
+        row.update(topk=[0], topk_labels=[label], topk_probs=[0.9], loss=1.0 + job.job / 100)
     if kind in ("localization", "segmentation"):
         row.update(outcome=job.outcome, class_correct=job.outcome in ("correct", "wrong_box") if job.valid else None,
                    iou=job.iou)

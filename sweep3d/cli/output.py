@@ -13,10 +13,14 @@ from sweep3d.stages.aggregate import Summary, connect, has_view, stored_summary,
 from sweep3d.stages.aggregate.tasks import HIDDEN
 from sweep3d.stages.driver import plan_status
 from sweep3d.stages.infer import InferStage, ModelHandle
+from sweep3d.stages.passes import truth_passes
 from sweep3d.stages.plan import Plan
 from sweep3d.stages.postprocess import PostprocessStage
 from sweep3d.stages.render import RenderStage
 from sweep3d.stages.render.estimate import duration, estimate_render_seconds, slow_render_warning
+
+#: Rendered controls that may hide part of the object (its mask pass then renders twice).
+HIDING_CONTROLS = {"occlusion", "position", "camera", "scale"}
 
 INFER_SECONDS = 0.05  # per image on a 2-core CPU (render costs: stages/render/estimate.py)
 
@@ -39,8 +43,10 @@ def print_plan(console: Console, spec: LoadedSpec) -> None:
                   f"policy {spec.spec.policy.type}; store {escape(str(spec.store))}")
     table = Table("stage", "needed", "cached", "to compute", "estimate")
     total = 0.0
+    passes = truth_passes(spec)
+    hidden = any(c.control.type_name in HIDING_CONTROLS for c in spec.controls)
     for stage, needed, cached, crop in status:
-        per_item = {"render": estimate_render_seconds(spec.render, crop),
+        per_item = {"render": estimate_render_seconds(spec.render, crop, bool(passes), hidden),
                     "postprocess": 0.005}.get(stage.split(" ")[0], INFER_SECONDS)
         seconds = (needed - cached) * per_item
         total += seconds
@@ -53,6 +59,9 @@ def print_plan(console: Console, spec: LoadedSpec) -> None:
     if spec.report.part_visibility:
         console.print("renders carry a UV pass (the report's part-visibility panel); a render cached "
                       "without it is rendered again for the pass only")
+    if passes:
+        console.print(f"renders carry the {' and '.join(passes)} passes (ground truth for the evaluator); a render "
+                      "cached without them is rendered again for the passes only")
     if spec.policy.adaptive:
         console.print(f"adaptive policy: this is its first round; it proposes up to "
                       f"{spec.policy.params.samples} jobs per scene as results come in")

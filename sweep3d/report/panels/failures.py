@@ -14,16 +14,16 @@ def build(inputs: PanelInputs) -> dict[str, Any]:
     failures = inputs.summary.failures
     columns = inputs.loaded.parameter_columns
     present = {row[0] for row in inputs.con.execute("DESCRIBE results").fetchall()}
-    task = [c if c in present else f"NULL AS {c}" for c in ("outcome", "iou")]
+    task = [c if c in present else f"NULL AS {c}" for c in ("outcome", "iou", "topk")]  # other tasks lack some
     selected = "".join(f', "{c}"' for c in columns)
     extra = {row[0]: row[1:] for row in inputs.con.execute(
-        f"SELECT job, {', '.join(task)}, topk{selected} FROM results WHERE list_contains(?, job)",
+        f"SELECT job, {', '.join(task)}{selected} FROM results WHERE list_contains(?, job)",
         [[f["job"] for f in failures]]).fetchall()} if failures else {}
     cards = []
     for failure in failures:
         outcome, iou, topk_ids, *values = extra.get(failure["job"], (None, None, None))
         truth = set(inputs.loaded.labels.get(failure["object"], ()))
-        names = failure["topk_labels"] or []
+        names = failure["topk_labels"] or ([failure["top1_label"]] if failure["top1_label"] else [])
         ids = topk_ids or [None] * len(names)
         cards.append({
             "job": failure["job"],
@@ -32,7 +32,7 @@ def build(inputs: PanelInputs) -> dict[str, Any]:
             "thumb": inputs.thumbs.want(failure["image_key"]),
             "controls": [(c, _fmt(v)) for c, v in zip(columns, values) if v is not None],
             "topk": [{"label": name, "prob": pct(prob), "truth": i in truth or name in truth}
-                     for name, prob, i in zip(names, failure["topk_probs"] or [], ids)],
+                     for name, prob, i in zip(names, failure["topk_probs"] or [None] * len(names), ids)],
             "loss": f"{failure['loss']:.2f}" if failure["loss"] is not None else "",
             "outcome": _outcome(outcome, iou),
         })

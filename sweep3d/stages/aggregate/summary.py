@@ -89,7 +89,9 @@ def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit:
     if not has_view(con, "control_accuracy"):  # a connection made without aggregate.connect
         register_views(con)
     materialise(con, ["results"])
-    unevaluable = "evaluable IS FALSE" if "evaluable" in _columns(con, "results") else "false"
+    # Other tasks' evaluators (detection, a user's own) may lack the classification columns.
+    have = {row[0] for row in con.execute("DESCRIBE results").fetchall()}
+    unevaluable = "evaluable IS FALSE" if "evaluable" in have else "false"
     evaluated, counted, invalid, correct = con.execute(
         f"SELECT count(*), count(*) FILTER (WHERE counted), count(*) FILTER (WHERE NOT valid AND NOT ({unevaluable})), "
         "count(*) FILTER (WHERE counted AND correct) FROM results"
@@ -109,18 +111,22 @@ def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit:
     scene_count = [[cells.get((o, e), (None, 0))[1] for e in environments] for o in objects]
 
     effects = control_effects(con, columns)
+    shown = ["top1_label", "topk_labels", "topk_probs", "loss"]
+    picked = ", ".join(name if name in have else f"NULL AS {name}" for name in shown)
+    worst = "loss DESC" if "loss" in have else "iou NULLS FIRST" if "iou" in have else "job"
     failures = [
-        dict(zip(["job", "object", "environment", "image_key", "top1_label", "topk_labels", "topk_probs", "loss"], r))
+        dict(zip(["job", "object", "environment", "image_key", *shown], r))
         for r in con.execute(
-            "SELECT job, object, environment, image_key, top1_label, topk_labels, topk_probs, loss "
-            "FROM results WHERE counted AND NOT correct ORDER BY loss DESC, job LIMIT ?", [failure_limit]
+            f"SELECT job, object, environment, image_key, {picked} "
+            f"FROM results WHERE counted AND NOT correct ORDER BY {worst}, job LIMIT ?", [failure_limit]
         ).fetchall()
     ]
+    top1 = "top1_label" if "top1_label" in have else "NULL::VARCHAR"
     per_object = [
         dict(zip(["object", "accuracy", "count", "top_wrong"], r))
         for r in con.execute(
             "SELECT object, avg(correct::DOUBLE), count(*), "
-            "mode(top1_label) FILTER (WHERE NOT correct) FROM results WHERE counted GROUP BY 1 ORDER BY 1"
+            f"mode({top1}) FILTER (WHERE NOT correct) FROM results WHERE counted GROUP BY 1 ORDER BY 1"
         ).fetchall()
     ]
     return Summary(jobs, evaluated, invalid, correct, accuracy, objects, environments, scene_accuracy,
@@ -137,9 +143,6 @@ def not_evaluable_reasons(con: duckdb.DuckDBPyConnection) -> tuple[dict[str, int
     thresholds = {row[2] for row in rows if row[2] is not None}
     return {reason: int(n) for reason, n, _ in rows}, (thresholds.pop() if thresholds else None)
 
-
-def _columns(con: duckdb.DuckDBPyConnection, view: str) -> set[str]:
-    return {row[0] for row in con.execute(f"DESCRIBE {view}").fetchall()}
 
 
 def control_effects(con: duckdb.DuckDBPyConnection, columns: list[str]) -> list[ControlEffect]:

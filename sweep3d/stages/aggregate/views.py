@@ -38,6 +38,9 @@ Views:
 ``not_evaluable``, ``outcomes_by_value``, ``iou_by_object``
     only when their columns exist: jobs counted apart and why; box and mask tasks' outcomes per
     value and IoU per object (see :mod:`sweep3d.stages.aggregate.tasks`).
+``average_precision``, ``average_precision_by_value``
+    only for a detector (results with ``det_scores``): COCO's AP per object and its mean, overall
+    and per level (see :mod:`sweep3d.stages.aggregate.detection`).
 
 Macros:
 
@@ -62,6 +65,7 @@ from sweep3d.cache.store import Store, lock_down, plan_min_visible
 from sweep3d.errors import UserError
 from sweep3d.spec.columns import JOB_COLUMNS, MODELS_METADATA, PARAMETERS_METADATA
 from sweep3d.stages.aggregate.compare import COMPARE_MACROS, COMPARE_VIEWS, register_compare_views
+from sweep3d.stages.aggregate.detection import DETECTION_VIEWS, detection_views
 from sweep3d.stages.aggregate.parts import register_part_views
 from sweep3d.stages.aggregate.tasks import TASK_VIEWS, register_task_views
 
@@ -82,7 +86,7 @@ _ACCURACY = ("n_correct / nullif(n, 0) AS accuracy, wilson_low(n_correct, n) AS 
 
 VIEWS = ("control_values", "control_stats", "control_levels", "control_parameters", "control_accuracy",
          "pair_accuracy", "scene_accuracy", "variance_explained", "object_sensitivity", "object_confusions",
-         "part_visibility", *TASK_VIEWS, *COMPARE_VIEWS)
+         "part_visibility", *TASK_VIEWS, *DETECTION_VIEWS, *COMPARE_VIEWS)
 MACROS = ("wilson_low", "wilson_high", "failure_modes", *COMPARE_MACROS)
 
 
@@ -188,6 +192,7 @@ def register_views(con: duckdb.DuckDBPyConnection, parameters: list[str] | None 
         con.execute(sql)
     register_part_views(con, set(result_columns))
     register_task_views(con, set(result_columns), model, min_visible)
+    detection_views(con, set(result_columns))
     return True
 
 

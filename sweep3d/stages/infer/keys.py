@@ -18,6 +18,19 @@ def infer_base(model_digest: str, evaluator: dict[str, Any], backend: str) -> di
     return base
 
 
+def evaluator_key(settings: Any) -> dict[str, Any]:
+    """The evaluator's part of prediction keys: its kind and the settings that change its rows,
+    and, when it reads truth passes, their version (a new mask recipe re-evaluates)."""
+    from sweep3d.stages.infer.evaluators import EVALUATORS
+    from sweep3d.truth import TRUTH_VERSION
+
+    evaluator = EVALUATORS.get(settings.kind)
+    part = {"kind": settings.kind, **evaluator.from_settings(settings).key_part()}
+    if evaluator.passes:
+        part["truth"] = TRUTH_VERSION
+    return part
+
+
 def pred_key(base: dict[str, Any], image: str, truth: list[Any]) -> str:
     """A job's prediction key: ``base`` plus its image and its ground truth."""
     return digest(_pred_value(base, image, truth))

@@ -1,8 +1,8 @@
-"""Classifiers: the built-in pretrained ImageNet models (EfficientNet-Lite0, -Lite1, -Lite2) and users'
+"""Models: the built-in pretrained ImageNet classifiers (EfficientNet-Lite0, -Lite1, -Lite2) and users'
 own ``module:factory``.
 
 A model factory returns a :class:`Classifier` (or a bare ``torch.nn.Module``, which gets
-ImageNet preprocessing and class names). Weights come only from installed packages or the
+ImageNet preprocessing and class names), a :class:`Detector` or a :class:`Segmenter`. Weights come only from installed packages or the
 user's own code: nothing is downloaded at run time.
 """
 
@@ -57,6 +57,48 @@ class Preprocess:
     def key_part(self) -> dict[str, Any]:
         return {"resize": self.resize, "crop": self.crop, "mean": list(self.mean), "std": list(self.std)}
 
+    def to_image(self, boxes: np.ndarray, height: int, width: int) -> np.ndarray:
+        """Boxes (N, 4) in the model's input pixels (the crop) as pixels of the (height, width)
+        image it was made from: the crop's offset added back, the resize undone."""
+        scale = self.resize / min(height, width)
+        rows, cols = max(self.crop, round(height * scale)), max(self.crop, round(width * scale))
+        top, left = (rows - self.crop) // 2, (cols - self.crop) // 2
+        out = np.asarray(boxes, dtype=np.float64).reshape(-1, 4).copy()
+        out[:, [0, 2]] = (out[:, [0, 2]] + left) * (width / cols)
+        out[:, [1, 3]] = (out[:, [1, 3]] + top) * (height / rows)
+        return out
+
+
+@dataclass(frozen=True)
+class ImageTensors:
+    """torchvision's detection input: each image as a float (3, H, W) tensor in [0, 1], unresized
+    (the detector resizes itself and answers in the input's pixels)."""
+
+    def __call__(self, images: np.ndarray) -> list:
+        import torch
+
+        return [torch.from_numpy(np.ascontiguousarray(image, dtype=np.float32)).permute(2, 0, 1) for image in images]
+
+    def key_part(self) -> dict[str, Any]:
+        return {"image_tensors": True}
+
+
+@dataclass(frozen=True)
+class Normalize:
+    """Per-channel normalisation of the whole image, unresized: a segmenter's usual input."""
+
+    mean: tuple[float, float, float] = IMAGENET_MEAN
+    std: tuple[float, float, float] = IMAGENET_STD
+
+    def __call__(self, images: np.ndarray):
+        import torch
+
+        x = torch.from_numpy(np.ascontiguousarray(images, dtype=np.float32)).permute(0, 3, 1, 2)
+        return (x - torch.tensor(self.mean).view(1, 3, 1, 1)) / torch.tensor(self.std).view(1, 3, 1, 1)
+
+    def key_part(self) -> dict[str, Any]:
+        return {"normalize": {"mean": list(self.mean), "std": list(self.std)}}
+
 
 @dataclass
 class Classifier:
@@ -84,6 +126,28 @@ class Classifier:
     def digest(self, name: str) -> str:
         weights = self.weights_digest or module_digest(self.module)
         return model_key(name, weights, self.preprocess)
+
+
+@dataclass
+class Detector(Classifier):
+    """An object detector: ``module`` takes what ``preprocess`` makes (by default a list of
+    (3, H, W) tensors in [0, 1], torchvision's convention) and returns, per image, a dict of
+    ``boxes`` (K, 4) as x0, y0, x1, y1 in that image's pixels, ``labels`` (K,) and ``scores`` (K,).
+
+    ``labels`` names the detector's own classes (e.g. COCO's), index = label id; a spec's object
+    labels must be among them.
+    """
+
+    preprocess: Callable[[np.ndarray], Any] = field(default_factory=ImageTensors)
+
+
+@dataclass
+class Segmenter(Classifier):
+    """A semantic segmenter: ``module`` returns class scores (N, C, h, w), or a dict holding them
+    under ``"out"`` (torchvision's convention); scores are resized to the image when h, w differ.
+    The default preprocessing normalises the whole image, unresized."""
+
+    preprocess: Callable[[np.ndarray], Any] = field(default_factory=Normalize)
 
 
 def builtin_labels(name: str) -> LabelMap | None:
@@ -187,7 +251,8 @@ def load_model(name: str) -> Classifier:
         made = Classifier(made)
     if not isinstance(made, Classifier) or not isinstance(made.module, torch.nn.Module):
         raise UserError(
-            f"model factory {name!r} must return a torch.nn.Module or sweep3d.stages.infer.Classifier, "
+            f"model factory {name!r} must return a torch.nn.Module or a sweep3d.stages.infer Classifier, Detector "
+            "or Segmenter, "
             f"got {type(made).__name__}"
         )
     made.module.eval()

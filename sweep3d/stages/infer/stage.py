@@ -21,17 +21,18 @@ from typing import TYPE_CHECKING, Any, Callable, Iterable, Iterator, Mapping
 import numpy as np
 import pyarrow as pa
 
-from sweep3d.cache.blobs import load_image
+from sweep3d.cache.blobs import load_image, load_pass
 from sweep3d.cache.store import Store, utc_now
 from sweep3d.errors import SpecError, UserError
 from sweep3d.spec.columns import PREDICTION_COLUMNS
 from sweep3d.spec.loader import LoadedSpec
 from sweep3d.spec.models import ModelSpec
 from sweep3d.stages.driver import Computed, Feed, unique_jobs
-from sweep3d.stages.infer.evaluators import EVALUATORS, Evaluator
+from sweep3d.stages.infer.evaluators import EVALUATORS, Evaluator, Truth
 from sweep3d.stages.infer.handle import ModelHandle, model_key_path
 from sweep3d.stages.infer.labels import LabelMap
-from sweep3d.stages.infer.models import Classifier, builtin_model
+from sweep3d.stages.infer.models import builtin_model
+from sweep3d.stages.infer.tasks import check_task, model_outputs
 from sweep3d.stages.jobs import Job, Plan
 
 if TYPE_CHECKING:
@@ -46,36 +47,6 @@ BASE_COLUMNS = list(zip(PREDICTION_COLUMNS, (pa.string(), pa.string(), pa.string
 
 def predictions_schema(evaluator: Evaluator) -> pa.Schema:
     return pa.schema(BASE_COLUMNS + list(zip(evaluator.schema.names, evaluator.schema.types)))
-
-
-def predict(model: Classifier, images: np.ndarray, name: str = "the model", runner: Callable | None = None) -> np.ndarray:
-    """Logits of a batch.
-
-    Args:
-        images: float32 (N, H, W, 3) in [0, 1].
-        name: the model's name in the spec, for error messages.
-        runner: runs the preprocessed batch instead of the torch module (e.g. ONNX Runtime).
-    Returns:
-        float32 (N, C) logits.
-    Raises:
-        UserError: if the model raises or its output is not (N, C).
-    """
-    import torch
-
-    try:
-        with torch.inference_mode():
-            batch = model.preprocess(images)
-            out = torch.from_numpy(runner(batch)) if runner is not None else model.module(batch)
-    except Exception as exc:  # noqa: BLE001  (a user's model failing on its input is a user error)
-        detail = " ".join(str(exc).split())[:300]
-        raise UserError(f"model {name!r} raised {type(exc).__name__} on a batch of shape {tuple(images.shape)}: "
-                        f"{detail}; fix the model or its preprocessing") from None
-    if isinstance(out, (tuple, list)):
-        out = out[0]
-    if not isinstance(out, torch.Tensor) or out.ndim != 2 or out.shape[0] != len(images):
-        shape = tuple(out.shape) if isinstance(out, torch.Tensor) else type(out).__name__
-        raise UserError(f"the model must return logits of shape (batch, classes); got {shape}")
-    return out.detach().float().cpu().numpy()
 
 
 #: The backend name of ONNX Runtime standing in for torch (see ``onnx_backend``): torch's keys.
@@ -145,18 +116,23 @@ class InferStage:
 
         spec = plan.spec
         torch.set_num_threads(self._threads())
+        task = self._evaluator(plan).task
         try:
             model = self.model.classifier()
             labels = model.label_map()
+            check_task(model, task, self.model.name)
             size = self.model.framing.crop
-            logits = predict(model, np.zeros((1, size, size, 3), np.float32), self.model.name)
-            _check_classes(logits, labels, self.model.name)
+            outputs = model_outputs(model, np.zeros((1, size, size, 3), np.float32), task, self.model.name)
+            _check_classes(outputs, labels, self.model.name)
         except SpecError:
             raise
         except UserError as exc:
             raise SpecError(str(spec.path), model_key_path(spec, self.model.settings), str(exc)) from None
         _truths(plan, labels, self.model.name)  # a label the model lacks fails now, naming the object
         self.backend = choose_backend(spec, self.model.settings, self.on_ray)
+        if self.backend == "onnx" and task != "classification":
+            raise SpecError(str(spec.path), model_key_path(spec, self.model.settings).replace("name", "backend"),
+                            f"the onnx backend serves classification only, not {task!r}; use backend = \"torch\"")
         if self.backend == "onnx":  # asked for: its failure is the user's to see now
             self._runner = self._onnx(plan, store, self._threads())
         self._labels = labels
@@ -171,16 +147,24 @@ class InferStage:
         if first is None:
             return  # nothing came (its inputs failed): nothing to load
         infer = self._inferrer(plan, store, self._threads(beside=todo.more))  # while the next images are made
+        passes = self._evaluator(plan).passes
         for batch_jobs in _batches(itertools.chain([first], jobs), self.model.settings.batch_size):
             t0 = time.perf_counter()
             batch, pixels, invalid, damaged = _load(store, batch_jobs, valid, digests)
-            rows = infer(batch, pixels) if batch else []
+            arrays, lost = _load_passes(store, batch, passes)
+            if lost:
+                keep = [i for i, job in enumerate(batch) if job not in lost]
+                batch, pixels, arrays = [batch[i] for i in keep], [pixels[i] for i in keep], [arrays[i] for i in keep]
+            rows = infer(batch, pixels, arrays) if batch else []
             per_image = (time.perf_counter() - t0) / max(len(batch) + len(invalid), 1)
             yield from self._computed(plan, batch, rows, invalid, per_image)
             for job in damaged:
                 yield Computed(job.pred_key, damaged=(_table(job), job.image_key))
+            for job in lost:  # its truth row goes, so the render stage renders its passes again
+                yield Computed(job.pred_key, damaged=("truths", job.truth_key))
 
-    def _inferrer(self, plan: Plan, store: Store, threads: int) -> Callable[[list[Job], list[np.ndarray]], list[dict]]:
+    def _inferrer(self, plan: Plan, store: Store,
+                  threads: int) -> Callable[[list[Job], list[np.ndarray], list[dict]], list[dict]]:
         """A function from a batch's jobs and pixels to their evaluator rows, on the run's backend
         with ``threads`` threads."""
         import torch
@@ -196,16 +180,19 @@ class InferStage:
         # threads, its idle ones would spin on the cores ONNX Runtime's threads are working on.
         torch.set_num_threads(threads if self._runner is None else 1)
         remote = None
-        if self.on_ray and self.backend == "torch":  # batches go to an inference actor (GPU if any)
+        if self.on_ray and self.backend == "torch" and evaluator.task == "classification":  # batches go to an inference actor (GPU if any)
             from sweep3d.stages.infer.ray_actor import remote_runner
 
             remote = remote_runner(self.model.name, self.model.framing.model)
 
-        def infer(jobs: list[Job], pixels: list[np.ndarray]) -> list[dict]:
+        def infer(jobs: list[Job], pixels: list[np.ndarray], arrays: list[dict]) -> list[dict]:
             stacked = np.stack(pixels)
-            logits = remote(stacked) if remote is not None else predict(model, stacked, self.model.name, self._runner)
-            _check_classes(logits, labels, self.model.name)
-            return evaluator.evaluate(logits, [truths[j.object] for j in jobs], labels)
+            if remote is not None:
+                outputs = remote(stacked)
+            else:
+                outputs = model_outputs(model, stacked, evaluator.task, self.model.name, self._runner)
+            _check_classes(outputs, labels, self.model.name)
+            return evaluator.evaluate(outputs, [Truth(truths[j.object], **a) for j, a in zip(jobs, arrays)], labels)
 
         return infer
 
@@ -245,7 +232,7 @@ class InferStage:
     @staticmethod
     def _evaluator(plan: Plan) -> Evaluator:
         spec = plan.spec
-        return EVALUATORS.get(spec.evaluator.kind)(top_k=spec.evaluator.top_k)
+        return EVALUATORS.get(spec.evaluator.kind).from_settings(spec.evaluator)
 
 
 def pending_predictions(plan: Plan, store: Store, stage: InferStage | None = None) -> set[str]:
@@ -302,7 +289,25 @@ def _invalid_row(schema: pa.Schema) -> dict:
     return row
 
 
-def _check_classes(logits: np.ndarray, labels: LabelMap, name: str) -> None:
+def _load_passes(store: Store, jobs: list[Job], passes: tuple[str, ...]) -> tuple[list[dict], set[Job]]:
+    """Each job's pass arrays for the evaluator (``{"mask": ..., "depth": ...}``), and the jobs
+    whose pass blobs are missing or undecodable."""
+    if not passes:
+        return [{} for _ in jobs], set()
+    arrays, lost = [], set()
+    for job in jobs:
+        found = {name: load_pass(store, job.truth_key, name) if job.truth_key else None for name in passes}
+        if any(v is None for v in found.values()):
+            lost.add(job)
+        arrays.append(found)
+    return arrays, lost
+
+
+def _check_classes(outputs: Any, labels: LabelMap, name: str) -> None:
+    """A classifier's or localizer's logits must have one column per class of its label map."""
+    logits = getattr(outputs, "logits", outputs)
+    if not isinstance(logits, np.ndarray) or logits.ndim != 2:
+        return  # detections and scores are checked against the label map as they are read
     if logits.shape[1] != len(labels):
         raise UserError(f"model {name!r} returns {logits.shape[1]} classes but its label map has {len(labels)}; "
                         "return one logit per class, or give the Classifier its own labels")

@@ -21,7 +21,7 @@ from sweep3d.spec.loader import ControlInstance, LoadedSpec
 from sweep3d.spec.models import ModelSpec
 from sweep3d.spec.sniff import unreadable
 from sweep3d.spec.space import Point, SearchSpace
-from sweep3d.stages.infer.keys import infer_base, pred_keys
+from sweep3d.stages.infer.keys import evaluator_key, infer_base, pred_keys
 from sweep3d.stages.jobs import JobList, Plan, PlanColumns, SceneBlock
 from sweep3d.stages.passes import truth_passes
 from sweep3d.stages.plan.batch import ControlBatch, control_batch, groups, keyed_texts
@@ -73,8 +73,7 @@ def make_plan(spec: LoadedSpec, *, framing: Framing, model_digest: str, blender:
                       key=lambda c: (c.control.order, spec.controls.index(c)))
     post = [c for c in spec.controls if c.control.stage == "post"]
     settings = spec.render.key_part(framing.key_part())
-    base = infer_base(model_digest, {"kind": spec.evaluator.kind, "top_k": spec.evaluator.top_k},
-                      model.backend)
+    base = infer_base(model_digest, evaluator_key(spec.evaluator), model.backend)
     passes = truth_passes(spec)
     keys = _Keys(parts=[] if spec.report.part_visibility else None, truth=[] if passes else None, truth_passes=passes)
     blocks: list[SceneBlock] = []

@@ -12,12 +12,27 @@ DENOISE_SECONDS_224 = {"fast": 0.04, "accurate": 0.3, "none": 0.02}
 LONG_RENDERING_SECONDS = 3600.0
 
 
-def estimate_render_seconds(render: RenderSpec, pixels: int) -> float:
+#: The truth passes' own work per render (reading the passes back, encoding them), and the
+#: index-only second render where an occluder or the frame's edge hides part of the object,
+#: counted for every render as the planner does not know which (benchmarks/RESULTS.md).
+TRUTH_SECONDS_224 = 0.02
+SECOND_RENDER_SECONDS_224 = 0.15
+
+
+def estimate_render_seconds(render: RenderSpec, pixels: int, truth_passes: bool = False,
+                            hidden: bool = False) -> float:
     """A rough per-render cost from the settings and the rendered side in pixels (measured on 2
-    CPU cores; see docs/architecture.md)."""
+    CPU cores; see docs/architecture.md).
+
+    Args:
+        truth_passes: the renders carry the mask (and depth) pass.
+        hidden: an occluder or the frame's edge may hide part of the object (a control that
+            occludes or moves it), so the mask pass needs its second render.
+    """
     scale = (pixels / 224) ** 2
     denoise = DENOISE_SECONDS_224[render.denoise_prefilter] if render.denoise else 0.0
-    return (SECONDS_PER_SAMPLE_224 * render.samples + denoise + 0.02) * scale
+    passes = (TRUTH_SECONDS_224 + (SECOND_RENDER_SECONDS_224 if hidden else 0.0)) if truth_passes else 0.0
+    return (SECONDS_PER_SAMPLE_224 * render.samples + denoise + 0.02 + passes) * scale
 
 
 def slow_render_warning(render: RenderSpec, pixels: int, renders: int) -> str | None:
