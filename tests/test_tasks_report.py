@@ -500,3 +500,33 @@ def test_the_new_panels_draw_in_chromium(tmp_path: Path) -> None:
         assert "not evaluable" in page.inner_text("#not-evaluable")
         assert "not evaluable" in page.inner_text("#accuracy-detail")
         assert_clean(path, events)
+
+
+def test_a_segmentation_report_tints_its_thumbnails_and_says_how_each_failure_failed(tmp_path: Path) -> None:
+    jobs = synthetic_jobs()
+    loaded, con, store = opened(make_store(tmp_path, jobs, "segmentation", images=True))
+    context = build_context(loaded, con, store)
+    cards = panel(context, "failures").data["cards"]
+    assert cards and all(c["outcome"].split(" · ")[0] in ("wrong class", "wrong box", "missed") for c in cards)
+    uris = json.loads(context["thumbs"])
+    wrong_box = next(c for c in cards if c["outcome"].startswith("wrong box"))
+    pixels = decoded(uris[wrong_box["thumb"]])
+    # the predicted mask (the true box shifted right) shows red beyond the true mask's green
+    assert any(p[0] - p[1] > 40 and p[0] - p[2] > 40 for p in pixels.reshape(-1, 3))
+    assert any(p[1] - p[0] > 40 and p[1] - p[2] > 40 for p in pixels.reshape(-1, 3))
+
+
+def test_query_reads_the_new_views_read_only(tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from sweep3d.cli import app
+
+    spec = make_store(tmp_path, synthetic_jobs())
+    for view in TASK_VIEWS:
+        out = tmp_path / f"{view}.json"
+        result = CliRunner().invoke(app, ["query", str(spec), f"FROM {view}", "-o", str(out)])
+        assert result.exit_code == 0, result.output
+        assert json.loads(out.read_text())
+    result = CliRunner().invoke(app, ["query", str(spec), "SELECT count(*) AS n FROM results WHERE counted",
+                                      "--format", "csv"])
+    assert result.exit_code == 0 and result.output.split() == ["n", str(sum(j.counted for j in synthetic_jobs()))]

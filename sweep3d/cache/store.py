@@ -437,10 +437,12 @@ class Store:
                 # every experiment whose job has its key, so its own ``model`` is what the first called it.
                 jobs_name_models = "model" in {row[0] for row in con.execute("DESCRIBE jobs").fetchall()}
                 own = ", model" if jobs_name_models else ""
+                judged = "valid" in {row[0] for row in con.execute("DESCRIBE predictions").fetchall()}
+                counted = (COUNTED_SQL if truth is not None else "p.valid") if judged else None
                 con.execute(
                     f"CREATE VIEW results AS SELECT j.*, p.* EXCLUDE (pred_key, image_key, created_at{own})"
                     + (f", g.* EXCLUDE (job, truth_key{own})" if truth is not None else "")
-                    + f", {COUNTED_SQL if truth is not None else 'p.valid'} AS counted"
+                    + (f", {counted} AS counted" if counted else "")
                     + " FROM jobs j JOIN predictions p USING (pred_key)"
                     + (" LEFT JOIN ground_truth g ON g.job = j.job" + (" AND g.model = j.model" if own else "")
                        if truth is not None else "")

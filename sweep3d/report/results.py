@@ -4,7 +4,7 @@ Two things make a report of 10^6 results cheap to build:
 
 - :func:`materialise_views` computes once the aggregate views the report reads many times
   (``results``, ``control_stats``, ``control_levels``, ``control_parameters``,
-  ``control_accuracy``, ``pair_accuracy``) into temp tables that those views then read. The
+  ``control_accuracy``, ``pair_accuracy``, ``not_evaluable``) into temp tables that those views then read. The
   SQL and the rows are the views' own (a connection's views read a fixed set of immutable
   segments, so nothing goes stale); without it each of the report's queries recomputes their
   ranks and self-joins (at 10^6 results, minutes per query).
@@ -32,7 +32,7 @@ OUTCOME_NAMES = ("wrong", "correct", "invalid", "not-evaluable")
 TABLE = "report_levels"  # the temp table of one row per result
 #: Views read many times by one report, in dependency order.
 MATERIALISED = ("results", "control_stats", "control_levels", "control_parameters", "control_accuracy",
-                "pair_accuracy")
+                "pair_accuracy", "not_evaluable")
 #: The order examples come in: most telling first.
 EXAMPLE_ORDER = "outcome, loss DESC NULLS LAST, job"
 
