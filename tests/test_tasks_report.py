@@ -157,7 +157,8 @@ def pred_box(job: Job) -> tuple[float, float, float, float] | None:
 def make_store(folder: Path, jobs: list[Job], kind: str = "localization", models: tuple[str, ...] = ("m",),
                images: bool = False) -> Path:
     """A spec and a store holding ``jobs`` with the columns of ``kind``'s evaluator (``localization``,
-    ``segmentation``, or ``classification``: none of the box or mask columns); returns the spec."""
+    ``detection`` (its box columns only), ``segmentation``, or ``classification``: none of the box or
+    mask columns); returns the spec."""
     folder.mkdir(parents=True, exist_ok=True)
     spec = write_spec(folder, SPEC)
     store = Store(folder / "store")
@@ -195,12 +196,12 @@ def prediction(key: str, image: str, job: Job, kind: str, model: str) -> dict[st
         label = "hidden thing" if job.fraction is not None and job.fraction < MIN_VISIBLE else "teapot"
     row = {"pred_key": key, "image_key": image, "model": model, "created_at": T0, "valid": job.valid,
            "correct": job.outcome == "correct" if job.valid else None, "top1_label": label if job.valid else None}
-    if kind != "segmentation":  # the segmentation evaluator ranks no classes
+    if kind in ("classification", "localization"):  # detection and segmentation rank no classes
         row.update(topk=[0], topk_labels=[label], topk_probs=[0.9], loss=1.0 + job.job / 100)
-    if kind in ("localization", "segmentation"):
+    if kind in ("localization", "detection", "segmentation"):
         row.update(outcome=job.outcome, class_correct=job.outcome in ("correct", "wrong_box") if job.valid else None,
                    iou=job.iou)
-    if kind == "localization":
+    if kind in ("localization", "detection"):
         box = pred_box(job) or (None,) * 4
         row.update(dict(zip(("pred_x0", "pred_y0", "pred_x1", "pred_y1"), box)))
     if kind == "segmentation":
@@ -354,12 +355,12 @@ def test_iou_by_object_quantiles_are_numpy_s(tmp_path: Path) -> None:
 def test_views_exist_only_with_their_columns(tmp_path: Path) -> None:
     jobs = synthetic_jobs()
     present = {}
-    for kind in ("classification", "localization", "segmentation"):
+    for kind in ("classification", "localization", "detection", "segmentation"):
         _, con, _ = opened(make_store(tmp_path / kind, jobs, kind))
         present[kind] = {v for v in TASK_VIEWS
                          if con.execute("SELECT count(*) FROM duckdb_views() WHERE view_name = ?", [v]).fetchone()[0]}
     assert present["classification"] == {"not_evaluable"}
-    assert present["localization"] == present["segmentation"] == set(TASK_VIEWS)
+    assert present["localization"] == present["detection"] == present["segmentation"] == set(TASK_VIEWS)
 
 
 # -- thumbnails ---------------------------------------------------------------------------------
@@ -530,3 +531,14 @@ def test_query_reads_the_new_views_read_only(tmp_path: Path) -> None:
     result = CliRunner().invoke(app, ["query", str(spec), "SELECT count(*) AS n FROM results WHERE counted",
                                       "--format", "csv"])
     assert result.exit_code == 0 and result.output.split() == ["n", str(sum(j.counted for j in synthetic_jobs()))]
+
+
+def test_a_detection_report_without_ranked_classes_builds_every_panel(tmp_path: Path) -> None:
+    jobs = synthetic_jobs()
+    loaded, con, store = opened(make_store(tmp_path, jobs, "detection", images=True))
+    context = build_context(loaded, con, store)
+    ids = {p.id for p in context["panels"]}
+    assert {"not-evaluable", "outcomes", "failures"} <= ids
+    card = panel(context, "failures").data["cards"][0]
+    assert card["loss"] == "" and [t["label"] for t in card["topk"]] and card["outcome"]
+    assert context["summary"].counted == sum(j.counted for j in jobs)
