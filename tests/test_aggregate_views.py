@@ -24,6 +24,7 @@ from sweep3d.stages.aggregate import MACROS, VIEWS, connect, register_views, sto
 from sweep3d.stages.aggregate.compare import COMPARE_VIEWS
 from sweep3d.stages.aggregate.detection import DETECTION_VIEWS
 from sweep3d.stages.aggregate.summary import summary_path
+from sweep3d.stages.aggregate.tasks import TASK_VIEWS
 from sweep3d.stages.aggregate.views import BINS, NOT_APPLIED
 
 T0 = datetime(2024, 1, 1)
@@ -185,9 +186,10 @@ def test_per_object_sensitivity_and_confusions(tmp_path: Path) -> None:
 def test_views_come_with_every_connection_and_summary_reads_them(tmp_path: Path) -> None:
     con = make_store(tmp_path, _grid(lambda a, b: a == 1))
     present = {r[0] for r in con.execute("SELECT view_name FROM duckdb_views() WHERE NOT internal").fetchall()}
-    assert set(VIEWS) - {"part_visibility", *DETECTION_VIEWS, *COMPARE_VIEWS} <= present
+    assert set(VIEWS) - {"part_visibility", *DETECTION_VIEWS, *COMPARE_VIEWS, *TASK_VIEWS} <= present
     assert not set(DETECTION_VIEWS) & present  # only for a detector (tests/test_detection_eval.py)
     assert "part_visibility" not in present  # only with a UV pass (tests/test_part_visibility.py)
+    assert not set(TASK_VIEWS) & present  # only with their columns (tests/test_tasks_report.py)
     assert not set(COMPARE_VIEWS) & present  # only with several models (tests/test_compare_models.py)
     macros = {r[0] for r in con.execute("SELECT function_name FROM duckdb_functions() WHERE function_type IN "
                                         "('macro', 'table_macro')").fetchall()}
@@ -213,7 +215,7 @@ PER_ROW_LEVELS = f"""
                CASE WHEN s.binned AND v.number IS NOT NULL
                     THEN least(floor((v.number - s.lo) / s.width), {BINS - 1})::INTEGER END AS bin
         FROM control_values v JOIN control_stats s USING (parameter, position))
-    SELECT job, object, environment, valid, correct, parameter, position,
+    SELECT job, object, environment, valid, counted, correct, parameter, position,
            (dense_rank() OVER (PARTITION BY parameter ORDER BY raw IS NULL, coalesce(bin::DOUBLE, number),
                                CASE WHEN bin IS NULL THEN raw END) - 1)::INTEGER AS level,
            CASE WHEN raw IS NULL THEN '{NOT_APPLIED}'
@@ -242,7 +244,7 @@ def _varied_rows(n: int, seed: int = 0) -> list[dict[str, Any]]:
 
 def test_levels_ranked_once_per_level_are_the_levels_of_ranking_every_row(tmp_path: Path) -> None:
     con = make_store(tmp_path, _varied_rows(400))
-    columns = "job, object, environment, valid, correct, parameter, position, level, label"
+    columns = "job, object, environment, valid, counted, correct, parameter, position, level, label"
     ranked_once = con.execute(f"SELECT {columns} FROM control_levels ORDER BY job, position").fetchall()
     per_row = con.execute(f"SELECT {columns} FROM ({PER_ROW_LEVELS}) ORDER BY job, position").fetchall()
     assert ranked_once == per_row

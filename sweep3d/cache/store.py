@@ -47,6 +47,10 @@ TRUTH_BLOBS = {"mask.png": "mask_sha256", "depth.npz": "depth_sha256"}
 #: Parquet metadata key of a jobs file planned with truth passes: ``[evaluator] min_visible``.
 MIN_VISIBLE_METADATA = b"sweep3d.min_visible"
 DEFAULT_MIN_VISIBLE = 0.1
+#: ``results.counted``: the rows every accuracy averages. A prediction must be valid (finite
+#: outputs) and its job not known to be unevaluable (out of frame, or too little of the object
+#: visible): such a job is counted apart, never as a failure. Unknown (no truth row yet) counts.
+COUNTED_SQL = "p.valid AND g.evaluable IS NOT FALSE"
 BLOB_TABLES = ("renders", "images")  # tables whose rows each own the blob named by their key
 DIGEST_COLUMN = "sha256"  # hex SHA-256 of a blob's bytes, recorded in its row when written
 BLOB_EXT = "png"  # the file type of the blobs a run makes
@@ -402,7 +406,9 @@ class Store:
         (per job: the truth columns and ``evaluable``) and ``results`` (jobs ⨝ predictions ⨝
         ground_truth). ``evaluable`` is false for a job out of frame and, where the plan has truth
         passes, for one whose ``visible_fraction`` is below ``[evaluator] min_visible`` (null while
-        its truth row is missing); without truth passes it is ``in_frame``.
+        its truth row is missing); without truth passes it is ``in_frame``. ``counted`` (see
+        :data:`COUNTED_SQL`) is what every accuracy counts: a valid prediction of a job not known
+        to be unevaluable.
         The aggregate stage adds its views on top (``sweep3d.stages.aggregate.connect``).
         Unreadable segments are left out (and quarantined). The views read the segments listed
         now; a compaction keeps the files it replaced for ``SUPERSEDED_GRACE`` seconds, so a
@@ -431,9 +437,12 @@ class Store:
                 # every experiment whose job has its key, so its own ``model`` is what the first called it.
                 jobs_name_models = "model" in {row[0] for row in con.execute("DESCRIBE jobs").fetchall()}
                 own = ", model" if jobs_name_models else ""
+                judged = "valid" in {row[0] for row in con.execute("DESCRIBE predictions").fetchall()}
+                counted = (COUNTED_SQL if truth is not None else "p.valid") if judged else None
                 con.execute(
                     f"CREATE VIEW results AS SELECT j.*, p.* EXCLUDE (pred_key, image_key, created_at{own})"
                     + (f", g.* EXCLUDE (job, truth_key{own})" if truth is not None else "")
+                    + (f", {counted} AS counted" if counted else "")
                     + " FROM jobs j JOIN predictions p USING (pred_key)"
                     + (" LEFT JOIN ground_truth g ON g.job = j.job" + (" AND g.model = j.model" if own else "")
                        if truth is not None else "")
@@ -721,6 +730,17 @@ def _sql_str(text: str) -> str:
     return "'" + text.replace("'", "''") + "'"
 
 
+def plan_min_visible(jobs: Path) -> float:
+    """``[evaluator] min_visible`` as the plan at ``jobs`` recorded it (the default when it did not,
+    or recorded something unusable): the threshold ``evaluable`` applies."""
+    try:
+        metadata = pq.read_schema(jobs).metadata or {}
+        min_visible = float(metadata.get(MIN_VISIBLE_METADATA, b"nan").decode())
+    except (OSError, ValueError, pa.ArrowException):
+        min_visible = float("nan")
+    return min_visible if 0.0 <= min_visible <= 1.0 else DEFAULT_MIN_VISIBLE
+
+
 def _ground_truth_sql(con: duckdb.DuckDBPyConnection, jobs: Path, truths: bool) -> str | None:
     """The ``ground_truth`` view: per job of the plan, its truth columns and ``evaluable``
     (None for a jobs table without the columns it needs: one written by hand, or very old)."""
@@ -733,13 +753,7 @@ def _ground_truth_sql(con: duckdb.DuckDBPyConnection, jobs: Path, truths: bool) 
                 "NULL::INTEGER AS gt_y0, NULL::INTEGER AS gt_x1, NULL::INTEGER AS gt_y1, "
                 "NULL::BIGINT AS visible_pixels, NULL::BIGINT AS silhouette_pixels, "
                 "NULL::DOUBLE AS visible_fraction, in_frame AS evaluable FROM jobs")
-    metadata = pq.read_schema(jobs).metadata or {}
-    try:
-        min_visible = float(metadata.get(MIN_VISIBLE_METADATA, b"nan").decode())
-    except ValueError:
-        min_visible = float("nan")
-    if not 0.0 <= min_visible <= 1.0:
-        min_visible = DEFAULT_MIN_VISIBLE
+    min_visible = plan_min_visible(jobs)
     source = ("(SELECT truth_key, gt_x0, gt_y0, gt_x1, gt_y1, visible_pixels, silhouette_pixels, visible_fraction "
               "FROM truths)") if truths else \
         ("(SELECT NULL::VARCHAR AS truth_key, NULL::INTEGER AS gt_x0, NULL::INTEGER AS gt_y0, "

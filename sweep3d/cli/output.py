@@ -9,7 +9,8 @@ from rich.table import Table
 from sweep3d.cache.store import Store
 from sweep3d.pipeline import plan_spec
 from sweep3d.spec.loader import LoadedSpec
-from sweep3d.stages.aggregate import connect, has_view, stored_summary, weakest_regions, wilson_interval
+from sweep3d.stages.aggregate import Summary, connect, has_view, stored_summary, weakest_regions, wilson_interval
+from sweep3d.stages.aggregate.tasks import HIDDEN
 from sweep3d.stages.driver import plan_status
 from sweep3d.stages.infer import InferStage, ModelHandle
 from sweep3d.stages.passes import truth_passes
@@ -123,13 +124,23 @@ def print_findings(console: Console, plan: Plan, store: Store | None = None) -> 
     if summary.accuracy is None:
         return
     which = f"{escape(plan.model)}: " if len(plan.spec.models) > 1 else ""
-    console.print(f"{which}accuracy {summary.accuracy:.1%} ({summary.correct} of {summary.evaluated - summary.invalid}); "
-                  f"{summary.evaluated - summary.invalid - summary.correct} failures"
-                  + (f", {summary.invalid} invalid (NaN/inf) excluded" if summary.invalid else ""))
+    console.print(f"{which}accuracy {summary.accuracy:.1%} ({summary.correct} of {summary.counted}); "
+                  f"{summary.wrong} failures"
+                  + (f", {summary.invalid} invalid (NaN/inf) excluded" if summary.invalid else "")
+                  + (f"; {not_evaluable_line(summary)}" if summary.not_evaluable else ""))
     regions = weakest_regions(summary)
     if regions:
         console.print("fails most at: " + "; ".join(
             f"{escape(r.column)} = {escape(r.label)} ({r.accuracy:.0%} of {r.count})" for r in regions))
+
+
+def not_evaluable_line(summary: Summary) -> str:
+    """``12 jobs not evaluable, excluded: 8 out of frame, 4 hidden (< 10% visible)``."""
+    reasons = ", ".join(
+        f"{n} {reason}" + (f" (< {summary.min_visible:.0%} visible)" if reason == HIDDEN and summary.min_visible
+                           is not None else "")
+        for reason, n in summary.not_evaluable_reasons.items())
+    return f"{summary.not_evaluable} jobs not evaluable, excluded: {reasons}"
 
 
 def print_warning(console: Console, line: str | None) -> None:

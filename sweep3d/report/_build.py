@@ -20,6 +20,7 @@ import duckdb
 from sweep3d.cache.store import Store, atomic_write
 from sweep3d.errors import UserError
 from sweep3d.report.figures import pct
+from sweep3d.report.overlays import read_overlays
 from sweep3d.report.page import render_page
 from sweep3d.report.panel import BuiltPanel, Panel, PanelInputs, build_panels
 from sweep3d.report.panels import PANELS
@@ -85,7 +86,7 @@ def build_context(loaded: LoadedSpec, con: duckdb.DuckDBPyConnection, store: Sto
     """
     page = gather(loaded, con, store, panels)
     summary, thumbs = page.summary, page.thumbs
-    uris = thumbs.data_uris()
+    uris = thumbs.data_uris(overlays=read_overlays(con, store, thumbs.keys()[:thumbs.limit]))
     return {
         "name": loaded.name,
         "model": model or loaded.model.label,
@@ -93,7 +94,7 @@ def build_context(loaded: LoadedSpec, con: duckdb.DuckDBPyConnection, store: Sto
         "store": str(loaded.store),
         "summary": summary,
         "accuracy": pct(summary.accuracy),
-        "wrong": summary.evaluated - summary.invalid - summary.correct,
+        "wrong": summary.wrong,
         "run": _latest_run(con, loaded.name),
         "panels": page.panels,
         "thumbs": json.dumps(uris, separators=(",", ":")),
@@ -152,9 +153,8 @@ def render_html(context: dict[str, Any]) -> str:
 
 
 def min_count(summary: Summary) -> int:
-    """The fewest valid results a failure mode needs: 5 % of them, between 2 and 10."""
-    valid = summary.evaluated - summary.invalid
-    return min(10, max(2, valid // 20))
+    """The fewest counted results a failure mode needs: 5 % of them, between 2 and 10."""
+    return min(10, max(2, summary.counted // 20))
 
 
 def _latest_run(con: duckdb.DuckDBPyConnection, experiment: str) -> dict[str, Any] | None:

@@ -4,7 +4,7 @@ Two things make a report of 10^6 results cheap to build:
 
 - :func:`materialise_views` computes once the aggregate views the report reads many times
   (``results``, ``control_stats``, ``control_levels``, ``control_parameters``,
-  ``control_accuracy``, ``pair_accuracy``) into temp tables that those views then read. The
+  ``control_accuracy``, ``pair_accuracy``, ``not_evaluable``) into temp tables that those views then read. The
   SQL and the rows are the views' own (a connection's views read a fixed set of immutable
   segments, so nothing goes stale); without it each of the report's queries recomputes their
   ranks and self-joins (at 10^6 results, minutes per query).
@@ -13,8 +13,9 @@ Two things make a report of 10^6 results cheap to build:
   the panels ask: a region's examples, the joint counts the explorer aggregates, the images to
   embed. Nothing here holds a Python object per result.
 
-Examples come wrong first (highest loss first), then correct, then invalid, so the first rows
-of any slice are its most telling failures.
+Examples come wrong first (highest loss first), then correct, then invalid, then those of jobs
+that are not evaluable (out of frame or hidden: never counted as right or wrong), so the first
+rows of any slice are its most telling failures.
 """
 
 from __future__ import annotations
@@ -26,12 +27,12 @@ import duckdb
 
 from sweep3d.stages.aggregate.views import materialise
 
-WRONG, CORRECT, INVALID = 0, 1, 2  # outcome codes
-OUTCOME_NAMES = ("wrong", "correct", "invalid")
+WRONG, CORRECT, INVALID, NOT_EVALUABLE = 0, 1, 2, 3  # outcome codes; the first two are counted
+OUTCOME_NAMES = ("wrong", "correct", "invalid", "not-evaluable")
 TABLE = "report_levels"  # the temp table of one row per result
 #: Views read many times by one report, in dependency order.
 MATERIALISED = ("results", "control_stats", "control_levels", "control_parameters", "control_accuracy",
-                "pair_accuracy")
+                "pair_accuracy", "not_evaluable")
 #: The order examples come in: most telling first.
 EXAMPLE_ORDER = "outcome, loss DESC NULLS LAST, job"
 
@@ -81,7 +82,8 @@ class Results:
         columns = {row[0] for row in con.execute("DESCRIBE results").fetchall()}
         con.execute(_table_sql(columns, [p.name for p in self.parameters]))
         #: ORDER BY putting rows of ``results`` in example order (for SQL shown to the user).
-        self.example_order_sql = "ORDER BY NOT valid, correct" + (", loss DESC" if "loss" in columns else "") + ", job"
+        self.example_order_sql = ("ORDER BY NOT counted, correct" + (", loss DESC" if "loss" in columns else "")
+                                  + ", job")
 
     def __len__(self) -> int:
         return int(self.con.execute(f"SELECT count(*) FROM {TABLE}").fetchone()[0])
@@ -114,13 +116,14 @@ class Results:
         """The non-empty cells of the contingency table over ``parameters``, column by column.
 
         Returns:
-            ``level`` (one list per parameter: each cell's level), ``n`` (valid results),
-            ``k`` (correct ones) and ``total`` (with the invalid ones), cells in level order.
+            ``level`` (one list per parameter: each cell's level), ``n`` (counted results),
+            ``k`` (correct ones) and ``total`` (with the invalid and unevaluable ones), cells in
+            level order.
         """
         columns = [_level(p) for p in parameters]
         keys = ", ".join(columns)
         found = self.con.execute(
-            f"SELECT {keys + ', ' if keys else ''}count(*) FILTER (WHERE outcome <> {INVALID}) AS n, "
+            f"SELECT {keys + ', ' if keys else ''}count(*) FILTER (WHERE outcome <= {CORRECT}) AS n, "
             f"count(*) FILTER (WHERE outcome = {CORRECT}) AS k, count(*) AS total FROM {TABLE}"
             + (f" GROUP BY {keys} ORDER BY {keys}" if keys else "")
         ).fetchnumpy()
@@ -180,7 +183,9 @@ def _table_sql(columns: set[str], names: list[str]) -> str:
     with their levels, one column per parameter."""
     prediction = "r.top1_label" if "top1_label" in columns else "NULL::VARCHAR"
     loss = "r.loss" if "loss" in columns else "NULL::DOUBLE"
-    select = (f"SELECT r.job, (CASE WHEN NOT r.valid THEN {INVALID} WHEN r.correct THEN {CORRECT} ELSE {WRONG} END)"
+    unevaluable = "r.evaluable IS FALSE" if "evaluable" in columns else "false"
+    select = (f"SELECT r.job, (CASE WHEN r.counted THEN (CASE WHEN r.correct THEN {CORRECT} ELSE {WRONG} END) "
+              f"WHEN {unevaluable} THEN {NOT_EVALUABLE} ELSE {INVALID} END)"
               f"::TINYINT AS outcome, {loss}::DOUBLE AS loss, {prediction} AS prediction, r.image_key")
     if not names:
         return f"CREATE OR REPLACE TEMP TABLE {TABLE} AS {select} FROM results r"

@@ -9,6 +9,9 @@ asked for; beyond either budget, later ones are left out (``null`` in the list; 
 placeholder), so a report stays small at any scale.
 A blob is embedded only if it matches a SHA-256 its rows recorded: a damaged one is shown as a
 placeholder saying so (:attr:`Thumbnails.problems`), never as the picture it no longer is.
+Boxes and masks are drawn on a thumbnail when the report hands them over (see
+:mod:`sweep3d.report.overlays`); such a thumbnail keeps full colour resolution, so thin coloured
+outlines keep their colour through JPEG.
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ import io
 import os
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+from typing import Mapping
 
 import pyarrow as pa
 import pyarrow.compute as pc
@@ -25,6 +29,7 @@ from PIL import Image
 
 from sweep3d.cache.blobs import sha256_bytes
 from sweep3d.cache.store import BLOB_TABLES, DIGEST_COLUMN, KEY_COLUMN, Store
+from sweep3d.report.overlays import Overlay, draw_overlay
 
 #: Longest side of a thumbnail by the number of distinct images in the report: 96 px up to
 #: 2500 images, else 64 px (a 64 px render is about 2 kB as JPEG).
@@ -73,8 +78,12 @@ class Thumbnails:
         """The image keys asked for, in the order first asked for."""
         return list(self._index)
 
-    def data_uris(self, workers: int | None = None) -> list[str | None]:
+    def data_uris(self, workers: int | None = None, overlays: Mapping[str, Overlay] | None = None
+                  ) -> list[str | None]:
         """Encode every image asked for, in the order first asked for.
+
+        Args:
+            overlays: image key → what to draw on its thumbnail (boxes, masks).
 
         Returns:
             One data URI per index (None for a blob missing, damaged or beyond the budget; see
@@ -82,10 +91,11 @@ class Thumbnails:
         """
         keys = self.keys()[:self.limit]
         digests = recorded_digests(self.store, keys)
-        jobs = [(self.store.blob_path(key), digests.get(key, set())) for key in keys]
+        overlays = overlays or {}
+        jobs = [(self.store.blob_path(key), digests.get(key, set()), overlays.get(key)) for key in keys]
         workers = workers or min(8, os.cpu_count() or 1)
         with ThreadPoolExecutor(workers) as pool:  # PIL releases the GIL while decoding and encoding
-            encoded = list(pool.map(lambda job: encode_thumbnail(*job, self.size), jobs))
+            encoded = list(pool.map(lambda job: encode_thumbnail(job[0], job[1], self.size, job[2]), jobs))
         uris: list[str | None] = []
         spent = 0
         self.missing = self.damaged = self.left_out = 0
@@ -129,11 +139,13 @@ def thumbnail_size(images: int) -> int:
     return next(size for limit, size in SIZES if limit is None or images <= limit)
 
 
-def encode_thumbnail(path: Path, digests: set[str], size: int) -> tuple[str | None, str | None]:
+def encode_thumbnail(path: Path, digests: set[str], size: int,
+                     overlay: Overlay | None = None) -> tuple[str | None, str | None]:
     """A JPEG data URI of the image at ``path`` downscaled to ``size`` (longest side), checked first.
 
     Args:
         digests: the SHA-256 digests its rows recorded (empty: it only has to decode).
+        overlay: boxes and masks to draw on it, in the stored image's pixels.
 
     Returns:
         (the data URI, None), or (None, :data:`MISSING` or :data:`DAMAGED`) when the file is
@@ -150,9 +162,13 @@ def encode_thumbnail(path: Path, digests: set[str], size: int) -> tuple[str | No
     try:
         with Image.open(io.BytesIO(data)) as img:
             img = img.convert("RGB")
+            full = img.size
             img.thumbnail((size, size), Image.Resampling.LANCZOS)
     except (OSError, ValueError):
         return None, DAMAGED
+    drawn = overlay is not None and not overlay.empty
+    if drawn:
+        img = draw_overlay(img, overlay, (img.width / full[0], img.height / full[1]))
     buf = io.BytesIO()
-    img.save(buf, format="JPEG", quality=JPEG_QUALITY, optimize=True)
+    img.save(buf, format="JPEG", quality=JPEG_QUALITY, optimize=True, **({"subsampling": 0} if drawn else {}))
     return "data:image/jpeg;base64," + base64.b64encode(buf.getvalue()).decode("ascii"), None

@@ -8,10 +8,12 @@ then list it below. A panel whose data may be absent returns None and is left ou
 
 The explorer is ``late``: built after the others, it fills the image budget they leave.
 
-``OPTIONAL_PANELS`` is where such panels go: the model comparison (only when the spec tests
-several models) and the part-visibility panel (accuracy conditioned on
-which parts of the object's surface are visible, from a UV render pass) returns None when the
-spec did not ask for the pass.
+``OPTIONAL_PANELS`` is where such panels go: the jobs that are not evaluable (only when there
+are some: out of frame, or too little of the object visible), box and mask outcomes (only for
+tasks whose results have an ``outcome`` or ``iou``), the model comparison (only when the spec
+tests several models) and the part-visibility panel (accuracy conditioned on which parts of the
+object's surface are visible, from a UV render pass) returns None when the spec did not ask for
+the pass.
 """
 
 from __future__ import annotations
@@ -23,7 +25,9 @@ from sweep3d.report.panels import (
     explorer,
     failure_modes,
     failures,
+    not_evaluable,
     objects,
+    outcomes,
     overall,
     part_visibility,
 )
@@ -37,12 +41,19 @@ CORE_PANELS: tuple[Panel, ...] = (
     Panel("aggregate", "Aggregate", "panels/aggregate.html.j2", aggregate.build),
 )
 
+NOT_EVALUABLE = Panel("not-evaluable", "Not evaluable", "panels/not_evaluable.html.j2", not_evaluable.build)
+OUTCOMES = Panel("outcomes", "Boxes and masks", "panels/outcomes.html.j2", outcomes.build)
+
 #: Panels shown only when their data exists (their ``build`` returns None otherwise).
 OPTIONAL_PANELS: tuple[Panel, ...] = (
+    NOT_EVALUABLE,
+    OUTCOMES,
     Panel("compare", "Model comparison", "panels/compare.html.j2", compare.build),
     Panel("part-visibility", "Part visibility", "panels/part_visibility.html.j2", part_visibility.build),
 )
 
-PANELS: tuple[Panel, ...] = CORE_PANELS + OPTIONAL_PANELS
+#: Page order: what was left out of the accuracy right after it, box and mask outcomes after
+#: the aggregate plots.
+PANELS: tuple[Panel, ...] = (CORE_PANELS[0], NOT_EVALUABLE, *CORE_PANELS[1:], *OPTIONAL_PANELS[1:])
 
 __all__ = ["CORE_PANELS", "OPTIONAL_PANELS", "PANELS"]

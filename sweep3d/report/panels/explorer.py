@@ -36,7 +36,8 @@ def build(inputs: PanelInputs, max_cells: int = MAX_CELLS) -> dict[str, Any]:
     """The explorer's JSON payload (see :func:`payload`) and what the template says about it."""
     data = payload(inputs, max_cells)
     return {"json": json.dumps(data, separators=(",", ":"), ensure_ascii=False), "mode": data["mode"],
-            "cells": data["cells"], "max_cells": max_cells, "images": len(data["sample"]["job"])}
+            "cells": data["cells"], "max_cells": max_cells, "images": len(data["sample"]["job"]),
+            "gated": data["gated"]}
 
 
 def payload(inputs: PanelInputs, max_cells: int = MAX_CELLS) -> dict[str, Any]:
@@ -49,7 +50,8 @@ def payload(inputs: PanelInputs, max_cells: int = MAX_CELLS) -> dict[str, Any]:
     page embeds, most telling first: ``level`` per parameter, ``outcome``, ``pred`` (index into
     ``preds``, -1 for none), ``thumb`` (index into the page's thumbnails), ``job``); ``defaults``
     (the parameters first on the x and y axes, -1 for none); ``limit`` (gallery size); ``query``
-    (the spec and the ORDER BY of the gallery's SQL); ``colorscale`` and ``layout``.
+    (the spec and the ORDER BY of the gallery's SQL); ``colorscale`` and ``layout``; ``gated``
+    (some jobs are not evaluable: the counts leave them out, and the page says "counted").
     """
     results = inputs.results
     shown = [i for i, p in enumerate(results.parameters) if p.varies or p.name in SCENE_COLUMNS]
@@ -71,6 +73,7 @@ def payload(inputs: PanelInputs, max_cells: int = MAX_CELLS) -> dict[str, Any]:
         "query": {"spec": str(inputs.loaded.path), "order": results.example_order_sql},
         "colorscale": ACCURACY_COLORSCALE,
         "layout": layout_json(margin={"l": 16, "r": 16, "t": 16, "b": 48}),
+        "gated": inputs.summary.not_evaluable > 0,
     }
 
 

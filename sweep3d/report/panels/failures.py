@@ -1,4 +1,5 @@
-"""Worst failures: the wrong predictions with the highest loss, each with its top-k."""
+"""Worst failures: the wrong predictions with the highest loss, each with its top-k (and, for box
+and mask tasks, how it failed and its IoU; the thumbnail shows the true and predicted boxes)."""
 
 from __future__ import annotations
 
@@ -12,15 +13,17 @@ def build(inputs: PanelInputs) -> dict[str, Any]:
     """Cards of the summary's failures: thumbnail, scene, control values, top-k, loss."""
     failures = inputs.summary.failures
     columns = inputs.loaded.parameter_columns
+    present = {row[0] for row in inputs.con.execute("DESCRIBE results").fetchall()}
+    task = [c if c in present else f"NULL AS {c}" for c in ("outcome", "iou", "topk")]  # other tasks lack some
     selected = "".join(f', "{c}"' for c in columns)
     extra = {row[0]: row[1:] for row in inputs.con.execute(
-        f"SELECT job, topk{selected} FROM results WHERE list_contains(?, job)", [[f["job"] for f in failures]]
-    ).fetchall()} if failures else {}
+        f"SELECT job, {', '.join(task)}{selected} FROM results WHERE list_contains(?, job)",
+        [[f["job"] for f in failures]]).fetchall()} if failures else {}
     cards = []
     for failure in failures:
-        topk_ids, *values = extra.get(failure["job"], (None,))
+        outcome, iou, topk_ids, *values = extra.get(failure["job"], (None, None, None))
         truth = set(inputs.loaded.labels.get(failure["object"], ()))
-        names = failure["topk_labels"] or []
+        names = failure["topk_labels"] or ([failure["top1_label"]] if failure["top1_label"] else [])
         ids = topk_ids or [None] * len(names)
         cards.append({
             "job": failure["job"],
@@ -29,11 +32,17 @@ def build(inputs: PanelInputs) -> dict[str, Any]:
             "thumb": inputs.thumbs.want(failure["image_key"]),
             "controls": [(c, _fmt(v)) for c, v in zip(columns, values) if v is not None],
             "topk": [{"label": name, "prob": pct(prob), "truth": i in truth or name in truth}
-                     for name, prob, i in zip(names, failure["topk_probs"] or [], ids)],
+                     for name, prob, i in zip(names, failure["topk_probs"] or [None] * len(names), ids)],
             "loss": f"{failure['loss']:.2f}" if failure["loss"] is not None else "",
+            "outcome": _outcome(outcome, iou),
         })
-    wrong = inputs.summary.evaluated - inputs.summary.invalid - inputs.summary.correct
-    return {"cards": cards, "wrong": wrong}
+    return {"cards": cards, "wrong": inputs.summary.wrong}
+
+
+def _outcome(outcome: str | None, iou: float | None) -> str:
+    """``wrong box · IoU 0.31`` for a box or mask task's failure ("" for classification)."""
+    parts = [outcome.replace("_", " ")] if outcome else []
+    return " · ".join(parts + ([f"IoU {iou:.2f}"] if iou is not None else []))
 
 
 def _fmt(value: Any) -> str:

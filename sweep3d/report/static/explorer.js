@@ -20,7 +20,8 @@
   data.tables.forEach(function (t) {  // where each parameter's column is in each table
     t.pos = params.map(function (_, p) { return t.params.indexOf(p); });
   });
-  var OUTCOMES = ['wrong', 'correct', 'invalid'];
+  var OUTCOMES = ['wrong', 'correct', 'invalid', 'not-evaluable'];
+  var COUNTED = data.gated ? 'counted' : 'valid';  // counted: valid results of evaluable jobs
   var ROLES = [['x', 'x axis'], ['y', 'y axis'], ['slider', 'slider'], ['pooled', 'pooled']];
   var MAX_CELL_TEXT = 400; // cells beyond which the numbers are left to the hover
 
@@ -166,7 +167,7 @@
       }
     }
     var ci = S.wilson(correct, total);
-    status.textContent = total + ' valid results match the sliders · accuracy ' + S.percent(correct / total) +
+    status.textContent = total + ' ' + COUNTED + ' results match the sliders · accuracy ' + S.percent(correct / total) +
       (total ? ' (95% CI ' + S.percent(ci[0], 0) + '–' + S.percent(ci[1], 0) + ')' : '');
     var trace = {
       type: 'heatmap', z: z, x: range(x.n), y: range(y.n), zmin: 0, zmax: 1, colorscale: data.colorscale,

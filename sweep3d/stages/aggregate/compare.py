@@ -1,11 +1,12 @@
 """Views that compare the models of one experiment on the same jobs (paired by ``job``).
 
-Two models are compared on the jobs both answered validly, so each difference is paired: the
+Two models are compared on the jobs both answered validly and both may be judged on (``counted``
+in ``results``: an unevaluable job is no evidence either way), so each difference is paired: the
 same render (or the same scene seen at each model's own framing) judged by both. For each pair
 of models (``model_a`` before ``model_b`` in spec order):
 
 ``model_accuracy``
-    per model: n, n_correct, accuracy and its Wilson interval (valid results only).
+    per model: n, n_correct, accuracy and its Wilson interval (counted results only).
 ``model_agreement``
     per pair: n (jobs both answered), accuracy of each, ``fixed`` (a wrong, b right),
     ``broken`` (a right, b wrong), the difference b − a, McNemar's exact p-value, the share of
@@ -68,7 +69,7 @@ def register_compare_views(con: duckdb.DuckDBPyConnection, models: list[str], ha
         f"""CREATE OR REPLACE VIEW model_pairs AS
             WITH r AS (SELECT r.job, r.model, m.model_rank, r.correct, {top1} AS top1, r.image_key,
                               r.object, r.environment
-                       FROM results_all r JOIN model_ranks m USING (model) WHERE r.valid)
+                       FROM results_all r JOIN model_ranks m USING (model) WHERE r.counted)
             SELECT a.model AS model_a, b.model AS model_b, a.model_rank AS rank_a, b.model_rank AS rank_b,
                    a.job, a.object, a.environment, a.correct AS correct_a, b.correct AS correct_b,
                    a.top1 AS top1_a, b.top1 AS top1_b, a.image_key AS image_key_a, b.image_key AS image_key_b
@@ -76,8 +77,8 @@ def register_compare_views(con: duckdb.DuckDBPyConnection, models: list[str], ha
         """CREATE OR REPLACE VIEW model_accuracy AS
             SELECT *, n_correct / nullif(n, 0) AS accuracy, wilson_low(n_correct, n) AS wilson_low,
                    wilson_high(n_correct, n) AS wilson_high FROM (
-                SELECT m.model, m.model_rank, count(r.job) FILTER (WHERE r.valid) AS n,
-                       count(r.job) FILTER (WHERE r.valid AND r.correct) AS n_correct
+                SELECT m.model, m.model_rank, count(r.job) FILTER (WHERE r.counted) AS n,
+                       count(r.job) FILTER (WHERE r.counted AND r.correct) AS n_correct
                 FROM model_ranks m LEFT JOIN results_all r USING (model) GROUP BY m.model, m.model_rank)
             ORDER BY model_rank""",
         f"""CREATE OR REPLACE VIEW model_agreement AS

@@ -3,7 +3,7 @@
 The paper's Figure 8. Each render made with the UV pass records its pixels per part (the
 ``parts`` table, see :mod:`sweep3d.parts`); a part counts as *visible* in an image when it
 covers at least :data:`VISIBLE_SHARE` of the object's visible pixels (so a sliver on the
-silhouette or a seam pixel does not count). Per (object, part): how many valid results show
+silhouette or a seam pixel does not count). Per (object, part): how many counted results show
 the part, their accuracy with its Wilson interval, and the object's accuracy over all its
 results with a UV pass, to compare against (``lift`` = the difference).
 """
@@ -29,7 +29,7 @@ def register_part_views(con: duckdb.DuckDBPyConnection, result_columns: set[str]
         WITH shown AS (
             SELECT r.object, r.correct, p.parts, p.pixels, p.object_pixels
             FROM results r JOIN parts p USING (parts_key)
-            WHERE r.valid AND p.layout = '{PARTS_LAYOUT}'),
+            WHERE r.counted AND p.layout = '{PARTS_LAYOUT}'),
         per_object AS (
             SELECT object, count(*) AS object_n, avg(correct::DOUBLE) AS object_accuracy FROM shown GROUP BY object),
         seen AS (

@@ -1,7 +1,9 @@
 """Summaries of a run's results, computed by DuckDB over the ``results`` view.
 
-Accuracy counts only valid predictions (a render or model output with NaN/inf is excluded and
-counted separately), so no non-finite value is ever averaged in silently.
+Accuracy counts only the results ``results.counted`` marks: valid predictions (a render or model
+output with NaN/inf is excluded and counted separately, so no non-finite value is ever averaged in
+silently) of jobs not known to be unevaluable (out of frame, or too little of the object visible:
+counted apart, from the ``not_evaluable`` view, with the reason).
 
 :func:`stored_summary` remembers a summary in the store, keyed by exactly the files and code it
 was computed from, so a run that changed nothing prints its findings without computing them.
@@ -26,7 +28,7 @@ from sweep3d.stages.aggregate.views import connect, has_view, materialise, regis
 FAILURE_LIMIT = 48  # failures a summary lists, worst first
 #: Bump when :func:`summarise` gives other numbers for the same rows without a change to this
 #: module or to the views' module (both are part of a remembered summary's key).
-SUMMARY_FORMAT = 1
+SUMMARY_FORMAT = 2
 
 
 @dataclass
@@ -44,9 +46,13 @@ class ControlEffect:
 
 @dataclass
 class Summary:
+    """What a run found. The jobs split into ``counted`` (their accuracy is ``accuracy``),
+    ``invalid`` (NaN/inf outputs), ``not_evaluable`` (out of frame or hidden, whatever their
+    prediction) and those without a prediction yet."""
+
     jobs: int
-    evaluated: int
-    invalid: int
+    evaluated: int  # results: jobs with a prediction
+    invalid: int  # results with non-finite outputs, not counted as unevaluable
     correct: int
     accuracy: float | None
     objects: list[str]
@@ -56,6 +62,15 @@ class Summary:
     effects: list[ControlEffect] = field(default_factory=list)
     failures: list[dict[str, Any]] = field(default_factory=list)
     per_object: list[dict[str, Any]] = field(default_factory=list)
+    counted: int = 0  # valid results of jobs not known to be unevaluable: what accuracy averages
+    not_evaluable: int = 0  # jobs of the plan with evaluable = false (rendered or not)
+    not_evaluable_reasons: dict[str, int] = field(default_factory=dict)  # reason -> jobs
+    min_visible: float | None = None  # the threshold behind the reason "hidden" (None: no truth passes)
+
+    @property
+    def wrong(self) -> int:
+        """Counted results that are not correct."""
+        return self.counted - self.correct
 
 
 def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit: int = FAILURE_LIMIT) -> Summary:
@@ -71,14 +86,18 @@ def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit:
     jobs = con.execute("SELECT count(*) FROM jobs").fetchone()[0] if has_view(con, "jobs") else 0
     if not has_view(con, "results"):
         return Summary(jobs, 0, 0, 0, None, [], [], [], [])
-    materialise(con, ["results"])
-    evaluated, invalid, correct = con.execute(
-        "SELECT count(*), count(*) FILTER (WHERE NOT valid), count(*) FILTER (WHERE valid AND correct) FROM results"
-    ).fetchone()
     if not has_view(con, "control_accuracy"):  # a connection made without aggregate.connect
         register_views(con)
-    valid = evaluated - invalid
-    accuracy = correct / valid if valid else None
+    materialise(con, ["results"])
+    # Other tasks' evaluators (detection, a user's own) may lack the classification columns.
+    have = {row[0] for row in con.execute("DESCRIBE results").fetchall()}
+    unevaluable = "evaluable IS FALSE" if "evaluable" in have else "false"
+    evaluated, counted, invalid, correct = con.execute(
+        f"SELECT count(*), count(*) FILTER (WHERE counted), count(*) FILTER (WHERE NOT valid AND NOT ({unevaluable})), "
+        "count(*) FILTER (WHERE counted AND correct) FROM results"
+    ).fetchone()
+    accuracy = correct / counted if counted else None
+    reasons, min_visible = not_evaluable_reasons(con)
 
     objects = [r[0] for r in con.execute("SELECT DISTINCT object FROM jobs ORDER BY 1").fetchall()]
     environments = [r[0] for r in con.execute("SELECT DISTINCT environment FROM jobs ORDER BY 1").fetchall()]
@@ -92,8 +111,6 @@ def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit:
     scene_count = [[cells.get((o, e), (None, 0))[1] for e in environments] for o in objects]
 
     effects = control_effects(con, columns)
-    # Other tasks' evaluators (detection, a user's own) may lack the classification columns.
-    have = {row[0] for row in con.execute("DESCRIBE results").fetchall()}
     shown = ["top1_label", "topk_labels", "topk_probs", "loss"]
     picked = ", ".join(name if name in have else f"NULL AS {name}" for name in shown)
     worst = "loss DESC" if "loss" in have else "iou NULLS FIRST" if "iou" in have else "job"
@@ -101,7 +118,7 @@ def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit:
         dict(zip(["job", "object", "environment", "image_key", *shown], r))
         for r in con.execute(
             f"SELECT job, object, environment, image_key, {picked} "
-            f"FROM results WHERE valid AND NOT correct ORDER BY {worst}, job LIMIT ?", [failure_limit]
+            f"FROM results WHERE counted AND NOT correct ORDER BY {worst}, job LIMIT ?", [failure_limit]
         ).fetchall()
     ]
     top1 = "top1_label" if "top1_label" in have else "NULL::VARCHAR"
@@ -109,11 +126,23 @@ def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit:
         dict(zip(["object", "accuracy", "count", "top_wrong"], r))
         for r in con.execute(
             "SELECT object, avg(correct::DOUBLE), count(*), "
-            f"mode({top1}) FILTER (WHERE NOT correct) FROM results WHERE valid GROUP BY 1 ORDER BY 1"
+            f"mode({top1}) FILTER (WHERE NOT correct) FROM results WHERE counted GROUP BY 1 ORDER BY 1"
         ).fetchall()
     ]
     return Summary(jobs, evaluated, invalid, correct, accuracy, objects, environments, scene_accuracy,
-                   scene_count, effects, failures, per_object)
+                   scene_count, effects, failures, per_object, counted, sum(reasons.values()), reasons, min_visible)
+
+
+def not_evaluable_reasons(con: duckdb.DuckDBPyConnection) -> tuple[dict[str, int], float | None]:
+    """Unevaluable jobs per reason (from the ``not_evaluable`` view, reasons in name order) and the
+    plan's ``min_visible`` behind them; ``({}, None)`` when the store cannot tell."""
+    if not has_view(con, "not_evaluable"):
+        return {}, None
+    rows = con.execute("SELECT reason, sum(n)::BIGINT, any_value(min_visible) FROM not_evaluable "
+                       "GROUP BY reason ORDER BY reason").fetchall()
+    thresholds = {row[2] for row in rows if row[2] is not None}
+    return {reason: int(n) for reason, n, _ in rows}, (thresholds.pop() if thresholds else None)
+
 
 
 def control_effects(con: duckdb.DuckDBPyConnection, columns: list[str]) -> list[ControlEffect]:
@@ -161,9 +190,9 @@ def weakest_regions(summary: Summary, min_count: int = 3, top: int = 3) -> list[
 def stored_summary(store: Store, experiment: str, columns: list[str], failure_limit: int = FAILURE_LIMIT) -> Summary:
     """:func:`summarise` of ``experiment``'s results in ``store``, remembered there.
 
-    The summary reads the experiment's jobs file and the ``predictions`` segments (``results``
-    is their join) and nothing else. It is remembered under ``cache/summary/`` with a key of
-    those files' states (name, size, modification and change times, inode: a segment or jobs
+    The summary reads the experiment's jobs file, the ``predictions`` segments and the ``truths``
+    segments (``results`` is their join; ``evaluable`` comes from the truths) and nothing else.
+    It is remembered under ``cache/summary/`` with a key of those files' states (name, size, modification and change times, inode: a segment or jobs
     file rewritten in any way is a new state, as for the blob memo of
     :func:`sweep3d.cache.blobs.damaged_blobs`), the arguments, this module's and the views'
     source and DuckDB's version; a remembered summary is used only under the same key, so an
@@ -196,7 +225,7 @@ def summary_path(store: Store, experiment: str) -> Path:
 
 def summary_key(store: Store, experiment: str, columns: list[str], failure_limit: int = FAILURE_LIMIT) -> str:
     """What a summary of ``experiment`` is computed from, as a hex digest (see :func:`stored_summary`)."""
-    files = [store.jobs_path(experiment), *store.segments("predictions")]
+    files = [store.jobs_path(experiment), *store.segments("predictions"), *store.segments("truths")]
     states = []
     for path in files:
         try:
@@ -204,8 +233,8 @@ def summary_key(store: Store, experiment: str, columns: list[str], failure_limit
             states.append([path.name, st.st_size, st.st_mtime_ns, st.st_ctime_ns, st.st_ino])
         except OSError:
             states.append([path.name, None])
-    views_source = Path(__file__).with_name("views.py").read_bytes()
-    code = hashlib.sha256(Path(__file__).read_bytes() + b"\0" + views_source).hexdigest()
+    sources = [Path(__file__).with_name(name).read_bytes() for name in ("views.py", "tasks.py")]
+    code = hashlib.sha256(b"\0".join([Path(__file__).read_bytes(), *sources])).hexdigest()
     described = {"format": SUMMARY_FORMAT, "experiment": experiment, "columns": list(columns),
                  "failure_limit": failure_limit, "files": states, "code": code, "duckdb": duckdb.__version__}
     return hashlib.sha256(json.dumps(described, sort_keys=True).encode()).hexdigest()

@@ -5,18 +5,20 @@
 Every *parameter* is a column of the jobs table that varies a scene: ``object``, ``environment``
 and each control parameter ``<control id>_<param>`` (the plan lists them in the jobs file). A parameter's *levels* are its values, or, for a numeric parameter
 with more than :data:`MAX_LEVELS` distinct values, :data:`BINS` equal-width bins; a job where a
-control does not apply sits in the level ``(not applied)``. Accuracy counts valid predictions
-only (NaN/inf outputs are counted apart, never averaged in).
+control does not apply sits in the level ``(not applied)``. Accuracy counts the results that
+``results.counted`` marks: valid predictions (NaN/inf outputs are counted apart, never averaged
+in) of jobs not known to be unevaluable (out of frame, or too little of the object visible:
+counted apart in ``not_evaluable``). Every ``n`` below counts those.
 
 Views:
 
 ``control_parameters``
     parameter, position (spec order: object, environment, then controls), levels, numeric, binned.
 ``control_levels``
-    one row per (result, parameter): job, object, environment, valid, correct, parameter,
+    one row per (result, parameter): job, object, environment, valid, counted, correct, parameter,
     position, level (0-based, in value order), label.
 ``control_accuracy``
-    per (parameter, level): n (valid results), n_correct, accuracy, wilson_low, wilson_high.
+    per (parameter, level): n (counted results), n_correct, accuracy, wilson_low, wilson_high.
 ``pair_accuracy``
     the same per pair of levels of two parameters (both with 2 levels or more).
 ``scene_accuracy``
@@ -33,6 +35,9 @@ Views:
 ``part_visibility``
     only when the spec asks for it (a UV pass): per (object, part of its surface), accuracy
     over the results that show the part (see :mod:`sweep3d.stages.aggregate.parts`).
+``not_evaluable``, ``outcomes_by_value``, ``iou_by_object``
+    only when their columns exist: jobs counted apart and why; box and mask tasks' outcomes per
+    value and IoU per object (see :mod:`sweep3d.stages.aggregate.tasks`).
 ``average_precision``, ``average_precision_by_value``
     only for a detector (results with ``det_scores``): COCO's AP per object and its mean, overall
     and per level (see :mod:`sweep3d.stages.aggregate.detection`).
@@ -42,7 +47,7 @@ Macros:
 ``wilson_low(k, n)``, ``wilson_high(k, n)``
     the 95 % Wilson score interval of a proportion k/n (NULL when n = 0).
 ``failure_modes(min_count := 10)``
-    single levels and pairs of levels with at least ``min_count`` valid results and accuracy
+    single levels and pairs of levels with at least ``min_count`` counted results and accuracy
     below the overall accuracy, ranked by ``wilson_high`` (the most certainly bad first).
 """
 
@@ -56,12 +61,13 @@ import duckdb
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from sweep3d.cache.store import Store, lock_down
+from sweep3d.cache.store import Store, lock_down, plan_min_visible
 from sweep3d.errors import UserError
 from sweep3d.spec.columns import JOB_COLUMNS, MODELS_METADATA, PARAMETERS_METADATA
 from sweep3d.stages.aggregate.compare import COMPARE_MACROS, COMPARE_VIEWS, register_compare_views
 from sweep3d.stages.aggregate.detection import DETECTION_VIEWS, detection_views
 from sweep3d.stages.aggregate.parts import register_part_views
+from sweep3d.stages.aggregate.tasks import TASK_VIEWS, register_task_views
 
 MAX_LEVELS = 12  # a numeric parameter with more distinct values is binned
 BINS = 10
@@ -69,16 +75,18 @@ Z95 = 1.959963984540054  # two-sided 95 % normal quantile
 NOT_APPLIED = "(not applied)"
 SCENE_COLUMNS = ("object", "environment")
 REQUIRED_COLUMNS = frozenset({"job", "object", "environment", "valid", "correct"})
+#: ``counted`` for a ``results`` view made without it (by hand): see :data:`sweep3d.cache.store.COUNTED_SQL`.
+_COUNTED = {True: "valid AND evaluable IS NOT FALSE", False: "valid"}
 _NUMERIC = ("TINYINT", "SMALLINT", "INTEGER", "BIGINT", "HUGEINT", "UTINYINT", "USMALLINT", "UINTEGER",
             "UBIGINT", "FLOAT", "DOUBLE", "DECIMAL")
 
-# accuracy and its Wilson interval from the counts n (valid results) and n_correct of an inner query
+# accuracy and its Wilson interval from the counts n (counted results) and n_correct of an inner query
 _ACCURACY = ("n_correct / nullif(n, 0) AS accuracy, wilson_low(n_correct, n) AS wilson_low, "
              "wilson_high(n_correct, n) AS wilson_high")
 
 VIEWS = ("control_values", "control_stats", "control_levels", "control_parameters", "control_accuracy",
          "pair_accuracy", "scene_accuracy", "variance_explained", "object_sensitivity", "object_confusions",
-         "part_visibility", *DETECTION_VIEWS, *COMPARE_VIEWS)
+         "part_visibility", *TASK_VIEWS, *DETECTION_VIEWS, *COMPARE_VIEWS)
 MACROS = ("wilson_low", "wilson_high", "failure_modes", *COMPARE_MACROS)
 
 
@@ -102,15 +110,17 @@ def connect(store: Store, experiment: str | None = None, read_only: bool = False
     """
     files = store.view_files(experiment)
     con = store.connect(experiment, files)
-    parameters, models = None, []
+    parameters, models, min_visible = None, [], None
     if experiment is not None and store.jobs_path(experiment).exists():
         parameters = stored_parameters(store.jobs_path(experiment))
         models = stored_models(store.jobs_path(experiment))
+        min_visible = plan_min_visible(store.jobs_path(experiment))
+    shown = None
     if has_view(con, "results"):
-        _select_model(con, models, model)
+        shown = _select_model(con, models, model)
     elif model is not None:
         raise UserError(f"--model {model}: the experiment has no results yet")
-    if register_views(con, parameters) and has_view(con, "results_all"):
+    if register_views(con, parameters, model=shown, min_visible=min_visible) and has_view(con, "results_all"):
         register_compare_views(con, models, "top1_label" in _columns(con, "results"))
     if read_only:
         lock_down(con, [path for paths in files.values() for path in paths], writable)
@@ -137,17 +147,20 @@ def stored_models(jobs_path: Path) -> list[str]:
     return json.loads(listed) if listed is not None else []
 
 
-def _select_model(con: duckdb.DuckDBPyConnection, models: list[str], model: str | None) -> None:
-    """Keep every model's results as ``results_all`` and one model's as ``results``."""
+def _select_model(con: duckdb.DuckDBPyConnection, models: list[str], model: str | None) -> str | None:
+    """Keep every model's results as ``results_all`` and one model's as ``results``; returns the
+    model ``results`` shows when the jobs table holds several (None: it holds one)."""
     if model is not None and model not in models:
         raise UserError(f"--model {model}: the experiment's models are {', '.join(models) or 'not recorded'}")
     con.execute("ALTER VIEW results RENAME TO results_all")
     chosen = model or (models[0] if models else None)
     where = f" WHERE model = {_literal(chosen)}" if chosen is not None and len(models) > 1 else ""
     con.execute(f"CREATE VIEW results AS SELECT * FROM results_all{where}")
+    return chosen if where else None
 
 
-def register_views(con: duckdb.DuckDBPyConnection, parameters: list[str] | None = None) -> bool:
+def register_views(con: duckdb.DuckDBPyConnection, parameters: list[str] | None = None, *,
+                   model: str | None = None, min_visible: float | None = None) -> bool:
     """Create the aggregate views and macros on ``con`` (idempotent).
 
     Args:
@@ -155,6 +168,9 @@ def register_views(con: duckdb.DuckDBPyConnection, parameters: list[str] | None 
         parameters: the jobs table's control-parameter columns, as its plan listed them; None
             for a jobs table written before plans listed them (its parameters are then the
             columns that are neither keys nor bookkeeping).
+        model: the model ``results`` shows, when the jobs table holds several (``not_evaluable``
+            counts that model's jobs).
+        min_visible: the plan's ``[evaluator] min_visible``, shown beside the jobs it excluded.
 
     Returns:
         True if the views were created; False (and nothing created but the Wilson macros) when
@@ -167,9 +183,15 @@ def register_views(con: duckdb.DuckDBPyConnection, parameters: list[str] | None 
     result_columns = _columns(con, "results")
     if not REQUIRED_COLUMNS <= result_columns.keys():
         return False
+    if "counted" not in result_columns:  # a results view made by hand, not by Store.connect
+        con.execute("ALTER VIEW results RENAME TO results_uncounted")
+        con.execute(f"CREATE VIEW results AS SELECT *, {_COUNTED['evaluable' in result_columns]} AS counted "
+                    "FROM results_uncounted")
+        result_columns = _columns(con, "results")
     for sql in _view_statements(control_columns(con, parameters), "top1_label" in result_columns):
         con.execute(sql)
     register_part_views(con, set(result_columns))
+    register_task_views(con, set(result_columns), model, min_visible)
     detection_views(con, set(result_columns))
     return True
 
@@ -237,7 +259,8 @@ _FIXED_VIEWS = (
         # number, value): a bin, or a value's text, which fixes its number.
         f"""CREATE OR REPLACE VIEW control_levels AS
             WITH placed AS MATERIALIZED (
-                SELECT job, object, environment, valid, correct, parameter, position, raw IS NULL AS absent, bin,
+                SELECT job, object, environment, valid, counted, correct, parameter, position, raw IS NULL AS absent,
+                       bin,
                        CASE WHEN bin IS NULL THEN raw END AS value, CASE WHEN bin IS NULL THEN number END AS number,
                        lo, width, digits
                 FROM (SELECT v.*, s.lo, s.width, s.digits,
@@ -254,7 +277,8 @@ _FIXED_VIEWS = (
                             WHEN number IS NOT NULL THEN level_number_label(number)
                             ELSE value END AS label
                 FROM (SELECT DISTINCT parameter, absent, bin, value, number, lo, width, digits FROM placed))
-            SELECT p.job, p.object, p.environment, p.valid, p.correct, p.parameter, p.position, l.level, l.label
+            SELECT p.job, p.object, p.environment, p.valid, p.counted, p.correct, p.parameter, p.position, l.level,
+                   l.label
             FROM placed p JOIN levels l ON p.parameter = l.parameter AND p.absent = l.absent
                  AND p.bin IS NOT DISTINCT FROM l.bin AND p.value IS NOT DISTINCT FROM l.value""",
         """CREATE OR REPLACE VIEW control_parameters AS
@@ -265,7 +289,7 @@ _FIXED_VIEWS = (
         f"""CREATE OR REPLACE VIEW control_accuracy AS
             SELECT *, {_ACCURACY} FROM (
                 SELECT parameter, position, level, any_value(label) AS label,
-                       count(*) FILTER (WHERE valid) AS n, count(*) FILTER (WHERE valid AND correct) AS n_correct
+                       count(*) FILTER (WHERE counted) AS n, count(*) FILTER (WHERE counted AND correct) AS n_correct
                 FROM control_levels GROUP BY parameter, position, level)
             ORDER BY position, level""",
         f"""CREATE OR REPLACE VIEW pair_accuracy AS
@@ -276,18 +300,19 @@ _FIXED_VIEWS = (
                        any_value(a.label) AS label_a,
                        b.parameter AS parameter_b, b.position AS position_b, b.level AS level_b,
                        any_value(b.label) AS label_b,
-                       count(*) FILTER (WHERE a.valid) AS n, count(*) FILTER (WHERE a.valid AND a.correct) AS n_correct
+                       count(*) FILTER (WHERE a.counted) AS n,
+                       count(*) FILTER (WHERE a.counted AND a.correct) AS n_correct
                 FROM varied a JOIN varied b ON a.job = b.job AND a.position < b.position
                 GROUP BY a.parameter, a.position, a.level, b.parameter, b.position, b.level)
             ORDER BY position_a, position_b, level_a, level_b""",
         f"""CREATE OR REPLACE VIEW scene_accuracy AS
             SELECT *, {_ACCURACY} FROM (
-                SELECT object, environment, count(*) FILTER (WHERE valid) AS n,
-                       count(*) FILTER (WHERE valid AND correct) AS n_correct
+                SELECT object, environment, count(*) FILTER (WHERE counted) AS n,
+                       count(*) FILTER (WHERE counted AND correct) AS n_correct
                 FROM results GROUP BY object, environment)
             ORDER BY object, environment""",
         """CREATE OR REPLACE VIEW variance_explained AS
-            WITH overall AS (SELECT count(*) AS n, avg(correct::DOUBLE) AS p FROM results WHERE valid),
+            WITH overall AS (SELECT count(*) AS n, avg(correct::DOUBLE) AS p FROM results WHERE counted),
             total AS (SELECT n, n * p * (1 - p) AS ss FROM overall),
             main AS (
                 SELECT c.parameter, c.position, sum(c.n * (c.accuracy - o.p) ^ 2) AS ss, count(*) - 1 AS df
@@ -322,10 +347,10 @@ _FIXED_VIEWS = (
         """CREATE OR REPLACE VIEW object_sensitivity AS
             WITH per_level AS (
                 SELECT object, parameter, position, level, any_value(label) AS label,
-                       count(*) FILTER (WHERE valid) AS n, avg(correct::DOUBLE) FILTER (WHERE valid) AS accuracy
+                       count(*) FILTER (WHERE counted) AS n, avg(correct::DOUBLE) FILTER (WHERE counted) AS accuracy
                 FROM control_levels WHERE parameter <> 'object'
                 GROUP BY object, parameter, position, level),
-            per_object AS (SELECT object, count(*) AS n, avg(correct::DOUBLE) AS p FROM results WHERE valid
+            per_object AS (SELECT object, count(*) AS n, avg(correct::DOUBLE) AS p FROM results WHERE counted
                            GROUP BY object)
             SELECT l.object, l.parameter, l.position, count(*)::INTEGER AS levels,
                    min(l.accuracy) AS accuracy_min, arg_min(l.label, l.accuracy ORDER BY l.level) AS worst_level,
@@ -353,14 +378,14 @@ _FIXED_VIEWS = (
                 JOIN control_accuracy a ON a.parameter = p.parameter_a AND a.level = p.level_a
                 JOIN control_accuracy b ON b.parameter = p.parameter_b AND b.level = p.level_b
                 WHERE p.wilson_high < least(a.accuracy, b.accuracy))
-            WHERE n >= min_count AND accuracy < (SELECT avg(correct::DOUBLE) FROM results WHERE valid)
+            WHERE n >= min_count AND accuracy < (SELECT avg(correct::DOUBLE) FROM results WHERE counted)
             ORDER BY wilson_high, accuracy, n DESC, size, position_a, level_a, position_b, level_b""",
 )
 _CONFUSIONS_VIEW = """CREATE OR REPLACE VIEW object_confusions AS
                 SELECT object, top1_label AS prediction, count(*) AS n,
                        count(*) / sum(count(*)) OVER (PARTITION BY object) AS share,
                        row_number() OVER (PARTITION BY object ORDER BY count(*) DESC, top1_label) AS rank
-                FROM results WHERE valid AND NOT correct GROUP BY object, top1_label
+                FROM results WHERE counted AND NOT correct GROUP BY object, top1_label
                 ORDER BY object, rank"""
 
 
@@ -380,15 +405,17 @@ def _values_sql(parameters: list[tuple[str, bool]]) -> str:
     ``results`` per parameter."""
     if not parameters:  # a jobs table without scene columns: an empty view of the right shape
         return ("SELECT NULL::BIGINT AS job, NULL::VARCHAR AS object, NULL::VARCHAR AS environment, "
-                "NULL::BOOLEAN AS valid, NULL::BOOLEAN AS correct, NULL::VARCHAR AS parameter, "
-                "NULL::INTEGER AS position, NULL::VARCHAR AS raw, NULL::DOUBLE AS number WHERE false")
-    columns = list(dict.fromkeys(["job", "object", "environment", "valid", "correct", *(n for n, _ in parameters)]))
+                "NULL::BOOLEAN AS valid, NULL::BOOLEAN AS counted, NULL::BOOLEAN AS correct, "
+                "NULL::VARCHAR AS parameter, NULL::INTEGER AS position, NULL::VARCHAR AS raw, NULL::DOUBLE AS number "
+                "WHERE false")
+    columns = list(dict.fromkeys(["job", "object", "environment", "valid", "counted", "correct",
+                                  *(n for n, _ in parameters)]))
     parts = []
     for position, (name, numeric) in enumerate(parameters):
         column = _identifier(name)
         number = f"CAST({column} AS DOUBLE)" if numeric else "NULL::DOUBLE"
         parts.append(
-            f"SELECT job, object, environment, valid, correct, {_literal(name)} AS parameter, "
+            f"SELECT job, object, environment, valid, counted, correct, {_literal(name)} AS parameter, "
             f"{position} AS position, CAST({column} AS VARCHAR) AS raw, {number} AS number FROM read_once"
         )
     return (f"WITH read_once AS MATERIALIZED (SELECT {', '.join(map(_identifier, columns))} FROM results)\n"

@@ -1,0 +1,100 @@
+"""Views for what accuracy leaves out or lumps together: unevaluable jobs, and box and mask outcomes.
+
+Each view is created only when the columns it reads exist, so a classification store without
+truth passes has none of them (and its other views are unchanged):
+
+``not_evaluable`` (needs ``ground_truth``: a plan with ``in_frame``)
+    per (object, reason): ``n`` jobs with ``evaluable = false``, ``object_jobs`` (all the
+    object's jobs), ``share`` of them, and ``min_visible`` (the plan's threshold; null without
+    truth passes). ``reason`` is ``out of frame`` (the planner put the object outside the frame,
+    no pixel of it reached the image, or it reaches behind the camera, so no visible fraction)
+    or ``hidden`` (some of it is in the image, but less than ``min_visible`` of its silhouette:
+    occluded or mostly clipped). Jobs out of frame are never rendered, so they are counted from
+    the plan, not from ``results``.
+``outcomes_by_value`` (needs ``outcome``: box and mask tasks)
+    per (parameter, level) as in ``control_accuracy``: ``n`` counted results with an outcome,
+    ``n_<outcome>`` and ``share_<outcome>`` for each of :data:`OUTCOMES` (the shares sum to 1).
+``iou_by_object`` (needs ``iou``)
+    per object: ``n`` counted results with an IoU, its ``mean`` and quantiles ``p10``, ``p25``,
+    ``median``, ``p75``, ``p90`` (linear interpolation, as numpy's default).
+"""
+
+from __future__ import annotations
+
+import duckdb
+
+TASK_VIEWS = ("not_evaluable", "outcomes_by_value", "iou_by_object")
+#: What a box or mask task says of each valid result (``results.outcome``), in stacking order.
+OUTCOMES = ("correct", "wrong_class", "wrong_box", "missed")
+#: Why a job is not evaluable (``not_evaluable.reason``).
+OUT_OF_FRAME, HIDDEN = "out of frame", "hidden"
+QUANTILES = {"p10": 0.1, "p25": 0.25, "median": 0.5, "p75": 0.75, "p90": 0.9}
+
+
+def register_task_views(con: duckdb.DuckDBPyConnection, result_columns: set[str], model: str | None = None,
+                        min_visible: float | None = None) -> list[str]:
+    """Create those of :data:`TASK_VIEWS` whose columns exist; returns their names.
+
+    Args:
+        result_columns: the columns of ``results``.
+        model: the model ``results`` shows when the jobs table holds several (its jobs are counted).
+        min_visible: the plan's ``[evaluator] min_visible`` (shown only for a plan with truth passes).
+    """
+    from sweep3d.stages.aggregate.views import has_view
+
+    made = []
+    if "evaluable" in result_columns and has_view(con, "ground_truth"):
+        con.execute(_not_evaluable_sql(con, model, min_visible))
+        made.append("not_evaluable")
+    if "outcome" in result_columns:
+        con.execute(_outcomes_sql())
+        made.append("outcomes_by_value")
+    if "iou" in result_columns:
+        con.execute(_iou_sql())
+        made.append("iou_by_object")
+    return made
+
+
+def _not_evaluable_sql(con: duckdb.DuckDBPyConnection, model: str | None, min_visible: float | None) -> str:
+    jobs = {row[0] for row in con.execute("DESCRIBE jobs").fetchall()}
+    own = " AND g.model = j.model" if "model" in jobs else ""
+    where = f" WHERE j.model = {_literal(model)}" if model is not None and "model" in jobs else ""
+    known = min_visible is not None and "truth_key" in jobs  # without truth passes, no threshold applies
+    threshold = f"{float(min_visible)!r}::DOUBLE" if known else "NULL::DOUBLE"
+    return f"""CREATE OR REPLACE VIEW not_evaluable AS
+        WITH planned AS (
+            SELECT j.object, j.in_frame, g.evaluable, g.visible_pixels, g.visible_fraction
+            FROM jobs j JOIN ground_truth g ON g.job = j.job{own}{where}),
+        per_object AS (SELECT object, count(*) AS object_jobs FROM planned GROUP BY object)
+        SELECT object, reason, n, object_jobs, n / object_jobs AS share, {threshold} AS min_visible
+        FROM (SELECT object, CASE WHEN NOT in_frame OR coalesce(visible_pixels, 0) = 0 OR visible_fraction IS NULL
+                                  THEN '{OUT_OF_FRAME}' ELSE '{HIDDEN}' END AS reason, count(*) AS n
+              FROM planned WHERE evaluable = false GROUP BY ALL)
+        JOIN per_object USING (object)
+        ORDER BY object, reason"""
+
+
+def _outcomes_sql() -> str:
+    counts = ", ".join(f"count(*) FILTER (WHERE l.counted AND r.outcome = '{o}') AS n_{o}" for o in OUTCOMES)
+    shares = ", ".join(f"n_{o} / nullif(n, 0) AS share_{o}" for o in OUTCOMES)
+    return f"""CREATE OR REPLACE VIEW outcomes_by_value AS
+        SELECT parameter, position, level, label, n, {", ".join(f"n_{o}" for o in OUTCOMES)}, {shares} FROM (
+            SELECT l.parameter, l.position, l.level, any_value(l.label) AS label,
+                   count(*) FILTER (WHERE l.counted AND r.outcome IS NOT NULL) AS n, {counts}
+            FROM control_levels l JOIN results r USING (job)
+            GROUP BY l.parameter, l.position, l.level)
+        ORDER BY position, level"""
+
+
+def _iou_sql() -> str:
+    levels = ", ".join(repr(q) for q in QUANTILES.values())
+    picked = ", ".join(f"q[{i}] AS {name}" for i, name in enumerate(QUANTILES, 1))
+    return f"""CREATE OR REPLACE VIEW iou_by_object AS
+        SELECT object, n, mean, {picked} FROM (
+            SELECT object, count(*) AS n, avg(iou) AS mean, quantile_cont(iou, [{levels}]) AS q
+            FROM results WHERE counted AND iou IS NOT NULL AND isfinite(iou) GROUP BY object)
+        ORDER BY object"""
+
+
+def _literal(text: str) -> str:
+    return "'" + text.replace("'", "''") + "'"
