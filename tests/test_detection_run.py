@@ -182,11 +182,18 @@ def query(folder: Path, sql: str):
 
 
 def test_the_oracle_scores_everything_and_ap_one(rendered: Path, monkeypatch) -> None:
-    code, output, _ = run(rendered, monkeypatch, "oracle", factory="oracle")
+    code, output, path = run(rendered, monkeypatch, "oracle", factory="oracle")
     assert code == 0, output
     rows = query(rendered, "SELECT correct, outcome, iou, score, false_positives FROM results WHERE evaluable")
     assert len(rows) == 4 and all(r[:3] == (True, "correct", 1.0) and r[4] == 0 for r in rows)
     assert query(rendered, "SELECT ap50, ap75, ap FROM average_precision WHERE object IS NULL") == [(1.0, 1.0, 1.0)]
+    # the report shows the same numbers, from the same view
+    from sweep3d.report import write_report
+
+    page = write_report(load_spec(path)).read_text()
+    table = page[page.index("<h3>Average precision</h3>"):]
+    table = table[:table.index("</table>")]
+    assert "mean over objects" in table and table.count("<td>100.0</td>") == 6  # mean and box: AP50, AP75, AP
 
 
 def test_the_shifted_oracle_scores_nothing(rendered: Path, monkeypatch) -> None:

@@ -36,9 +36,21 @@ def build(inputs: PanelInputs) -> dict[str, Any] | None:
         varied = [p for p in inputs.parameters if p.varies and levels[p.name]]
         figures = [_outcome_figure(i, p, levels[p.name]) for i, p in enumerate(varied, 1)]
     iou = _iou_figure(inputs.rows("FROM iou_by_object")) if has_iou else None
-    if not figures and iou is None:
+    precision = _average_precision(inputs) if has_view(inputs.con, "average_precision") else []
+    if not figures and iou is None and not precision:
         return None
-    return {"outcomes": figures, "iou": iou, "has_outcomes": has_outcomes}
+    return {"outcomes": figures, "iou": iou, "has_outcomes": has_outcomes, "precision": precision}
+
+
+def _average_precision(inputs: PanelInputs) -> list[dict[str, Any]]:
+    """Detection's COCO average precision per object and their mean (``average_precision``), as
+    table rows with percentages; the mean first."""
+    def percent(value: Any) -> str:
+        return "–" if value is None else f"{100 * value:.1f}"
+
+    return [{"object": r["object"] if r["object"] is not None else "mean over objects", "images": r["images"],
+             "ap50": percent(r["ap50"]), "ap75": percent(r["ap75"]), "ap": percent(r["ap"])}
+            for r in inputs.rows("FROM average_precision")]
 
 
 def _outcome_figure(index: int, parameter: Parameter, rows: list[dict[str, Any]]) -> Figure:
