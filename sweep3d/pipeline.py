@@ -71,22 +71,38 @@ def plan_spec(spec: LoadedSpec, model: ModelHandle | None = None, history: Histo
 def outcomes_by_scene(plan: Plan, store: Store) -> History:
     """What the model did on each job of ``plan``, per scene, for adaptive policies.
 
-    A job with no valid prediction (its render failed, or the model gave NaN) counts as not
-    failed with zero loss, so the search moves on instead of waiting for it.
+    A job with no valid prediction (its render failed, or the model gave NaN), or whose object
+    is hidden (its visible fraction below ``[evaluator] min_visible``), counts as not failed
+    with zero loss, so the search moves on instead of searching around what is not a model
+    mistake. Tasks without a loss (detection, segmentation) use 1 - IoU.
     """
     con = store.connect()
     rows: dict[str, tuple] = {}
     if store.segments("predictions"):
         keys = list({j.pred_key for j in plan.jobs})
+        have = {r[0] for r in con.execute("DESCRIBE predictions").fetchall()}
+        loss = "loss" if "loss" in have else "1 - coalesce(iou, 0)" if "iou" in have else "0.0"
         rows = {r[0]: r[1:] for r in con.execute(
-            "SELECT pred_key, valid, correct, loss FROM predictions WHERE pred_key IN (SELECT unnest(?))", [keys]
+            f"SELECT pred_key, valid, correct, {loss} FROM predictions WHERE pred_key IN (SELECT unnest(?))", [keys]
         ).fetchall()}
+    hidden = _hidden_truths(plan, store, con)
     history: History = {}
     for job in plan.jobs + plan.out_of_frame:
         valid, correct, loss = rows.get(job.pred_key, (False, None, None))
-        outcome = Outcome(failed=bool(valid and not correct), loss=float(loss) if valid else 0.0)
+        valid = valid and job.truth_key not in hidden
+        outcome = Outcome(failed=bool(valid and not correct), loss=float(loss) if valid and loss is not None else 0.0)
         history.setdefault(job.scene, {})[job.point] = outcome
     return history
+
+
+def _hidden_truths(plan: Plan, store: Store, con) -> set[str]:
+    """Truth keys of the plan whose object shows less than ``min_visible`` of itself."""
+    keys = [j.truth_key for j in plan.jobs if j.truth_key is not None]
+    if not keys or not store.segments("truths"):
+        return set()
+    return {r[0] for r in con.execute(
+        "SELECT truth_key FROM truths WHERE truth_key IN (SELECT unnest(?)) "
+        "AND coalesce(visible_fraction, 0) < ?", [keys, plan.spec.evaluator.min_visible]).fetchall()}
 
 
 def write_jobs(plans: Plan | list[Plan], store: Store) -> None:

@@ -298,3 +298,21 @@ def test_zoom_frames_the_bounding_sphere_as_the_readme_says(tmp_path: Path) -> N
     for zoom, width, height in spans:
         expected = math.tan(math.asin(0.8 * zoom * math.sin(half))) / math.tan(half) * side
         assert abs(width - expected) <= 2 and abs(height - expected) <= 2, (zoom, width, expected)
+
+
+def test_adaptive_search_does_not_count_a_hidden_object_as_a_failure(truth_run: Path) -> None:
+    from sweep3d.pipeline import outcomes_by_scene
+
+    spec = load_spec(truth_run / "spec.toml")
+    plan = plan_for(spec)
+    history = outcomes_by_scene(plan, Store(truth_run / "store"))
+    con = Store(truth_run / "store").connect("truth")
+    rows = dict(con.execute("SELECT truth_key, visible_fraction FROM truths").fetchall())
+    wrong = dict(con.execute("SELECT pred_key, valid AND NOT correct FROM predictions").fetchall())
+    for job in plan.jobs:
+        outcome = history[job.scene][job.point]
+        if (rows[job.truth_key] or 0) < spec.evaluator.min_visible:  # the sliver at x = 1.6
+            assert not outcome.failed and outcome.loss == 0.0
+        else:
+            assert outcome.failed == wrong[job.pred_key]
+    assert any((rows[j.truth_key] or 0) < spec.evaluator.min_visible for j in plan.jobs)
