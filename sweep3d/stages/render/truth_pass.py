@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from sweep3d.stages.render.compositor import pass_outputs
 from sweep3d.truth import encode_depth, encode_mask, ground_truth
 
 SLOTS = ("index", "depth")
@@ -50,21 +51,7 @@ class TruthPass:
         layer = scene.view_layers[0]
         layer.use_pass_object_index = True
         layer.use_pass_z = True
-        scene.use_nodes = True
-        scene.render.use_compositing = True
-        tree = scene.node_tree
-        layers = next(n for n in tree.nodes if n.bl_idname == "CompositorNodeRLayers")
-        out = tree.nodes.new("CompositorNodeOutputFile")
-        out.base_path = str(self.folder)
-        out.format.file_format = "OPEN_EXR"
-        out.format.color_mode = "BW"
-        out.format.color_depth = "32"
-        out.format.exr_codec = "ZIP"
-        out.format.color_management = "OVERRIDE"
-        out.format.view_settings.view_transform = "Raw"
-        out.file_slots.clear()
-        for name in SLOTS:
-            out.file_slots.new(f"{name}_")
+        tree, layers, out = pass_outputs(scene, self.folder, SLOTS, exr=True)
         tree.links.new(layers.outputs["IndexOB"], out.inputs[0])
         tree.links.new(layers.outputs["Depth"], out.inputs[1])
         self.frame = scene.frame_current

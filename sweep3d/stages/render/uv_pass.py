@@ -20,6 +20,7 @@ import numpy as np
 
 from sweep3d.errors import UserError
 from sweep3d.parts import UV_MAP, loop_uvs, part_counts
+from sweep3d.stages.render.compositor import pass_outputs
 
 CHANNELS = ("u", "v", "mask")
 
@@ -33,23 +34,9 @@ class UVPass:
         layer = scene.view_layers[0]
         layer.use_pass_uv = True
         layer.use_pass_object_index = True
-        scene.use_nodes = True
-        scene.render.use_compositing = True
-        tree = scene.node_tree
-        layers = next(n for n in tree.nodes if n.bl_idname == "CompositorNodeRLayers")
+        tree, layers, out = pass_outputs(scene, self.folder, CHANNELS, exr=False)
         split = tree.nodes.new("CompositorNodeSeparateColor")
         tree.links.new(layers.outputs["UV"], split.inputs[0])
-        out = tree.nodes.new("CompositorNodeOutputFile")
-        out.base_path = str(self.folder)
-        out.format.file_format = "PNG"
-        out.format.color_mode = "BW"
-        out.format.color_depth = "16"
-        out.format.compression = 0
-        out.format.color_management = "OVERRIDE"
-        out.format.view_settings.view_transform = "Raw"  # data, not colour: no display transform
-        out.file_slots.clear()
-        for name in CHANNELS:
-            out.file_slots.new(f"{name}_")
         tree.links.new(split.outputs[0], out.inputs[0])
         tree.links.new(split.outputs[1], out.inputs[1])
         tree.links.new(layers.outputs["IndexOB"], out.inputs[2])
