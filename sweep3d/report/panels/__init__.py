@@ -9,7 +9,7 @@ then list it below. A panel whose data may be absent returns None and is left ou
 The explorer is ``late``: built after the others, it fills the image budget they leave.
 
 ``OPTIONAL_PANELS`` is where such panels go: the model comparison (only when the spec tests
-several models) and the part-visibility panel (accuracy conditioned on
+several models), the paired comparisons (only when the spec is paired: ``[policy] paired``) and the part-visibility panel (accuracy conditioned on
 which parts of the object's surface are visible, from a UV render pass) returns None when the
 spec did not ask for the pass.
 """
@@ -25,6 +25,7 @@ from sweep3d.report.panels import (
     failures,
     objects,
     overall,
+    paired,
     part_visibility,
 )
 
@@ -40,6 +41,7 @@ CORE_PANELS: tuple[Panel, ...] = (
 #: Panels shown only when their data exists (their ``build`` returns None otherwise).
 OPTIONAL_PANELS: tuple[Panel, ...] = (
     Panel("compare", "Model comparison", "panels/compare.html.j2", compare.build),
+    Panel("paired", "Paired comparisons", "panels/paired.html.j2", paired.build),
     Panel("part-visibility", "Part visibility", "panels/part_visibility.html.j2", part_visibility.build),
 )
 
