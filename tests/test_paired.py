@@ -270,3 +270,72 @@ def test_a_configuration_seen_twice_pairs_once(tmp_path: Path) -> None:
     [pair] = rows_of(con, "SELECT * FROM paired_environments")
     assert (pair["n"], pair["a_right_b_wrong"], pair["a_wrong_b_right"]) == (1, 1, 0)
     assert [r["job_a"] for r in rows_of(con, "SELECT * FROM paired_jobs WHERE parameter = 'environment'")] == [0]
+
+
+# -- the report panel -----------------------------------------------------------------------------------
+
+PANEL_SPEC = TINY_SPEC.replace("yaw = [0, 45]", "yaw = { range = [0, 360] }").replace(
+    '[[controls]]\ntype = "blur"\nsigma = [0.0, 1.5]', '[[controls]]\ntype = "material"\nskin = ["original", "zebra"]')
+
+
+class Thumbs:
+    """Stands in for the page's thumbnails: an index per image key asked for."""
+
+    def __init__(self) -> None:
+        self.keys: list[str] = []
+
+    def want(self, key: str) -> int:
+        self.keys.append(key)
+        return len(self.keys) - 1
+
+
+@pytest.mark.parametrize("paired", [True, False])
+def test_the_panel_shows_paired_numbers_only_for_a_paired_spec(tmp_path: Path, paired: bool) -> None:
+    from sweep3d.report.page import environment
+    from sweep3d.report.panel import PanelInputs
+    from sweep3d.report.panels import paired as panel
+
+    policy = '[policy]\ntype = "random"\nsamples = 4' + ("\npaired = true" if paired else "")
+    loaded = load_spec(write_spec(tmp_path, PANEL_SPEC.replace('[policy]\ntype = "grid"', policy)))
+    rows = synthetic(1)
+    con = make_store(tmp_path, rows)
+    inputs = PanelInputs(loaded, con, None, None, Thumbs(), 2, None)  # type: ignore[arg-type]
+    data = panel.build(inputs)
+    if not paired:
+        assert data is None
+        return
+    assert [(r["a"], r["b"]) for r in data["environments"]] == [("white", "studio"), ("white", "forest"),
+                                                                ("studio", "forest")]
+    assert [(r["parameter"], r["a"], r["b"]) for r in data["others"]] == [("material_skin", "original", "zebra")]
+    expected = hand_count(rows, "material_skin", "original", "zebra")
+    assert (data["others"][0]["n"], data["others"][0]["a_only"]) == (expected["n"], expected["a_right_b_wrong"])
+    for left, right in data["examples"]["pairs"]:
+        assert left["outcome"] != right["outcome"]
+    html = environment().from_string('{% import "_macros.html.j2" as m with context %}'
+                                     '{% include "panels/paired.html.j2" %}').render(data=data, spec_path="s.toml")
+    assert "only A right" in html and "material_skin" in html and "paired_environments" in html
+
+
+def test_a_post_control_added_to_a_paired_random_spec_renders_nothing_new(tmp_path: Path) -> None:
+    """Each control draws from its own stream: the orientation's draws, and so every render, stay."""
+    before = plan(tmp_path, RANDOM + "\npaired = true")
+    body = SPEC.format(seed=3, policy=RANDOM + "\npaired = true").replace(
+        "[policy]", '[[controls]]\ntype = "noise"\nstd = { range = [0, 0.1] }\n\n[policy]')
+    folder = tmp_path / "more"
+    folder.mkdir()
+    after = make_plan(load_spec(write_spec(folder, body)), framing=Framing.full(32), model_digest="m", blender="4.5.0")
+    assert [j.render_key for j in every_job(after)] == [j.render_key for j in every_job(before)]
+    assert {j.image_key for j in every_job(after)}.isdisjoint(j.image_key for j in every_job(before))
+
+
+def test_query_reads_the_paired_views(tmp_path: Path) -> None:
+    rows = synthetic(2)
+    make_store(tmp_path, rows, experiment="tiny").close()
+    spec = write_spec(tmp_path, TINY_SPEC)  # experiment "tiny", store "store": the one just written
+    result = CliRunner().invoke(app, ["query", str(spec), "SELECT environment_a, environment_b, n, p_value FROM "
+                                      "paired_environments", "--format", "json"])
+    assert result.exit_code == 0, result.output
+    found = {(r["environment_a"], r["environment_b"]): r for r in json.loads(result.output)}
+    expected = hand_count(rows, "environment", "white", "forest")
+    assert found[("white", "forest")]["n"] == expected["n"]
+    assert found[("white", "forest")]["p_value"] == expected["p_value"]

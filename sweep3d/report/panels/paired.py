@@ -28,8 +28,9 @@ def build(inputs: PanelInputs) -> dict[str, Any] | None:
     environments = inputs.rows(f"SELECT * FROM paired_environments LIMIT {ROWS}")
     columns = [parameter_column(c.id, p) for c in inputs.loaded.controls for p, s in c.spaces.items()
                if isinstance(s, Choice)]  # a range's draws do not repeat, so they never pair
-    others = inputs.rows(f"SELECT * FROM paired_values WHERE parameter IN (SELECT unnest(?)) LIMIT {ROWS}",
-                         [columns]) if columns else []
+    # one query per parameter: a constant filter computes only that parameter's pairs
+    others = [r for column in columns for r in inputs.rows(f"SELECT * FROM paired_values WHERE parameter = ? "
+                                                           f"LIMIT {ROWS}", [column])][:ROWS]
     if not environments and not others:
         return None
     return {"environments": [_row(r, r["environment_a"], r["environment_b"]) for r in environments],

@@ -35,7 +35,6 @@ from sweep3d.stages.aggregate.compare import create_mcnemar
 
 PAIRED_VIEWS = ("paired_jobs", "paired_values", "paired_environments")
 SCENE = ("object", "environment")
-ENVIRONMENTS = "WHERE parameter = 'environment'"
 
 
 def register_paired_views(con: duckdb.DuckDBPyConnection, parameters: list[tuple[str, bool]],
@@ -59,15 +58,18 @@ def register_paired_views(con: duckdb.DuckDBPyConnection, parameters: list[tuple
         branches.append(branch)
     con.execute("CREATE OR REPLACE VIEW paired_jobs AS WITH " + ",\n".join(ctes) + "\n"
                 + "\nUNION ALL ".join(branches))
-    con.execute(f"CREATE OR REPLACE VIEW paired_values AS {_values_sql('')}")
-    # filtered before the counts, so only the environments' branch of paired_jobs is computed
+    # one branch per parameter, so a filter on ``parameter`` computes only the branches it keeps
+    each = "\nUNION ALL ".join(f"SELECT {_literal(name)} AS parameter, * EXCLUDE (parameter) FROM ({_values_sql(name)})"
+                               for name, _ in parameters)
+    con.execute(f"CREATE OR REPLACE VIEW paired_values AS SELECT * EXCLUDE (rank_a, rank_b) FROM ({each}) "
+                "ORDER BY position, rank_a, rank_b")
     con.execute("CREATE OR REPLACE VIEW paired_environments AS SELECT value_a AS environment_a, "
                 "value_b AS environment_b, * EXCLUDE (parameter, position, value_a, value_b) "
-                f"FROM ({_values_sql(ENVIRONMENTS)})")
+                "FROM paired_values WHERE parameter = 'environment'")
 
 
-def _values_sql(where: str) -> str:
-    """Counts, McNemar's p and Holm's adjustment per pair of values, over the pairs ``where`` keeps."""
+def _values_sql(parameter: str) -> str:
+    """Counts, McNemar's p and Holm's adjustment per pair of values of ``parameter``."""
     return f"""
         WITH counts AS (
             SELECT parameter, position, value_a, value_b, rank_a, rank_b, n, n_correct_a, n_correct_b,
@@ -79,7 +81,8 @@ def _values_sql(where: str) -> str:
                          count(*) FILTER (WHERE correct_b) AS n_correct_b,
                          count(*) FILTER (WHERE correct_a AND NOT correct_b) AS a_right_b_wrong,
                          count(*) FILTER (WHERE correct_b AND NOT correct_a) AS a_wrong_b_right
-                  FROM paired_jobs {where} GROUP BY parameter, position, value_a, value_b, rank_a, rank_b)),
+                  FROM paired_jobs WHERE parameter = {_literal(parameter)}
+                  GROUP BY parameter, position, value_a, value_b, rank_a, rank_b)),
         ranked AS (
             SELECT *, row_number() OVER (PARTITION BY parameter ORDER BY p_value, rank_a, rank_b) AS k,
                    count(*) OVER (PARTITION BY parameter) AS m
@@ -87,8 +90,8 @@ def _values_sql(where: str) -> str:
         SELECT parameter, position, value_a, value_b, n, n_correct_a, n_correct_b, accuracy_a, accuracy_b,
                a_right_b_wrong, a_wrong_b_right, difference, p_value,
                least(1.0, max((m - k + 1) * p_value) OVER (PARTITION BY parameter ORDER BY k
-                                                           ROWS UNBOUNDED PRECEDING)) AS p_holm
-        FROM ranked ORDER BY position, rank_a, rank_b"""
+                                                           ROWS UNBOUNDED PRECEDING)) AS p_holm, rank_a, rank_b
+        FROM ranked"""
 
 
 def _scene_branch(name: str, position: int, numeric: bool, controls: list[str]) -> tuple[list[str], str]:
