@@ -40,7 +40,7 @@ def print_plan(console: Console, spec: LoadedSpec) -> None:
     scenes = len({j.scene for j in plan.jobs})
     console.print(f"[bold]{escape(spec.name)}[/]: {len(plan.jobs) + len(plan.out_of_frame)} jobs over {scenes} scenes "
                   f"({len(spec.objects)} objects × {len(spec.environments)} environments), "
-                  f"policy {spec.spec.policy.type}; store {escape(str(spec.store))}")
+                  f"policy {spec.spec.policy.type}{_pairing(spec)}; store {escape(str(spec.store))}")
     table = Table("stage", "needed", "cached", "to compute", "estimate")
     total = 0.0
     passes = truth_passes(spec)
@@ -68,6 +68,14 @@ def print_plan(console: Console, spec: LoadedSpec) -> None:
     console.print(f"estimated time: {duration(total)} (plus ~5 s start-up when anything needs rendering)")
     to_render = sum(needed - cached for stage, needed, cached, _ in status if stage.startswith("render"))
     print_warning(console, slow_render_warning(spec.render, max(p.framing.crop for p in plans), to_render))
+
+
+def _pairing(spec: LoadedSpec) -> str:
+    """What ``[policy] paired`` shares, for the plan's first line ("" when it is off)."""
+    paired = spec.spec.policy.paired
+    if not paired:
+        return ""
+    return " (paired across objects and environments)" if paired == "all" else " (paired across environments)"
 
 
 def _models_status(plans: list[Plan], models: list[ModelHandle], store: Store) -> list[tuple[str, int, int, int]]:

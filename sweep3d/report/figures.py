@@ -69,6 +69,18 @@ def pct(value: float | None, digits: int = 1) -> str:
     return "–" if value is None else f"{value:.{digits}%}"
 
 
+def signed_points(value: float | None) -> str:
+    """A difference of two accuracies in percentage points, signed ("+4.2 pts")."""
+    return "–" if value is None else f"{value * 100:+.1f} pts"
+
+
+def p_text(value: float | None) -> str:
+    """A p-value to three decimals, or "< 0.001"."""
+    if value is None:
+        return "–"
+    return "< 0.001" if value < 0.001 else f"{value:.3f}"
+
+
 def interval(low: float | None, high: float | None) -> str:
     """A Wilson interval as ``[10–25 %]`` (empty when unknown)."""
     if low is None or high is None:

@@ -390,6 +390,9 @@ def _load_policy(spec: Spec, fail, catalogue: Catalogue):
         cls = catalogue.policies.get(spec.policy.type)
     except UserError as exc:
         raise fail("policy.type", str(exc)) from None
+    if spec.policy.paired and getattr(cls, "adaptive", False):
+        raise fail("policy.paired", f"the {spec.policy.type} policy learns per scene, so its points cannot be "
+                                    "shared across scenes; use random or sobol, or remove paired")
     try:
         return cls(cls.Params(**params))
     except ValidationError as exc:

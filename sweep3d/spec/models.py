@@ -160,10 +160,21 @@ class ReportSpec(StrictModel):
 
 
 class PolicySpec(BaseModel):
-    """``type`` picks the policy; its other keys are that policy's parameters."""
+    """``type`` picks the policy; ``paired`` is the planner's; the other keys are the policy's parameters."""
 
     model_config = ConfigDict(extra="allow", frozen=True)
     type: str = "grid"
+    paired: bool | Literal["all"] = Field(
+        False, description="Draw the controls from (seed, object, control id), not per scene, so every environment "
+                           "of an object gets the same points (\"all\": every object too); for paired statistics.")
+
+    @field_validator("paired", mode="before")
+    @classmethod
+    def _paired_word(cls, value: Any) -> Any:
+        """Only the TOML booleans or "all": pydantic would read "yes" or 1 as true."""
+        if value is True or value is False or value == "all":
+            return value
+        raise ValueError(f'must be true, false or "all" (got {value!r})')
 
 
 class Spec(StrictModel):

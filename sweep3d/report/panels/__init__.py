@@ -11,9 +11,9 @@ The explorer is ``late``: built after the others, it fills the image budget they
 ``OPTIONAL_PANELS`` is where such panels go: the jobs that are not evaluable (only when there
 are some: out of frame, or too little of the object visible), box and mask outcomes (only for
 tasks whose results have an ``outcome`` or ``iou``), the model comparison (only when the spec
-tests several models) and the part-visibility panel (accuracy conditioned on which parts of the
-object's surface are visible, from a UV render pass) returns None when the spec did not ask for
-the pass.
+tests several models), the paired comparisons (only when the spec is paired: ``[policy]
+paired``) and the part-visibility panel (accuracy conditioned on which parts of the object's
+surface are visible, from a UV render pass) returns None when the spec did not ask for the pass.
 """
 
 from __future__ import annotations
@@ -29,6 +29,7 @@ from sweep3d.report.panels import (
     objects,
     outcomes,
     overall,
+    paired,
     part_visibility,
 )
 
@@ -49,6 +50,7 @@ OPTIONAL_PANELS: tuple[Panel, ...] = (
     NOT_EVALUABLE,
     OUTCOMES,
     Panel("compare", "Model comparison", "panels/compare.html.j2", compare.build),
+    Panel("paired", "Paired comparisons", "panels/paired.html.j2", paired.build),
     Panel("part-visibility", "Part visibility", "panels/part_visibility.html.j2", part_visibility.build),
 )
 

@@ -41,6 +41,10 @@ Views:
 ``average_precision``, ``average_precision_by_value``
     only for a detector (results with ``det_scores``): COCO's AP per object and its mean, overall
     and per level (see :mod:`sweep3d.stages.aggregate.detection`).
+``paired_jobs``, ``paired_values``, ``paired_environments``
+    two values of one parameter on the same configurations (environment A against B on the
+    same poses): the pairs, and per pair of values McNemar's exact test on the discordant ones
+    (see :mod:`sweep3d.stages.aggregate.paired`).
 
 Macros:
 
@@ -66,6 +70,7 @@ from sweep3d.errors import UserError
 from sweep3d.spec.columns import JOB_COLUMNS, MODELS_METADATA, PARAMETERS_METADATA
 from sweep3d.stages.aggregate.compare import COMPARE_MACROS, COMPARE_VIEWS, register_compare_views
 from sweep3d.stages.aggregate.detection import DETECTION_VIEWS, detection_views
+from sweep3d.stages.aggregate.paired import PAIRED_VIEWS, register_paired_views
 from sweep3d.stages.aggregate.parts import register_part_views
 from sweep3d.stages.aggregate.tasks import TASK_VIEWS, register_task_views
 
@@ -86,7 +91,7 @@ _ACCURACY = ("n_correct / nullif(n, 0) AS accuracy, wilson_low(n_correct, n) AS 
 
 VIEWS = ("control_values", "control_stats", "control_levels", "control_parameters", "control_accuracy",
          "pair_accuracy", "scene_accuracy", "variance_explained", "object_sensitivity", "object_confusions",
-         "part_visibility", *TASK_VIEWS, *DETECTION_VIEWS, *COMPARE_VIEWS)
+         "part_visibility", *TASK_VIEWS, *DETECTION_VIEWS, *PAIRED_VIEWS, *COMPARE_VIEWS)
 MACROS = ("wilson_low", "wilson_high", "failure_modes", *COMPARE_MACROS)
 
 
@@ -188,11 +193,13 @@ def register_views(con: duckdb.DuckDBPyConnection, parameters: list[str] | None 
         con.execute(f"CREATE VIEW results AS SELECT *, {_COUNTED['evaluable' in result_columns]} AS counted "
                     "FROM results_uncounted")
         result_columns = _columns(con, "results")
-    for sql in _view_statements(control_columns(con, parameters), "top1_label" in result_columns):
+    columns = control_columns(con, parameters)
+    for sql in _view_statements(columns, "top1_label" in result_columns):
         con.execute(sql)
     register_part_views(con, set(result_columns))
     register_task_views(con, set(result_columns), model, min_visible)
     detection_views(con, set(result_columns))
+    register_paired_views(con, columns, set(result_columns))
     return True
 
 

@@ -13,7 +13,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from sweep3d.cache.keys import Template, digest, digests, file_digest
+from sweep3d.cache.keys import Template, digests, file_digest
 from sweep3d.errors import SpecError, UserError
 from sweep3d.spec.assets import mesh_digest
 from sweep3d.spec.framing import Framing
@@ -25,6 +25,7 @@ from sweep3d.stages.infer.keys import evaluator_key, infer_base, pred_keys
 from sweep3d.stages.jobs import JobList, Plan, PlanColumns, SceneBlock
 from sweep3d.stages.passes import truth_passes
 from sweep3d.stages.plan.batch import ControlBatch, control_batch, groups, keyed_texts
+from sweep3d.stages.plan.pairing import scene_points
 from sweep3d.stages.plan.policies import Outcome
 from sweep3d.stages.postprocess.keys import image_template
 from sweep3d.stages.render.controls.base import frame_fields
@@ -87,8 +88,8 @@ def make_plan(spec: LoadedSpec, *, framing: Framing, model_digest: str, blender:
                                "color": list(env.color) if env.color else None, "strength": env.strength})
             scene_controls = [c for c in spec.controls if c.applies_to(obj.name, env.name)]
             space = SearchSpace(scene_controls)
-            seed = int(digest([spec.experiment.seed, obj.name, env.name])[:15], 16)
-            unit, choice = spec.policy.arrays(space.shape, seed, (history or {}).get((obj.name, env.name), {}))
+            unit, choice = scene_points(spec.policy, spec.spec.policy.paired, space, spec.experiment.seed, obj.name,
+                                        env.name, (history or {}).get((obj.name, env.name), {}))
             n = len(unit)
             if len(keys.render) + n > spec.experiment.max_jobs:  # a policy that cannot count
                 raise _too_many(spec, f"more than {spec.experiment.max_jobs:,}")

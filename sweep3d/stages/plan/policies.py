@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from typing import ClassVar, Mapping
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, StrictBool
 
 from sweep3d.registry import Registry
 from sweep3d.spec.space import Point, SpaceShape, as_arrays, as_points
@@ -35,6 +35,9 @@ class Policy:
 
     Params: ClassVar[type[PolicyParams]] = PolicyParams
     adaptive: ClassVar[bool] = False
+    #: Its draws of each dimension are independent of the others and it returns as many points
+    #: whatever the shape: a paired plan may then draw each control from a stream of its own.
+    separable: ClassVar[bool] = False
 
     def __init__(self, params: PolicyParams) -> None:
         self.params = params
@@ -59,6 +62,14 @@ class Policy:
 
 
 POLICIES: Registry[type[Policy]] = Registry("policy")
+
+
+def balanced(rng: np.random.Generator, n: int, size: int) -> np.ndarray:
+    """``n`` choices among ``size`` options, each taken ⌊n/size⌋ or ⌈n/size⌉ times, in random order:
+    every option gets its share, and which ones get one more is drawn too."""
+    whole = np.tile(np.arange(size, dtype=np.int64), n // size)
+    extra = rng.choice(size, n % size, replace=False).astype(np.int64)
+    return rng.permutation(np.concatenate([whole, extra]))
 
 
 @POLICIES.register("grid")
@@ -93,10 +104,15 @@ class GridPolicy(Policy):
 
 @POLICIES.register("random")
 class RandomPolicy(Policy):
-    """``samples`` independent uniform draws per scene, reproducible from the seed."""
+    """``samples`` independent uniform draws per scene, reproducible from the seed. With ``stratify``,
+    each list's options are dealt out evenly (each ⌊n/k⌋ or ⌈n/k⌉ times, in random order) instead
+    of drawn independently, so a rare option is not left with few samples by chance."""
+
+    separable = True
 
     class Params(PolicyParams):
         samples: int = Field(16, ge=1, le=10_000_000)
+        stratify: StrictBool = False
 
     def points(self, shape: SpaceShape, seed: int, history: Mapping[Point, Outcome]) -> list[Point]:
         return as_points(*self.arrays(shape, seed, history))
@@ -105,7 +121,8 @@ class RandomPolicy(Policy):
         rng = np.random.default_rng(seed)
         n = self.params.samples
         unit = rng.random((n, shape.n_continuous))
-        choice = [rng.integers(0, size, n) for size in shape.choice_sizes]
+        draw = balanced if self.params.stratify else lambda rng, n, size: rng.integers(0, size, n)
+        choice = [draw(rng, n, size) for size in shape.choice_sizes]
         return unit, np.stack(choice, axis=1).astype(np.int64) if choice else np.zeros((n, 0), np.int64)
 
     def count(self, shape: SpaceShape) -> int:
