@@ -27,7 +27,7 @@ from sweep3d.cache.store import MIN_VISIBLE_METADATA, Store
 from sweep3d.cli.output import not_evaluable_line
 from sweep3d.report import build_context, render_html, write_report
 from sweep3d.report.overlays import PRED_COLOR, TRUE_COLOR, Overlay, read_overlays
-from sweep3d.report.panels import CORE_PANELS, PANELS
+from sweep3d.report.panels import CORE_PANELS
 from sweep3d.report.results import CORRECT, NOT_EVALUABLE, WRONG, Results, materialise_views
 from sweep3d.report.thumbs import encode_thumbnail
 from sweep3d.spec.columns import MODELS_METADATA, PARAMETERS_METADATA
@@ -483,7 +483,6 @@ def test_a_classification_store_without_unevaluable_jobs_gets_the_report_it_got_
     loaded, con, store = opened(make_store(tmp_path / "truth", jobs, "classification"))
     ids = [p.id for p in build_context(loaded, con, store)["panels"]]
     assert ids == [p.id for p in CORE_PANELS]
-    assert len(PANELS) == len(CORE_PANELS) + 4
 
 
 @pytest.mark.browser
