@@ -24,6 +24,7 @@ import pytest
 from typer.testing import CliRunner
 
 from sweep3d.cli import app
+from tests import files
 from tests.conftest import CUBE_OBJ, TINY_SPEC
 
 pytestmark = pytest.mark.slow
@@ -180,6 +181,19 @@ CASES = [
          "controls[2].elevation", ("less than or equal to 90", "120")),
     Case("control-value-wrong-type", ("[policy]", '[[controls]]\ntype = "scale"\nfactor = "huge"\n\n[policy]'),
          "controls[2].factor", ("valid number", "huge")),
+    # parts and material overrides of an object (tests/test_sub_objects.py has more)
+    Case("object-part-unknown", ('labels = ["carton"]', 'labels = ["carton"]\nparts = ["Cube"]'), "objects[0].parts[0]",
+         ("no object 'Cube' in cube.obj", "did you mean 'cube'?")),
+    Case("object-part-unknown-in-a-ply", ('mesh = "cube.obj"', 'mesh = "tri.ply"\nparts = ["Tri"]'), "objects[0].parts",
+         ("no object 'Tri' in tri.ply", "did you mean 'tri'?"), {"tri.ply": files.ply_binary([(0, 0, 0), (1, 0, 0),
+                                                                                             (0, 1, 0)])},
+         one_job=True),  # only Blender knows a PLY's object names: found by the render worker
+    Case("object-material-unknown-key", ('labels = ["carton"]', 'labels = ["carton"]\nmaterial = { opcity = 1.0 }'),
+         "objects[0].material.opcity", ("unknown key", "did you mean 'opacity'?")),
+    Case("object-material-negative", ('labels = ["carton"]', 'labels = ["carton"]\nmaterial = { roughness = -0.5 }'),
+         "objects[0].material.roughness", ("greater than or equal to 0", "-0.5")),
+    Case("object-material-nan", ('labels = ["carton"]', 'labels = ["carton"]\nmaterial = { base_color = [nan, 0, 0] }'),
+         "objects[0].material.base_color", ("between 0 and 1",)),
     # models (checked on one blank image before anything is rendered)
     model("raises", "raised ValueError", "weights file not found"),
     model("a_string", "must return a torch.nn.Module", "str"),

@@ -32,12 +32,24 @@ ModelOption = typer.Option(None, "--model", help="Which of the spec's models res
 
 
 @command
-def plan(spec: Path = SpecArg) -> None:
+def plan(
+    spec: Path = SpecArg,
+    materials: bool = typer.Option(False, "--materials", help="Also import each object in Blender and print "
+                                   "the material values it renders with (the file's, as the importer read them, "
+                                   "and the spec's overrides)."),
+) -> None:
     """Show the jobs a spec expands to, what is already cached, and an estimated time."""
     from sweep3d.cli.output import print_plan
     from sweep3d.stages import load_spec
 
-    print_plan(console, load_spec(spec))
+    loaded = load_spec(spec)
+    if materials:  # first: a part or material only Blender can check fails before anything prints
+        from sweep3d.cli.materials import effective_materials, print_materials
+
+        described = effective_materials(loaded)
+    print_plan(console, loaded)
+    if materials:
+        print_materials(console, loaded, described)
 
 
 @command

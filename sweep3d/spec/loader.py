@@ -20,6 +20,7 @@ from sweep3d.errors import SpecError, UserError
 from sweep3d.spec.assets import resolve_hdri, resolve_mesh
 from sweep3d.spec.catalogue import Catalogue
 from sweep3d.spec.columns import JOB_COLUMNS, PREDICTION_COLUMNS, TRUTH_RESULT_COLUMNS, parameter_column
+from sweep3d.spec.looks import check_look, valid_keys
 from sweep3d.spec.models import (
     EnvironmentSpec,
     EvaluatorSpec,
@@ -155,6 +156,7 @@ def load_spec(path: str | Path, catalogue: Catalogue) -> LoadedSpec:
             check_mesh(meshes[obj.name])
         except UserError as exc:
             raise fail(f"objects[{i}].mesh", _naming(obj.mesh, exc)) from None
+        check_look(obj, meshes[obj.name], i, fail)
     hdris: dict[str, str | None] = {}
     for i, env in enumerate(spec.environments):
         try:
@@ -202,6 +204,10 @@ def _first_error(path: Path, exc: ValidationError) -> SpecError:
     msg = err["msg"]
     if err["type"] == "extra_forbidden":
         msg = "unknown key; remove it or check its spelling"
+        valid = valid_keys(Spec, err["loc"][:-1])
+        close = difflib.get_close_matches(str(err["loc"][-1]), valid, n=1) if valid else []
+        if close:
+            msg = f"unknown key; remove it or check its spelling (did you mean {close[0]!r}? valid: {', '.join(valid)})"
     elif err["type"] == "missing":
         msg = "required key is missing"
     elif "input" in err and err["type"] not in ("value_error",):

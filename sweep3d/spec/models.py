@@ -114,10 +114,69 @@ class EvaluatorSpec(StrictModel):
                                          "unclipped silhouette is not evaluable (needs the mask pass).")
 
 
+def _unit(low: float = 0.0, high: float = 1.0, what: str = "") -> Any:
+    return Field(None, ge=low, le=high, allow_inf_nan=False, description=what)
+
+
+class MaterialSpec(StrictModel):
+    """Principled BSDF inputs set on an object's materials; a value left out keeps the file's
+    (as Blender's importer made it: ``sweep3d plan --materials`` shows both)."""
+
+    base_color: tuple[float, float, float] | None = Field(None, description="Linear RGB, 0..1 each.")
+    opacity: float | None = _unit(what="Alpha: 1 opaque, 0 invisible (an MTL's `d`).")
+    roughness: float | None = _unit()
+    metallic: float | None = _unit()
+    transmission: float | None = _unit(what="Transmission weight: 1 is glass (an MTL's `Tf`).")
+    ior: float | None = _unit(1.0, 4.0, "Index of refraction (an MTL's `Ni`).")
+    coat: float | None = _unit(what="Coat weight (Blender's OBJ importer sets a quarter of an MTL's `Pc`).")
+
+    @field_validator("base_color")
+    @classmethod
+    def _unit_color(cls, color: tuple[float, float, float] | None) -> tuple[float, float, float] | None:
+        if color is not None and not all(math.isfinite(c) and 0.0 <= c <= 1.0 for c in color):
+            raise ValueError(f"base_color components must be finite numbers between 0 and 1, got {list(color)}")
+        return color
+
+    def key_part(self) -> dict[str, Any]:
+        """The values given, by name (what the render key holds; empty: no override)."""
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in self.model_dump(exclude_none=True).items()}
+
+
 class ObjectSpec(StrictModel):
     name: Name
     mesh: str = Field(description="OBJ/glTF/GLB/PLY/STL path, or 'archive.zip#member.obj'.")
     labels: list[int | str] = Field(min_length=1, description="ImageNet class names or ids.")
+    parts: list[Name] | None = Field(None, min_length=1, description="Render (and frame) only these objects of the "
+                                     "mesh file, by name (an object's descendants come with it).")
+    material: MaterialSpec | None = Field(None, description="Overrides on every material of the rendered parts.")
+    materials: dict[Name, MaterialSpec] = Field(default_factory=dict, description="Overrides per material name, "
+                                                "on top of `material`.")
+    auto_smooth: float | None = Field(None, gt=0.0, le=180.0, allow_inf_nan=False,
+                                      description="Shade smooth, with edges sharper than this angle (degrees) kept "
+                                                  "sharp; replaces the file's own normals.")
+
+    @field_validator("parts")
+    @classmethod
+    def _distinct_parts(cls, parts: list[str] | None) -> list[str] | None:
+        if parts is not None and len(set(parts)) < len(parts):
+            twice = next(p for i, p in enumerate(parts) if p in parts[:i])
+            raise ValueError(f"part {twice!r} is listed twice; list each object once")
+        return parts
+
+    def look_key(self) -> dict[str, Any] | None:
+        """What the object's parts, material overrides and smoothing add to its render key; None
+        when nothing is given (or only empty overrides), so keys stay as they were before them."""
+        look: dict[str, Any] = {}
+        if self.parts:
+            look["parts"] = sorted(self.parts)
+        if self.material is not None and self.material.key_part():
+            look["material"] = self.material.key_part()
+        named = {name: m.key_part() for name, m in self.materials.items() if m.key_part()}
+        if named:
+            look["materials"] = named
+        if self.auto_smooth is not None:
+            look["auto_smooth"] = self.auto_smooth
+        return look or None
 
     @field_validator("labels", mode="before")
     @classmethod

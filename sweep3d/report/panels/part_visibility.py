@@ -37,6 +37,7 @@ from sweep3d.report.panel import PanelInputs
 from sweep3d.spec.assets import materialise_mesh, mesh_digest
 from sweep3d.stages.aggregate.views import has_view
 from sweep3d.stages.render.paint import SIDES, paint_objects
+from sweep3d.stages.render.protocol import Look
 
 UNSEEN = (0.93, 0.93, 0.93)  # never shown in an image
 TOO_FEW = (0.72, 0.72, 0.72)  # shown, but in fewer images than the panel's minimum
@@ -81,18 +82,23 @@ def _attach_renders(inputs: PanelInputs, blocks: list[dict[str, Any]]) -> None:
     store does not hold yet in one Blender process."""
 
     store, loaded = inputs.store, inputs.loaded
-    todo: list[tuple[str, np.ndarray, list[Path]]] = []
+    todo: list[tuple[str, np.ndarray, list[Path], Look | None]] = []
+    objects = {o.name: o for o in loaded.objects}
     for block in blocks:
         ref, colours = loaded.meshes[block["object"]], block.pop("colours")
-        key = digest({"paint": PAINT_VERSION, "layout": PARTS_LAYOUT, "mesh": mesh_digest(ref, store.root),
-                      "colours": np.round(colours, 3).tolist(), "views": SIDES})  # "views": as keyed before
-        paths = [_paint_path(store, key, label) for label, _, _ in SIDES]
+        value = {"paint": PAINT_VERSION, "layout": PARTS_LAYOUT, "mesh": mesh_digest(ref, store.root),
+                 "colours": np.round(colours, 3).tolist(), "views": SIDES}  # "views": as keyed before
+        look = objects[block["object"]].look_key()
+        if look:
+            value["look"] = look  # only parts show; without a look the key is as before
+        paths = [_paint_path(store, digest(value), label) for label, _, _ in SIDES]
         if not all(p.exists() for p in paths):
-            todo.append((ref, colours, paths))
+            todo.append((ref, colours, paths, Look.of(objects[block["object"]])))
         block["sides"] = list(zip([label for label, _, _ in SIDES], paths))
     if todo:
-        painted = paint_objects([(str(materialise_mesh(ref, store.root)), colours) for ref, colours, _ in todo])
-        for (_, _, paths), images in zip(todo, painted):
+        painted = paint_objects([(str(materialise_mesh(ref, store.root)), colours) for ref, colours, _, _ in todo],
+                                looks=[look for *_, look in todo])
+        for (_, _, paths, _), images in zip(todo, painted):
             for path, png in zip(paths, images):
                 atomic_write(path, png)
     for block in blocks:

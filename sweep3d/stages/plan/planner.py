@@ -85,7 +85,8 @@ def make_plan(spec: LoadedSpec, *, framing: Framing, model_digest: str, blender:
         for env in spec.environments:
             scene = scene_key(blender, settings, object_digest,
                               {"hdri": hdri_digests[env.name],
-                               "color": list(env.color) if env.color else None, "strength": env.strength})
+                               "color": list(env.color) if env.color else None, "strength": env.strength},
+                              obj.look_key())
             scene_controls = [c for c in spec.controls if c.applies_to(obj.name, env.name)]
             space = SearchSpace(scene_controls)
             unit, choice = scene_points(spec.policy, spec.spec.policy.paired, space, spec.experiment.seed, obj.name,

@@ -1,7 +1,8 @@
 """The render stage's cache keys: what changes a rendered image, and nothing else.
 
 ``render_key`` hashes the Blender version, the render settings that change pixels (with the
-resolved frame), the mesh's and the HDRI's *content*, and the rendered controls that apply to the
+resolved frame), the mesh's and the HDRI's *content*, the object's look when the spec gives one
+(parts, material overrides, smoothing), and the rendered controls that apply to the
 job and are not at their neutral values. Extra passes leave the RGB image alone, so they are keyed
 apart: ``parts_key`` names what a UV pass saw in one render, ``truth_key`` what the truth passes
 (mask, depth) gave it.
@@ -19,11 +20,20 @@ from sweep3d.truth import TRUTH_VERSION
 RENDER_STAGE_VERSION = 1
 
 
-def scene_key(blender: str, settings: dict[str, Any], object_digest: str, environment: dict[str, Any]) -> str:
-    """Everything of a render key that is fixed for one (object, environment) scene, hashed once."""
-    return digest({"stage": "render", "v": RENDER_STAGE_VERSION, "blender": blender, "settings": settings,
-                   "passes": [],  # the RGB image's; extra passes leave it alone and are keyed apart
-                   "object": object_digest, "environment": environment})
+def scene_key(blender: str, settings: dict[str, Any], object_digest: str, environment: dict[str, Any],
+              look: dict[str, Any] | None = None) -> str:
+    """Everything of a render key that is fixed for one (object, environment) scene, hashed once.
+
+    Args:
+        look: the object's ``parts``, material overrides and ``auto_smooth``
+            (``ObjectSpec.look_key``); None leaves the key as it was before they existed.
+    """
+    value = {"stage": "render", "v": RENDER_STAGE_VERSION, "blender": blender, "settings": settings,
+             "passes": [],  # the RGB image's; extra passes leave it alone and are keyed apart
+             "object": object_digest, "environment": environment}
+    if look:
+        value["look"] = look
+    return digest(value)
 
 
 def render_key(scene: str, controls: list[dict[str, Any]]) -> str:

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from sweep3d.parts import AZIMUTH_PARTS, ELEVATION_PARTS, PARTS, UV_MAP
+from sweep3d.stages.render.protocol import Look
 from sweep3d.stages.render.worker import die_with_parent
 
 #: (label, camera azimuth, camera elevation): the sides shown, as the camera control names them.
@@ -26,19 +27,24 @@ SIDES = (("front", 0.0, 15.0), ("right", 90.0, 15.0), ("back", 180.0, 15.0), ("l
 BACKGROUND = (1.0, 1.0, 1.0)
 
 
-def paint_objects(items: list[tuple[str, np.ndarray]], resolution: int = 160, samples: int = 16) -> list[list[bytes]]:
+def paint_objects(items: list[tuple[str, np.ndarray]], resolution: int = 160, samples: int = 16,
+                  looks: list[Look | None] | None = None) -> list[list[bytes]]:
     """PNG renders of each ``(mesh, colours)`` (colours: PARTS × 3, sRGB in [0, 1]), one per side.
 
-    Runs Blender once, in a fresh spawned process, for all the items.
+    Runs Blender once, in a fresh spawned process, for all the items. ``looks`` (one per item)
+    paint only an object's ``parts``, as it was rendered.
     """
-    items = [(mesh, np.asarray(colours, dtype=np.float32).reshape(PARTS, 3)) for mesh, colours in items]
+    looks = looks or [None] * len(items)
+    items = [(mesh, np.asarray(colours, dtype=np.float32).reshape(PARTS, 3), look)
+             for (mesh, colours), look in zip(items, looks)]
     if not items:
         return []
     with mp.get_context("spawn").Pool(1, initializer=die_with_parent) as pool:  # no orphan if the report is killed
         return pool.apply(_paint_in_this_process, (items, resolution, samples))
 
 
-def _paint_in_this_process(items: list[tuple[str, np.ndarray]], resolution: int, samples: int) -> list[list[bytes]]:
+def _paint_in_this_process(items: list[tuple[str, np.ndarray, Look | None]], resolution: int,
+                           samples: int) -> list[list[bytes]]:
     os.dup2(os.open(os.devnull, os.O_WRONLY), 1)  # Blender prints progress straight to fd 1
     from sweep3d.pixels import encode_png
     from sweep3d.stages.render.protocol import EnvironmentRef, RenderSettings
@@ -50,8 +56,8 @@ def _paint_in_this_process(items: list[tuple[str, np.ndarray]], resolution: int,
     out = []
     with tempfile.TemporaryDirectory(prefix="sweep3d-paint-") as scratch:
         scene = BlenderScene(settings, Path(scratch))
-        for mesh, colours in items:
-            scene.prepare(mesh, EnvironmentRef(color=BACKGROUND))
+        for mesh, colours, look in items:
+            scene.prepare(mesh, EnvironmentRef(color=BACKGROUND), look)
             material = _paint_material(scene.bpy, colours)
             images = []
             for _, azimuth, elevation in SIDES:

@@ -16,7 +16,7 @@ from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, fields
 from typing import TYPE_CHECKING, Any, Literal, Protocol, Self
 
-from sweep3d.spec.models import RenderSpec
+from sweep3d.spec.models import MaterialSpec, ObjectSpec, RenderSpec
 
 if TYPE_CHECKING:
     from pydantic import BaseModel
@@ -69,11 +69,43 @@ class EnvironmentRef:
     strength: float = 1.0
 
 
+#: A material override as (input, value) pairs, sorted: hashable, so a worker can key objects by it.
+Overrides = tuple[tuple[str, Any], ...]
+
+
+def overrides(material: MaterialSpec | None) -> Overrides:
+    """The values a ``[objects] material`` table gives, as sorted pairs (colours as tuples)."""
+    part = material.key_part() if material is not None else {}
+    return tuple(sorted((k, tuple(v) if isinstance(v, list) else v) for k, v in part.items()))
+
+
+@dataclass(frozen=True)
+class Look:
+    """How an object is shown beyond what its file says: which of its objects (``parts``; None:
+    all), material overrides for all of their materials and per material name, and smoothing by
+    angle. A worker keeps one import per (mesh, look)."""
+
+    parts: tuple[str, ...] | None = None
+    material: Overrides = ()
+    materials: tuple[tuple[str, Overrides], ...] = ()
+    auto_smooth: float | None = None
+
+    @classmethod
+    def of(cls, obj: ObjectSpec) -> Look | None:
+        """The spec object's look; None when it has none (the object renders as its file says)."""
+        if obj.look_key() is None:
+            return None
+        named = tuple(sorted((name, overrides(m)) for name, m in obj.materials.items() if overrides(m)))
+        parts = tuple(sorted(obj.parts)) if obj.parts else None  # the order changes nothing rendered
+        return cls(parts, overrides(obj.material), named, obj.auto_smooth)
+
+
 @dataclass(frozen=True)
 class RenderJob:
     """One render: the scene, the rendered controls in application order, and where it goes.
 
     Args:
+        look: the object's parts, material overrides and smoothing (None: as its file says).
         blob: the store path the PNG is written to; None when the render is already stored and
             the job is here only for its UV or truth passes.
     """
@@ -83,6 +115,7 @@ class RenderJob:
     environment: EnvironmentRef
     controls: tuple[tuple[RenderedControl, BaseModel], ...] = ()
     blob: str | None = None
+    look: Look | None = None
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,8 @@
 """Blender's copy of a :class:`SceneState`: builds a scene once, then re-poses it per job.
 
 A :class:`BlenderScene` keeps every object and every world it has loaded (up to a budget,
-least recently used first out): each object sits under its own normalising empty and is hidden
+least recently used first out): each object (a mesh file as a look shows it: its parts, material
+overrides, smoothing; see :mod:`.looks`) sits under its own normalising empty and is hidden
 for render and viewport while another is current; each environment has its own bpy World and
 ``scene.world`` points at the job's. Going back to a scene is a switch, not a re-import. A job
 that changes only pose or camera just moves things (persistent render data keeps Cycles' scene
@@ -29,8 +30,9 @@ from sweep3d.errors import UserError
 from sweep3d.stages.render._bpy import import_bpy
 from sweep3d.stages.render._rna import assign
 from sweep3d.stages.render.kept import Kept
+from sweep3d.stages.render.looks import FileNames, apply_look, rename_imported, select_parts
 from sweep3d.stages.render.props import Props
-from sweep3d.stages.render.protocol import EnvironmentRef, RenderSettings
+from sweep3d.stages.render.protocol import EnvironmentRef, Look, RenderSettings
 from sweep3d.stages.render.render_log import RenderLog
 from sweep3d.stages.render.skins import SkinMaterials
 from sweep3d.stages.render.state import SENSOR_WIDTH_MM, SceneState
@@ -63,13 +65,15 @@ class LoadedObject:
 
     normaliser: Any
     objects: list[Any]  # everything the import made
-    meshes: list[Any]
+    meshes: list[Any]  # the mesh objects that render (the look's parts)
     radius: float
     own: list[tuple[bool, bool]]  # each object's own (hide_render, hide_viewport), restored when shown
+    names: FileNames  # what the file called its objects and materials
 
     @property
     def faces(self) -> int:
-        return sum(len(o.data.polygons) for o in self.meshes)
+        """Every imported mesh's faces (parts left out are hidden, not removed: they cost memory)."""
+        return sum(len(o.data.polygons) for o in self.objects if o.type == "MESH")
 
     def show(self, visible: bool) -> None:
         """Show the object as imported, or hide it from render and viewport (Cycles drops it)."""
@@ -93,7 +97,8 @@ class BlenderScene:
         self.log = log
         self.loading = False  # the current job switched object or world (or is the first)
         self.load_seconds = 0.0  # what that switch cost the current job (0 when it did not switch)
-        self.object_ref: str | None = None
+        self.object_ref: str | None = None  # the shown object's mesh ...
+        self.look: Look | None = None  # ... and its look
         self.background: tuple[float, float, float] | None = None
         bpy.ops.wm.read_factory_settings(use_empty=True)
         scene = self.scene = bpy.context.scene
@@ -108,7 +113,7 @@ class BlenderScene:
         scene.camera = self.camera
         self.pose = bpy.data.objects.new("sweep3d_pose", None)  # controls move this empty
         scene.collection.objects.link(self.pose)
-        self.objects: Kept[str, LoadedObject] = Kept(MAX_KEPT_OBJECTS, MAX_KEPT_FACES, lambda o: o.faces)
+        self.objects: Kept[tuple[str, Look | None], LoadedObject] = Kept(MAX_KEPT_OBJECTS, MAX_KEPT_FACES, lambda o: o.faces)
         self.meshes: list[Any] = []  # the current object's
         self.worlds: Kept[EnvironmentRef, WorldNodes] = Kept(MAX_KEPT_WORLDS, MAX_KEPT_HDRI_PIXELS, lambda w: w.pixels)
         self.environment = EnvironmentRef()
@@ -151,9 +156,10 @@ class BlenderScene:
         scene.render.image_settings.compression = 0
 
     # -- loading -------------------------------------------------------------------------------
-    def prepare(self, mesh_path: str, environment: EnvironmentRef) -> None:
-        """Make ``mesh_path`` the shown object and ``environment``'s world the scene's (its values
-        are synced by :meth:`pose_scene`); each is loaded only the first time it is needed.
+    def prepare(self, mesh_path: str, environment: EnvironmentRef, look: Look | None = None) -> None:
+        """Make ``mesh_path`` (as ``look`` shows it) the shown object and ``environment``'s world the
+        scene's (its values are synced by :meth:`pose_scene`); each is loaded only the first time
+        it is needed.
 
         Starts the job's :attr:`load_seconds`: the time spent here when the object or the world
         changed (or nothing was shown yet), else 0."""
@@ -164,9 +170,9 @@ class BlenderScene:
         if self.scene.world != self.world.world:
             self.scene.world = self.world.world
             self.loading = True
-        if mesh_path != self.object_ref:
-            self._show(mesh_path)
-            self.object_ref = mesh_path
+        if (mesh_path, look) != (self.object_ref, self.look):
+            self._show((mesh_path, look))
+            self.object_ref, self.look = mesh_path, look
             self.loading = True
         self.load_seconds = time.perf_counter() - started if self.loading else 0.0
 
@@ -188,12 +194,12 @@ class BlenderScene:
         if evicted:
             self.bpy.data.orphans_purge(do_recursive=True)
 
-    def _show(self, mesh_path: str) -> None:
-        """Show ``mesh_path``'s object (importing it the first time) and hide every other one."""
-        loaded = self.objects.get(mesh_path)
+    def _show(self, ref: tuple[str, Look | None]) -> None:
+        """Show a (mesh, look)'s object (importing it the first time) and hide every other one."""
+        loaded = self.objects.get(ref)
         if loaded is None:
-            loaded = self._load_object(mesh_path)  # a UserError leaves the scene as it was
-            self.objects.add(mesh_path, loaded)
+            loaded = self._load_object(*ref)  # a UserError leaves the scene as it was
+            self.objects.add(ref, loaded)
         self.skins.restore()  # the object going out of sight gets its own materials back
         for other in self.objects.values():
             other.show(other is loaded)
@@ -206,14 +212,22 @@ class BlenderScene:
         if evicted:
             self.bpy.data.orphans_purge(do_recursive=True)  # their meshes, materials, textures
 
-    def _load_object(self, mesh_path: str) -> LoadedObject:
-        """Import ``mesh_path`` under a new normalising empty (unit bounding sphere at the origin)."""
+    def _load_object(self, mesh_path: str, look: Look | None = None) -> LoadedObject:
+        """Import ``mesh_path`` under a new normalising empty (unit bounding sphere at the origin
+        around what renders: the look's parts), with the look's materials and smoothing."""
         bpy = self.bpy
-        before = set(bpy.data.objects)
+        before, materials = set(bpy.data.objects), set(bpy.data.materials)
         try:
             self._import(mesh_path)
             imported = [o for o in bpy.data.objects if o not in before]
-            meshes = [o for o in imported if o.type == "MESH"]
+            names = rename_imported(imported, [m for m in bpy.data.materials if m not in materials])
+            where = Path(mesh_path).name
+            shown = select_parts(imported, names, look.parts if look else None, where)
+            meshes = [o for o in imported if o.type == "MESH" and o in shown]
+            if look is not None and look.parts and not meshes:
+                raise UserError(f"the parts {', '.join(map(repr, look.parts))} of {where} hold no mesh to render")
+            if look is not None:
+                apply_look(bpy, meshes, names, look, where)
             centre, radius = self._check(mesh_path, meshes)
         except UserError:
             for obj in [o for o in bpy.data.objects if o not in before]:
@@ -238,8 +252,8 @@ class BlenderScene:
             bpy.context.view_layer.update()
             to_pose = self.pose.matrix_world.inverted()
             self.uv_pass.prepare(meshes, lambda obj: to_pose @ obj.matrix_world)
-        own = [(o.hide_render, o.hide_viewport) for o in imported]
-        return LoadedObject(normaliser, imported, meshes, radius, own)
+        own = [(o.hide_render, o.hide_viewport) if o in shown else (True, True) for o in imported]
+        return LoadedObject(normaliser, imported, meshes, radius, own, names)
 
     def _import(self, mesh_path: str) -> None:
         op_name, kwargs = IMPORTERS[Path(mesh_path).suffix.lower()]

@@ -34,12 +34,14 @@ from sweep3d.cache.store import DIGEST_COLUMN, TRUTH_BLOBS, Store, atomic_write,
 from sweep3d.errors import SpecError, UserError
 from sweep3d.parts import PARTS_LAYOUT
 from sweep3d.spec.assets import materialise_mesh
+from sweep3d.spec.loader import LoadedSpec
 from sweep3d.stages.driver import Computed, Feed
 from sweep3d.stages.jobs import Job, Plan
 from sweep3d.stages.passes import needed_passes, truth_passes
 from sweep3d.stages.render.pool import RenderPool
 from sweep3d.stages.render.protocol import (
     EnvironmentRef,
+    Look,
     RenderExecutor,
     RenderInfo,
     RenderJob,
@@ -207,6 +209,7 @@ def _groups(plan: Plan, store: Store, todo: list[Job], stored: set[str]) -> list
     spec = plan.spec
     ordered = sorted((c.control for c in spec.controls if c.control.stage == "render"), key=lambda c: c.order)
     environments = {e.name: e for e in spec.environments}
+    looks = {o.name: Look.of(o) for o in spec.objects}
     meshes: dict[str, str] = {}
     by_scene: dict[tuple[str, str], list[RenderJob]] = defaultdict(list)
     for job in todo:
@@ -219,6 +222,7 @@ def _groups(plan: Plan, store: Store, todo: list[Job], stored: set[str]) -> list
             environment=EnvironmentRef(hdri=spec.hdris[env.name], color=env.color, strength=env.strength),
             controls=tuple((c, c.params(job.values[c.id])) for c in ordered if c.id in job.values),
             blob=None if job.render_key in stored else str(store.blob_path(job.render_key)),
+            look=looks[job.object],
         ))
     groups = []
     for scene in sorted(by_scene):
@@ -239,7 +243,6 @@ def _user_error(plan: Plan, job: Job, message: str) -> UserError:
     spec = plan.spec
     problem = " ".join(message.split())  # Blender's messages may span lines
     hdri = spec.hdris.get(job.environment)
-    objects = [o.name for o in spec.objects]
     environments = [e.name for e in spec.environments]
     if hdri and hdri in message:
         key = f"environments[{environments.index(job.environment)}].hdri"
@@ -247,6 +250,19 @@ def _user_error(plan: Plan, job: Job, message: str) -> UserError:
     elif "cannot write" in message:
         return UserError(problem)
     else:
-        key = f"objects[{objects.index(job.object)}].mesh"
-        fix = "check that the file opens in Blender, or export the mesh again"
+        return object_error(spec, job.object, message, f" ({job.object!r} in {job.environment!r})")
     return SpecError(str(spec.path), key, f"{problem.rstrip('.')} ({job.object!r} in {job.environment!r}); {fix}")
+
+
+def object_error(spec: LoadedSpec, name: str, message: str, context: str = "") -> SpecError:
+    """A worker's user error about object ``name`` as one line naming the key to fix: its ``parts``
+    or material overrides (stages/render/looks.py says the fix), else its mesh."""
+    problem = " ".join(message.split())
+    index = [o.name for o in spec.objects].index(name)
+    if problem.startswith(("no object ", "the parts ")):
+        return SpecError(str(spec.path), f"objects[{index}].parts", problem)
+    if problem.startswith("no material ") or "Principled BSDF" in problem:
+        key = "materials" if problem.startswith("no material ") or not spec.objects[index].material else "material"
+        return SpecError(str(spec.path), f"objects[{index}].{key}", problem)
+    return SpecError(str(spec.path), f"objects[{index}].mesh", f"{problem.rstrip('.')}{context}; check that the file "
+                                                               "opens in Blender, or export the mesh again")

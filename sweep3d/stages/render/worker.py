@@ -117,7 +117,7 @@ def render_job(scene, job: RenderJob, keep_pixels: bool = False) -> RenderReply:
     key = job.render_key
     started = time.perf_counter()
     try:
-        scene.prepare(job.mesh, job.environment)
+        scene.prepare(job.mesh, job.environment, job.look)
         state = SceneState()
         for control, params in job.controls:
             control.apply(state, params)
