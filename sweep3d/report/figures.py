@@ -69,6 +69,13 @@ def pct(value: float | None, digits: int = 1) -> str:
     return "–" if value is None else f"{value:.{digits}%}"
 
 
+def p_text(value: float | None) -> str:
+    """A p-value as the report prints it: three decimals, or ``< 0.001``; None → ``–``."""
+    if value is None:
+        return "–"
+    return "< 0.001" if value < 0.001 else f"{value:.3f}"
+
+
 def interval(low: float | None, high: float | None) -> str:
     """A Wilson interval as ``[10–25 %]`` (empty when unknown)."""
     if low is None or high is None:

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from sweep3d.report.figures import ACCURACY_AXIS, COLORS, Figure, interval, layout, make_figure, pct, plot_text
+from sweep3d.report.figures import ACCURACY_AXIS, COLORS, Figure, interval, layout, make_figure, p_text, pct, plot_text
 from sweep3d.report.panel import PanelInputs
 from sweep3d.stages.aggregate import has_view
 
@@ -45,13 +45,13 @@ def _pair(inputs: PanelInputs, pair: dict[str, Any], index: int) -> dict[str, An
     return {
         "a": a, "b": b, "n": pair["n"], "fixed": pair["fixed"], "broken": pair["broken"],
         "accuracy_a": pct(pair["accuracy_a"]), "accuracy_b": pct(pair["accuracy_b"]),
-        "difference": _signed(pair["difference"]), "p_value": _p(pair["p_value"]),
+        "difference": _signed(pair["difference"]), "p_value": p_text(pair["p_value"]),
         "same_top1": pct(pair["same_top1"]), "kappa": "–" if pair["kappa"] is None else f"{pair['kappa']:.2f}",
         "regions": [{
             "terms": [(r[f"parameter_{s}"], r[f"label_{s}"]) for s in "ab" if r[f"parameter_{s}"] is not None],
             "accuracy_a": pct(r["accuracy_a"], 0), "accuracy_b": pct(r["accuracy_b"], 0),
             "difference": _signed(r["difference"]), "n": r["n"], "fixed": r["fixed"], "broken": r["broken"],
-            "p_value": _p(r["p_value"]), "p_holm": _p(r["p_holm"]), "verdict": r["verdict"],
+            "p_value": p_text(r["p_value"]), "p_holm": p_text(r["p_holm"]), "verdict": r["verdict"],
         } for r in regions],
         "changes": {change: [_tile(inputs, row, a, b) for row in rows] for change, rows in changes.items()},
         "figure": _figure(levels, a, b, index) if levels else None,
@@ -99,7 +99,3 @@ def _signed(value: float | None) -> str:
     return "–" if value is None else f"{value * 100:+.1f} pts"
 
 
-def _p(value: float | None) -> str:
-    if value is None:
-        return "–"
-    return "< 0.001" if value < 0.001 else f"{value:.3f}"
