@@ -20,7 +20,16 @@ from typer.testing import CliRunner
 import sweep3d.stages.aggregate.summary as summary_module
 from sweep3d.cache.store import Store
 from sweep3d.cli import app
-from sweep3d.stages.aggregate import MACROS, VIEWS, connect, register_views, stored_summary, summarise
+from sweep3d.stages.aggregate import (
+    MACROS,
+    VIEWS,
+    Region,
+    connect,
+    register_views,
+    stored_summary,
+    summarise,
+    weakest_regions,
+)
 from sweep3d.stages.aggregate.compare import COMPARE_VIEWS
 from sweep3d.stages.aggregate.detection import DETECTION_VIEWS
 from sweep3d.stages.aggregate.summary import summary_path
@@ -183,6 +192,88 @@ def test_per_object_sensitivity_and_confusions(tmp_path: Path) -> None:
     assert confusions[0]["share"] == pytest.approx(0.7)
 
 
+def _effect_sizes(groups: list[tuple[int, int]]) -> tuple[float, float]:
+    """(eta², epsilon²) of correct over groups given as (n, n_correct), by hand."""
+    n, k = sum(g[0] for g in groups), sum(g[1] for g in groups)
+    p = k / n
+    between = sum(size * (right / size - p) ** 2 for size, right in groups)
+    total = n * p * (1 - p)
+    df = len(groups) - 1
+    return between / total, max(between - df * (total - between) / (n - df - 1), 0) / total
+
+
+def test_object_sensitivity_leaves_out_levels_with_too_few_results(tmp_path: Path) -> None:
+    rows = []
+    for x, size, right in (("a", 20, 10), ("b", 20, 10), ("c", 2, 0)):  # c: 2 images, both wrong
+        rows += [{"object": "mug", "c_x": x, "c_y": i % 2, "correct": i < right} for i in range(size)]
+    con = make_store(tmp_path, rows)
+    found = {r["parameter"]: r for r in rows_of(con, "FROM object_sensitivity WHERE object = 'mug'")}
+    x = found["c_x"]  # at the default of 10 results per level, c is left out: a and b are alike
+    assert (x["levels"], x["n"], x["worst_level"], x["worst_n"], x["best_n"]) == (2, 40, "a", 20, 20)
+    assert x["accuracy_range"] == 0 and x["eta2"] == 0 and x["eta2_adjusted"] == 0
+    assert rows_of(con, "FROM object_sensitivity") == rows_of(con, "FROM object_sensitivity(min_count := 10)")
+
+    lowered = {r["parameter"]: r for r in rows_of(con, "FROM object_sensitivity(min_count := 2)")}["c_x"]
+    assert (lowered["levels"], lowered["worst_level"], lowered["accuracy_min"], lowered["worst_n"]) == (3, "c", 0, 2)
+    eta2, epsilon2 = _effect_sizes([(20, 10), (20, 10), (2, 0)])
+    assert lowered["eta2"] == pytest.approx(eta2) and eta2 > 0.04
+    assert lowered["eta2_adjusted"] == pytest.approx(epsilon2) == 0  # two images explain nothing beyond chance
+
+    few = [{"object": "cup", "c_x": x, "correct": x == "a"} for x in ("a", "b") for _ in range(3)] + rows
+    con = make_store(tmp_path / "few", few)  # the cup has 3 results per level: no level qualifies at 10
+    assert not [r for r in rows_of(con, "FROM object_sensitivity") if r["object"] == "cup"]
+    assert {r["parameter"] for r in rows_of(con, "FROM object_sensitivity(min_count := 3)")
+            if r["object"] == "cup"} == {"c_x"}
+
+
+def test_object_sensitivity_beyond_chance_is_the_aggregate_panel_s(tmp_path: Path) -> None:
+    groups = [(12, 3), (12, 6), (12, 10)]
+    rows = [{"object": "mug", "c_x": x, "c_y": i % 3, "correct": i < right}
+            for x, (size, right) in enumerate(groups) for i in range(size)]
+    con = make_store(tmp_path, rows)
+    sensitivity = {r["parameter"]: r for r in rows_of(con, "FROM object_sensitivity")}
+    shares = {r["effect"]: r for r in rows_of(con, "FROM variance_explained WHERE kind = 'main'")}
+    eta2, epsilon2 = _effect_sizes(groups)
+    assert 0 < epsilon2 < eta2
+    for name in ("c_x", "c_y"):  # one object: its sensitivity is the experiment's main effect
+        assert sensitivity[name]["eta2_adjusted"] == pytest.approx(shares[name]["eta2_adjusted"], rel=1e-12, abs=1e-15)
+        assert sensitivity[name]["eta2"] == pytest.approx(shares[name]["eta2"], rel=1e-12, abs=1e-15)
+    assert sensitivity["c_x"]["eta2_adjusted"] == pytest.approx(epsilon2)
+    assert sensitivity["c_x"]["eta2"] == pytest.approx(eta2)
+    (value,) = con.execute("SELECT epsilon_squared(?, ?, ?, ?, ?)", [4.0, 2, 10.0, 30, 14.0]).fetchone()
+    assert value == pytest.approx((4 - 2 * 10 / 30) / 14)  # the one formula both read
+
+
+def _binomial_cdf(k: int, n: int, p: float) -> float:
+    return sum(math.comb(n, j) * p**j * (1 - p) ** (n - j) for j in range(k + 1))
+
+
+def test_failure_modes_say_which_regions_are_significantly_below_overall(tmp_path: Path) -> None:
+    rows = []
+    for a, size, right in (("far", 20, 2), ("near", 20, 13), ("good", 60, 60)):
+        rows += [{"c_a": a, "correct": i < right} for i in range(size)]
+    con = make_store(tmp_path, rows)
+    overall = 75 / 100
+    modes = {m["region"]: m for m in rows_of(con, "FROM failure_modes(min_count := 10)")}
+    assert set(modes) == {"c_a = far", "c_a = near"}  # good is above overall: not listed, but tested
+    near, far = modes["c_a = near"], modes["c_a = far"]
+    assert near["wilson_low"] < overall < near["wilson_high"]  # 65 %: its interval holds the overall 75 %
+    p_far, p_near = _binomial_cdf(2, 20, overall), _binomial_cdf(13, 20, overall)
+    assert far["p_value"] == pytest.approx(p_far, rel=1e-9) and near["p_value"] == pytest.approx(p_near, rel=1e-9)
+    # Holm over the three regions of 10 or more results (good's p-value is 1): far first, then near
+    assert far["p_holm"] == pytest.approx(3 * p_far, rel=1e-9)
+    assert near["p_holm"] == pytest.approx(max(3 * p_far, 2 * p_near), rel=1e-9)
+    assert far["significant"] is True and near["significant"] is False
+    for k, n, p in ((0, 5, 0.3), (3, 10, 0.7), (9, 10, 0.95), (10, 10, 0.5)):
+        (value,) = con.execute("SELECT binomial_cdf(?, ?, ?)", [k, n, p]).fetchone()
+        assert value == pytest.approx(_binomial_cdf(k, n, p), rel=1e-9)
+
+    summary = summarise(con, ["c_a"])  # the printed "fails most at" names only the significant one
+    assert weakest_regions(summary) == [Region("c_a", "far", 0.1, 20, pytest.approx(3 * p_far, rel=1e-9))]
+    rows = [{"c_a": a, "correct": i < right} for a, right in (("near", 13), ("good", 16)) for i in range(20)]
+    assert weakest_regions(summarise(make_store(tmp_path / "noise", rows), ["c_a"])) == []
+
+
 def test_views_come_with_every_connection_and_summary_reads_them(tmp_path: Path) -> None:
     con = make_store(tmp_path, _grid(lambda a, b: a == 1))
     present = {r[0] for r in con.execute("SELECT view_name FROM duckdb_views() WHERE NOT internal").fetchall()}
@@ -259,12 +350,13 @@ def test_object_sensitivity_names_the_first_level_of_a_tie_whatever_duckdb_s_thr
     rows = [{"object": "mug", "c_x": x, "correct": x in (1, 2)} for x in (0, 1, 2, 3) for _ in range(4)]
     con = make_store(tmp_path, rows)
     answers = set()
+    sql = "SELECT parameter, worst_level, best_level FROM object_sensitivity(min_count := 4)"
     for threads in (1, 4):
         con.execute(f"SET threads = {threads}")
-        answers.add(tuple(con.execute("FROM object_sensitivity").fetchall()))
+        answers.add(tuple(con.execute(sql).fetchall()))
     assert len(answers) == 1
-    (row,) = [r for r in answers.pop() if r[1] == "c_x"]
-    assert (row[5], row[7]) == ("0", "1")  # worst: 0 and 3 tie at 0 %; best: 1 and 2 at 100 %
+    (row,) = [r for r in answers.pop() if r[0] == "c_x"]
+    assert row[1:] == ("0", "1")  # worst: 0 and 3 tie at 0 %; best: 1 and 2 at 100 %
 
 
 def test_summary_reads_results_once_and_leaves_the_views_answering_the_same(tmp_path: Path) -> None:

@@ -122,7 +122,8 @@ def print_run(console: Console, result) -> None:
 
 
 def print_findings(console: Console, plan: Plan, store: Store | None = None) -> None:
-    """Accuracy and where the model fails most (the weakest control values).
+    """Accuracy and where the model fails most: the control values significantly below the overall
+    accuracy, as the report's failure modes test them (never a value that merely looks low).
 
     Args:
         store: the run's store object (it has read the segments already), else a new one.
@@ -139,7 +140,10 @@ def print_findings(console: Console, plan: Plan, store: Store | None = None) -> 
     regions = weakest_regions(summary)
     if regions:
         console.print("fails most at: " + "; ".join(
-            f"{escape(r.column)} = {escape(r.label)} ({r.accuracy:.0%} of {r.count})" for r in regions))
+            f"{escape(r.column)} = {escape(r.label)} ({r.accuracy:.0%} of {r.count})" for r in regions)
+            + " (significantly below overall, Holm-adjusted)")
+    elif summary.wrong and summary.effects:
+        console.print("fails most at: no value is significantly below the overall accuracy")
 
 
 def not_evaluable_line(summary: Summary) -> str:

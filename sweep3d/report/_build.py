@@ -27,7 +27,16 @@ from sweep3d.report.panels import PANELS
 from sweep3d.report.results import Results, materialise_views
 from sweep3d.report.thumbs import Thumbnails
 from sweep3d.spec.loader import LoadedSpec
-from sweep3d.stages.aggregate import MACROS, VIEWS, Summary, connect, has_view, no_results, summarise
+from sweep3d.stages.aggregate import (
+    MACROS,
+    VIEWS,
+    Summary,
+    connect,
+    has_view,
+    no_results,
+    region_min_count,
+    summarise,
+)
 
 STAGES = ("render", "postprocess", "infer")
 
@@ -97,6 +106,7 @@ def build_context(loaded: LoadedSpec, con: duckdb.DuckDBPyConnection, store: Sto
         "wrong": summary.wrong,
         "run": _latest_run(con, loaded.name),
         "panels": page.panels,
+        "fixed": page.fixed,
         "thumbs": json.dumps(uris, separators=(",", ":")),
         "thumb_problems": json.dumps(thumbs.problems, separators=(",", ":")),
         "thumb_size": thumbs.size,
@@ -115,6 +125,7 @@ class Gathered:
     panels: list[BuiltPanel]
     thumbs: Thumbnails  # the images the panels asked for
     images: int  # distinct images in the results
+    fixed: list[tuple[str, str]]  # parameters with one value: the header states them, no image card repeats them
 
 
 def gather(loaded: LoadedSpec, con: duckdb.DuckDBPyConnection, store: Store,
@@ -129,7 +140,7 @@ def gather(loaded: LoadedSpec, con: duckdb.DuckDBPyConnection, store: Store,
     images = con.execute("SELECT count(DISTINCT image_key) FROM results").fetchone()[0]
     thumbs = Thumbnails(store, images)
     inputs = PanelInputs(loaded, con, summary, results, thumbs, min_count(summary), store)
-    return Gathered(summary, build_panels(panels, inputs), thumbs, images)
+    return Gathered(summary, build_panels(panels, inputs), thumbs, images, results.fixed())
 
 
 def image_keys(loaded: LoadedSpec, panels: tuple[Panel, ...] = PANELS) -> list[str]:
@@ -153,8 +164,9 @@ def render_html(context: dict[str, Any]) -> str:
 
 
 def min_count(summary: Summary) -> int:
-    """The fewest counted results a failure mode needs: 5 % of them, between 2 and 10."""
-    return min(10, max(2, summary.counted // 20))
+    """The fewest counted results a failure mode, or a value in the per-object sensitivity, needs:
+    5 % of them, between 2 and 10 (as the printed findings)."""
+    return region_min_count(summary.counted)
 
 
 def _latest_run(con: duckdb.DuckDBPyConnection, experiment: str) -> dict[str, Any] | None:

@@ -25,7 +25,7 @@ from typing import Any, Mapping, Sequence
 
 import duckdb
 
-from sweep3d.stages.aggregate.views import materialise
+from sweep3d.stages.aggregate.views import SCENE_COLUMNS, materialise
 
 WRONG, CORRECT, INVALID, NOT_EVALUABLE = 0, 1, 2, 3  # outcome codes; the first two are counted
 OUTCOME_NAMES = ("wrong", "correct", "invalid", "not-evaluable")
@@ -151,9 +151,15 @@ class Results:
         return found["job"].tolist()
 
     def describe(self, row: ResultRow) -> str:
-        """``job 3 · object = mug · …`` for a gallery tile's title."""
-        values = [f"{p.name} = {p.labels[level]}" for p, level in zip(self.parameters, row.levels) if level >= 0]
+        """``job 3 · object = mug · …`` for a gallery tile's title: the scene, and the control
+        parameters that vary (one with a single value is stated once, in the page's header)."""
+        values = [f"{p.name} = {p.labels[level]}" for p, level in zip(self.parameters, row.levels)
+                  if level >= 0 and (p.varies or p.name in SCENE_COLUMNS)]
         return " · ".join([f"job {row.job}", *values])
+
+    def fixed(self) -> list[tuple[str, str]]:
+        """(name, value) of each parameter with a single value in the experiment."""
+        return [(p.name, p.labels[0]) for p in self.parameters if not p.varies]
 
     def _rows(self, where: str, values: list[Any], limit: int | None) -> list[ResultRow]:
         levels = "".join(f", {_level(p)}" for p in range(len(self.parameters)))

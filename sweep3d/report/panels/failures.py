@@ -10,9 +10,10 @@ from sweep3d.report.panel import PanelInputs
 
 
 def build(inputs: PanelInputs) -> dict[str, Any]:
-    """Cards of the summary's failures: thumbnail, scene, control values, top-k, loss."""
+    """Cards of the summary's failures: thumbnail, scene, the values of the controls that vary, top-k, loss."""
     failures = inputs.summary.failures
-    columns = inputs.loaded.parameter_columns
+    varying = {p.name for p in inputs.parameters if p.varies}  # a fixed one is stated once, in the header
+    columns = [c for c in inputs.loaded.parameter_columns if c in varying]
     present = {row[0] for row in inputs.con.execute("DESCRIBE results").fetchall()}
     task = [c if c in present else f"NULL AS {c}" for c in ("outcome", "iou", "topk")]  # other tasks lack some
     selected = "".join(f', "{c}"' for c in columns)

@@ -10,6 +10,7 @@ from sweep3d.stages.aggregate.summary import (
     Region,
     Summary,
     control_effects,
+    region_min_count,
     stored_summary,
     summarise,
     weakest_regions,
@@ -26,5 +27,5 @@ from sweep3d.stages.aggregate.views import (
 )
 
 __all__ = ["MACROS", "VIEWS", "ControlEffect", "Region", "Summary", "connect", "control_effects", "has_view",
-           "materialise", "no_results", "register_views", "stored_summary", "summarise", "weakest_regions",
+           "materialise", "no_results", "region_min_count", "register_views", "stored_summary", "summarise", "weakest_regions",
            "wilson_interval"]

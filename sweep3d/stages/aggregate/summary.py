@@ -26,6 +26,7 @@ from sweep3d.errors import UserError
 from sweep3d.stages.aggregate.views import connect, has_view, materialise, register_views
 
 FAILURE_LIMIT = 48  # failures a summary lists, worst first
+REGION_LIMIT = 3  # control values a summary names where the model fails, most certainly bad first
 #: Bump when :func:`summarise` gives other numbers for the same rows without a change to this
 #: module or to the views' module (both are part of a remembered summary's key).
 SUMMARY_FORMAT = 2
@@ -66,6 +67,8 @@ class Summary:
     not_evaluable: int = 0  # jobs of the plan with evaluable = false (rendered or not)
     not_evaluable_reasons: dict[str, int] = field(default_factory=dict)  # reason -> jobs
     min_visible: float | None = None  # the threshold behind the reason "hidden" (None: no truth passes)
+    #: control values significantly below the overall accuracy (``failure_modes``), most certainly bad first
+    regions: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def wrong(self) -> int:
@@ -76,9 +79,9 @@ class Summary:
 def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit: int = FAILURE_LIMIT) -> Summary:
     """Summarise the ``results`` view of ``con`` (see :func:`~sweep3d.stages.aggregate.connect`).
 
-    ``results`` is computed once into a temp table that the view then reads (as the report
-    does, :func:`~sweep3d.stages.aggregate.views.materialise`): the queries here read it
-    several times.
+    ``results`` and the levels are computed once into temp tables that the views then read (as
+    the report does, :func:`~sweep3d.stages.aggregate.views.materialise`): the queries here read
+    them several times.
 
     Args:
         columns: the control-parameter columns of the jobs table.
@@ -88,7 +91,9 @@ def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit:
         return Summary(jobs, 0, 0, 0, None, [], [], [], [])
     if not has_view(con, "control_accuracy"):  # a connection made without aggregate.connect
         register_views(con)
-    materialise(con, ["results"])
+    # failure_modes (the significant values) reads the levels and their pairs several times
+    materialise(con, ["results", "control_stats", "control_levels", "control_parameters", "control_accuracy",
+                      "pair_accuracy"])
     # Other tasks' evaluators (detection, a user's own) may lack the classification columns.
     have = {row[0] for row in con.execute("DESCRIBE results").fetchall()}
     unevaluable = "evaluable IS FALSE" if "evaluable" in have else "false"
@@ -129,8 +134,26 @@ def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit:
             f"mode({top1}) FILTER (WHERE NOT correct) FROM results WHERE counted GROUP BY 1 ORDER BY 1"
         ).fetchall()
     ]
+    regions = significant_values(con, columns, region_min_count(counted))
     return Summary(jobs, evaluated, invalid, correct, accuracy, objects, environments, scene_accuracy,
-                   scene_count, effects, failures, per_object, counted, sum(reasons.values()), reasons, min_visible)
+                   scene_count, effects, failures, per_object, counted, sum(reasons.values()), reasons, min_visible,
+                   regions)
+
+
+def region_min_count(counted: int) -> int:
+    """The fewest counted results a region needs to be tested as a failure mode: 5 % of the
+    counted results, between 2 and 10 (the report and the printed findings use the same)."""
+    return min(10, max(2, counted // 20))
+
+
+def significant_values(con: duckdb.DuckDBPyConnection, columns: list[str], min_count: int,
+                       limit: int = REGION_LIMIT) -> list[dict[str, Any]]:
+    """Single control values (of ``columns``, object and environment) whose accuracy is significantly
+    below the overall one, as ``failure_modes`` ranks and tests them."""
+    return [dict(zip(["column", "label", "accuracy", "count", "p_holm"], row)) for row in con.execute(
+        "SELECT parameter_a, label_a, accuracy, n, p_holm FROM failure_modes(min_count := ?) "
+        "WHERE size = 1 AND significant AND list_contains(?, parameter_a) LIMIT ?",
+        [min_count, ["object", "environment", *columns], limit]).fetchall()]
 
 
 def not_evaluable_reasons(con: duckdb.DuckDBPyConnection) -> tuple[dict[str, int], float | None]:
@@ -168,20 +191,20 @@ def control_effects(con: duckdb.DuckDBPyConnection, columns: list[str]) -> list[
 
 @dataclass(frozen=True)
 class Region:
-    """One control parameter's value (or bin) and how the model did there."""
+    """One control parameter's value (or bin) where the model is significantly worse than overall."""
 
     column: str
     label: str
     accuracy: float
     count: int
+    p_holm: float
 
 
-def weakest_regions(summary: Summary, min_count: int = 3, top: int = 3) -> list[Region]:
-    """The parameter values with the lowest accuracy, each supported by ``min_count`` results."""
-    regions = [Region(e.column, label, acc, n)
-               for e in summary.effects for label, acc, n in zip(e.labels, e.accuracy, e.count)
-               if n >= min_count and acc is not None]
-    return sorted(regions, key=lambda r: (r.accuracy, -r.count))[:top]
+def weakest_regions(summary: Summary, top: int = REGION_LIMIT) -> list[Region]:
+    """The control values significantly below the overall accuracy (one-sided exact binomial test,
+    Holm's adjustment over every region tested, as in ``failure_modes``), most certainly bad first;
+    none when no value is."""
+    return [Region(r["column"], r["label"], r["accuracy"], r["count"], r["p_holm"]) for r in summary.regions[:top]]
 
 
 # -- remembered summaries ---------------------------------------------------------------------

@@ -26,10 +26,15 @@ Views:
 ``variance_explained``
     share of the variance of ``correct`` explained by each parameter (kind ``main``) and each
     pair beyond its two main effects (kind ``interaction``): eta² = between-group sum of
-    squares / total sum of squares. In an unbalanced design the shares overlap.
+    squares / total sum of squares, and ``eta2_adjusted``, its part beyond chance (epsilon²,
+    the ``epsilon_squared`` macro). In an unbalanced design the shares overlap.
 ``object_sensitivity``
-    per (object, other parameter): accuracy range over the levels, worst and best level (the
-    first in level order among equals), and eta² within the object.
+    ``object_sensitivity(min_count := 10)`` with its default: per (object, other parameter),
+    over the levels with at least ``min_count`` of the object's counted results (the others are
+    left out, their results with them; a parameter left with fewer than two levels has no row):
+    levels, n, worst and best level (the first in level order among equals) with their accuracy
+    and count (``worst_n``, ``best_n``), accuracy range, eta² and ``eta2_adjusted`` within the
+    object (the same ``epsilon_squared`` as ``variance_explained``); most sensitive first.
 ``object_confusions``
     per object, its wrong top-1 predictions with counts, share of its failures and rank.
 ``part_visibility``
@@ -50,9 +55,22 @@ Macros:
 
 ``wilson_low(k, n)``, ``wilson_high(k, n)``
     the 95 % Wilson score interval of a proportion k/n (NULL when n = 0).
+``binomial_cdf(k, n, p)``
+    P(X <= k) for X ~ Binomial(n, p), exact (summed in log space).
+``epsilon_squared(ss_effect, df_effect, ss_error, df_error, ss_total)``
+    an effect's share of the variance beyond chance: (SS_effect - df_effect * SS_error /
+    df_error) / SS_total, at least 0.
 ``failure_modes(min_count := 10)``
     single levels and pairs of levels with at least ``min_count`` counted results and accuracy
-    below the overall accuracy, ranked by ``wilson_high`` (the most certainly bad first).
+    below the overall accuracy, ranked by ``wilson_high`` (the most certainly bad first). A pair
+    is listed only when its ``wilson_high`` is below the accuracy of each of its two levels.
+    ``p_value``: one-sided exact binomial test of the region's results against the overall
+    accuracy (``binomial_cdf(n_correct, n, overall)``; 1 for a region at or above it);
+    ``p_holm``: Holm's adjustment over every region of ``min_count`` results or more, listed or
+    not (each level and each pair of levels of two varying parameters); ``significant``:
+    ``p_holm`` < 0.05. ``sweep3d run``'s "fails most at" and the report show significant ones.
+``object_sensitivity(min_count := 10)``
+    the ``object_sensitivity`` view at another minimum count per level.
 """
 
 from __future__ import annotations
@@ -68,13 +86,15 @@ import pyarrow.parquet as pq
 from sweep3d.cache.store import Store, lock_down, plan_min_visible
 from sweep3d.errors import UserError
 from sweep3d.spec.columns import JOB_COLUMNS, MODELS_METADATA, PARAMETERS_METADATA
-from sweep3d.stages.aggregate.compare import COMPARE_MACROS, COMPARE_VIEWS, register_compare_views
+from sweep3d.stages.aggregate.compare import ALPHA, COMPARE_MACROS, COMPARE_VIEWS, register_compare_views
 from sweep3d.stages.aggregate.detection import DETECTION_VIEWS, detection_views
 from sweep3d.stages.aggregate.paired import PAIRED_VIEWS, register_paired_views
 from sweep3d.stages.aggregate.parts import register_part_views
 from sweep3d.stages.aggregate.tasks import TASK_VIEWS, register_task_views
 
 MAX_LEVELS = 12  # a numeric parameter with more distinct values is binned
+#: Default fewest counted results a failure mode's region, or a level in ``object_sensitivity``, needs.
+MIN_COUNT = 10
 BINS = 10
 Z95 = 1.959963984540054  # two-sided 95 % normal quantile
 NOT_APPLIED = "(not applied)"
@@ -92,7 +112,8 @@ _ACCURACY = ("n_correct / nullif(n, 0) AS accuracy, wilson_low(n_correct, n) AS 
 VIEWS = ("control_values", "control_stats", "control_levels", "control_parameters", "control_accuracy",
          "pair_accuracy", "scene_accuracy", "variance_explained", "object_sensitivity", "object_confusions",
          "part_visibility", *TASK_VIEWS, *DETECTION_VIEWS, *PAIRED_VIEWS, *COMPARE_VIEWS)
-MACROS = ("wilson_low", "wilson_high", "failure_modes", *COMPARE_MACROS)
+MACROS = ("wilson_low", "wilson_high", "binomial_cdf", "epsilon_squared", "failure_modes", "object_sensitivity",
+          *COMPARE_MACROS)
 
 
 def connect(store: Store, experiment: str | None = None, read_only: bool = False,
@@ -228,6 +249,20 @@ def _create_macros(con: duckdb.DuckDBPyConnection) -> None:
             f"(({p} + {z2!r} / (2 * n)) {sign} {Z95!r} * sqrt(greatest({p} * (1 - {p}) / n "
             f"+ {z2!r} / (4 * n::DOUBLE * n), 0))) / (1 + {z2!r} / n) END"
         )
+    # P(X <= k) for X ~ Binomial(n, p), summed exactly in log space (no overflow, no underflow
+    # trouble: a term too small for a double is 0, as its share of the sum is).
+    con.execute(
+        "CREATE OR REPLACE MACRO binomial_cdf(k, n, p) AS CASE WHEN k >= n OR p <= 0 THEN 1.0 "
+        "WHEN k < 0 OR p >= 1 THEN 0.0 ELSE least(1.0, (SELECT sum(exp(lgamma(n + 1) - lgamma(j + 1) "
+        "- lgamma(n - j + 1) + j * ln(p) + (n - j) * ln(1 - p))) FROM range(0, k + 1) t(j))) END"
+    )
+    # Epsilon squared: eta² less the share that df_effect groups of pure noise would explain on
+    # average (df_effect times the error mean square), never below 0. One formula for every
+    # effect size that is "beyond chance" (variance_explained, object_sensitivity).
+    con.execute(
+        "CREATE OR REPLACE MACRO epsilon_squared(ss_effect, df_effect, ss_error, df_error, ss_total) AS "
+        "greatest(ss_effect - df_effect * ss_error / nullif(df_error, 0), 0) / nullif(ss_total, 0)"
+    )
     con.execute(
         "CREATE OR REPLACE MACRO level_number_label(x) AS CASE "
         "WHEN x = round(x) AND abs(x) < 1e9 THEN CAST(CAST(x AS BIGINT) AS VARCHAR) "
@@ -334,58 +369,83 @@ _FIXED_VIEWS = (
             effects AS (
                 SELECT 'main' AS kind, m.parameter AS effect, m.parameter AS parameter_a,
                        NULL::VARCHAR AS parameter_b, m.ss AS sum_of_squares, m.df,
-                       (t.ss - m.ss) / nullif(t.n - m.df - 1, 0) AS mean_square_error,
+                       t.ss - m.ss AS ss_error, t.n - m.df - 1 AS df_error,
                        m.position AS position_a, NULL::INTEGER AS position_b
                 FROM main m, total t
                 UNION ALL
                 SELECT 'interaction', c.parameter_a || ' × ' || c.parameter_b, c.parameter_a, c.parameter_b,
-                       greatest(c.ss - a.ss - b.ss, 0), c.df - a.df - b.df,
-                       (t.ss - c.ss) / nullif(t.n - c.df - 1, 0), c.position_a, c.position_b
+                       greatest(c.ss - a.ss - b.ss, 0), c.df - a.df - b.df, t.ss - c.ss, t.n - c.df - 1,
+                       c.position_a, c.position_b
                 FROM cells c JOIN main a ON a.parameter = c.parameter_a JOIN main b ON b.parameter = c.parameter_b,
                      total t)
             SELECT kind, effect, parameter_a, parameter_b, sum_of_squares, df,
                    sum_of_squares / nullif(t.ss, 0) AS eta2,
-                   greatest(sum_of_squares - df * mean_square_error, 0) / nullif(t.ss, 0) AS eta2_adjusted,
+                   epsilon_squared(sum_of_squares, df, ss_error, df_error, t.ss) AS eta2_adjusted,
                    position_a, position_b
             FROM effects, total t
             ORDER BY eta2_adjusted DESC NULLS LAST, eta2 DESC, position_a, position_b NULLS FIRST""",
         # Level order fixes the order of the sum and which level a tie names, whatever order the
-        # rows of control_levels come in.
-        """CREATE OR REPLACE VIEW object_sensitivity AS
+        # rows of control_levels come in. Levels with fewer than min_count results are left out,
+        # their results with them: a 0 % of two images is no evidence of a sensitivity.
+        f"""CREATE OR REPLACE MACRO object_sensitivity(min_count := {MIN_COUNT}) AS TABLE
             WITH per_level AS (
                 SELECT object, parameter, position, level, any_value(label) AS label,
-                       count(*) FILTER (WHERE counted) AS n, avg(correct::DOUBLE) FILTER (WHERE counted) AS accuracy
+                       count(*) FILTER (WHERE counted) AS n, count(*) FILTER (WHERE counted AND correct) AS n_correct
                 FROM control_levels WHERE parameter <> 'object'
                 GROUP BY object, parameter, position, level),
-            per_object AS (SELECT object, count(*) AS n, avg(correct::DOUBLE) AS p FROM results WHERE counted
-                           GROUP BY object)
-            SELECT l.object, l.parameter, l.position, count(*)::INTEGER AS levels,
-                   min(l.accuracy) AS accuracy_min, arg_min(l.label, l.accuracy ORDER BY l.level) AS worst_level,
-                   max(l.accuracy) AS accuracy_max, arg_max(l.label, l.accuracy ORDER BY l.level) AS best_level,
-                   max(l.accuracy) - min(l.accuracy) AS accuracy_range,
-                   sum(l.n * (l.accuracy - o.p) ^ 2 ORDER BY l.level)
-                       / nullif(any_value(o.n * o.p * (1 - o.p)), 0) AS eta2
-            FROM per_level l JOIN per_object o USING (object)
-            WHERE l.n > 0
-            GROUP BY l.object, l.parameter, l.position HAVING count(*) > 1
-            ORDER BY l.object, eta2 DESC NULLS LAST, accuracy_range DESC, l.position""",
-        """CREATE OR REPLACE MACRO failure_modes(min_count := 10) AS TABLE
-            SELECT * FROM (
+            kept AS (SELECT *, n_correct / n AS accuracy FROM per_level WHERE n >= greatest(min_count, 1)),
+            pooled AS (SELECT object, parameter, sum(n) AS n, sum(n_correct) / sum(n) AS p
+                       FROM kept GROUP BY object, parameter),
+            effects AS (
+                SELECT l.object, l.parameter, l.position, count(*)::INTEGER AS levels, any_value(o.n) AS n,
+                       min(l.accuracy) AS accuracy_min, arg_min(l.label, l.accuracy ORDER BY l.level) AS worst_level,
+                       arg_min(l.n, l.accuracy ORDER BY l.level) AS worst_n,
+                       max(l.accuracy) AS accuracy_max, arg_max(l.label, l.accuracy ORDER BY l.level) AS best_level,
+                       arg_max(l.n, l.accuracy ORDER BY l.level) AS best_n,
+                       sum(l.n * (l.accuracy - o.p) ^ 2 ORDER BY l.level) AS ss,
+                       any_value(o.n * o.p * (1 - o.p)) AS ss_total
+                FROM kept l JOIN pooled o USING (object, parameter)
+                GROUP BY l.object, l.parameter, l.position HAVING count(*) > 1)
+            SELECT object, parameter, position, levels, n, accuracy_min, worst_level, worst_n, accuracy_max,
+                   best_level, best_n, accuracy_max - accuracy_min AS accuracy_range, ss / nullif(ss_total, 0) AS eta2,
+                   epsilon_squared(ss, levels - 1, ss_total - ss, n - levels, ss_total) AS eta2_adjusted
+            FROM effects
+            ORDER BY object, eta2_adjusted DESC NULLS LAST, eta2 DESC NULLS LAST, accuracy_range DESC, position""",
+        "CREATE OR REPLACE VIEW object_sensitivity AS FROM object_sensitivity()",
+        # Every region of min_count results or more is a test (one-sided exact binomial: is it
+        # below the overall accuracy?), listed or not, so Holm's adjustment counts all that were
+        # looked at. A region at or above the overall accuracy cannot be significantly below it:
+        # its p-value is 1 (its exact one is at least about one half), which spares summing it.
+        f"""CREATE OR REPLACE MACRO failure_modes(min_count := {MIN_COUNT}) AS TABLE
+            WITH overall AS (SELECT avg(correct::DOUBLE) AS p FROM results WHERE counted),
+            regions AS (
                 SELECT 1 AS size, parameter || ' = ' || label AS region,
                        parameter AS parameter_a, level AS level_a, label AS label_a,
                        NULL::VARCHAR AS parameter_b, NULL::INTEGER AS level_b, NULL::VARCHAR AS label_b,
                        n, n_correct, accuracy, wilson_low, wilson_high, position AS position_a,
-                       NULL::INTEGER AS position_b
+                       NULL::INTEGER AS position_b, true AS listed
                 FROM control_accuracy c SEMI JOIN control_parameters p ON p.parameter = c.parameter AND p.levels > 1
                 UNION ALL
                 SELECT 2, p.parameter_a || ' = ' || p.label_a || ' · ' || p.parameter_b || ' = ' || p.label_b,
                        p.parameter_a, p.level_a, p.label_a, p.parameter_b, p.level_b, p.label_b,
-                       p.n, p.n_correct, p.accuracy, p.wilson_low, p.wilson_high, p.position_a, p.position_b
+                       p.n, p.n_correct, p.accuracy, p.wilson_low, p.wilson_high, p.position_a, p.position_b,
+                       p.wilson_high < least(a.accuracy, b.accuracy)
                 FROM pair_accuracy p
                 JOIN control_accuracy a ON a.parameter = p.parameter_a AND a.level = p.level_a
-                JOIN control_accuracy b ON b.parameter = p.parameter_b AND b.level = p.level_b
-                WHERE p.wilson_high < least(a.accuracy, b.accuracy))
-            WHERE n >= min_count AND accuracy < (SELECT avg(correct::DOUBLE) FROM results WHERE counted)
+                JOIN control_accuracy b ON b.parameter = p.parameter_b AND b.level = p.level_b),
+            tested AS (
+                SELECT r.*, r.accuracy < o.p AS below,
+                       CASE WHEN r.accuracy < o.p THEN binomial_cdf(r.n_correct, r.n, o.p) ELSE 1.0 END AS p_value
+                FROM regions r, overall o WHERE r.n >= greatest(min_count, 1)),
+            ranked AS (
+                SELECT *, row_number() OVER (ORDER BY p_value, size, position_a, level_a, position_b, level_b) AS k,
+                       count(*) OVER () AS m
+                FROM tested)
+            SELECT size, region, parameter_a, level_a, label_a, parameter_b, level_b, label_b, n, n_correct, accuracy,
+                   wilson_low, wilson_high, p_value, p_holm, p_holm < {ALPHA} AS significant, position_a, position_b
+            FROM (SELECT *, least(1.0, max((m - k + 1) * p_value) OVER (ORDER BY k ROWS UNBOUNDED PRECEDING)) AS p_holm
+                  FROM ranked)
+            WHERE listed AND below
             ORDER BY wilson_high, accuracy, n DESC, size, position_a, level_a, position_b, level_b""",
 )
 _CONFUSIONS_VIEW = """CREATE OR REPLACE VIEW object_confusions AS
