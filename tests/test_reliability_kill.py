@@ -75,14 +75,14 @@ def marked(compute):
 
 for stage in (RenderStage, PostprocessStage, infer.InferStage):
     stage.compute = marked(stage.compute)
-_predict = infer.predict
+_model_outputs = infer.model_outputs
 
-def predict(model, images, *args, **kwargs):
+def model_outputs(model, images, *args, **kwargs):
     if (markers / "infer").exists():
         (markers / "predict").touch()
-    return _predict(model, images, *args, **kwargs)
+    return _model_outputs(model, images, *args, **kwargs)
 
-infer.predict = predict
+infer.model_outputs = model_outputs
 
 from sweep3d.cli import main
 sys.argv = ["sweep3d", "run", "spec.toml", "--no-report"]
