@@ -15,9 +15,10 @@ from sweep3d.stages.render.state import PointLight, SceneState, Sky
 
 @RENDERED_CONTROLS.register("point_light")
 class PointLightControl(RenderedControl):
-    """Adds a point light: ``watts`` (0 = none), colour ``temperature`` in kelvin (6500 = white),
-    ``distance`` from the object's centre in object radii, ``azimuth``/``elevation`` in degrees
-    (as for the camera: azimuth 0 is in front). Use two ids for two lights."""
+    """Adds a point light: ``watts`` (0 = none), colour ``temperature`` in kelvin (6500 is a faint
+    warm tint, see ``lights.kelvin_to_rgb``), ``distance`` from the origin in object radii,
+    ``azimuth``/``elevation`` in degrees (as for the camera: azimuth 0 is in front). Use two ids
+    for two lights."""
 
     order = 60
     frame_fields = {}
