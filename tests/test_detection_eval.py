@@ -13,7 +13,6 @@ from typing import Any
 import duckdb
 import numpy as np
 import pytest
-import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -111,7 +110,10 @@ def one(boxes: Any = ((0.0, 0.0, 5.0, 5.0),), labels: Any = (1,), scores: Any = 
     return {"boxes": np.asarray(boxes, dtype=np.float32), "labels": np.asarray(labels), "scores": np.asarray(scores)}
 
 
+@pytest.mark.torch
 def test_detections_from_accepts_torchvision_output() -> None:
+    import torch
+
     out = [{"boxes": torch.tensor([[1.0, 2.0, 3.0, 4.0]]), "labels": torch.tensor([2]),
             "scores": torch.tensor([0.7], dtype=torch.bfloat16)},
            {"boxes": torch.zeros((0, 4)), "labels": torch.zeros(0, dtype=torch.int64), "scores": torch.zeros(0)}]
@@ -187,7 +189,10 @@ def test_non_finite_scores_make_the_image_invalid() -> None:
     assert row["valid"] is False and all(v is None for k, v in row.items() if k != "valid")
 
 
+@pytest.mark.torch
 def test_segment_scores_from_resizes_and_reads_torchvision_dicts() -> None:
+    import torch
+
     small = np.stack([np.full((4, 4), float(c)) for c in range(3)])[None].repeat(2, axis=0)
     out = segment_scores_from(small, 2, 3, (8, 6), "fcn")
     assert out.shape == (2, 3, 8, 6) and out.dtype == np.float32

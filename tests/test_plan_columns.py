@@ -98,9 +98,7 @@ def reference_jobs(spec, *, framing: Framing, model_digest: str, blender: str) -
         object_digest = mesh_digest(spec.meshes[obj.name], spec.store)
         truth = list(spec.labels[obj.name])
         for env in spec.environments:
-            scene = scene_key(blender, settings_part, object_digest,
-                              {"hdri": None, "color": list(env.color) if env.color else None,
-                               "strength": env.strength})
+            scene = scene_key(blender, settings_part, object_digest, env.key_part(None))
             scene_controls = [c for c in spec.controls if c.applies_to(obj.name, env.name)]
             space = SearchSpace(scene_controls)
             seed = int(digest([spec.experiment.seed, obj.name, env.name])[:15], 16)
@@ -151,6 +149,8 @@ CONTROLS = {
     "scale": {"factor": (0.2, 3)},
     "occlusion": {"coverage": (0, 1), "direction": (-360, 360)},
     "point_light": {"watts": (0, 50)},
+    "sun_light": {"strength": (0, 5), "azimuth": (-360, 360)},
+    "area_light": {"watts": (0, 50), "size": (0.5, 3)},
     "blur": {"sigma": (0, 3)},
     "noise": {"std": (0, 0.2)},
     f"{HERE}:Nudge": {"amount": (-3, 3)},

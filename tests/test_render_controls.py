@@ -66,6 +66,11 @@ def cases(texture: Path):
         ("material", "plain", {"skin": "image", "image": str(texture)}, []),
         ("point_light", "plain", {"watts": 200.0, "temperature": 2000.0},
          [{"watts": 1e7, "distance": 1.01}, {"watts": 1e-3, "distance": 1e4, "temperature": 40000.0}]),
+        ("sun_light", "plain", {"strength": 3.0, "angle": 5.0, "temperature": 3000.0},
+         [{"strength": 1e6, "angle": 180.0, "elevation": -90.0}, {"strength": 1e-6, "relative_to": "camera",
+                                                                  "elevation": 90.0, "temperature": 40000.0}]),
+        ("area_light", "plain", {"watts": 200.0, "size": 2.0, "relative_to": "camera"},
+         [{"watts": 1e7, "distance": 1.01, "size": 1e4, "shape": "disk"}, {"watts": 1e-3, "distance": 1e4, "size": 1e-3}]),
         ("hdri", "hdri", {"rotation": 120.0}, [{"rotation": 180.0, "strength": 1e6}, {"strength": 1e-6}]),
         ("sky", "plain", {"enabled": True, "sun_elevation": 20.0},
          [{"enabled": True, "sun_elevation": -90.0}, {"enabled": True, "sun_elevation": 90.0, "strength": 1e6}]),
@@ -79,7 +84,7 @@ def test_every_rendered_control_is_covered(texture) -> None:
     assert rendered == {c[0] for c in cases(texture)}
 
 
-@pytest.mark.parametrize("index", range(18))
+@pytest.mark.parametrize("index", range(20))
 def test_control_changes_the_image_and_its_range_ends_are_finite(blender_scene, texture, index) -> None:
     name, env_kind, values, extremes = cases(texture)[index]
     env = environment(env_kind)

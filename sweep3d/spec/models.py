@@ -189,11 +189,48 @@ class ObjectSpec(StrictModel):
         return labels
 
 
+class KeyLightSpec(StrictModel):
+    """The key light of a plain-colour environment: a neutral white sun that rides with the camera,
+    with the plain world's uniform light dimmed to ``fill``, so an object has a lit and a shaded
+    side instead of washing out (a white mug on white). Both scale with the environment's strength."""
+
+    strength: float = Field(2.5, gt=0, le=1e6, allow_inf_nan=False,
+                            description="The sun's irradiance in W/m² at environment strength 1.")
+    azimuth: float = Field(-40.0, ge=-180.0, le=180.0, allow_inf_nan=False,
+                           description="Degrees from the camera, > 0 toward the image's right (-40: camera left).")
+    elevation: float = Field(45.0, ge=-90.0, le=90.0, allow_inf_nan=False,
+                             description="Degrees from the camera toward the image's top.")
+    angle: float = Field(10.0, ge=0.0, le=180.0, allow_inf_nan=False,
+                         description="The sun's angular diameter in degrees: larger, softer shadows.")
+    fill: float = Field(0.4, ge=0.0, le=1.0, allow_inf_nan=False,
+                        description="What share of the plain world's light stays, as fill.")
+
+
 class EnvironmentSpec(StrictModel):
     name: Name
     hdri: str | None = Field(None, description="'builtin:NAME' or an .exr/.hdr/.png path.")
     color: tuple[float, float, float] | None = Field(None, description="Plain background, RGB 0..1.")
-    strength: float = Field(1.0, gt=0, le=1e6, allow_inf_nan=False, description="World light strength.")
+    strength: float = Field(1.0, gt=0, le=1e6, allow_inf_nan=False,
+                            description="Multiplies the world's light: the HDRI's radiance, or a plain colour's "
+                                        "uniform white light (radiance 1 at strength 1) and its key light.")
+    key_light: KeyLightSpec | None = Field(None, description="A plain colour's key light: true (the default for "
+                                           "a colour), false, or a table of KeyLightSpec's keys.")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _key_light(cls, data: Any) -> Any:
+        """``key_light`` is on for a plain colour unless ``false``; ``true`` means the defaults."""
+        if not isinstance(data, dict):
+            return data
+        key = data.get("key_light", "color" in data)
+        if key is True:
+            key = {}
+        elif key is False:
+            key = None
+        elif not isinstance(key, dict):
+            raise ValueError(f"key_light must be true, false or a table such as {{ strength = 2.5, azimuth = -40 }}; "
+                             f"got {key!r}")
+        return {**data, "key_light": key}
 
     @field_validator("color")
     @classmethod
@@ -208,7 +245,19 @@ class EnvironmentSpec(StrictModel):
     def _one_background(self) -> EnvironmentSpec:
         if (self.hdri is None) == (self.color is None):
             raise ValueError("give exactly one of hdri = '...' or color = [r, g, b]")
+        if self.hdri is not None and self.key_light is not None:
+            raise ValueError("key_light is for a plain colour environment (color = [r, g, b]); light an HDRI "
+                             "with a sun_light or area_light control")
         return self
+
+    def key_part(self, hdri_digest: str | None) -> dict[str, Any]:
+        """The environment's part of a render key (the HDRI by content); no key light, no entry,
+        so keys made before key lights existed stay valid for ``key_light = false``."""
+        part: dict[str, Any] = {"hdri": hdri_digest, "color": list(self.color) if self.color else None,
+                                "strength": self.strength}
+        if self.key_light is not None:
+            part["key_light"] = self.key_light.model_dump()
+        return part
 
 
 class ReportSpec(StrictModel):

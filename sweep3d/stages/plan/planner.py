@@ -83,10 +83,7 @@ def make_plan(spec: LoadedSpec, *, framing: Framing, model_digest: str, blender:
         object_digest = _asset_digest(spec, f"objects[{i}].mesh", mesh_digest, spec.meshes[obj.name], spec.store)
         truth = list(spec.labels[obj.name])
         for env in spec.environments:
-            scene = scene_key(blender, settings, object_digest,
-                              {"hdri": hdri_digests[env.name],
-                               "color": list(env.color) if env.color else None, "strength": env.strength},
-                              obj.look_key())
+            scene = scene_key(blender, settings, object_digest, env.key_part(hdri_digests[env.name]), obj.look_key())
             scene_controls = [c for c in spec.controls if c.applies_to(obj.name, env.name)]
             space = SearchSpace(scene_controls)
             unit, choice = scene_points(spec.policy, spec.spec.policy.paired, space, spec.experiment.seed, obj.name,

@@ -1,5 +1,5 @@
-"""Objects a job adds around the subject: point lights, an occluding plate, a shadow-catching
-ground. Each is rebuilt only when its part of the state changes."""
+"""Objects a job adds around the subject: an occluding plate and a shadow-catching ground (lights:
+:mod:`sweep3d.stages.render.lamps`). Each is moved, not rebuilt, when its part of the state changes."""
 
 from __future__ import annotations
 
@@ -16,8 +16,6 @@ OCCLUDER_DEPTH = 0.5  # the plate sits at this fraction of the way from camera t
 class Props:
     def __init__(self, bpy, scene) -> None:
         self.bpy, self.scene = bpy, scene
-        self.lights: list[Any] = []
-        self.light_key: tuple = ()
         self.occluder = self._plate("sweep3d_occluder", (0.5, 0.5, 0.5))
         self.ground = self._plate("sweep3d_ground", (0.8, 0.8, 0.8))
         self.ground.is_shadow_catcher = True
@@ -34,26 +32,6 @@ class Props:
         self.scene.collection.objects.link(obj)
         obj.hide_render = True
         return obj
-
-    def sync_lights(self, state: SceneState) -> None:
-        key = tuple(state.lights)
-        if key == self.light_key:
-            return
-        for obj in self.lights:
-            data = obj.data
-            self.bpy.data.objects.remove(obj, do_unlink=True)
-            self.bpy.data.lights.remove(data)
-        self.lights = []
-        for i, light in enumerate(state.lights):
-            data = self.bpy.data.lights.new(f"sweep3d_light_{i}", "POINT")
-            data.energy = light.watts
-            data.color = light.rgb
-            data.shadow_soft_size = light.radius
-            obj = self.bpy.data.objects.new(f"sweep3d_light_{i}", data)
-            obj.location = tuple(light.position())
-            self.scene.collection.objects.link(obj)
-            self.lights.append(obj)
-        self.light_key = key
 
     def sync_occluder(self, state: SceneState) -> None:
         """Place a grey plate, facing the camera, over ``coverage`` of the object's projected disc."""

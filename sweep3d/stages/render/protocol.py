@@ -16,7 +16,7 @@ from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, fields
 from typing import TYPE_CHECKING, Any, Literal, Protocol, Self
 
-from sweep3d.spec.models import MaterialSpec, ObjectSpec, RenderSpec
+from sweep3d.spec.models import KeyLightSpec, MaterialSpec, ObjectSpec, RenderSpec
 
 if TYPE_CHECKING:
     from pydantic import BaseModel
@@ -62,11 +62,13 @@ class RenderSettings:
 
 @dataclass(frozen=True)
 class EnvironmentRef:
-    """A job's world: an HDRI file (a local path, or a Ray pack reference) or a plain colour."""
+    """A job's world: an HDRI file (a local path, or a Ray pack reference) or a plain colour, with
+    a plain colour's key light (None: lit by its uniform light alone)."""
 
     hdri: str | None = None
     color: tuple[float, float, float] | None = None
     strength: float = 1.0
+    key_light: KeyLightSpec | None = None
 
 
 #: A material override as (input, value) pairs, sorted: hashable, so a worker can key objects by it.

@@ -30,6 +30,8 @@ from sweep3d.errors import UserError
 from sweep3d.stages.render._bpy import import_bpy
 from sweep3d.stages.render._rna import assign
 from sweep3d.stages.render.kept import Kept
+from sweep3d.stages.render.lamps import Lamps
+from sweep3d.stages.render.lights import WHITE, SunLight
 from sweep3d.stages.render.looks import FileNames, apply_look, rename_imported, select_parts
 from sweep3d.stages.render.props import Props
 from sweep3d.stages.render.protocol import EnvironmentRef, Look, RenderSettings
@@ -121,6 +123,7 @@ class BlenderScene:
         scene.world = self.world.world
         self.skins = SkinMaterials(bpy)
         self.props = Props(bpy, scene)
+        self.lamps = Lamps(bpy, scene)
         self.frame = scratch / f"frame-{os.getpid()}.png"
         self.uv_pass = UVPass(bpy, scene, scratch) if "uv" in settings.passes else None
         self.parts: dict[str, Any] | None = None  # what the UV pass saw in the latest render
@@ -339,13 +342,23 @@ class BlenderScene:
         self.background = state.background or (tuple(env.color) if env.color and state.sky is None else None)
         assign(self.scene.render, "film_transparent", self.background is not None)
         self.skins.sync(state.skin, state.skin_scale, state.skin_image)
-        self.props.sync_lights(state)
+        self.lamps.sync(state.lights + self._key_light(env, state), state)
         self.props.sync_occluder(state)
         lowest = None
         if state.pin_to_ground:
             self.bpy.context.view_layer.update()
             lowest = float(self._world_vertices(self.meshes)[:, 2].min())
         self.props.sync_ground(state, lowest)
+
+    @staticmethod
+    def _key_light(env: EnvironmentRef, state: SceneState) -> list[SunLight]:
+        """A plain colour's key light: a white sun riding with the camera, scaled like the world's
+        light (the world keeps ``fill`` of it, see world.py); none under a procedural sky."""
+        key = env.key_light
+        if key is None or state.sky is not None:
+            return []
+        strength = key.strength * env.strength * state.world_strength
+        return [SunLight(WHITE, strength, key.angle, key.azimuth, key.elevation, "camera")]
 
     def render(self) -> np.ndarray:
         """Render the current scene.

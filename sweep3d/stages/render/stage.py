@@ -219,7 +219,8 @@ def _groups(plan: Plan, store: Store, todo: list[Job], stored: set[str]) -> list
         by_scene[job.environment, job.object].append(RenderJob(
             render_key=job.render_key,
             mesh=meshes[job.object],
-            environment=EnvironmentRef(hdri=spec.hdris[env.name], color=env.color, strength=env.strength),
+            environment=EnvironmentRef(hdri=spec.hdris[env.name], color=env.color, strength=env.strength,
+                                       key_light=env.key_light),
             controls=tuple((c, c.params(job.values[c.id])) for c in ordered if c.id in job.values),
             blob=None if job.render_key in stored else str(store.blob_path(job.render_key)),
             look=looks[job.object],

@@ -9,9 +9,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Mapping
+from typing import TYPE_CHECKING, Mapping
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from sweep3d.stages.render.lights import AreaLight, SunLight
 
 SENSOR_WIDTH_MM = 36.0
 FRAME_FILL = 0.8  # distance = 1 / (zoom · FRAME_FILL · sin(half fov)): the sphere spans ~78 % at 50 mm (README)
@@ -79,7 +82,7 @@ class SceneState:
     skin_scale: float = 1.0
     skin_image: str | None = None
     denoise: bool | None = None  # None = as the render settings say
-    lights: list[PointLight] = field(default_factory=list)
+    lights: list[PointLight | SunLight | AreaLight] = field(default_factory=list)
     sky: Sky | None = None
     world_rotation: float = 0.0  # degrees about the vertical axis
     world_strength: float = 1.0  # multiplies the environment's strength

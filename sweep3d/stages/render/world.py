@@ -1,4 +1,5 @@
-"""The Blender world: an HDRI (rotatable, scalable), a plain colour's neutral light, or a sky.
+"""The Blender world: an HDRI (rotatable, scalable), a plain colour's neutral light (dimmed to its
+key light's fill), or a sky.
 
 A render worker keeps one :class:`WorldNodes` (one bpy World) per environment. Its node tree is
 rebuilt only when its structure changes (a sky instead of the map) and its values are written
@@ -35,6 +36,8 @@ class WorldNodes:
             self._build(structure, env)
             self.structure = structure
         strength = env.strength * state.world_strength
+        if env.key_light is not None and sky is None:
+            strength *= env.key_light.fill  # the key light takes the rest (scene.py adds it)
         if sky is not None:
             strength = sky.strength * state.world_strength
             node = self.nodes["sky"]

@@ -16,6 +16,8 @@ from sweep3d.stages.render.controls.lighting import (
            PointLightControl,
            SkyControl,
 )
+from sweep3d.stages.render.controls.lights import AreaLightControl, SunLightControl
 
-__all__ = ["RENDERED_CONTROLS", "SKINS", "Background", "Camera", "Denoiser", "Hdri", "Material", "Occlusion", "Orientation",
-           "PinToGround", "PointLightControl", "Position", "RenderedControl", "Scale", "SkyControl"]
+__all__ = ["RENDERED_CONTROLS", "SKINS", "AreaLightControl", "Background", "Camera", "Denoiser", "Hdri", "Material",
+           "Occlusion", "Orientation", "PinToGround", "PointLightControl", "Position", "RenderedControl", "Scale",
+           "SkyControl", "SunLightControl"]

@@ -3,32 +3,22 @@ background colour, and the denoiser."""
 
 from __future__ import annotations
 
-import math
 from typing import Any, Literal
 
 from pydantic import Field
 
 from sweep3d.controls import ControlParams
 from sweep3d.stages.render.controls.base import RENDERED_CONTROLS, RenderedControl
+from sweep3d.stages.render.lights import kelvin_to_rgb
 from sweep3d.stages.render.state import PointLight, SceneState, Sky
-
-
-def kelvin_to_rgb(kelvin: float) -> tuple[float, float, float]:
-    """Approximate linear RGB of a black body at ``kelvin`` (1000..40000), max component 1."""
-    t = min(max(kelvin, 1000.0), 40000.0) / 100.0
-    r = 255.0 if t <= 66 else 329.698727446 * (t - 60) ** -0.1332047592
-    g = 99.4708025861 * math.log(t) - 161.1195681661 if t <= 66 else 288.1221695283 * (t - 60) ** -0.0755148492
-    b = 255.0 if t >= 66 else (0.0 if t <= 19 else 138.5177312231 * math.log(t - 10) - 305.0447927307)
-    rgb = [min(max(c / 255.0, 0.0), 1.0) ** 2.2 for c in (r, g, b)]  # sRGB-ish to linear
-    peak = max(rgb)
-    return tuple(c / peak for c in rgb)  # type: ignore[return-value]
 
 
 @RENDERED_CONTROLS.register("point_light")
 class PointLightControl(RenderedControl):
-    """Adds a point light: ``watts`` (0 = none), colour ``temperature`` in kelvin (6500 = white),
-    ``distance`` from the object's centre in object radii, ``azimuth``/``elevation`` in degrees
-    (as for the camera: azimuth 0 is in front). Use two ids for two lights."""
+    """Adds a point light: ``watts`` (0 = none), colour ``temperature`` in kelvin (6500 is a faint
+    warm tint, see ``lights.kelvin_to_rgb``), ``distance`` from the origin in object radii,
+    ``azimuth``/``elevation`` in degrees (as for the camera: azimuth 0 is in front). Use two ids
+    for two lights."""
 
     order = 60
     frame_fields = {}
