@@ -53,10 +53,12 @@ labels = ["crate"]
 [[environments]]
 name = "white"
 color = [1.0, 1.0, 1.0]
+key_light = false  # lit as before plain backgrounds had a key light: the keys of the frozen plans
 
 [[environments]]
 name = "grey"
 color = [0.5, 0.5, 0.5]
+key_light = false
 
 [[controls]]
 type = "orientation"
