@@ -170,3 +170,13 @@ def test_plan_counts_the_passes_in_its_estimate_and_says_so(tmp_path: Path) -> N
     spec = write_spec(tmp_path, LOCALIZE_SPEC)
     result = CliRunner().invoke(app, ["plan", str(spec)])
     assert result.exit_code == 0 and "mask passes" in " ".join(result.output.split()), result.output
+
+
+def test_an_evaluator_asking_for_an_unknown_task_is_refused_in_one_line() -> None:
+    from sweep3d.errors import UserError
+    from sweep3d.stages.infer import Classifier
+    from sweep3d.stages.infer.tasks import check_task
+
+    with pytest.raises(UserError) as caught:
+        check_task(Classifier(module=None), "depth", "mine")
+    assert "'depth'" in str(caught.value) and "raw" in str(caught.value) and "\n" not in str(caught.value)

@@ -23,9 +23,9 @@ from __future__ import annotations
 
 import duckdb
 
+from sweep3d.stages.infer.evaluators.base import OUTCOMES  # what a box or mask task says (``results.outcome``)
+
 TASK_VIEWS = ("not_evaluable", "outcomes_by_value", "iou_by_object")
-#: What a box or mask task says of each valid result (``results.outcome``), in stacking order.
-OUTCOMES = ("correct", "wrong_class", "wrong_box", "missed")
 #: Why a job is not evaluable (``not_evaluable.reason``).
 OUT_OF_FRAME, HIDDEN = "out of frame", "hidden"
 QUANTILES = {"p10": 0.1, "p25": 0.25, "median": 0.5, "p75": 0.75, "p90": 0.9}

@@ -92,6 +92,7 @@ class InferStage:
         self.backend: str | None = None  # chosen by ``prepare``
         self._labels: LabelMap | None = None
         self._runner: OnnxRunner | None = None
+        self._made: tuple[Any, Evaluator] | None = None  # (the spec's [evaluator], the evaluator it made)
 
     def schema(self, plan: Plan) -> pa.Schema:
         return predictions_schema(self._evaluator(plan))
@@ -229,10 +230,12 @@ class InferStage:
         else every core."""
         return self.model.settings.threads or (1 if beside else os.cpu_count() or 1)
 
-    @staticmethod
-    def _evaluator(plan: Plan) -> Evaluator:
-        spec = plan.spec
-        return EVALUATORS.get(spec.evaluator.kind).from_settings(spec.evaluator)
+    def _evaluator(self, plan: Plan) -> Evaluator:
+        """The run's evaluator, made once (the schema and the rows of every batch come from it)."""
+        settings = plan.spec.evaluator
+        if self._made is None or self._made[0] is not settings:
+            self._made = (settings, EVALUATORS.get(settings.kind).from_settings(settings))
+        return self._made[1]
 
 
 def pending_predictions(plan: Plan, store: Store, stage: InferStage | None = None) -> set[str]:

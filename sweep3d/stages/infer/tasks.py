@@ -14,6 +14,7 @@ import numpy as np
 from sweep3d.errors import UserError
 from sweep3d.stages.infer import outputs
 from sweep3d.stages.infer.cam import cam_localize, supports_cam
+from sweep3d.stages.infer.evaluators.base import TASKS
 from sweep3d.stages.infer.models import Classifier, Detector, Preprocess, Segmenter
 from sweep3d.stages.infer.outputs import Localized
 
@@ -95,7 +96,10 @@ def localize(model: Classifier, images: np.ndarray, name: str) -> Localized:
 
 
 def check_task(model: Classifier, task: str, name: str) -> None:
-    """Refuse a model that cannot answer ``task`` (a classifier asked to detect, ...)."""
+    """Refuse a model that cannot answer ``task`` (a classifier asked to detect, ...), and a task
+    that is none of :data:`TASKS` (a user's evaluator would otherwise get the raw output)."""
+    if task not in TASKS:
+        raise UserError(f"the evaluator asks for task {task!r}; an evaluator's task is one of {', '.join(TASKS)}")
     wanted = {"detection": Detector, "segmentation": Segmenter}.get(task)
     if wanted is not None and not isinstance(model, wanted):
         raise UserError(f"evaluator kind {task!r} needs a {wanted.__name__} but model {name!r} is a "

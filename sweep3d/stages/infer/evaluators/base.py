@@ -25,9 +25,11 @@ from sweep3d.stages.infer.labels import LabelMap
 
 EVALUATORS: Registry[type["Evaluator"]] = Registry("evaluator")
 
-#: What a task with boxes or masks says of each image (``outcome``), besides null for an invalid one.
+#: What a task with boxes or masks says of each image (``outcome``), besides null for an invalid one;
+#: in the order the report stacks them.
 OUTCOMES = ("correct", "wrong_class", "wrong_box", "missed")
 
+#: What an evaluator's ``task`` may ask the model for (``stages.infer.tasks.model_outputs``).
 TASKS = ("classification", "localization", "detection", "segmentation", "raw")
 
 
