@@ -16,6 +16,11 @@ from sweep3d.errors import UserError
 T = TypeVar("T")
 
 
+def is_user_plugin(name: str) -> bool:
+    """Whether a spec's plug-in name is a user's own (``module:Name``) rather than a built-in's."""
+    return ":" in name
+
+
 class Registry(Generic[T]):
     """Maps short names to plug-ins of one kind.
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 import difflib
 import logging
 import tomllib
+import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -370,12 +371,18 @@ def _check_space(control: Control, name: str, space: Space, key: str, fail) -> S
         return Fixed(check(space.value))
     if isinstance(space, Choice):
         return Choice(tuple(check(v) for v in space.options))
-    annotation = control.Params.model_fields[name].annotation
+    annotation = numeric(control.Params.model_fields[name].annotation)
     if annotation not in (int, float):
         raise fail(key, f"a range needs a numeric parameter; {name!r} takes {getattr(annotation, '__name__', annotation)}: use a list")
     check(space.low)
     check(space.high)
     return Range(space.low, space.high, log=space.log, integer=annotation is int)
+
+
+def numeric(annotation: Any) -> Any:
+    """``int`` or ``float`` for a parameter that takes one (also when it may be None: "keep as is")."""
+    args = [a for a in typing.get_args(annotation) if a is not type(None)]
+    return args[0] if len(args) == 1 and len(typing.get_args(annotation)) == 2 else annotation
 
 
 def _name_filter(entry, key, valid: set[str], where: str, fail) -> frozenset[str] | None:

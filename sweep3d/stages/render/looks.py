@@ -132,10 +132,10 @@ def _overridden(bpy: Any, original: Any | None, values: dict[str, Any], names: F
     return material
 
 
-def set_inputs(tree: Any, bsdf: Any, values: dict[str, Any]) -> None:
-    """Set Principled BSDF inputs by spec name, cutting the links that drove them."""
+def set_inputs(tree: Any, bsdf: Any, values: dict[str, Any], inputs: dict[str, str] = INPUTS) -> None:
+    """Set Principled BSDF inputs by spec name (``inputs``: name → socket), cutting the links that drove them."""
     for key, value in values.items():
-        socket = bsdf.inputs[INPUTS[key]]
+        socket = bsdf.inputs[inputs[key]]
         for link in list(socket.links):
             tree.links.remove(link)
         socket.default_value = (*value, 1.0) if key == "base_color" else value

@@ -118,6 +118,8 @@ class RenderJob:
     controls: tuple[tuple[RenderedControl, BaseModel], ...] = ()
     blob: str | None = None
     look: Look | None = None
+    object_name: str = ""  # the spec's names of the scene, for a control's ``edit``
+    environment_name: str = ""
 
 
 @dataclass(frozen=True)
@@ -138,6 +140,9 @@ class RenderInfo:
     parts: dict[str, Any] | None = None
     load_seconds: float = 0.0
     truth: dict[str, Any] | None = None  # the truth passes' numbers (``sweep3d.truth.ground_truth``)
+    #: What a control's ``edit`` changed of the data the scene held before (the worker then rebuilt
+    #: its scene, which is slow: the render stage says so once); empty when edits only added things.
+    rebuilt: tuple[str, ...] = ()
 
     @property
     def render_seconds(self) -> float:
@@ -152,7 +157,8 @@ class RenderReply:
     Args:
         info: set when ``ok``.
         kind: "user" when the spec's input (a mesh, an HDRI) or a full disk failed the job, which
-            stops the run with a user error; "internal" otherwise.
+            stops the run with a user error; "plugin" when a user's control raised (``error`` is
+            its one line, ``details`` the traceback); "internal" otherwise.
         png: the pixels, when the worker keeps them for the caller to write (Ray: the driver
             writes every blob, so workers need no shared file system).
         truth: the truth passes' blobs by pass ("mask", "depth"), always returned: the render
@@ -163,9 +169,10 @@ class RenderReply:
     ok: bool
     info: RenderInfo | None = None
     error: str | None = None
-    kind: Literal["user", "internal"] = "internal"
+    kind: Literal["user", "plugin", "internal"] = "internal"
     png: bytes | None = None
     truth: dict[str, bytes] | None = None
+    details: str = ""
 
 
 @dataclass(frozen=True)

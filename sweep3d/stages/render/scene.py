@@ -33,6 +33,7 @@ from sweep3d.stages.render.kept import Kept
 from sweep3d.stages.render.lamps import Lamps
 from sweep3d.stages.render.lights import WHITE, SunLight
 from sweep3d.stages.render.looks import FileNames, apply_look, rename_imported, select_parts
+from sweep3d.stages.render.material_edits import MaterialEdits
 from sweep3d.stages.render.props import Props
 from sweep3d.stages.render.protocol import EnvironmentRef, Look, RenderSettings
 from sweep3d.stages.render.render_log import RenderLog
@@ -117,11 +118,13 @@ class BlenderScene:
         scene.collection.objects.link(self.pose)
         self.objects: Kept[tuple[str, Look | None], LoadedObject] = Kept(MAX_KEPT_OBJECTS, MAX_KEPT_FACES, lambda o: o.faces)
         self.meshes: list[Any] = []  # the current object's
+        self.current: LoadedObject | None = None  # the shown object
         self.worlds: Kept[EnvironmentRef, WorldNodes] = Kept(MAX_KEPT_WORLDS, MAX_KEPT_HDRI_PIXELS, lambda w: w.pixels)
         self.environment = EnvironmentRef()
         self.world = self._world(self.environment)
         scene.world = self.world.world
         self.skins = SkinMaterials(bpy)
+        self.material_edits = MaterialEdits(bpy)
         self.props = Props(bpy, scene)
         self.lamps = Lamps(bpy, scene)
         self.frame = scratch / f"frame-{os.getpid()}.png"
@@ -129,6 +132,11 @@ class BlenderScene:
         self.parts: dict[str, Any] | None = None  # what the UV pass saw in the latest render
         truth = tuple(p for p in settings.passes if p in TRUTH_PASSES)
         self.truth_pass = TruthPass(bpy, scene, scratch, truth) if truth else None
+
+    def reset(self) -> None:
+        """Start again from an empty Blender scene (everything loaded is loaded again when next
+        needed): for after a control's ``edit`` changed data this scene held (see ``scene_edit``)."""
+        self.__init__(self.settings, self.scratch, self.log)
 
     @staticmethod
     def _configure(scene, s: RenderSettings) -> None:
@@ -203,10 +211,11 @@ class BlenderScene:
         if loaded is None:
             loaded = self._load_object(*ref)  # a UserError leaves the scene as it was
             self.objects.add(ref, loaded)
-        self.skins.restore()  # the object going out of sight gets its own materials back
+        self.material_edits.forget()  # the object going out of sight gets its own materials back
+        self.skins.restore()
         for other in self.objects.values():
             other.show(other is loaded)
-        self.meshes = loaded.meshes
+        self.meshes, self.current = loaded.meshes, loaded
         self.skins.reset(loaded.meshes, loaded.radius)
         evicted = self.objects.evict()
         for old in evicted:
@@ -341,7 +350,10 @@ class BlenderScene:
             self.load_seconds += time.perf_counter() - started
         self.background = state.background or (tuple(env.color) if env.color and state.sky is None else None)
         assign(self.scene.render, "film_transparent", self.background is not None)
+        if self.skins.changes(state.skin, state.skin_scale, state.skin_image):
+            self.material_edits.restore()  # the skin swaps the slots' materials: edits go on top again
         self.skins.sync(state.skin, state.skin_scale, state.skin_image)
+        self.material_edits.sync(self.meshes, self.current.names, state.material_edits, Path(self.object_ref).name)
         self.lamps.sync(state.lights + self._key_light(env, state), state)
         self.props.sync_occluder(state)
         lowest = None

@@ -53,8 +53,15 @@ class SkinMaterials:
         """Give the current object its own materials back."""
         self.sync("original", 1.0, None)
 
+    def changes(self, skin: str, scale: float, image: str | None) -> bool:
+        """Whether :meth:`sync` with these values would swap materials."""
+        return self._key(skin, scale, image) != self.current
+
+    def _key(self, skin: str, scale: float, image: str | None) -> tuple:
+        return ("original",) if skin == "original" else (skin, scale / self.radius, image)
+
     def sync(self, skin: str, scale: float, image: str | None) -> None:
-        key = ("original",) if skin == "original" else (skin, scale / self.radius, image)
+        key = self._key(skin, scale, image)
         if key == self.current:
             return
         for obj in self.meshes:

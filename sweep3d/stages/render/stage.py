@@ -22,6 +22,7 @@ cached render whose truth row or blobs are missing is rendered again for the pas
 
 from __future__ import annotations
 
+import logging
 from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
@@ -31,7 +32,7 @@ import pyarrow as pa
 
 from sweep3d.cache.blobs import sha256_bytes
 from sweep3d.cache.store import DIGEST_COLUMN, TRUTH_BLOBS, Store, atomic_write, utc_now
-from sweep3d.errors import SpecError, UserError
+from sweep3d.errors import PluginError, SpecError, UserError
 from sweep3d.parts import PARTS_LAYOUT
 from sweep3d.spec.assets import materialise_mesh
 from sweep3d.spec.loader import LoadedSpec
@@ -49,6 +50,8 @@ from sweep3d.stages.render.protocol import (
     RenderSettings,
 )
 from sweep3d.truth import BLOB_SUFFIX
+
+log = logging.getLogger("sweep3d.render")
 
 GROUP_SIZE = 32  # jobs sent to a worker at once; a scene's jobs stay together in order
 
@@ -144,16 +147,22 @@ class RenderStage:
         groups = _groups(plan, store, todo, stored)
         jobs = {j.render_key: j for j in todo}
         workers = min(plan.spec.render.workers, len(groups))
+        warned = False
         with self.executor.pool(render_settings(plan), workers, plan.spec.render.timeout) as pool:
             for reply in pool.run(groups):
                 job = jobs[reply.render_key]
                 if not reply.ok:
+                    if reply.kind == "plugin":
+                        raise PluginError(reply.error or "a control failed", reply.details)
                     if reply.kind == "user":
                         raise _user_error(plan, job, reply.error or "")
                     yield Computed(job.render_key, error=reply.error or "the render failed")
                     continue
                 if self.timings is not None:
                     self.timings[job.render_key] = reply.info
+                if reply.info.rebuilt and not warned:
+                    warned = True
+                    log.warning(rebuilt_warning(plan, reply.info.rebuilt))
                 row = None
                 if job.render_key not in stored:  # else it was rendered again for its UV pass only
                     row = _row(store, reply)
@@ -224,12 +233,24 @@ def _groups(plan: Plan, store: Store, todo: list[Job], stored: set[str]) -> list
             controls=tuple((c, c.params(job.values[c.id])) for c in ordered if c.id in job.values),
             blob=None if job.render_key in stored else str(store.blob_path(job.render_key)),
             look=looks[job.object],
+            object_name=job.object,
+            environment_name=job.environment,
         ))
     groups = []
     for scene in sorted(by_scene):
         jobs = by_scene[scene]
         groups += [jobs[i : i + GROUP_SIZE] for i in range(0, len(jobs), GROUP_SIZE)]
     return groups
+
+
+def rebuilt_warning(plan: Plan, changed: tuple[str, ...]) -> str:
+    """The one line said when a control's ``edit`` changed data the scene held (see ``scene_edit``)."""
+    names = ", ".join(repr(c.control.type_name) for c in plan.spec.controls
+                      if c.control.stage == "render" and c.control.edits_scene)
+    return (f"warning: the edit() of control {names} changed what the scene already held ({', '.join(changed[:3])}"
+            f"{', …' if len(changed) > 3 else ''}), so the render worker rebuilds its scene after each such job "
+            "(slow: every mesh and world is loaded again); change copies instead (material.copy(), then assign "
+            "the copy), or use the state's material edits")
 
 
 def _blob_digest(path: Path) -> str | None:

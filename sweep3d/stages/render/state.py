@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Mapping
+from typing import TYPE_CHECKING, Any, Mapping
 
 import numpy as np
 
@@ -87,6 +87,9 @@ class SceneState:
     world_rotation: float = 0.0  # degrees about the vertical axis
     world_strength: float = 1.0  # multiplies the environment's strength
     background: tuple[float, float, float] | None = None  # a plain colour behind the object
+    #: Principled BSDF values per material for this job: (material name as the file names it, "" for
+    #: all; sorted (input, value) pairs), applied in order (see ``material_edits``).
+    material_edits: tuple[tuple[str, tuple[tuple[str, Any], ...]], ...] = ()
 
     def half_fov(self) -> float:
         """Half the camera's field of view in radians (square sensor)."""

@@ -95,6 +95,28 @@ def _serve(conn: Connection, settings: RenderSettings, scratch: str) -> None:
         conn.send(Idle())
 
 
+def posed_state(job: RenderJob):
+    """The job's :class:`SceneState`: each rendered control's ``apply``, in order, on a fresh state.
+
+    Raises:
+        PluginError: a control's ``apply`` raised.
+    """
+    from sweep3d.errors import plugin_failure
+    from sweep3d.registry import is_user_plugin
+    from sweep3d.stages.render.state import SceneState
+
+    state = SceneState()
+    for control, params in job.controls:
+        try:
+            control.apply(state, params)
+        except Exception as exc:
+            if not is_user_plugin(control.type_name):
+                raise  # sweep3d's own control: an internal error, not the user's
+            raise plugin_failure(f"control {control.type_name!r} (id {control.id!r})", exc, "failed in apply()") \
+                from None
+    return state
+
+
 def render_job(scene, job: RenderJob, keep_pixels: bool = False) -> RenderReply:
     """Render one job in ``scene`` (a BlenderScene); shared by process workers and Ray actors.
 
@@ -110,19 +132,18 @@ def render_job(scene, job: RenderJob, keep_pixels: bool = False) -> RenderReply:
         failure "internal", so one bad job does not kill the sweep.
     """
     from sweep3d.cache.store import atomic_write
-    from sweep3d.errors import UserError
+    from sweep3d.errors import PluginError, UserError
     from sweep3d.pixels import encode_png
-    from sweep3d.stages.render.state import SceneState
+    from sweep3d.stages.render.scene_edit import render_edited
 
     key = job.render_key
     started = time.perf_counter()
     try:
         scene.prepare(job.mesh, job.environment, job.look)
-        state = SceneState()
-        for control, params in job.controls:
-            control.apply(state, params)
-        scene.pose_scene(state)
-        rgb = scene.render()
+        scene.pose_scene(posed_state(job))
+        edits = [(control, params) for control, params in job.controls if control.edits_scene]
+        rgb, rebuilt = render_edited(scene, edits, job.object_name, job.environment_name) if edits \
+            else (scene.render(), ())
         finite = bool(np.isfinite(rgb).all())
         png = None
         if job.blob is not None:  # None: the render is cached, the job is here for its UV pass
@@ -134,9 +155,11 @@ def render_job(scene, job: RenderJob, keep_pixels: bool = False) -> RenderReply:
         truth = getattr(scene, "truth_pass", None)
         info = RenderInfo(seconds=time.perf_counter() - started, valid=finite, width=rgb.shape[1],
                           height=rgb.shape[0], parts=scene.parts, load_seconds=scene.load_seconds,
-                          truth=truth.truth if truth is not None else None)
+                          truth=truth.truth if truth is not None else None, rebuilt=rebuilt)
         return RenderReply(key, True, info, png=png if keep_pixels else None,
                            truth=dict(truth.blobs) if truth is not None else None)
+    except PluginError as exc:  # a user's control raised: its one line, and the traceback for --debug
+        return RenderReply(key, False, error=str(exc), kind="plugin", details=exc.details)
     except UserError as exc:  # the spec's input (a mesh, an HDRI) or a full disk: exit 2
         return RenderReply(key, False, error=str(exc), kind="user")
     except Exception as exc:  # noqa: BLE001  (one bad job must not kill the sweep)

@@ -2,19 +2,26 @@
 
 from __future__ import annotations
 
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 from sweep3d.controls import Control, ControlParams
 from sweep3d.registry import Registry
 from sweep3d.stages.render.state import SceneState
 
+if TYPE_CHECKING:
+    from sweep3d.stages.render.scene_edit import SceneEdit
+
 
 class RenderedControl(Control):
-    """Changes the 3D scene before it is rendered.
+    """Changes the 3D scene before it is rendered, in one or both of two ways.
 
-    ``apply`` edits the plain :class:`SceneState`; the worker resets the state for every job,
-    so controls that only set state need no undo. ``order`` sorts application (object pose,
-    then camera, then in-frame placement, which needs the final camera).
+    ``apply`` edits the plain :class:`SceneState` (pose, camera, lights, materials, ...); it runs
+    wherever the job is planned or rendered and needs no Blender, and the worker starts every job
+    from a fresh state, so it needs no undo. ``edit`` runs in the render worker only, after the
+    state is posed in Blender, and gets the live scene (:class:`~.scene_edit.SceneEdit`): it may
+    add or change anything Blender can. Whatever it creates or changes is gone before the next
+    job (see :mod:`sweep3d.stages.render.sandbox`); it need not clean up. ``order`` sorts
+    application (object pose, then camera, then in-frame placement, which needs the final camera).
     """
 
     stage = "render"
@@ -25,7 +32,15 @@ class RenderedControl(Control):
     frame_fields: ClassVar[dict[str, str] | None] = None
 
     def apply(self, state: SceneState, params: ControlParams) -> None:
-        raise NotImplementedError
+        """Set this job's values on the plain scene state (default: nothing)."""
+
+    def edit(self, scene: SceneEdit, params: ControlParams) -> None:
+        """Change the live Blender scene for this job (default: nothing; see the class docstring)."""
+
+    @property
+    def edits_scene(self) -> bool:
+        """Whether this control defines :meth:`edit` (its jobs then run in the worker's sandbox)."""
+        return type(self).edit is not RenderedControl.edit
 
 
 #: The rendered controls a spec may name (``[[controls]] type = ...``).
@@ -36,6 +51,8 @@ def frame_fields(control: RenderedControl) -> dict[str, str] | None:
     """``control.frame_fields``, trusted only when the class that declares it also defines ``apply``
     (a subclass that overrides ``apply`` may move the object in other ways: None)."""
     mro = type(control).__mro__
+    if type(control).apply is RenderedControl.apply:
+        return {}  # it sets no field of the state (an edit-only control)
     declares = next((c for c in mro if "frame_fields" in c.__dict__), None)
     applies = next((c for c in mro if "apply" in c.__dict__), None)
     return control.frame_fields if declares is not None and declares is applies else None
