@@ -16,6 +16,8 @@ from typing import Annotated, Any, ClassVar, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict
 
+from sweep3d.registry import code_identity, is_user_plugin
+
 
 class _SpecRelativePath:
     """Marks a ``str`` parameter as a file: see :data:`SpecPath`."""
@@ -76,8 +78,12 @@ class Control:
         return all(canon.get(k) == v for k, v in neutral.items())
 
     def key_part(self, values: dict[str, Any]) -> dict[str, Any]:
-        """What of this control goes into a cache key."""
-        return {"type": self.type_name, "v": self.version, "values": self.canonical(values)}
+        """What of this control goes into a cache key: for a user's control (``module:Name``) also
+        the identity of its code (``registry.code_identity``)."""
+        part = {"type": self.type_name, "v": self.version, "values": self.canonical(values)}
+        if is_user_plugin(self.type_name):
+            part["code"] = code_identity(type(self))
+        return part
 
 
 def wrap_periodic(value: float, period: float) -> float:

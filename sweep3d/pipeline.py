@@ -29,6 +29,8 @@ from sweep3d.progress import RunProgress
 from sweep3d.spec.assets import blender_version
 from sweep3d.spec.columns import MODELS_METADATA
 from sweep3d.spec.loader import LoadedSpec
+from sweep3d.stages.code import PLUGINS_METADATA
+from sweep3d.stages.code import metadata as plugins_metadata
 from sweep3d.stages.driver import add_outcomes, merge_outcomes, plan_status, run_stages
 from sweep3d.stages.infer import InferStage, ModelHandle, pending_predictions
 from sweep3d.stages.outcome import StageOutcome
@@ -112,7 +114,8 @@ def write_jobs(plans: Plan | list[Plan], store: Store) -> None:
     tables = [plan.table() for plan in plans]
     table = tables[0] if len(tables) == 1 else pa.concat_tables(tables, promote_options="default")
     models = json.dumps([plan.model for plan in plans]).encode()
-    table = table.replace_schema_metadata({**(tables[0].schema.metadata or {}), MODELS_METADATA: models})
+    table = table.replace_schema_metadata({**(tables[0].schema.metadata or {}), MODELS_METADATA: models,
+                                           PLUGINS_METADATA: plugins_metadata(plans[0].spec)})
     store.write_table_file(store.jobs_path(plans[0].spec.name), table, keep_same=True)
 
 

@@ -8,10 +8,15 @@ spec load with the list of valid names.
 from __future__ import annotations
 
 import difflib
+import hashlib
 import importlib
-from typing import Callable, Generic, Iterator, TypeVar
+import inspect
+import sys
+from functools import lru_cache
+from pathlib import Path
+from typing import Any, Callable, Generic, Iterator, TypeVar
 
-from sweep3d.errors import UserError
+from sweep3d.errors import PluginError, UserError, plugin_failure
 
 T = TypeVar("T")
 
@@ -19,6 +24,63 @@ T = TypeVar("T")
 def is_user_plugin(name: str) -> bool:
     """Whether a spec's plug-in name is a user's own (``module:Name``) rather than a built-in's."""
     return ":" in name
+
+
+@lru_cache(maxsize=None)
+def code_identity(plugin: Any) -> str:
+    """What a user's plug-in (a class or a factory function) puts into the keys of the stages it
+    feeds, so that editing it re-does exactly their work: the ``version`` its author declares on
+    it (or on a base class of their own), else a digest of the source of the module defining it.
+
+    A module's source is the whole file, so an edit anywhere in it counts; code it imports from
+    other modules does not: declare a ``version`` when that matters.
+
+    Raises:
+        UserError: the source cannot be read (a class defined in a notebook cell or ``python -c``)
+            and no ``version`` is declared.
+    """
+    declared = _declared_version(plugin)
+    if declared is not None:
+        return f"version:{declared}"
+    module = sys.modules.get(getattr(plugin, "__module__", ""), None)
+    try:
+        path = Path(inspect.getsourcefile(module) or "") if module is not None else None
+        source = path.read_bytes() if path is not None and path.is_file() else inspect.getsource(plugin).encode()
+    except (OSError, TypeError):
+        raise UserError(f"cannot read the source of {_name(plugin)} to key its results; declare a version on it "
+                        "(version = '1', changed whenever its output changes)") from None
+    return "source:" + hashlib.sha256(source).hexdigest()[:16]
+
+
+_imported: dict[str, tuple[int, int]] = {}  # a user module's file (mtime, size) when it was imported
+
+
+def _fresh(module: Any) -> Any:
+    """``module``, imported again when its file changed since (a notebook or a long-lived process
+    whose user edits a plug-in between runs sees the edit, and keys it)."""
+    try:
+        stat = Path(module.__file__).stat()
+    except (AttributeError, TypeError, OSError):
+        return module
+    seen = (stat.st_mtime_ns, stat.st_size)
+    if _imported.setdefault(module.__name__, seen) != seen:
+        module = importlib.reload(module)
+        _imported[module.__name__] = seen
+    return module
+
+
+def _declared_version(plugin: Any) -> Any:
+    """The ``version`` set on ``plugin`` or a base class outside sweep3d; None when none is."""
+    for klass in inspect.getmro(plugin) if inspect.isclass(plugin) else (plugin,):
+        if getattr(klass, "__module__", "").split(".")[0] == "sweep3d":
+            return None
+        if "version" in vars(klass):
+            return vars(klass)["version"]
+    return None
+
+
+def _name(plugin: Any) -> str:
+    return f"{getattr(plugin, '__module__', '?')}:{getattr(plugin, '__qualname__', plugin)}"
 
 
 class Registry(Generic[T]):
@@ -91,16 +153,20 @@ class Registry(Generic[T]):
     def _import(self, dotted: str) -> T:
         module_name, _, attr = dotted.partition(":")
         try:
-            module = importlib.import_module(module_name)
-        except ImportError as exc:
+            module = _fresh(importlib.import_module(module_name))
+        except ModuleNotFoundError as exc:
+            if exc.name != module_name.split(".")[0] and exc.name != module_name:  # one it imports is missing
+                raise plugin_failure(f"{self.kind} module {module_name!r}", exc, "failed to import") from None
             raise UserError(
-                f"cannot import {self.kind} module {module_name!r}: {exc}; "
-                "make sure it is installed or on PYTHONPATH"
+                f"cannot import {self.kind} module {module_name!r}: {exc}; put {module_name.replace('.', '/')}.py "
+                "beside the spec, or install it, or add its folder to PYTHONPATH"
             ) from None
         except Exception as exc:  # noqa: BLE001  (a syntax error or a raise in the user's module)
-            raise UserError(
-                f"importing {self.kind} module {module_name!r} failed: {type(exc).__name__}: {exc}"
-            ) from None
+            if isinstance(exc, SyntaxError) and exc.filename:
+                where = f" ({Path(exc.filename).name}:{exc.lineno})"
+                raise PluginError(f"{self.kind} module {module_name!r}{where} failed to import: SyntaxError: "
+                                  f"{exc.msg}") from None
+            raise plugin_failure(f"{self.kind} module {module_name!r}", exc, "failed to import") from None
         try:
             return getattr(module, attr)
         except AttributeError:

@@ -96,3 +96,18 @@ def test_a_killed_actor_loses_no_job_and_duplicates_none(local_cluster, tmp_path
     assert len(keys) == len(set(keys)) == 12, "every job exactly once"
     assert all(r.ok for r in seen), [r.error for r in seen if not r.ok]
     assert all(store.blob_path(k).stat().st_size > 0 for k in keys)
+
+
+def test_a_control_module_beside_the_spec_runs_on_ray_actors(local_cluster, tmp_path: Path, monkeypatch) -> None:
+    """The actors get the control's code from the driver: no shared folder, no PYTHONPATH."""
+    import textwrap
+
+    from tests.test_plugin_code import SCENE_CONTROL
+
+    folder = tmp_path / "study"
+    folder.mkdir()
+    (folder / "rayslab.py").write_text(textwrap.dedent(SCENE_CONTROL))
+    spec = write_spec(folder, TINY_SPEC.replace('type = "blur"\nsigma = [0.0, 1.5]', 'type = "rayslab:Slab"\nsize = [0.6]'))
+    monkeypatch.chdir(tmp_path)
+    result = run(load_spec(spec), executor=Executor("ray"))
+    assert result.failed == 0 and result.outcome("render").computed == 4

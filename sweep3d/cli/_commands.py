@@ -14,6 +14,7 @@ from rich.markup import escape
 from sweep3d.errors import RenderError, UserError
 
 err_console = Console(stderr=True)
+DEBUG = {"on": False}  # set by ``sweep3d --debug``: a failing plug-in's traceback is printed too
 
 
 def registrar(app: typer.Typer) -> Callable[[Callable], Callable]:
@@ -26,6 +27,8 @@ def registrar(app: typer.Typer) -> Callable[[Callable], Callable]:
             try:
                 return func(*args, **kwargs)
             except UserError as exc:
+                if DEBUG["on"] and getattr(exc, "details", ""):  # a plug-in's traceback, on request
+                    err_console.print(escape(exc.details), highlight=False, soft_wrap=True)
                 err_console.print(f"[bold red]error:[/] {escape(str(exc))}", highlight=False, soft_wrap=True)
                 raise typer.Exit(exc.exit_code) from None
             except RenderError as exc:  # not the user's mistake, but one line all the same

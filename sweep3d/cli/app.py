@@ -13,7 +13,7 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
-from sweep3d.cli._commands import check_wait, registrar
+from sweep3d.cli._commands import DEBUG, check_wait, registrar
 from sweep3d.errors import UserError
 
 app = typer.Typer(
@@ -24,6 +24,13 @@ app = typer.Typer(
 console = Console()
 
 command = registrar(app)
+
+
+@app.callback()
+def options(debug: bool = typer.Option(False, "--debug", help="When a plug-in of yours fails, print its traceback "
+                                                                "too (otherwise: one line naming it).")) -> None:
+    """Find where computer-vision models fail by rendering 3D scenes under systematic variation."""
+    DEBUG["on"] = debug
 
 
 SpecArg = typer.Argument(..., help="Path to the experiment's TOML spec.", show_default=False)

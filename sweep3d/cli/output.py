@@ -11,6 +11,7 @@ from sweep3d.pipeline import plan_spec
 from sweep3d.spec.loader import LoadedSpec
 from sweep3d.stages.aggregate import Summary, connect, has_view, stored_summary, weakest_regions, wilson_interval
 from sweep3d.stages.aggregate.tasks import HIDDEN
+from sweep3d.stages.code import explain
 from sweep3d.stages.driver import plan_status
 from sweep3d.stages.infer import InferStage, ModelHandle
 from sweep3d.stages.passes import truth_passes
@@ -52,6 +53,8 @@ def print_plan(console: Console, spec: LoadedSpec) -> None:
         total += seconds
         table.add_row(stage, str(needed), str(cached), str(needed - cached), duration(seconds))
     console.print(table)
+    for line in explain(plan, store):
+        console.print(escape(line), highlight=False)
     if len(models) > 1:
         console.print(_sharing(models))
     if plan.out_of_frame:

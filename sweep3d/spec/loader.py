@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import difflib
 import logging
+import sys
 import tomllib
 import typing
 from dataclasses import dataclass, field
@@ -18,6 +19,7 @@ from pydantic import ValidationError
 
 from sweep3d.controls import Control, is_spec_path
 from sweep3d.errors import SpecError, UserError
+from sweep3d.registry import is_user_plugin
 from sweep3d.spec.assets import resolve_hdri, resolve_mesh
 from sweep3d.spec.catalogue import Catalogue
 from sweep3d.spec.columns import JOB_COLUMNS, PREDICTION_COLUMNS, TRUTH_RESULT_COLUMNS, parameter_column
@@ -169,6 +171,8 @@ def load_spec(path: str | Path, catalogue: Catalogue) -> LoadedSpec:
         if warning:
             log.warning(f"warning: {path}: environments[{i}].hdri: {_naming(env.hdri or '', warning)}")
 
+    if _names_user_plugins(spec):
+        plugin_folder(base)
     _check_model(spec, fail, catalogue)
     labels = _resolve_labels(spec, fail, catalogue)
     controls = _load_controls(spec, fail, base, catalogue)
@@ -177,6 +181,21 @@ def load_spec(path: str | Path, catalogue: Catalogue) -> LoadedSpec:
     store = Path(spec.experiment.store)
     store = (store if store.is_absolute() else base / store).resolve()
     return LoadedSpec(path, spec, store, meshes, hdris, labels, controls, policy)
+
+
+def plugin_folder(folder: Path) -> None:
+    """Make the modules in a spec's folder importable (first on ``sys.path``), so ``module:Name``
+    finds a plug-in file beside the spec whatever the working directory; render workers started
+    afterwards inherit the path (spawned processes copy the parent's ``sys.path``)."""
+    entry = str(folder)
+    if entry not in sys.path:
+        sys.path.insert(0, entry)
+
+
+def _names_user_plugins(spec: Spec) -> bool:
+    names = [spec.policy.type, spec.evaluator.kind, *(m.name for m in spec.all_models)]
+    names += [c.get("type") for c in spec.controls if isinstance(c.get("type"), str)]
+    return any(is_user_plugin(name) for name in names)
 
 
 def _naming(ref: str, problem: UserError | str) -> str:

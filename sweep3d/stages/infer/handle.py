@@ -13,10 +13,12 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from sweep3d.errors import SpecError, UserError
+from sweep3d.registry import code_identity
 from sweep3d.spec.framing import Framing
 from sweep3d.spec.loader import LoadedSpec
 from sweep3d.spec.models import ModelSpec
 from sweep3d.stages.infer.models import (
+    MODELS,
     Classifier,
     Preprocess,
     builtin_model,
@@ -66,6 +68,7 @@ class ModelHandle:
             else:
                 loaded = load_model(name)
                 weights, preprocess = loaded.weights_digest or module_digest(loaded.module), loaded.preprocess
+                weights += f"+{code_identity(MODELS.get(name))}"  # the factory's code: editing it re-infers
         except SpecError:
             raise
         except UserError as exc:

@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import Any, Sequence
 
 from sweep3d.cache.keys import Hole, Template, digest, digests
+from sweep3d.registry import code_identity, is_user_plugin
 
 #: Bumped when inference or evaluation changes results for the same inputs.
 INFER_STAGE_VERSION = 2  # 2: correct_top5 and label_ids in every classification row
@@ -28,6 +29,8 @@ def evaluator_key(settings: Any) -> dict[str, Any]:
     part = {"kind": settings.kind, **evaluator.from_settings(settings).key_part()}
     if evaluator.passes:
         part["truth"] = TRUTH_VERSION
+    if is_user_plugin(settings.kind):  # editing a user's evaluator re-evaluates
+        part["code"] = code_identity(evaluator)
     return part
 
 

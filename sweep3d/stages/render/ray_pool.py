@@ -11,6 +11,7 @@ a new actor; results are yielded only for finished groups, so nothing is counted
 from __future__ import annotations
 
 import io
+import sys
 import tarfile
 from collections import deque
 from dataclasses import replace
@@ -20,6 +21,7 @@ from typing import Any, Iterator
 from sweep3d.cache.keys import digest
 from sweep3d.cache.store import atomic_write
 from sweep3d.errors import UserError
+from sweep3d.registry import is_user_plugin
 from sweep3d.spec.assets import bpy_root, mesh_files
 from sweep3d.stages.render.protocol import RenderJob, RenderReply, RenderSettings
 
@@ -90,6 +92,21 @@ class RenderActor:
                 tar.extractall(folder, filter="data")
             self.unpacked[pack] = str(folder)
         return str(Path(self.unpacked[pack]) / name)
+
+
+def _ship_code(job: RenderJob) -> None:
+    """Send the code of the job's user controls with it (by value), so an actor on any node runs
+    them without the module file: Ray's pickler then copies their module instead of naming it."""
+    from ray import cloudpickle
+
+    for control, _ in job.controls:
+        module = sys.modules.get(type(control).__module__)
+        if is_user_plugin(control.type_name) and module is not None and module.__name__ not in _SHIPPED:
+            cloudpickle.register_pickle_by_value(module)
+            _SHIPPED.add(module.__name__)
+
+
+_SHIPPED: set[str] = set()
 
 
 class RayRenderPool:
@@ -172,6 +189,7 @@ class RayRenderPool:
         out = []
         builtin = str(bpy_root())
         for job in group:
+            _ship_code(job)
             env = job.environment
             if env.hdri and not env.hdri.startswith(builtin):
                 env = replace(env, hdri=self._pack(Path(env.hdri), [Path(env.hdri)]))

@@ -1,0 +1,151 @@
+"""A user's plug-ins beside the spec: found from any working directory, and keyed by their code, so
+editing one redoes exactly the stages it feeds (and ``plan`` says so)."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from sweep3d.cache.store import Store
+from sweep3d.cli import app
+from tests.conftest import write_spec
+
+pytestmark = pytest.mark.slow
+
+SCENE_CONTROL = '''
+from pydantic import Field
+from sweep3d.controls import ControlParams
+from sweep3d.stages.render import RenderedControl
+
+RED = (1.0, 0.0, 0.0, 1.0)
+
+
+class Slab(RenderedControl):
+    class Params(ControlParams):
+        size: float = Field(0.0, ge=0.0)
+
+    def edit(self, scene, params):
+        bpy = scene.bpy
+        s = params.size
+        mesh = bpy.data.meshes.new("slab")
+        mesh.from_pydata([(-s, -1.5, -s), (s, -1.5, -s), (s, -1.5, s), (-s, -1.5, s)], [], [(0, 1, 2, 3)])
+        material = bpy.data.materials.new("slab")
+        material.use_nodes = True
+        material.node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = RED
+        mesh.materials.append(material)
+        scene.add(bpy.data.objects.new("slab", mesh))
+'''
+POST_CONTROL = '''
+from pydantic import Field
+from sweep3d.controls import ControlParams
+from sweep3d.stages.postprocess import PostControl
+
+FACTOR = 0.5
+
+
+class Dim(PostControl):
+    class Params(ControlParams):
+        strength: float = Field(0.0, ge=0.0, le=1.0)
+
+    def apply(self, image, params, rng):
+        return image * (1.0 - FACTOR * params.strength)
+'''
+EVALUATOR = '''
+from sweep3d.stages.infer.evaluators import ClassificationEvaluator
+
+NOTE = "first"
+
+
+class Strict(ClassificationEvaluator):
+    """Classification as usual (its code is what the test edits)."""
+'''
+SPEC = """\
+[experiment]
+name = "plugins"
+store = "store"
+
+[render]
+resolution = 32
+samples = 1
+denoise = false
+
+[evaluator]
+kind = "myeval:Strict"
+
+[[objects]]
+name = "box"
+mesh = "cube.obj"
+labels = ["carton"]
+
+[[environments]]
+name = "white"
+color = [1.0, 1.0, 1.0]
+
+[[controls]]
+type = "myscene:Slab"
+size = [0.0, 0.6]
+
+[[controls]]
+type = "mypost:Dim"
+strength = [0.0, 0.5]
+
+[policy]
+type = "grid"
+"""
+
+
+def counts(folder: Path) -> dict[str, int]:
+    con = Store(folder / "store").connect()
+    return {t: con.execute(f"SELECT count(*) FROM {t}").fetchone()[0] for t in ("renders", "images", "predictions")}
+
+
+def edit(path: Path, old: str, new: str) -> None:
+    path.write_text(path.read_text().replace(old, new))
+    stat = path.stat()
+    os.utime(path, ns=(stat.st_atime_ns, stat.st_mtime_ns + 10**9))  # a new mtime even on coarse clocks
+
+
+def test_plugins_beside_the_spec_run_from_elsewhere_and_edits_redo_exactly_their_stages(tmp_path: Path) -> None:
+    folder = tmp_path / "study"
+    folder.mkdir()
+    spec = write_spec(folder, SPEC)
+    (folder / "myscene.py").write_text(textwrap.dedent(SCENE_CONTROL))
+    (folder / "mypost.py").write_text(textwrap.dedent(POST_CONTROL))
+    (folder / "myeval.py").write_text(textwrap.dedent(EVALUATOR))
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    # the console script, from another folder, with nothing on PYTHONPATH: the spec's folder is found
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    done = subprocess.run([str(Path(sys.executable).parent / "sweep3d"), "run", str(spec), "--no-report"],
+                          cwd=elsewhere, env=env, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert counts(folder) == {"renders": 2, "images": 2, "predictions": 4}  # an image with no post is its render
+
+    runner = CliRunner()
+    edit(folder / "myscene.py", "RED = (1.0, 0.0, 0.0, 1.0)", "RED = (0.0, 0.0, 1.0, 1.0)")
+    plan = runner.invoke(app, ["plan", str(spec)])
+    assert "myscene:Slab changed since the last run: 1 to render" in plan.output, plan.output
+    assert "mypost:Dim" not in plan.output
+    assert runner.invoke(app, ["run", str(spec), "--no-report"]).exit_code == 0
+    assert counts(folder) == {"renders": 3, "images": 3, "predictions": 6}  # the slab's render, its images
+
+    edit(folder / "mypost.py", "FACTOR = 0.5", "FACTOR = 0.25")
+    plan = runner.invoke(app, ["plan", str(spec)])
+    assert "mypost:Dim changed since the last run: 2 to postprocess" in plan.output, plan.output
+    assert runner.invoke(app, ["run", str(spec), "--no-report"]).exit_code == 0
+    assert counts(folder) == {"renders": 3, "images": 5, "predictions": 8}  # nothing rendered
+
+    edit(folder / "myeval.py", 'NOTE = "first"', 'NOTE = "second"')
+    plan = runner.invoke(app, ["plan", str(spec)])
+    assert "myeval:Strict changed since the last run: 4 to infer" in plan.output, plan.output
+    assert runner.invoke(app, ["run", str(spec), "--no-report"]).exit_code == 0
+    assert counts(folder) == {"renders": 3, "images": 5, "predictions": 12}  # re-evaluated only
+
+    plan = runner.invoke(app, ["plan", str(spec)])
+    assert "changed since the last run" not in plan.output
