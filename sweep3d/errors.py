@@ -24,3 +24,12 @@ class StoreBusyError(UserError):
 
 class RenderError(RuntimeError):
     """Blender failed on a job in a way the spec did not cause (a crashed worker, a bpy error)."""
+
+
+class PluginError(UserError):
+    """A user's plug-in (an evaluator, a model) failed or broke its contract; the message names it
+    (``mymod:MyEval (mymod.py:12)``) and what it did, in one line."""
+
+    def __init__(self, plugin: str, problem: str) -> None:
+        self.plugin, self.problem = plugin, problem
+        super().__init__(f"{plugin} {problem}")
