@@ -271,3 +271,26 @@ def test_rows_that_keep_the_contract_pass_unchanged() -> None:
     evaluator = Returns()
     evaluator.rows = [{"valid": True, "correct": i % 2 == 0, "score": 0.1 * i} for i in range(4)] + [{"valid": False}]
     assert evaluate_checked(evaluator, "mymod:Returns", None, TRUTHS, LABELS) == evaluator.rows
+
+
+def test_the_readme_s_evaluator_loads_and_its_rows_pass_the_checks(tmp_path: Path, monkeypatch) -> None:
+    """The README's depth evaluator, without a render: its settings, roles and rows, and the
+    line its failure message names."""
+    import numpy as np
+
+    from tests.test_readme import readme_block
+
+    (tmp_path / "mydepth.py").write_text(readme_block("### Your own evaluator"))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    loaded = load_spec(spec_with(tmp_path, 'kind = "mydepth:DepthError"\ntolerance = 0.05'))
+    evaluator = EVALUATORS.get("mydepth:DepthError").from_settings(loaded.evaluator)
+    assert evaluator.params.tolerance == 0.05 and evaluator.roles.loss == "abs_rel"
+    mask = np.zeros((4, 4), bool)
+    mask[1:3, 1:3] = True
+    depth = np.full((4, 4), 2.0, np.float32)
+    truths = [Truth((0,), mask=mask, depth=depth), Truth((0,), mask=np.zeros((4, 4), bool), depth=depth)]
+    rows = evaluate_checked(evaluator, "mydepth:DepthError", np.full((2, 1, 4, 4), 2.05), truths, LABELS)
+    assert rows[0] == {"valid": True, "correct": True, "abs_rel": pytest.approx(0.025)}
+    assert rows[1]["valid"] is False
+    readme = (Path(__file__).parents[1] / "README.md").read_text()
+    assert f"(mydepth.py:{type(evaluator).where().split(':')[1]}) failed" in readme

@@ -11,11 +11,15 @@ from __future__ import annotations
 
 from typing import Any, Sequence
 
+import numpy as np
 import pyarrow as pa
 
 from sweep3d.errors import PluginError
 from sweep3d.stages.infer.evaluators import Evaluator, Truth
 from sweep3d.stages.infer.labels import LabelMap
+
+#: What a verdict may be: Python's booleans, or numpy's (``ok and error.mean() < 0.1`` is one).
+BOOLS = (bool, np.bool_)
 
 
 def evaluate_checked(evaluator: Evaluator, kind: str, outputs: Any, truths: Sequence[Truth],
@@ -56,9 +60,9 @@ def rows_problem(evaluator: Evaluator, rows: Any, images: int) -> str | None:
             return f"returned {field.name} = {bad!r}, which is not {field.type} as its schema says"
     roles = evaluator.roles
     for i, row in enumerate(rows):
-        if not isinstance(row.get(roles.valid), bool):
+        if not isinstance(row.get(roles.valid), BOOLS):
             return f"returned no {roles.valid!r} in row {i}; every row says whether it is valid (true or false)"
-        if row[roles.valid] and not isinstance(row.get(roles.correct), bool):
+        if row[roles.valid] and not isinstance(row.get(roles.correct), BOOLS):
             return (f"returned no {roles.correct!r} in valid row {i} (its correctness column); set it to "
                     "true or false, or the row to valid = false")
     return None
