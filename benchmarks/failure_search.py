@@ -20,6 +20,7 @@ from rich.table import Table
 from sweep3d.cache.store import Store
 from sweep3d.pipeline import run
 from sweep3d.stages import load_spec
+from sweep3d.stages.aggregate import connect
 from sweep3d.stages.plan.policies import POLICIES
 
 SPEC = Path(__file__).resolve().parents[1] / "specs" / "failure_search.toml"
@@ -35,7 +36,7 @@ def measure(policy_name: str, seed: int, console: Console) -> tuple[int, int, in
     spec = loaded.spec.model_copy(update={"experiment": experiment})
     loaded = dataclasses.replace(loaded, spec=spec, policy=policy_cls(params))
     result = run(loaded, console)
-    con = Store(loaded.store).connect(loaded.name)
+    con = connect(Store(loaded.store), loaded.name)
     renders, failures, images = con.execute(
         "SELECT count(DISTINCT render_key), count(DISTINCT image_key) FILTER (WHERE valid AND NOT correct), "
         "count(DISTINCT image_key) FROM results").fetchone()

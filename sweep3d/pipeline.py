@@ -82,10 +82,11 @@ def outcomes_by_scene(plan: Plan, store: Store) -> History:
     rows: dict[str, tuple] = {}
     if store.segments("predictions"):
         keys = list({j.pred_key for j in plan.jobs})
-        have = {r[0] for r in con.execute("DESCRIBE predictions").fetchall()}
-        loss = "loss" if "loss" in have else "1 - coalesce(iou, 0)" if "iou" in have else "0.0"
+        roles = plan.evaluator_record().roles  # the run's evaluator, whatever else the store holds
+        loss = f'"{roles.loss}"' if roles.loss else f'1 - coalesce("{roles.iou}", 0)' if roles.iou else "0.0"
         rows = {r[0]: r[1:] for r in con.execute(
-            f"SELECT pred_key, valid, correct, {loss} FROM predictions WHERE pred_key IN (SELECT unnest(?))", [keys]
+            f'SELECT pred_key, "{roles.valid}", "{roles.correct}", {loss} FROM predictions '
+            "WHERE pred_key IN (SELECT unnest(?))", [keys]
         ).fetchall()}
     hidden = _hidden_truths(plan, store, con)
     history: History = {}

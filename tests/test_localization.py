@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 from sweep3d.cli import app
+from sweep3d.errors import SpecError
 from sweep3d.stages import load_spec
 from sweep3d.stages.infer import Preprocess
 from sweep3d.stages.infer.cam import map_box
@@ -98,11 +99,15 @@ def test_prediction_keys_follow_the_evaluators_own_settings(tmp_path: Path) -> N
         return [j.pred_key for j in plan_for(load_spec(write_spec(folder, spec)), "m").jobs]
 
     classification = keys('kind = "classification"')
-    assert keys('kind = "classification"\niou = 0.7\nscore = 0.9') == classification  # not its settings
+    assert keys('kind = "classification"\ntop_k = 5') == classification  # its default, written out
     loc = keys('kind = "localization"')
     assert not set(loc) & set(classification)
-    assert keys('kind = "localization"\nscore = 0.9') == loc  # a detection setting
     assert not set(keys('kind = "localization"\niou = 0.7')) & set(loc)
+    # another evaluator's setting is refused, naming the key and the valid ones, not ignored
+    for kind, key in (("classification", "iou = 0.7"), ("localization", "score = 0.9")):
+        with pytest.raises(SpecError, match=rf"evaluator\.{key.split()[0]}: unknown setting for evaluator "
+                                            rf"'{kind}'; valid: kind, passes, min_visible, top_k"):
+            keys(f'kind = "{kind}"\n{key}')
 
 
 def test_the_localization_evaluator_asks_for_the_mask_pass(tmp_path: Path) -> None:

@@ -21,6 +21,7 @@ from sweep3d.progress import RunProgress
 from sweep3d.spec.framing import Framing
 from sweep3d.spec.models import RenderSpec
 from sweep3d.stages import load_spec
+from sweep3d.stages.aggregate import connect as connect_results
 from sweep3d.stages.driver import run_stage
 from sweep3d.stages.render import RenderStage, render_settings
 from tests.conftest import TINY_SPEC, plan_for, write_spec
@@ -136,7 +137,7 @@ def test_a_model_framed_run_reports_sheets_and_benches(tmp_path: Path) -> None:
     result = runner.invoke(app, ["run", str(spec)])
     assert result.exit_code == 0, result.output
     store = Store(spec.parent / "store")
-    con = store.connect("tiny")
+    con = connect_results(store, "tiny")
     assert con.execute("SELECT DISTINCT width, height FROM renders").fetchall() == [(224, 224)]
     assert con.execute("SELECT count(*) FROM results WHERE top1_label IS NOT NULL").fetchone()[0] == 2
     for key in store.keys("images"):

@@ -239,7 +239,7 @@ def test_invalid_renders_and_images_make_invalid_predictions_excluded_from_accur
     spec.write_text(spec.read_text().replace("[policy]", f'[[controls]]\ntype = "{POISON_MODULE}:Poison"\n'
                                                          'amount = [0, 1]\n\n[policy]'))
     store = Store(tiny_copy / "store")
-    jobs = store.connect("tiny").execute("SELECT render_key, image_key, pred_key FROM jobs ORDER BY job").fetchall()
+    jobs = connect(store, "tiny").execute("SELECT render_key, image_key, pred_key FROM jobs ORDER BY job").fetchall()
     bad_render = jobs[0][0]
     renders = store.table("renders").to_pylist()
     marked = [dict(r, valid=False) for r in renders if r["render_key"] == bad_render]

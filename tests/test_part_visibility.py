@@ -19,6 +19,7 @@ from sweep3d.pixels import decode_png
 from sweep3d.report import write_report
 from sweep3d.stages import load_spec
 from sweep3d.stages.aggregate import connect
+from sweep3d.stages.aggregate import connect as connect_results
 from sweep3d.stages.aggregate.parts import VISIBLE_SHARE
 from tests.conftest import TINY_SPEC, write_spec
 from tests.test_parts import direction
@@ -99,11 +100,11 @@ def test_switching_the_panel_on_renders_the_pass_only(parts_run: Path, tmp_path:
     spec = write_spec(tmp_path, PARTS_SPEC.replace("part_visibility = true", "part_visibility = false"))
     run_cli(spec)
     store = Store(tmp_path / "store")
-    before = dict(store.connect("tiny").execute("SELECT render_key, sha256 FROM renders").fetchall())
+    before = dict(connect_results(store, "tiny").execute("SELECT render_key, sha256 FROM renders").fetchall())
     assert not store.keys("parts")
     spec.write_text(PARTS_SPEC)
     assert run_stage_counts(tmp_path) == {"render": 8, "infer": 0}  # rendered for the pass; nothing re-inferred
-    con = store.connect("tiny")
+    con = connect_results(store, "tiny")
     assert dict(con.execute("SELECT render_key, sha256 FROM renders").fetchall()) == before  # blobs kept
     assert con.execute("SELECT count(*) FROM parts").fetchone()[0] == 8
     # the pass leaves the RGB image alone: the same render keys, the same pixels as the run with it

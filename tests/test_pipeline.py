@@ -15,6 +15,7 @@ from sweep3d.cache.store import Store
 from sweep3d.cli import app
 from sweep3d.pipeline import run
 from sweep3d.stages import load_spec
+from sweep3d.stages.aggregate import connect as connect_results
 from tests.conftest import REPO, TINY_SPEC, write_cube, write_spec
 
 pytestmark = pytest.mark.slow
@@ -49,7 +50,7 @@ def test_first_run_stores_every_stage(tiny_run: Path) -> None:
     assert len(store.keys("renders")) == 4  # 2 yaws × 2 environments
     assert len(store.keys("images")) == 4  # the blurred variants (sigma 0 reuses the render)
     assert len(store.keys("predictions")) == 8
-    con = store.connect("tiny")
+    con = connect_results(store, "tiny")
     assert con.execute("SELECT count(*) FROM results").fetchone()[0] == 8
     nulls = con.execute("SELECT count(*) FROM results WHERE valid AND (loss IS NULL OR isnan(loss))").fetchone()[0]
     assert nulls == 0
@@ -71,7 +72,7 @@ def test_changing_the_model_renders_and_postprocesses_nothing(tiny_copy: Path, m
     monkeypatch.syspath_prepend(str(tiny_copy))
     edit_spec(tiny_copy, "[model]\n", '[model]\nname = "tiny_test_model:make"\n')
     assert computed(tiny_copy) == {"render": 0, "postprocess": 0, "infer": 8}
-    con = Store(tiny_copy / "store").connect("tiny")
+    con = connect_results(Store(tiny_copy / "store"), "tiny")
     models = {r[0] for r in con.execute("SELECT model FROM results").fetchall()}
     assert models == {"tiny_test_model:make"}
 
@@ -129,7 +130,7 @@ def test_adaptive_policy_runs_rounds_and_resumes_from_the_cache(tmp_path: Path) 
     again = run(load_spec(spec))  # replays the rounds: every key is cached, same jobs
     assert again.outcome("render").computed == 0 and again.outcome("infer").computed == 0
     assert [j.pred_key for j in again.plan.jobs] == [j.pred_key for j in first.plan.jobs]
-    rows = Store(tmp_path / "store").connect("tiny").execute("SELECT count(*) FROM results").fetchone()[0]
+    rows = connect_results(Store(tmp_path / "store"), "tiny").execute("SELECT count(*) FROM results").fetchone()[0]
     assert rows == 24
 
 
@@ -152,11 +153,11 @@ def test_the_all_controls_spec_renders_every_control_without_error(tmp_path: Pat
 
 
 def test_onnx_backend_reinfers_but_renders_nothing_and_agrees(tiny_copy: Path) -> None:
-    con = Store(tiny_copy / "store").connect("tiny")
+    con = connect_results(Store(tiny_copy / "store"), "tiny")
     torch_rows = con.execute("SELECT job, top1_label, correct FROM results ORDER BY job").fetchall()
     edit_spec(tiny_copy, "[model]\n", '[model]\nbackend = "onnx"\n')
     assert computed(tiny_copy) == {"render": 0, "postprocess": 0, "infer": 8}
-    con = Store(tiny_copy / "store").connect("tiny")
+    con = connect_results(Store(tiny_copy / "store"), "tiny")
     assert con.execute("SELECT job, top1_label, correct FROM results ORDER BY job").fetchall() == torch_rows
 
 
@@ -166,12 +167,12 @@ RESULT_COLUMNS = "SELECT job, render_key, image_key, pred_key, top1_label, corre
 def test_the_default_backend_keeps_torch_s_keys_and_answers(tiny_copy: Path) -> None:
     """tiny_copy was inferred by ONNX Runtime standing in for torch (the default); eager torch
     finds every prediction cached under the same keys, and computed again gives the same answers."""
-    stand_in = Store(tiny_copy / "store").connect("tiny").execute(RESULT_COLUMNS).fetchall()
+    stand_in = connect_results(Store(tiny_copy / "store"), "tiny").execute(RESULT_COLUMNS).fetchall()
     edit_spec(tiny_copy, "[model]\n", '[model]\nbackend = "torch"\n')
     assert computed(tiny_copy) == {"render": 0, "postprocess": 0, "infer": 0}
     shutil.rmtree(tiny_copy / "store" / "tables" / "predictions")
     assert computed(tiny_copy) == {"render": 0, "postprocess": 0, "infer": 8}
-    assert Store(tiny_copy / "store").connect("tiny").execute(RESULT_COLUMNS).fetchall() == stand_in
+    assert connect_results(Store(tiny_copy / "store"), "tiny").execute(RESULT_COLUMNS).fetchall() == stand_in
 
 
 def test_overlapped_stages_give_what_stages_one_after_the_other_give(tmp_path: Path) -> None:
@@ -182,7 +183,7 @@ def test_overlapped_stages_give_what_stages_one_after_the_other_give(tmp_path: P
         write_spec(folder, TINY_SPEC)
         result = run(load_spec(folder / "spec.toml"), overlap=overlap)
         counts = [(o.stage, o.total, o.cached, o.computed, o.failed, o.skipped) for o in result.outcomes]
-        results[overlap] = (counts, Store(folder / "store").connect("tiny").execute(RESULT_COLUMNS).fetchall())
+        results[overlap] = (counts, connect_results(Store(folder / "store"), "tiny").execute(RESULT_COLUMNS).fetchall())
     assert results[True] == results[False]
     assert results[True][0] == [("render", 4, 0, 4, 0, 0), ("postprocess", 4, 0, 4, 0, 0), ("infer", 8, 0, 8, 0, 0)]
 

@@ -92,7 +92,7 @@ def reference_jobs(spec, *, framing: Framing, model_digest: str, blender: str) -
                       key=lambda c: (c.control.order, spec.controls.index(c)))
     post = [c for c in spec.controls if c.control.stage == "post"]
     settings_part = spec.render.key_part(framing.key_part())
-    base = infer_base(model_digest, {"kind": spec.evaluator.kind, "top_k": spec.evaluator.top_k}, spec.model.backend)
+    base = infer_base(model_digest, {"kind": spec.evaluator.kind, "top_k": spec.evaluator.params.get("top_k", 5)}, spec.model.backend)
     out = []
     for obj in spec.objects:
         object_digest = mesh_digest(spec.meshes[obj.name], spec.store)

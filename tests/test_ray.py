@@ -10,6 +10,7 @@ import pytest
 from sweep3d.cache.store import Store
 from sweep3d.pipeline import run
 from sweep3d.stages import load_spec
+from sweep3d.stages.aggregate import connect as connect_results
 from sweep3d.stages.render.stage import Executor
 from tests.conftest import TINY_SPEC, write_spec
 
@@ -26,19 +27,19 @@ def local_cluster():
 
 
 def _results(folder: Path) -> list[tuple]:
-    return Store(folder / "store").connect("tiny").execute(
+    return connect_results(Store(folder / "store"), "tiny").execute(
         "SELECT job, render_key, image_key, pred_key, top1_label, correct, round(loss, 3) FROM results ORDER BY job"
     ).fetchall()
 
 
 def _visible_parts(folder: Path) -> dict[str, list[int]]:
-    rows = Store(folder / "store").connect("tiny").execute(
+    rows = connect_results(Store(folder / "store"), "tiny").execute(
         "SELECT render_key, parts, pixels, object_pixels FROM parts").fetchall()
     return {key: [p for p, n in zip(parts, pixels) if n >= 0.05 * total] for key, parts, pixels, total in rows}
 
 
 def _truths(folder: Path) -> dict[str, tuple]:
-    rows = Store(folder / "store").connect("tiny").execute(
+    rows = connect_results(Store(folder / "store"), "tiny").execute(
         "SELECT truth_key, gt_x0, gt_y0, gt_x1, gt_y1, round(visible_fraction, 2) FROM truths").fetchall()
     return {row[0]: row[1:] for row in rows}
 

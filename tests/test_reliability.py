@@ -34,6 +34,7 @@ from sweep3d.errors import UserError
 from sweep3d.pipeline import run
 from sweep3d.pixels import encode_png
 from sweep3d.stages import load_spec
+from sweep3d.stages.aggregate import connect as connect_results
 from tests.conftest import REPO, TINY_SPEC, write_spec
 
 T0 = datetime(2024, 1, 1)
@@ -344,7 +345,7 @@ def test_stats_count_files_rows_and_bytes(tmp_path):
 
 
 def _results(folder: Path) -> list[tuple]:
-    con = Store(folder / "store").connect("tiny")
+    con = connect_results(Store(folder / "store"), "tiny")
     return con.execute("SELECT job, pred_key, top1_label, correct, loss FROM results ORDER BY job").fetchall()
 
 
@@ -361,7 +362,7 @@ def test_damaged_blobs_and_segments_are_recomputed_not_fatal(tiny_copy: Path, ca
     run warns, quarantines, recomputes exactly what is needed (rendering again with Blender)."""
     root = tiny_copy / "store"
     want = _results(tiny_copy)
-    con = Store(root).connect("tiny")
+    con = connect_results(Store(root), "tiny")
     render, image = con.execute(
         "SELECT render_key, image_key FROM jobs WHERE image_key <> render_key ORDER BY job LIMIT 1").fetchone()
     flip_bytes(Store(root).blob_path(render), 0.7)
@@ -393,7 +394,7 @@ def test_a_plain_rerun_repairs_damaged_renders_whose_results_are_cached(tiny_cop
 
     spec, root = tiny_copy / "spec.toml", tiny_copy / "store"
     want = _results(tiny_copy)
-    con = Store(root).connect("tiny")
+    con = connect_results(Store(root), "tiny")
     damaged = [k for (k,) in con.execute(
         "SELECT DISTINCT render_key FROM jobs WHERE image_key = render_key ORDER BY 1 LIMIT 2").fetchall()]
     for key in damaged:  # each is also the image of a job: the report shows it
@@ -529,8 +530,8 @@ def test_a_second_run_on_a_busy_store_refuses_in_one_line_or_waits_with_wait(tmp
         keys = [k for p in store.segments(table) for k in pq.read_table(p).column(0).to_pylist()]
         assert len(keys) == len(set(keys)), f"duplicate {table} rows"
     assert verify(tmp_path / "store").ok
-    assert store.connect("tiny").execute("SELECT count(*) FROM results").fetchone()[0] == 32
-    assert store.connect("other").execute("SELECT count(*) FROM results").fetchone()[0] == 12
+    assert connect_results(store, "tiny").execute("SELECT count(*) FROM results").fetchone()[0] == 32
+    assert connect_results(store, "other").execute("SELECT count(*) FROM results").fetchone()[0] == 12
     shutil.rmtree(tmp_path / "store")
 
 

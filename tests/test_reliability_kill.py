@@ -29,6 +29,7 @@ from sweep3d.cache.maintenance import collect_garbage, verify
 from sweep3d.cache.store import KEY_COLUMN, Store
 from sweep3d.pipeline import run
 from sweep3d.stages import load_spec
+from sweep3d.stages.aggregate import connect as connect_results
 from tests.conftest import REPO, TINY_SPEC, write_spec
 
 pytestmark = pytest.mark.slow
@@ -196,7 +197,7 @@ def _segment_keys(store: Path) -> dict[str, list[str]]:
 
 
 def _results(folder: Path) -> list[tuple]:
-    con = Store(folder / "store").connect("tiny")
+    con = connect_results(Store(folder / "store"), "tiny")
     return con.execute(
         "SELECT job, object, environment, render_key, image_key, pred_key, top1_label, correct, loss "
         "FROM results ORDER BY job").fetchall()

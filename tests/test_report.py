@@ -49,7 +49,7 @@ EVIL_EXPERIMENT = "tiny</title><script>alert(3)</script>"
 
 def results_count(folder: Path, where: str = "true") -> int:
     loaded = load_spec(folder / "spec.toml")
-    con = Store(loaded.store).connect(loaded.name)
+    con = connect(Store(loaded.store), loaded.name)
     return con.execute(f"SELECT count(*) FROM results WHERE {where}").fetchone()[0]
 
 

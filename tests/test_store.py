@@ -19,6 +19,7 @@ from typer.testing import CliRunner
 from sweep3d.cache.store import Store, atomic_write
 from sweep3d.cli import app
 from sweep3d.errors import StoreBusyError, UserError
+from sweep3d.stages.aggregate import connect as connect_results
 
 T0 = datetime(2024, 1, 1, tzinfo=timezone.utc)
 
@@ -78,7 +79,7 @@ def test_results_view_joins_jobs_and_predictions(tmp_path):
         {"pred_key": "p2", "image_key": "i2", "correct": False, "created_at": T0},
         {"pred_key": "p0", "image_key": "i0", "correct": False, "created_at": T0 + timedelta(1)},
     ])
-    con = store.connect("e")
+    con = connect_results(store, "e")
     rows = con.execute("select job, correct from results order by job").fetchall()
     assert rows == [(0, True), (2, False)]
     assert "results" not in {r[0] for r in store.connect().execute("show tables").fetchall()}
@@ -256,7 +257,7 @@ def _results_count(folder: Path) -> int:
     from sweep3d.stages import load_spec
 
     loaded = load_spec(folder / "spec.toml")
-    return Store(loaded.store).connect(loaded.name).execute("select count(*) from results").fetchone()[0]
+    return connect_results(Store(loaded.store), loaded.name).execute("select count(*) from results").fetchone()[0]
 
 
 def test_query_prints_a_table(tiny_run):

@@ -23,14 +23,14 @@ import pytest
 from PIL import Image
 
 from benchmarks.report_scale import build_store
-from sweep3d.cache.store import MIN_VISIBLE_METADATA, Store
+from sweep3d.cache.store import Store
 from sweep3d.cli.output import not_evaluable_line
 from sweep3d.report import build_context, render_html, write_report
 from sweep3d.report.overlays import PRED_COLOR, TRUE_COLOR, Overlay, read_overlays
 from sweep3d.report.panels import CORE_PANELS
 from sweep3d.report.results import CORRECT, NOT_EVALUABLE, WRONG, Results, materialise_views
 from sweep3d.report.thumbs import encode_thumbnail
-from sweep3d.spec.columns import MODELS_METADATA, PARAMETERS_METADATA
+from sweep3d.spec.columns import MIN_VISIBLE_METADATA, MODELS_METADATA, PARAMETERS_METADATA
 from sweep3d.stages import load_spec
 from sweep3d.stages.aggregate import connect, stored_summary, summarise
 from sweep3d.stages.aggregate.tasks import OUTCOMES, TASK_VIEWS

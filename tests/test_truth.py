@@ -16,6 +16,7 @@ from sweep3d.cache.store import Store
 from sweep3d.cli import app
 from sweep3d.errors import SpecError
 from sweep3d.stages import load_spec
+from sweep3d.stages.aggregate import connect as connect_results
 from sweep3d.stages.passes import needed_passes, truth_passes
 from sweep3d.truth import box, decode_depth, decode_mask, encode_depth, encode_mask, ground_truth
 from tests.conftest import plan_for, write_spec
@@ -124,7 +125,7 @@ def truth_run(tmp_path_factory) -> Path:
 
 def truths(folder: Path) -> dict[tuple[float, float], dict]:
     """(x, coverage) → the job's row of ``ground_truth`` with its jobs columns."""
-    con = Store(folder / "store").connect("truth")
+    con = connect_results(Store(folder / "store"), "truth")
     cursor = con.execute("SELECT j.position_x, j.occlusion_coverage, j.in_frame, g.* FROM jobs j "
                          "JOIN ground_truth g USING (job)")
     names = [d[0] for d in cursor.description]
@@ -161,7 +162,7 @@ def test_half_occluded_shows_half_and_out_of_frame_is_not_evaluable(truth_run: P
     assert sliver["in_frame"] and sliver["visible_fraction"] < 0.1 and sliver["evaluable"] is False
     gone = rows[2.5, 0.0]
     assert not gone["in_frame"] and gone["evaluable"] is False and gone["visible_pixels"] is None
-    con = Store(truth_run / "store").connect("truth")
+    con = connect_results(Store(truth_run / "store"), "truth")
     evaluable = con.execute("SELECT count(*) FILTER (WHERE evaluable), count(*) FROM results").fetchone()
     assert evaluable[1] == 6 and 3 <= evaluable[0] <= 5
 
@@ -172,7 +173,7 @@ def test_a_missing_truth_blob_renders_the_pass_again_and_nothing_else(truth_run:
     folder = tmp_path / "copy"
     shutil.copytree(truth_run, folder)
     store = Store(folder / "store")
-    key = store.connect("truth").execute("SELECT truth_key FROM truths LIMIT 1").fetchone()[0]
+    key = connect_results(store, "truth").execute("SELECT truth_key FROM truths LIMIT 1").fetchone()[0]
     store.blob_path(key, "mask.png").unlink()
     assert stage_counts(folder / "spec.toml") == {"render": 1, "infer": 0}
     assert store.blob_path(key, "mask.png").exists()
@@ -186,7 +187,7 @@ def test_switching_passes_on_renders_for_the_passes_only(tmp_path: Path) -> None
     spec = write_spec(tmp_path, PLAIN_SPEC)
     run_cli(spec)
     store = Store(tmp_path / "store")
-    con = store.connect("truth")
+    con = connect_results(store, "truth")
     before = dict(con.execute("SELECT render_key, sha256 FROM renders").fetchall())
     blobs = {key: store.blob_path(key).read_bytes() for key in before}
     # a run that needs no pass renders none: no truth rows, no truth blobs, workers without passes
@@ -197,7 +198,7 @@ def test_switching_passes_on_renders_for_the_passes_only(tmp_path: Path) -> None
     assert con.execute("SELECT bool_and(evaluable), count(*) FROM results").fetchone() == (True, 6)
     spec.write_text(TRUTH_SPEC)
     assert stage_counts(spec) == {"render": 6, "infer": 0}  # rendered for the passes; nothing re-inferred
-    con = store.connect("truth")
+    con = connect_results(store, "truth")
     assert dict(con.execute("SELECT render_key, sha256 FROM renders").fetchall()) == before
     assert {key: store.blob_path(key).read_bytes() for key in before} == blobs  # RGB blobs byte-identical
     assert con.execute("SELECT count(*) FROM truths").fetchone()[0] == 6
@@ -212,7 +213,7 @@ def test_model_framing_gives_passes_in_the_stored_images_grid(tmp_path: Path) ->
             .replace("x = [0.0, 0.5, 1.6, 2.5]", "x = 0.3").replace("coverage = [0.0, 0.5]", "coverage = 0.0"))
     run_cli(write_spec(tmp_path, body))
     store = Store(tmp_path / "store")
-    row = store.connect("truth").execute("SELECT r.render_key, t.* FROM results r JOIN truths t USING (truth_key)")
+    row = connect_results(store, "truth").execute("SELECT r.render_key, t.* FROM results r JOIN truths t USING (truth_key)")
     names = [d[0] for d in row.description]
     row = dict(zip(names, row.fetchone()))
     from sweep3d.pixels import decode_png
@@ -258,7 +259,7 @@ def test_a_killed_run_resumes_its_truth_passes(tmp_path: Path) -> None:
     assert 0 < len(done) < 24, f"the kill landed with {len(done)} of 24 truth rows recorded"
     assert store.keys("renders") and verify(tmp_path / "store").ok
     run_cli(spec)
-    con = store.connect("truth")
+    con = connect_results(store, "truth")
     assert con.execute("SELECT count(*), count(DISTINCT truth_key) FROM truths").fetchone() == (24, 24)
     assert con.execute("SELECT count(*) FROM results WHERE visible_fraction IS NULL").fetchone()[0] == 0
     assert verify(tmp_path / "store").ok
@@ -292,7 +293,7 @@ def test_zoom_frames_the_bounding_sphere_as_the_readme_says(tmp_path: Path) -> N
                       + '\n[evaluator]\npasses = ["mask"]\n', cube=False)
     run_cli(spec)
     half = math.atan(18 / 50)
-    spans = Store(tmp_path / "store").connect("truth").execute(
+    spans = connect_results(Store(tmp_path / "store"), "truth").execute(
         "SELECT camera_zoom, gt_x1 - gt_x0, gt_y1 - gt_y0 FROM results ORDER BY 1").fetchall()
     assert len(spans) == 2
     for zoom, width, height in spans:
@@ -306,7 +307,7 @@ def test_adaptive_search_does_not_count_a_hidden_object_as_a_failure(truth_run: 
     spec = load_spec(truth_run / "spec.toml")
     plan = plan_for(spec)
     history = outcomes_by_scene(plan, Store(truth_run / "store"))
-    con = Store(truth_run / "store").connect("truth")
+    con = connect_results(Store(truth_run / "store"), "truth")
     rows = dict(con.execute("SELECT truth_key, visible_fraction FROM truths").fetchall())
     wrong = dict(con.execute("SELECT pred_key, valid AND NOT correct FROM predictions").fetchall())
     for job in plan.jobs:

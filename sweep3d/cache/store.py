@@ -44,13 +44,6 @@ KEY_COLUMN = {"renders": "render_key", "images": "image_key", "predictions": "pr
 #: Blobs a ``truths`` row owns beside its key (``blobs/ab/<truth_key>.<suffix>``) and the column
 #: recording each one's SHA-256 (null: the pass was not rendered).
 TRUTH_BLOBS = {"mask.png": "mask_sha256", "depth.npz": "depth_sha256"}
-#: Parquet metadata key of a jobs file planned with truth passes: ``[evaluator] min_visible``.
-MIN_VISIBLE_METADATA = b"sweep3d.min_visible"
-DEFAULT_MIN_VISIBLE = 0.1
-#: ``results.counted``: the rows every accuracy averages. A prediction must be valid (finite
-#: outputs) and its job not known to be unevaluable (out of frame, or too little of the object
-#: visible): such a job is counted apart, never as a failure. Unknown (no truth row yet) counts.
-COUNTED_SQL = "p.valid AND g.evaluable IS NOT FALSE"
 BLOB_TABLES = ("renders", "images")  # tables whose rows each own the blob named by their key
 DIGEST_COLUMN = "sha256"  # hex SHA-256 of a blob's bytes, recorded in its row when written
 BLOB_EXT = "png"  # the file type of the blobs a run makes
@@ -402,14 +395,10 @@ class Store:
         """An in-memory DuckDB connection with views over this store's Parquet files.
 
         Views: ``renders``, ``images``, ``predictions``, ``runs``, ``parts``, ``truths`` (deduplicated
-        by key), and when ``experiment`` has a plan, ``jobs`` (its latest plan), ``ground_truth``
-        (per job: the truth columns and ``evaluable``) and ``results`` (jobs ⨝ predictions ⨝
-        ground_truth). ``evaluable`` is false for a job out of frame and, where the plan has truth
-        passes, for one whose ``visible_fraction`` is below ``[evaluator] min_visible`` (null while
-        its truth row is missing); without truth passes it is ``in_frame``. ``counted`` (see
-        :data:`COUNTED_SQL`) is what every accuracy counts: a valid prediction of a job not known
-        to be unevaluable.
-        The aggregate stage adds its views on top (``sweep3d.stages.aggregate.connect``).
+        by key), and when ``experiment`` has a plan, ``jobs`` (its latest plan). Storage only: how
+        they join into ``results``, and what counts, is the aggregate stage's
+        (``sweep3d.stages.aggregate.results``), which adds its views on top
+        (``sweep3d.stages.aggregate.connect``).
         Unreadable segments are left out (and quarantined). The views read the segments listed
         now; a compaction keeps the files it replaced for ``SUPERSEDED_GRACE`` seconds, so a
         connection stays good that long whatever happens to the store meanwhile.
@@ -429,24 +418,6 @@ class Store:
                 )
         if "jobs" in files:
             con.execute(f"CREATE VIEW jobs AS SELECT * FROM read_parquet({_sql_str(str(files['jobs'][0]))})")
-            truth = _ground_truth_sql(con, files["jobs"][0], "truths" in files)
-            if truth is not None:
-                con.execute(truth)
-            if "predictions" in files:
-                # A job row names its model (a spec may test several); a prediction row is shared by
-                # every experiment whose job has its key, so its own ``model`` is what the first called it.
-                jobs_name_models = "model" in {row[0] for row in con.execute("DESCRIBE jobs").fetchall()}
-                own = ", model" if jobs_name_models else ""
-                judged = "valid" in {row[0] for row in con.execute("DESCRIBE predictions").fetchall()}
-                counted = (COUNTED_SQL if truth is not None else "p.valid") if judged else None
-                con.execute(
-                    f"CREATE VIEW results AS SELECT j.*, p.* EXCLUDE (pred_key, image_key, created_at{own})"
-                    + (f", g.* EXCLUDE (job, truth_key{own})" if truth is not None else "")
-                    + (f", {counted} AS counted" if counted else "")
-                    + " FROM jobs j JOIN predictions p USING (pred_key)"
-                    + (" LEFT JOIN ground_truth g ON g.job = j.job" + (" AND g.model = j.model" if own else "")
-                       if truth is not None else "")
-                )
         return con
 
     # -- damage control ----------------------------------------------------------------------
@@ -728,40 +699,3 @@ def _first_line(exc: BaseException) -> str:
 
 def _sql_str(text: str) -> str:
     return "'" + text.replace("'", "''") + "'"
-
-
-def plan_min_visible(jobs: Path) -> float:
-    """``[evaluator] min_visible`` as the plan at ``jobs`` recorded it (the default when it did not,
-    or recorded something unusable): the threshold ``evaluable`` applies."""
-    try:
-        metadata = pq.read_schema(jobs).metadata or {}
-        min_visible = float(metadata.get(MIN_VISIBLE_METADATA, b"nan").decode())
-    except (OSError, ValueError, pa.ArrowException):
-        min_visible = float("nan")
-    return min_visible if 0.0 <= min_visible <= 1.0 else DEFAULT_MIN_VISIBLE
-
-
-def _ground_truth_sql(con: duckdb.DuckDBPyConnection, jobs: Path, truths: bool) -> str | None:
-    """The ``ground_truth`` view: per job of the plan, its truth columns and ``evaluable``
-    (None for a jobs table without the columns it needs: one written by hand, or very old)."""
-    columns = {row[0] for row in con.execute("DESCRIBE jobs").fetchall()}
-    if not {"job", "in_frame"} <= columns:
-        return None
-    if "truth_key" not in columns:  # planned without truth passes: the geometric flag alone
-        model = "model, " if "model" in columns else ""
-        return (f"CREATE VIEW ground_truth AS SELECT job, {model}NULL::VARCHAR AS truth_key, NULL::INTEGER AS gt_x0, "
-                "NULL::INTEGER AS gt_y0, NULL::INTEGER AS gt_x1, NULL::INTEGER AS gt_y1, "
-                "NULL::BIGINT AS visible_pixels, NULL::BIGINT AS silhouette_pixels, "
-                "NULL::DOUBLE AS visible_fraction, in_frame AS evaluable FROM jobs")
-    min_visible = plan_min_visible(jobs)
-    source = ("(SELECT truth_key, gt_x0, gt_y0, gt_x1, gt_y1, visible_pixels, silhouette_pixels, visible_fraction "
-              "FROM truths)") if truths else \
-        ("(SELECT NULL::VARCHAR AS truth_key, NULL::INTEGER AS gt_x0, NULL::INTEGER AS gt_y0, "
-         "NULL::INTEGER AS gt_x1, NULL::INTEGER AS gt_y1, NULL::BIGINT AS visible_pixels, "
-         "NULL::BIGINT AS silhouette_pixels, NULL::DOUBLE AS visible_fraction WHERE false)")
-    model = "j.model, " if "model" in columns else ""  # a spec with several models: a row per (job, model)
-    return (f"CREATE VIEW ground_truth AS SELECT j.job, {model}j.truth_key, t.gt_x0, t.gt_y0, t.gt_x1, t.gt_y1, "
-            "t.visible_pixels, t.silhouette_pixels, t.visible_fraction, "
-            "CASE WHEN NOT j.in_frame THEN false WHEN t.truth_key IS NULL THEN NULL "
-            f"ELSE coalesce(t.visible_fraction >= {min_visible!r}, false) END AS evaluable "
-            f"FROM jobs j LEFT JOIN {source} t ON t.truth_key = j.truth_key")

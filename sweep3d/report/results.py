@@ -25,6 +25,8 @@ from typing import Any, Mapping, Sequence
 
 import duckdb
 
+from sweep3d.evaluation import Roles
+from sweep3d.stages.aggregate.results import results_roles
 from sweep3d.stages.aggregate.views import SCENE_COLUMNS, materialise
 
 WRONG, CORRECT, INVALID, NOT_EVALUABLE = 0, 1, 2, 3  # outcome codes; the first two are counted
@@ -80,9 +82,10 @@ class Results:
         self.con = con
         self.parameters = read_parameters(con, names)
         columns = {row[0] for row in con.execute("DESCRIBE results").fetchall()}
-        con.execute(_table_sql(columns, [p.name for p in self.parameters]))
+        roles = results_roles(con)
+        con.execute(_table_sql(columns, roles, [p.name for p in self.parameters]))
         #: ORDER BY putting rows of ``results`` in example order (for SQL shown to the user).
-        self.example_order_sql = ("ORDER BY NOT counted, correct" + (", loss DESC" if "loss" in columns else "")
+        self.example_order_sql = ("ORDER BY NOT counted, correct" + (", loss DESC" if roles.has("loss") else "")
                                   + ", job")
 
     def __len__(self) -> int:
@@ -184,11 +187,11 @@ def read_parameters(con: duckdb.DuckDBPyConnection, names: Sequence[str]) -> lis
     return [Parameter(name, labels[name], bool(known[name][0]), bool(known[name][1])) for name in order]
 
 
-def _table_sql(columns: set[str], names: list[str]) -> str:
-    """The CREATE statement of :data:`TABLE` (``columns``: those of ``results``): results joined
-    with their levels, one column per parameter."""
-    prediction = "r.top1_label" if "top1_label" in columns else "NULL::VARCHAR"
-    loss = "r.loss" if "loss" in columns else "NULL::DOUBLE"
+def _table_sql(columns: set[str], roles: Roles, names: list[str]) -> str:
+    """The CREATE statement of :data:`TABLE` (``columns``: those of ``results``; ``roles``: its
+    evaluator's): results joined with their levels, one column per parameter."""
+    prediction = "r.top1_label" if roles.has("prediction") else "NULL::VARCHAR"
+    loss = "r.loss" if roles.has("loss") else "NULL::DOUBLE"
     unevaluable = "r.evaluable IS FALSE" if "evaluable" in columns else "false"
     select = (f"SELECT r.job, (CASE WHEN r.counted THEN (CASE WHEN r.correct THEN {CORRECT} ELSE {WRONG} END) "
               f"WHEN {unevaluable} THEN {NOT_EVALUABLE} ELSE {INVALID} END)"

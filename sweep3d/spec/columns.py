@@ -7,8 +7,6 @@ Every control parameter becomes a column ``<control id>_<param>`` of the experim
 
 from __future__ import annotations
 
-from sweep3d.cache.store import MIN_VISIBLE_METADATA as MIN_VISIBLE_KEY
-
 #: The jobs table's own columns, besides the control parameters.
 JOB_COLUMNS = ("experiment", "job", "object", "environment", "render_key", "image_key", "pred_key",
                "parts_key", "in_frame", "model")
@@ -22,7 +20,7 @@ PARAMETERS_METADATA = b"sweep3d.parameters"
 #: Parquet metadata key of a jobs file holding the models its rows name (a JSON list, in spec order).
 MODELS_METADATA = b"sweep3d.models"
 #: Parquet metadata key of a jobs file planned with truth passes: ``[evaluator] min_visible``.
-MIN_VISIBLE_METADATA = MIN_VISIBLE_KEY
+MIN_VISIBLE_METADATA = b"sweep3d.min_visible"
 
 
 def parameter_column(control_id: str, param: str) -> str:

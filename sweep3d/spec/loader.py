@@ -19,6 +19,7 @@ from pydantic import ValidationError
 
 from sweep3d.controls import Control, is_spec_path
 from sweep3d.errors import SpecError, UserError
+from sweep3d.evaluation import declaration_problem
 from sweep3d.registry import is_user_plugin
 from sweep3d.spec.assets import resolve_hdri, resolve_mesh
 from sweep3d.spec.catalogue import Catalogue
@@ -174,9 +175,10 @@ def load_spec(path: str | Path, catalogue: Catalogue) -> LoadedSpec:
     if _names_user_plugins(spec):
         plugin_folder(base)
     _check_model(spec, fail, catalogue)
+    evaluator = _load_evaluator(spec, fail, catalogue)
     labels = _resolve_labels(spec, fail, catalogue)
     controls = _load_controls(spec, fail, base, catalogue)
-    _check_columns(spec, controls, fail, catalogue)
+    _check_columns(controls, fail, evaluator)
     policy = _load_policy(spec, fail, catalogue)
     store = Path(spec.experiment.store)
     store = (store if store.is_absolute() else base / store).resolve()
@@ -252,13 +254,41 @@ def _check_model(spec: Spec, fail, catalogue: Catalogue) -> None:
     where = [f"models[{i}]" for i in range(len(spec.models))] or ["model"]
     for key, model in zip(where, spec.all_models):
         _check_name(f"{key}.name", catalogue.models, model.name, fail)
-    _check_name("evaluator.kind", catalogue.evaluators, spec.evaluator.kind, fail)
     first = catalogue.labels(spec.all_models[0].name)
     for key, model in zip(where[1:], spec.all_models[1:]):
         classes = catalogue.labels(model.name)  # None: a user's model, checked once loaded
         if first is not None and classes is not None and classes != first:
             raise fail(f"{key}.name", f"{model.name!r} names other classes than {spec.all_models[0].name!r}; "
                        "models compared in one spec must share their class names (objects' labels are theirs)")
+
+
+def _load_evaluator(spec: Spec, fail, catalogue: Catalogue) -> Any:
+    """The evaluator class ``[evaluator] kind`` names (a user's module is imported now), its
+    declaration checked and the table's other keys validated against its ``Params``."""
+    kind = spec.evaluator.kind
+    try:
+        cls = catalogue.evaluators.get(kind)
+    except UserError as exc:
+        raise fail("evaluator.kind", str(exc)) from None
+    problem = declaration_problem(cls)
+    if problem is not None:
+        raise fail("evaluator.kind", f"evaluator {kind!r} {problem}")
+    fields = cls.Params.model_fields
+    for name in spec.evaluator.params:
+        if name not in fields:
+            close = difflib.get_close_matches(name, fields, n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            valid = ", ".join(["kind", "passes", "min_visible", *fields])
+            raise fail(f"evaluator.{name}", f"unknown setting for evaluator {kind!r}{hint}; valid: {valid}")
+    try:
+        cls.Params(**spec.evaluator.params)
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        problem = err["msg"].removeprefix("Value error, ")
+        if "input" in err:
+            problem += f" (got {err['input']!r})"
+        raise fail(f"evaluator.{_key_path(err['loc'])}", problem) from None
+    return cls
 
 
 def _check_name(key: str, registry: Any, name: str, fail) -> None:
@@ -317,11 +347,11 @@ def _load_controls(spec: Spec, fail, base: Path, catalogue: Catalogue) -> list[C
     return instances
 
 
-def _check_columns(spec: Spec, controls: list[ControlInstance], fail, catalogue: Catalogue) -> None:
+def _check_columns(controls: list[ControlInstance], fail, evaluator: Any) -> None:
     """Refuse a parameter whose column would collide with another column of ``jobs`` or ``results``
     (``render`` + ``key`` would shadow ``render_key``; ``a`` + ``b_c`` and ``a_b`` + ``c`` would merge)."""
-    evaluator = catalogue.evaluators.get(spec.evaluator.kind) if ":" not in spec.evaluator.kind else None
-    reserved = set(JOB_COLUMNS) | set(PREDICTION_COLUMNS) | set(TRUTH_RESULT_COLUMNS) | set(getattr(getattr(evaluator, "schema", None), "names", ()))
+    reserved = (set(JOB_COLUMNS) | set(PREDICTION_COLUMNS) | set(TRUTH_RESULT_COLUMNS) | set(evaluator.schema.names)
+                | set(evaluator.roles.aliases()))
     seen: dict[str, str] = {}
     for i, inst in enumerate(controls):
         for param in inst.spaces:

@@ -97,21 +97,25 @@ class ModelSpec(StrictModel):
         return self.id or self.name
 
 
-class EvaluatorSpec(StrictModel):
+class EvaluatorSpec(BaseModel):
+    """``kind`` picks the evaluator; ``passes`` and ``min_visible`` are every evaluator's; the other
+    keys are the evaluator's own settings, checked against its ``Params`` when the spec loads
+    (``top_k`` for classification, ``iou`` and ``score`` for detection, …)."""
+
+    model_config = ConfigDict(extra="allow", frozen=True)
     kind: str = Field("classification", description="classification | localization | detection | segmentation, "
                                                      "or 'package.module:Class' for your own.")
-    top_k: int = Field(5, ge=1, le=100)
-    iou: float = Field(0.5, gt=0.0, le=1.0, allow_inf_nan=False,
-                       description="Localization, detection, segmentation: the IoU with the true box or mask "
-                                   "that counts as correct.")
-    score: float = Field(0.5, ge=0.0, le=1.0, allow_inf_nan=False,
-                         description="Detection: the score a box needs to count.")
     passes: list[Literal["mask", "depth"]] = Field(
         default_factory=list, description="Ground-truth passes to render beside the image: the object's visible "
                                           "mask (with its box and visible fraction) and depth. Not in the render key.")
     min_visible: float = Field(
         0.1, ge=0.0, le=1.0, description="A job whose object shows less than this share of its unoccluded, "
                                          "unclipped silhouette is not evaluable (needs the mask pass).")
+
+    @property
+    def params(self) -> dict[str, Any]:
+        """The evaluator's own settings, as the spec gives them (its ``Params`` fills the rest)."""
+        return dict(self.model_extra or {})
 
 
 def _unit(low: float = 0.0, high: float = 1.0, what: str = "") -> Any:

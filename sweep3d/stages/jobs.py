@@ -22,6 +22,7 @@ from typing import Any, Callable, Iterator, Sequence, overload
 import numpy as np
 import pyarrow as pa
 
+from sweep3d.evaluation import EVALUATOR_METADATA, EvaluatorRecord
 from sweep3d.spec.columns import MIN_VISIBLE_METADATA, PARAMETERS_METADATA, parameter_column
 from sweep3d.spec.framing import Framing
 from sweep3d.spec.loader import LoadedSpec
@@ -362,6 +363,13 @@ class Plan:
             out.append(row)
         return out
 
+    def evaluator_record(self) -> EvaluatorRecord:
+        """The experiment's evaluator as the jobs file records it, for the views to follow."""
+        from sweep3d.stages.infer.evaluators import EVALUATORS  # the infer stage plans on this module
+
+        kind = self.spec.evaluator.kind
+        return EVALUATORS.get(kind).record(kind)
+
     def table(self) -> pa.Table:
         """:meth:`rows` as a table whose metadata lists the parameter columns (see spec.columns).
 
@@ -377,6 +385,7 @@ class Plan:
         metadata = {PARAMETERS_METADATA: json.dumps(self.columns).encode()}
         if "truth_key" in table.column_names:  # the validity gate's threshold, for the results view
             metadata[MIN_VISIBLE_METADATA] = repr(float(self.spec.evaluator.min_visible)).encode()
+        metadata[EVALUATOR_METADATA] = self.evaluator_record().to_json()
         return table.replace_schema_metadata(metadata)
 
 

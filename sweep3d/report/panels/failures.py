@@ -7,6 +7,7 @@ from typing import Any
 
 from sweep3d.report.figures import pct
 from sweep3d.report.panel import PanelInputs
+from sweep3d.stages.aggregate.results import results_roles
 
 
 def build(inputs: PanelInputs) -> dict[str, Any]:
@@ -14,8 +15,10 @@ def build(inputs: PanelInputs) -> dict[str, Any]:
     failures = inputs.summary.failures
     varying = {p.name for p in inputs.parameters if p.varies}  # a fixed one is stated once, in the header
     columns = [c for c in inputs.loaded.parameter_columns if c in varying]
-    present = {row[0] for row in inputs.con.execute("DESCRIBE results").fetchall()}
-    task = [c if c in present else f"NULL AS {c}" for c in ("outcome", "iou", "topk")]  # other tasks lack some
+    present = {row[0] for row in inputs.con.execute("DESCRIBE results").fetchall()}  # its evaluator's only
+    roles = results_roles(inputs.con)
+    task = [c if has else f"NULL AS {c}" for c, has in
+            (("outcome", roles.has("outcome")), ("iou", roles.has("iou")), ("topk", "topk" in present))]
     selected = "".join(f', "{c}"' for c in columns)
     extra = {row[0]: row[1:] for row in inputs.con.execute(
         f"SELECT job, {', '.join(task)}{selected} FROM results WHERE list_contains(?, job)",

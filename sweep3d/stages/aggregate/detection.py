@@ -1,7 +1,8 @@
 """Average precision (COCO's) of a detector, overall and per control level, as SQL views.
 
-Created only when ``results`` has the detection evaluator's ``det_scores``/``det_ious`` columns
-(see :mod:`sweep3d.stages.infer.evaluators.detection`). Every image holds one object, whose
+Created only for an evaluator with the detection roles (``detection_scores``/``detection_ious``,
+which ``results`` shows as ``det_scores``/``det_ious``: see
+:mod:`sweep3d.stages.infer.evaluators.detection`). Every image holds one object, whose
 label set is its class, so COCO's "per class" is here per object:
 
 - the *positives* of an object are its evaluable, valid results (``evaluable IS NOT FALSE AND
@@ -33,6 +34,8 @@ from __future__ import annotations
 
 import duckdb
 
+from sweep3d.evaluation import Roles
+
 DETECTION_VIEWS = ("average_precision", "average_precision_by_value")
 THRESHOLDS = 10  # t = 0.50, 0.55, …, 0.95
 RECALL_POINTS = 101
@@ -40,9 +43,9 @@ RECALL_POINTS = 101
 _LEVEL_KEYS = ("parameter", "position", "level", "label")
 
 
-def detection_views(con: duckdb.DuckDBPyConnection, result_columns: set[str]) -> bool:
-    """Create the average-precision views when ``results`` carries detections (after ``control_levels``)."""
-    if not {"det_scores", "det_ious", "object", "job", "valid"} <= result_columns:
+def detection_views(con: duckdb.DuckDBPyConnection, roles: Roles, result_columns: set[str]) -> bool:
+    """Create the average-precision views for an evaluator with the detection roles (after ``control_levels``)."""
+    if not (roles.has("detection_scores") and {"object", "job", "valid"} <= result_columns):
         return False
     evaluable = "r.valid AND r.evaluable IS NOT FALSE" if "evaluable" in result_columns else "r.valid"
     con.execute("CREATE OR REPLACE VIEW average_precision AS "

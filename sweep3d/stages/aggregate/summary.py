@@ -23,6 +23,7 @@ import duckdb
 
 from sweep3d.cache.store import Store, atomic_write, safe_filename
 from sweep3d.errors import UserError
+from sweep3d.stages.aggregate.results import results_roles
 from sweep3d.stages.aggregate.views import connect, has_view, materialise, register_views
 
 FAILURE_LIMIT = 48  # failures a summary lists, worst first
@@ -94,8 +95,9 @@ def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit:
     # failure_modes (the significant values) reads the levels and their pairs several times
     materialise(con, ["results", "control_stats", "control_levels", "control_parameters", "control_accuracy",
                       "pair_accuracy"])
-    # Other tasks' evaluators (detection, a user's own) may lack the classification columns.
+    # ``results`` holds the experiment's evaluator's columns only; its roles say which are which.
     have = {row[0] for row in con.execute("DESCRIBE results").fetchall()}
+    roles = results_roles(con)
     unevaluable = "evaluable IS FALSE" if "evaluable" in have else "false"
     evaluated, counted, invalid, correct = con.execute(
         f"SELECT count(*), count(*) FILTER (WHERE counted), count(*) FILTER (WHERE NOT valid AND NOT ({unevaluable})), "
@@ -118,7 +120,7 @@ def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit:
     effects = control_effects(con, columns)
     shown = ["top1_label", "topk_labels", "topk_probs", "loss"]
     picked = ", ".join(name if name in have else f"NULL AS {name}" for name in shown)
-    worst = "loss DESC" if "loss" in have else "iou NULLS FIRST" if "iou" in have else "job"
+    worst = "loss DESC" if roles.has("loss") else "iou NULLS FIRST" if roles.has("iou") else "job"
     failures = [
         dict(zip(["job", "object", "environment", "image_key", *shown], r))
         for r in con.execute(
@@ -126,7 +128,7 @@ def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit:
             f"FROM results WHERE counted AND NOT correct ORDER BY {worst}, job LIMIT ?", [failure_limit]
         ).fetchall()
     ]
-    top1 = "top1_label" if "top1_label" in have else "NULL::VARCHAR"
+    top1 = "top1_label" if roles.has("prediction") else "NULL::VARCHAR"
     per_object = [
         dict(zip(["object", "accuracy", "count", "top_wrong"], r))
         for r in con.execute(
@@ -256,7 +258,7 @@ def summary_key(store: Store, experiment: str, columns: list[str], failure_limit
             states.append([path.name, st.st_size, st.st_mtime_ns, st.st_ctime_ns, st.st_ino])
         except OSError:
             states.append([path.name, None])
-    sources = [Path(__file__).with_name(name).read_bytes() for name in ("views.py", "tasks.py")]
+    sources = [Path(__file__).with_name(name).read_bytes() for name in ("views.py", "tasks.py", "results.py")]
     code = hashlib.sha256(b"\0".join([Path(__file__).read_bytes(), *sources])).hexdigest()
     described = {"format": SUMMARY_FORMAT, "experiment": experiment, "columns": list(columns),
                  "failure_limit": failure_limit, "files": states, "code": code, "duckdb": duckdb.__version__}

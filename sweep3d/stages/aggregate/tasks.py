@@ -1,7 +1,9 @@
 """Views for what accuracy leaves out or lumps together: unevaluable jobs, and box and mask outcomes.
 
-Each view is created only when the columns it reads exist, so a classification store without
-truth passes has none of them (and its other views are unchanged):
+Each view is created only when the experiment has what it reads: ``not_evaluable`` a plan that
+knows which jobs are in frame, the others an evaluator with an ``outcome`` or ``iou`` role (see
+:class:`~sweep3d.evaluation.Roles`), so a classification experiment has none of those two,
+whatever else its store holds:
 
 ``not_evaluable`` (needs ``ground_truth``: a plan with ``in_frame``)
     per (object, reason): ``n`` jobs with ``evaluable = false``, ``object_jobs`` (all the
@@ -11,10 +13,10 @@ truth passes has none of them (and its other views are unchanged):
     or ``hidden`` (some of it is in the image, but less than ``min_visible`` of its silhouette:
     occluded or mostly clipped). Jobs out of frame are never rendered, so they are counted from
     the plan, not from ``results``.
-``outcomes_by_value`` (needs ``outcome``: box and mask tasks)
+``outcomes_by_value`` (the ``outcome`` role: box and mask tasks)
     per (parameter, level) as in ``control_accuracy``: ``n`` counted results with an outcome,
     ``n_<outcome>`` and ``share_<outcome>`` for each of :data:`OUTCOMES` (the shares sum to 1).
-``iou_by_object`` (needs ``iou``)
+``iou_by_object`` (the ``iou`` role)
     per object: ``n`` counted results with an IoU, its ``mean`` and quantiles ``p10``, ``p25``,
     ``median``, ``p75``, ``p90`` (linear interpolation, as numpy's default).
 """
@@ -23,7 +25,7 @@ from __future__ import annotations
 
 import duckdb
 
-from sweep3d.stages.infer.evaluators.base import OUTCOMES  # what a box or mask task says (``results.outcome``)
+from sweep3d.evaluation import OUTCOMES, Roles  # what a box or mask task says (``results.outcome``)
 
 TASK_VIEWS = ("not_evaluable", "outcomes_by_value", "iou_by_object")
 #: Why a job is not evaluable (``not_evaluable.reason``).
@@ -31,11 +33,12 @@ OUT_OF_FRAME, HIDDEN = "out of frame", "hidden"
 QUANTILES = {"p10": 0.1, "p25": 0.25, "median": 0.5, "p75": 0.75, "p90": 0.9}
 
 
-def register_task_views(con: duckdb.DuckDBPyConnection, result_columns: set[str], model: str | None = None,
-                        min_visible: float | None = None) -> list[str]:
-    """Create those of :data:`TASK_VIEWS` whose columns exist; returns their names.
+def register_task_views(con: duckdb.DuckDBPyConnection, roles: Roles, result_columns: set[str],
+                        model: str | None = None, min_visible: float | None = None) -> list[str]:
+    """Create those of :data:`TASK_VIEWS` the experiment has; returns their names.
 
     Args:
+        roles: the roles of the experiment's evaluator.
         result_columns: the columns of ``results``.
         model: the model ``results`` shows when the jobs table holds several (its jobs are counted).
         min_visible: the plan's ``[evaluator] min_visible`` (shown only for a plan with truth passes).
@@ -46,10 +49,10 @@ def register_task_views(con: duckdb.DuckDBPyConnection, result_columns: set[str]
     if "evaluable" in result_columns and has_view(con, "ground_truth"):
         con.execute(_not_evaluable_sql(con, model, min_visible))
         made.append("not_evaluable")
-    if "outcome" in result_columns:
+    if roles.has("outcome"):
         con.execute(_outcomes_sql())
         made.append("outcomes_by_value")
-    if "iou" in result_columns:
+    if roles.has("iou"):
         con.execute(_iou_sql())
         made.append("iou_by_object")
     return made

@@ -41,11 +41,17 @@ Views:
     only when the spec asks for it (a UV pass): per (object, part of its surface), accuracy
     over the results that show the part (see :mod:`sweep3d.stages.aggregate.parts`).
 ``not_evaluable``, ``outcomes_by_value``, ``iou_by_object``
-    only when their columns exist: jobs counted apart and why; box and mask tasks' outcomes per
-    value and IoU per object (see :mod:`sweep3d.stages.aggregate.tasks`).
+    jobs counted apart and why (a plan that knows which are in frame); for an evaluator with an
+    ``outcome`` or ``iou`` role, outcomes per value and IoU per object (see
+    :mod:`sweep3d.stages.aggregate.tasks`).
 ``average_precision``, ``average_precision_by_value``
-    only for a detector (results with ``det_scores``): COCO's AP per object and its mean, overall
-    and per level (see :mod:`sweep3d.stages.aggregate.detection`).
+    only for an evaluator with the detection roles (the built-in detector's ``det_scores`` and
+    ``det_ious``): COCO's AP per object and its mean, overall and per level (see
+    :mod:`sweep3d.stages.aggregate.detection`).
+
+Which of these exist follows the experiment's evaluator (its roles, as the plan recorded them:
+:mod:`sweep3d.stages.aggregate.results`), never the columns another experiment left in a shared
+store.
 ``paired_jobs``, ``paired_values``, ``paired_environments``
     two values of one parameter on the same configurations (environment A against B on the
     same poses): the pairs, and per pair of values McNemar's exact test on the discordant ones
@@ -83,13 +89,15 @@ import duckdb
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from sweep3d.cache.store import Store, lock_down, plan_min_visible
+from sweep3d.cache.store import Store, lock_down
 from sweep3d.errors import UserError
+from sweep3d.evaluation import Roles
 from sweep3d.spec.columns import JOB_COLUMNS, MODELS_METADATA, PARAMETERS_METADATA
 from sweep3d.stages.aggregate.compare import ALPHA, COMPARE_MACROS, COMPARE_VIEWS, register_compare_views
 from sweep3d.stages.aggregate.detection import DETECTION_VIEWS, detection_views
 from sweep3d.stages.aggregate.paired import PAIRED_VIEWS, register_paired_views
 from sweep3d.stages.aggregate.parts import register_part_views
+from sweep3d.stages.aggregate.results import plan_min_visible, register_results, results_roles
 from sweep3d.stages.aggregate.tasks import TASK_VIEWS, register_task_views
 
 MAX_LEVELS = 12  # a numeric parameter with more distinct values is binned
@@ -137,6 +145,8 @@ def connect(store: Store, experiment: str | None = None, read_only: bool = False
     files = store.view_files(experiment)
     con = store.connect(experiment, files)
     parameters, models, min_visible = None, [], None
+    if "jobs" in files:
+        register_results(con, files["jobs"][0], "truths" in files)
     if experiment is not None and store.jobs_path(experiment).exists():
         parameters = stored_parameters(store.jobs_path(experiment))
         models = stored_models(store.jobs_path(experiment))
@@ -147,7 +157,7 @@ def connect(store: Store, experiment: str | None = None, read_only: bool = False
     elif model is not None:
         raise UserError(f"--model {model}: the experiment has no results yet")
     if register_views(con, parameters, model=shown, min_visible=min_visible) and has_view(con, "results_all"):
-        register_compare_views(con, models, "top1_label" in _columns(con, "results"))
+        register_compare_views(con, models, results_roles(con).has("prediction"))
     if read_only:
         lock_down(con, [path for paths in files.values() for path in paths], writable)
     return con
@@ -209,17 +219,18 @@ def register_views(con: duckdb.DuckDBPyConnection, parameters: list[str] | None 
     result_columns = _columns(con, "results")
     if not REQUIRED_COLUMNS <= result_columns.keys():
         return False
-    if "counted" not in result_columns:  # a results view made by hand, not by Store.connect
+    if "counted" not in result_columns:  # a results view made by hand, not by register_results
         con.execute("ALTER VIEW results RENAME TO results_uncounted")
         con.execute(f"CREATE VIEW results AS SELECT *, {_COUNTED['evaluable' in result_columns]} AS counted "
                     "FROM results_uncounted")
         result_columns = _columns(con, "results")
     columns = control_columns(con, parameters)
-    for sql in _view_statements(columns, "top1_label" in result_columns):
+    roles = results_roles(con)
+    for sql in _view_statements(columns, roles):
         con.execute(sql)
     register_part_views(con, set(result_columns))
-    register_task_views(con, set(result_columns), model, min_visible)
-    detection_views(con, set(result_columns))
+    register_task_views(con, roles, set(result_columns), model, min_visible)
+    detection_views(con, roles, set(result_columns))
     register_paired_views(con, columns, set(result_columns))
     return True
 
@@ -456,10 +467,11 @@ _CONFUSIONS_VIEW = """CREATE OR REPLACE VIEW object_confusions AS
                 ORDER BY object, rank"""
 
 
-def _view_statements(parameters: list[tuple[str, bool]], has_predictions: bool) -> list[str]:
-    """The CREATE statements, in dependency order."""
+def _view_statements(parameters: list[tuple[str, bool]], roles: Roles) -> list[str]:
+    """The CREATE statements, in dependency order (``object_confusions`` for an evaluator that
+    names its predicted class)."""
     statements = ["CREATE OR REPLACE VIEW control_values AS " + _values_sql(parameters), *_FIXED_VIEWS]
-    if has_predictions:
+    if roles.has("prediction"):
         statements.append(_CONFUSIONS_VIEW)
     return statements
 

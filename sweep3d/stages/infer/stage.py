@@ -28,6 +28,7 @@ from sweep3d.spec.columns import PREDICTION_COLUMNS
 from sweep3d.spec.loader import LoadedSpec
 from sweep3d.spec.models import ModelSpec
 from sweep3d.stages.driver import Computed, Feed, unique_jobs
+from sweep3d.stages.infer.evaluate import evaluate_checked
 from sweep3d.stages.infer.evaluators import EVALUATORS, Evaluator, Truth
 from sweep3d.stages.infer.handle import ModelHandle, model_key_path
 from sweep3d.stages.infer.labels import LabelMap
@@ -172,7 +173,7 @@ class InferStage:
 
         model, labels = self.model.classifier(), self._labels
         truths = _truths(plan, labels, self.model.name)
-        evaluator = self._evaluator(plan)
+        evaluator, kind = self._evaluator(plan), plan.spec.evaluator.kind
         if self.backend == STAND_IN and self._runner is None:
             self._runner = self._stand_in(plan, store, threads)
         if self._runner is not None:
@@ -193,7 +194,8 @@ class InferStage:
             else:
                 outputs = model_outputs(model, stacked, evaluator.task, self.model.name, self._runner)
             _check_classes(outputs, labels, self.model.name)
-            return evaluator.evaluate(outputs, [Truth(truths[j.object], **a) for j, a in zip(jobs, arrays)], labels)
+            return evaluate_checked(evaluator, kind, outputs,
+                                    [Truth(truths[j.object], **a) for j, a in zip(jobs, arrays)], labels)
 
         return infer
 
@@ -217,7 +219,8 @@ class InferStage:
         """ONNX Runtime standing in for torch, or None (torch) when it cannot: its answers must be
         torch's, so an export that fails or disagrees means torch, with a warning."""
         try:
-            return self._onnx(plan, store, threads, exact_ranks=max(plan.spec.evaluator.top_k, 5))  # and top-5
+            top_k = getattr(self._evaluator(plan).params, "top_k", 5)
+            return self._onnx(plan, store, threads, exact_ranks=max(top_k, 5))  # and top-5
         except Exception as exc:  # noqa: BLE001  (whatever stops ONNX Runtime, torch gives the same answers)
             log.warning(f"warning: ONNX Runtime cannot stand in for torch ({str(exc).split(';')[0]}); "
                         "inferring with torch")

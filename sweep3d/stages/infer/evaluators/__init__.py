@@ -3,11 +3,21 @@
 Each task is a module that registers its evaluator; a user's own is named ``module:Class``.
 """
 
-from sweep3d.stages.infer.evaluators.base import EVALUATORS, OUTCOMES, TASKS, Evaluator, Truth, box_iou, log_softmax
+from sweep3d.stages.infer.evaluators.base import (
+    EVALUATORS,
+    OUTCOMES,
+    TASKS,
+    Evaluator,
+    EvaluatorParams,
+    Roles,
+    Truth,
+    box_iou,
+    log_softmax,
+)
 from sweep3d.stages.infer.evaluators.classification import ClassificationEvaluator
 from sweep3d.stages.infer.evaluators.detection import DetectionEvaluator
 from sweep3d.stages.infer.evaluators.localization import LocalizationEvaluator
 from sweep3d.stages.infer.evaluators.segmentation import SegmentationEvaluator
 
 __all__ = ["EVALUATORS", "OUTCOMES", "TASKS", "ClassificationEvaluator", "DetectionEvaluator", "Evaluator",
-           "LocalizationEvaluator", "SegmentationEvaluator", "Truth", "box_iou", "log_softmax"]
+           "EvaluatorParams", "LocalizationEvaluator", "Roles", "SegmentationEvaluator", "Truth", "box_iou", "log_softmax"]

@@ -9,25 +9,39 @@ columns. It declares, before anything runs:
   ``"detection"`` boxes, labels and scores, ``"segmentation"`` per-pixel class scores, or
   ``"raw"`` the model's output array as it is (a user's own task, e.g. depth estimation);
 - ``passes``: the render passes it reads ("mask", "depth"); they are rendered only then, and
-  arrive in :class:`Truth` as arrays in the stored image's pixel grid.
+  arrive in :class:`Truth` as arrays in the stored image's pixel grid;
+- ``Params``: its settings, a :class:`~sweep3d.evaluation.EvaluatorParams` model read from the
+  spec's ``[evaluator]`` table (besides ``kind``, ``passes`` and ``min_visible``, which every
+  evaluator shares); unknown keys are spec errors;
+- ``roles``: which of its columns is the verdict, the loss, the outcome, … (a
+  :class:`~sweep3d.evaluation.Roles`), checked against ``schema`` when the spec loads; the views
+  and the report show what the roles say the evaluator has.
 """
 
 from __future__ import annotations
 
+import inspect
 from dataclasses import dataclass
-from typing import Any, ClassVar, Sequence
+from pathlib import Path
+from typing import Annotated, Any, ClassVar, Sequence
 
 import numpy as np
 import pyarrow as pa
+from pydantic import Field
 
+from sweep3d.evaluation import OUTCOMES, EvaluatorParams, EvaluatorRecord, Roles
 from sweep3d.registry import Registry
 from sweep3d.stages.infer.labels import LabelMap
 
 EVALUATORS: Registry[type["Evaluator"]] = Registry("evaluator")
 
-#: What a task with boxes or masks says of each image (``outcome``), besides null for an invalid one;
-#: in the order the report stacks them.
-OUTCOMES = ("correct", "wrong_class", "wrong_box", "missed")
+__all__ = ["EVALUATORS", "OUTCOMES", "TASKS", "Evaluator", "EvaluatorParams", "IoU", "Roles", "TopK", "Truth",
+           "box_iou", "log_softmax"]
+
+#: The settings the built-in evaluators share, declared once.
+TopK = Annotated[int, Field(ge=1, le=100, description="How many ranked classes the rows keep.")]
+IoU = Annotated[float, Field(gt=0.0, le=1.0, allow_inf_nan=False,
+                             description="The IoU with the true box or mask that counts as correct.")]
 
 #: What an evaluator's ``task`` may ask the model for (``stages.infer.tasks.model_outputs``).
 TASKS = ("classification", "localization", "detection", "segmentation", "raw")
@@ -64,28 +78,42 @@ class Evaluator:
     """Base of evaluators: ``evaluate`` returns one row (a dict over ``schema``'s names) per image.
 
     Args:
-        top_k: how many ranked classes classification columns keep.
-        iou: the IoU a box or mask needs to count as correct.
-        score: the score a detection needs to count.
+        params: its settings (a ``Params``); or, instead, their values by name
+            (``ClassificationEvaluator(top_k=3)``).
     """
 
     schema: ClassVar[pa.Schema]
     task: ClassVar[str] = "classification"
     passes: ClassVar[tuple[str, ...]] = ()
+    Params: ClassVar[type[EvaluatorParams]] = EvaluatorParams
+    roles: ClassVar[Roles] = Roles()
 
-    def __init__(self, top_k: int = 5, iou: float = 0.5, score: float = 0.5) -> None:
-        self.top_k = top_k
-        self.iou = iou
-        self.score = score
+    def __init__(self, params: EvaluatorParams | None = None, **values: Any) -> None:
+        self.params = params if params is not None else self.Params(**values)
 
     @classmethod
     def from_settings(cls, settings: Any) -> "Evaluator":
-        """The evaluator configured by the spec's ``[evaluator]`` table."""
-        return cls(top_k=settings.top_k, iou=settings.iou, score=settings.score)
+        """The evaluator configured by the spec's ``[evaluator]`` table (an ``EvaluatorSpec``)."""
+        return cls(cls.Params(**settings.params))
+
+    @classmethod
+    def record(cls, kind: str) -> EvaluatorRecord:
+        """What a plan records of the evaluator called ``kind``: its columns and their roles."""
+        return EvaluatorRecord(kind, tuple(cls.schema.names), cls.roles)
+
+    @classmethod
+    def where(cls) -> str:
+        """Where its ``evaluate`` is written (``mymod.py:12``), for errors that name the plug-in."""
+        try:
+            lines = inspect.getsourcelines(cls.evaluate)
+            return f"{Path(inspect.getsourcefile(cls.evaluate) or '?').name}:{lines[1]}"
+        except (OSError, TypeError):
+            return cls.__module__
 
     def key_part(self) -> dict[str, Any]:
-        """What of the evaluator's settings changes its rows (part of prediction keys)."""
-        return {"top_k": self.top_k}
+        """What of the evaluator's settings changes its rows (part of prediction keys): every
+        setting of its ``Params``, by default."""
+        return self.params.model_dump(mode="json")
 
     def evaluate(self, outputs: Any, truths: Sequence[Truth], labels: LabelMap) -> list[dict]:
         raise NotImplementedError

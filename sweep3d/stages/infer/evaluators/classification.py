@@ -7,7 +7,7 @@ from typing import Sequence
 import numpy as np
 import pyarrow as pa
 
-from sweep3d.stages.infer.evaluators.base import EVALUATORS, Evaluator, Truth, log_softmax
+from sweep3d.stages.infer.evaluators.base import EVALUATORS, Evaluator, EvaluatorParams, Roles, TopK, Truth, log_softmax
 from sweep3d.stages.infer.labels import LabelMap
 
 #: The columns every evaluator that ranks classes shares (localization adds its box to them).
@@ -70,7 +70,11 @@ class ClassificationEvaluator(Evaluator):
     model returned non-finite outputs (then the rest is null).
     """
 
+    class Params(EvaluatorParams):
+        top_k: TopK = 5
+
     schema = pa.schema(RANKED_FIELDS)
+    roles = Roles(loss="loss", prediction="top1_label")
 
     def evaluate(self, logits: np.ndarray, truths: Sequence[Truth], labels: LabelMap) -> list[dict]:
-        return ranked_rows(logits, truths, labels, self.top_k)
+        return ranked_rows(logits, truths, labels, self.params.top_k)

@@ -11,12 +11,13 @@ and IoU, so average precision can be computed over any subset of images later, i
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from typing import Sequence
 
 import numpy as np
 import pyarrow as pa
+from pydantic import Field
 
-from sweep3d.stages.infer.evaluators.base import EVALUATORS, Evaluator, Truth, box_iou
+from sweep3d.stages.infer.evaluators.base import EVALUATORS, Evaluator, EvaluatorParams, IoU, Roles, Truth, box_iou
 from sweep3d.stages.infer.labels import LabelMap
 from sweep3d.stages.infer.outputs import Detections
 
@@ -51,12 +52,15 @@ class DetectionEvaluator(Evaluator):
     detection by score, descending, with its IoU (0 for an image with no visible object).
     """
 
+    class Params(EvaluatorParams):
+        iou: IoU = 0.5
+        score: float = Field(0.5, ge=0.0, le=1.0, allow_inf_nan=False, description="The score a box needs to count.")
+
     schema = pa.schema(DETECTION_FIELDS)
     task = "detection"
     passes = ("mask",)
-
-    def key_part(self) -> dict[str, Any]:
-        return {"iou": self.iou, "score": self.score}
+    roles = Roles(outcome="outcome", iou="iou", prediction="top1_label", detection_scores="det_scores",
+                  detection_ious="det_ious")
 
     def evaluate(self, outputs: Sequence[Detections], truths: Sequence[Truth], labels: LabelMap) -> list[dict]:
         return [self._row(found, truth, labels) for found, truth in zip(outputs, truths)]
@@ -64,7 +68,7 @@ class DetectionEvaluator(Evaluator):
     def _row(self, found: Detections, truth: Truth, labels: LabelMap) -> dict:
         true_box = truth.box
         ious = box_iou(found.boxes, true_box) if true_box is not None else np.zeros(len(found.scores))
-        kept = found.scores >= self.score
+        kept = found.scores >= self.params.score
         matching = np.isin(found.labels, np.asarray(truth.ids, dtype=np.int64))
         hits = np.flatnonzero(kept & matching)
         chosen: int | None = None
@@ -74,14 +78,14 @@ class DetectionEvaluator(Evaluator):
             candidates = np.flatnonzero(kept)
             chosen = int(candidates[np.argmax(found.scores[candidates])])
         iou = float(ious[chosen]) if len(hits) and true_box is not None else None
-        correct = iou is not None and iou >= self.iou
+        correct = iou is not None and iou >= self.params.iou
         if true_box is None:
             outcome = "missed"
         elif correct:
             outcome = "correct"
         elif len(hits):
             outcome = "wrong_box"
-        elif np.any(kept & ~matching & (ious >= self.iou)):
+        elif np.any(kept & ~matching & (ious >= self.params.iou)):
             outcome = "wrong_class"
         else:
             outcome = "missed"

@@ -11,7 +11,16 @@ from typing import Sequence
 import numpy as np
 import pyarrow as pa
 
-from sweep3d.stages.infer.evaluators.base import EVALUATORS, Evaluator, Truth, box_iou
+from sweep3d.stages.infer.evaluators.base import (
+    EVALUATORS,
+    Evaluator,
+    EvaluatorParams,
+    IoU,
+    Roles,
+    TopK,
+    Truth,
+    box_iou,
+)
 from sweep3d.stages.infer.evaluators.classification import RANKED_FIELDS, ranked_rows
 from sweep3d.stages.infer.labels import LabelMap
 from sweep3d.stages.infer.outputs import Localized
@@ -38,15 +47,17 @@ class LocalizationEvaluator(Evaluator):
     in the stored image's pixels.
     """
 
+    class Params(EvaluatorParams):
+        top_k: TopK = 5
+        iou: IoU = 0.5
+
     schema = pa.schema(RANKED_FIELDS + BOX_FIELDS)
     task = "localization"
     passes = ("mask",)
-
-    def key_part(self) -> dict:
-        return {"top_k": self.top_k, "iou": self.iou}
+    roles = Roles(loss="loss", outcome="outcome", iou="iou", prediction="top1_label")
 
     def evaluate(self, outputs: Localized, truths: Sequence[Truth], labels: LabelMap) -> list[dict]:
-        rows = ranked_rows(outputs.logits, truths, labels, self.top_k)
+        rows = ranked_rows(outputs.logits, truths, labels, self.params.top_k)
         for row, box, truth in zip(rows, np.asarray(outputs.boxes, np.float64), truths):
             if not row["valid"]:
                 row.update({name: None for name, _ in BOX_FIELDS})
@@ -57,7 +68,7 @@ class LocalizationEvaluator(Evaluator):
             row.update(class_correct=class_correct, iou=iou,
                        **dict(zip(("pred_x0", "pred_y0", "pred_x1", "pred_y1"),
                                   (float(v) for v in box) if found else (None,) * 4)))
-            row["correct"] = bool(class_correct and iou is not None and iou >= self.iou)
+            row["correct"] = bool(class_correct and iou is not None and iou >= self.params.iou)
             row["outcome"] = ("wrong_class" if not class_correct else "missed" if iou is None
                               else "correct" if row["correct"] else "wrong_box")
         return rows

@@ -6,12 +6,12 @@ predicted mask is then compared with the visible mask from the render's mask pas
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from typing import Sequence
 
 import numpy as np
 import pyarrow as pa
 
-from sweep3d.stages.infer.evaluators.base import EVALUATORS, Evaluator, Truth
+from sweep3d.stages.infer.evaluators.base import EVALUATORS, Evaluator, EvaluatorParams, IoU, Roles, Truth
 from sweep3d.stages.infer.labels import LabelMap
 from sweep3d.truth import encode_mask
 
@@ -40,12 +40,13 @@ class SegmentationEvaluator(Evaluator):
     image whose scores are not all finite.
     """
 
+    class Params(EvaluatorParams):
+        iou: IoU = 0.5
+
     schema = pa.schema(SEGMENTATION_FIELDS)
     task = "segmentation"
     passes = ("mask",)
-
-    def key_part(self) -> dict[str, Any]:
-        return {"iou": self.iou}
+    roles = Roles(outcome="outcome", iou="iou", prediction="top1_label")
 
     def evaluate(self, scores: np.ndarray, truths: Sequence[Truth], labels: LabelMap) -> list[dict]:
         return [self._row(image, truth, labels) for image, truth in zip(np.asarray(scores), truths)]
@@ -64,7 +65,7 @@ class SegmentationEvaluator(Evaluator):
         # Ties between classes name the lowest id, so the label is the same on every run.
         votes = np.bincount((classes[true] if true.any() else classes).ravel(), minlength=scores.shape[0])
         top1 = int(votes.argmax())
-        correct = iou is not None and iou >= self.iou
+        correct = iou is not None and iou >= self.params.iou
         if correct:
             outcome = "correct"
         elif not pred.any():
