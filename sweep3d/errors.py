@@ -18,6 +18,11 @@ class SpecError(UserError):
         super().__init__(f"{where}: {problem}")
 
 
+class PluginError(UserError):
+    """A user's plug-in (a policy, a control, ...) broke its contract: the message names it and says
+    what it must do."""
+
+
 class StoreBusyError(UserError):
     """Another sweep3d process holds the store's writer lock."""
 

@@ -88,6 +88,8 @@ class Registry(Generic[T]):
         try:
             module = importlib.import_module(module_name)
         except ImportError as exc:
+            if exc.name and not module_name.startswith(exc.name):  # the module is there; an import of its failed
+                raise UserError(f"importing {self.kind} module {module_name!r} failed: {exc}") from None
             raise UserError(
                 f"cannot import {self.kind} module {module_name!r}: {exc}; "
                 "make sure it is installed or on PYTHONPATH"
