@@ -6,7 +6,7 @@
     exp.plan()                  # the jobs, cached or not; nothing is rendered
     exp.run()                   # render, postprocess and infer what the store lacks
     df = exp.dataframe()        # the results (exp.results() for a pyarrow Table)
-    exp.sql("SELECT ... FROM failure_modes")
+    exp.sql("SELECT * FROM control_accuracy")  # any read-only SELECT over the views
     exp.report("mugs.html")
 
 The command line is a thin layer over this module: ``run``, ``query`` and ``report`` call the same
@@ -107,7 +107,7 @@ class Experiment:
         return result
 
     def sql(self, query: str, model: str | None = None) -> pa.Table:
-        """The rows of one read-only SELECT over the views (``results``, ``failure_modes``, …; see
+        """The rows of one read-only SELECT over the views (``results``, ``control_accuracy``, …; see
         the README), as ``sweep3d query`` answers it.
 
         Args:

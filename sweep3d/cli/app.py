@@ -6,7 +6,7 @@ import os
 import signal
 import uuid
 from pathlib import Path
-from typing import Optional
+from typing import TYPE_CHECKING, Optional
 
 import typer
 from rich.console import Console
@@ -15,6 +15,9 @@ from rich.table import Table
 
 from sweep3d.cli._commands import check_wait, registrar
 from sweep3d.errors import UserError
+
+if TYPE_CHECKING:
+    from sweep3d.api import Experiment
 
 app = typer.Typer(
     add_completion=False,
@@ -331,7 +334,7 @@ def _cell(value, whole: bool = False) -> str:
     return "" if value is None else str(value)
 
 
-def _write_report(experiment, output: Optional[Path], model: Optional[str] = None) -> None:
+def _write_report(experiment: Experiment, output: Optional[Path], model: Optional[str] = None) -> None:
     path = experiment.report(output, model)
     console.print(f"report: [bold]{path}[/]")
 
