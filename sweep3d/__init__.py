@@ -2,6 +2,29 @@
 
 The package root imports neither bpy nor torch, so the CLI, the planner and the
 store start fast; the render stage imports bpy only inside its worker processes.
+``sweep3d.load`` and ``sweep3d.Experiment`` (the Python API, :mod:`sweep3d.api`) and
+``sweep3d.plugins`` (the classes plug-ins subclass) are imported when first used.
 """
 
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
 __version__ = "0.1.0"
+__all__ = ["Experiment", "load", "plugins"]
+
+if TYPE_CHECKING:
+    from sweep3d import plugins
+    from sweep3d.api import Experiment, load
+
+_LAZY = {"Experiment": "sweep3d.api", "load": "sweep3d.api"}
+
+
+def __getattr__(name: str) -> Any:
+    """``sweep3d.Experiment``, ``sweep3d.load`` and ``sweep3d.plugins``, imported on first use."""
+    if name in _LAZY:
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    if name == "plugins":
+        return importlib.import_module("sweep3d.plugins")
+    raise AttributeError(f"module 'sweep3d' has no attribute {name!r}")

@@ -196,7 +196,7 @@ def _run_locked(spec: LoadedSpec, store: Store, console: Console | None, wait: f
         result.seconds = time.perf_counter() - started
         store.append("runs", [{
             "run_id": result.run_id, "experiment": spec.name, "spec_path": str(spec.path),
-            "spec": spec.path.read_text(encoding="utf-8"), "jobs": len(result.plan.jobs),
+            "spec": spec.text(), "jobs": len(result.plan.jobs),
             "started_at": started_at, "created_at": utc_now(), "seconds": result.seconds,
             **{f"{o.stage}_{k}": v for o in result.outcomes for k, v in o.as_row().items() if k != "stage"},
         }])

@@ -4,14 +4,16 @@ render worker (one line, exit code 1)."""
 from __future__ import annotations
 
 import functools
-import math
 from typing import Callable
 
 import typer
 from rich.console import Console
 from rich.markup import escape
 
+from sweep3d.api import check_wait
 from sweep3d.errors import RenderError, UserError
+
+__all__ = ["check_wait", "registrar"]  # check_wait: the API's, for the commands' --wait
 
 err_console = Console(stderr=True)
 DEBUG = {"on": False}  # set by ``sweep3d --debug``: a failing plug-in's traceback is printed too
@@ -41,11 +43,3 @@ def registrar(app: typer.Typer) -> Callable[[Callable], Callable]:
         return app.command()(wrapper)
 
     return command
-
-
-def check_wait(seconds: float) -> float:
-    """``--wait``, refused when negative or not finite (typer reads ``-5`` and ``nan`` as floats)."""
-    if not (math.isfinite(seconds) and seconds >= 0):
-        raise UserError(f"--wait {seconds:g}: give the seconds to wait for the store's lock, a finite number >= 0 "
-                        "(0: do not wait)")
-    return seconds

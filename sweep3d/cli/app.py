@@ -6,7 +6,7 @@ import os
 import signal
 import uuid
 from pathlib import Path
-from typing import Optional
+from typing import TYPE_CHECKING, Optional
 
 import typer
 from rich.console import Console
@@ -15,6 +15,9 @@ from rich.table import Table
 
 from sweep3d.cli._commands import DEBUG, check_wait, registrar
 from sweep3d.errors import UserError
+
+if TYPE_CHECKING:
+    from sweep3d.api import Experiment
 
 app = typer.Typer(
     add_completion=False,
@@ -69,24 +72,18 @@ def run(
                                                       "start a local one on 127.0.0.1)."),
 ) -> None:
     """Render, postprocess and infer everything the spec needs that the store lacks."""
-    from sweep3d.cli.output import print_run
-    from sweep3d.pipeline import run as run_pipeline
-    from sweep3d.stages import load_spec
-    from sweep3d.stages.render.stage import Executor
+    from sweep3d.api import Experiment
 
     check_wait(wait)
-    loaded = load_spec(spec)
+    experiment = Experiment(spec)
     signal.signal(signal.SIGTERM, _interrupt)  # clean up workers and scratch files as on Ctrl-C
-    if executor not in ("local", "ray"):
-        raise UserError(f"--executor {executor!r}: use local or ray")
-    result = run_pipeline(loaded, console, wait=wait, executor=Executor(executor, address))
-    print_run(console, result)
-    if len(loaded.models) > 1:
+    result = experiment.run(wait=wait, executor=executor, address=address, console=console)
+    if len(experiment.spec.models) > 1:
         from sweep3d.cli.output import print_comparison
 
-        print_comparison(console, loaded)
+        print_comparison(console, experiment.spec)
     if report:
-        _write_report(loaded, None)
+        _write_report(experiment, None)
     if result.failed:
         raise typer.Exit(1)
 
@@ -98,20 +95,19 @@ def report(
     model: Optional[str] = ModelOption,
 ) -> None:
     """Write a self-contained HTML dashboard of the spec's results."""
-    from sweep3d.stages import load_spec
+    from sweep3d.api import Experiment
 
-    _write_report(load_spec(spec), output, model)
+    _write_report(Experiment(spec), output, model)
 
 
 @command
 def compare(spec: Path = SpecArg) -> None:
     """Compare the spec's models on the same jobs: accuracy, McNemar's test, where each is better."""
+    from sweep3d.api import Experiment, require_models
     from sweep3d.cli.output import print_comparison
-    from sweep3d.stages import load_spec
 
-    loaded = load_spec(spec)
-    if len(loaded.models) < 2:
-        raise UserError(f"{spec}: the spec tests one model; list two or more under [[models]] to compare them")
+    loaded = Experiment(spec).spec
+    require_models(loaded)
     print_comparison(console, loaded)
 
 
@@ -229,26 +225,17 @@ def query(
                                                           "the terminal, else records. Values are never cut."),
 ) -> None:
     """Answer SQL over the store with DuckDB, read-only: only --output writes a file."""
-    import duckdb
+    from sweep3d.api import Experiment
+    from sweep3d.stages.aggregate.sql import results_connection, select_only
 
-    from sweep3d.cache.store import Store
-    from sweep3d.stages import load_spec
-    from sweep3d.stages.aggregate import connect, has_view, no_results
-
-    loaded = load_spec(spec)
-    store = Store(loaded.store)
-    statement = _select_only(sql)
+    experiment = Experiment(spec)
+    statement = select_only(sql)
     export = _export_target(output) if output is not None else None
-    con = connect(store, loaded.name, read_only=True, writable=[export[0]] if export else [], model=model)
-    try:
+    with results_connection(experiment.spec, model, writable=[export[0]] if export else []) as con:
         if export is not None:
             _export(con, statement, output, *export)
         else:
             _print_rows(con.execute(statement), limit, form)
-    except duckdb.Error as exc:
-        if isinstance(exc, duckdb.CatalogException) and not has_view(con, "results"):
-            raise no_results(store, loaded.name, spec) from None
-        raise UserError(f"query failed: {str(exc).splitlines()[0]} ({QUERY_HINT})") from None
     if export is not None:
         console.print(f"wrote {output}")
 
@@ -308,30 +295,7 @@ def _print_plain(columns: list[str], rows: list[tuple], form: str) -> None:
     typer.echo(buffer.getvalue(), nl=False)
 
 
-QUERY_HINT = "sweep3d query runs one SELECT over the views results, jobs, predictions, renders, images, runs"
 EXPORT_FORMATS = {".csv": "FORMAT CSV, HEADER", ".json": "FORMAT JSON, ARRAY true", ".parquet": "FORMAT PARQUET"}
-
-
-def _select_only(sql: str) -> str:
-    """``sql`` without its trailing semicolons, if DuckDB parses it as one read-only query.
-
-    A query shared in a notebook or a script must not change or leak files: COPY, ATTACH,
-    INSTALL, SET and the like are refused here, before the connection (locked to the store's
-    files) would refuse most of them anyway.
-    """
-    import duckdb
-
-    from sweep3d.cache.store import is_select
-
-    statement = sql.strip().rstrip(";").strip()
-    try:
-        if is_select(statement):
-            return statement
-        kinds = [s.type.name for s in duckdb.extract_statements(statement)]
-    except duckdb.Error as exc:
-        raise UserError(f"query failed: {str(exc).splitlines()[0]} ({QUERY_HINT})") from None
-    what = kinds[0] if len(kinds) == 1 else f"{len(kinds)} statements" if kinds else "an empty query"
-    raise UserError(f"query refused {what}: {QUERY_HINT}; write rows to a file with --output FILE")
 
 
 def _export_target(output: Path) -> tuple[Path, str]:
@@ -377,10 +341,8 @@ def _cell(value, whole: bool = False) -> str:
     return "" if value is None else str(value)
 
 
-def _write_report(loaded, output: Optional[Path], model: Optional[str] = None) -> None:
-    from sweep3d.report import write_report
-
-    path = write_report(loaded, output, model)
+def _write_report(experiment: Experiment, output: Optional[Path], model: Optional[str] = None) -> None:
+    path = experiment.report(output, model)
     console.print(f"report: [bold]{path}[/]")
 
 

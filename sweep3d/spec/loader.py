@@ -7,6 +7,7 @@ what is expected, so the CLI can print one line instead of a traceback.
 from __future__ import annotations
 
 import difflib
+import importlib
 import logging
 import sys
 import tomllib
@@ -85,6 +86,11 @@ class LoadedSpec:
     labels: dict[str, tuple]  # object name -> ImageNet ids (built-in models) or the labels as given
     controls: list[ControlInstance] = field(default_factory=list)
     policy: Any = None
+    source: str | None = None  # the spec's text when it came from no file (a dict or a TOML string)
+
+    def text(self) -> str:
+        """The spec as written (what the runs table records)."""
+        return self.source if self.source is not None else self.path.read_text(encoding="utf-8")
 
     @property
     def name(self) -> str:
@@ -145,12 +151,25 @@ def load_spec(path: str | Path, catalogue: Catalogue) -> LoadedSpec:
         SpecError: for any mistake in the file, naming the key and the fix.
     """
     path = Path(path)
-    raw = _read_toml(path)
+    return validate_spec(_read_toml(path), catalogue, path=path, base=path.resolve().parent)
+
+
+def validate_spec(raw: dict[str, Any], catalogue: Catalogue, *, path: Path, base: Path,
+                  source: str | None = None) -> LoadedSpec:
+    """Validate and resolve a spec already read into a dict (from a file, a string or a notebook).
+
+    Args:
+        path: what errors name as the file (``<dict>`` or ``<string>`` for a spec with none).
+        base: the folder relative meshes, HDRIs, files and the store resolve against.
+        source: the spec's text, for one that has no file to read it back from.
+
+    Raises:
+        SpecError: for any mistake, naming ``path``, the key and the fix.
+    """
     try:
         spec = Spec.model_validate(raw)
     except ValidationError as exc:
         raise _first_error(path, exc) from None
-    base = path.resolve().parent
     fail = lambda key, problem: SpecError(str(path), key, problem)  # noqa: E731
 
     meshes = {}
@@ -182,7 +201,7 @@ def load_spec(path: str | Path, catalogue: Catalogue) -> LoadedSpec:
     policy = _load_policy(spec, fail, catalogue)
     store = Path(spec.experiment.store)
     store = (store if store.is_absolute() else base / store).resolve()
-    return LoadedSpec(path, spec, store, meshes, hdris, labels, controls, policy)
+    return LoadedSpec(path, spec, store, meshes, hdris, labels, controls, policy, source)
 
 
 def plugin_folder(folder: Path) -> None:
@@ -214,10 +233,15 @@ def _read_toml(path: Path) -> dict[str, Any]:
         raise SpecError(str(path), "", "no such spec file; check the path") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise SpecError(str(path), "", f"cannot read the spec: {exc}") from None
+    return parse_toml(text, str(path))
+
+
+def parse_toml(text: str, file: str) -> dict[str, Any]:
+    """The TOML ``text`` as a dict; a syntax error is a :class:`SpecError` naming ``file``."""
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise SpecError(str(path), "", f"not valid TOML: {exc}") from None
+        raise SpecError(file, "", f"not valid TOML: {exc}") from None
 
 
 def _first_error(path: Path, exc: ValidationError) -> SpecError:
@@ -333,6 +357,8 @@ def _load_controls(spec: Spec, fail, base: Path, catalogue: Catalogue) -> list[C
             raise fail(f"{where}.type", str(exc)) from None
         if not (isinstance(cls, type) and issubclass(cls, Control)):
             raise fail(f"{where}.type", f"{type_name!r} is not a sweep3d Control subclass")
+        if getattr(cls, "stage", None) == "render" and not importable_by_name(cls):
+            raise fail(f"{where}.type", _unreachable_in_workers(cls))
         control_id = entry.get("id", type_name.rsplit(":", 1)[-1])
         if not isinstance(control_id, str) or not control_id.isidentifier():
             raise fail(f"{where}.id", "must be a name made of letters, digits and underscores")
@@ -345,6 +371,33 @@ def _load_controls(spec: Spec, fail, base: Path, catalogue: Catalogue) -> list[C
         environments = _name_filter(entry, "environments", env_names, where, fail)
         instances.append(ControlInstance(control, spaces, objects, environments))
     return instances
+
+
+def importable_by_name(cls: type) -> bool:
+    """Whether another process can import ``cls`` by its module and name, as pickle does.
+
+    A class defined in ``__main__`` (a notebook cell, the script being run) is not: a spawned
+    render worker would run the script's whole body again to find it, or fail in a notebook.
+    """
+    if cls.__module__ in ("__main__", "__mp_main__") or "<locals>" in cls.__qualname__:
+        return False
+    try:
+        found: Any = importlib.import_module(cls.__module__)
+        for part in cls.__qualname__.split("."):
+            found = getattr(found, part)
+    except Exception:  # noqa: BLE001  (any failure means a worker could not find it either)
+        return False
+    return found is cls
+
+
+def _unreachable_in_workers(cls: type) -> str:
+    where = "a function" if "<locals>" in cls.__qualname__ else (
+        "__main__ (a notebook cell or the script being run)" if cls.__module__ in ("__main__", "__mp_main__")
+        else f"module {cls.__module__!r}, which does not hold it under that name")
+    name = cls.__qualname__.rsplit(".", 1)[-1]
+    return (f"rendered control {name} is defined in {where}; render workers are separate processes that import "
+            f"it by name: put the class in a module file beside the spec (e.g. mycontrols.py) and name it as "
+            f"type = \"mycontrols:{name}\" (post controls may stay: they run in this process)")
 
 
 def _check_columns(controls: list[ControlInstance], fail, evaluator: Any) -> None:

@@ -8,7 +8,7 @@ turns such a point into physical control values, so policies are testable on the
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any, Iterable, Sequence
 
 import numpy as np
 
@@ -52,8 +52,24 @@ class SpaceShape:
 
 @dataclass(frozen=True)
 class Point:
+    """One point a policy proposes: ``unit`` holds a coordinate in [0, 1] per continuous dimension
+    (a range), ``choice`` an option index per discrete one (a list), in :class:`SpaceShape` order."""
+
     unit: tuple[float, ...]
     choice: tuple[int, ...]
+
+
+class PointError(ValueError):
+    """A policy's points break the contract of :class:`Point`; the message says what was expected."""
+
+
+def contract(shape: SpaceShape) -> str:
+    """What a policy must return for ``shape``, for error messages."""
+    sizes = ", ".join(f"0..{size - 1}" for size in shape.choice_sizes)
+    floats, lists = shape.n_continuous, len(shape.choice_sizes)
+    return (f"return a list of Point(unit, choice) (from sweep3d.plugins) with unit a tuple of {floats} "
+            f"float{'s' * (floats != 1)} in [0, 1] and choice a tuple of {lists} option "
+            f"ind{'ices' if lists != 1 else 'ex'}" + (f" ({sizes})" if sizes else ""))
 
 
 def as_points(unit: np.ndarray, choice: np.ndarray) -> list[Point]:
@@ -62,10 +78,41 @@ def as_points(unit: np.ndarray, choice: np.ndarray) -> list[Point]:
 
 
 def as_arrays(points: Sequence[Point], shape: SpaceShape) -> tuple[np.ndarray, np.ndarray]:
-    """The arrays of :func:`as_points` for ``points`` (float64 and int64, one row per point)."""
-    unit = np.array([p.unit for p in points], dtype=np.float64).reshape(len(points), shape.n_continuous)
-    choice = np.array([p.choice for p in points], dtype=np.int64).reshape(len(points), len(shape.choice_sizes))
-    return unit, choice
+    """The arrays of :func:`as_points` for ``points`` (float64 and int64, one row per point).
+
+    Raises:
+        PointError: ``points`` is not a list of :class:`Point` of ``shape``'s sizes, with numbers
+            for coordinates and whole numbers for choices (the range of each is checked apart).
+    """
+    if isinstance(points, (str, bytes, Point)) or not isinstance(points, Iterable):
+        raise PointError(f"its points are {_what(points)}, not a list of points; {contract(shape)}")
+    points = list(points)
+    sizes = (shape.n_continuous, len(shape.choice_sizes))
+    for i, p in enumerate(points):
+        if not isinstance(p, Point):
+            raise PointError(f"its point {i} is {_what(p)}, not a Point; {contract(shape)}")
+        for field, size in zip(("unit", "choice"), sizes):
+            value = getattr(p, field)
+            if isinstance(value, (str, bytes)) or not isinstance(value, Sequence) or len(value) != size:
+                got = f"{len(value)} values" if isinstance(value, Sequence) else _what(value)
+                raise PointError(f"its point {i} has {got} as {field} where this scene's space needs {size}; "
+                                 f"{contract(shape)}")
+    try:
+        unit = np.array([p.unit for p in points], dtype=np.float64).reshape(len(points), sizes[0])
+        choice = np.array([p.choice for p in points], dtype=np.float64).reshape(len(points), sizes[1])
+    except (TypeError, ValueError) as exc:
+        raise PointError(f"its points hold something that is not a number ({exc}); {contract(shape)}") from None
+    whole = np.isfinite(choice) & (choice == np.round(choice))
+    if not whole.all():
+        i, d = (int(x) for x in np.argwhere(~whole)[0])
+        raise PointError(f"its point {i} has choice {points[i].choice[d]!r} at index {d}, not an option index; "
+                         f"{contract(shape)}")
+    return unit, choice.astype(np.int64)
+
+
+def _what(value: Any) -> str:
+    """``a tuple``, ``None``, ``a str``: what a value is, for error messages."""
+    return "None" if value is None else f"a {type(value).__name__} ({value!r:.40})"
 
 
 @dataclass(frozen=True)

@@ -523,7 +523,8 @@ def no_results(store: Store, experiment: str, spec: str | Path) -> UserError:
     """The one line for a query or report that finds no results: the experiment never ran, or
     its first run is still going (a run records its jobs table, which ``results`` joins, once
     its stages are through)."""
-    return UserError(f"no results for experiment {experiment!r} yet in {store.root}; run: sweep3d run {spec} "
+    how = "run it first" if str(spec).startswith("<") else f"run: sweep3d run {spec}"  # <dict>: no file to name
+    return UserError(f"no results for experiment {experiment!r} yet in {store.root}; {how} "
                      "(a run in progress shows its results when its stages finish)")
 
 

@@ -20,6 +20,7 @@ import numpy as np
 
 from sweep3d.cache.keys import digest
 from sweep3d.spec.space import Point, SearchSpace
+from sweep3d.stages.plan.checked import policy_arrays
 from sweep3d.stages.plan.policies import Outcome, Policy
 
 
@@ -35,15 +36,17 @@ def paired_seed(seed: int, object_name: str | None, control_ids: list[str]) -> i
 
 
 def scene_points(policy: Policy, paired: bool | str, space: SearchSpace, seed: int, object_name: str,
-                 environment: str, history: Mapping[Point, Outcome]) -> tuple[np.ndarray, np.ndarray]:
+                 environment: str, history: Mapping[Point, Outcome], name: str = "") -> tuple[np.ndarray, np.ndarray]:
     """The policy's points for one scene as arrays (unit coordinates, choices), from the seed
-    ``paired`` calls for (see the module's docstring)."""
+    ``paired`` calls for (see the module's docstring), checked (errors call the policy ``name``)."""
+    name = name or type(policy).__name__
     if not paired:
-        return policy.arrays(space.shape, scene_seed(seed, object_name, environment), history)
+        return policy_arrays(policy, name, space, scene_seed(seed, object_name, environment), history)
     owner = None if paired == "all" else object_name
     if not policy.separable or not space.controls:
-        return policy.arrays(space.shape, paired_seed(seed, owner, [c.id for c in space.controls]), history)
-    parts = [policy.arrays(SearchSpace([c]).shape, paired_seed(seed, owner, [c.id]), history) for c in space.controls]
+        return policy_arrays(policy, name, space, paired_seed(seed, owner, [c.id for c in space.controls]), history)
+    parts = [policy_arrays(policy, name, SearchSpace([c]), paired_seed(seed, owner, [c.id]), history)
+             for c in space.controls]
     return np.concatenate([u for u, _ in parts], axis=1), np.concatenate([c for _, c in parts], axis=1)
 
 

@@ -25,6 +25,7 @@ from sweep3d.stages.infer.keys import evaluator_key, infer_base, pred_keys
 from sweep3d.stages.jobs import JobList, Plan, PlanColumns, SceneBlock
 from sweep3d.stages.passes import truth_passes
 from sweep3d.stages.plan.batch import ControlBatch, control_batch, groups, keyed_texts
+from sweep3d.stages.plan.checked import policy_count
 from sweep3d.stages.plan.pairing import scene_points
 from sweep3d.stages.plan.policies import Outcome
 from sweep3d.stages.postprocess.keys import image_template
@@ -87,7 +88,7 @@ def make_plan(spec: LoadedSpec, *, framing: Framing, model_digest: str, blender:
             scene_controls = [c for c in spec.controls if c.applies_to(obj.name, env.name)]
             space = SearchSpace(scene_controls)
             unit, choice = scene_points(spec.policy, spec.spec.policy.paired, space, spec.experiment.seed, obj.name,
-                                        env.name, (history or {}).get((obj.name, env.name), {}))
+                                        env.name, (history or {}).get((obj.name, env.name), {}), spec.spec.policy.type)
             n = len(unit)
             if len(keys.render) + n > spec.experiment.max_jobs:  # a policy that cannot count
                 raise _too_many(spec, f"more than {spec.experiment.max_jobs:,}")
@@ -197,7 +198,8 @@ def count_jobs(spec: LoadedSpec) -> int | None:
         for env in spec.environments:
             applying = tuple(i for i, c in enumerate(spec.controls) if c.applies_to(obj.name, env.name))
             if applying not in per_space:
-                per_space[applying] = spec.policy.count(SearchSpace([spec.controls[i] for i in applying]).shape)
+                shape = SearchSpace([spec.controls[i] for i in applying]).shape
+                per_space[applying] = policy_count(spec.policy, spec.spec.policy.type, shape)
             if per_space[applying] is None:
                 return None
             total += per_space[applying]

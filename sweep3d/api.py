@@ -1,0 +1,176 @@
+"""The Python API, for notebooks and scripts: what the command line does, as calls.
+
+    import sweep3d
+
+    exp = sweep3d.load({"experiment": {"name": "mugs"}, ...}, base="assets")  # or a path, or TOML text
+    exp.plan()                  # the jobs, cached or not; nothing is rendered
+    exp.run()                   # render, postprocess and infer what the store lacks
+    df = exp.dataframe()        # the results (exp.results() for a pyarrow Table)
+    exp.sql("SELECT * FROM control_accuracy")  # any read-only SELECT over the views
+    exp.report("mugs.html")
+
+The command line is a thin layer over this module: ``run``, ``query`` and ``report`` call the same
+functions, so both raise the same one-line :class:`~sweep3d.errors.UserError` for a user's mistake.
+Importing it imports neither bpy nor torch.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Mapping, Union
+
+from sweep3d.errors import UserError
+
+if TYPE_CHECKING:
+    import pandas
+    import pyarrow as pa
+    from rich.console import Console
+
+    from sweep3d.pipeline import RunResult
+    from sweep3d.spec.loader import LoadedSpec
+    from sweep3d.stages.plan import Plan
+
+#: A spec: a file's path, TOML text (a string holding a newline or starting with ``[``) or a dict.
+SpecSource = Union[str, Path, Mapping[str, Any]]
+EXECUTORS = ("local", "ray")
+
+
+def load(spec: SpecSource, *, base: str | Path | None = None) -> Experiment:
+    """The experiment ``spec`` describes; see :class:`Experiment`."""
+    return Experiment(spec, base=base)
+
+
+class Experiment:
+    """One experiment: its validated spec, and the calls that plan, run and read it.
+
+    Args:
+        spec: a spec file's path, the text of one, or a dict of its tables (arrays of tables as
+            lists of dicts). In a dict a plug-in may be the class itself (``{"type": Vignette}``),
+            as it would be named ``"module:Vignette"`` in a file; a rendered control must come from
+            a module file (render workers import it by name), post controls, policies, models and
+            evaluators may be defined in the notebook.
+        base: the folder a dict's or a string's relative paths (meshes, HDRIs, the store) resolve
+            against; default the working directory. A file's resolve against its own folder.
+
+    Raises:
+        SpecError: for any mistake in the spec, naming the file (``<dict>``, ``<string>``), the key
+            and the fix.
+    """
+
+    def __init__(self, spec: SpecSource, *, base: str | Path | None = None) -> None:
+        self.spec: LoadedSpec = _load_spec(spec, base)
+
+    def __repr__(self) -> str:
+        return f"Experiment({self.name!r}, spec={str(self.spec.path)!r}, store={str(self.store)!r})"
+
+    @property
+    def name(self) -> str:
+        return self.spec.name
+
+    @property
+    def store(self) -> Path:
+        """The store folder the experiment's renders and results are kept in."""
+        return self.spec.store
+
+    def plan(self) -> Plan:
+        """The jobs of the spec's first model (``plan.table()`` for them as a pyarrow Table)."""
+        from sweep3d.pipeline import plan_spec
+
+        return plan_spec(self.spec)
+
+    def run(self, progress: bool = True, *, wait: float = 0.0, executor: str = "local",
+            address: str | None = None, console: Console | None = None) -> RunResult:
+        """Render, postprocess and infer what the store lacks; resumable, like ``sweep3d run``.
+
+        Args:
+            progress: show progress bars, then the stages' table and the findings.
+            wait: seconds to wait for another run holding the store's lock.
+            executor: where renders run, ``local`` worker processes or ``ray``.
+            address: with ``ray``, the cluster's address (default: start a local one).
+            console: print there (the command line's console), whatever ``progress`` says.
+        """
+        from rich.console import Console
+
+        from sweep3d.pipeline import run as run_pipeline
+        from sweep3d.stages.render.stage import Executor
+
+        check_wait(wait)
+        if executor not in EXECUTORS:
+            raise UserError(f"executor {executor!r}: use local or ray")
+        console = console or (Console() if progress else None)
+        result = run_pipeline(self.spec, console, wait=wait, executor=Executor(executor, address))
+        if console is not None:
+            from sweep3d.cli.output import print_run
+
+            print_run(console, result)
+        return result
+
+    def sql(self, query: str, model: str | None = None) -> pa.Table:
+        """The rows of one read-only SELECT over the views (``results``, ``control_accuracy``, …; see
+        the README), as ``sweep3d query`` answers it.
+
+        Args:
+            model: the model whose results the views show (its id; default the spec's first).
+        """
+        from sweep3d.stages.aggregate.sql import arrow, results_connection, select_only
+
+        statement = select_only(query, "read the rows and write them with pyarrow or pandas")
+        with results_connection(self.spec, model) as con:
+            return arrow(con, statement)
+
+    def results(self, model: str | None = None) -> pa.Table:
+        """One row per job with its parameters, prediction and verdict, ordered by job."""
+        return self.sql("SELECT * FROM results ORDER BY job", model)
+
+    def dataframe(self, model: str | None = None) -> pandas.DataFrame:
+        """:meth:`results` as a pandas DataFrame."""
+        try:
+            import pandas  # noqa: F401
+        except ImportError:
+            raise UserError("results as a DataFrame need pandas: pip install pandas (or use results(), "
+                            "a pyarrow Table)") from None
+        return self.results(model).to_pandas()
+
+    def report(self, path: str | Path | None = None, model: str | None = None) -> Path:
+        """Write the HTML report (default ``<store>/reports/<experiment>.html``) and return its path."""
+        from sweep3d.report import write_report
+
+        return write_report(self.spec, Path(path) if path is not None else None, model)
+
+    def compare(self) -> pa.Table:
+        """The spec's models against each other on the jobs both answered: accuracy difference,
+        fixed and broken jobs, McNemar's p-value and agreement (the ``model_agreement`` view)."""
+        require_models(self.spec)
+        return self.sql("SELECT * FROM model_agreement ORDER BY model_a, model_b")
+
+
+def require_models(spec: LoadedSpec) -> None:
+    """Refuse to compare a spec that tests one model."""
+    if len(spec.models) < 2:
+        raise UserError(f"{spec.path}: the spec tests one model; list two or more under [[models]] to compare them")
+
+
+def check_wait(seconds: float) -> float:
+    """``wait``, refused when negative or not finite (typer reads ``-5`` and ``nan`` as floats)."""
+    if not (math.isfinite(seconds) and seconds >= 0):
+        raise UserError(f"--wait {seconds:g}: give the seconds to wait for the store's lock, a finite number >= 0 "
+                        "(0: do not wait)")
+    return seconds
+
+
+def _load_spec(spec: SpecSource, base: str | Path | None) -> LoadedSpec:
+    """Load ``spec`` from wherever it comes, against the built-in plug-ins."""
+    from sweep3d.spec.sources import spec_from_dict, spec_from_toml
+    from sweep3d.stages import catalogue, load_spec
+
+    folder = Path(base) if base is not None else Path.cwd()
+    if isinstance(spec, Mapping):
+        return spec_from_dict(spec, catalogue(), folder)
+    if isinstance(spec, str) and ("\n" in spec or spec.lstrip().startswith("[")):
+        return spec_from_toml(spec, catalogue(), folder)
+    if not isinstance(spec, (str, Path)):
+        raise UserError(f"a spec is a path, TOML text or a dict, got {type(spec).__name__}")
+    if base is not None:
+        raise UserError(f"{spec}: base= is for a dict or TOML text; a spec file's paths are relative to its folder")
+    return load_spec(spec)

@@ -1,0 +1,60 @@
+"""A user's SQL over an experiment's views, read-only: what ``sweep3d query`` and the Python
+API's ``sql`` share (the statement check, the locked-down connection, one-line errors)."""
+
+from __future__ import annotations
+
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Iterator, Sequence
+
+import duckdb
+import pyarrow as pa
+
+from sweep3d.cache.store import Store, is_select
+from sweep3d.errors import UserError
+from sweep3d.spec.loader import LoadedSpec
+from sweep3d.stages.aggregate.views import connect, has_view, no_results
+
+QUERY_HINT = "sweep3d query runs one SELECT over the views results, jobs, predictions, renders, images, runs"
+
+
+def select_only(sql: str, refusal_hint: str = "write rows to a file with --output FILE") -> str:
+    """``sql`` without its trailing semicolons, if DuckDB parses it as one read-only query.
+
+    A query shared in a notebook or a script must not change or leak files: COPY, ATTACH,
+    INSTALL, SET and the like are refused here, before the connection (locked to the store's
+    files) would refuse most of them anyway.
+    """
+    statement = sql.strip().rstrip(";").strip()
+    try:
+        if is_select(statement):
+            return statement
+        kinds = [s.type.name for s in duckdb.extract_statements(statement)]
+    except duckdb.Error as exc:
+        raise UserError(f"query failed: {str(exc).splitlines()[0]} ({QUERY_HINT})") from None
+    what = kinds[0] if len(kinds) == 1 else f"{len(kinds)} statements" if kinds else "an empty query"
+    raise UserError(f"query refused {what}: {QUERY_HINT}; {refusal_hint}")
+
+
+@contextmanager
+def results_connection(spec: LoadedSpec, model: str | None = None,
+                       writable: Sequence[Path] = ()) -> Iterator[duckdb.DuckDBPyConnection]:
+    """A read-only connection over the experiment's views (``model``'s results, default the
+    first model's); a DuckDB error inside the block becomes one line (no results yet: how to
+    make them)."""
+    store = Store(spec.store)
+    con = connect(store, spec.name, read_only=True, writable=writable, model=model)
+    try:
+        yield con
+    except duckdb.Error as exc:
+        if isinstance(exc, duckdb.CatalogException) and not has_view(con, "results"):
+            raise no_results(store, spec.name, spec.path) from None
+        raise UserError(f"query failed: {str(exc).splitlines()[0]} ({QUERY_HINT})") from None
+    finally:
+        con.close()
+
+
+def arrow(con: duckdb.DuckDBPyConnection, statement: str) -> pa.Table:
+    """Every row of ``statement`` as a pyarrow Table (DuckDB 1.x and 2.x)."""
+    relation = con.sql(statement)
+    return relation.to_arrow_table() if hasattr(relation, "to_arrow_table") else relation.arrow()
