@@ -8,6 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from sweep3d.controls import ControlParams
 from sweep3d.stages import catalogue
 from sweep3d.stages.postprocess import PostControl, apply_post
 from sweep3d.stages.postprocess.controls import CORRUPTIONS
@@ -105,3 +106,31 @@ def test_apply_post_skips_identity_controls_and_keeps_order() -> None:
 def test_cutout_never_leaves_the_range(size, x, y, value) -> None:
     out = run(post_control("cutout"), photo(), size=size, x=x, y=y, value=value)
     assert out.shape == (48, 48, 3) and np.isfinite(out).all() and 0 <= out.min() <= out.max() <= 1
+
+
+def test_a_users_post_control_that_raises_or_returns_no_image_is_one_line_naming_it() -> None:
+    from sweep3d.errors import PluginError
+    from sweep3d.spec.loader import ControlInstance
+
+    class Broken(PostControl):
+        class Params(ControlParams):
+            mode: str = ""  # neutral: the modes below are not
+
+        def apply(self, image, params, rng):
+            if params.mode == "raise":
+                raise RuntimeError("no vignette today")
+            return "not an image" if params.mode == "text" else image[:2]
+
+    inst = ControlInstance(Broken("broken", "mypost:Broken"), {})
+    image = np.zeros((8, 8, 3), np.float32)
+    expected = {"raise": "(test_post_controls.py:", "text": "returned a str from apply()",
+                "crop": "returned an array of shape (2, 8, 3) from apply(); return the image as a float array of "
+                        "shape (8, 8, 3)"}
+    for mode, says in expected.items():
+        with pytest.raises(PluginError) as caught:
+            apply_post(image, [inst], {"broken": {"mode": mode}}, "ab" * 10)
+        message = str(caught.value)
+        assert message.startswith("control 'mypost:Broken' (id 'broken')") and says in message, message
+        assert "\n" not in message
+    assert "RuntimeError: no vignette today" in str(pytest.raises(PluginError, apply_post, image, [inst],
+                                                                  {"broken": {"mode": "raise"}}, "ab" * 10).value)

@@ -155,3 +155,32 @@ def test_the_python_api_example_runs(tmp_path: Path, monkeypatch) -> None:
     assert len(frame) == 4 and set(frame["blur_sigma"]) == {0.0, 2.0} and frame["valid"].all()
     assert scope["page"] == Path("notebook.html") and scope["page"].stat().st_size > 10_000
     assert scope["exp"].sql("SELECT count(*) AS n FROM results").to_pylist() == [{"n": 4}]
+
+
+@pytest.mark.blender
+def test_scene_edit_control_from_the_readme_adds_its_disc_for_one_job(blender_scene, tmp_path: Path,
+                                                                      monkeypatch) -> None:
+    from io import BytesIO
+
+    from PIL import Image
+
+    from sweep3d.stages.render.protocol import EnvironmentRef, RenderJob
+    from sweep3d.stages.render.worker import render_job
+
+    (tmp_path / "mydisc.py").write_text(readme_block("A rendered control has two hooks"))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    spec = write_spec(tmp_path, TINY_SPEC.replace(
+        "[policy]", '[[controls]]\ntype = "mydisc:Disc"\nradius = [0, 1]\nred = 1.0\n\n[policy]'))
+    control = next(c.control for c in load_spec(spec).controls if c.id == "Disc")
+
+    def render(radius: float) -> np.ndarray:
+        job = RenderJob(render_key="k", mesh=blender_scene.cube, environment=EnvironmentRef(color=(1.0, 1.0, 1.0)),
+                        blob=str(tmp_path / "x.png"), controls=((control, control.params({"radius": radius, "red": 1.0})),))
+        reply = render_job(blender_scene, job, keep_pixels=True)
+        assert reply.ok and not reply.info.rebuilt, reply.error
+        return np.asarray(Image.open(BytesIO(reply.png))).astype(int)
+
+    plain = render(0.0)
+    with_disc = render(1.0)  # a disc of the bounding sphere's radius sticks out of the cube
+    assert ((with_disc[..., 0] - with_disc[..., 2]) > 60).sum() > ((plain[..., 0] - plain[..., 2]) > 60).sum()
+    assert np.array_equal(render(0.0), plain)

@@ -128,6 +128,7 @@ class BlenderScene:
         self.props = Props(bpy, scene)
         self.lamps = Lamps(bpy, scene)
         self.frame = scratch / f"frame-{os.getpid()}.png"
+        scene.render.filepath = str(self.frame)  # set once: a scene edit's snapshot sees it as the render leaves it
         self.uv_pass = UVPass(bpy, scene, scratch) if "uv" in settings.passes else None
         self.parts: dict[str, Any] | None = None  # what the UV pass saw in the latest render
         truth = tuple(p for p in settings.passes if p in TRUTH_PASSES)
@@ -384,7 +385,6 @@ class BlenderScene:
         """
         from PIL import Image  # noqa: PLC0415
 
-        self.scene.render.filepath = str(self.frame)
         if self.log is not None:
             self.log.clear()
         self.bpy.ops.render.render(write_still=True)

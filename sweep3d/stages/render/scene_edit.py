@@ -76,6 +76,7 @@ def render_edited(scene: BlenderScene, edits: list[tuple[RenderedControl, BaseMo
         PluginError: an ``edit`` raised; the scene is cleaned up all the same.
     """
     bpy = scene.bpy
+    bpy.context.view_layer.update()  # derived values (world matrices) as the render will leave them
     before = snapshot(bpy)
     try:
         context = SceneEdit(bpy, scene.scene, tuple(scene.meshes), scene.pose, scene.current.normaliser,
