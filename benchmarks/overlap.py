@@ -130,6 +130,7 @@ def quickstart(folder: Path, config: str, objects: int) -> dict:
     from sweep3d.cache.store import Store
     from sweep3d.pipeline import run
     from sweep3d.stages import load_spec
+    from sweep3d.stages.aggregate import connect
     from sweep3d.stages.infer import onnx_backend
 
     overlap, model_lines = CONFIGS[config]
@@ -154,7 +155,7 @@ def quickstart(folder: Path, config: str, objects: int) -> dict:
     finally:
         onnx_backend.OnnxRunner = runner_class
     assert result.failed == 0, result.outcomes
-    rows = Store(folder / "store").connect("quickstart").execute(
+    rows = connect(Store(folder / "store"), "quickstart").execute(
         "SELECT job, render_key, image_key, pred_key, top1_label, correct FROM results ORDER BY job").fetchall()
     return {"wall": wall, "stages": {o.stage: o.seconds for o in result.outcomes}, "rows": rows,
             "by_torch": sum(r.by_torch for r in runners)}

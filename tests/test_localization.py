@@ -145,11 +145,12 @@ LOCALIZE_SPEC = TINY_SPEC.replace("[policy]", '[evaluator]\nkind = "localization
 @pytest.mark.torch
 def test_a_localization_run_records_boxes_and_splits_its_failures(tmp_path: Path) -> None:
     from sweep3d.cache.store import Store
+    from sweep3d.stages.aggregate import connect
 
     spec = write_spec(tmp_path, LOCALIZE_SPEC)
     result = CliRunner().invoke(app, ["run", str(spec), "--no-report"])
     assert result.exit_code == 0, result.output
-    con = Store(tmp_path / load_spec(spec).spec.experiment.store).connect(load_spec(spec).spec.experiment.name)
+    con = connect(Store(tmp_path / load_spec(spec).spec.experiment.store), load_spec(spec).spec.experiment.name)
     rows = con.execute("SELECT correct, class_correct, iou, outcome, pred_x0, pred_y0, pred_x1, pred_y1, "
                        "gt_x0, gt_y0, gt_x1, gt_y1 FROM results").fetchall()
     assert rows and con.execute("SELECT count(*) FROM truths").fetchone()[0] > 0  # the mask pass was rendered

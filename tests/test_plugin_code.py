@@ -149,3 +149,50 @@ def test_plugins_beside_the_spec_run_from_elsewhere_and_edits_redo_exactly_their
 
     plan = runner.invoke(app, ["plan", str(spec)])
     assert "changed since the last run" not in plan.output
+
+
+HANGING_POST = '''
+import os
+import time
+from pathlib import Path
+
+from pydantic import Field
+from sweep3d.controls import ControlParams
+from sweep3d.stages.postprocess import PostControl
+
+
+class Hang(PostControl):
+    class Params(ControlParams):
+        seconds: float = Field(0.0, ge=0.0)
+
+    def apply(self, image, params, rng):
+        Path(os.environ["HANG_MARK"]).touch()
+        time.sleep(params.seconds)
+        return image
+'''
+
+
+def test_ctrl_c_stops_a_run_whose_post_control_hangs(tmp_path: Path) -> None:
+    import signal
+    import time
+
+    (tmp_path / "hang.py").write_text(textwrap.dedent(HANGING_POST))
+    spec = write_spec(tmp_path, SPEC.replace('kind = "myeval:Strict"', 'kind = "classification"').replace(
+        'type = "myscene:Slab"\nsize = [0.0, 0.6]', 'type = "hang:Hang"\nseconds = [100000.0]').replace(
+        '[[controls]]\ntype = "mypost:Dim"\nstrength = [0.0, 0.5]\n', ""))
+    mark = tmp_path / "hanging"
+    process = subprocess.Popen([sys.executable, "-m", "sweep3d", "run", str(spec), "--no-report"], cwd=tmp_path,
+                               env={**os.environ, "HANG_MARK": str(mark)}, stdout=subprocess.PIPE,
+                               stderr=subprocess.STDOUT, text=True)
+    try:
+        deadline = time.monotonic() + 120
+        while not mark.exists() and time.monotonic() < deadline and process.poll() is None:
+            time.sleep(0.2)
+        assert mark.exists(), process.communicate(timeout=5)[0]
+        process.send_signal(signal.SIGINT)
+        output, _ = process.communicate(timeout=15)  # the hung thread is left behind: it is a daemon
+    finally:
+        process.kill()
+    assert process.returncode == 130, output
+    assert "interrupted: everything finished so far is stored" in output
+    assert len(Store(tmp_path / "store").keys("renders")) == 1, "the render made before the hang is kept"

@@ -43,6 +43,8 @@ FLUSH_SECONDS = 3.0
 FLUSH_ROWS = 64
 #: How long a failed or interrupted pass waits for a stage's thread to stop (it ends its item first).
 JOIN_SECONDS = 60.0
+#: ... and an interrupted one (a thread stuck in a user's plug-in is left behind: it is a daemon).
+INTERRUPTED_JOIN_SECONDS = 2.0
 
 
 @dataclass
@@ -365,6 +367,7 @@ class _Pass:
                                           daemon=True)
                 self.threads.append(thread)
                 thread.start()
+        interrupted = False
         try:
             if self.running[0]:
                 with closing(self.runs[0].stage.compute(self.feeds[0], self.plan, self.store)) as items:
@@ -374,11 +377,18 @@ class _Pass:
                 self._done(0)
             while any(self.running):
                 self._drain(block=True)
+        except KeyboardInterrupt:  # Ctrl-C or SIGTERM: the user wants out, even past a plug-in that hangs
+            interrupted = True
+            raise
         finally:
-            for feed in self.feeds:
-                feed.cancel()  # a no-op for the stages that are done
-            for thread in self.threads:
-                thread.join(JOIN_SECONDS)
+            self._stop(INTERRUPTED_JOIN_SECONDS if interrupted else JOIN_SECONDS)
+
+    def _stop(self, seconds: float) -> None:
+        """Cancel the stages' feeds and give each thread up to ``seconds`` to end its item."""
+        for feed in self.feeds:
+            feed.cancel()  # a no-op for the stages that are done
+        for thread in self.threads:
+            thread.join(seconds)
 
     def _produce(self, index: int) -> None:
         """A stage's thread: compute its feed, passing each item to the recording thread."""
