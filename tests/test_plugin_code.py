@@ -196,3 +196,57 @@ def test_ctrl_c_stops_a_run_whose_post_control_hangs(tmp_path: Path) -> None:
     assert process.returncode == 130, output
     assert "interrupted: everything finished so far is stored" in output
     assert len(Store(tmp_path / "store").keys("renders")) == 1, "the render made before the hang is kept"
+
+
+RAISING_POST = '''
+from pydantic import Field
+from sweep3d.plugins import ControlParams, PostControl
+
+
+class Smear(PostControl):
+    class Params(ControlParams):
+        amount: float = Field(0.0, ge=0.0)
+
+    def apply(self, image, params, rng):
+        raise ValueError(f"cannot smear by {params.amount}")
+'''
+SHORT_EVALUATOR = '''
+from sweep3d.stages.infer.evaluators import ClassificationEvaluator
+
+
+class FirstOnly(ClassificationEvaluator):
+    def evaluate(self, logits, truths, labels):
+        return super().evaluate(logits, truths, labels)[:1]  # one row, whatever the batch
+'''
+
+
+def test_a_post_control_that_raises_stops_the_run_in_one_line_and_keeps_the_renders(tmp_path: Path) -> None:
+    (tmp_path / "smear.py").write_text(textwrap.dedent(RAISING_POST))
+    spec = write_spec(tmp_path, SPEC.replace('kind = "myeval:Strict"', 'kind = "classification"').replace(
+        'type = "myscene:Slab"\nsize = [0.0, 0.6]', 'type = "smear:Smear"\namount = [0.5]').replace(
+        '[[controls]]\ntype = "mypost:Dim"\nstrength = [0.0, 0.5]\n', ""))
+    runner = CliRunner()
+    result = runner.invoke(app, ["run", str(spec), "--no-report"])
+    assert result.exit_code == 2, result.output
+    error = [line for line in result.output.splitlines() if "error:" in line]
+    assert len(error) == 1 and "Traceback" not in result.output, result.output
+    line = " ".join(result.output[result.output.index("error:"):].split())
+    assert line.startswith("error: control 'smear:Smear' (id 'Smear') (smear.py:11) failed in apply(): "
+                           "ValueError: cannot smear by 0.5"), line
+    assert len(Store(tmp_path / "store").keys("renders")) == 1, "the render is kept"
+    debug = runner.invoke(app, ["--debug", "run", str(spec), "--no-report"])
+    assert debug.exit_code == 2 and "Traceback" in debug.output and 'smear.py", line 11' in debug.output
+
+
+@pytest.mark.torch
+def test_an_evaluator_returning_too_few_rows_stops_the_run_in_one_line(tmp_path: Path) -> None:
+    (tmp_path / "short.py").write_text(textwrap.dedent(SHORT_EVALUATOR))
+    spec = write_spec(tmp_path, SPEC.replace('kind = "myeval:Strict"', 'kind = "short:FirstOnly"').replace(
+        'type = "myscene:Slab"\nsize = [0.0, 0.6]', 'type = "orientation"\nyaw = [0, 90]').replace(
+        '[[controls]]\ntype = "mypost:Dim"\nstrength = [0.0, 0.5]\n', ""))
+    result = CliRunner().invoke(app, ["run", str(spec), "--no-report"])
+    assert result.exit_code == 2, result.output
+    line = " ".join(result.output[result.output.index("error:"):].split())
+    assert line.startswith("error: evaluator short:FirstOnly") and "1 row" in line and "2 images" in line, line
+    assert "accuracy" not in result.output
+    assert len(Store(tmp_path / "store").keys("renders")) == 2, "the renders are kept"

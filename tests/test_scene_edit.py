@@ -91,6 +91,17 @@ def test_an_edit_shows_in_its_job_and_leaves_nothing_for_the_next(blender_scene,
 
 
 @pytest.mark.blender
+def test_another_objects_renders_are_byte_identical_with_and_without_an_edit_on_the_first(blender_scene,
+                                                                                         tmp_path) -> None:
+    other = material_job(blender_scene, tmp_path, {})  # a second mesh, which the edit does not apply to
+    baseline = pixels(render_job(blender_scene, other, keep_pixels=True))
+    slab = Slab("slab", "tests:Slab")
+    for size in (0.3, 0.6):  # the box with the slab, then the other object, twice over
+        render_job(blender_scene, job(blender_scene, tmp_path, (slab, slab.params({"size": size}))), keep_pixels=True)
+        assert np.array_equal(pixels(render_job(blender_scene, other, keep_pixels=True)), baseline)
+
+
+@pytest.mark.blender
 def test_an_edit_that_changes_held_data_rebuilds_the_scene(blender_scene, tmp_path) -> None:
     baseline = pixels(render_job(blender_scene, job(blender_scene, tmp_path), keep_pixels=True))
     repaint = Repaint("repaint", "tests:Repaint")
@@ -194,3 +205,21 @@ def test_material_surface_values_leave_a_skins_key_as_it_was() -> None:
     material.apply(state, edited)
     (target, pairs), = state.material_edits
     assert target == "glass" and dict(pairs)["base_color"] == pytest.approx((1.0, 0.0, 0.0))
+
+
+@pytest.mark.slow
+def test_a_material_target_no_object_has_is_one_line_naming_the_key(tmp_path) -> None:
+    from typer.testing import CliRunner
+
+    from sweep3d.cli import app
+    from tests.conftest import TINY_SPEC, write_spec
+
+    (tmp_path / "two.obj").write_text(TWO_MATERIALS_OBJ)
+    (tmp_path / "two.mtl").write_text(TWO_MATERIALS_MTL)
+    spec = write_spec(tmp_path, TINY_SPEC.replace('mesh = "cube.obj"', 'mesh = "two.obj"').replace(
+        'type = "orientation"\nyaw = [0, 45]', 'type = "material"\ntarget = "gray"\nroughness = [0.2, 0.8]'))
+    result = CliRunner().invoke(app, ["run", str(spec), "--no-report"])
+    assert result.exit_code == 2, result.output
+    line = " ".join(result.output.split())
+    assert "controls[0].target: the material control's target 'gray' is no material of two.obj (its materials: " \
+           "blue, grey)" in line and "name one of its materials" in line, line

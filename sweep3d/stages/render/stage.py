@@ -271,6 +271,10 @@ def _user_error(plan: Plan, job: Job, message: str) -> UserError:
         fix = "give an .exr/.hdr image Blender can read"
     elif "cannot write" in message:
         return UserError(problem)
+    elif problem.startswith("the material control's target"):
+        index = next((i for i, c in enumerate(spec.controls) if c.control.type_name == "material"
+                      and "target" in c.spaces), 0)
+        key, fix = f"controls[{index}].target", "name one of its materials, or leave target out for all of them"
     else:
         return object_error(spec, job.object, message, f" ({job.object!r} in {job.environment!r})")
     return SpecError(str(spec.path), key, f"{problem.rstrip('.')} ({job.object!r} in {job.environment!r}); {fix}")
