@@ -250,3 +250,32 @@ def test_an_evaluator_returning_too_few_rows_stops_the_run_in_one_line(tmp_path:
     assert line.startswith("error: evaluator short:FirstOnly") and "1 row" in line and "2 images" in line, line
     assert "accuracy" not in result.output
     assert len(Store(tmp_path / "store").keys("renders")) == 2, "the renders are kept"
+
+
+HANGING_EDIT = '''
+import time
+
+from pydantic import Field
+from sweep3d.plugins import ControlParams, RenderedControl
+
+
+class Stuck(RenderedControl):
+    class Params(ControlParams):
+        seconds: float = Field(0.0, ge=0.0)
+
+    def edit(self, scene, params):
+        time.sleep(params.seconds)
+'''
+
+
+def test_a_scene_edit_that_hangs_is_named_after_the_render_timeout(tmp_path: Path) -> None:
+    (tmp_path / "stuck.py").write_text(textwrap.dedent(HANGING_EDIT))
+    spec = write_spec(tmp_path, SPEC.replace('kind = "myeval:Strict"', 'kind = "classification"').replace(
+        'type = "myscene:Slab"\nsize = [0.0, 0.6]', 'type = "stuck:Stuck"\nseconds = [100000.0]').replace(
+        '[[controls]]\ntype = "mypost:Dim"\nstrength = [0.0, 0.5]\n', "").replace(
+        "denoise = false\n", "denoise = false\ntimeout = 1\n"))
+    result = CliRunner().invoke(app, ["run", str(spec), "--no-report"])
+    assert result.exit_code == 2, result.output
+    line = " ".join(result.output[result.output.index("error:"):].split())
+    assert line.startswith("error: control 'stuck:Stuck' (id 'Stuck') did not finish its job within render.timeout "
+                           "= 1 s, twice: its edit() may hang"), line

@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any, Iterator
 
 from sweep3d.errors import RenderError
+from sweep3d.registry import is_user_plugin
 from sweep3d.stages.render.protocol import (
     Fatal,
     Idle,
@@ -163,7 +164,7 @@ class RenderPool:
         for job in leftover:
             key = job.render_key
             if key == culprit and key in retried:
-                yield RenderReply(key, False, error=reason)
+                yield _failure(job, reason, timed_out, self.timeout)
             else:
                 if key == culprit:
                     retried.add(key)
@@ -185,6 +186,18 @@ class RenderPool:
                 worker.process.kill()
         self.workers = []
         shutil.rmtree(self.scratch, ignore_errors=True)
+
+
+def _failure(job: RenderJob, reason: str, timed_out: bool, timeout: float) -> RenderReply:
+    """The reply for a job that failed its worker twice: a user's control that edits the scene is
+    the likely cause of a job that never ends, so it is named (kind "plugin": the run stops)."""
+    editing = [c for c, _ in job.controls if is_user_plugin(c.type_name) and c.edits_scene]
+    if timed_out and editing:
+        names = ", ".join(f"{c.type_name!r} (id {c.id!r})" for c in editing)
+        return RenderReply(job.render_key, False, kind="plugin",
+                           error=f"control {names} did not finish its job within render.timeout = {timeout:g} s, "
+                                 "twice: its edit() may hang; raise render.timeout if it is only slow")
+    return RenderReply(job.render_key, False, error=reason)
 
 
 def _first_message(conn: Connection, process: Any) -> Ready | Fatal:
