@@ -11,11 +11,13 @@ its own registry; the spec loader sees both through the catalogue it is handed.
 from __future__ import annotations
 
 import math
-from typing import Annotated, Any, ClassVar, Literal
+from contextlib import contextmanager
+from typing import Annotated, Any, ClassVar, Iterator, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict
 
+from sweep3d.errors import plugin_failure
 from sweep3d.registry import code_identity, is_user_plugin
 
 
@@ -84,6 +86,19 @@ class Control:
         if is_user_plugin(self.type_name):
             part["code"] = code_identity(type(self))
         return part
+
+
+@contextmanager
+def blamed(control: Control, doing: str) -> Iterator[None]:
+    """Run a control's code so that a user's control that raises becomes one
+    :class:`~sweep3d.errors.PluginError` naming it (``doing``: "failed in apply()"); sweep3d's own
+    controls' exceptions are bugs, raised as they are."""
+    try:
+        yield
+    except Exception as exc:
+        if not is_user_plugin(control.type_name):
+            raise
+        raise plugin_failure(f"control {control.type_name!r} (id {control.id!r})", exc, doing) from None
 
 
 def wrap_periodic(value: float, period: float) -> float:

@@ -17,9 +17,9 @@ import pyarrow as pa
 
 from sweep3d.cache.blobs import load_image, sha256_bytes
 from sweep3d.cache.store import DIGEST_COLUMN, Store, atomic_write, utc_now
-from sweep3d.errors import PluginError, plugin_failure
+from sweep3d.controls import blamed
+from sweep3d.errors import PluginError
 from sweep3d.pixels import encode_png
-from sweep3d.registry import is_user_plugin
 from sweep3d.spec.loader import ControlInstance
 from sweep3d.stages.driver import Computed, Feed
 from sweep3d.stages.jobs import Job, Plan
@@ -50,21 +50,15 @@ def _applied(inst: ControlInstance, image: np.ndarray, params: Any, rng: np.rand
     """One control's ``apply``; a user's control that raises or returns no image of ``image``'s
     shape is a :class:`PluginError` naming it (sweep3d's own controls' failures are bugs: raised)."""
     control = inst.control
-    user = is_user_plugin(control.type_name)
-    name = f"control {control.type_name!r} (id {inst.id!r})"
-    try:
+    with blamed(control, "failed in apply()"):
         out = control.apply(image, params, rng)
-    except Exception as exc:
-        if not user:
-            raise
-        raise plugin_failure(name, exc, "failed in apply()") from None
     try:
         array = np.asarray(out, dtype=np.float32)
     except (TypeError, ValueError):
         array = None
     if array is None or array.shape != image.shape:
         what = f"an array of shape {array.shape}" if array is not None else f"a {type(out).__name__}"
-        raise PluginError(f"{name} returned {what} from apply(); return the image as a float array of shape "
+        raise PluginError(f"control {control.type_name!r} (id {inst.id!r}) returned {what} from apply(); return the image as a float array of shape "
                           f"{image.shape} (H, W, 3), values in [0, 1]")
     return array
 

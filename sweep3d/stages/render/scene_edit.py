@@ -13,8 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from sweep3d.errors import plugin_failure
-from sweep3d.registry import is_user_plugin
+from sweep3d.controls import blamed
 from sweep3d.stages.render.sandbox import clean_up, snapshot
 
 if TYPE_CHECKING:
@@ -82,13 +81,8 @@ def render_edited(scene: BlenderScene, edits: list[tuple[RenderedControl, BaseMo
         context = SceneEdit(bpy, scene.scene, tuple(scene.meshes), scene.pose, scene.current.normaliser,
                             scene.camera, object_name, environment_name)
         for control, params in edits:
-            try:
+            with blamed(control, "failed in edit()"):
                 control.edit(context, params)
-            except Exception as exc:
-                if not is_user_plugin(control.type_name):
-                    raise  # sweep3d's own control: an internal error, not the user's
-                raise plugin_failure(f"control {control.type_name!r} (id {control.id!r})", exc, "failed in edit()") \
-                    from None
         rgb = scene.render()
     finally:
         changed = clean_up(bpy, before).changed

@@ -101,19 +101,13 @@ def posed_state(job: RenderJob):
     Raises:
         PluginError: a control's ``apply`` raised.
     """
-    from sweep3d.errors import plugin_failure
-    from sweep3d.registry import is_user_plugin
+    from sweep3d.controls import blamed
     from sweep3d.stages.render.state import SceneState
 
     state = SceneState()
     for control, params in job.controls:
-        try:
+        with blamed(control, "failed in apply()"):
             control.apply(state, params)
-        except Exception as exc:
-            if not is_user_plugin(control.type_name):
-                raise  # sweep3d's own control: an internal error, not the user's
-            raise plugin_failure(f"control {control.type_name!r} (id {control.id!r})", exc, "failed in apply()") \
-                from None
     return state
 
 
