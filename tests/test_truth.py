@@ -243,7 +243,7 @@ def test_a_killed_run_resumes_its_truth_passes(tmp_path: Path) -> None:
 
     body = TRUTH_SPEC.replace("x = [0.0, 0.5, 1.6, 2.5]", "x = { range = [-0.6, 0.6] }").replace(
         '[policy]\ntype = "grid"', '[policy]\ntype = "grid"\nsamples_per_dim = 12').replace(
-        "samples = 1", "samples = 48")  # 24 renders, slow enough that the first segment holds only some
+        "samples = 1", "samples = 192")  # 24 renders, slow enough that the first segment (3 s) holds only some
     spec = write_spec(tmp_path, body)
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     proc = subprocess.Popen([sys.executable, "-m", "sweep3d", "run", str(spec), "--no-report"], env=env,
