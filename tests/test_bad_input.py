@@ -195,7 +195,7 @@ CASES = [
     Case("object-material-nan", ('labels = ["carton"]', 'labels = ["carton"]\nmaterial = { base_color = [nan, 0, 0] }'),
          "objects[0].material.base_color", ("between 0 and 1",)),
     # models (checked on one blank image before anything is rendered)
-    model("raises", "raised ValueError", "weights file not found"),
+    model("raises", "(bad_input_models.py:", "raised: ValueError", "weights file not found"),
     model("a_string", "must return a torch.nn.Module", "str"),
     model("four_d", "(batch, classes)"),
     model("ten_classes", "returns 10 classes", "1000"),

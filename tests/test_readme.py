@@ -184,3 +184,24 @@ def test_scene_edit_control_from_the_readme_adds_its_disc_for_one_job(blender_sc
     with_disc = render(1.0)  # a disc of the bounding sphere's radius sticks out of the cube
     assert ((with_disc[..., 0] - with_disc[..., 2]) > 60).sum() > ((plain[..., 0] - plain[..., 2]) > 60).sum()
     assert np.array_equal(render(0.0), plain)
+
+
+@pytest.mark.torch
+def test_classifier_factory_from_the_readme_loads_a_scripted_model_and_keys_its_code(tmp_path: Path,
+                                                                                      monkeypatch) -> None:
+    import torch
+
+    from sweep3d.registry import code_identity
+    from sweep3d.stages.infer import MODELS, Classifier, load_model
+
+    class Linear(torch.nn.Module):
+        def forward(self, x: torch.Tensor) -> torch.Tensor:
+            return x.mean(dim=(2, 3)) @ torch.ones(3, 1000)
+
+    torch.jit.save(torch.jit.script(Linear()), str(tmp_path / "my_model.pt"))
+    (tmp_path / "mymodels.py").write_text(readme_block("### Your own model"))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.chdir(tmp_path)
+    model = load_model("mymodels:resnet_like")
+    assert isinstance(model, Classifier) and model.preprocess.crop == 224
+    assert code_identity(MODELS.get("mymodels:resnet_like")).startswith("source:")

@@ -191,8 +191,8 @@ class RenderPool:
 def _failure(job: RenderJob, reason: str, timed_out: bool, timeout: float) -> RenderReply:
     """The reply for a job that failed its worker twice: a user's control that edits the scene is
     the likely cause of a job that never ends, so it is named (kind "plugin": the run stops)."""
-    editing = [c for c, _ in job.controls if is_user_plugin(c.type_name) and c.edits_scene]
-    if timed_out and editing:
+    editing = [c for c, _ in job.controls if is_user_plugin(c.type_name) and c.edits_scene] if timed_out else []
+    if editing:
         names = ", ".join(f"{c.type_name!r} (id {c.id!r})" for c in editing)
         return RenderReply(job.render_key, False, kind="plugin",
                            error=f"control {names} did not finish its job within render.timeout = {timeout:g} s, "
