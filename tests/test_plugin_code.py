@@ -14,6 +14,7 @@ from typer.testing import CliRunner
 
 from sweep3d.cache.store import Store
 from sweep3d.cli import app
+from sweep3d.stages.infer.tasks import model_outputs
 from tests.conftest import write_spec
 
 pytestmark = pytest.mark.slow
@@ -111,7 +112,8 @@ def edit(path: Path, old: str, new: str) -> None:
     os.utime(path, ns=(stat.st_atime_ns, stat.st_mtime_ns + 10**9))  # a new mtime even on coarse clocks
 
 
-def test_plugins_beside_the_spec_run_from_elsewhere_and_edits_redo_exactly_their_stages(tmp_path: Path) -> None:
+def test_plugins_beside_the_spec_run_from_elsewhere_and_edits_redo_exactly_their_stages(tmp_path: Path,
+                                                                                         monkeypatch) -> None:
     folder = tmp_path / "study"
     folder.mkdir()
     spec = write_spec(folder, SPEC)
@@ -144,8 +146,14 @@ def test_plugins_beside_the_spec_run_from_elsewhere_and_edits_redo_exactly_their
     edit(folder / "myeval.py", 'NOTE = "first"', 'NOTE = "second"')
     plan = runner.invoke(app, ["plan", str(spec)])
     assert "myeval:Strict changed since the last run: 4 to infer" in plan.output, plan.output
+    from sweep3d.stages.infer import stage
+
+    batches = []  # the model's runs on the run's images (its one-image probe on a blank aside)
+    monkeypatch.setattr(stage, "model_outputs", lambda model, images, *args: batches.append(len(images)) or
+                        model_outputs(model, images, *args))
     assert runner.invoke(app, ["run", str(spec), "--no-report"]).exit_code == 0
     assert counts(folder) == {"renders": 3, "images": 5, "predictions": 12}  # re-evaluated only
+    assert batches == [1], "the model's outputs for the 4 images were kept: it ran on none of them"
 
     plan = runner.invoke(app, ["plan", str(spec)])
     assert "changed since the last run" not in plan.output

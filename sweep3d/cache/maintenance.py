@@ -34,7 +34,7 @@ from sweep3d.cache.store import (
 TEMP_AGE = 3600.0  # seconds after which gc removes temp files (a live run's are younger)
 #: Folders that only the writer lock's holder writes (``reports/`` and ``cache/`` are not:
 #: ``sweep3d report`` writes them without the lock).
-LOCKED_FOLDERS = ("tables", "blobs", "jobs", "models")
+LOCKED_FOLDERS = ("tables", "blobs", "jobs", "models", "outputs")
 TEMP_PATTERN = ".*.tmp"  # how atomic_write names its temp files (a dot, the file's name, a tag, .tmp)
 
 

@@ -31,6 +31,7 @@ from sweep3d.stages.driver import Computed, Feed, unique_jobs
 from sweep3d.stages.infer.evaluate import evaluate_checked
 from sweep3d.stages.infer.evaluators import EVALUATORS, Evaluator, Truth
 from sweep3d.stages.infer.handle import ModelHandle, model_key_path
+from sweep3d.stages.infer.kept_outputs import KeptOutputs
 from sweep3d.stages.infer.labels import LabelMap
 from sweep3d.stages.infer.models import builtin_model
 from sweep3d.stages.infer.tasks import check_task, model_outputs
@@ -187,13 +188,21 @@ class InferStage:
 
             remote = remote_runner(self.model.name, self.model.framing.model)
 
+        kept = KeptOutputs(store, plan.model_digest, self._answers(plan), evaluator.task)
+
         def infer(jobs: list[Job], pixels: list[np.ndarray], arrays: list[dict]) -> list[dict]:
-            stacked = np.stack(pixels)
-            if remote is not None:
-                outputs = remote(stacked)
-            else:
-                outputs = model_outputs(model, stacked, evaluator.task, self.model.name, self._runner)
+            images = [j.image_key for j in jobs]
+            outputs = kept.load(images)  # kept from an earlier evaluator of the same model
+            computed = outputs is None
+            if computed:
+                stacked = np.stack(pixels)
+                if remote is not None:
+                    outputs = remote(stacked)
+                else:
+                    outputs = model_outputs(model, stacked, evaluator.task, self.model.name, self._runner)
             _check_classes(outputs, labels, self.model.name)
+            if computed:
+                kept.save(images, outputs)
             return evaluate_checked(evaluator, kind, outputs,
                                     [Truth(truths[j.object], **a) for j, a in zip(jobs, arrays)], labels)
 
@@ -226,6 +235,13 @@ class InferStage:
                         "inferring with torch")
             self.backend = "torch"
             return None
+
+    def _answers(self, plan: Plan) -> str:
+        """Whose answers the outputs are, for keeping them: the backend, and for ONNX Runtime standing
+        in for torch the ranks it checked against torch (another ``top_k`` needs others checked)."""
+        if self.backend == STAND_IN:
+            return f"{STAND_IN}:{max(getattr(self._evaluator(plan).params, 'top_k', 5), 5)}"
+        return self.backend or "torch"
 
     def _threads(self, beside: bool = False) -> int:
         """Inference threads: the model's setting, else one ``beside`` stages that still compute
