@@ -602,8 +602,11 @@ def utc_now() -> datetime:
     return datetime.now(timezone.utc).replace(tzinfo=None)
 
 
-def atomic_write(path: Path, data: bytes) -> None:
+def atomic_write(path: Path, data: bytes, durable: bool = True) -> None:
     """Write ``data`` to ``path`` through a temp file in the same folder and a rename.
+
+    Args:
+        durable: fsync before the rename; a cache whose damaged file is only a miss may skip it.
 
     Raises:
         StoreWriteError: the disk is full or the folder is not writable (no temp file is left).
@@ -613,8 +616,9 @@ def atomic_write(path: Path, data: bytes) -> None:
         path.parent.mkdir(parents=True, exist_ok=True)
         with open(tmp, "wb") as fh:
             fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
+            if durable:
+                fh.flush()
+                os.fsync(fh.fileno())
         os.replace(tmp, path)
     except BaseException as exc:
         _unlink_quietly(tmp)
