@@ -480,3 +480,39 @@ def test_query_never_cuts_values_whatever_the_terminal_width(synthetic: Path) ->
     assert [row["long_value"] for row in json.loads(as_json.output)] == [long, long]
     bad = CliRunner().invoke(app, ["query", str(synthetic), "SELECT 1", "--format", "xml"])
     assert bad.exit_code == 2 and "--format 'xml': use one of" in one_line(bad.output)
+
+
+@pytest.mark.parametrize("value", ["[/x]", "[bold red]x", "[link=https://example.com]click[/link]", "a\\tb"])
+def test_query_prints_values_as_text_never_as_markup(synthetic: Path, value: str) -> None:
+    for form in ("table", "records"):
+        result = CliRunner().invoke(app, ["query", str(synthetic), f"SELECT '{value}' AS v", "--format", form])
+        assert result.exit_code == 0 and "Traceback" not in result.output, result.output
+        assert value in result.stdout, (form, result.stdout)
+
+
+def test_query_shows_control_characters_escaped_and_keeps_them_in_json(synthetic: Path) -> None:
+    sql = "SELECT chr(27) || '[31mred' || chr(7) AS v"
+    for form in ("table", "records", "csv"):  # CliRunner's stdout is no terminal: csv keeps the bytes
+        result = CliRunner().invoke(app, ["query", str(synthetic), sql, "--format", form])
+        assert result.exit_code == 0, result.output
+        if form == "csv":
+            assert "\x1b[31mred\x07" in result.stdout
+        else:
+            assert "\\x1b[31mred\\x07" in result.stdout and "\x1b" not in result.stdout
+    result = CliRunner().invoke(app, ["query", str(synthetic), sql, "--format", "json"])
+    assert json.loads(result.stdout) == [{"v": "\x1b[31mred\x07"}]
+
+
+def test_machine_formats_print_every_row_and_notes_go_to_stderr(synthetic: Path) -> None:
+    sql = "SELECT range AS i FROM range(120)"
+    as_json = CliRunner().invoke(app, ["query", str(synthetic), sql, "--format", "json"])
+    assert [row["i"] for row in json.loads(as_json.stdout)] == list(range(120)) and not as_json.stderr
+    as_csv = CliRunner().invoke(app, ["query", str(synthetic), sql, "--format", "csv"])
+    assert len(list(csv.DictReader(as_csv.stdout.splitlines()))) == 120
+    table = CliRunner().invoke(app, ["query", str(synthetic), sql, "--format", "table"])
+    assert "first 50 rows shown" in table.stderr and "first 50 rows shown" not in table.stdout
+
+
+def test_help_texts_print_table_names_in_brackets() -> None:
+    result = CliRunner().invoke(app, ["bench", "--help"])
+    assert result.exit_code == 0 and "spec's [render]" in " ".join(result.output.split())

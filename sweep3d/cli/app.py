@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import os
+import re
 import signal
+import sys
 import uuid
 from pathlib import Path
 from typing import TYPE_CHECKING, Optional
@@ -11,9 +13,10 @@ from typing import TYPE_CHECKING, Optional
 import typer
 from rich.console import Console
 from rich.markup import escape
-from rich.table import Table
+from rich.table import Column, Table
+from rich.text import Text
 
-from sweep3d.cli._commands import DEBUG, check_wait, registrar
+from sweep3d.cli._commands import DEBUG, check_wait, err_console, registrar
 from sweep3d.errors import UserError
 
 if TYPE_CHECKING:
@@ -21,6 +24,7 @@ if TYPE_CHECKING:
 
 app = typer.Typer(
     add_completion=False,
+    rich_markup_mode=None,  # help texts are plain text: "[render]" is a table name, not markup
     no_args_is_help=True,
     help="Find where computer-vision models fail by rendering 3D scenes under systematic variation.",
 )
@@ -244,29 +248,28 @@ PRINT_FORMATS = ("auto", "table", "records", "csv", "json")
 
 
 def _print_rows(cursor, limit: int, form: str = "auto") -> None:
-    """The first ``limit`` rows of ``cursor`` in ``form`` (see ``query --format``), every value
-    whole, saying so when there are more."""
+    """``cursor``'s rows in ``form`` (see ``query --format``), every value whole and as text (never
+    read as markup; control characters shown escaped). A table or records show the first ``limit``
+    rows and say on stderr when there are more; CSV and JSON, for pipes, hold every row."""
     if form not in PRINT_FORMATS:
         raise UserError(f"--format {form!r}: use one of {', '.join(PRINT_FORMATS)}")
     columns = [d[0] for d in cursor.description or []]
+    if form in ("csv", "json"):
+        _print_plain(columns, cursor.fetchall(), form)
+        return
     rows = cursor.fetchmany(limit + 1)
     shown = rows[:limit]
-    if form in ("csv", "json"):
-        _print_plain(columns, shown, form)
+    table = Table(*(Column(header=Text(visible(c)), overflow="fold") for c in columns))  # wrap, never cut
+    for row in shown:
+        table.add_row(*[Text(visible(_cell(v))) for v in row])
+    fits = console.measure(table).minimum <= console.width and all(
+        len(c) <= max(console.width // max(len(columns), 1) - 3, 1) for c in columns)
+    if form == "table" or (form == "auto" and fits):
+        console.print(table)
     else:
-        table = Table(*columns)
-        for column in table.columns:
-            column.overflow = "fold"  # long values wrap instead of being cut with "…"
-        for row in shown:
-            table.add_row(*[_cell(v) for v in row])
-        fits = console.measure(table).minimum <= console.width and all(
-            len(c) <= max(console.width // max(len(columns), 1) - 3, 1) for c in columns)
-        if form == "table" or (form == "auto" and fits):
-            console.print(table)
-        else:
-            _print_records(columns, shown)
+        _print_records(columns, shown)
     if len(rows) > limit:
-        console.print(f"[dim]first {limit} rows shown; --limit N or --output FILE for more[/]")
+        err_console.print(f"[dim]first {limit} rows shown; --limit N or --output FILE for more[/]")
 
 
 def _print_records(columns: list[str], rows: list[tuple]) -> None:
@@ -275,8 +278,17 @@ def _print_records(columns: list[str], rows: list[tuple]) -> None:
     for i, row in enumerate(rows):
         console.print(f"[dim]-- row {i + 1}[/]", highlight=False)
         for column, value in zip(columns, row):
-            console.print(f"{escape(column.rjust(width))}: {escape(_cell(value, whole=True))}", highlight=False,
-                          soft_wrap=True)
+            console.print(Text(f"{visible(column.rjust(width))}: {visible(_cell(value, whole=True))}"),
+                          highlight=False, soft_wrap=True)
+
+
+_CONTROL = re.compile(r"[\x00-\x08\x0b-\x1f\x7f-\x9f]")  # control characters but tab and newline
+
+
+def visible(text: str) -> str:
+    """``text`` with its control characters (an ANSI escape's ESC, a bell) written as ``\\x1b``: a
+    value from the data reaches the terminal as text, never as a command to it."""
+    return _CONTROL.sub(lambda m: f"\\x{ord(m.group()):02x}", text)
 
 
 def _print_plain(columns: list[str], rows: list[tuple], form: str) -> None:
@@ -285,14 +297,16 @@ def _print_plain(columns: list[str], rows: list[tuple], form: str) -> None:
     import io
     import json
 
-    if form == "json":
+    if form == "json":  # JSON escapes control characters itself
         typer.echo(json.dumps([dict(zip(columns, row)) for row in rows], default=str, indent=1))
         return
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
     writer.writerow(columns)
     writer.writerows(["" if v is None else v for v in row] for row in rows)
-    typer.echo(buffer.getvalue(), nl=False)
+    text = buffer.getvalue()
+    # a pipe gets the values as they are (typer.echo would strip what looks like colour codes)
+    sys.stdout.write(visible(text) if sys.stdout.isatty() else text)
 
 
 EXPORT_FORMATS = {".csv": "FORMAT CSV, HEADER", ".json": "FORMAT JSON, ARRAY true", ".parquet": "FORMAT PARQUET"}

@@ -16,7 +16,7 @@ from rich.table import Table
 from sweep3d.cli._commands import check_wait, registrar
 from sweep3d.errors import UserError
 
-cache_app = typer.Typer(no_args_is_help=True, help="Check and tidy a spec's store: verify, gc, compact, stats.")
+cache_app = typer.Typer(no_args_is_help=True, rich_markup_mode=None, help="Check and tidy a spec's store: verify, gc, compact, stats.")
 console = Console()
 
 SpecArg = typer.Argument(..., help="Path to a spec whose store to work on.", show_default=False)
