@@ -1,7 +1,14 @@
-"""Rich progress bars for long stages: counts, cache hits, failures and rate."""
+"""Progress of long stages: counts, cache hits, failures and rate.
+
+On a terminal, Rich progress bars; when the output is not a terminal (a pipe, a log file, CI),
+where bars would show only at the end, one plain line per running stage every
+:data:`PLAIN_EVERY` seconds, and each stage's last line when it ends.
+"""
 
 from __future__ import annotations
 
+import datetime
+import threading
 from contextlib import contextmanager
 from typing import Iterator
 
@@ -44,11 +51,34 @@ class StageProgress:
             self._progress.update(self._task, advance=n, failed=self.failed)
 
 
-class RunProgress:
-    """A rich Progress shared by the stages of one run (silent when ``console`` is None)."""
+#: Seconds between progress lines when the output is not a terminal.
+PLAIN_EVERY = 10.0
 
-    def __init__(self, console: Console | None) -> None:
+
+def plain_line(task: Task) -> str:
+    """One stage's progress as plain text: ``render: 120/264 (0 cached, 0 failed), 4.12/s, 0:00:29 elapsed,
+    about 0:00:35 left``."""
+    elapsed = task.finished_time if task.finished else task.elapsed
+    line = (f"{task.description}: {int(task.completed)}/{int(task.total or 0)} ({task.fields.get('cached', 0)} cached, "
+            f"{task.fields.get('failed', 0)} failed)")
+    if elapsed and task.completed:
+        line += f", {task.completed / elapsed:.2f}/s, {datetime.timedelta(seconds=int(elapsed))} elapsed"
+        if not task.finished and task.total:
+            left = (task.total - task.completed) * elapsed / task.completed
+            line += f", about {datetime.timedelta(seconds=int(left))} left"
+    return line
+
+
+class RunProgress:
+    """A rich Progress shared by the stages of one run (silent when ``console`` is None; plain
+    lines at a steady interval when the console is not a terminal)."""
+
+    def __init__(self, console: Console | None, every: float = PLAIN_EVERY) -> None:
         self.console = console
+        self.plain = console is not None and not console.is_terminal
+        self.every = every
+        self._stop = threading.Event()
+        self._printer: threading.Thread | None = None
         self.progress = (
             Progress(
                 SpinnerColumn(),
@@ -61,6 +91,7 @@ class RunProgress:
                 TimeRemainingColumn(),
                 console=console,
                 transient=False,
+                disable=self.plain,  # the tasks are still counted: the plain lines read them
             )
             if console is not None
             else None
@@ -69,11 +100,24 @@ class RunProgress:
     def __enter__(self) -> "RunProgress":
         if self.progress is not None:
             self.progress.start()
+        if self.plain:
+            self._printer = threading.Thread(target=self._print_lines, name="sweep3d-progress", daemon=True)
+            self._printer.start()
         return self
 
     def __exit__(self, *exc: object) -> None:
         if self.progress is not None:
             self.progress.stop()
+        if self._printer is not None:
+            self._stop.set()
+            self._printer.join()
+
+    def _print_lines(self) -> None:
+        """Every ``every`` seconds, a line per stage still running (stages end with their own line)."""
+        while not self._stop.wait(self.every):
+            for task in list(self.progress.tasks):
+                if task.started and task.stop_time is None:
+                    self.console.print(plain_line(task), markup=False, highlight=False, soft_wrap=True)
 
     @contextmanager
     def stage(self, name: str, total: int, cached: int) -> Iterator[StageProgress]:
@@ -85,3 +129,6 @@ class RunProgress:
             yield StageProgress(self.progress, task)
         finally:
             self.progress.stop_task(task)
+            if self.plain:
+                done = next(t for t in self.progress.tasks if t.id == task)
+                self.console.print(plain_line(done), markup=False, highlight=False, soft_wrap=True)
