@@ -51,8 +51,9 @@ def plan(
     materials: bool = typer.Option(False, "--materials", help="Also import each object in Blender and print "
                                    "the material values it renders with (the file's, as the importer read them, "
                                    "and the spec's overrides)."),
+    jobs: int = typer.Option(0, "--jobs", min=0, help="Also list the first N jobs: scene, values, cached or not."),
 ) -> None:
-    """Show the jobs a spec expands to, what is already cached, and an estimated time."""
+    """Count the jobs a spec expands to, what is already cached, and an estimated time."""
     from sweep3d.cli.output import print_plan
     from sweep3d.stages import load_spec
 
@@ -61,7 +62,7 @@ def plan(
         from sweep3d.cli.materials import effective_materials, print_materials
 
         described = effective_materials(loaded)
-    print_plan(console, loaded)
+    print_plan(console, loaded, jobs)
     if materials:
         print_materials(console, loaded, described)
 

@@ -32,7 +32,9 @@ def cache_status(plan: Plan, store: Store, model: ModelHandle, several: bool = F
             for stage in (RenderStage(), PostprocessStage(), InferStage(model, several=several))]
 
 
-def print_plan(console: Console, spec: LoadedSpec) -> None:
+def print_plan(console: Console, spec: LoadedSpec, jobs: int = 0) -> None:
+    """What ``sweep3d plan`` prints: the counts per stage, cached and to compute, the estimate, and
+    with ``jobs`` the first that many jobs of the first model's plan."""
     store = Store(spec.store)
     models = [ModelHandle.resolve(spec, settings) for settings in spec.models]
     plans = [plan_spec(spec, model) for model in models]
@@ -71,6 +73,29 @@ def print_plan(console: Console, spec: LoadedSpec) -> None:
     console.print(f"estimated time: {duration(total)} (plus ~5 s start-up when anything needs rendering)")
     to_render = sum(needed - cached for stage, needed, cached, _ in status if stage.startswith("render"))
     print_warning(console, slow_render_warning(spec.render, max(p.framing.crop for p in plans), to_render))
+    if jobs:
+        print_jobs(console, plan, store, jobs)
+
+
+def print_jobs(console: Console, plan: Plan, store: Store, n: int) -> None:
+    """The first ``n`` jobs of ``plan``: scene, parameter values, and whether each stage has them
+    (values print as text)."""
+    from rich.table import Column
+    from rich.text import Text
+
+    rows = plan.table().slice(0, n).to_pylist()
+    have = {"render": store.keys("renders"), "infer": store.keys("predictions")}
+    headers = ["job", "object", "environment", *plan.columns, "rendered", "inferred"]
+    table = Table(*(Column(header=Text(h), overflow="fold") for h in headers))  # wrapped, never cut
+    for row in rows:
+        cells = [row["job"], row["object"], row["environment"], *(row.get(c) for c in plan.columns)]
+        cells += ["yes" if row["render_key"] in have["render"] else "no",
+                  "yes" if row["pred_key"] in have["infer"] else "no"]
+        table.add_row(*(Text("" if v is None else f"{v:.4g}" if isinstance(v, float) else str(v)) for v in cells))
+    total = len(plan.jobs) + len(plan.out_of_frame)
+    console.print(table)
+    console.print(f"the first {len(rows)} of {total} jobs" + (" (out-of-frame jobs are not rendered)"
+                                                              if plan.out_of_frame else ""))
 
 
 def _pairing(spec: LoadedSpec) -> str:

@@ -1,0 +1,24 @@
+"""``sweep3d plan --jobs N`` lists the first jobs: their scene, values and what is cached."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from typer.testing import CliRunner
+
+from sweep3d.cli import app
+from tests.conftest import TINY_SPEC, write_spec
+
+
+def test_plan_lists_the_first_jobs_with_their_values_and_cache_state(tmp_path: Path) -> None:
+    spec = write_spec(tmp_path, TINY_SPEC.replace('name = "box"', 'name = "[bold]box"'))
+    result = CliRunner().invoke(app, ["plan", str(spec), "--jobs", "3"], env={"COLUMNS": "200"})
+    assert result.exit_code == 0, result.output
+    lines = result.output.splitlines()
+    header = next(line for line in lines if "orientation_yaw" in line)
+    assert all(name in header for name in ("job", "object", "environment", "blur_sigma", "rendered", "inferred"))
+    rows = lines[lines.index(header) + 2: lines.index(header) + 5]  # under the header and its rule
+    assert all(row.split("│")[2].strip() == "[bold]box" and row.count(" no ") == 2 for row in rows), rows
+    assert [row.split("│")[4].strip() for row in rows] == ["0", "0", "45"]  # yaw: the grid's order
+    assert "the first 3 of 8 jobs" in result.output
+    assert "the first" not in CliRunner().invoke(app, ["plan", str(spec)]).output
