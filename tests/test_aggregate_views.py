@@ -23,8 +23,8 @@ from sweep3d.cli import app
 from sweep3d.stages.aggregate import (
     MACROS,
     VIEWS,
-    Region,
     connect,
+    largest_gap_region,
     register_views,
     stored_summary,
     summarise,
@@ -248,30 +248,99 @@ def _binomial_cdf(k: int, n: int, p: float) -> float:
     return sum(math.comb(n, j) * p**j * (1 - p) ** (n - j) for j in range(k + 1))
 
 
-def test_failure_modes_say_which_regions_are_significantly_below_overall(tmp_path: Path) -> None:
+def _hypergeometric_cdf(k: int, draws: int, successes: int, total: int) -> float:
+    return sum(math.comb(successes, j) * math.comb(total - successes, draws - j)
+               for j in range(k + 1)) / math.comb(total, draws)
+
+
+def test_failure_modes_test_each_value_against_the_rest_of_its_parameter(tmp_path: Path) -> None:
     rows = []
     for a, size, right in (("far", 20, 2), ("near", 20, 13), ("good", 60, 60)):
         rows += [{"c_a": a, "correct": i < right} for i in range(size)]
     con = make_store(tmp_path, rows)
-    overall = 75 / 100
     modes = {m["region"]: m for m in rows_of(con, "FROM failure_modes(min_count := 10)")}
-    assert set(modes) == {"c_a = far", "c_a = near"}  # good is above overall: not listed, but tested
+    assert set(modes) == {"c_a = far", "c_a = near"}  # good is above the rest: not listed, but tested
     near, far = modes["c_a = near"], modes["c_a = far"]
-    assert near["wilson_low"] < overall < near["wilson_high"]  # 65 %: its interval holds the overall 75 %
-    p_far, p_near = _binomial_cdf(2, 20, overall), _binomial_cdf(13, 20, overall)
+    # Fisher's exact test, one-sided, against the other 80 results (73 right for far, 62 for near)
+    p_far, p_near = _hypergeometric_cdf(2, 20, 75, 100), _hypergeometric_cdf(13, 20, 75, 100)
     assert far["p_value"] == pytest.approx(p_far, rel=1e-9) and near["p_value"] == pytest.approx(p_near, rel=1e-9)
-    # Holm over the three regions of 10 or more results (good's p-value is 1): far first, then near
-    assert far["p_holm"] == pytest.approx(3 * p_far, rel=1e-9)
-    assert near["p_holm"] == pytest.approx(max(3 * p_far, 2 * p_near), rel=1e-9)
-    assert far["significant"] is True and near["significant"] is False
+    assert (far["n_rest"], far["accuracy_rest"], far["test"]) == (80, pytest.approx(73 / 80), "fisher")
+    assert far["difference"] == pytest.approx(0.1 - 73 / 80)
+    assert far["difference_low"] < far["difference"] < far["difference_high"] < 0
+    # Benjamini–Hochberg over the three values of 10 or more results (good's p-value is 1)
+    assert far["q_value"] == pytest.approx(3 * p_far, rel=1e-9)
+    assert near["q_value"] == pytest.approx(min(1.0, 3 / 2 * p_near), rel=1e-9)
+    assert far["significant"] is True and near["significant"] is (near["q_value"] < 0.05)
+    # the earlier view's numbers stay: a binomial test against the overall 75 %, Holm-adjusted
+    assert far["p_overall"] == pytest.approx(_binomial_cdf(2, 20, 0.75), rel=1e-9)
+    assert far["p_holm_overall"] == pytest.approx(3 * _binomial_cdf(2, 20, 0.75), rel=1e-9)
     for k, n, p in ((0, 5, 0.3), (3, 10, 0.7), (9, 10, 0.95), (10, 10, 0.5)):
         (value,) = con.execute("SELECT binomial_cdf(?, ?, ?)", [k, n, p]).fetchone()
         assert value == pytest.approx(_binomial_cdf(k, n, p), rel=1e-9)
+    for k, draws, successes, total in ((0, 5, 10, 20), (3, 10, 12, 30), (4, 4, 10, 12), (2, 8, 9, 12)):
+        (value,) = con.execute("SELECT hypergeometric_cdf(?, ?, ?, ?)", [k, draws, successes, total]).fetchone()
+        assert value == pytest.approx(_hypergeometric_cdf(k, draws, successes, total), rel=1e-9)
 
     summary = summarise(con, ["c_a"])  # the printed "fails most at" names only the significant one
-    assert weakest_regions(summary) == [Region("c_a", "far", 0.1, 20, pytest.approx(3 * p_far, rel=1e-9))]
+    (region,) = weakest_regions(summary)
+    assert (region.column, region.label, region.count, region.count_rest) == ("c_a", "far", 20, 80)
+    assert region.q_value == pytest.approx(far["q_value"]) and summary.gap is None
     rows = [{"c_a": a, "correct": i < right} for a, right in (("near", 13), ("good", 16)) for i in range(20)]
-    assert weakest_regions(summarise(make_store(tmp_path / "noise", rows), ["c_a"])) == []
+    noise = summarise(make_store(tmp_path / "noise", rows), ["c_a"])
+    assert weakest_regions(noise) == []
+    gap = largest_gap_region(noise)  # no failure mode, but the largest gap is said, with its interval
+    assert (gap.label, gap.accuracy, gap.accuracy_rest) == ("near", 0.65, 0.8) and gap.difference_low < -0.15
+
+
+def test_half_hidden_halves_accuracy_and_is_named_with_a_paired_test(tmp_path: Path) -> None:
+    """The audit's 48-job case: hiding half the object drops accuracy from 16/24 to 4/24 on the
+    same 24 poses. Against the overall accuracy (which includes it) Holm said nothing; against the
+    rest of its parameter, on the pairs, it is a failure mode."""
+    rows = []
+    for pose in range(24):
+        rows.append({"hide": "none", "yaw": 15 * pose, "correct": pose < 16})
+        rows.append({"hide": "half", "yaw": 15 * pose, "correct": pose < 4})
+    con = make_store(tmp_path, rows)
+    modes = {m["region"]: m for m in rows_of(con, "FROM failure_modes(min_count := 2)")}
+    half = modes["hide = half"]
+    assert half["test"] == "mcnemar" and half["significant"]
+    assert half["p_value"] == pytest.approx(0.5 ** 12)  # 12 discordant pairs, all against half
+    assert half["difference"] == pytest.approx(4 / 24 - 16 / 24)
+    assert half["difference_low"] < -0.5 < half["difference_high"] < -0.2
+    assert half["p_holm_overall"] > 0.05  # what the old view said: nothing
+    (region,) = weakest_regions(summarise(con, ["hide", "yaw"]))
+    assert (region.column, region.label) == ("hide", "half")
+    unpaired = make_store(tmp_path / "unpaired", [{**r, "yaw": i} for i, r in enumerate(rows)])
+    half = {m["region"]: m for m in rows_of(unpaired, "FROM failure_modes(min_count := 2)")}["hide = half"]
+    assert half["test"] == "fisher" and half["p_value"] == pytest.approx(_hypergeometric_cdf(4, 24, 20, 48))
+    assert half["significant"]
+
+
+def test_where_no_value_differs_nothing_is_named_in_95_percent_of_seeds() -> None:
+    """A null model (every result right with the same chance, whatever the values) over three
+    crossed parameters: the false discovery rate over values and pairs keeps the chance of naming
+    any region at 5 % or less."""
+    import random
+
+    con = duckdb.connect()
+    con.register("cases", pa.Table.from_pylist(_null_rows(random.Random(0))))
+    con.execute("CREATE VIEW jobs AS SELECT * EXCLUDE (correct) FROM cases")
+    con.execute("CREATE VIEW results AS SELECT *, true AS valid FROM cases")
+    assert register_views(con, ["c_a", "c_b", "c_c"])
+    named = 0
+    seeds = 60
+    for seed in range(seeds):
+        con.register("cases", pa.Table.from_pylist(_null_rows(random.Random(seed))))
+        named += con.execute("SELECT count(*) > 0 FROM failure_modes(min_count := 5) WHERE significant"
+                             ).fetchall()[0][0]
+    assert named <= 0.05 * seeds
+
+
+def _null_rows(rng: Any) -> list[dict[str, Any]]:
+    """96 results, 2 × 3 × 4 values crossed, 4 each, right with probability 0.7."""
+    values = [(a, b, c) for a in "xy" for b in "uvw" for c in range(4) for _ in range(4)]
+    return [{"job": i, "object": "o", "environment": "e", "c_a": a, "c_b": b, "c_c": c, "correct": rng.random() < 0.7}
+            for i, (a, b, c) in enumerate(values)]
 
 
 def test_views_come_with_every_connection_and_summary_reads_them(tmp_path: Path) -> None:

@@ -9,7 +9,16 @@ from rich.table import Table
 from sweep3d.cache.store import Store
 from sweep3d.pipeline import plan_spec
 from sweep3d.spec.loader import LoadedSpec
-from sweep3d.stages.aggregate import Summary, connect, has_view, stored_summary, weakest_regions, wilson_interval
+from sweep3d.stages.aggregate import (
+    Region,
+    Summary,
+    connect,
+    has_view,
+    largest_gap_region,
+    stored_summary,
+    weakest_regions,
+    wilson_interval,
+)
 from sweep3d.stages.aggregate.tasks import HIDDEN
 from sweep3d.stages.code import explain
 from sweep3d.stages.driver import plan_status
@@ -167,11 +176,22 @@ def print_findings(console: Console, plan: Plan, store: Store | None = None) -> 
                   + (f"; {not_evaluable_line(summary)}" if summary.not_evaluable else ""))
     regions = weakest_regions(summary)
     if regions:
-        console.print("fails most at: " + "; ".join(
-            f"{escape(r.column)} = {escape(r.label)} ({r.accuracy:.0%} of {r.count})" for r in regions)
-            + " (significantly below overall, Holm-adjusted)")
+        console.print("fails most at: " + "; ".join(map(describe_region, regions))
+                      + " (each against the rest of its parameter; false discovery rate 5%)")
     elif summary.wrong and summary.effects:
-        console.print("fails most at: no value is significantly below the overall accuracy")
+        gap = largest_gap_region(summary)
+        if gap is None:
+            console.print("fails most at: no value is below the rest of its parameter")
+        else:
+            console.print(f"fails most at: no value is clearly below the rest of its parameter; the largest gap, "
+                          f"{describe_region(gap)}, may be chance at this size")
+
+
+def describe_region(region: Region) -> str:
+    """``occluder = half: 17% of 24 against 67% of the other 24 (-50.0 pts, 95% CI -68.3 to -22.3)``."""
+    return (f"{escape(region.column)} = {escape(region.label)}: {region.accuracy:.0%} of {region.count} against "
+            f"{region.accuracy_rest:.0%} of the other {region.count_rest} ({_points(region.difference)}, "
+            f"95% CI {_points(region.difference_low)} to {_points(region.difference_high)})")
 
 
 def not_evaluable_line(summary: Summary) -> str:

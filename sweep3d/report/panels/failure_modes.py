@@ -1,13 +1,14 @@
-"""Failure modes: the control regions where the model is significantly worse than overall.
+"""Failure modes: the control regions where the model does significantly worse than elsewhere.
 
 A region is one level of a parameter, or a pair of levels of two parameters (listed only when
-the pair is confidently worse than each level alone). Regions need ``min_count`` counted results
-and an accuracy below the overall one; they are ranked by the upper bound of the 95 % Wilson
-interval, so a small region must be very bad to rank above a large, merely bad one. A region is
-*significant* when a one-sided exact binomial test of its results against the overall accuracy
-holds after Holm's adjustment over every region tested (``p_holm`` < 0.05). The table and the
-figure show the significant regions; the others are listed apart, greyed, without examples. The
-list comes from the ``failure_modes`` SQL macro (see :mod:`sweep3d.stages.aggregate.views`).
+the pair is confidently worse than each level alone). Each is compared with the rest of its
+parameter (McNemar's exact test where the design pairs a two-level parameter, else Fisher's),
+and called significant at a false discovery rate of 5 % over every region tested
+(Benjamini–Hochberg ``q_value`` < 0.05). Regions are ranked by the upper end of the 95 %
+interval of their difference from the rest: the most certainly large drop first. The table and
+the figure show the significant regions; the others are listed apart, greyed, without examples.
+The list comes from the ``failure_modes`` SQL macro (see
+:mod:`sweep3d.stages.aggregate.failure_modes`).
 """
 
 from __future__ import annotations
@@ -15,7 +16,6 @@ from __future__ import annotations
 from typing import Any
 
 from sweep3d.report.figures import (
-    ACCURACY_AXIS,
     COLORS,
     Figure,
     interval,
@@ -28,12 +28,13 @@ from sweep3d.report.figures import (
 from sweep3d.report.panel import PanelInputs
 
 TOP = 12  # regions listed
+TESTS = {"mcnemar": "McNemar (paired)", "fisher": "Fisher"}
 EXAMPLES = 4  # wrong predictions shown per region
 
 
 def build(inputs: PanelInputs) -> dict[str, Any]:
-    """The ranked significant regions, each with examples, a dot plot of their accuracy and
-    interval, and the regions below the overall accuracy that are not significantly below it."""
+    """The ranked significant regions, each with examples, a dot plot of their difference from the
+    rest of their parameter, and the regions below the rest that are not significantly below it."""
     sql = f"FROM failure_modes(min_count := {inputs.min_count}) WHERE significant LIMIT {TOP}"
     modes = inputs.rows(sql)
     weak = inputs.rows(f"FROM failure_modes(min_count := {inputs.min_count}) WHERE NOT significant LIMIT {TOP}")
@@ -54,7 +55,8 @@ def build(inputs: PanelInputs) -> dict[str, Any]:
         "weak_total": weak_total,
         "min_count": inputs.min_count,
         "overall": pct(inputs.summary.accuracy, 0),
-        "figure": _figure(modes, inputs.summary.accuracy, sql) if modes else None,
+        "figure": _figure(modes, sql) if modes else None,
+        "gap": _row(weak[0]) if weak and not modes else None,
     }
 
 
@@ -65,33 +67,45 @@ def _terms(mode: dict[str, Any]) -> list[tuple[str, int, str]]:
 
 
 def _row(mode: dict[str, Any]) -> dict[str, Any]:
-    """A table row: the region's values, accuracy, interval, counts and Holm-adjusted p-value."""
+    """A table row: the region's values, accuracy and interval, the rest's accuracy, the difference
+    with its interval, counts, the test and its q-value."""
     return {"terms": [(parameter, label) for parameter, _, label in _terms(mode)],
             "accuracy": pct(mode["accuracy"], 0), "interval": interval(mode["wilson_low"], mode["wilson_high"]),
-            "wrong": mode["n"] - mode["n_correct"], "count": mode["n"], "p_holm": p_text(mode["p_holm"])}
+            "rest": pct(mode["accuracy_rest"], 0), "count_rest": mode["n_rest"],
+            "difference": points(mode["difference"]),
+            "difference_interval": f"{points(mode['difference_low'])} to {points(mode['difference_high'])}",
+            "wrong": mode["n"] - mode["n_correct"], "count": mode["n"], "test": TESTS[mode["test"]],
+            "q_value": p_text(mode["q_value"]), "p_overall": p_text(mode["p_holm_overall"])}
 
 
-def _figure(modes: list[dict[str, Any]], overall: float | None, sql: str) -> Figure:
-    """Accuracy of each region (dot) with its Wilson interval (bar), worst at the top."""
+def points(difference: float | None) -> str:
+    """A difference of two accuracies in percentage points: ``−50``, ``+3``."""
+    return "–" if difference is None else f"{100 * difference:+.0f}".replace("-", "−")
+
+
+def _figure(modes: list[dict[str, Any]], sql: str) -> Figure:
+    """Each region's difference from the rest of its parameter (dot) with its 95 % interval (bar),
+    worst at the top; 0 (no difference) dotted."""
     labels = [f"{i + 1}. " + plot_text(m["region"]) for i, m in enumerate(modes)]
     trace = {
-        "type": "scatter", "mode": "markers", "y": labels, "x": [m["accuracy"] for m in modes],
+        "type": "scatter", "mode": "markers", "y": labels, "x": [100 * m["difference"] for m in modes],
         "marker": {"color": COLORS["wrong"], "size": 9},
         "error_x": {"type": "data", "symmetric": False, "color": COLORS["muted"], "thickness": 1.5, "width": 4,
-                    "array": [m["wilson_high"] - m["accuracy"] for m in modes],
-                    "arrayminus": [m["accuracy"] - m["wilson_low"] for m in modes]},
-        "customdata": [[m["n"], m["n"] - m["n_correct"], m["wilson_low"], m["wilson_high"]] for m in modes],
-        "hovertemplate": "%{y}<br>accuracy %{x:.1%} (95% CI %{customdata[2]:.0%}–%{customdata[3]:.0%})"
-                         "<br>%{customdata[1]} wrong of %{customdata[0]}<extra></extra>",
+                    "array": [100 * (m["difference_high"] - m["difference"]) for m in modes],
+                    "arrayminus": [100 * (m["difference"] - m["difference_low"]) for m in modes]},
+        "customdata": [[m["n"], m["n"] - m["n_correct"], m["accuracy"], m["accuracy_rest"], m["n_rest"],
+                        100 * m["difference_low"], 100 * m["difference_high"]] for m in modes],
+        "hovertemplate": "%{y}<br>%{x:+.0f} points: %{customdata[2]:.0%} of %{customdata[0]} against "
+                         "%{customdata[3]:.0%} of the other %{customdata[4]}"
+                         "<br>95% CI %{customdata[5]:+.0f} to %{customdata[6]:+.0f} points<extra></extra>",
         "showlegend": False,
     }
-    shapes = []
-    if overall is not None:
-        shapes.append({"type": "line", "xref": "x", "yref": "paper", "x0": overall, "x1": overall, "y0": 0, "y1": 1,
-                       "line": {"color": COLORS["bar"], "dash": "dot", "width": 1.5}})
+    shapes = [{"type": "line", "xref": "x", "yref": "paper", "x0": 0, "x1": 0, "y0": 0, "y1": 1,
+               "line": {"color": COLORS["bar"], "dash": "dot", "width": 1.5}}]
     figure_layout = layout(
         height=90 + 30 * len(modes), margin={"l": 16, "r": 16, "t": 28, "b": 40}, shapes=shapes,
-        xaxis={**ACCURACY_AXIS, "title": {"text": "accuracy (95% Wilson interval); dotted: overall"}},
+        xaxis={"range": [-100, 5], "title": {"text": "accuracy less the rest of the parameter's, points (95% CI)"},
+               "zeroline": False},
         yaxis={"type": "category", "autorange": "reversed", "automargin": True},
     )
     return make_figure("fig-failure-modes", [trace], figure_layout, sql)

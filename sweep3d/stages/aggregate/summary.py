@@ -68,8 +68,10 @@ class Summary:
     not_evaluable: int = 0  # jobs of the plan with evaluable = false (rendered or not)
     not_evaluable_reasons: dict[str, int] = field(default_factory=dict)  # reason -> jobs
     min_visible: float | None = None  # the threshold behind the reason "hidden" (None: no truth passes)
-    #: control values significantly below the overall accuracy (``failure_modes``), most certainly bad first
+    #: control values significantly below the rest of their parameter (``failure_modes``), most certainly bad first
     regions: list[dict[str, Any]] = field(default_factory=list)
+    #: when no value is significant: the one furthest below the rest of its parameter (see :func:`largest_gap`)
+    gap: dict[str, Any] | None = None
 
     @property
     def wrong(self) -> int:
@@ -136,10 +138,12 @@ def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit:
             f"mode({top1}) FILTER (WHERE NOT correct) FROM results WHERE counted GROUP BY 1 ORDER BY 1"
         ).fetchall()
     ]
-    regions = significant_values(con, columns, region_min_count(counted))
+    min_count = region_min_count(counted)
+    regions = significant_values(con, columns, min_count)
+    gap = None if regions else largest_gap(con, columns, min_count)
     return Summary(jobs, evaluated, invalid, correct, accuracy, objects, environments, scene_accuracy,
                    scene_count, effects, failures, per_object, counted, sum(reasons.values()), reasons, min_visible,
-                   regions)
+                   regions, gap)
 
 
 def region_min_count(counted: int) -> int:
@@ -148,14 +152,34 @@ def region_min_count(counted: int) -> int:
     return min(10, max(2, counted // 20))
 
 
+#: What the findings say of each value (``failure_modes`` columns, renamed).
+_REGION_FIELDS = {"parameter_a": "column", "label_a": "label", "accuracy": "accuracy", "n": "count",
+                  "accuracy_rest": "accuracy_rest", "n_rest": "count_rest", "difference": "difference",
+                  "difference_low": "difference_low", "difference_high": "difference_high", "q_value": "q_value"}
+
+
 def significant_values(con: duckdb.DuckDBPyConnection, columns: list[str], min_count: int,
                        limit: int = REGION_LIMIT) -> list[dict[str, Any]]:
     """Single control values (of ``columns``, object and environment) whose accuracy is significantly
-    below the overall one, as ``failure_modes`` ranks and tests them."""
-    return [dict(zip(["column", "label", "accuracy", "count", "p_holm"], row)) for row in con.execute(
-        "SELECT parameter_a, label_a, accuracy, n, p_holm FROM failure_modes(min_count := ?) "
-        "WHERE size = 1 AND significant AND list_contains(?, parameter_a) LIMIT ?",
-        [min_count, ["object", "environment", *columns], limit]).fetchall()]
+    below the rest of their parameter's, as ``failure_modes`` ranks and tests them."""
+    return _values(con, columns, min_count, "significant", limit)
+
+
+def largest_gap(con: duckdb.DuckDBPyConnection, columns: list[str], min_count: int) -> dict[str, Any] | None:
+    """The value furthest below the rest of its parameter that is not significantly below it (the
+    smallest p-value), so a run with no failure mode says how large a gap chance may hide."""
+    gaps = _values(con, columns, min_count, "NOT significant ORDER BY p_value, difference", 1)
+    return gaps[0] if gaps else None
+
+
+def _values(con: duckdb.DuckDBPyConnection, columns: list[str], min_count: int, where: str,
+            limit: int) -> list[dict[str, Any]]:
+    """``failure_modes``' single values of ``columns`` (with object and environment) under ``where``."""
+    names = ", ".join(_REGION_FIELDS)
+    rows = con.execute(
+        f"SELECT {names} FROM failure_modes(min_count := ?) WHERE size = 1 AND list_contains(?, parameter_a) "
+        f"AND {where} LIMIT ?", [min_count, ["object", "environment", *columns], limit]).fetchall()
+    return [dict(zip(_REGION_FIELDS.values(), row)) for row in rows]
 
 
 def not_evaluable_reasons(con: duckdb.DuckDBPyConnection) -> tuple[dict[str, int], float | None]:
@@ -193,20 +217,31 @@ def control_effects(con: duckdb.DuckDBPyConnection, columns: list[str]) -> list[
 
 @dataclass(frozen=True)
 class Region:
-    """One control parameter's value (or bin) where the model is significantly worse than overall."""
+    """One control parameter's value (or bin) where the model does worse than at the parameter's
+    other values: its accuracy and count, the rest's, and the difference with its 95 % interval."""
 
     column: str
     label: str
     accuracy: float
     count: int
-    p_holm: float
+    accuracy_rest: float
+    count_rest: int
+    difference: float
+    difference_low: float
+    difference_high: float
+    q_value: float
 
 
 def weakest_regions(summary: Summary, top: int = REGION_LIMIT) -> list[Region]:
-    """The control values significantly below the overall accuracy (one-sided exact binomial test,
-    Holm's adjustment over every region tested, as in ``failure_modes``), most certainly bad first;
-    none when no value is."""
-    return [Region(r["column"], r["label"], r["accuracy"], r["count"], r["p_holm"]) for r in summary.regions[:top]]
+    """The control values significantly below the rest of their parameter (one-sided exact test,
+    Benjamini–Hochberg over every region tested, as in ``failure_modes``), most certainly bad
+    first; none when no value is."""
+    return [Region(**r) for r in summary.regions[:top]]
+
+
+def largest_gap_region(summary: Summary) -> Region | None:
+    """The value furthest below the rest of its parameter, not significantly (None if none is below)."""
+    return Region(**summary.gap) if summary.gap else None
 
 
 # -- remembered summaries ---------------------------------------------------------------------
@@ -258,7 +293,7 @@ def summary_key(store: Store, experiment: str, columns: list[str], failure_limit
             states.append([path.name, st.st_size, st.st_mtime_ns, st.st_ctime_ns, st.st_ino])
         except OSError:
             states.append([path.name, None])
-    sources = [Path(__file__).with_name(name).read_bytes() for name in ("views.py", "tasks.py", "results.py")]
+    sources = [Path(__file__).with_name(name).read_bytes() for name in ("views.py", "tasks.py", "results.py", "failure_modes.py", "paired.py")]
     code = hashlib.sha256(b"\0".join([Path(__file__).read_bytes(), *sources])).hexdigest()
     described = {"format": SUMMARY_FORMAT, "experiment": experiment, "columns": list(columns),
                  "failure_limit": failure_limit, "files": states, "code": code, "duckdb": duckdb.__version__}

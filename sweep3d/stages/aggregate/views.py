@@ -68,13 +68,10 @@ Macros:
     df_error) / SS_total, at least 0.
 ``failure_modes(min_count := 10)``
     single levels and pairs of levels with at least ``min_count`` counted results and accuracy
-    below the overall accuracy, ranked by ``wilson_high`` (the most certainly bad first). A pair
-    is listed only when its ``wilson_high`` is below the accuracy of each of its two levels.
-    ``p_value``: one-sided exact binomial test of the region's results against the overall
-    accuracy (``binomial_cdf(n_correct, n, overall)``; 1 for a region at or above it);
-    ``p_holm``: Holm's adjustment over every region of ``min_count`` results or more, listed or
-    not (each level and each pair of levels of two varying parameters); ``significant``:
-    ``p_holm`` < 0.05. ``sweep3d run``'s "fails most at" and the report show significant ones.
+    below the rest of their parameter, each with its difference from the rest (and interval), a
+    one-sided exact test (McNemar's on a paired two-level parameter, else Fisher's), and the
+    Benjamini–Hochberg ``q_value`` over every region tested; ``significant``:
+    ``q_value`` < 0.05. See :mod:`sweep3d.stages.aggregate.failure_modes`.
 ``object_sensitivity(min_count := 10)``
     the ``object_sensitivity`` view at another minimum count per level.
 """
@@ -93,8 +90,9 @@ from sweep3d.cache.store import Store, lock_down
 from sweep3d.errors import UserError
 from sweep3d.evaluation import Roles
 from sweep3d.spec.columns import JOB_COLUMNS, MODELS_METADATA, PARAMETERS_METADATA
-from sweep3d.stages.aggregate.compare import ALPHA, COMPARE_MACROS, COMPARE_VIEWS, register_compare_views
+from sweep3d.stages.aggregate.compare import COMPARE_MACROS, COMPARE_VIEWS, register_compare_views
 from sweep3d.stages.aggregate.detection import DETECTION_VIEWS, detection_views
+from sweep3d.stages.aggregate.failure_modes import create_failure_modes
 from sweep3d.stages.aggregate.paired import PAIRED_VIEWS, register_paired_views
 from sweep3d.stages.aggregate.parts import register_part_views
 from sweep3d.stages.aggregate.results import plan_min_visible, register_results, results_roles
@@ -120,7 +118,8 @@ _ACCURACY = ("n_correct / nullif(n, 0) AS accuracy, wilson_low(n_correct, n) AS 
 VIEWS = ("control_values", "control_stats", "control_levels", "control_parameters", "control_accuracy",
          "pair_accuracy", "scene_accuracy", "variance_explained", "object_sensitivity", "object_confusions",
          "part_visibility", *TASK_VIEWS, *DETECTION_VIEWS, *PAIRED_VIEWS, *COMPARE_VIEWS)
-MACROS = ("wilson_low", "wilson_high", "binomial_cdf", "epsilon_squared", "failure_modes", "object_sensitivity",
+MACROS = ("wilson_low", "wilson_high", "binomial_cdf", "hypergeometric_cdf", "difference_low",
+          "difference_high", "epsilon_squared", "failure_modes", "object_sensitivity",
           *COMPARE_MACROS)
 
 
@@ -232,6 +231,7 @@ def register_views(con: duckdb.DuckDBPyConnection, parameters: list[str] | None 
     register_task_views(con, roles, set(result_columns), model, min_visible)
     detection_views(con, roles, set(result_columns))
     register_paired_views(con, columns, set(result_columns))
+    create_failure_modes(con, MIN_COUNT, paired=has_view(con, "paired_values"))
     return True
 
 
@@ -423,41 +423,6 @@ _FIXED_VIEWS = (
             FROM effects
             ORDER BY object, eta2_adjusted DESC NULLS LAST, eta2 DESC NULLS LAST, accuracy_range DESC, position""",
         "CREATE OR REPLACE VIEW object_sensitivity AS FROM object_sensitivity()",
-        # Every region of min_count results or more is a test (one-sided exact binomial: is it
-        # below the overall accuracy?), listed or not, so Holm's adjustment counts all that were
-        # looked at. A region at or above the overall accuracy cannot be significantly below it:
-        # its p-value is 1 (its exact one is at least about one half), which spares summing it.
-        f"""CREATE OR REPLACE MACRO failure_modes(min_count := {MIN_COUNT}) AS TABLE
-            WITH overall AS (SELECT avg(correct::DOUBLE) AS p FROM results WHERE counted),
-            regions AS (
-                SELECT 1 AS size, parameter || ' = ' || label AS region,
-                       parameter AS parameter_a, level AS level_a, label AS label_a,
-                       NULL::VARCHAR AS parameter_b, NULL::INTEGER AS level_b, NULL::VARCHAR AS label_b,
-                       n, n_correct, accuracy, wilson_low, wilson_high, position AS position_a,
-                       NULL::INTEGER AS position_b, true AS listed
-                FROM control_accuracy c SEMI JOIN control_parameters p ON p.parameter = c.parameter AND p.levels > 1
-                UNION ALL
-                SELECT 2, p.parameter_a || ' = ' || p.label_a || ' · ' || p.parameter_b || ' = ' || p.label_b,
-                       p.parameter_a, p.level_a, p.label_a, p.parameter_b, p.level_b, p.label_b,
-                       p.n, p.n_correct, p.accuracy, p.wilson_low, p.wilson_high, p.position_a, p.position_b,
-                       p.wilson_high < least(a.accuracy, b.accuracy)
-                FROM pair_accuracy p
-                JOIN control_accuracy a ON a.parameter = p.parameter_a AND a.level = p.level_a
-                JOIN control_accuracy b ON b.parameter = p.parameter_b AND b.level = p.level_b),
-            tested AS (
-                SELECT r.*, r.accuracy < o.p AS below,
-                       CASE WHEN r.accuracy < o.p THEN binomial_cdf(r.n_correct, r.n, o.p) ELSE 1.0 END AS p_value
-                FROM regions r, overall o WHERE r.n >= greatest(min_count, 1)),
-            ranked AS (
-                SELECT *, row_number() OVER (ORDER BY p_value, size, position_a, level_a, position_b, level_b) AS k,
-                       count(*) OVER () AS m
-                FROM tested)
-            SELECT size, region, parameter_a, level_a, label_a, parameter_b, level_b, label_b, n, n_correct, accuracy,
-                   wilson_low, wilson_high, p_value, p_holm, p_holm < {ALPHA} AS significant, position_a, position_b
-            FROM (SELECT *, least(1.0, max((m - k + 1) * p_value) OVER (ORDER BY k ROWS UNBOUNDED PRECEDING)) AS p_holm
-                  FROM ranked)
-            WHERE listed AND below
-            ORDER BY wilson_high, accuracy, n DESC, size, position_a, level_a, position_b, level_b""",
 )
 _CONFUSIONS_VIEW = """CREATE OR REPLACE VIEW object_confusions AS
                 SELECT object, top1_label AS prediction, count(*) AS n,
