@@ -340,13 +340,15 @@ def test_outcomes_by_value_shares_sum_to_one_and_match_a_hand_count(tmp_path: Pa
         assert row["share_correct"] == pytest.approx(accuracy[row["label"]])
 
 
-def test_iou_by_object_quantiles_are_numpy_s(tmp_path: Path) -> None:
+def test_iou_by_object_quantiles_are_numpy_s_with_a_miss_as_0(tmp_path: Path) -> None:
     jobs = synthetic_jobs()
     _, con, _ = opened(make_store(tmp_path, jobs))
     rows = {r["object"]: r for r in rows_of(con, "FROM iou_by_object")}
     assert set(rows) == {"mug", "ball"}
     for name, row in rows.items():
-        values = np.array([j.iou for j in jobs if j.counted and j.object == name and j.iou is not None])
+        mine = [j for j in jobs if j.counted and j.object == name]
+        values = np.array([0.0 if j.iou is None else j.iou for j in mine])
+        assert row["misses"] == sum(j.iou is None for j in mine) > 0  # the misses are in, at 0
         assert row["n"] == len(values) and row["mean"] == pytest.approx(values.mean())
         for column, q in (("p10", 10), ("p25", 25), ("median", 50), ("p75", 75), ("p90", 90)):
             assert row[column] == pytest.approx(np.percentile(values, q), abs=1e-12), column
@@ -464,6 +466,39 @@ def test_the_report_shows_what_was_not_evaluable_and_how_boxes_fail(tmp_path: Pa
     assert "FROM not_evaluable" in html and "FROM iou_by_object" in html
     for view in TASK_VIEWS:
         assert f"<code>{view}</code>" in html
+
+
+def test_box_task_panels_say_the_task_s_measure_and_why_each_failure_failed(tmp_path: Path) -> None:
+    jobs = synthetic_jobs()
+    spec = make_store(tmp_path, jobs, "detection")
+    spec.write_text(spec.read_text().replace("[evaluator]\n", '[evaluator]\nkind = "detection"\n'))
+    loaded, con, store = opened(spec)
+    context = build_context(loaded, con, store)
+    html = render_html(context)
+    assert context["measure"] == ("detection accuracy", "a kept box of the object's class with IoU ≥ 0.5")
+    assert re.search(r'id="measure"[^>]*>detection accuracy<', html)
+    # "Taken for" lists wrong classes only; the right-class failures are counted beside them
+    counted = [j for j in jobs if j.counted]
+    for row in panel(context, "objects").data["objects"]:
+        mine = [j for j in counted if j.object == row["object"]]
+        wrong_class = sum(j.outcome == "wrong_class" for j in mine)
+        assert sum(c["count"] for c in row["confusions"]) == wrong_class
+        said = dict(reversed(text.split(" ", 1)) for text in row["box_failures"])
+        assert said == {o.replace("_", " "): str(n) for o in ("wrong_box", "missed")
+                        if (n := sum(j.outcome == o for j in mine))}
+    # the worst failures: lowest IoU first (misses first), and no claim about a loss
+    failures = panel(context, "failures").data
+    assert failures["order"] == "with the lowest IoU (misses first)" and "highest loss" not in failures["order"]
+    ious = [c["outcome"] for c in failures["cards"]]
+    assert ious[0].startswith("missed")
+    # every tile of a failure says how it failed
+    mode_tiles = [t for m in panel(context, "failure-modes").data["modes"] for t in m["examples"]]
+    example = next(t for t in mode_tiles + [c for r in panel(context, "objects").data["objects"]
+                                            for c in (x["example"] for x in r["confusions"]) if c])
+    assert any(why in example["caption"] for why in ("wrong class", "wrong box · IoU", "missed"))
+    explorer = panel(context, "explorer").data
+    whys = explorer["whys"] if "whys" in explorer else json.loads(explorer["json"])["whys"]
+    assert whys and all(w.split(" · ")[0] in ("wrong class", "wrong box", "missed") for w in whys)
 
 
 def test_a_classification_store_without_unevaluable_jobs_gets_the_report_it_got_before(tmp_path: Path) -> None:

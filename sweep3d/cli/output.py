@@ -23,6 +23,7 @@ from sweep3d.stages.aggregate.tasks import HIDDEN
 from sweep3d.stages.code import explain
 from sweep3d.stages.driver import plan_status
 from sweep3d.stages.infer import InferStage, ModelHandle
+from sweep3d.stages.infer.evaluators import measure_of
 from sweep3d.stages.passes import truth_passes
 from sweep3d.stages.plan import Plan
 from sweep3d.stages.postprocess import PostprocessStage
@@ -170,7 +171,9 @@ def print_findings(console: Console, plan: Plan, store: Store | None = None) -> 
     if summary.accuracy is None:
         return
     which = f"{escape(plan.model)}: " if len(plan.spec.models) > 1 else ""
-    console.print(f"{which}accuracy {summary.accuracy:.1%} ({summary.correct} of {summary.counted}); "
+    measure, rule = measure_of(plan.spec.evaluator)
+    console.print(f"{which}{measure} {summary.accuracy:.1%} ({summary.correct} of {summary.counted}"
+                  + (f"; {rule}" if measure != "top-1 accuracy" else "") + "); "
                   f"{summary.wrong} failures"
                   + (f", {summary.invalid} invalid (NaN/inf) excluded" if summary.invalid else "")
                   + (f"; {not_evaluable_line(summary)}" if summary.not_evaluable else ""))

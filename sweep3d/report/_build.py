@@ -37,6 +37,7 @@ from sweep3d.stages.aggregate import (
     region_min_count,
     summarise,
 )
+from sweep3d.stages.infer.evaluators import measure_of
 
 STAGES = ("render", "postprocess", "infer")
 
@@ -103,6 +104,7 @@ def build_context(loaded: LoadedSpec, con: duckdb.DuckDBPyConnection, store: Sto
         "store": str(loaded.store),
         "summary": summary,
         "accuracy": pct(summary.accuracy),
+        "measure": measure_of(loaded.spec.evaluator),
         "wrong": summary.wrong,
         "run": _latest_run(con, loaded.name),
         "panels": page.panels,

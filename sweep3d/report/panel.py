@@ -60,8 +60,9 @@ class PanelInputs:
         """A gallery tile for one result: thumbnail, outcome, prediction, details."""
         outcome = OUTCOME_NAMES[row.outcome]
         prediction = row.prediction or "no prediction"
-        return {"thumb": self.thumbs.want(row.image_key), "outcome": outcome, "caption": prediction,
-                "title": f"{self.results.describe(row)} · predicted {prediction} ({outcome})"}
+        caption = f"{prediction} · {row.why}" if row.why else prediction
+        return {"thumb": self.thumbs.want(row.image_key), "outcome": outcome, "caption": caption,
+                "title": f"{self.results.describe(row)} · predicted {caption} ({outcome})"}
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,8 @@ Two things make a report of 10^6 results cheap to build:
   the panels ask: a region's examples, the joint counts the explorer aggregates, the images to
   embed. Nothing here holds a Python object per result.
 
-Examples come wrong first (highest loss first), then correct, then invalid, then those of jobs
+Examples come wrong first (worst first: highest loss, or for a box or mask task without a loss,
+lowest IoU with misses first), then correct, then invalid, then those of jobs
 that are not evaluable (out of frame or hidden: never counted as right or wrong), so the first
 rows of any slice are its most telling failures.
 """
@@ -62,6 +63,7 @@ class ResultRow:
     prediction: str | None
     image_key: str
     levels: tuple[int, ...]  # its level of each of :attr:`Results.parameters` (-1: none)
+    why: str | None = None  # how a box or mask task's failure failed: "wrong box · IoU 0.32", "missed"
 
 
 def materialise_views(con: duckdb.DuckDBPyConnection) -> None:
@@ -85,7 +87,8 @@ class Results:
         roles = results_roles(con)
         con.execute(_table_sql(columns, roles, [p.name for p in self.parameters]))
         #: ORDER BY putting rows of ``results`` in example order (for SQL shown to the user).
-        self.example_order_sql = ("ORDER BY NOT counted, correct" + (", loss DESC" if roles.has("loss") else "")
+        badness = badness_sql(roles)
+        self.example_order_sql = ("ORDER BY NOT counted, correct" + (f", {badness} DESC" if badness != "NULL" else "")
                                   + ", job")
 
     def __len__(self) -> int:
@@ -167,11 +170,11 @@ class Results:
     def _rows(self, where: str, values: list[Any], limit: int | None) -> list[ResultRow]:
         levels = "".join(f", {_level(p)}" for p in range(len(self.parameters)))
         found = self.con.execute(
-            f"SELECT job, outcome, prediction, image_key{levels} FROM {TABLE} WHERE {where} ORDER BY {EXAMPLE_ORDER}"
-            + (f" LIMIT {int(limit)}" if limit is not None else ""), values
+            f"SELECT job, outcome, prediction, image_key, why{levels} FROM {TABLE} WHERE {where} "
+            f"ORDER BY {EXAMPLE_ORDER}" + (f" LIMIT {int(limit)}" if limit is not None else ""), values
         ).fetchall()
-        return [ResultRow(int(job), int(outcome), prediction, str(key), tuple(int(v) for v in rest))
-                for job, outcome, prediction, key, *rest in found]
+        return [ResultRow(int(job), int(outcome), prediction, str(key), tuple(int(v) for v in rest), why)
+                for job, outcome, prediction, key, why, *rest in found]
 
 
 def read_parameters(con: duckdb.DuckDBPyConnection, names: Sequence[str]) -> list[Parameter]:
@@ -191,11 +194,11 @@ def _table_sql(columns: set[str], roles: Roles, names: list[str]) -> str:
     """The CREATE statement of :data:`TABLE` (``columns``: those of ``results``; ``roles``: its
     evaluator's): results joined with their levels, one column per parameter."""
     prediction = "r.top1_label" if roles.has("prediction") else "NULL::VARCHAR"
-    loss = "r.loss" if roles.has("loss") else "NULL::DOUBLE"
     unevaluable = "r.evaluable IS FALSE" if "evaluable" in columns else "false"
     select = (f"SELECT r.job, (CASE WHEN r.counted THEN (CASE WHEN r.correct THEN {CORRECT} ELSE {WRONG} END) "
               f"WHEN {unevaluable} THEN {NOT_EVALUABLE} ELSE {INVALID} END)"
-              f"::TINYINT AS outcome, {loss}::DOUBLE AS loss, {prediction} AS prediction, r.image_key")
+              f"::TINYINT AS outcome, {badness_sql(roles, 'r.')}::DOUBLE AS loss, {prediction} AS prediction, "
+              f"r.image_key, {_why(roles)} AS why")
     if not names:
         return f"CREATE OR REPLACE TEMP TABLE {TABLE} AS {select} FROM results r"
     pivot = ", ".join(f"max(level) FILTER (WHERE parameter = {_literal(n)}) AS {_level(i)}" for i, n in enumerate(names))
@@ -203,6 +206,27 @@ def _table_sql(columns: set[str], roles: Roles, names: list[str]) -> str:
     return (f"CREATE OR REPLACE TEMP TABLE {TABLE} AS {select}{levels} FROM results r LEFT JOIN "
             f"(SELECT job, {pivot} FROM control_levels WHERE list_contains({_list(names)}, parameter) GROUP BY job) l "
             "USING (job)")
+
+
+def badness_sql(roles: Roles, prefix: str = "") -> str:
+    """How bad a result is, for ordering examples worst first: the loss, else (a box or mask task
+    without one) 1 - IoU with a miss as IoU 0, else nothing."""
+    if roles.has("loss"):
+        return f"{prefix}{roles.loss}"
+    if roles.has("iou"):
+        return f"1 - coalesce({prefix}{roles.iou}, 0)"
+    return "NULL"
+
+
+def _why(roles: Roles) -> str:
+    """SQL of a failure's reason for a box or mask task (``wrong box · IoU 0.32``; NULL when
+    correct, or for classification, whose caption's predicted class says it)."""
+    if not roles.has("outcome"):
+        return "NULL::VARCHAR"
+    reason = f"replace(r.{roles.outcome}, '_', ' ')"
+    if roles.has("iou"):
+        reason += f" || coalesce(printf(' · IoU %.2f', r.{roles.iou}), '')"
+    return f"CASE WHEN r.counted AND NOT r.correct THEN {reason} END"
 
 
 def _rank(parameters: Sequence[int]) -> str:

@@ -48,7 +48,8 @@ def payload(inputs: PanelInputs, max_cells: int = MAX_CELLS) -> dict[str, Any]:
     of the joint table); ``tables`` (each: ``params``, indices into ``params``, and the columns
     of :meth:`~sweep3d.report.results.Results.counts`); ``sample`` (the results whose images the
     page embeds, most telling first: ``level`` per parameter, ``outcome``, ``pred`` (index into
-    ``preds``, -1 for none), ``thumb`` (index into the page's thumbnails), ``job``); ``defaults``
+    ``preds``, -1 for none), ``why`` (index into ``whys``: a box or mask task's reason for a
+    failure, ``wrong box · IoU 0.32``; -1 for none), ``thumb`` (index into the page's thumbnails), ``job``); ``defaults``
     (the parameters first on the x and y axes, -1 for none); ``limit`` (gallery size); ``query``
     (the spec and the ORDER BY of the gallery's SQL); ``colorscale`` and ``layout``; ``gated``
     (some jobs are not evaluable: the counts leave them out, and the page says "counted").
@@ -86,13 +87,16 @@ def sample(inputs: PanelInputs, rows: list[ResultRow], shown: list[int]) -> dict
     """The sampled results column by column (``sample``) and their predictions' names (``preds``)."""
     preds = sorted({r.prediction for r in rows if r.prediction is not None})
     index = {p: i for i, p in enumerate(preds)}
+    whys = sorted({r.why for r in rows if r.why is not None})
+    why_index = {w: i for i, w in enumerate(whys)}
     return {"sample": {
         "level": [[r.levels[i] for r in rows] for i in shown],
         "outcome": [r.outcome for r in rows],
         "pred": [index.get(r.prediction, -1) for r in rows],
+        "why": [why_index.get(r.why, -1) for r in rows],
         "thumb": [inputs.thumbs.want(r.image_key) for r in rows],
         "job": [r.job for r in rows],
-    }, "preds": preds}
+    }, "preds": preds, "whys": whys}
 
 
 def default_axes(params: list[Parameter]) -> dict[str, int]:

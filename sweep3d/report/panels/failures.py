@@ -1,10 +1,12 @@
-"""Worst failures: the wrong predictions with the highest loss, each with its top-k (and, for box
-and mask tasks, how it failed and its IoU; the thumbnail shows the true and predicted boxes)."""
+"""Worst failures: the wrong predictions, worst first (the highest loss; for a box or mask task
+without a loss, the lowest IoU, misses first), each with its top-k (and, for box and mask tasks,
+how it failed and its IoU; the thumbnail shows the true and predicted boxes)."""
 
 from __future__ import annotations
 
 from typing import Any
 
+from sweep3d.evaluation import Roles
 from sweep3d.report.figures import pct
 from sweep3d.report.panel import PanelInputs
 from sweep3d.stages.aggregate.results import results_roles
@@ -40,7 +42,28 @@ def build(inputs: PanelInputs) -> dict[str, Any]:
             "loss": f"{failure['loss']:.2f}" if failure["loss"] is not None else "",
             "outcome": _outcome(outcome, iou),
         })
-    return {"cards": cards, "wrong": inputs.summary.wrong}
+    return {"cards": cards, "wrong": inputs.summary.wrong, "order": _order(roles),
+            "truth_note": _truth_note(cards, roles)}
+
+
+def _order(roles: Roles) -> str:
+    """What "worst" means here, as the summary sorts its failures."""
+    if roles.has("loss"):
+        return "with the highest loss"
+    if roles.has("iou"):
+        return "with the lowest IoU (misses first)"
+    return "first, in job order"
+
+
+def _truth_note(cards: list[dict[str, Any]], roles: Roles) -> str:
+    """What the green label says: the truth among the top k, or, with one class shown, a right
+    class (for a box or mask task, the failure was then the box)."""
+    k = max((len(c["topk"]) for c in cards), default=0)
+    if k > 1:
+        return f"the true label is green where it is among the top {k}"
+    if roles.has("outcome"):
+        return "the predicted class is green where it is right: the box or mask failed, not the class"
+    return "the predicted class is green where it is right"
 
 
 def _outcome(outcome: str | None, iou: float | None) -> str:

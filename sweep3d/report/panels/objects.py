@@ -5,7 +5,8 @@ results) that the parameter's levels explain beyond chance: epsilon squared, the
 aggregate panel's "beyond chance" (``eta2_adjusted`` of the ``object_sensitivity`` macro). Only
 levels with at least ``min_count`` of the object's results count (the rest are left out, as a
 0 % of two images is no evidence), and the worst and best level are shown with their counts.
-Wrong predictions come from ``object_confusions``.
+Wrong predictions come from ``object_confusions`` (for a box or mask task, its wrong-class
+failures only; its wrong boxes and misses are counted beside them).
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from typing import Any
 
 from sweep3d.report.figures import Figure, interval, layout, make_figure, pct, plot_text
 from sweep3d.report.panel import PanelInputs
+from sweep3d.stages.aggregate.results import results_roles
 from sweep3d.stages.aggregate.views import has_view
 
 SENSITIVE = 3  # parameters listed per object
@@ -35,6 +37,7 @@ def build(inputs: PanelInputs) -> dict[str, Any]:
         for row in inputs.rows("SELECT object, prediction, n, share FROM object_confusions WHERE rank <= ?",
                                [CONFUSIONS]):
             confusions[row["object"]].append(row)
+    box_failures = _box_failures(inputs)
     labels = {o.name: ", ".join(str(label) for label in o.labels) for o in inputs.loaded.spec.objects}
     objects = []
     for row in inputs.rows("SELECT label AS object, level, n, accuracy, wilson_low, wilson_high FROM control_accuracy "
@@ -44,9 +47,24 @@ def build(inputs: PanelInputs) -> dict[str, Any]:
             "accuracy": pct(row["accuracy"]), "interval": interval(row["wilson_low"], row["wilson_high"]),
             "sensitive": [_sensitivity(s) for s in sensitivity[row["object"]] if s["eta2_adjusted"]][:SENSITIVE],
             "confusions": [_confusion(inputs, row["level"], c) for c in confusions[row["object"]]],
+            "box_failures": (box_failures or {}).get(row["object"], []),
         })
-    return {"objects": objects, "min_count": inputs.min_count,
+    return {"objects": objects, "min_count": inputs.min_count, "box_task": box_failures is not None,
             "figure": _figure(sensitivity, [o["object"] for o in objects], known, sql, inputs.min_count)}
+
+
+def _box_failures(inputs: PanelInputs) -> dict[str, list[str]] | None:
+    """Per object, its failures with the right class (``3 wrong box``, ``2 missed``): a box or mask
+    task's failures that "taken for" must not list as confusions. None for other tasks."""
+    roles = results_roles(inputs.con)
+    if not roles.has("outcome"):
+        return None
+    out: dict[str, list[str]] = defaultdict(list)
+    for row in inputs.rows(f'SELECT object, "{roles.outcome}" AS outcome, count(*) AS n FROM results '
+                           f"WHERE counted AND NOT correct AND \"{roles.outcome}\" IN ('wrong_box', 'missed') "
+                           "GROUP BY ALL ORDER BY object, outcome DESC"):
+        out[row["object"]].append(f"{row['n']} {row['outcome'].replace('_', ' ')}")
+    return out
 
 
 def _sensitivity(row: dict[str, Any]) -> dict[str, Any]:

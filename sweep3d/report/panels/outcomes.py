@@ -83,14 +83,16 @@ def _iou_figure(rows: list[dict[str, Any]]) -> Figure | None:
     if not rows:
         return None
     trace = {
-        "type": "box", "x": [plot_text(r["object"]) for r in rows], "q1": [r["p25"] for r in rows],
+        "type": "box", "x": [plot_text(r["object"] + (f" ({r['misses']} of {r['n']} missed)" if r["misses"] else ""))
+                            for r in rows], "q1": [r["p25"] for r in rows],
         "median": [r["median"] for r in rows], "q3": [r["p75"] for r in rows],
         "lowerfence": [r["p10"] for r in rows], "upperfence": [r["p90"] for r in rows],
         "mean": [r["mean"] for r in rows], "boxmean": True, "name": "IoU", "showlegend": False,
         "marker": {"color": COLORS["bar"]}, "line": {"color": COLORS["bar"]}, "fillcolor": COLORS["band"],
     }
     figure_layout = layout(
-        title=title("IoU with the truth per object (box: quartiles; whiskers: 10th–90th percentile; dashed: mean)"),
+        title=title("IoU with the truth per object, a miss as 0 (box: quartiles; whiskers: 10th–90th percentile; "
+                    "dashed: mean)"),
         height=340, xaxis={"type": "category", "automargin": True, "title": {"text": "object"}},
         yaxis={"range": [0, 1.02], "title": {"text": "IoU"}, "zeroline": False},
     )

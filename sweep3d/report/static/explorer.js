@@ -237,6 +237,7 @@
     tiles.className = 'tiles';
     chosen.slice(0, shown).forEach(function (i) {
       var caption = sample.pred[i] >= 0 ? data.preds[sample.pred[i]] : 'no prediction';
+      if (sample.why && sample.why[i] >= 0) caption += ' · ' + data.whys[sample.why[i]];
       tiles.appendChild(S.tile(sample.thumb[i], OUTCOMES[sample.outcome[i]], caption, describe(i, caption)));
     });
     gallery.append(heading, note, tiles);

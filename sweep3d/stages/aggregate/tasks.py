@@ -17,8 +17,9 @@ whatever else its store holds:
     per (parameter, level) as in ``control_accuracy``: ``n`` counted results with an outcome,
     ``n_<outcome>`` and ``share_<outcome>`` for each of :data:`OUTCOMES` (the shares sum to 1).
 ``iou_by_object`` (the ``iou`` role)
-    per object: ``n`` counted results with an IoU, its ``mean`` and quantiles ``p10``, ``p25``,
-    ``median``, ``p75``, ``p90`` (linear interpolation, as numpy's default).
+    per object: ``n`` counted results, ``misses`` (no box or mask found on the object: IoU 0),
+    the IoU's ``mean`` and quantiles ``p10``, ``p25``, ``median``, ``p75``, ``p90`` (linear
+    interpolation, as numpy's default), misses counted as 0.
 """
 
 from __future__ import annotations
@@ -53,7 +54,7 @@ def register_task_views(con: duckdb.DuckDBPyConnection, roles: Roles, result_col
         con.execute(_outcomes_sql())
         made.append("outcomes_by_value")
     if roles.has("iou"):
-        con.execute(_iou_sql())
+        con.execute(_iou_sql(roles.iou))
         made.append("iou_by_object")
     return made
 
@@ -89,13 +90,18 @@ def _outcomes_sql() -> str:
         ORDER BY position, level"""
 
 
-def _iou_sql() -> str:
+def _iou_sql(column: str) -> str:
+    # A counted result without an IoU found no box (or mask) on the object: IoU 0, not left out,
+    # or an object the model mostly misses looks best, its few found boxes being good ones.
     levels = ", ".join(repr(q) for q in QUANTILES.values())
     picked = ", ".join(f"q[{i}] AS {name}" for i, name in enumerate(QUANTILES, 1))
     return f"""CREATE OR REPLACE VIEW iou_by_object AS
-        SELECT object, n, mean, {picked} FROM (
-            SELECT object, count(*) AS n, avg(iou) AS mean, quantile_cont(iou, [{levels}]) AS q
-            FROM results WHERE counted AND iou IS NOT NULL AND isfinite(iou) GROUP BY object)
+        SELECT object, n, misses, mean, {picked} FROM (
+            SELECT object, count(*) AS n, count(*) FILTER (WHERE missed) AS misses, avg(iou) AS mean,
+                   quantile_cont(iou, [{levels}]) AS q
+            FROM (SELECT object, coalesce("{column}", 0) AS iou, "{column}" IS NULL AS missed
+                  FROM results WHERE counted)
+            WHERE isfinite(iou) GROUP BY object)
         ORDER BY object"""
 
 

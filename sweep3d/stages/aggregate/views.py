@@ -36,7 +36,8 @@ Views:
     and count (``worst_n``, ``best_n``), accuracy range, eta² and ``eta2_adjusted`` within the
     object (the same ``epsilon_squared`` as ``variance_explained``); most sensitive first.
 ``object_confusions``
-    per object, its wrong top-1 predictions with counts, share of its failures and rank.
+    per object, its wrong top-1 predictions with counts, share of its failures and rank (for a
+    box or mask task, of its wrong-class failures only: a wrong box or a miss names the right class).
 ``part_visibility``
     only when the spec asks for it (a UV pass): per (object, part of its surface), accuracy
     over the results that show the part (see :mod:`sweep3d.stages.aggregate.parts`).
@@ -424,11 +425,12 @@ _FIXED_VIEWS = (
             ORDER BY object, eta2_adjusted DESC NULLS LAST, eta2 DESC NULLS LAST, accuracy_range DESC, position""",
         "CREATE OR REPLACE VIEW object_sensitivity AS FROM object_sensitivity()",
 )
+# A box or mask task's failure with the right class (a wrong box, a miss) is no confusion.
 _CONFUSIONS_VIEW = """CREATE OR REPLACE VIEW object_confusions AS
                 SELECT object, top1_label AS prediction, count(*) AS n,
                        count(*) / sum(count(*)) OVER (PARTITION BY object) AS share,
                        row_number() OVER (PARTITION BY object ORDER BY count(*) DESC, top1_label) AS rank
-                FROM results WHERE counted AND NOT correct GROUP BY object, top1_label
+                FROM results WHERE counted AND NOT correct{wrong_class} GROUP BY object, top1_label
                 ORDER BY object, rank"""
 
 
@@ -437,7 +439,8 @@ def _view_statements(parameters: list[tuple[str, bool]], roles: Roles) -> list[s
     names its predicted class)."""
     statements = ["CREATE OR REPLACE VIEW control_values AS " + _values_sql(parameters), *_FIXED_VIEWS]
     if roles.has("prediction"):
-        statements.append(_CONFUSIONS_VIEW)
+        wrong_class = f" AND {_identifier(roles.outcome)} = 'wrong_class'" if roles.has("outcome") else ""
+        statements.append(_CONFUSIONS_VIEW.format(wrong_class=wrong_class))
     return statements
 
 

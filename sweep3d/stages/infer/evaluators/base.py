@@ -115,6 +115,11 @@ class Evaluator:
         setting of its ``Params``, by default."""
         return self.params.model_dump(mode="json")
 
+    def measure(self) -> tuple[str, str]:
+        """What its ``correct`` measures, for headlines that must not say a bare "accuracy" of a
+        box task: a name ("localization accuracy") and the rule ("top-1 class right and box IoU ≥ 0.5")."""
+        return "accuracy", f"{type(self).__name__}'s correct"
+
     def evaluate(self, outputs: Any, truths: Sequence[Truth], labels: LabelMap) -> list[dict]:
         raise NotImplementedError
 

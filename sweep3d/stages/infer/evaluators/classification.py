@@ -76,5 +76,8 @@ class ClassificationEvaluator(Evaluator):
     schema = pa.schema(RANKED_FIELDS)
     roles = Roles(loss="loss", prediction="top1_label")
 
+    def measure(self) -> tuple[str, str]:
+        return "top-1 accuracy", "the top-1 class is one of the object's labels"
+
     def evaluate(self, logits: np.ndarray, truths: Sequence[Truth], labels: LabelMap) -> list[dict]:
         return ranked_rows(logits, truths, labels, self.params.top_k)

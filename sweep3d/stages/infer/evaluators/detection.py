@@ -62,6 +62,9 @@ class DetectionEvaluator(Evaluator):
     roles = Roles(outcome="outcome", iou="iou", prediction="top1_label", detection_scores="det_scores",
                   detection_ious="det_ious")
 
+    def measure(self) -> tuple[str, str]:
+        return "detection accuracy", f"a kept box of the object's class with IoU ≥ {self.params.iou:g}"
+
     def evaluate(self, outputs: Sequence[Detections], truths: Sequence[Truth], labels: LabelMap) -> list[dict]:
         return [self._row(found, truth, labels) for found, truth in zip(outputs, truths)]
 

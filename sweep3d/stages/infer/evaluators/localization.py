@@ -56,6 +56,9 @@ class LocalizationEvaluator(Evaluator):
     passes = ("mask",)
     roles = Roles(loss="loss", outcome="outcome", iou="iou", prediction="top1_label")
 
+    def measure(self) -> tuple[str, str]:
+        return "localization accuracy", f"top-1 class right and box IoU ≥ {self.params.iou:g}"
+
     def evaluate(self, outputs: Localized, truths: Sequence[Truth], labels: LabelMap) -> list[dict]:
         rows = ranked_rows(outputs.logits, truths, labels, self.params.top_k)
         for row, box, truth in zip(rows, np.asarray(outputs.boxes, np.float64), truths):

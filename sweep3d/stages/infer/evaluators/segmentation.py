@@ -48,6 +48,9 @@ class SegmentationEvaluator(Evaluator):
     passes = ("mask",)
     roles = Roles(outcome="outcome", iou="iou", prediction="top1_label")
 
+    def measure(self) -> tuple[str, str]:
+        return "segmentation accuracy", f"predicted object mask IoU ≥ {self.params.iou:g}"
+
     def evaluate(self, scores: np.ndarray, truths: Sequence[Truth], labels: LabelMap) -> list[dict]:
         return [self._row(image, truth, labels) for image, truth in zip(np.asarray(scores), truths)]
 
