@@ -7,6 +7,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from sweep3d.cache.store import Store
+from sweep3d.errors import UserError
 from sweep3d.pipeline import plan_spec
 from sweep3d.spec.loader import LoadedSpec
 from sweep3d.stages.aggregate import Summary, connect, has_view, stored_summary, weakest_regions, wilson_interval
@@ -158,12 +159,14 @@ def print_findings(console: Console, plan: Plan, store: Store | None = None) -> 
     """
     store = store if store is not None else Store(plan.spec.store)
     summary = stored_summary(store, plan.spec.name, plan.columns)
-    if summary.accuracy is None:
-        return
     which = f"{escape(plan.model)}: " if len(plan.spec.models) > 1 else ""
+    if summary.accuracy is None:
+        if summary.invalid:
+            console.print(f"{which}no accuracy: {all_invalid_line(summary)}")
+        return
     console.print(f"{which}accuracy {summary.accuracy:.1%} ({summary.correct} of {summary.counted}); "
                   f"{summary.wrong} failures"
-                  + (f", {summary.invalid} invalid (NaN/inf) excluded" if summary.invalid else "")
+                  + (f", {summary.invalid} invalid predictions (NaN/inf outputs) excluded" if summary.invalid else "")
                   + (f"; {not_evaluable_line(summary)}" if summary.not_evaluable else ""))
     regions = weakest_regions(summary)
     if regions:
@@ -172,6 +175,26 @@ def print_findings(console: Console, plan: Plan, store: Store | None = None) -> 
             + " (significantly below overall, Holm-adjusted)")
     elif summary.wrong and summary.effects:
         console.print("fails most at: no value is significantly below the overall accuracy")
+
+
+def all_invalid_line(summary: Summary) -> str:
+    """What a run whose every prediction is invalid found (nothing to count)."""
+    return (f"all {summary.invalid} predictions are invalid (the model's outputs are NaN or infinite), so none is "
+            "counted")
+
+
+def check_some_valid(plan: Plan, store: Store | None = None) -> None:
+    """Refuse to report a run whose model gave no valid prediction: its accuracy would be blank,
+    not a finding. What was computed stays stored (a fixed model has another digest: it infers again).
+
+    Raises:
+        UserError: naming the model, how many predictions were invalid and what to fix.
+    """
+    store = store if store is not None else Store(plan.spec.store)
+    summary = stored_summary(store, plan.spec.name, plan.columns)
+    if summary.accuracy is None and summary.invalid:
+        raise UserError(f"{plan.spec.path}: model {plan.model!r}: {all_invalid_line(summary)}; no report was "
+                        "written: fix the model (its weights, its preprocessing) and run again (the renders are kept)")
 
 
 def not_evaluable_line(summary: Summary) -> str:
