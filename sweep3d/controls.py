@@ -15,10 +15,11 @@ from contextlib import contextmanager
 from typing import Annotated, Any, ClassVar, Iterator, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict
+from pydantic import ConfigDict
 
 from sweep3d.errors import plugin_failure
 from sweep3d.registry import code_identity, is_user_plugin
+from sweep3d.typed import Typed
 
 
 class _SpecRelativePath:
@@ -35,7 +36,7 @@ def is_spec_path(field: Any) -> bool:
     return any(isinstance(m, _SpecRelativePath) for m in getattr(field, "metadata", ()))
 
 
-class ControlParams(BaseModel):
+class ControlParams(Typed):
     """Base of every control's parameter model: unknown keys are errors, values are checked."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)

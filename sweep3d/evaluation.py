@@ -19,7 +19,9 @@ from typing import Any, Callable
 
 import pyarrow as pa
 import pyarrow.parquet as pq
-from pydantic import BaseModel, ConfigDict
+from pydantic import ConfigDict
+
+from sweep3d.typed import Typed
 
 #: Parquet metadata key of a jobs file recording its experiment's evaluator (a JSON object).
 EVALUATOR_METADATA = b"sweep3d.evaluator"
@@ -28,7 +30,7 @@ EVALUATOR_METADATA = b"sweep3d.evaluator"
 OUTCOMES = ("correct", "wrong_class", "wrong_box", "missed")
 
 
-class EvaluatorParams(BaseModel):
+class EvaluatorParams(Typed):
     """Base of every evaluator's settings: unknown keys are errors, values are checked."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)

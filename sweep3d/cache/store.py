@@ -55,6 +55,8 @@ SUPERSEDED_GRACE = 600.0  # seconds a compaction keeps the segments it merged, f
 WRITE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM})
 #: What reading a damaged Parquet file raises (pyarrow's ArrowInvalid is a ValueError).
 READ_ERRORS = (OSError, ValueError, pa.ArrowException)
+#: Parquet metadata key of a segment listing the columns it was written with (a JSON list).
+COLUMNS_METADATA = b"sweep3d.columns"
 
 log = logging.getLogger("sweep3d.store")
 MAX_FILENAME_BYTES = 120  # of an experiment's name in file names: with suffixes, well under 255
@@ -158,9 +160,12 @@ class Store:
     def jobs_path(self, experiment: str) -> Path:
         return self.root / "jobs" / f"{safe_filename(experiment)}.parquet"
 
-    def report_path(self, experiment: str, suffix: str = ".html") -> Path:
-        """Where an experiment's report files go by default: ``reports/<experiment><suffix>``."""
-        return self.root / "reports" / f"{safe_filename(experiment)}{suffix}"
+    def report_path(self, experiment: str, suffix: str = ".html", kind: str = "") -> Path:
+        """Where an experiment's report files go by default: ``reports/<experiment><suffix>``, and
+        another kind of output under its own folder, ``reports/<kind>/<experiment><suffix>``, so
+        that no experiment's name can make it another's report (``q-bench`` and ``q``'s bench)."""
+        folder = self.root / "reports" / kind if kind else self.root / "reports"
+        return folder / f"{safe_filename(experiment)}{suffix}"
 
     def tmp_dir(self) -> Path:
         path = self.root / "tmp"
@@ -220,7 +225,7 @@ class Store:
         """Write ``rows`` as one new segment of ``table``; returns its path (None if no rows)."""
         if not rows:
             return None
-        data = pa.Table.from_pylist(rows, schema=schema)
+        data = with_column_list(pa.Table.from_pylist(rows, schema=schema))
         path = self.table_dir(table) / segment_name()
         self.write_table_file(path, data)
         return path
@@ -285,6 +290,7 @@ class Store:
             names = self._checked.get(ident)
             if names is None:
                 whole = pq.read_table(path, page_checksum_verification=True)
+                check_column_list(whole)
                 self._checked[ident] = whole.column_names
                 return whole.select([c for c in columns if c in whole.column_names]) if columns else whole
             return pq.read_table(path, columns=[c for c in columns if c in names] if columns else None)
@@ -558,6 +564,28 @@ class SegmentWriter:
 
     def __exit__(self, *exc: object) -> None:
         self.flush()
+
+
+# -- a segment's columns ------------------------------------------------------------------------
+def with_column_list(table: pa.Table) -> pa.Table:
+    """``table`` with the list of its columns in its metadata, so a segment that later lacks one
+    (a tool rewrote it without a column) reads as damaged rather than as rows with nulls."""
+    metadata = {**(table.schema.metadata or {}), COLUMNS_METADATA: json.dumps(table.column_names).encode()}
+    return table.replace_schema_metadata(metadata)
+
+
+def check_column_list(table: pa.Table) -> None:
+    """Raise ValueError (a read error: the segment is damaged) when ``table`` lacks a column its
+    metadata lists; a segment written before the list was kept is not judged."""
+    listed = (table.schema.metadata or {}).get(COLUMNS_METADATA)
+    if listed is None:
+        return
+    try:
+        missing = [c for c in json.loads(listed) if c not in table.column_names]
+    except (ValueError, TypeError):
+        raise ValueError("its list of columns is not readable") from None
+    if missing:
+        raise ValueError(f"it lacks its column{'s' * (len(missing) > 1)} {', '.join(map(repr, missing))}")
 
 
 def lock_down(con: duckdb.DuckDBPyConnection, readable: Iterable[Path], writable: Iterable[Path] = ()) -> None:

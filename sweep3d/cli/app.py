@@ -87,6 +87,9 @@ def run(
         from sweep3d.cli.output import print_comparison
 
         print_comparison(console, experiment.spec)
+    from sweep3d.cli.output import check_some_valid
+
+    check_some_valid(result.plan, result.store)
     if report:
         _write_report(experiment, None)
     if result.failed:
@@ -192,7 +195,7 @@ def bench(
     print_bench(console, rows, best, current, agreement)
     if budget is not None:
         console.print(f"the bench took {duration(time.perf_counter() - started)} (--budget {budget:g} min)")
-    plot = write_pareto_plot(rows, best, Store(loaded.store).report_path(loaded.name, "-bench.html"),
+    plot = write_pareto_plot(rows, best, Store(loaded.store).report_path(loaded.name, ".html", "bench"),
                              f"{loaded.name}: render time against error ({rows[0].jobs} jobs)")
     console.print(f"Pareto plot: [bold]{plot}[/]")
     if apply and best is not None:

@@ -7,6 +7,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from sweep3d.cache.store import Store
+from sweep3d.errors import UserError
 from sweep3d.pipeline import plan_spec
 from sweep3d.spec.loader import LoadedSpec
 from sweep3d.stages.aggregate import (
@@ -160,22 +161,25 @@ def print_run(console: Console, result) -> None:
 
 
 def print_findings(console: Console, plan: Plan, store: Store | None = None) -> None:
-    """Accuracy and where the model fails most: the control values significantly below the overall
-    accuracy, as the report's failure modes test them (never a value that merely looks low).
+    """The task's accuracy and where the model fails most: the control values significantly below the
+    rest of their parameter, as the report's failure modes test them (never a value that merely
+    looks low), or, when none is, the largest gap with its interval.
 
     Args:
         store: the run's store object (it has read the segments already), else a new one.
     """
     store = store if store is not None else Store(plan.spec.store)
     summary = stored_summary(store, plan.spec.name, plan.columns)
-    if summary.accuracy is None:
-        return
     which = f"{escape(plan.model)}: " if len(plan.spec.models) > 1 else ""
+    if summary.accuracy is None:
+        if summary.invalid:
+            console.print(f"{which}no accuracy: {all_invalid_line(summary)}")
+        return
     measure, rule = measure_of(plan.spec.evaluator)
     console.print(f"{which}{measure} {summary.accuracy:.1%} ({summary.correct} of {summary.counted}"
                   + (f"; {rule}" if measure != "top-1 accuracy" else "") + "); "
                   f"{summary.wrong} failures"
-                  + (f", {summary.invalid} invalid (NaN/inf) excluded" if summary.invalid else "")
+                  + (f", {summary.invalid} invalid predictions (NaN/inf outputs) excluded" if summary.invalid else "")
                   + (f"; {not_evaluable_line(summary)}" if summary.not_evaluable else ""))
     regions = weakest_regions(summary)
     if regions:
@@ -195,6 +199,26 @@ def describe_region(region: Region) -> str:
     return (f"{escape(region.column)} = {escape(region.label)}: {region.accuracy:.0%} of {region.count} against "
             f"{region.accuracy_rest:.0%} of the other {region.count_rest} ({_points(region.difference)}, "
             f"95% CI {_points(region.difference_low)} to {_points(region.difference_high)})")
+
+
+def all_invalid_line(summary: Summary) -> str:
+    """What a run whose every prediction is invalid found (nothing to count)."""
+    return (f"all {summary.invalid} predictions are invalid (the model's outputs are NaN or infinite), so none is "
+            "counted")
+
+
+def check_some_valid(plan: Plan, store: Store | None = None) -> None:
+    """Refuse to report a run whose model gave no valid prediction: its accuracy would be blank,
+    not a finding. What was computed stays stored (a fixed model has another digest: it infers again).
+
+    Raises:
+        UserError: naming the model, how many predictions were invalid and what to fix.
+    """
+    store = store if store is not None else Store(plan.spec.store)
+    summary = stored_summary(store, plan.spec.name, plan.columns)
+    if summary.accuracy is None and summary.invalid:
+        raise UserError(f"{plan.spec.path}: model {plan.model!r}: {all_invalid_line(summary)}; no report was "
+                        "written: fix the model (its weights, its preprocessing) and run again (the renders are kept)")
 
 
 def not_evaluable_line(summary: Summary) -> str:

@@ -18,7 +18,7 @@ from pathlib import Path
 
 from sweep3d.cache.keys import digest, files_digest
 from sweep3d.errors import UserError
-from sweep3d.spec.sniff import check_file, unreadable
+from sweep3d.spec.sniff import check_file, damaged_member, unreadable
 
 MESH_SUFFIXES = {".obj", ".gltf", ".glb", ".ply", ".stl"}
 HDRI_SUFFIXES = {".exr", ".hdr", ".png", ".jpg", ".jpeg", ".tif", ".tiff"}
@@ -49,6 +49,7 @@ def blender_version() -> str:
 
 def resolve_hdri(ref: str, base: Path) -> str:
     """An HDRI reference (``builtin:NAME`` or a path) as an absolute path that exists."""
+    check_named(ref, "HDRI", "an .exr or .hdr image, or builtin:NAME")
     if ref.startswith("builtin:"):
         name = ref.removeprefix("builtin:")
         maps = builtin_hdris()
@@ -66,6 +67,7 @@ def resolve_hdri(ref: str, base: Path) -> str:
 def resolve_mesh(ref: str, base: Path) -> str:
     """A mesh reference with its path made absolute; checks that the file (or zip member) exists."""
     archive, sep, member = ref.partition("#")
+    check_named(archive, "mesh", "a mesh file (or archive.zip#member.obj)")
     path = Path(archive).expanduser()
     path = path if path.is_absolute() else base / path
     check_file(path, "mesh file", "give a path relative to the spec file")
@@ -85,17 +87,22 @@ def resolve_mesh(ref: str, base: Path) -> str:
     return str(path.resolve())
 
 
+def check_named(ref: str, what: str, example: str) -> None:
+    """Refuse an empty path: joined to the spec's folder it would name that folder ("is a directory")."""
+    if not ref.strip():
+        raise UserError(f"the {what} path is empty; give the path of {example}, relative to the spec file")
+
+
 def materialise_mesh(ref: str, scratch: Path) -> Path:
     """A local file path for a mesh reference, extracting zip members' folders under ``scratch``."""
     archive, sep, member = ref.partition("#")
     if not sep:
         return Path(archive)
-    folder = member.rsplit("/", 1)[0] + "/" if "/" in member else ""
     target = scratch / "assets" / digest([archive, member])[:16]
     done = target / ".complete"
     if not done.exists():
         try:
-            _extract(archive, member, folder, target)
+            _extract(archive, member, target)
             done.write_text("ok")
         except OSError as exc:
             if not str(exc.filename or "").startswith(str(scratch)):
@@ -105,12 +112,55 @@ def materialise_mesh(ref: str, scratch: Path) -> Path:
     return target / member
 
 
-def _extract(archive: str, member: str, folder: str, target: Path) -> None:
-    """Extract ``member``'s folder (its materials and textures) from ``archive`` into ``target``."""
+def extracted_members(zf: zipfile.ZipFile, member: str) -> list[zipfile.ZipInfo]:
+    """The files :func:`materialise_mesh` extracts for ``member``: those of its folder (its
+    materials and textures), not of sub-folders."""
+    folder = member.rsplit("/", 1)[0] + "/" if "/" in member else ""
+    return [info for info in zf.infolist() if info.filename.startswith(folder) and not info.is_dir()
+            and info.filename.count("/") == member.count("/")]
+
+
+def check_archive(ref: str, limit_mb: float) -> None:
+    """Refuse a mesh archive one of whose extracted files declares more than ``limit_mb`` megabytes.
+
+    Raises:
+        UserError: naming the archive, the file, its size and ``[experiment] max_archive_mb``.
+    """
+    archive, sep, member = ref.partition("#")
+    if not sep:
+        return
     with zipfile.ZipFile(archive) as zf:
-        for name in zf.namelist():
-            if name.startswith(folder) and not name.endswith("/") and name.count("/") == member.count("/"):
-                zf.extract(name, target)
+        for info in extracted_members(zf, member):
+            if info.file_size > limit_mb * 1e6:
+                raise UserError(f"{Path(archive).name}#{info.filename} expands to {info.file_size / 1e6:,.1f} MB "
+                                f"({info.compress_size / 1e6:,.3g} MB zipped), over [experiment] max_archive_mb = "
+                                f"{limit_mb:g}; raise max_archive_mb if the archive is trusted")
+
+
+def _extract(archive: str, member: str, target: Path) -> None:
+    """Extract ``member``'s folder (its materials and textures) from ``archive`` into ``target``,
+    each file no longer than it declares (the spec's check read those sizes, not the bytes)."""
+    with zipfile.ZipFile(archive) as zf:
+        for info in extracted_members(zf, member):
+            path = target.joinpath(*(part for part in info.filename.split("/") if part not in ("", ".", "..")))
+            path.parent.mkdir(parents=True, exist_ok=True)
+            name = f"{Path(archive).name}#{info.filename}"
+            try:
+                with zf.open(info) as source, open(path, "wb") as out:
+                    _copy_at_most(source, out, info.file_size, name)
+            except zipfile.BadZipFile as exc:
+                raise damaged_member(name, exc) from None
+
+
+def _copy_at_most(source, out, size: int, name: str) -> None:
+    """Copy ``source`` to ``out``, refusing it once it yields more than ``size`` bytes."""
+    written = 0
+    while chunk := source.read(1 << 20):
+        written += len(chunk)
+        if written > size:
+            raise UserError(f"{name} expands to more than the {size:,} bytes its archive declares (a damaged or "
+                            "crafted zip); repack the archive")
+        out.write(chunk)
 
 
 def mesh_files(path: Path) -> list[Path]:

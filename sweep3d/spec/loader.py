@@ -22,7 +22,7 @@ from sweep3d.controls import Control, is_spec_path
 from sweep3d.errors import SpecError, UserError
 from sweep3d.evaluation import declaration_problem
 from sweep3d.registry import is_user_plugin
-from sweep3d.spec.assets import resolve_hdri, resolve_mesh
+from sweep3d.spec.assets import check_archive, resolve_hdri, resolve_mesh
 from sweep3d.spec.catalogue import Catalogue
 from sweep3d.spec.columns import JOB_COLUMNS, PREDICTION_COLUMNS, TRUTH_RESULT_COLUMNS, parameter_column
 from sweep3d.spec.looks import check_look, valid_keys
@@ -176,6 +176,7 @@ def validate_spec(raw: dict[str, Any], catalogue: Catalogue, *, path: Path, base
     for i, obj in enumerate(spec.objects):
         try:
             meshes[obj.name] = resolve_mesh(obj.mesh, base)
+            check_archive(meshes[obj.name], spec.experiment.max_archive_mb)
             check_mesh(meshes[obj.name])
         except UserError as exc:
             raise fail(f"objects[{i}].mesh", _naming(obj.mesh, exc)) from None
@@ -183,9 +184,9 @@ def validate_spec(raw: dict[str, Any], catalogue: Catalogue, *, path: Path, base
     hdris: dict[str, str | None] = {}
     for i, env in enumerate(spec.environments):
         try:
-            hdris[env.name] = resolve_hdri(env.hdri, base) if env.hdri else None
+            hdris[env.name] = resolve_hdri(env.hdri, base) if env.hdri is not None else None
             # the built-in maps are known to be good (and DWA-compressed, which radiance does not read)
-            warning = check_hdri(hdris[env.name], pixels=not env.hdri.startswith("builtin:")) if env.hdri else None
+            warning = check_hdri(hdris[env.name], pixels=not env.hdri.startswith("builtin:")) if env.hdri is not None else None
         except UserError as exc:
             raise fail(f"environments[{i}].hdri", _naming(env.hdri or "", exc)) from None
         if warning:
@@ -223,7 +224,7 @@ def _naming(ref: str, problem: UserError | str) -> str:
     """The problem's message, prefixed with the file as the spec gives it unless it already says it."""
     message = str(problem)
     name = Path(ref.partition("#")[2] or ref).name
-    return message if name and name in message else f"{ref}: {message}"
+    return message if not ref or (name and name in message) else f"{ref}: {message}"
 
 
 def _read_toml(path: Path) -> dict[str, Any]:
@@ -308,10 +309,7 @@ def _load_evaluator(spec: Spec, fail, catalogue: Catalogue) -> Any:
         cls.Params(**spec.evaluator.params)
     except ValidationError as exc:
         err = exc.errors()[0]
-        problem = err["msg"].removeprefix("Value error, ")
-        if "input" in err:
-            problem += f" (got {err['input']!r})"
-        raise fail(f"evaluator.{_key_path(err['loc'])}", problem) from None
+        raise fail(f"evaluator.{_key_path(err['loc'])}", _params_problem(err)) from None
     return cls
 
 
@@ -467,7 +465,7 @@ def _check_space(control: Control, name: str, space: Space, key: str, fail) -> S
         try:
             return getattr(control.Params(**{name: value}), name)
         except ValidationError as exc:
-            raise fail(key, f"{exc.errors()[0]['msg']} (got {value!r})") from None
+            raise fail(key, _params_problem({**exc.errors()[0], "input": value})) from None
 
     if isinstance(space, Fixed):
         return Fixed(check(space.value))
@@ -512,7 +510,13 @@ def _load_policy(spec: Spec, fail, catalogue: Catalogue):
         return cls(cls.Params(**params))
     except ValidationError as exc:
         err = exc.errors()[0]
-        problem = "unknown key; remove it or check its spelling" if err["type"] == "extra_forbidden" else err["msg"]
-        if "input" in err and err["type"] != "extra_forbidden":
-            problem += f" (got {err['input']!r})"
-        raise fail(f"policy.{_key_path(err['loc'])}", problem) from None
+        raise fail(f"policy.{_key_path(err['loc'])}", _params_problem(err)) from None
+
+
+def _params_problem(err: dict[str, Any]) -> str:
+    """A plug-in ``Params`` model's first validation error as a line: pydantic's message with the
+    value it got (a value error's own message already says it)."""
+    if err["type"] == "extra_forbidden":
+        return "unknown key; remove it or check its spelling"
+    problem = err["msg"].removeprefix("Value error, ")
+    return problem if "input" not in err or err["type"] == "value_error" else f"{problem} (got {err['input']!r})"

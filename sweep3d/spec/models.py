@@ -6,7 +6,7 @@ import math
 from typing import Annotated, Any, Literal
 
 from pydantic import (
-    BaseModel,
+    AfterValidator,
     ConfigDict,
     Field,
     ValidationInfo,
@@ -14,10 +14,12 @@ from pydantic import (
     model_validator,
 )
 
-Name = Annotated[str, Field(min_length=1, max_length=200)]
+from sweep3d.typed import Typed, printable
+
+Name = Annotated[str, Field(min_length=1, max_length=200), AfterValidator(printable)]
 
 
-class StrictModel(BaseModel):
+class StrictModel(Typed):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
 
@@ -27,6 +29,9 @@ class ExperimentSpec(StrictModel):
     store: str = Field(".sweep3d", description="Content-addressed store; relative to the spec file.")
     max_jobs: int = Field(1_000_000, ge=1, description="Refuse a spec that expands to more jobs (counted before "
                                                        "any is made); raise it for a bigger sweep.")
+    max_archive_mb: float = Field(256.0, gt=0, allow_inf_nan=False,
+                                  description="The most megabytes (10^6 bytes) a file of a mesh archive may expand "
+                                              "to: a small zip can hold a huge file that would fill the store.")
 
     @field_validator("store")
     @classmethod
@@ -97,7 +102,7 @@ class ModelSpec(StrictModel):
         return self.id or self.name
 
 
-class EvaluatorSpec(BaseModel):
+class EvaluatorSpec(Typed):
     """``kind`` picks the evaluator; ``passes`` and ``min_visible`` are every evaluator's; the other
     keys are the evaluator's own settings, checked against its ``Params`` when the spec loads
     (``top_k`` for classification, ``iou`` and ``score`` for detection, …)."""
@@ -190,6 +195,8 @@ class ObjectSpec(StrictModel):
             if isinstance(label, bool) or not isinstance(label, (int, str)):
                 raise ValueError(f"labels[{i}] = {label!r} is not a class name or id; give an ImageNet class "
                                  "name such as \"coffee mug\" or an integer id 0..999")
+            if isinstance(label, str):
+                printable(label)
         return labels
 
 
@@ -271,7 +278,7 @@ class ReportSpec(StrictModel):
                            "for the pass only and re-infers nothing).")
 
 
-class PolicySpec(BaseModel):
+class PolicySpec(Typed):
     """``type`` picks the policy; ``paired`` is the planner's; the other keys are the policy's parameters."""
 
     model_config = ConfigDict(extra="allow", frozen=True)

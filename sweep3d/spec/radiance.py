@@ -8,7 +8,9 @@ FLOAT colour channels (R, G, B or Y). Other EXR compressions (PIZ, PXR24, B44, D
 are left to Blender; 8-bit images (.png, .jpg) are read with Pillow (``sniff``).
 
 What is legal: a map with lit pixels and some negative ones (filtering rings around the sun)
-renders, with a warning; a map with no positive pixel at all is an error.
+renders, with a warning; a map with no positive pixel at all is an error, and so is an EXR with a
+NaN or infinite value (Cycles renders a NaN region black and an infinite one white, and the
+images count as valid) or a value over :data:`MAX_RADIANCE`.
 """
 
 from __future__ import annotations
@@ -32,6 +34,10 @@ EXR_COLOUR = {"R", "G", "B", "Y"}
 EXR_DECODED = {0: 1, 2: 1, 3: 16}  # NONE, ZIPS, ZIP -> scanlines per chunk
 #: Bytes of pixels read from a big map, in evenly spread chunks (about 0.05 s).
 EXR_BUDGET = 4 << 20
+#: The largest radiance a map may hold. Captured maps peak at about 1e5 (an unclipped sun; a HALF
+#: EXR cannot pass 65504): 1e6 leaves a tenfold margin, while 1e30 (times ``strength`` up to 1e6,
+#: squared in Cycles' variance estimates) overflows 32-bit floats and renders white.
+MAX_RADIANCE = 1e6
 
 
 class Undecided(Exception):
@@ -45,12 +51,24 @@ class Tally:
     values: int = 0
     positive: int = 0
     negative: int = 0
+    pixels: int = 0
+    nonfinite: int = 0  # pixels with a NaN or infinite channel
+    absurd: int = 0  # pixels with a finite channel over MAX_RADIANCE
 
     def add(self, chunk: np.ndarray) -> None:
+        """Count a chunk of (channels, pixels) values."""
+        finite = np.isfinite(chunk)
         with np.errstate(invalid="ignore"):
             self.values += chunk.size
-            self.positive += int(np.count_nonzero(chunk > 0))
-            self.negative += int(np.count_nonzero(chunk < 0))
+            self.positive += int(np.count_nonzero(finite & (chunk > 0)))
+            self.negative += int(np.count_nonzero(finite & (chunk < 0)))
+            self.pixels += chunk.shape[1]
+            self.nonfinite += int(np.count_nonzero(~finite.all(axis=0)))
+            self.absurd += int(np.count_nonzero((finite & (chunk > MAX_RADIANCE)).any(axis=0)))
+
+    @property
+    def bad(self) -> bool:
+        return bool(self.nonfinite or self.absurd)
 
 
 def check_hdr(data: bytes) -> None:
@@ -76,12 +94,13 @@ def check_exr(data: bytes, attrs: dict[str, bytes], offsets: Sequence[int]) -> s
         _, ymin, _, ymax = struct.unpack("<iiii", attrs["dataWindow"][:16])
         step = max(1, math.ceil((ymax - ymin + 1) * row / EXR_BUDGET))
         tally = _tally(exr_colour(data, attrs, offsets[::step]))
-        if tally.values and not tally.positive and step > 1:
-            tally = _tally(exr_colour(data, attrs, offsets))
+        if tally.values and (not tally.positive or tally.bad) and step > 1:
+            tally = _tally(exr_colour(data, attrs, offsets))  # before refusing: the whole map, and exact counts
     except (Undecided, ValueError, IndexError, struct.error):
         return None  # a layout these few lines do not read: Blender decides
     if tally.values == 0:
         return None
+    _refuse_unusable(tally)
     if tally.positive == 0:
         what = (f"{tally.negative:,} of its {tally.values:,} colour values are negative and none is positive"
                 if tally.negative else "every pixel is 0")
@@ -91,6 +110,18 @@ def check_exr(data: bytes, attrs: dict[str, bytes], offsets: Sequence[int]) -> s
         return (f"{tally.negative / tally.values:.2%} of the map's colour values are negative; negative light is "
                 "not physical and may render as dark or odd patches: clamp them to 0")
     return None
+
+
+def _refuse_unusable(tally: Tally) -> None:
+    """Refuse a map with NaN, infinite or absurdly bright pixels, saying how many."""
+    if tally.nonfinite:
+        raise UserError(f"{tally.nonfinite:,} of the EXR map's {tally.pixels:,} pixels are NaN or infinite; Cycles "
+                        "would render them black or white and the images would count as valid: fix or re-export the "
+                        "map (e.g. replace them with their neighbours' values)")
+    if tally.absurd:
+        raise UserError(f"{tally.absurd:,} of the EXR map's {tally.pixels:,} pixels are brighter than "
+                        f"{MAX_RADIANCE:g} (no captured sky is), which overflows Cycles' 32-bit light sums and renders "
+                        "white: fix the map's scale (use the environment's strength to brighten it)")
 
 
 def _tally(chunks: Iterator[np.ndarray]) -> Tally:
@@ -146,7 +177,7 @@ def _rle_scanline(data: bytes, pos: int, width: int) -> tuple[np.ndarray, int]:
 
 
 def exr_colour(data: bytes, attrs: dict[str, bytes], offsets: Iterable[int]) -> Iterator[np.ndarray]:
-    """The colour channels' values of a scanline EXR, one flat array per chunk at ``offsets``."""
+    """The colour channels' values of a scanline EXR, one (channels, pixels) array per chunk at ``offsets``."""
     lines_per_chunk = EXR_DECODED.get(attrs["compression"][0])
     if lines_per_chunk is None:
         raise Undecided
@@ -156,7 +187,8 @@ def exr_colour(data: bytes, attrs: dict[str, bytes], offsets: Iterable[int]) -> 
         y, size = struct.unpack_from("<ii", data, offset)
         lines = min(lines_per_chunk, ymax + 1 - y)
         rows = _exr_block(data[offset + 8:offset + 8 + size], lines * row).reshape(lines, row)
-        yield np.concatenate([rows[:, start:start + width * t.itemsize].copy().view(t).ravel() for start, t in wanted])
+        yield np.stack([rows[:, start:start + width * t.itemsize].copy().view(t).ravel().astype(np.float32)
+                        for start, t in wanted])
 
 
 def _exr_rows(attrs: dict[str, bytes]) -> tuple[int, int, list[tuple[int, np.dtype]]]:

@@ -24,6 +24,7 @@ from pathlib import Path
 
 from sweep3d.errors import UserError
 from sweep3d.spec import radiance, vertices
+from sweep3d.spec.obj_faces import check_obj_geometry
 
 EXR_MAGIC = b"\x76\x2f\x31\x01"
 #: Scanlines per chunk for each OpenEXR compression (NONE, RLE, ZIPS, ZIP, PIZ, PXR24, B44, B44A, DWAA, DWAB).
@@ -108,11 +109,19 @@ def check_hdri(path: str, pixels: bool = True) -> str | None:
         raise unreadable(exc, "HDRI file", path) from None
 
 
+def damaged_member(name: str, exc: Exception) -> UserError:
+    """One line for an archive member that cannot be decompressed (a bad CRC, a size that lies)."""
+    return UserError(f"{name} cannot be read from its archive ({exc}): a damaged or crafted zip; repack the archive")
+
+
 @lru_cache(maxsize=256)
 def _check_mesh(archive: str, member: str, size: int, mtime_ns: int) -> None:
     if member:
         with zipfile.ZipFile(archive) as zf:
-            data = zf.read(member)
+            try:
+                data = zf.read(member)
+            except (zipfile.BadZipFile, EOFError) as exc:
+                raise damaged_member(f"{Path(archive).name}#{member}", exc) from None
         name = member
     else:
         data = Path(archive).read_bytes()
@@ -131,6 +140,7 @@ def _obj(data: bytes) -> None:
     if not re.search(rb"(?m)^[ \t]*f[ \t]", data):
         raise UserError("the OBJ file has no faces ('f' lines), so nothing would be rendered; export it with faces")
     vertices.check_obj(data)
+    check_obj_geometry(data)
 
 
 def _ply(data: bytes) -> None:

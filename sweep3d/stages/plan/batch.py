@@ -59,10 +59,10 @@ class ControlBatch:
     def part(self, group: int) -> Any:
         """The key part of the jobs of ``group``, with a :class:`Hole` for what differs between them."""
         if not self.plain:
-            return Hole(self.id)
+            return Hole(self.hole())
         dump = dict(self.values.dumps[group])
         for param in self.values.numbers:
-            dump[param] = Hole(f"{self.id}.{param}")
+            dump[param] = Hole(self.hole(param))
         return self.inst.control.key_part(dump)
 
     def patterns(self, rows: np.ndarray) -> list[np.ndarray]:
@@ -77,8 +77,13 @@ class ControlBatch:
     def hole_texts(self, rows: np.ndarray) -> dict[str, np.ndarray]:
         """The canonical text filling each hole of :meth:`part`, per job of ``rows``."""
         if not self.plain:
-            return {self.id: self.texts[self.values.group[rows]]}  # type: ignore[index]
-        return {f"{self.id}.{param}": self._number_texts(param, rows) for param in self.values.numbers}
+            return {self.hole(): self.texts[self.values.group[rows]]}  # type: ignore[index]
+        return {self.hole(param): self._number_texts(param, rows) for param in self.values.numbers}
+
+    def hole(self, param: str = "") -> str:
+        """The name of a hole of :meth:`part`: under ``control:``, so that no control id (``render``)
+        can take the name of a key's other holes (``render``, ``image``)."""
+        return f"control:{self.id}.{param}" if param else f"control:{self.id}"
 
     def _number_texts(self, param: str, rows: np.ndarray) -> np.ndarray:
         """Canonical texts of a range parameter's numbers, as ``key_part`` would write them."""

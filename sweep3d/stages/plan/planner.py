@@ -26,6 +26,7 @@ from sweep3d.stages.jobs import JobList, Plan, PlanColumns, SceneBlock
 from sweep3d.stages.passes import truth_passes
 from sweep3d.stages.plan.batch import ControlBatch, control_batch, groups, keyed_texts
 from sweep3d.stages.plan.checked import policy_count
+from sweep3d.stages.plan.memory import check_memory
 from sweep3d.stages.plan.pairing import scene_points
 from sweep3d.stages.plan.policies import Outcome
 from sweep3d.stages.postprocess.keys import image_template
@@ -215,11 +216,18 @@ def check_size(spec: LoadedSpec) -> None:
     jobs = count_jobs(spec)
     if jobs is not None and jobs > spec.experiment.max_jobs:
         raise _too_many(spec, f"{jobs:,}")
+    if jobs is not None:
+        check_memory(spec, jobs, _knob(spec))
 
 
 def _too_many(spec: LoadedSpec, jobs: str) -> SpecError:
-    kind = spec.spec.policy.type
-    knob = ("policy.samples_per_dim or the number of listed values" if kind == "grid" else
-            "policy.samples" if kind in ("random", "sobol", "adaptive") else "the policy's parameters")
     return spec.fail("policy", f"the spec expands to {jobs} jobs, over the limit of {spec.experiment.max_jobs:,}; "
-                               f"lower {knob} (or the objects and environments), or raise [experiment] max_jobs")
+                               f"lower {_knob(spec)} (or the objects and environments), or raise [experiment] "
+                               "max_jobs")
+
+
+def _knob(spec: LoadedSpec) -> str:
+    """The policy's setting that sets how many jobs a scene has."""
+    kind = spec.spec.policy.type
+    return ("policy.samples_per_dim or the number of listed values" if kind == "grid" else
+            "policy.samples" if kind in ("random", "sobol", "adaptive") else "the policy's parameters")

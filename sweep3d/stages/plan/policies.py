@@ -7,13 +7,14 @@ from dataclasses import dataclass
 from typing import ClassVar, Mapping
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, StrictBool
+from pydantic import ConfigDict, Field, StrictBool
 
 from sweep3d.registry import Registry
 from sweep3d.spec.space import Point, SpaceShape, as_arrays, as_points
+from sweep3d.typed import Typed
 
 
-class PolicyParams(BaseModel):
+class PolicyParams(Typed):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
 
