@@ -73,6 +73,7 @@ def tree(root: Path) -> dict[str, str]:
 
 @pytest.mark.parametrize("damage", ["flipped", "truncated", "garbage", "empty"])
 def test_an_unreadable_segment_is_quarantined_with_one_warning_and_skipped(tmp_path, caplog, damage):
+    """By the writer lock's holder (a reader only skips it: tests/test_store_audit.py)."""
     store = Store(tmp_path / "store")
     good = store.append("renders", [render_row("a"), render_row("b")])
     bad = store.append("renders", [render_row(f"k{i}", i) for i in range(200)])
@@ -85,7 +86,7 @@ def test_an_unreadable_segment_is_quarantined_with_one_warning_and_skipped(tmp_p
     else:
         bad.write_bytes(b"")
 
-    with caplog.at_level(logging.WARNING, logger="sweep3d.store"):
+    with caplog.at_level(logging.WARNING, logger="sweep3d.store"), store.lock():
         assert store.keys("renders") == {"a", "b"}
         con = store.connect()
         assert con.execute("select count(*) from renders").fetchone()[0] == 2

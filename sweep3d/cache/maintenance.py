@@ -27,7 +27,10 @@ from sweep3d.cache.store import (
     TABLES,
     TRUTH_BLOBS,
     Store,
+    StoreReadError,
     atomic_write,
+    blob_key,
+    scan,
     segment_name,
 )
 
@@ -65,7 +68,8 @@ class Verification:
 
 
 def verify(root: Path) -> Verification:
-    """Re-read every segment and re-hash every blob that a row references; change nothing."""
+    """Re-read every segment (checking its columns are its table's) and re-hash every blob that a
+    row references; change nothing."""
     store = Store(root, quarantine=False, warn=False)
     report = Verification()
     for table in TABLES:
@@ -77,7 +81,7 @@ def verify(root: Path) -> Verification:
                     report.problems.append(Problem("corrupt segment", table, path, detail=store.unreadable.get(str(path), "")))
                 continue
             report.rows += data.num_rows
-    for path in sorted((root / "jobs").glob("*.parquet")):
+    for path in jobs_files(root):
         if store.read_segment(path) is None and path.exists():
             report.problems.append(Problem("corrupt jobs table", "jobs", path, detail=store.unreadable.get(str(path), "")))
     for table in BLOB_TABLES:
@@ -173,52 +177,91 @@ def collect_garbage(root: Path, older_than: float = TEMP_AGE, purge_quarantine: 
     """Remove blobs that no row references, and temp files and segments a compaction replaced
     that are older than ``older_than`` seconds.
 
-    Call it holding the writer lock (no run is writing). ``purge_quarantine`` also empties
-    ``quarantine/``.
+    Only what the store wrote goes: files named as it names blobs (:func:`blob_key`) and temp
+    files (:data:`TEMP_PATTERN`); anything else put in its folders stays, and symbolic links are
+    neither followed nor removed, so gc never reaches outside the store. Call it holding the
+    writer lock (no run is writing). ``purge_quarantine`` also empties ``quarantine/``.
+
+    Raises:
+        StoreReadError: a segment or folder cannot be read: the blobs of its rows would look
+            unreferenced, so nothing is removed.
     """
     store = Store(root)
     referenced: set[str] = set()
     for table in (*BLOB_TABLES, "truths"):  # a truth key owns its mask and depth blobs
         referenced |= store.keys(table)
+    _refuse_unread(store)
     out = Collected()
     now = time.time()
 
-    def remove(path: Path) -> bool:
+    def remove(entry: os.DirEntry) -> bool:
         try:
-            size = path.stat().st_size
-            path.unlink()
+            size = entry.stat(follow_symlinks=False).st_size
+            os.unlink(entry.path)
         except OSError:
             return False
         out.bytes += size
         return True
 
+    def old(entry: os.DirEntry) -> bool:
+        try:
+            return now - entry.stat(follow_symlinks=False).st_mtime >= older_than
+        except OSError:  # gone meanwhile
+            return False
+
     blobs = root / "blobs"
-    for path in sorted(blobs.glob("*/*")) if blobs.is_dir() else []:
-        if not path.is_file():
-            continue
-        if path.name.startswith("."):
-            if now - path.stat().st_mtime >= older_than and remove(path):
-                out.temp_files += 1
-        elif path.name.split(".", 1)[0] not in referenced and remove(path):
-            out.blobs += 1
+    for folder, entry in _blob_files(blobs):
+        if _is_temp(entry.name):
+            out.temp_files += old(entry) and remove(entry)
+        elif (key := blob_key(entry.name, folder)) is not None and key not in referenced:
+            out.blobs += remove(entry)
     for table in TABLES:
         out.temp_files += store.sweep_superseded(table, older_than)
     for folder in (root / "tables", root / "jobs", root / "reports"):
-        for path in folder.rglob(".*.tmp") if folder.is_dir() else []:
-            if now - path.stat().st_mtime >= older_than and remove(path):
-                out.temp_files += 1
+        out.temp_files += sum(old(e) and remove(e) for e in store_files(folder) if _is_temp(e.name))
     scratch = root / "tmp"
-    for path in sorted(scratch.rglob("*"), reverse=True) if scratch.is_dir() else []:
-        if path.is_file() and now - path.stat().st_mtime >= older_than and remove(path):
-            out.temp_files += 1
+    out.temp_files += sum(old(e) and remove(e) for e in store_files(scratch))
     quarantine = root / "quarantine"
-    if purge_quarantine and quarantine.is_dir():
-        for path in quarantine.rglob("*"):
-            if path.is_file() and remove(path):
-                out.quarantined += 1
+    if purge_quarantine:
+        out.quarantined += sum(remove(e) for e in store_files(quarantine))
     for folder in (blobs, scratch, quarantine):
         _remove_empty_dirs(folder)
     return out
+
+
+def _refuse_unread(store: Store) -> None:
+    """Stop gc when a segment it read around is still there (one it may not read, a folder in
+    its place): the blobs of its rows would look unreferenced."""
+    left = [path for path in store.unreadable if os.path.lexists(path)]
+    if left:
+        where = Path(left[0]).relative_to(store.root)
+        raise StoreReadError(f"gc removed nothing: {where} is unreadable ({store.unreadable[left[0]]}), so the "
+                             "blobs of its rows would look unreferenced; fix it, or move it aside with sweep3d cache "
+                             "verify --repair")
+
+
+def store_files(folder: Path) -> Iterator[os.DirEntry]:
+    """The files under ``folder`` at any depth, as the store wrote them: symbolic links (to a
+    file or a folder, or ``folder`` itself one) are not the store's and are skipped, never followed."""
+    if folder.is_symlink():
+        return
+    for entry in scan(folder):
+        if entry.is_dir(follow_symlinks=False):
+            yield from store_files(Path(entry.path))
+        elif entry.is_file(follow_symlinks=False):
+            yield entry
+
+
+def _blob_files(blobs: Path) -> Iterator[tuple[str, os.DirEntry]]:
+    """(blob folder's name, file) for every file directly in a blob folder (``blobs/ab/…``),
+    without following symbolic links."""
+    if blobs.is_symlink():
+        return
+    for folder in scan(blobs):
+        if folder.is_dir(follow_symlinks=False):
+            for entry in scan(Path(folder.path)):
+                if entry.is_file(follow_symlinks=False):
+                    yield folder.name, entry
 
 
 def remove_killed_writers_temp_files(root: Path, store: Store | None = None) -> int:
@@ -236,9 +279,9 @@ def remove_killed_writers_temp_files(root: Path, store: Store | None = None) -> 
     removed = 0
     for name in LOCKED_FOLDERS:
         folder = root / name
-        if not folder.is_dir():
-            continue
-        for path in _blob_temp_files(store) if name == "blobs" else folder.rglob(TEMP_PATTERN):
+        found = _blob_temp_files(store) if name == "blobs" else (Path(e.path) for e in store_files(folder)
+                                                                   if _is_temp(e.name))
+        for path in found:
             try:
                 path.unlink()
             except OSError:
@@ -253,32 +296,38 @@ def _is_temp(name: str) -> bool:
 
 
 def _blob_temp_files(store: Store) -> Iterator[Path]:
-    """What ``blobs/`` holds that matches :data:`TEMP_PATTERN`, at any depth (as ``rglob`` finds
-    it), read from the store's listings of the blob folders: what a blob folder holds besides
-    blobs (few names, if any) is looked at closer, and searched if it is a folder."""
+    """What ``blobs/`` holds that matches :data:`TEMP_PATTERN`, at any depth (symbolic links
+    neither followed nor listed), read from the store's listings of the blob folders: what a
+    blob folder holds besides blobs (few names, if any) is looked at closer, and searched if it
+    is a folder."""
     blobs = store.root / "blobs"
-    with os.scandir(blobs) as listing:
-        entries = list(listing)
-    for entry in entries:
-        if _is_temp(entry.name):
+    if blobs.is_symlink():
+        return
+    for entry in scan(blobs):
+        if entry.is_symlink():
+            continue
+        if _is_temp(entry.name) and entry.is_file():
             yield Path(entry.path)
-        if not entry.is_dir() or entry.is_symlink():
+        if not entry.is_dir():
             continue
         for name in store.blob_listing(entry.name).others:
             path = blobs / entry.name / name
-            if _is_temp(name):
+            if path.is_symlink():
+                continue
+            if _is_temp(name) and path.is_file():
                 yield path
-            if path.is_dir() and not path.is_symlink():
-                yield from path.rglob(TEMP_PATTERN)
+            if path.is_dir():
+                yield from (Path(e.path) for e in store_files(path) if _is_temp(e.name))
 
 
 def _remove_empty_dirs(folder: Path) -> None:
-    if not folder.is_dir():
+    """Remove the empty folders under ``folder`` and ``folder`` itself if it is left empty
+    (symbolic links are not followed)."""
+    if folder.is_symlink() or not folder.is_dir():
         return
-    for path in [*sorted((p for p in folder.rglob("*") if p.is_dir()), key=lambda p: len(p.parts), reverse=True),
-                 folder]:
+    for path, _, _ in os.walk(folder, topdown=False):
         try:
-            path.rmdir()
+            os.rmdir(path)
         except OSError:
             pass
 
@@ -345,10 +394,9 @@ def store_stats(root: Path) -> list[TableStats]:
         rows = data.num_rows if data is not None else 0
         keys = len(set(data.column(0).to_pylist())) if data is not None else 0
         out.append(TableStats(table, len(paths), rows, keys, sum(_size(p) for p in paths)))
-    jobs = sorted((root / "jobs").glob("*.parquet")) if (root / "jobs").is_dir() else []
+    jobs = jobs_files(root)
     out.append(TableStats("jobs", len(jobs), sum(_rows(store, p) for p in jobs), len(jobs), sum(_size(p) for p in jobs)))
-    blobs = [p for p in (root / "blobs").glob("*/*") if p.is_file() and not p.name.startswith(".")] \
-        if (root / "blobs").is_dir() else []
+    blobs = [Path(e.path) for folder, e in _blob_files(root / "blobs") if blob_key(e.name, folder) is not None]
     out.append(TableStats("blobs", len(blobs), len(blobs), len(blobs), sum(_size(p) for p in blobs)))
     replaced = [store.table_dir(t) / n for t in TABLES for _, names, _ in store.superseded(t) for n in names]
     replaced = [p for p in replaced if p.is_file()]
@@ -358,6 +406,12 @@ def store_stats(root: Path) -> list[TableStats]:
     quarantine = [p for p in (root / "quarantine").rglob("*") if p.is_file()] if (root / "quarantine").is_dir() else []
     out.append(TableStats("quarantine", len(quarantine), 0, 0, sum(_size(p) for p in quarantine)))
     return out
+
+
+def jobs_files(root: Path) -> list[Path]:
+    """The experiments' jobs files (``jobs/*.parquet``), by name."""
+    return sorted(root / "jobs" / e.name for e in scan(root / "jobs") if e.name.endswith(".parquet")
+                  and not e.name.startswith("."))
 
 
 def _size(path: Path) -> int:

@@ -10,9 +10,12 @@ Layout under the store root::
 
 Every write is a temp file plus an atomic rename, so a killed run leaves either a whole file
 or none: rerunning recomputes only what no complete row records. Segments carry Parquet page
-checksums; a segment that fails to read (corrupted on disk) is moved to ``quarantine/`` with one
-warning and its rows are recomputed, so a damaged store never crashes a run. A full disk or a
-read-only folder is a :class:`StoreWriteError` (a one-line user error), and leaves no temp file.
+checksums; a segment that fails to read (corrupted on disk, or whose columns are not its
+table's) is skipped with one warning, and moved to ``quarantine/`` when the process reading it
+holds the writer lock (its rows are then recomputed), so a damaged store never crashes a run and
+readers never change it. A full disk or a read-only folder is a :class:`StoreWriteError`, a
+folder that cannot be read a :class:`StoreReadError` (one-line user errors); a failed write
+leaves no temp file.
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ import json
 import logging
 import os
 import re
+import stat
 import time
 import uuid
 from contextlib import contextmanager
@@ -47,23 +51,41 @@ TRUTH_BLOBS = {"mask.png": "mask_sha256", "depth.npz": "depth_sha256"}
 BLOB_TABLES = ("renders", "images")  # tables whose rows each own the blob named by their key
 DIGEST_COLUMN = "sha256"  # hex SHA-256 of a blob's bytes, recorded in its row when written
 BLOB_EXT = "png"  # the file type of the blobs a run makes
+BLOB_SUFFIXES = (f".{BLOB_EXT}", *(f".{suffix}" for suffix in TRUTH_BLOBS))  # the names of blobs end so
+_HEX = re.compile(r"[0-9a-f]+")  # a key, as :mod:`sweep3d.cache.keys` writes it
 LISTING_ADVANTAGE = 4  # listing a folder's entries costs about a quarter of a stat per entry
 LISTING_SETTLED = 2.0  # seconds since a blob folder last changed before its listing is remembered
 SUPERSEDED_GRACE = 600.0  # seconds a compaction keeps the segments it merged, for readers that listed them
 
-#: Write failures the user can fix (free space, permissions), reported as one line, not a traceback.
-WRITE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM})
+#: Write failures the user can fix (free space, permissions, a folder where a file should be),
+#: reported as one line, not a traceback.
+WRITE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM, errno.EISDIR,
+                          errno.ENOTDIR})
+#: How to fix what an errno says about a path of the store (permissions, a misplaced file or folder).
+FIXES = {errno.EACCES: "fix its permissions", errno.EPERM: "fix its permissions",
+         errno.EISDIR: "a folder is where the store keeps a file: move it away",
+         errno.ENOTDIR: "a file is where the store keeps a folder: move it away"}
 #: What reading a damaged Parquet file raises (pyarrow's ArrowInvalid is a ValueError).
 READ_ERRORS = (OSError, ValueError, pa.ArrowException)
 #: Parquet metadata key of a segment listing the columns it was written with (a JSON list).
 COLUMNS_METADATA = b"sweep3d.columns"
 
+#: Columns a file of each table must have (its key), and a jobs file (what results join on).
+REQUIRED_COLUMNS = {**{table: (key,) for table, key in KEY_COLUMN.items()}, "jobs": ("pred_key",)}
+
 log = logging.getLogger("sweep3d.store")
 MAX_FILENAME_BYTES = 120  # of an experiment's name in file names: with suffixes, well under 255
+#: Stores whose writer lock this process holds (by real path): only their holder quarantines.
+_HELD: set[str] = set()
 
 
 class StoreWriteError(UserError):
     """The store cannot be written: a full disk, a quota, a read-only or forbidden folder."""
+
+
+class StoreReadError(UserError):
+    """A folder or file of the store cannot be read (its permissions), or is not what the store
+    keeps there (a file where a folder should be)."""
 
 
 class BlobListing(NamedTuple):
@@ -80,8 +102,9 @@ class Store:
 
     def __init__(self, root: str | Path, quarantine: bool = True, warn: bool = True) -> None:
         """Args:
-            quarantine: move unreadable segments to ``quarantine/`` when a read finds them
-                (False: only skip them, leaving the store untouched, as ``cache verify`` does).
+            quarantine: move unreadable segments to ``quarantine/`` when a read finds them while
+                this process holds the writer lock (:meth:`lock`); without it they are only
+                skipped, as by every reader (False: never move them, as ``cache verify`` does).
             warn: log one warning per unreadable file (``cache verify`` lists them itself).
         """
         self.root = Path(root)
@@ -146,6 +169,8 @@ class Store:
         except FileNotFoundError:
             self._listed.pop(folder, None)
             return BlobListing(frozenset(), frozenset())
+        except OSError as exc:
+            raise store_error(exc, "read") from None
         keys, others = _split_listing(names, folder, f".{BLOB_EXT}")
         listing = BlobListing(frozenset(keys), frozenset(others))
         if listed_at - max(st.st_mtime_ns, st.st_ctime_ns) >= LISTING_SETTLED * 1e9:
@@ -180,8 +205,9 @@ class Store:
             probe.write_bytes(b"")
             probe.unlink()
         except OSError as exc:
+            fix = "fix its permissions or " if exc.errno in (errno.EACCES, errno.EPERM) else ""
             raise UserError(
-                f"store {self.root} is not writable ({exc.strerror}); set experiment.store to a writable folder"
+                f"store {self.root} is not writable ({exc.strerror}); {fix}set experiment.store to a writable folder"
             ) from None
 
     # -- writes ------------------------------------------------------------------------------
@@ -241,24 +267,29 @@ class Store:
         Temp files are never listed, nor segments a compaction has merged into one that exists
         (they stay on disk a while for readers that listed them before; see :meth:`superseded`).
         """
-        directory = self.table_dir(table)
-        if not directory.is_dir():
-            return []
-        merged = {name for _, names, _ in self.superseded(table) for name in names}
-        return sorted(p for p in directory.glob("*.parquet") if not p.name.startswith(".") and p.name not in merged)
+        names = [entry.name for entry in scan(self.table_dir(table))]
+        merged = {name for _, replaced, _ in self.superseded(table, names) for name in replaced}
+        return sorted(self.table_dir(table) / name for name in names if _is_segment_name(name) and name not in merged)
 
-    def superseded(self, table: str) -> list[tuple[Path, list[str], float]]:
+    def superseded(self, table: str, names: list[str] | None = None) -> list[tuple[Path, list[str], float]]:
         """Compactions of ``table`` whose merged segment exists: (record, segment names it
         replaces, when). The replaced files are deleted by :meth:`sweep_superseded` after a grace
-        period, so a query that listed them just before the compaction can still open them."""
+        period, so a query that listed them just before the compaction can still open them.
+
+        Args:
+            names: what the table's folder holds, when the caller has just listed it.
+        """
         out = []
-        for record in sorted(self.table_dir(table).glob(".compacted-*.json")):
+        names = [entry.name for entry in scan(self.table_dir(table))] if names is None else names
+        for record in sorted(self.table_dir(table) / n for n in names if n.startswith(".compacted-")
+                             and n.endswith(".json")):
             try:
                 entry = json.loads(record.read_text())
             except (OSError, ValueError):
                 continue
             if (self.table_dir(table) / entry.get("merged", "")).is_file():
-                out.append((record, list(entry.get("replaces", [])), float(entry.get("at", 0.0))))
+                replaced = [n for n in entry.get("replaces", []) if isinstance(n, str) and _is_segment_name(n)]
+                out.append((record, replaced, float(entry.get("at", 0.0))))
         return out
 
     def sweep_superseded(self, table: str, older_than: float = SUPERSEDED_GRACE) -> int:
@@ -280,28 +311,50 @@ class Store:
     def read_segment(self, path: Path, columns: list[str] | None = None) -> pa.Table | None:
         """One segment (only the ``columns`` it has, when given), or None when it cannot be read.
 
-        A segment is read whole, with its page checksums verified, the first time this store
-        object sees it (by path, size and mtime); one that fails is quarantined and reported once.
-        A segment that vanished meanwhile (compacted away by another process) is None, silently.
+        A segment is read whole, with its page checksums verified and its columns checked
+        (:data:`REQUIRED_COLUMNS`), the first time this store object sees it (by path, size and
+        mtime); one that fails, or a folder in its place, is reported once (and quarantined by the
+        lock's holder). A segment that vanished meanwhile (compacted away by another process) is
+        None, silently.
         """
         try:
-            stat = path.stat()
-            ident = (str(path), stat.st_size, stat.st_mtime_ns)
+            st = path.stat()
+            if not stat.S_ISREG(st.st_mode):  # a fifo would block the read
+                what = "a folder, not a file" if stat.S_ISDIR(st.st_mode) else "not a regular file"
+                self._report_bad(path, what, move=self.quarantine_bad)
+                return None
+            ident = (str(path), st.st_size, st.st_mtime_ns)
             names = self._checked.get(ident)
             if names is None:
                 whole = pq.read_table(path, page_checksum_verification=True)
                 check_column_list(whole)
+                mismatch = self._columns_mismatch(path, whole.schema)
+                if mismatch:
+                    self._report_bad(path, mismatch, move=self.quarantine_bad)
+                    return None
                 self._checked[ident] = whole.column_names
                 return whole.select([c for c in columns if c in whole.column_names]) if columns else whole
             return pq.read_table(path, columns=[c for c in columns if c in names] if columns else None)
         except FileNotFoundError:
             return None
-        except PermissionError as exc:
-            self._report_bad(path, f"cannot read it: {exc.strerror}", move=False)
+        except PermissionError as exc:  # pyarrow's strerror holds the path and more: the errno's words
+            self._report_bad(path, f"{os.strerror(exc.errno or errno.EACCES)}; fix its permissions", move=False)
             return None
         except READ_ERRORS as exc:
             self._report_bad(path, _first_line(exc), move=self.quarantine_bad)
             return None
+
+    def _columns_mismatch(self, path: Path, schema: pa.Schema) -> str:
+        """Why the file at ``path`` cannot hold its table's rows ("" when it can): it lacks a
+        column the table needs, or its key is not text (a file of another table, a query's export)."""
+        folder = path.parent
+        kind = folder.name if folder.parent == self.root / "tables" or folder == self.root / "jobs" else None
+        for column in REQUIRED_COLUMNS.get(kind or "", ()):
+            if column not in schema.names:
+                return f"its columns are not the {kind} table's: it has no {column} column"
+            if not pa.types.is_string(schema.field(column).type):
+                return f"its columns are not the {kind} table's: its {column} is {schema.field(column).type}, not text"
+        return ""
 
     def _read_all(self, table: str, columns: list[str] | None) -> list[tuple[Path, pa.Table]]:
         """(segment, rows) for every readable segment of ``table``; unreadable ones are quarantined.
@@ -392,7 +445,7 @@ class Store:
         ``jobs`` the experiment's jobs file when it reads (tables without files are left out)."""
         files = {table: segments for table in TABLES if (segments := self.readable_segments(table))}
         jobs_path = self.jobs_path(experiment) if experiment is not None else None
-        if jobs_path is not None and jobs_path.exists() and self.read_segment(jobs_path, ["pred_key"]) is not None:
+        if jobs_path is not None and self.read_segment(jobs_path, ["pred_key"]) is not None:
             files["jobs"] = [jobs_path]
         return files
 
@@ -438,7 +491,7 @@ class Store:
         why = re.sub(r"^(\w+: )Could not open Parquet input source '[^']*': ", r"\1", why.replace(str(path), path.name))
         self._bad[str(path)] = why
         where = _relative(path, self.root)
-        moved = move and self.quarantine(path) is not None
+        moved = move and self.holds_lock and self.quarantine(path) is not None
         if not self.warn:
             return
         if moved:
@@ -504,15 +557,26 @@ class Store:
                     "recomputing them")
 
     # -- locking -----------------------------------------------------------------------------
+    @property
+    def holds_lock(self) -> bool:
+        """Whether this process holds the store's writer lock (through any store object)."""
+        return os.path.realpath(self.root) in _HELD
+
     @contextmanager
     def lock(self, wait: float = 0.0) -> Iterator[None]:
         """Hold the store's writer lock; readers never take it.
 
         Raises:
             StoreBusyError: if another process holds it for longer than ``wait`` seconds.
+            StoreWriteError: the lock file cannot be opened (its permissions, a folder in its place).
         """
         self.ensure_writable()
-        fh = open(self.root / "lock", "a+")
+        path = self.root / "lock"
+        try:
+            fh = open(path, "a+")
+        except OSError as exc:
+            raise store_error(exc, "write") from None
+        held = os.path.realpath(self.root)
         deadline = time.monotonic() + wait
         try:
             while True:
@@ -531,7 +595,11 @@ class Store:
             fh.truncate()
             fh.write(f"sweep3d pid {os.getpid()}")
             fh.flush()
-            yield
+            _HELD.add(held)
+            try:
+                yield
+            finally:
+                _HELD.discard(held)
         finally:
             fh.close()
 
@@ -665,10 +733,58 @@ def _as_write_error(exc: BaseException, path: Path) -> StoreWriteError:
     assert isinstance(exc, OSError)
     code = exc.errno if exc.errno in WRITE_ERRNOS else errno.ENOSPC
     reason = exc.strerror or os.strerror(code)
+    if code in (errno.EISDIR, errno.ENOTDIR):
+        return StoreWriteError(f"cannot write {path}: {reason}; {FIXES[code]}")
     fix = ("free some disk space" if code in (errno.ENOSPC, errno.EDQUOT)
            else "make the folder writable")
     return StoreWriteError(f"cannot write {path}: {reason}; {fix}, or set experiment.store to a folder on "
                            "another disk")
+
+
+def store_error(exc: OSError, doing: str) -> StoreReadError | StoreWriteError:
+    """One line for ``exc``, met reading or writing (``doing``) a path of the store: the path
+    (for a permission, the outermost folder that denies it) and how to fix it."""
+    path = Path(exc.filename) if exc.filename else Path(".")
+    if exc.errno in (errno.EACCES, errno.EPERM):
+        path = _blocked(path)
+    error = StoreReadError if doing == "read" else StoreWriteError
+    return error(f"cannot {doing} {path} ({exc.strerror or exc}); {FIXES.get(exc.errno or 0, 'check the disk')}")
+
+
+def _blocked(path: Path) -> Path:
+    """The outermost of ``path`` and its folders that this process may not read (``path`` itself
+    when none is found: a denial that ``os.access`` does not see)."""
+    for folder in reversed(path.parents):
+        if not os.access(folder, os.R_OK | os.X_OK):
+            return folder
+    return path
+
+
+def scan(folder: Path) -> list[os.DirEntry]:
+    """The entries of ``folder`` ([] when it is not there).
+
+    Raises:
+        StoreReadError: it cannot be read (its permissions, a file in its place): never taken
+            for an empty folder, or gc would delete every blob whose row it could not see.
+    """
+    try:
+        with os.scandir(folder) as entries:
+            return list(entries)
+    except FileNotFoundError:
+        return []
+    except OSError as exc:
+        raise store_error(exc, "read") from None
+
+
+def blob_key(name: str, folder: str) -> str | None:
+    """The key whose blob the file ``name`` in the blob folder ``folder`` is; None when the store
+    gives no blob that name (``<key>.png``, ``<key>.mask.png``, ``<key>.depth.npz``: the key hex
+    and beginning with the folder's name, as :meth:`Store.blob_file` places it)."""
+    for suffix in BLOB_SUFFIXES:
+        key = name[:-len(suffix)]
+        if name.endswith(suffix) and key[:2] == folder and _HEX.fullmatch(key):
+            return key
+    return None
 
 
 def _folder_entries(folder: Path) -> int:
@@ -715,6 +831,12 @@ def _unlink_quietly(path: Path) -> None:
 def segment_name() -> str:
     """A new segment's file name: sorts in write order, unique across processes."""
     return f"{time.time_ns():020d}-{os.getpid()}-{uuid.uuid4().hex[:8]}.parquet"
+
+
+def _is_segment_name(name: str) -> bool:
+    """Whether ``name`` could be a segment's (a ``.parquet`` file's name, no folder, not hidden):
+    a compaction record naming anything else is not followed out of the table's folder."""
+    return name.endswith(".parquet") and not name.startswith(".") and name == Path(name).name
 
 
 def _relative(path: Path, root: Path) -> Path:

@@ -40,7 +40,8 @@ def options(debug: bool = typer.Option(False, "--debug", help="When a plug-in of
     DEBUG["on"] = debug
 
 
-SpecArg = typer.Argument(..., help="Path to the experiment's TOML spec.", show_default=False)
+SpecArg = typer.Argument(..., help="Path to the experiment's TOML spec.", show_default=False,
+                         readable=False)  # the loader says why it cannot read one, in one line
 ModelOption = typer.Option(None, "--model", help="Which of the spec's models results and the views show (its id; "
                                                    "default: the first). results_all holds every model's.")
 
@@ -238,7 +239,7 @@ def query(
 
     experiment = Experiment(spec)
     statement = select_only(sql)
-    export = _export_target(output) if output is not None else None
+    export = _export_target(output, experiment.store) if output is not None else None
     with results_connection(experiment.spec, model, writable=[export[0]] if export else []) as con:
         if export is not None:
             _export(con, statement, output, *export)
@@ -316,13 +317,18 @@ def _print_plain(columns: list[str], rows: list[tuple], form: str) -> None:
 EXPORT_FORMATS = {".csv": "FORMAT CSV, HEADER", ".json": "FORMAT JSON, ARRAY true", ".parquet": "FORMAT PARQUET"}
 
 
-def _export_target(output: Path) -> tuple[Path, str]:
+def _export_target(output: Path, store: Path) -> tuple[Path, str]:
     """(the temp file an export writes before it is renamed to ``output``, its COPY options).
 
     Raises:
-        UserError: the suffix is not a format we write, or the folder cannot be created.
+        UserError: the suffix is not a format we write, ``output`` is inside the ``store`` (whose
+            files only sweep3d writes: an export there would replace or add a table), or the
+            folder cannot be created.
     """
     suffix = output.suffix.lower()
+    if Path(os.path.realpath(output)).is_relative_to(os.path.realpath(store)):
+        raise UserError(f"--output {output}: inside the store {store}, whose files only sweep3d writes; "
+                        "write it to another folder")
     if suffix not in EXPORT_FORMATS:
         raise UserError(f"--output {output}: unsupported format {suffix or '(none)'!r}; use .csv, .json or .parquet")
     try:

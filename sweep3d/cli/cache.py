@@ -19,7 +19,8 @@ from sweep3d.errors import UserError
 cache_app = typer.Typer(no_args_is_help=True, rich_markup_mode=None, help="Check and tidy a spec's store: verify, gc, compact, stats.")
 console = Console()
 
-SpecArg = typer.Argument(..., help="Path to a spec whose store to work on.", show_default=False)
+SpecArg = typer.Argument(..., help="Path to a spec whose store to work on.", show_default=False,
+                         readable=False)  # the loader says why it cannot read one, in one line
 WaitOption = typer.Option(0.0, help="Seconds to wait for a run holding the store's lock.")
 MAX_LISTED = 20  # problems printed one per line; the rest are counted
 

@@ -232,6 +232,8 @@ def _read_toml(path: Path) -> dict[str, Any]:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise SpecError(str(path), "", "no such spec file; check the path") from None
+    except PermissionError as exc:
+        raise SpecError(str(path), "", f"cannot read the spec ({exc.strerror}); fix its permissions") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise SpecError(str(path), "", f"cannot read the spec: {exc}") from None
     return parse_toml(text, str(path))
