@@ -254,7 +254,7 @@ def test_a_bright_but_captured_sun_passes() -> None:
 def test_a_segment_lacking_a_column_is_damaged_found_and_quarantined(tmp_path: Path, caplog) -> None:
     """The audit dropped ``top1_label`` from a predictions segment: its rows read as NULL labels,
     counted valid, and ``cache verify`` said "store OK". Such a segment is now unreadable: verify
-    names it, a read quarantines it (so its rows are recomputed), the others are untouched."""
+    names it, a run's read quarantines it (so its rows are recomputed), the others are untouched."""
     from sweep3d.cache.maintenance import verify
     from sweep3d.cache.store import Store
 
@@ -269,7 +269,9 @@ def test_a_segment_lacking_a_column_is_damaged_found_and_quarantined(tmp_path: P
     assert [(p.kind, p.path) for p in problems] == [("corrupt segment", damaged)]
     assert "top1_label" in problems[0].detail
 
-    assert Store(store.root).keys("predictions") == {"other"}
+    reader = Store(store.root)
+    with reader.lock():  # a run's: only the writer lock's holder quarantines
+        assert reader.keys("predictions") == {"other"}
     assert not damaged.exists() and (store.root / "quarantine").exists() and kept.exists()
     assert "lacks its column 'top1_label'" in caplog.text
 
