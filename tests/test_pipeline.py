@@ -114,6 +114,20 @@ def test_sheet_shows_one_row_per_control(tiny_copy: Path) -> None:
         pixels = np.asarray(sheet.convert("RGB"), dtype=np.float32)
     tiles = [pixels[2 * TILE : 3 * TILE - 14, LABEL_WIDTH + i * TILE : LABEL_WIDTH + (i + 1) * TILE] for i in range(3)]
     assert np.abs(tiles[0] - tiles[1]).mean() > 1 and np.abs(tiles[1] - tiles[2]).mean() > 1  # skins differ
+    assert "white" in result.output and "shown" not in result.output  # the spec's first scene, nothing sampled
+
+    # another base view, and fewer tiles than values: said, one line per sampled row
+    result = CliRunner().invoke(app, ["sheet", str(tiny_copy / "spec.toml"), "-o", str(out), "--environment",
+                                      "studio", "--tiles", "2"])
+    assert result.exit_code == 0, result.output
+    assert "box in studio" in result.output
+    assert result.output.count("values shown") == 1 and "2 of its 3 values shown, evenly spread" in result.output
+    with Image.open(out) as sheet:
+        assert sheet.size == (LABEL_WIDTH + 2 * TILE, 3 * TILE)
+        studio = np.asarray(sheet.convert("RGB"), dtype=np.float32)
+    assert np.abs(studio[:TILE, LABEL_WIDTH:LABEL_WIDTH + TILE] - pixels[:TILE, LABEL_WIDTH:LABEL_WIDTH + TILE]).mean() > 1
+    result = CliRunner().invoke(app, ["sheet", str(tiny_copy / "spec.toml"), "--object", "mug"])
+    assert result.exit_code == 2 and "no object named 'mug' for --object; the spec has 'box'" in result.output
 
 
 ADAPTIVE_SPEC = TINY_SPEC.replace("yaw = [0, 45]", "yaw = { range = [-180, 180] }\npitch = { range = [-90, 90] }").replace(

@@ -208,8 +208,16 @@ def bench(
 def sheet(
     spec: Path = SpecArg,
     output: Optional[Path] = typer.Option(None, "--output", "-o", help="PNG file to write."),
+    object_name: Optional[str] = typer.Option(None, "--object", help="The object every row shows (default: the "
+                                                                     "spec's first)."),
+    environment: Optional[str] = typer.Option(None, "--environment", help="The environment every row shows "
+                                                                          "(default: the spec's first)."),
+    tiles: int = typer.Option(8, min=0, help="The most tiles a row shows, evenly spread over its values (0: all)."),
 ) -> None:
-    """Render a contact sheet: one row per control, showing its effect alone on the first scene."""
+    """Render a contact sheet: one row per control, showing its effect alone on one scene.
+
+    A range is shown at the spec's own grid when its policy is a grid, else at five points.
+    """
     from sweep3d.cache.store import Store
     from sweep3d.progress import RunProgress
     from sweep3d.report.sheet import contact_sheet
@@ -218,8 +226,10 @@ def sheet(
     loaded = load_spec(spec)
     target = output or Store(loaded.store).report_path(loaded.name, "-controls.png")
     with RunProgress(console) as progress:
-        path = contact_sheet(loaded, target, progress)
-    console.print(f"contact sheet: [bold]{path}[/]")
+        sheet = contact_sheet(loaded, target, progress, object_name, environment, tiles)
+    console.print(f"contact sheet of {escape(sheet.object)} in {escape(sheet.environment)}: [bold]{escape(str(sheet.path))}[/]")
+    for control, shown, total in sheet.sampled:
+        console.print(f"{escape(control)}: {shown} of its {total} values shown, evenly spread (--tiles {total} shows all)")
 
 
 @command

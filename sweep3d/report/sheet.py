@@ -1,13 +1,16 @@
 """A contact sheet: one row per control of a spec, showing its effect alone.
 
-Each row renders the spec's first object in its first environment with only that control
-varied (its list values, or five points across its range) and every other control neutral,
-through the normal render and postprocess stages, so every tile is cached like any job.
+Each row renders one scene (the spec's first object in its first environment, or those the user
+names) with only that control varied and every other control neutral, through the normal render
+and postprocess stages, so every tile is cached like any job. A range is shown at the spec's own
+grid when its policy is a grid (five points across it otherwise). A row with more values than
+tiles shows an evenly spread subset, and says so (:attr:`Sheet.sampled`).
 """
 
 from __future__ import annotations
 
 import dataclasses
+from dataclasses import dataclass
 from pathlib import Path
 
 from PIL import Image, ImageDraw
@@ -30,18 +33,39 @@ SAMPLES_PER_RANGE = 5
 MAX_TILES = 8
 
 
-def contact_sheet(loaded: LoadedSpec, output: Path, progress: RunProgress) -> Path:
-    """Render the sheet for ``loaded`` into the PNG ``output`` and return its path."""
+@dataclass(frozen=True)
+class Sheet:
+    """A written contact sheet: its file, its scene, and the rows that show a subset of their
+    values (control id, values shown, values in all)."""
+
+    path: Path
+    object: str
+    environment: str
+    sampled: list[tuple[str, int, int]]
+
+
+def contact_sheet(loaded: LoadedSpec, output: Path, progress: RunProgress, object_name: str | None = None,
+                  environment: str | None = None, tiles: int = MAX_TILES) -> Sheet:
+    """Render the sheet for ``loaded`` into the PNG ``output``.
+
+    Args:
+        object_name, environment: the scene every row shows (default: the spec's first of each).
+        tiles: the most tiles a row shows (0: every value).
+    """
     if not loaded.controls:
         raise UserError(f"{loaded.path}: the spec has no [[controls]] to show")
+    scene = _scene(loaded, object_name, environment)
     rows: list[tuple[str, list[Job]]] = []
+    sampled: list[tuple[str, int, int]] = []
     jobs: list[Job] = []
     model = ModelHandle.resolve(loaded)
     for inst in loaded.controls:
-        plan = plan_spec(_one_control(loaded, inst), model)
+        plan = plan_spec(_one_control(scene, inst), model)
         distinct = list({j.image_key: j for j in plan.jobs}.values())
-        if len(distinct) > MAX_TILES:  # several ranges: a spread of the grid
-            distinct = [distinct[round(i * (len(distinct) - 1) / (MAX_TILES - 1))] for i in range(MAX_TILES)]
+        if 0 < tiles < len(distinct):  # an evenly spread subset, said
+            sampled.append((inst.id, tiles, len(distinct)))
+            distinct = ([distinct[round(i * (len(distinct) - 1) / (tiles - 1))] for i in range(tiles)]
+                        if tiles > 1 else distinct[:1])
         rows.append((inst.id, distinct))
         jobs += distinct
     plan = Plan(loaded, jobs, model.digest, framing=model.framing)
@@ -63,14 +87,32 @@ def contact_sheet(loaded: LoadedSpec, output: Path, progress: RunProgress) -> Pa
             draw.text((LABEL_WIDTH + x * TILE + 2, y * TILE + TILE - 12), caption[:24], fill="black")
     output.parent.mkdir(parents=True, exist_ok=True)
     sheet.save(output)
-    return output
+    return Sheet(output, scene.objects[0].name, scene.environments[0].name, sampled)
 
 
-def _one_control(loaded: LoadedSpec, inst) -> LoadedSpec:
-    """The spec reduced to its first scene and this one control, on a small grid."""
-    spec = loaded.spec.model_copy(update={"objects": loaded.objects[:1], "environments": loaded.environments[:1]})
-    policy = GridPolicy(GridPolicy.Params(samples_per_dim=SAMPLES_PER_RANGE))
-    return dataclasses.replace(loaded, spec=spec, controls=[inst], policy=policy)
+def _scene(loaded: LoadedSpec, object_name: str | None, environment: str | None) -> LoadedSpec:
+    """The spec reduced to one object and one environment (the named ones, else the first)."""
+    def pick(items: list, name: str | None, what: str, option: str) -> list:
+        if name is None:
+            return items[:1]
+        found = [item for item in items if item.name == name]
+        if not found:
+            known = ", ".join(repr(item.name) for item in items)
+            raise UserError(f"{loaded.path}: no {what} named {name!r} for {option}; the spec has {known}")
+        return found
+
+    spec = loaded.spec.model_copy(update={
+        "objects": pick(loaded.objects, object_name, "object", "--object"),
+        "environments": pick(loaded.environments, environment, "environment", "--environment")})
+    return dataclasses.replace(loaded, spec=spec)
+
+
+def _one_control(scene: LoadedSpec, inst) -> LoadedSpec:
+    """The one-scene spec with only this control, on the spec's own grid when its policy is one
+    (else five points across each range)."""
+    policy = scene.policy if isinstance(scene.policy, GridPolicy) else GridPolicy(
+        GridPolicy.Params(samples_per_dim=SAMPLES_PER_RANGE))
+    return dataclasses.replace(scene, controls=[inst], policy=policy)
 
 
 def _varied(loaded: LoadedSpec, control_id: str) -> set[str]:
