@@ -22,3 +22,13 @@ def test_plan_lists_the_first_jobs_with_their_values_and_cache_state(tmp_path: P
     assert [row.split("│")[4].strip() for row in rows] == ["0", "0", "45"]  # yaw: the grid's order
     assert "the first 3 of 8 jobs" in result.output
     assert "the first" not in CliRunner().invoke(app, ["plan", str(spec)]).output
+
+
+def test_the_estimate_says_what_it_assumes_and_how_busy_the_machine_is() -> None:
+    from sweep3d.cli.output import load_note
+
+    assert load_note(2, 0.1) == "it assumes 2 free CPU cores, as they are now"
+    busy = load_note(2, 2.0)  # another run on both cores: up to twice as long
+    assert "busy now (load 2.0" in busy and busy.endswith("expect up to 2.0× as long")
+    assert "up to 1.5×" in load_note(4, 2.0)
+    assert "assumes" in load_note()  # this machine's own cores and load

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
@@ -81,11 +83,29 @@ def print_plan(console: Console, spec: LoadedSpec, jobs: int = 0) -> None:
     if spec.policy.adaptive:
         console.print(f"adaptive policy: this is its first round; it proposes up to "
                       f"{spec.policy.params.samples} jobs per scene as results come in")
-    console.print(f"estimated time: {duration(total)} (plus ~5 s start-up when anything needs rendering)")
+    console.print(f"estimated time: {duration(total)} (plus ~5 s start-up when anything needs rendering); "
+                  f"{load_note()}")
     to_render = sum(needed - cached for stage, needed, cached, _ in status if stage.startswith("render"))
     print_warning(console, slow_render_warning(spec.render, max(p.framing.crop for p in plans), to_render))
     if jobs:
         print_jobs(console, plan, store, jobs)
+
+
+def load_note(cores: int | None = None, load: float | None = None) -> str:
+    """What the estimate assumes of the machine, and how busy it is now: another process on the
+    cores (a second run, a build) takes its share of them, so the run is slower by up to the load
+    per core (measured: 10–40 % with one other run on 2 cores)."""
+    cores = cores or os.cpu_count() or 1
+    if load is None:
+        try:
+            load = os.getloadavg()[0]
+        except OSError:  # no load average here: say only what is assumed
+            return f"it assumes {cores} free CPU cores"
+    busy = load / cores
+    if busy < 0.25:
+        return f"it assumes {cores} free CPU cores, as they are now"
+    return (f"it assumes {cores} free CPU cores, but they are busy now (load {load:.1f} over the last minute): "
+            f"expect up to {1 + busy:.1f}× as long")
 
 
 def print_jobs(console: Console, plan: Plan, store: Store, n: int) -> None:
