@@ -8,8 +8,8 @@ dilutes the difference: with two levels, half of it. The test is one-sided (is t
 worse?):
 
 - **McNemar's exact test** for a parameter with two levels seen on the same configurations
-  (a paired design: every result at one level has its twin at the other, as the
-  ``paired_values`` view pairs them): the discordant pairs decide;
+  (a paired design: every counted result at one level has its twin at the other, with the same
+  object, environment and value of every other parameter): the discordant pairs decide;
 - **Fisher's exact test** otherwise (the region's correct count against the hypergeometric
   law of the parameter's results).
 
@@ -34,12 +34,54 @@ import duckdb
 from sweep3d.stages.aggregate.compare import ALPHA
 
 
-def create_failure_modes(con: duckdb.DuckDBPyConnection, min_count: int, paired: bool) -> None:
+def create_failure_modes(con: duckdb.DuckDBPyConnection, min_count: int, parameters: list[tuple[str, bool]]) -> None:
     """Create ``hypergeometric_cdf``, the ``difference_low``/``difference_high`` macros and
-    ``failure_modes(min_count)`` on ``con``, which has the level views (and ``paired_values``
-    when ``paired``)."""
+    ``failure_modes(min_count)`` on ``con``, which has the level views.
+
+    Args:
+        parameters: the results' parameter columns (name, numeric), object and environment first,
+            as ``control_columns`` lists them.
+    """
     _create_macros(con)
-    con.execute(_failure_modes_sql(min_count, paired))
+    con.execute(_failure_modes_sql(min_count, _twins_sql(parameters)))
+
+
+def _twins_sql(parameters: list[tuple[str, bool]]) -> str:
+    """One row per parameter whose counted results form twins: grouped by everything else (object,
+    environment, every other parameter) and occurrence (the k-th result of a configuration at one
+    value pairs with the k-th at the other, as ``paired_jobs`` pairs them), each group holds
+    exactly one result at each of the same two values. The row has the two values as the levels label them (a before b) and the
+    discordant pairs in both directions. One GROUP BY per parameter: linear in the results."""
+    names = [name for name, _ in parameters]
+    parts = []
+    for name, numeric in parameters:
+        others = [_identifier(other) for other in names if other != name]
+        if not others:
+            continue
+        column = _identifier(name)
+        label = (lambda x: f"level_number_label(CAST({x} AS DOUBLE))") if numeric else (lambda x: f"CAST({x} AS VARCHAR)")
+        parts.append(f"""
+            SELECT {_literal(name)} AS parameter, {label('min(lo)')} AS value_a, {label('max(hi)')} AS value_b,
+                   count(*) FILTER (WHERE right_lo AND NOT right_hi) AS a_right_b_wrong,
+                   count(*) FILTER (WHERE right_hi AND NOT right_lo) AS a_wrong_b_right, count(*) AS n
+            FROM (SELECT min({column}) AS lo, max({column}) AS hi, arg_min(correct, {column}) AS right_lo,
+                         arg_max(correct, {column}) AS right_hi, count(*) AS k, count({column}) AS known
+                  FROM (SELECT *, row_number() OVER (PARTITION BY {', '.join(others)}, {column} ORDER BY job)
+                                      AS occurrence FROM results WHERE counted)
+                  GROUP BY {', '.join(others)}, occurrence)
+            HAVING bool_and(k = 2 AND known = 2 AND lo <> hi) AND count(DISTINCT lo) = 1 AND count(DISTINCT hi) = 1""")
+    if not parts:
+        return ("SELECT NULL::VARCHAR AS parameter, NULL::VARCHAR AS value_a, NULL::VARCHAR AS value_b, "
+                "NULL::BIGINT AS a_right_b_wrong, NULL::BIGINT AS a_wrong_b_right, NULL::BIGINT AS n WHERE false")
+    return "\nUNION ALL ".join(parts)
+
+
+def _identifier(name: str) -> str:
+    return '"' + name.replace('"', '""') + '"'
+
+
+def _literal(text: str) -> str:
+    return "'" + text.replace("'", "''") + "'"
 
 
 def _create_macros(con: duckdb.DuckDBPyConnection) -> None:
@@ -64,18 +106,11 @@ def _create_macros(con: duckdb.DuckDBPyConnection) -> None:
         )
 
 
-def _failure_modes_sql(min_count: int, paired: bool) -> str:
-    """The macro. ``paired``: the connection has ``paired_values``, so two-level parameters seen
-    on the same configurations are tested with McNemar's test."""
-    if paired:
-        # One row per two-level parameter whose every counted result has its twin: its two
-        # values (a before b), with the discordant pairs in both directions.
-        twins = """SELECT v.parameter, v.value_a, v.value_b, v.a_right_b_wrong, v.a_wrong_b_right
-                   FROM paired_values v
-                   JOIN totals t ON t.parameter = v.parameter AND t.levels = 2 AND t.n = 2 * v.n"""
-    else:
-        twins = ("SELECT NULL::VARCHAR AS parameter, NULL::VARCHAR AS value_a, NULL::VARCHAR AS value_b, "
-                 "NULL::BIGINT AS a_right_b_wrong, NULL::BIGINT AS a_wrong_b_right WHERE false")
+def _failure_modes_sql(min_count: int, twins_sql: str) -> str:
+    """The macro; ``twins_sql`` lists the parameters whose results are twins (:func:`_twins_sql`)."""
+    twins = f"""SELECT v.parameter, v.value_a, v.value_b, v.a_right_b_wrong, v.a_wrong_b_right
+                FROM ({twins_sql}) v
+                JOIN totals t ON t.parameter = v.parameter AND t.levels = 2 AND t.n = 2 * v.n"""
     return f"""CREATE OR REPLACE MACRO failure_modes(min_count := {min_count}) AS TABLE
         WITH overall AS (SELECT avg(correct::DOUBLE) AS p FROM results WHERE counted),
         accuracy AS MATERIALIZED (FROM control_accuracy),

@@ -232,7 +232,7 @@ def register_views(con: duckdb.DuckDBPyConnection, parameters: list[str] | None 
     register_task_views(con, roles, set(result_columns), model, min_visible)
     detection_views(con, roles, set(result_columns))
     register_paired_views(con, columns, set(result_columns))
-    create_failure_modes(con, MIN_COUNT, paired=has_view(con, "paired_values"))
+    create_failure_modes(con, MIN_COUNT, columns)
     return True
 
 
