@@ -8,10 +8,14 @@
 
     .venv/bin/python benchmarks/pipeline.py [--renders 40] [--cold 4] [--cached 10000]
 
-`--multi-scene` instead measures the render stage against a bare bpy loop on the quickstart's
-240 distinct renders (5 objects × 4 environments): a hand-written bpy process that imports every
-mesh and builds every world once and renders world by world, object by object, and sweep3d's
-render stage on a fresh store, in one run (`--rounds 2` runs them bare, stage, stage, bare).
+`--multi-scene` instead measures sweep3d against a bare bpy loop on the quickstart's 240 distinct
+renders (5 objects × 4 environments): a hand-written bpy process that imports every mesh and
+builds every world once and renders world by world, object by object; sweep3d's render stage on
+a fresh store (in this process); and a cold `sweep3d run` of the quickstart from process start to
+exit on a fresh store (what a user waits for), interleaved round by round (`--rounds 2` runs
+bare, stage, run, then run, stage, bare). The whole run's honest limit is the bare loop plus the
+inference of the same images (timed alone on the stage's store): on 2 cores both are CPU-bound,
+so overlapping them cannot beat their sum by much. Stores and frames are on disk, as a user's are.
 
     .venv/bin/python benchmarks/pipeline.py --multi-scene [--rounds 2]
 """
@@ -400,6 +404,36 @@ def stage_multi(folder: Path) -> dict:
             "worker_peak_mb": max(watch.peaks.values(), default=0) / 1024}
 
 
+def cli_multi(folder: Path) -> dict:
+    """Seconds of a cold ``sweep3d run`` of the quickstart on a fresh store, process start to exit."""
+    spec = quickstart_spec(folder)
+    started = time.perf_counter()
+    done = subprocess.run([sys.executable, "-m", "sweep3d", "run", str(spec)], capture_output=True, text=True,
+                          cwd=folder)
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+    return {"seconds": time.perf_counter() - started}
+
+
+def infer_alone(stage: dict, folder: Path) -> float:
+    """Seconds of the postprocess and inference stages alone over the stage's renders (the model
+    loaded first, as a run's is before its renders end)."""
+    from sweep3d.pipeline import plan_spec
+    from sweep3d.progress import RunProgress
+    from sweep3d.stages import load_spec
+    from sweep3d.stages.driver import run_stages
+    from sweep3d.stages.infer import InferStage, ModelHandle
+    from sweep3d.stages.postprocess import PostprocessStage
+
+    spec = load_spec(quickstart_spec(folder))
+    model = ModelHandle.resolve(spec)
+    plan = plan_spec(spec, model)
+    infer = InferStage(model)
+    started = time.perf_counter()
+    outcomes = run_stages([PostprocessStage(), infer], plan, stage["store"], RunProgress(None))
+    assert all(o.failed == 0 for o in outcomes), outcomes
+    return time.perf_counter() - started
+
+
 def agreement(bare: dict, stage: dict) -> tuple[float, float]:
     """Mean |difference| in 8-bit levels between the two sides' images, and the share of pixels
     more than 2 levels apart (edges against a plain background are blended differently)."""
@@ -414,15 +448,19 @@ def agreement(bare: dict, stage: dict) -> tuple[float, float]:
 
 
 def multi_scene(rounds: int, console: Console) -> None:
-    """Bare loop and render stage on the quickstart's renders, interleaved (bare, stage, stage, bare, ...)."""
-    bare, stage = [], []
-    with tempfile.TemporaryDirectory(prefix="sweep3d-bench-", dir="/dev/shm" if Path("/dev/shm").is_dir() else None) as tmp:
+    """Bare loop, render stage and cold run on the quickstart's renders, interleaved (bare, stage,
+    run; run, stage, bare; ...)."""
+    sides = {"bare": bare_multi, "stage": stage_multi, "run": cli_multi}
+    done: dict[str, list[dict]] = {side: [] for side in sides}
+    with tempfile.TemporaryDirectory(prefix="sweep3d-bench-") as tmp:
         for i in range(rounds):
-            for side in ("bare", "stage") if i % 2 == 0 else ("stage", "bare"):
+            for side in list(sides) if i % 2 == 0 else list(sides)[::-1]:
                 console.print(f"round {i + 1}: {side} ...")
-                folder = Path(tmp) / f"{side}{i}"
-                (bare if side == "bare" else stage).append((bare_multi if side == "bare" else stage_multi)(folder))
-        mean_diff, far = agreement(bare[0], stage[0])
+                done[side].append(sides[side](Path(tmp) / f"{side}{i}"))
+        mean_diff, far = agreement(done["bare"][0], done["stage"][0])
+        console.print("inference alone ...")
+        infer = infer_alone(done["stage"][0], Path(tmp) / "stage0")
+    bare, stage, run = done["bare"], done["stage"], done["run"]
     n = stage[0]["n"]
     bare_rate = n / np.mean([b["wall"] for b in bare])
     loop_rate = n / np.mean([b["loop"] for b in bare])
@@ -436,8 +474,15 @@ def multi_scene(rounds: int, console: Console) -> None:
     table.add_row("   its set-up: import bpy, meshes, worlds (s)", f"{np.mean([b['setup'] for b in bare]):.1f}", "", "")
     table.add_row("sweep3d render stage, incl. worker start (img/s)", f"{stage_rate:.2f}", "", "")
     ratio = stage_rate / bare_rate
-    table.add_row("render stage / bare process", f"{ratio:.2f}", "≥ 0.9", "yes" if ratio >= 0.9 else "NO")
+    table.add_row("render stage / bare process", f"{ratio:.2f}", "≥ 0.95", "yes" if ratio >= 0.95 else "NO")
     table.add_row("render stage / bare render loop only", f"{stage_rate / loop_rate:.2f}", "", "")
+    bare_wall = np.mean([b["wall"] for b in bare])
+    run_wall = np.mean([r["seconds"] for r in run])
+    table.add_row("cold `sweep3d run`, process start to exit (s)", f"{run_wall:.1f}", "", "")
+    table.add_row("   its limit: bare process + inference alone (s)", f"{bare_wall:.1f} + {infer:.1f}", "", "")
+    table.add_row("whole run / bare process (×)", f"{run_wall / bare_wall:.2f}", "", "")
+    limit_ratio = (bare_wall + infer) / run_wall
+    table.add_row("limit / whole run", f"{limit_ratio:.2f}", "≥ 0.95", "yes" if limit_ratio >= 0.95 else "NO")
     table.add_row("peak memory: render worker / bare process (MB)",
                   f"{max(s['worker_peak_mb'] for s in stage):.0f} / {max(b['peak_mb'] for b in bare):.0f}", "", "")
     table.add_row("images, bare vs stage: mean |Δ| (8-bit levels)", f"{mean_diff:.2f}", "", "")

@@ -69,6 +69,14 @@ def poisoned_hdri(path: Path) -> Path:
     return path
 
 
+def blazing_hdri(path: Path) -> Path:
+    """A 32×16 sky as bright as a legal map may be: a 1e6 hot spot (the load's bound) on 0.8."""
+    rgb = np.full((16, 32, 3), 0.8, np.float32)
+    rgb[12:16, 28:32] = 1e6
+    write_exr(path, rgb)
+    return path
+
+
 def cube(scale: float) -> str:
     return "".join(f"v {' '.join(str(float(c) * scale) for c in line.split()[1:])}\n" if line.startswith("v ")
                    else line + "\n" for line in CUBE_OBJ.splitlines())
@@ -128,11 +136,12 @@ type = "grid"
 @pytest.mark.slow
 def test_extreme_legal_values_finish_and_no_nan_reaches_the_results(tmp_path: Path) -> None:
     """Objects 1e-6 and 1e6 units across, zoom 1e-3 and 1e3, elevation ±90° with pitch 90°
-    (gimbal lock), an HDRI with NaN/±inf pixels at strength 10¹² overall: every job ends with
-    either a finite, valid prediction or valid = false, and accuracy counts only valid ones."""
+    (gimbal lock), an HDRI with a 1e6 hot spot at strength 10¹² overall: every job ends with
+    either a finite, valid prediction or valid = false, and accuracy counts only valid ones. A map
+    with NaN/±inf pixels is refused at load (tests/test_input_audit.py), so it is not rendered."""
     (tmp_path / "speck.obj").write_text(cube(5e-7))
     (tmp_path / "giant.obj").write_text(cube(5e5))
-    poisoned_hdri(tmp_path / "poisoned.exr")
+    blazing_hdri(tmp_path / "poisoned.exr")
     spec = write_spec(tmp_path, EXTREME_SPEC, cube=False)
 
     result = run(load_spec(spec))
@@ -155,8 +164,8 @@ def test_extreme_legal_values_finish_and_no_nan_reaches_the_results(tmp_path: Pa
     valid_rows = [r for r in rows if r[1]]
     assert summary.invalid == 10 - len(valid_rows)
     assert summary.accuracy == (sum(bool(r[2]) for r in valid_rows) / len(valid_rows) if valid_rows else None)
-    # Cycles reads NaN and inf sky pixels as black, so today every render is finite (and valid):
-    # no NaN flows. A float readback that did see NaN would flag the render, as tested below.
+    # 8-bit renders are finite (and valid) however bright the sky: no NaN flows. A float readback
+    # that did see NaN would flag the render, as tested below.
     assert all(r[0] for r in rows)
 
 

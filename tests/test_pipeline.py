@@ -211,7 +211,7 @@ def test_bench_measures_settings_and_applies_the_recommendation(tiny_copy: Path)
     result = CliRunner().invoke(app, args)
     assert result.exit_code == 0, result.output
     assert "recommended:" in result.output
-    assert (tiny_copy / "store" / "reports" / "tiny-bench.html").stat().st_size > 100_000
+    assert (tiny_copy / "store" / "reports" / "bench" / "tiny.html").stat().st_size > 100_000
     again = CliRunner().invoke(app, args + ["--apply"])
     assert again.exit_code == 0, again.output
     assert "failed" not in again.output  # every setting was cached: no progress bar ran
