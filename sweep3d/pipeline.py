@@ -37,6 +37,7 @@ from sweep3d.stages.outcome import StageOutcome
 from sweep3d.stages.plan import History, Outcome, Plan, make_plan
 from sweep3d.stages.postprocess import PostprocessStage
 from sweep3d.stages.render import LOCAL, Executor, RenderStage
+from sweep3d.stages.render.device import fallback_note
 from sweep3d.stages.render.estimate import slow_render_warning
 from sweep3d.stages.render.pool import remove_stale_scratch, scratch_root
 
@@ -160,7 +161,9 @@ def _run_locked(spec: LoadedSpec, store: Store, console: Console | None, wait: f
         models = [ModelHandle.resolve(spec, settings) for settings in spec.models]
         plans = [plan_spec(spec, model) for model in models]
         result = RunResult(uuid.uuid4().hex[:12], plans[0], plans=plans, store=store)
-        _warn_if_slow(plans, store, executor, console)
+        missing = _missing_renders(plans, store, executor)
+        _note_fallback(plans, missing, console)
+        _warn_if_slow(plans, store, executor, console, missing)
         infers = [InferStage(model, on_ray=executor.kind == "ray", several=len(models) > 1) for model in models]
         for plan, infer in zip(plans, infers):
             if pending_predictions(plan, store, infer):
@@ -204,12 +207,29 @@ def _run_locked(spec: LoadedSpec, store: Store, console: Console | None, wait: f
     return result
 
 
-def _warn_if_slow(plans: list[Plan], store: Store, executor: Executor, console: Console | None) -> None:
-    """One warning line before a run whose renders would take hours at the spec's settings."""
-    missing = {}  # renders to make, by frame side (models framed alike share them)
+def _missing_renders(plans: list[Plan], store: Store, executor: Executor) -> dict[int, int]:
+    """Renders to make, by frame side (models framed alike share them)."""
+    missing = {}
     for plan in plans:
         needed, cached = plan_status(RenderStage(executor), plan, store)
         missing[plan.framing.crop] = needed - cached
+    return missing
+
+
+def _note_fallback(plans: list[Plan], missing: dict[int, int], console: Console | None) -> None:
+    """One line before a run that renders when ``device = "auto"`` found no GPU: it renders on the CPU."""
+    note = fallback_note(plans[0].spec.render, plans[0].device)
+    if note and any(missing.values()) and console is not None:
+        console.print(f"[dim]note: {escape(note)}[/]", highlight=False, soft_wrap=True)
+
+
+def _warn_if_slow(plans: list[Plan], store: Store, executor: Executor, console: Console | None,
+                  missing: dict[int, int] | None = None) -> None:
+    """One warning line before a run whose renders would take hours at the spec's settings on the
+    CPU (the estimate's costs are CPU costs: nothing is said for a GPU)."""
+    if plans[0].device != "cpu":
+        return
+    missing = _missing_renders(plans, store, executor) if missing is None else missing
     line = slow_render_warning(plans[0].spec.render, max(missing), sum(missing.values()))
     if line and console is not None:
         console.print(f"[bold yellow]warning:[/] {escape(line)}", highlight=False, soft_wrap=True)

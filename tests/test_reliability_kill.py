@@ -341,7 +341,7 @@ from pathlib import Path
 from sweep3d.stages.render import worker
 
 
-def worker_main(conn, settings, scratch):
+def worker_main(conn, settings, scratch, *args):
     starts = Path(os.environ["SWEEP3D_TEST_STARTS"])
     with open(starts, "a") as fh:
         fh.write("started\\n")
@@ -356,7 +356,7 @@ def worker_main(conn, settings, scratch):
         return render(scene, job, *args, **kwargs)
 
     worker.render_job = render_three
-    worker.worker_main(conn, settings, scratch)
+    worker.worker_main(conn, settings, scratch, *args)
 '''
 
 DYING_HARNESS = """

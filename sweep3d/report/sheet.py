@@ -68,7 +68,7 @@ def contact_sheet(loaded: LoadedSpec, output: Path, progress: RunProgress, objec
                         if tiles > 1 else distinct[:1])
         rows.append((inst.id, distinct))
         jobs += distinct
-    plan = Plan(loaded, jobs, model.digest, framing=model.framing)
+    plan = Plan(loaded, jobs, model.digest, framing=model.framing, device=plan.device)
     store = Store(loaded.store)
     with store.lock():
         run_stages((RenderStage(), PostprocessStage()), plan, store, progress, strict=True)

@@ -57,6 +57,13 @@ class RenderSpec(StrictModel):
     threads: int = Field(0, ge=0, le=1024, description="Cycles threads per worker; 0 = all cores.")
     workers: int = Field(1, ge=1, le=256, description="Render worker processes.")
     timeout: float = Field(600.0, gt=0, description="Seconds one render may take before it fails.")
+    device: Literal["auto", "cpu", "cuda", "optix"] = Field(
+        "auto", description="Cycles' device: auto (OptiX, else CUDA, else the CPU), cpu, or an NVIDIA GPU through "
+                            "cuda or optix. A GPU's renders are keyed apart (GPU Cycles does not give CPU's pixels).")
+    worker_memory: int = Field(4096, ge=0, le=2**22, description="MB of resident memory a render worker may hold "
+                               "after a job before it is replaced by a fresh one (between jobs); 0 = no limit.")
+    worker_jobs: int = Field(0, ge=0, description="Replace a render worker by a fresh one after this many jobs; "
+                                                  "0 = never.")
 
     @field_validator("resolution", mode="before")
     @classmethod
@@ -74,16 +81,22 @@ class RenderSpec(StrictModel):
             raise ValueError("must be a finite number of seconds")
         return value
 
-    def key_part(self, pixels: dict[str, int]) -> dict[str, Any]:
-        """Settings that change pixels (threads and workers do not).
+    def key_part(self, pixels: dict[str, int], device: str = "cpu") -> dict[str, Any]:
+        """Settings that change pixels (threads, workers and their recycling do not).
 
         Args:
             pixels: the resolved frame (``Framing.key_part()``): "model" is never hashed as such,
                 so a model-framed render and a full-frame one cannot share a key. New settings at
                 their neutral value are left out, so older keys stay valid.
+            device: the device renders are made on, ``device`` resolved (``"auto"`` never is
+                hashed: see ``stages.render.device``); only a GPU is in the key, so CPU renders
+                keep the keys they had before the setting existed.
         """
-        part = self.model_dump(exclude={"threads", "workers", "timeout", "resolution", "adaptive_threshold", "seed"})
+        part = self.model_dump(exclude={"threads", "workers", "timeout", "resolution", "adaptive_threshold", "seed",
+                                        "device", "worker_memory", "worker_jobs"})
         part.update(pixels)
+        if device != "cpu":
+            part["device"] = device
         part.update({k: v for k in ("adaptive_threshold", "seed") if (v := getattr(self, k))})
         return part
 

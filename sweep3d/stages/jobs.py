@@ -329,6 +329,8 @@ class Plan:
         out_of_frame: jobs whose object is wholly outside the frame: flagged, never rendered.
         framing: the resolved frame (``resolution = "model"`` becomes the model's sizes).
         model: what results call the model the plan infers (its ``id`` or name).
+        device: what renders: ``[render] device`` resolved ("cpu", "cuda", "optix"), as its
+            render keys say.
     """
 
     spec: LoadedSpec
@@ -337,6 +339,7 @@ class Plan:
     out_of_frame: Sequence[Job] = field(default_factory=list)
     framing: Framing | None = None
     model: str = ""
+    device: str = "cpu"
 
     @property
     def columns(self) -> list[str]:

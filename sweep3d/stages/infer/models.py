@@ -256,4 +256,23 @@ def load_model(name: str) -> Classifier:
             f"got {type(made).__name__}"
         )
     made.module.eval()
+    made.module.to(inference_device())
     return made
+
+
+def inference_device() -> str:
+    """Where torch models run: the first CUDA GPU when torch sees one, else the CPU."""
+    import torch
+
+    return "cuda" if torch.cuda.is_available() else "cpu"
+
+
+def on_device(module: Any, batch: Any) -> Any:
+    """A preprocessed ``batch`` (a tensor, or a list or tuple of them: a detector's images) where
+    ``module``'s weights are; on the CPU, ``batch`` itself (preprocessing makes CPU tensors)."""
+    weights = next(iter(module.parameters()), None) if hasattr(module, "parameters") else None
+    if weights is None or weights.device.type == "cpu":
+        return batch
+    if isinstance(batch, (list, tuple)):
+        return type(batch)(on_device(module, b) for b in batch)
+    return batch.to(weights.device) if hasattr(batch, "to") else batch

@@ -29,7 +29,7 @@ import numpy as np
 
 from sweep3d.cache.store import atomic_write
 from sweep3d.errors import UserError
-from sweep3d.stages.infer.models import Classifier
+from sweep3d.stages.infer.models import Classifier, on_device
 
 TOLERANCE = 1e-3  # max |logit difference| accepted between torch and ONNX Runtime
 CHECK_BATCH = 4
@@ -92,14 +92,15 @@ class OnnxRunner:
         """Torch's logits for ``rows`` of the batch."""
         import torch
 
+        module = self.classifier.module
         with torch.inference_mode():
-            out = self.classifier.module(torch.as_tensor(batch)[torch.from_numpy(rows)])
-        return (out[0] if isinstance(out, (tuple, list)) else out).float().numpy()
+            out = module(on_device(module, torch.as_tensor(batch)[torch.from_numpy(rows)]))
+        return (out[0] if isinstance(out, (tuple, list)) else out).float().cpu().numpy()
 
     def _export(self, classifier: Classifier, scratch: Path) -> None:
         import torch
 
-        sample = classifier.preprocess(np.full((1, 256, 256, 3), 0.5, np.float32))
+        sample = on_device(classifier.module, classifier.preprocess(np.full((1, 256, 256, 3), 0.5, np.float32)))
         buffer = io.BytesIO()
         with warnings.catch_warnings():  # tracer warnings; nothing else is printed
             warnings.simplefilter("ignore")
@@ -124,7 +125,7 @@ class OnnxRunner:
                                  np.full((1, 240, 240, 3), 0.5, np.float32)])
         batch = classifier.preprocess(images)
         with torch.inference_mode():
-            expected = classifier.module(batch).float().numpy()
+            expected = classifier.module(on_device(classifier.module, batch)).float().cpu().numpy()
         got = self._run(batch)
         diff = float(np.abs(expected - got).max())
         if not diff <= TOLERANCE or not np.array_equal(expected.argmax(1), got.argmax(1)):
@@ -134,15 +135,22 @@ class OnnxRunner:
 
 
 def _session(path: Path, threads: int) -> Any:
-    """An ONNX Runtime session on the CPU whose idle threads sleep instead of spinning, so that
-    renders beside inference keep the cores."""
+    """An ONNX Runtime session on a CUDA GPU when this onnxruntime has one, else on the CPU; its
+    idle CPU threads sleep instead of spinning, so that renders beside inference keep the cores."""
     import onnxruntime as ort
 
     options = ort.SessionOptions()
     options.intra_op_num_threads = threads
     options.inter_op_num_threads = 1
     options.add_session_config_entry("session.intra_op.allow_spinning", "0")
-    return ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+    return ort.InferenceSession(str(path), options, providers=providers(ort.get_available_providers()))
+
+
+def providers(available: list[str]) -> list[str]:
+    """The execution providers a session asks for: CUDA first where ``available`` has it (ONNX
+    Runtime falls back to the CPU for what CUDA cannot run), else the CPU alone."""
+    cuda = ["CUDAExecutionProvider"] if "CUDAExecutionProvider" in available else []
+    return [*cuda, "CPUExecutionProvider"]
 
 
 def near_ties(logits: np.ndarray, ranks: int, margin: float = 2 * TOLERANCE) -> np.ndarray:

@@ -15,7 +15,7 @@ from sweep3d.errors import UserError
 from sweep3d.stages.infer import outputs
 from sweep3d.stages.infer.cam import cam_localize, supports_cam
 from sweep3d.stages.infer.evaluators.base import TASKS
-from sweep3d.stages.infer.models import Classifier, Detector, Preprocess, Segmenter
+from sweep3d.stages.infer.models import Classifier, Detector, Preprocess, Segmenter, on_device
 from sweep3d.stages.infer.outputs import Localized
 
 
@@ -77,7 +77,7 @@ def localize(model: Classifier, images: np.ndarray, name: str) -> Localized:
     if supports_cam(model.module):
         try:
             with torch.inference_mode():
-                logits, boxes = cam_localize(model.module, model.preprocess(images))
+                logits, boxes = cam_localize(model.module, on_device(model.module, model.preprocess(images)))
         except Exception as exc:  # noqa: BLE001  (a user's module failing on its input is a user error)
             raise _raised(name, exc, images) from None
     else:
@@ -116,7 +116,7 @@ def _call(model: Classifier, images: np.ndarray, name: str, runner: Callable | N
     try:
         with torch.inference_mode():
             batch = model.preprocess(images)
-            return torch.from_numpy(runner(batch)) if runner is not None else model.module(batch)
+            return torch.from_numpy(runner(batch)) if runner is not None else model.module(on_device(model.module, batch))
     except Exception as exc:  # noqa: BLE001  (a user's model failing on its input is a user error)
         raise _raised(name, exc, images) from None
 

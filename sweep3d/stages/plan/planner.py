@@ -31,6 +31,7 @@ from sweep3d.stages.plan.pairing import scene_points
 from sweep3d.stages.plan.policies import Outcome
 from sweep3d.stages.postprocess.keys import image_template
 from sweep3d.stages.render.controls.base import frame_fields
+from sweep3d.stages.render.device import resolve_device
 from sweep3d.stages.render.keys import parts_keys, render_template, scene_key, truth_keys
 from sweep3d.stages.render.state import SceneState, in_frame, in_frame_many
 
@@ -54,7 +55,7 @@ class _Keys:
 
 
 def make_plan(spec: LoadedSpec, *, framing: Framing, model_digest: str, blender: str,
-              history: History | None = None, model: ModelSpec | None = None) -> Plan:
+              history: History | None = None, model: ModelSpec | None = None, device: str | None = None) -> Plan:
     """Expand ``spec`` into jobs, sorted by scene so workers reload as little as possible.
 
     Each scene's jobs are made as columns (see :mod:`sweep3d.stages.plan.batch`): values and
@@ -69,13 +70,16 @@ def make_plan(spec: LoadedSpec, *, framing: Framing, model_digest: str, blender:
         history: for adaptive policies, the outcomes so far per (object, environment); the
             policy then proposes its next round on top of the points already evaluated.
         model: which of the spec's models the plan infers (default: the first).
+        device: what renders ("cpu", "cuda", "optix"; a GPU is part of every render key);
+            default: ``[render] device`` resolved here (see ``stages.render.device``).
     """
     model = model or spec.model
+    device = device or resolve_device(spec.render.device)
     check_size(spec)
     rendered = sorted((c for c in spec.controls if c.control.stage == "render"),
                       key=lambda c: (c.control.order, spec.controls.index(c)))
     post = [c for c in spec.controls if c.control.stage == "post"]
-    settings = spec.render.key_part(framing.key_part())
+    settings = spec.render.key_part(framing.key_part(), device)
     base = infer_base(model_digest, evaluator_key(spec.evaluator), model.backend)
     passes = truth_passes(spec)
     keys = _Keys(parts=[] if spec.report.part_visibility else None, truth=[] if passes else None, truth_passes=passes)
@@ -106,7 +110,7 @@ def make_plan(spec: LoadedSpec, *, framing: Framing, model_digest: str, blender:
     mask = np.concatenate(keys.in_frame) if keys.in_frame else np.zeros(0, bool)
     plan = PlanColumns(blocks, keys.render, keys.image, keys.pred, keys.parts, mask, keys.truth)
     return Plan(spec, JobList(plan, np.flatnonzero(mask)), model_digest, JobList(plan, np.flatnonzero(~mask)), framing,
-                model.label)
+                model.label, device)
 
 
 def _scene_keys(spec: LoadedSpec, keys: _Keys, scene: str, rendered: list[ControlBatch], post: list[ControlBatch],

@@ -1,4 +1,4 @@
-"""Render: Blender (Cycles on CPU) in persistent worker processes.
+"""Render: Blender (Cycles on the CPU, or NVIDIA GPUs) in persistent worker processes.
 
 This package's public API never imports bpy; only :mod:`.worker` (in child processes) does.
 """

@@ -3,7 +3,11 @@
 Jobs arrive grouped by scene, ordered world by world; a group goes to one worker so the scene is
 loaded once, and each worker takes its groups from its own contiguous share of that order
 (:class:`Shares`), so it changes world as rarely as the order allows. A worker that dies or
-exceeds the per-job timeout is replaced and its unfinished jobs are retried once; scratch files
+exceeds the per-job timeout is replaced and its unfinished jobs are retried once; a worker that
+retires between jobs (it reached ``[render] worker_memory`` or ``worker_jobs``: see
+:class:`WorkerLimits`) is replaced too, and a fresh one renders the rest of its list: no job is
+lost or rendered twice. With a GPU device and several workers, each renders on its own GPU
+(its slot's number, modulo the GPUs there are). Scratch files
 are removed when the pool closes, also on Ctrl-C, and a killed run's by the next run
 (:func:`remove_stale_scratch`). Workers die with their parent.
 """
@@ -16,22 +20,25 @@ import shutil
 import signal
 import tempfile
 import time
-from collections import deque
+from collections import Counter, deque
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, wait
 from pathlib import Path
 from typing import Any, Iterator
 
-from sweep3d.errors import RenderError
+from sweep3d.errors import RenderError, UserError
 from sweep3d.registry import is_user_plugin
 from sweep3d.stages.render.protocol import (
+    NO_LIMITS,
     Fatal,
     Idle,
     Ready,
     RenderJob,
     RenderReply,
     RenderSettings,
+    Retired,
     Started,
+    WorkerLimits,
 )
 from sweep3d.stages.render.worker import worker_main
 
@@ -79,16 +86,20 @@ class _Worker:
     done: set[str] = field(default_factory=set)
     current: str | None = None
     started: float = 0.0
+    retired: Retired | None = None  # it reached a limit after a job and exits
 
 
 class RenderPool:
     """Persistent worker processes (a :class:`RenderExecutor`); use as a context manager and call
     :meth:`run`."""
 
-    def __init__(self, settings: RenderSettings, workers: int = 1, timeout: float = 600.0) -> None:
+    def __init__(self, settings: RenderSettings, workers: int = 1, timeout: float = 600.0,
+                 limits: WorkerLimits = NO_LIMITS) -> None:
         self.settings = settings
         self.n_workers = workers
         self.timeout = timeout
+        self.limits = limits
+        self.recycled: Counter[str] = Counter()  # workers retired between jobs, by the limit reached
         self.ctx = mp.get_context("spawn")
         root = scratch_root()
         remove_stale_scratch(root)
@@ -103,8 +114,10 @@ class RenderPool:
 
     def _spawn(self, slot: int) -> _Worker:
         parent, child = self.ctx.Pipe()
+        gpu = slot if self.settings.device != "cpu" and self.n_workers > 1 else None  # one GPU per worker
         process = self.ctx.Process(
-            target=worker_main, args=(child, self.settings, str(self.scratch)), daemon=True, name="sweep3d-render"
+            target=worker_main, args=(child, self.settings, str(self.scratch), self.limits, gpu), daemon=True,
+            name="sweep3d-render"
         )
         process.start()
         child.close()
@@ -112,6 +125,8 @@ class RenderPool:
         if not isinstance(message, Ready):
             process.kill()
             process.join(5)
+            if message.user:  # the worker's own line says what to fix
+                raise UserError(message.message)
             raise RenderError(f"render worker {message.message}")
         return _Worker(process, parent, slot)
 
@@ -132,15 +147,18 @@ class RenderPool:
             for worker in busy:
                 if worker.conn in ready:
                     try:
-                        while worker.conn.poll():
+                        while worker.retired is None and worker.conn.poll():
                             yield from self._handle(worker, worker.conn.recv())
                     except (EOFError, OSError):
                         pass  # died mid-message: handled below as a dead worker
+                if worker.retired is not None:
+                    self._recycle(worker, queue)
+                    continue
                 timed_out = worker.current is not None and time.monotonic() - worker.started > self.timeout
                 if worker.task is not None and (not worker.process.is_alive() or timed_out):
                     yield from self._replace(worker, queue, retried, timed_out)
 
-    def _handle(self, worker: _Worker, message: Started | RenderReply | Idle) -> Iterator[RenderReply]:
+    def _handle(self, worker: _Worker, message: Started | RenderReply | Idle | Retired) -> Iterator[RenderReply]:
         if isinstance(message, Started):
             worker.current, worker.started = message.render_key, time.monotonic()
         elif isinstance(message, RenderReply):
@@ -149,6 +167,23 @@ class RenderPool:
             yield message
         elif isinstance(message, Idle):
             worker.task = None
+        elif isinstance(message, Retired):
+            worker.retired = message
+
+    def _recycle(self, worker: _Worker, queue: Shares) -> None:
+        """Replace a worker that retired between jobs: the rest of its list goes first to the fresh
+        worker in its slot (not a retry: none of those jobs had started)."""
+        worker.process.join(5)  # it exits by itself after saying so
+        if worker.process.is_alive():
+            worker.process.kill()
+            worker.process.join(5)
+        self.recycled[worker.retired.reason] += 1
+        self.workers.remove(worker)
+        leftover = [job for job in worker.task or [] if job.render_key not in worker.done]
+        if leftover:
+            queue.put_back(worker.slot, leftover)
+        if queue:
+            self.workers.append(self._spawn(worker.slot))
 
     def _replace(self, worker: _Worker, queue: Shares, retried: set[str],
                  timed_out: bool) -> Iterator[RenderReply]:
@@ -208,7 +243,7 @@ def _first_message(conn: Connection, process: Any) -> Ready | Fatal:
     try:
         if conn.poll(1.0):  # a message sent just before dying is still there to read
             message = conn.recv()
-            if isinstance(message, Fatal):
+            if isinstance(message, Fatal) and not message.user:
                 return Fatal(f"failed to start: {message.message}")
             return message
     except (EOFError, OSError):

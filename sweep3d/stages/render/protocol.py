@@ -7,11 +7,13 @@ process never loads Blender.
 
 A local worker receives a list of :class:`RenderJob` (one scene group) or None to stop, and
 answers :class:`Ready` (or :class:`Fatal`) once, then per job :class:`Started` and a
-:class:`RenderReply`, and :class:`Idle` after each list.
+:class:`RenderReply`, and :class:`Idle` after each list, or :class:`Retired` after a reply when
+it reached a :class:`WorkerLimits` limit (it then exits).
 """
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, fields
 from typing import TYPE_CHECKING, Any, Literal, Protocol, Self
@@ -37,6 +39,8 @@ class RenderSettings:
         passes: extra passes beside the RGB image ("uv": the parts seen, for part visibility;
             "mask", "depth": the truth passes, see ``sweep3d.truth``).
         threads: Cycles threads per worker; 0 = all cores.
+        device: what renders: "cpu", "cuda" or "optix" (``[render] device`` resolved: never
+            "auto", see ``stages.render.device``).
     """
 
     resolution: int
@@ -49,15 +53,50 @@ class RenderSettings:
     seed: int = _SPEC.seed
     threads: int = _SPEC.threads
     passes: tuple[str, ...] = ()
+    device: str = "cpu"
 
     @classmethod
-    def from_spec(cls, spec: RenderSpec, framing: Framing, passes: Iterable[str] = ()) -> RenderSettings:
-        """The ``[render]`` settings of the same name, with the resolved frame and the passes.
+    def from_spec(cls, spec: RenderSpec, framing: Framing, passes: Iterable[str] = (),
+                  device: str = "cpu") -> RenderSettings:
+        """The ``[render]`` settings of the same name, with the resolved frame, the passes and the
+        resolved device.
 
-        The frame replaces ``resolution`` because the spec's may be "model", resolved elsewhere.
+        The frame replaces ``resolution`` because the spec's may be "model", resolved elsewhere;
+        the device replaces ``device``, which may be "auto".
         """
         shared = {f.name: getattr(spec, f.name) for f in fields(cls) if f.name in RenderSpec.model_fields}
-        return cls(**{**shared, "resolution": framing.size, "crop": framing.crop, "passes": tuple(passes)})
+        return cls(**{**shared, "resolution": framing.size, "crop": framing.crop, "passes": tuple(passes),
+                      "device": device})
+
+
+@dataclass(frozen=True)
+class WorkerLimits:
+    """When a local worker stops between jobs (after its reply), for a fresh one to go on: a
+    worker's memory only grows (what it keeps loaded, Blender's own caches and leaks).
+
+    Args:
+        memory_mb: ``[render] worker_memory``: the resident MB it may hold after a job; 0 = no limit.
+        jobs: ``[render] worker_jobs``: the jobs it renders; 0 = no limit.
+    """
+
+    memory_mb: int = 0
+    jobs: int = 0
+
+    @classmethod
+    def from_spec(cls, spec: RenderSpec) -> WorkerLimits:
+        return cls(spec.worker_memory, spec.worker_jobs)
+
+    def reached(self, jobs: int, resident_mb: float | None) -> Literal["memory", "jobs"] | None:
+        """Which limit a worker that rendered ``jobs`` and holds ``resident_mb`` (None: unknown,
+        no check) has reached, memory first; None when neither."""
+        if self.memory_mb and resident_mb is not None and resident_mb > self.memory_mb:
+            return "memory"
+        if self.jobs and jobs >= self.jobs:
+            return "jobs"
+        return None
+
+
+NO_LIMITS = WorkerLimits()  # a worker renders until it is stopped
 
 
 @dataclass(frozen=True)
@@ -184,9 +223,19 @@ class Ready:
 
 @dataclass(frozen=True)
 class Fatal:
-    """A worker could not build its scene; the run fails."""
+    """A worker could not build its scene; the run fails (``user``: with a user error, exit 2,
+    such as a ``[render] device`` it cannot use)."""
 
     message: str
+    user: bool = False
+
+
+@dataclass(frozen=True)
+class Retired:
+    """A worker reached one of its :class:`WorkerLimits` after a job's reply and exits; the pool
+    gives the rest of its list to a fresh worker."""
+
+    reason: Literal["memory", "jobs"]
 
 
 @dataclass(frozen=True)
@@ -207,6 +256,9 @@ class RenderExecutor(Protocol):
     def __enter__(self) -> Self: ...
 
     def __exit__(self, *exc: object) -> None: ...
+
+    #: Workers replaced by fresh ones between jobs, by the limit they reached ("memory", "jobs").
+    recycled: Counter[str]
 
     def run(self, groups: list[list[RenderJob]]) -> Iterator[RenderReply]:
         """Render every job of every group (a group shares one scene), yielding one reply per job."""

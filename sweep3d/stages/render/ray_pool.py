@@ -13,7 +13,7 @@ from __future__ import annotations
 import io
 import sys
 import tarfile
-from collections import deque
+from collections import Counter, deque
 from dataclasses import replace
 from pathlib import Path
 from typing import Any, Iterator
@@ -122,6 +122,7 @@ class RayRenderPool:
         self.n_workers = workers
         self.actors: list[Any] = []
         self.packs: dict[str, bytes] = {}
+        self.recycled: Counter[str] = Counter()  # actors are not recycled: [render] worker_memory is local
 
     def __enter__(self) -> "RayRenderPool":
         return self

@@ -29,6 +29,7 @@ import numpy as np
 from sweep3d.errors import UserError
 from sweep3d.stages.render._bpy import import_bpy
 from sweep3d.stages.render._rna import assign
+from sweep3d.stages.render.device import use_device
 from sweep3d.stages.render.kept import Kept
 from sweep3d.stages.render.lamps import Lamps
 from sweep3d.stages.render.lights import WHITE, SunLight
@@ -91,13 +92,20 @@ class BlenderScene:
     Args:
         log: where this process's fd 1 (Blender's progress) goes, read to time Cycles' set-up of
             a render after a scene switch; None (fd 1 elsewhere) times only the loading here.
+        gpu: with a GPU device, the number of the one GPU to render on (one worker per GPU);
+            None: all of them.
+
+    Raises:
+        UserError: ``settings.device`` is a GPU back-end that finds no GPU here.
     """
 
-    def __init__(self, settings: RenderSettings, scratch: Path, log: RenderLog | None = None) -> None:
+    def __init__(self, settings: RenderSettings, scratch: Path, log: RenderLog | None = None,
+                 gpu: int | None = None) -> None:
         self.bpy = bpy = import_bpy()
         self.settings = settings
         self.scratch = scratch
         self.log = log
+        self.gpu = gpu
         self.loading = False  # the current job switched object or world (or is the first)
         self.load_seconds = 0.0  # what that switch cost the current job (0 when it did not switch)
         self.object_ref: str | None = None  # the shown object's mesh ...
@@ -106,6 +114,7 @@ class BlenderScene:
         bpy.ops.wm.read_factory_settings(use_empty=True)
         scene = self.scene = bpy.context.scene
         self._configure(scene, settings)
+        use_device(bpy, scene, settings.device, gpu)  # after the factory settings, which reset preferences
         cam_data = bpy.data.cameras.new("sweep3d_camera")
         cam_data.sensor_fit = "HORIZONTAL"
         cam_data.sensor_width = SENSOR_WIDTH_MM
@@ -137,13 +146,12 @@ class BlenderScene:
     def reset(self) -> None:
         """Start again from an empty Blender scene (everything loaded is loaded again when next
         needed): for after a control's ``edit`` changed data this scene held (see ``scene_edit``)."""
-        self.__init__(self.settings, self.scratch, self.log)
+        self.__init__(self.settings, self.scratch, self.log, self.gpu)
 
     @staticmethod
     def _configure(scene, s: RenderSettings) -> None:
         scene.render.engine = "CYCLES"
         cycles = scene.cycles
-        cycles.device = "CPU"
         cycles.samples = s.samples
         cycles.use_adaptive_sampling = bool(s.adaptive_threshold)
         if cycles.use_adaptive_sampling:

@@ -23,7 +23,7 @@ cached render whose truth row or blobs are missing is rendered again for the pas
 from __future__ import annotations
 
 import logging
-from collections import defaultdict
+from collections import Counter, defaultdict
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
@@ -36,11 +36,14 @@ from sweep3d.errors import PluginError, SpecError, UserError
 from sweep3d.parts import PARTS_LAYOUT
 from sweep3d.spec.assets import materialise_mesh
 from sweep3d.spec.loader import LoadedSpec
+from sweep3d.spec.models import RenderSpec
 from sweep3d.stages.driver import Computed, Feed
 from sweep3d.stages.jobs import Job, Plan
 from sweep3d.stages.passes import needed_passes, truth_passes
+from sweep3d.stages.render.device import worker_count
 from sweep3d.stages.render.pool import RenderPool
 from sweep3d.stages.render.protocol import (
+    NO_LIMITS,
     EnvironmentRef,
     Look,
     RenderExecutor,
@@ -48,6 +51,7 @@ from sweep3d.stages.render.protocol import (
     RenderJob,
     RenderReply,
     RenderSettings,
+    WorkerLimits,
 )
 from sweep3d.truth import BLOB_SUFFIX
 
@@ -81,22 +85,23 @@ class Executor:
     kind: str = "local"
     address: str | None = None
 
-    def pool(self, settings: RenderSettings, workers: int, timeout: float) -> RenderExecutor:
-        """A fresh executor of this kind (``timeout`` applies to local workers only)."""
+    def pool(self, settings: RenderSettings, workers: int, timeout: float,
+             limits: WorkerLimits = NO_LIMITS) -> RenderExecutor:
+        """A fresh executor of this kind (``timeout`` and ``limits`` apply to local workers only)."""
         if self.kind == "ray":
             from sweep3d.stages.render.ray_pool import RayRenderPool
 
             return RayRenderPool(settings, workers, self.address)
-        return RenderPool(settings, workers, timeout)
+        return RenderPool(settings, workers, timeout, limits)
 
 
 LOCAL = Executor()
 
 
 def render_settings(plan: Plan) -> RenderSettings:
-    """The [render] settings with the resolved frame and the passes to write, as workers need them
-    (only those something needs: see :func:`needed_passes`)."""
-    return RenderSettings.from_spec(plan.spec.render, plan.framing, needed_passes(plan.spec))
+    """The [render] settings with the resolved frame and device and the passes to write, as workers
+    need them (only those something needs: see :func:`needed_passes`)."""
+    return RenderSettings.from_spec(plan.spec.render, plan.framing, needed_passes(plan.spec), plan.device)
 
 
 class RenderStage:
@@ -146,37 +151,45 @@ class RenderStage:
         stored = {j.render_key for j in todo if store.blob_path(j.render_key).exists()} & store.keys("renders")
         groups = _groups(plan, store, todo, stored)
         jobs = {j.render_key: j for j in todo}
-        workers = min(plan.spec.render.workers, len(groups))
+        spec = plan.spec.render
+        workers = min(worker_count(spec, plan.device), len(groups))
+        with self.executor.pool(render_settings(plan), workers, spec.timeout, WorkerLimits.from_spec(spec)) as pool:
+            yield from self._replies(pool.run(groups), plan, store, jobs, stored)
+            if pool.recycled:
+                log.warning(recycled_note(spec, pool.recycled))
+
+    def _replies(self, replies: Iterator[RenderReply], plan: Plan, store: Store, jobs: dict[str, Job],
+                 stored: set[str]) -> Iterator[Computed]:
+        """What each worker's reply computed: the render's row and its side rows, or its error."""
         warned = False
-        with self.executor.pool(render_settings(plan), workers, plan.spec.render.timeout) as pool:
-            for reply in pool.run(groups):
-                job = jobs[reply.render_key]
-                if not reply.ok:
-                    if reply.kind == "plugin":
-                        raise PluginError(reply.error or "a control failed", reply.details)
-                    if reply.kind == "user":
-                        raise _user_error(plan, job, reply.error or "")
-                    yield Computed(job.render_key, error=reply.error or "the render failed")
+        for reply in replies:
+            job = jobs[reply.render_key]
+            if not reply.ok:
+                if reply.kind == "plugin":
+                    raise PluginError(reply.error or "a control failed", reply.details)
+                if reply.kind == "user":
+                    raise _user_error(plan, job, reply.error or "")
+                yield Computed(job.render_key, error=reply.error or "the render failed")
+                continue
+            if self.timings is not None:
+                self.timings[job.render_key] = reply.info
+            if reply.info.rebuilt and not warned:
+                warned = True
+                log.warning(rebuilt_warning(plan, reply.info.rebuilt))
+            row = None
+            if job.render_key not in stored:  # else it was rendered again for its UV pass only
+                row = _row(store, reply)
+                if row is None:
+                    yield Computed(job.render_key, error="the worker reported success but its blob cannot be read")
                     continue
-                if self.timings is not None:
-                    self.timings[job.render_key] = reply.info
-                if reply.info.rebuilt and not warned:
-                    warned = True
-                    log.warning(rebuilt_warning(plan, reply.info.rebuilt))
-                row = None
-                if job.render_key not in stored:  # else it was rendered again for its UV pass only
-                    row = _row(store, reply)
-                    if row is None:
-                        yield Computed(job.render_key, error="the worker reported success but its blob cannot be read")
-                        continue
-                side = {"parts": _parts_row(job, reply)} if job.parts_key is not None else {}
-                if job.truth_key is not None:
-                    truth = _truth_row(store, job, reply)
-                    if truth is None:
-                        yield Computed(job.render_key, error="the worker rendered no truth passes")
-                        continue
-                    side["truths"] = truth
-                yield Computed(job.render_key, row, side)
+            side = {"parts": _parts_row(job, reply)} if job.parts_key is not None else {}
+            if job.truth_key is not None:
+                truth = _truth_row(store, job, reply)
+                if truth is None:
+                    yield Computed(job.render_key, error="the worker rendered no truth passes")
+                    continue
+                side["truths"] = truth
+            yield Computed(job.render_key, row, side)
 
 
 def _row(store: Store, reply: RenderReply) -> dict | None:
@@ -251,6 +264,16 @@ def rebuilt_warning(plan: Plan, changed: tuple[str, ...]) -> str:
             f"{', …' if len(changed) > 3 else ''}), so the render worker rebuilds its scene after each such job "
             "(slow: every mesh and world is loaded again); change copies instead (material.copy(), then assign "
             "the copy), or use the state's material edits")
+
+
+def recycled_note(spec: RenderSpec, recycled: Counter[str]) -> str:
+    """The one line said when workers were replaced between jobs: how many, and which limit."""
+    why = {"memory": f"holding more than render.worker_memory = {spec.worker_memory} MB",
+           "jobs": f"after render.worker_jobs = {spec.worker_jobs} jobs"}
+    parts = ", ".join(f"{n} {why[reason]}" for reason, n in sorted(recycled.items()))
+    total = sum(recycled.values())
+    return (f"note: {total} render worker{'s were' if total > 1 else ' was'} replaced by a fresh one between jobs "
+            f"({parts}); each replacement loads Blender and its scene again")
 
 
 def _blob_digest(path: Path) -> str | None:

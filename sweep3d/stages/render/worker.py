@@ -3,7 +3,9 @@
 It talks to the parent over one pipe with the messages of :mod:`.protocol`: it receives a list
 of :class:`RenderJob` (one scene group) or None to stop, and sends :class:`Ready` (or
 :class:`Fatal`) once, then :class:`Started` and a :class:`RenderReply` per job, and :class:`Idle`
-after each list.
+after each list. After a job's reply, a worker that reached one of its :class:`WorkerLimits`
+(its resident memory, its number of jobs) sends :class:`Retired` and exits: the pool gives the
+rest of its list to a fresh worker.
 
 A worker dies with its run: it asks the kernel for SIGKILL when its parent dies, and it never
 writes a blob once its parent has gone (a new run may hold the store's lock by then).
@@ -23,7 +25,9 @@ from pathlib import Path
 
 import numpy as np
 
+from sweep3d.errors import UserError
 from sweep3d.stages.render.protocol import (
+    NO_LIMITS,
     Fatal,
     Idle,
     Ready,
@@ -31,7 +35,9 @@ from sweep3d.stages.render.protocol import (
     RenderJob,
     RenderReply,
     RenderSettings,
+    Retired,
     Started,
+    WorkerLimits,
 )
 
 PR_SET_PDEATHSIG = 1  # from <linux/prctl.h>
@@ -62,17 +68,19 @@ def orphaned() -> bool:
     return _parent_pid is not None and os.getppid() != _parent_pid
 
 
-def worker_main(conn: Connection, settings: RenderSettings, scratch: str) -> None:
-    """Entry point of a spawned worker process."""
+def worker_main(conn: Connection, settings: RenderSettings, scratch: str, limits: WorkerLimits = NO_LIMITS,
+                gpu: int | None = None) -> None:
+    """Entry point of a spawned worker process (``gpu``: the one GPU it renders on; None: all)."""
     die_with_parent()
     try:
-        _serve(conn, settings, scratch)
+        _serve(conn, settings, scratch, limits, gpu)
     except (BrokenPipeError, ConnectionResetError, EOFError):
         pass  # the parent has gone: nobody to report to, and nothing may be written
 
 
-def _serve(conn: Connection, settings: RenderSettings, scratch: str) -> None:
-    """Build the scene, then render the lists of jobs the parent sends until it sends None."""
+def _serve(conn: Connection, settings: RenderSettings, scratch: str, limits: WorkerLimits, gpu: int | None) -> None:
+    """Build the scene, then render the lists of jobs the parent sends until it sends None, or
+    until a limit is reached after a job."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides when workers stop
     from sweep3d.stages.render.render_log import RenderLog
     from sweep3d.stages.render.scene import BlenderScene
@@ -80,11 +88,15 @@ def _serve(conn: Connection, settings: RenderSettings, scratch: str) -> None:
     try:
         # Blender prints progress straight to fd 1: into scratch, where a scene load's set-up is read
         log = RenderLog(Path(scratch) / f"blender-{os.getpid()}.log")
-        scene = BlenderScene(settings, Path(scratch), log)
+        scene = BlenderScene(settings, Path(scratch), log, gpu)
+    except UserError as exc:  # a device it cannot use, bpy missing: the user's to fix (exit 2)
+        conn.send(Fatal(str(exc), user=True))
+        return
     except Exception as exc:  # noqa: BLE001  (reported to the parent, which fails the run)
         conn.send(Fatal(f"{type(exc).__name__}: {exc}"))
         return
     conn.send(Ready(os.getpid()))
+    rendered = 0
     while True:
         jobs = conn.recv()
         if jobs is None:
@@ -92,7 +104,22 @@ def _serve(conn: Connection, settings: RenderSettings, scratch: str) -> None:
         for job in jobs:
             conn.send(Started(job.render_key))
             conn.send(render_job(scene, job))
+            rendered += 1
+            reason = limits.reached(rendered, resident_mb())
+            if reason is not None:
+                conn.send(Retired(reason))
+                return
         conn.send(Idle())
+
+
+def resident_mb(pid: int | str = "self") -> float | None:
+    """The resident memory of process ``pid`` in MB (2^20 bytes), from ``/proc``; None where
+    there is no ``/proc`` (no limit is checked then)."""
+    try:
+        pages = int(Path(f"/proc/{pid}/statm").read_text().split()[1])
+    except (OSError, IndexError, ValueError):
+        return None
+    return pages * os.sysconf("SC_PAGE_SIZE") / 2**20
 
 
 def posed_state(job: RenderJob):
@@ -126,7 +153,7 @@ def render_job(scene, job: RenderJob, keep_pixels: bool = False) -> RenderReply:
         failure "internal", so one bad job does not kill the sweep.
     """
     from sweep3d.cache.store import atomic_write
-    from sweep3d.errors import PluginError, UserError
+    from sweep3d.errors import PluginError
     from sweep3d.pixels import encode_png
     from sweep3d.stages.render.scene_edit import render_edited
 

@@ -1,0 +1,96 @@
+"""Which Cycles device renders: the CPU, or NVIDIA GPUs through OptiX or CUDA.
+
+``[render] device = "auto"`` is resolved in the parent before the run is planned, so that its
+render keys are known up front and the same wherever they are computed: the device is in a
+render key only for a GPU (GPU Cycles does not give CPU's pixels), so auto on a machine without
+one keys and renders exactly as ``"cpu"``. The parent never imports bpy: a probe, a child process
+running :mod:`.gpus`, asks Cycles which GPUs each back-end finds, once per process, and only
+where an NVIDIA driver is present (elsewhere auto is the CPU at no cost).
+
+A device named explicitly is keyed as named; the workers enable it on start-up and report one
+they cannot use (:func:`use_device`) as a user error, before any job is sent.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+from sweep3d.errors import UserError
+from sweep3d.spec.models import RenderSpec
+from sweep3d.stages.render import gpus as gpus_module
+
+PROBE_TIMEOUT = 120.0  # seconds the probe may take to import bpy and list Cycles' devices
+#: What shows an NVIDIA driver: its /proc entry and device node (Linux), or WSL's GPU node.
+DRIVER_PATHS = ("/proc/driver/nvidia/version", "/dev/nvidiactl", "/dev/dxg")
+NAMES = {"optix": "OptiX", "cuda": "CUDA"}
+
+
+def resolve_device(requested: str) -> str:
+    """The device renders are made on: ``requested``, with "auto" as the best GPU back-end that
+    finds a GPU here (OptiX, then CUDA), else "cpu"."""
+    if requested != "auto":
+        return requested
+    return next((b.lower() for b in gpus_module.BACKENDS if gpu_count(b.lower())), "cpu")
+
+
+def gpu_count(device: str) -> int:
+    """How many GPUs Cycles finds here through ``device``'s back-end (0 for "cpu")."""
+    return probe().get(device, 0)
+
+
+@functools.cache
+def probe() -> dict[str, int]:
+    """GPUs per back-end ("optix", "cuda"), as a child importing bpy sees them; empty without an
+    NVIDIA driver, or when the child fails (no bpy, a crashing driver): then auto is the CPU."""
+    if not any(Path(p).exists() for p in DRIVER_PATHS):
+        return {}
+    try:
+        done = subprocess.run([sys.executable, gpus_module.__file__], capture_output=True, text=True,
+                              timeout=PROBE_TIMEOUT, check=True)
+        found = json.loads(done.stdout.strip().splitlines()[-1])
+    except (OSError, subprocess.SubprocessError, ValueError, IndexError):
+        return {}
+    return {k: int(v) for k, v in found.items()} if isinstance(found, dict) else {}
+
+
+def worker_count(spec: RenderSpec, device: str) -> int:
+    """Render workers: the spec's ``workers``, or one per GPU when a GPU renders and it is not set."""
+    if device == "cpu" or "workers" in spec.model_fields_set:
+        return spec.workers
+    return max(gpu_count(device), 1)
+
+
+def fallback_note(spec: RenderSpec, device: str) -> str | None:
+    """The line a run says when auto found no GPU (None otherwise)."""
+    if spec.device != "auto" or device != "cpu":
+        return None
+    return 'render.device = "auto" found no NVIDIA GPU that Cycles can use (OptiX or CUDA): rendering on the CPU'
+
+
+def use_device(bpy: Any, scene: Any, device: str, gpu: int | None = None) -> None:
+    """Make ``scene`` render on ``device`` (in a worker): the CPU, or the GPUs of its back-end, all
+    of them or only number ``gpu`` (modulo their count: one worker per GPU).
+
+    Raises:
+        UserError: the back-end finds no GPU here: one line naming ``render.device`` and the fix.
+    """
+    if device == "cpu":
+        scene.cycles.device = "CPU"
+        return
+    backend = device.upper()
+    found = gpus_module.gpus(bpy, backend)
+    if not found:
+        raise UserError(f'render.device = "{device}": Cycles finds no {NAMES[device]} GPU on this machine (is the '
+                        'NVIDIA driver installed and the GPU visible?); set device = "auto" (the best GPU back-end '
+                        'that works, else the CPU) or "cpu"')
+    chosen = {found[gpu % len(found)].id} if gpu is not None else {d.id for d in found}
+    prefs = bpy.context.preferences.addons["cycles"].preferences
+    prefs.compute_device_type = backend
+    for entry in prefs.devices:  # the CPU too: GPUs alone, as the key says
+        entry.use = entry.type == backend and entry.id in chosen
+    scene.cycles.device = "GPU"

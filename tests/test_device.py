@@ -1,0 +1,215 @@
+"""``[render] device`` (CPU, CUDA, OptiX; auto) and render workers recycled between jobs
+(``[render] worker_memory``, ``worker_jobs``).
+
+Planning and the small pieces run in the fast lane, whatever GPUs the machine has (the probe is
+replaced); what needs Blender renders a handful of 32-pixel jobs.
+"""
+
+from __future__ import annotations
+
+import os
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rich.console import Console
+
+from sweep3d.errors import UserError
+from sweep3d.pixels import decode_png
+from sweep3d.spec.models import RenderSpec
+from sweep3d.stages import load_spec
+from sweep3d.stages.render import device as device_module
+from sweep3d.stages.render.device import fallback_note, resolve_device, worker_count
+from sweep3d.stages.render.protocol import EnvironmentRef, RenderJob, RenderSettings, WorkerLimits
+from sweep3d.stages.render.stage import recycled_note
+from sweep3d.stages.render.worker import resident_mb
+from tests.conftest import TINY_SPEC, plan_for, write_spec
+
+NO_GPU: dict[str, int] = {}
+TWO_GPUS = {"optix": 2, "cuda": 2}
+
+
+def with_render(extra: str) -> str:
+    """The tiny spec with ``extra`` lines added to its [render] table."""
+    return TINY_SPEC.replace("denoise = false\n", f"denoise = false\n{extra}\n")
+
+
+def plan_with(folder: Path, extra: str = ""):
+    """Plan the tiny spec with ``extra`` [render] lines, in a fresh subfolder (no model loaded)."""
+    sub = folder / f"spec{len(list(folder.iterdir()))}"
+    sub.mkdir()
+    return plan_for(load_spec(write_spec(sub, with_render(extra))), "model-x")
+
+
+def render_keys(plan) -> list[str]:
+    return [job.render_key for job in plan.jobs]
+
+
+@pytest.fixture
+def gpus(monkeypatch):
+    """Set what the device probe finds (it is never run)."""
+    def found(what: dict[str, int]) -> None:
+        monkeypatch.setattr(device_module, "probe", lambda: what)
+    found(NO_GPU)
+    return found
+
+
+# -- keys ----------------------------------------------------------------------------------------
+
+def test_auto_without_a_gpu_keys_its_renders_as_cpu_and_as_a_spec_without_device(tmp_path, gpus) -> None:
+    plain = plan_with(tmp_path)
+    auto, cpu = plan_with(tmp_path, 'device = "auto"'), plan_with(tmp_path, 'device = "cpu"')
+    assert plain.device == auto.device == cpu.device == "cpu"
+    assert render_keys(auto) == render_keys(cpu) == render_keys(plain)
+    assert [j.pred_key for j in auto.jobs] == [j.pred_key for j in plain.jobs]
+
+
+def test_a_gpu_is_in_the_render_key_and_auto_keys_by_the_gpu_it_finds(tmp_path, gpus) -> None:
+    cpu = render_keys(plan_with(tmp_path, 'device = "cpu"'))
+    cuda, optix = render_keys(plan_with(tmp_path, 'device = "cuda"')), render_keys(plan_with(tmp_path, 'device = "optix"'))
+    assert len(set(cpu) | set(cuda) | set(optix)) == 3 * len(set(cpu))  # GPU Cycles: other pixels, other keys
+    gpus(TWO_GPUS)
+    auto = plan_with(tmp_path, 'device = "auto"')
+    assert auto.device == "optix" and render_keys(auto) == optix
+    gpus({"optix": 0, "cuda": 1})
+    assert resolve_device("auto") == "cuda"
+
+
+def test_worker_recycling_settings_are_not_in_render_keys(tmp_path, gpus) -> None:
+    base = render_keys(plan_with(tmp_path))
+    assert render_keys(plan_with(tmp_path, "worker_memory = 1\nworker_jobs = 1")) == base
+    assert render_keys(plan_with(tmp_path, "worker_memory = 0")) == base
+
+
+def test_a_gpu_run_has_one_worker_per_gpu_unless_workers_is_set(gpus) -> None:
+    gpus({"optix": 3, "cuda": 3})
+    assert worker_count(RenderSpec(device="optix"), "optix") == 3
+    assert worker_count(RenderSpec(), "optix") == 3  # auto resolved to OptiX
+    assert worker_count(RenderSpec(workers=1), "optix") == 1
+    assert worker_count(RenderSpec(workers=2), "cpu") == 2 and worker_count(RenderSpec(), "cpu") == 1
+    gpus(NO_GPU)
+    assert worker_count(RenderSpec(device="cuda"), "cuda") == 1  # its worker says what is wrong
+
+
+def test_the_probe_starts_no_process_without_an_nvidia_driver(monkeypatch) -> None:
+    monkeypatch.setattr(device_module, "DRIVER_PATHS", (os.devnull + "-absent",))
+    monkeypatch.setattr(device_module.subprocess, "run", lambda *a, **k: pytest.fail("the probe ran"))
+    device_module.probe.cache_clear()
+    try:
+        assert device_module.probe() == {} and resolve_device("auto") == "cpu"
+    finally:
+        device_module.probe.cache_clear()
+
+
+def test_a_run_says_once_that_auto_renders_on_the_cpu_and_only_when_it_renders(tmp_path, gpus) -> None:
+    from sweep3d.pipeline import _note_fallback
+
+    auto, cpu = plan_with(tmp_path), plan_with(tmp_path, 'device = "cpu"')
+    console = Console(record=True, width=400)
+    _note_fallback([auto], {32: 0}, console)  # everything stored: nothing to say
+    _note_fallback([cpu], {32: 4}, console)  # asked for: nothing to say
+    assert console.export_text() == ""
+    _note_fallback([auto, auto], {32: 4}, console)
+    (line,) = console.export_text().splitlines()
+    assert line == f"note: {fallback_note(RenderSpec(), 'cpu')}" and 'render.device = "auto"' in line
+    assert fallback_note(RenderSpec(), "optix") is None
+
+
+# -- worker limits -------------------------------------------------------------------------------
+
+def test_worker_limits_are_reached_after_a_job_by_memory_or_by_count() -> None:
+    assert WorkerLimits().reached(10**6, 10.0**6) is None
+    assert WorkerLimits(memory_mb=100).reached(1, 101.0) == "memory"
+    assert WorkerLimits(memory_mb=100).reached(1, 99.0) is None
+    assert WorkerLimits(memory_mb=100).reached(1, None) is None  # no /proc: not checked
+    assert WorkerLimits(jobs=2).reached(1, 5.0) is None and WorkerLimits(jobs=2).reached(2, 5.0) == "jobs"
+    assert WorkerLimits.from_spec(RenderSpec()) == WorkerLimits(memory_mb=4096, jobs=0)
+
+
+def test_resident_memory_is_read_from_proc() -> None:
+    if not Path("/proc/self/statm").exists():
+        pytest.skip("no /proc here: the memory limit is not checked")
+    assert 1.0 < resident_mb() < 1e6
+    assert resident_mb(2**22 + 1) is None  # no such process
+
+
+def test_the_recycling_note_says_how_many_workers_were_replaced_and_why() -> None:
+    spec = RenderSpec(worker_memory=1, worker_jobs=3)
+    line = recycled_note(spec, Counter(memory=3, jobs=1))
+    assert line.startswith("note: 4 render workers were replaced by a fresh one between jobs ")
+    assert "3 holding more than render.worker_memory = 1 MB" in line and "1 after render.worker_jobs = 3 jobs" in line
+    assert "\n" not in line
+
+
+def test_onnx_runtime_asks_for_cuda_first_only_where_it_has_it() -> None:
+    from sweep3d.stages.infer.onnx_backend import providers
+
+    assert providers(["CPUExecutionProvider"]) == ["CPUExecutionProvider"]
+    assert providers(["CUDAExecutionProvider", "CPUExecutionProvider"]) == ["CUDAExecutionProvider",
+                                                                            "CPUExecutionProvider"]
+
+
+# -- with Blender --------------------------------------------------------------------------------
+
+@pytest.mark.blender
+def test_a_gpu_blender_cannot_find_is_one_user_error_naming_render_device(blender_scene) -> None:
+    from sweep3d.stages.render.device import use_device
+
+    for device in ("cuda", "optix"):
+        if device_module.gpu_count(device):
+            continue  # this machine has one
+        with pytest.raises(UserError, match=rf'^render\.device = "{device}": Cycles finds no .* "cpu"$'):
+            use_device(blender_scene.bpy, blender_scene.scene, device)
+        assert blender_scene.scene.cycles.device == "CPU"
+
+
+@pytest.mark.blender
+def test_workers_recycled_between_jobs_render_every_job_once_and_the_same_pixels(tmp_path: Path) -> None:
+    from sweep3d.stages.render.pool import RenderPool
+    from tests.conftest import write_cube
+
+    cube = str(write_cube(tmp_path))
+    colours = [(1.0, 1.0, 1.0), (0.5, 0.5, 0.5), (0.2, 0.4, 0.8), (0.9, 0.3, 0.1)]
+    settings = RenderSettings(resolution=32, samples=1, denoise=False)
+    pixels = {}
+    for name, limits in (("plain", WorkerLimits()), ("memory", WorkerLimits(memory_mb=1)), ("jobs", WorkerLimits(jobs=1))):
+        folder = tmp_path / name
+        folder.mkdir()
+        jobs = [RenderJob(f"k{i}", cube, EnvironmentRef(color=c), blob=str(folder / f"k{i}.png"))
+                for i, c in enumerate(colours)]
+        with RenderPool(settings, workers=1, timeout=120, limits=limits) as pool:
+            replies = list(pool.run([jobs[:3], jobs[3:]]))  # recycled within a list and between lists
+            recycled = dict(pool.recycled)
+        assert sorted(r.render_key for r in replies) == [j.render_key for j in jobs], name  # each once
+        assert all(r.ok for r in replies), [r.error for r in replies]
+        assert recycled == ({} if name == "plain" else {name: len(jobs)}), recycled  # after every job
+        pixels[name] = np.stack([decode_png(j.blob) for j in jobs])
+    for name in ("memory", "jobs"):  # renders in other processes: one 8-bit level apart at most
+        assert np.abs(pixels[name] - pixels["plain"]).max() <= 1.5 / 255, name
+
+
+@pytest.mark.slow
+def test_auto_reuses_a_cpu_runs_renders_and_an_absent_gpu_is_one_line_exit_2_rendering_nothing(tiny_copy) -> None:
+    from typer.testing import CliRunner
+
+    from sweep3d.cache.store import Store
+    from sweep3d.cli import app
+
+    spec = tiny_copy / "spec.toml"
+    renders = Store(tiny_copy / "store").keys("renders")
+    spec.write_text(spec.read_text().replace("denoise = false\n", 'denoise = false\ndevice = "auto"\n'))
+    if device_module.resolve_device("auto") == "cpu":  # no GPU here: the tiny run's renders are auto's
+        result = CliRunner().invoke(app, ["run", str(spec), "--no-report"])
+        assert result.exit_code == 0, result.output
+        assert "note:" not in result.output  # nothing rendered: nothing to say about the device
+        assert Store(tiny_copy / "store").keys("renders") == renders
+    if device_module.gpu_count("cuda"):
+        pytest.skip("this machine has a CUDA GPU")
+    spec.write_text(spec.read_text().replace('device = "auto"', 'device = "cuda"'))
+    result = CliRunner().invoke(app, ["run", str(spec), "--no-report"])
+    assert result.exit_code == 2, result.output
+    assert "Traceback" not in result.output
+    (line,) = [line for line in result.output.splitlines() if line.startswith("error:")]
+    assert line.startswith('error: render.device = "cuda": Cycles finds no CUDA GPU') and '"cpu"' in line, line
+    assert Store(tiny_copy / "store").keys("renders") == renders  # nothing rendered
