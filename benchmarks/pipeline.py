@@ -248,6 +248,7 @@ BARE_MULTI = textwrap.dedent("""
     t0 = time.perf_counter()
     import bpy
     import numpy as np
+    from mathutils import Matrix
     spec, out = json.load(open(sys.argv[1])), sys.argv[2]
     s = spec["settings"]
     bpy.ops.wm.read_factory_settings(use_empty=True)
@@ -266,7 +267,7 @@ BARE_MULTI = textwrap.dedent("""
     r.use_persistent_data = True
     r.threads_mode, r.threads = "FIXED", os.cpu_count()
     scene.view_settings.view_transform = "Standard"
-    r.image_settings.file_format, r.image_settings.color_mode, r.image_settings.compression = "PNG", "RGB", 0
+    r.image_settings.file_format, r.image_settings.color_mode, r.image_settings.compression = "PNG", "RGBA", 0
 
     def load(path):  # under a pose empty, normalised to a unit bounding sphere at the origin
         before = set(bpy.data.objects)
@@ -302,7 +303,7 @@ BARE_MULTI = textwrap.dedent("""
             w.node_tree.links.new(tex.outputs["Color"], bg.inputs["Color"])
         else:
             bg.inputs["Color"].default_value = (*env["color"], 1.0)
-        bg.inputs["Strength"].default_value = env["strength"]
+        bg.inputs["Strength"].default_value = env["strength"] * env["fill"]
         return w
 
     objects = {path: load(path) for path in spec["meshes"]}
@@ -314,6 +315,8 @@ BARE_MULTI = textwrap.dedent("""
     d = 1 / (0.8 * math.sin(math.atan(18 / 50)))
     t1 = time.perf_counter()
     devnull = os.open(os.devnull, os.O_WRONLY); saved = os.dup(1); os.dup2(devnull, 1)
+    sun = bpy.data.objects.new("sun", bpy.data.lights.new("sun", "SUN"))
+    scene.collection.objects.link(sun)
     shown = None
     for job in spec["jobs"]:  # world by world, object by object
         if scene.world != worlds[job["environment"]]:
@@ -327,6 +330,11 @@ BARE_MULTI = textwrap.dedent("""
         e = math.radians(job["elevation"])
         cam.location = (0.0, -d * math.cos(e), d * math.sin(e))
         cam.rotation_euler = (math.pi / 2 - e, 0.0, 0.0)
+        r.film_transparent = job["sun"] is not None  # a plain colour is put behind afterwards, as sweep3d does
+        sun.hide_render = job["sun"] is None  # a plain colour's key light, riding with the camera
+        if job["sun"] is not None:
+            sun.data.energy, sun.data.angle = job["sun"]["energy"], job["sun"]["angle"]
+            sun.matrix_world = Matrix(job["sun"]["matrix"])
         r.filepath = f"{out}/{job['key']}.png"
         bpy.ops.render.render(write_still=True)
     os.dup2(saved, 1)
@@ -360,9 +368,11 @@ def bare_jobs(folder: Path) -> tuple[Path, int]:
     meshes = {o.name: str(materialise_mesh(spec.meshes[o.name], folder / "assets")) for o in spec.objects}
     unique = {j.render_key: j for j in plan.jobs}.values()
     jobs = [{"key": j.render_key, "mesh": meshes[j.object], "environment": j.environment,
-             "yaw": j.values["orientation"]["yaw"], "elevation": j.values["camera"]["elevation"]}
+             "yaw": j.values["orientation"]["yaw"], "elevation": j.values["camera"]["elevation"],
+             "sun": key_light(spec, j)}
             for j in sorted(unique, key=lambda j: (j.environment, j.object, j.index))]
-    environments = {e.name: {"hdri": spec.hdris[e.name], "color": e.color, "strength": e.strength}
+    environments = {e.name: {"hdri": spec.hdris[e.name], "color": e.color, "strength": e.strength,
+                             "fill": e.key_light.fill if e.key_light is not None else 1.0}
                     for e in spec.environments}
     path = folder / "bare.json"
     path.write_text(json.dumps({"settings": {"size": settings.resolution, "crop": settings.crop or settings.resolution,
@@ -370,6 +380,26 @@ def bare_jobs(folder: Path) -> tuple[Path, int]:
                                              "max_bounces": settings.max_bounces},
                                 "meshes": list(meshes.values()), "environments": environments, "jobs": jobs}))
     return path, len(jobs)
+
+
+def key_light(spec, job) -> dict | None:
+    """The sun sweep3d lights a plain colour with for ``job`` (its energy, angle and column-major
+    world matrix, by rows), from sweep3d's own light code; None for an HDRI."""
+    from sweep3d.stages.render.lamps import blender_light
+    from sweep3d.stages.render.lights import SunLight
+    from sweep3d.stages.render.state import SceneState
+
+    env = next(e for e in spec.environments if e.name == job.environment)
+    if env.key_light is None:
+        return None
+    state = SceneState()
+    for inst in sorted((c.control for c in spec.controls if c.control.stage == "render"), key=lambda c: c.order):
+        if inst.id in job.values:
+            inst.apply(state, inst.params(job.values[inst.id]))
+    key = env.key_light
+    sun = SunLight((1.0, 1.0, 1.0), key.strength * env.strength, key.angle, key.azimuth, key.elevation, "camera")
+    _, values, matrix = blender_light(sun, state)
+    return {"energy": values["energy"], "angle": values["angle"], "matrix": matrix.tolist()}
 
 
 def bare_multi(folder: Path) -> dict:
@@ -381,7 +411,9 @@ def bare_multi(folder: Path) -> dict:
     done = subprocess.run([sys.executable, "-c", BARE_MULTI, str(spec), str(out)], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr[-3000:]
     timing = json.loads(done.stdout.strip().splitlines()[-1])
-    return {**timing, "wall": time.perf_counter() - started, "n": n, "frames": out}
+    described = json.loads(spec.read_text())
+    return {**timing, "wall": time.perf_counter() - started, "n": n, "frames": out, "jobs": described["jobs"],
+            "environments": described["environments"]}
 
 
 def stage_multi(folder: Path) -> dict:
@@ -437,11 +469,19 @@ def infer_alone(stage: dict, folder: Path) -> float:
 def agreement(bare: dict, stage: dict) -> tuple[float, float]:
     """Mean |difference| in 8-bit levels between the two sides' images, and the share of pixels
     more than 2 levels apart (edges against a plain background are blended differently)."""
+    from PIL import Image
+
     from sweep3d.pixels import decode_png
 
     means, far = [], []
+    backgrounds = {job["key"]: bare["environments"][job["environment"]]["color"] for job in bare["jobs"]}
     for frame in sorted(bare["frames"].glob("*.png")):
-        diff = np.abs(decode_png(frame) - decode_png(stage["store"].blob_path(frame.stem))) * 255
+        with Image.open(frame) as img:  # the bare loop's plain colours come out transparent
+            rgba = np.asarray(img.convert("RGBA"), dtype=np.float32) / 255.0
+        rgb, alpha = rgba[..., :3], rgba[..., 3:]
+        if backgrounds[frame.stem] is not None:
+            rgb = rgb * alpha + np.asarray(backgrounds[frame.stem], dtype=np.float32) * (1 - alpha)
+        diff = np.abs(np.round(rgb * 255) / 255 - decode_png(stage["store"].blob_path(frame.stem))) * 255
         means.append(diff.mean())
         far.append((diff.max(axis=2) > 2.5).mean())
     return float(np.mean(means)), float(np.mean(far))
