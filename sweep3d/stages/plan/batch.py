@@ -28,6 +28,7 @@ from sweep3d.controls import Control, wrap_periodic_many
 from sweep3d.spec.loader import ControlInstance
 from sweep3d.spec.space import Column
 from sweep3d.stages.jobs import ControlValues
+from sweep3d.typed import Typed
 
 #: Metadata a range field may carry and stay plain: bounds, which every value in range meets.
 INTERVALS = (annotated_types.Ge, annotated_types.Gt, annotated_types.Le, annotated_types.Lt)
@@ -191,8 +192,7 @@ def _plain(control: Control, ranges: list[str]) -> bool:
     cls, model = type(control), control.Params
     if any(getattr(cls, m) is not getattr(Control, m) for m in ("params", "canonical", "key_part")):
         return False
-    decorators = model.__pydantic_decorators__
-    if any(getattr(decorators, kind, None) for kind in _DECORATORS):
+    if any(_own_decorators(model, kind) for kind in _DECORATORS):
         return False
     if any(getattr(model, m) is not getattr(BaseModel, m) for m in ("__init__", "model_dump", "model_post_init")):
         return False
@@ -205,6 +205,22 @@ def _plain(control: Control, ranges: list[str]) -> bool:
         if not all(isinstance(m, INTERVALS) for m in info.metadata):
             return False
     return True
+
+
+def _own_decorators(model: type[BaseModel], kind: str) -> dict[str, Any]:
+    """The model's decorators of ``kind``, but for :class:`~sweep3d.typed.Typed`'s type check,
+    which refuses a value of the wrong type and never changes one that fits (a number in range)."""
+    found = dict(getattr(model.__pydantic_decorators__, kind, None) or {})
+    typed = Typed.__pydantic_decorators__.field_validators["_no_coercion"]
+    mine = found.get("_no_coercion") if kind == "field_validators" else None
+    if mine is not None and _function(mine.func) is _function(typed.func):
+        del found["_no_coercion"]
+    return found
+
+
+def _function(method: Any) -> Any:
+    """The plain function behind a (class-bound) method."""
+    return getattr(method, "__func__", method)
 
 
 def groups(codes: list[np.ndarray], n: int) -> tuple[np.ndarray, np.ndarray]:
