@@ -24,7 +24,7 @@ from sweep3d.stages.aggregate import (
     MACROS,
     VIEWS,
     connect,
-    largest_gap_region,
+    nearest_miss_region,
     register_views,
     stored_summary,
     summarise,
@@ -288,7 +288,7 @@ def test_failure_modes_test_each_value_against_the_rest_of_its_parameter(tmp_pat
     rows = [{"c_a": a, "correct": i < right} for a, right in (("near", 13), ("good", 16)) for i in range(20)]
     noise = summarise(make_store(tmp_path / "noise", rows), ["c_a"])
     assert weakest_regions(noise) == []
-    gap = largest_gap_region(noise)  # no failure mode, but the largest gap is said, with its interval
+    gap = nearest_miss_region(noise)  # no failure mode, but the nearest miss is said, with its interval
     assert (gap.label, gap.accuracy, gap.accuracy_rest) == ("near", 0.65, 0.8) and gap.difference_low < -0.15
 
 
@@ -314,6 +314,28 @@ def test_half_hidden_halves_accuracy_and_is_named_with_a_paired_test(tmp_path: P
     half = {m["region"]: m for m in rows_of(unpaired, "FROM failure_modes(min_count := 2)")}["hide = half"]
     assert half["test"] == "fisher" and half["p_value"] == pytest.approx(_hypergeometric_cdf(4, 24, 20, 48))
     assert half["significant"]
+
+
+def test_a_control_is_compared_only_where_it_applies(tmp_path: Path) -> None:
+    """c applies in one environment only (its values equally good there); the other environment is
+    easier. Its values must not be named against results where c does not apply."""
+    rows = [{"environment": "hard", "c_c": value, "correct": i % 2 == 0} for value in ("x", "y") for i in range(40)]
+    rows += [{"environment": "easy", "correct": i % 10 != 0} for i in range(80)]  # c not applied
+    con = make_store(tmp_path, rows)
+    modes = rows_of(con, "FROM failure_modes(min_count := 10)")
+    assert not [m for m in modes if "c_c" in (m["parameter_a"], m["parameter_b"])]
+    assert {m["region"] for m in modes if m["significant"]} == {"environment = hard"}
+
+
+def test_mcnemar_is_oriented_by_value_even_where_two_values_print_alike(tmp_path: Path) -> None:
+    rows = []
+    for pose in range(24):  # the larger value is right 4 times in 24, the smaller 20: 16 pairs against it
+        rows.append({"c_z": 1.00001, "yaw": pose, "correct": pose < 20})
+        rows.append({"c_z": 1.00002, "yaw": pose, "correct": pose < 4})
+    con = make_store(tmp_path, rows)
+    modes = [m for m in rows_of(con, "FROM failure_modes(min_count := 2)") if m["parameter_a"] == "c_z"]
+    assert [(m["level_a"], m["test"], m["significant"]) for m in modes] == [(1, "mcnemar", True)]
+    assert modes[0]["p_value"] == pytest.approx(0.5 ** 16)
 
 
 def test_where_no_value_differs_nothing_is_named_in_95_percent_of_seeds() -> None:
@@ -408,7 +430,8 @@ def test_levels_ranked_once_per_level_are_the_levels_of_ranking_every_row(tmp_pa
     ranked_once = con.execute(f"SELECT {columns} FROM control_levels ORDER BY job, position").fetchall()
     per_row = con.execute(f"SELECT {columns} FROM ({PER_ROW_LEVELS}) ORDER BY job, position").fetchall()
     assert ranked_once == per_row
-    assert {r[0] for r in con.execute("DESCRIBE control_levels").fetchall()} == set(columns.split(", "))
+    assert {r[0] for r in con.execute("DESCRIBE control_levels").fetchall()} == {*columns.split(", "), "absent"}
+    assert con.execute("SELECT bool_and(absent = (label = ?)) FROM control_levels", [NOT_APPLIED]).fetchone()[0]
     labels = dict(con.execute("SELECT parameter, list(DISTINCT label ORDER BY label) FROM control_levels "
                               "WHERE parameter IN ('c_zero', 'c_str') GROUP BY parameter").fetchall())
     assert labels["c_zero"] == ["0", "1.5"]  # 0.0 and -0.0 are two levels, both labelled 0, as before

@@ -17,7 +17,7 @@ from sweep3d.stages.aggregate import (
     Summary,
     connect,
     has_view,
-    largest_gap_region,
+    nearest_miss_region,
     stored_summary,
     weakest_regions,
     wilson_interval,
@@ -206,19 +206,20 @@ def print_findings(console: Console, plan: Plan, store: Store | None = None) -> 
         console.print("fails most at: " + "; ".join(map(describe_region, regions))
                       + " (each against the rest of its parameter; false discovery rate 5%)")
     elif summary.wrong and summary.effects:
-        gap = largest_gap_region(summary)
+        gap = nearest_miss_region(summary)
         if gap is None:
             console.print("fails most at: no value is below the rest of its parameter")
         else:
-            console.print(f"fails most at: no value is clearly below the rest of its parameter; the largest gap, "
-                          f"{describe_region(gap)}, may be chance at this size")
+            console.print(f"fails most at: no value is significantly below the rest of its parameter once adjusted "
+                          f"for every region tested; the nearest, {describe_region(gap)}, q = {gap.q_value:.2f}, "
+                          "does not rule out chance")
 
 
 def describe_region(region: Region) -> str:
     """``occluder = half: 17% of 24 against 67% of the other 24 (-50.0 pts, 95% CI -68.3 to -22.3)``."""
     return (f"{escape(region.column)} = {escape(region.label)}: {region.accuracy:.0%} of {region.count} against "
             f"{region.accuracy_rest:.0%} of the other {region.count_rest} ({_points(region.difference)}, "
-            f"95% CI {_points(region.difference_low)} to {_points(region.difference_high)})")
+            f"unadjusted 95% CI {_points(region.difference_low)} to {_points(region.difference_high)})")
 
 
 def all_invalid_line(summary: Summary) -> str:

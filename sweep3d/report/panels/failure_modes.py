@@ -56,8 +56,19 @@ def build(inputs: PanelInputs) -> dict[str, Any]:
         "min_count": inputs.min_count,
         "overall": pct(inputs.summary.accuracy, 0),
         "figure": _figure(modes, sql) if modes else None,
-        "gap": _row(weak[0]) if weak and not modes else None,
+        "gap": _gap(inputs, weak) if not modes else None,
     }
+
+
+def _gap(inputs: PanelInputs, weak: list[dict[str, Any]]) -> dict[str, Any] | None:
+    """The value nearest to significance, as ``run``'s findings name it (the summary's gap)."""
+    gap = inputs.summary.gap
+    if gap is None:
+        return None
+    found = [m for m in weak if m["size"] == 1 and (m["parameter_a"], m["label_a"]) == (gap["column"], gap["label"])]
+    rows = found or inputs.rows(f"FROM failure_modes(min_count := {inputs.min_count}) WHERE size = 1 "
+                                "AND parameter_a = ? AND label_a = ?", [gap["column"], gap["label"]])
+    return _row(rows[0]) if rows else None
 
 
 def _terms(mode: dict[str, Any]) -> list[tuple[str, int, str]]:

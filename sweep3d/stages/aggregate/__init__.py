@@ -10,7 +10,7 @@ from sweep3d.stages.aggregate.summary import (
     Region,
     Summary,
     control_effects,
-    largest_gap_region,
+    nearest_miss_region,
     region_min_count,
     stored_summary,
     summarise,
@@ -28,6 +28,6 @@ from sweep3d.stages.aggregate.views import (
 )
 
 __all__ = ["MACROS", "VIEWS", "ControlEffect", "Region", "Summary", "connect", "control_effects", "has_view",
-           "largest_gap_region",
+           "nearest_miss_region",
            "materialise", "no_results", "region_min_count", "register_views", "stored_summary", "summarise", "weakest_regions",
            "wilson_interval"]

@@ -16,11 +16,17 @@ worse?):
 The **family** is every region tested in the run: each value and each pair of values with
 ``min_count`` counted results or more, listed or not. ``q_value`` is the Benjamini–Hochberg
 adjustment within it (the false discovery rate: among the regions called significant at
-q < 0.05, at most 5 % are expected to be chance; where no value matters at all, the chance
-of naming any is at most 5 %), and ``significant`` is ``q_value`` < 0.05.
+q < 0.05, about 5 % are expected to be chance; where no value matters at all, a simulation of
+three crossed parameters named any region in about 3 % of seeds), and ``significant`` is
+``q_value`` < 0.05.
 
 ``difference`` is the region's accuracy less the rest's, with Newcombe's hybrid score
-interval (from the two Wilson intervals): the effect size, readable without the test.
+interval (from the two Wilson intervals): the effect size, readable without the test. The
+interval is neither adjusted for the regions tested nor paired, so it may exclude 0 where the
+adjusted test does not call the region significant.
+
+A level where a control does not apply (another scene) is no value of it: neither tested nor
+part of any rest.
 
 The earlier view's numbers stay available: ``p_overall`` (one-sided exact binomial test of the
 region against the overall accuracy) and ``p_holm_overall`` (Holm's adjustment of those over
@@ -51,28 +57,28 @@ def _twins_sql(parameters: list[tuple[str, bool]]) -> str:
     environment, every other parameter) and occurrence (the k-th result of a configuration at one
     value pairs with the k-th at the other, as ``paired_jobs`` pairs them), each group holds
     exactly one result at each of the same two values. The row has the two values as the levels label them (a before b) and the
-    discordant pairs in both directions. One GROUP BY per parameter: linear in the results."""
+    discordant pairs in both directions (a: the lower value, which is the parameter's first level).
+    Results where the control does not apply are left out. One GROUP BY per parameter."""
     names = [name for name, _ in parameters]
     parts = []
-    for name, numeric in parameters:
+    for name, _ in parameters:
         others = [_identifier(other) for other in names if other != name]
         if not others:
             continue
         column = _identifier(name)
-        label = (lambda x: f"level_number_label(CAST({x} AS DOUBLE))") if numeric else (lambda x: f"CAST({x} AS VARCHAR)")
         parts.append(f"""
-            SELECT {_literal(name)} AS parameter, {label('min(lo)')} AS value_a, {label('max(hi)')} AS value_b,
+            SELECT {_literal(name)} AS parameter,
                    count(*) FILTER (WHERE right_lo AND NOT right_hi) AS a_right_b_wrong,
                    count(*) FILTER (WHERE right_hi AND NOT right_lo) AS a_wrong_b_right, count(*) AS n
             FROM (SELECT min({column}) AS lo, max({column}) AS hi, arg_min(correct, {column}) AS right_lo,
                          arg_max(correct, {column}) AS right_hi, count(*) AS k, count({column}) AS known
                   FROM (SELECT *, row_number() OVER (PARTITION BY {', '.join(others)}, {column} ORDER BY job)
-                                      AS occurrence FROM results WHERE counted)
+                                      AS occurrence FROM results WHERE counted AND {column} IS NOT NULL)
                   GROUP BY {', '.join(others)}, occurrence)
             HAVING bool_and(k = 2 AND known = 2 AND lo <> hi) AND count(DISTINCT lo) = 1 AND count(DISTINCT hi) = 1""")
     if not parts:
-        return ("SELECT NULL::VARCHAR AS parameter, NULL::VARCHAR AS value_a, NULL::VARCHAR AS value_b, "
-                "NULL::BIGINT AS a_right_b_wrong, NULL::BIGINT AS a_wrong_b_right, NULL::BIGINT AS n WHERE false")
+        return ("SELECT NULL::VARCHAR AS parameter, NULL::BIGINT AS a_right_b_wrong, NULL::BIGINT AS a_wrong_b_right, "
+                "NULL::BIGINT AS n WHERE false")
     return "\nUNION ALL ".join(parts)
 
 
@@ -108,36 +114,49 @@ def _create_macros(con: duckdb.DuckDBPyConnection) -> None:
 
 def _failure_modes_sql(min_count: int, twins_sql: str) -> str:
     """The macro; ``twins_sql`` lists the parameters whose results are twins (:func:`_twins_sql`)."""
-    twins = f"""SELECT v.parameter, v.value_a, v.value_b, v.a_right_b_wrong, v.a_wrong_b_right
+    twins = f"""SELECT v.parameter, v.a_right_b_wrong, v.a_wrong_b_right
                 FROM ({twins_sql}) v
                 JOIN totals t ON t.parameter = v.parameter AND t.levels = 2 AND t.n = 2 * v.n"""
+    # A level where the control does not apply (``absent``: another scene) is no value of it: it
+    # is neither tested nor part of any rest, which would mix scenes into the comparison.
     return f"""CREATE OR REPLACE MACRO failure_modes(min_count := {min_count}) AS TABLE
         WITH overall AS (SELECT avg(correct::DOUBLE) AS p FROM results WHERE counted),
-        accuracy AS MATERIALIZED (FROM control_accuracy),
+        applied AS MATERIALIZED (FROM control_accuracy WHERE NOT absent),
         totals AS MATERIALIZED (
-            SELECT parameter, count(*) AS levels, sum(n)::BIGINT AS n, sum(n_correct)::BIGINT AS n_correct
-            FROM accuracy GROUP BY parameter HAVING count(*) > 1),
+            SELECT parameter, count(*) AS levels, min(level) AS first_level, sum(n)::BIGINT AS n,
+                   sum(n_correct)::BIGINT AS n_correct
+            FROM applied GROUP BY parameter HAVING count(*) > 1),
         twins AS ({twins}),
+        pairs AS (
+            SELECT p.*, least(a.accuracy, b.accuracy) AS accuracy_alone,
+                   sum(p.n) OVER (PARTITION BY p.parameter_a, p.level_a, p.parameter_b)
+                   + sum(p.n) OVER (PARTITION BY p.parameter_a, p.parameter_b, p.level_b) - 2 * p.n AS n_rest,
+                   sum(p.n_correct) OVER (PARTITION BY p.parameter_a, p.level_a, p.parameter_b)
+                   + sum(p.n_correct) OVER (PARTITION BY p.parameter_a, p.parameter_b, p.level_b) - 2 * p.n_correct
+                       AS n_correct_rest
+            FROM pair_accuracy p
+            JOIN applied a ON a.parameter = p.parameter_a AND a.level = p.level_a
+            JOIN applied b ON b.parameter = p.parameter_b AND b.level = p.level_b
+            SEMI JOIN totals ta ON ta.parameter = p.parameter_a
+            SEMI JOIN totals tb ON tb.parameter = p.parameter_b),
         regions AS (
             SELECT 1 AS size, c.parameter || ' = ' || c.label AS region,
                    c.parameter AS parameter_a, c.level AS level_a, c.label AS label_a,
                    NULL::VARCHAR AS parameter_b, NULL::INTEGER AS level_b, NULL::VARCHAR AS label_b,
                    c.n, c.n_correct, c.accuracy, c.wilson_low, c.wilson_high,
                    t.n - c.n AS n_rest, t.n_correct - c.n_correct AS n_correct_rest,
-                   CASE WHEN w.value_a = c.label THEN w.a_wrong_b_right ELSE w.a_right_b_wrong END AS worse_pairs,
-                   CASE WHEN w.value_a = c.label THEN w.a_right_b_wrong ELSE w.a_wrong_b_right END AS better_pairs,
+                   -- the twins' first value is the parameter's first level: orient by level, not label
+                   CASE WHEN c.level = t.first_level THEN w.a_wrong_b_right ELSE w.a_right_b_wrong END AS worse_pairs,
+                   CASE WHEN c.level = t.first_level THEN w.a_right_b_wrong ELSE w.a_wrong_b_right END AS better_pairs,
                    c.position AS position_a, NULL::INTEGER AS position_b, true AS listed
-            FROM accuracy c JOIN totals t USING (parameter)
-            LEFT JOIN twins w ON w.parameter = c.parameter AND c.label IN (w.value_a, w.value_b)
+            FROM applied c JOIN totals t USING (parameter)
+            LEFT JOIN twins w ON w.parameter = c.parameter
             UNION ALL
-            SELECT 2, p.parameter_a || ' = ' || p.label_a || ' · ' || p.parameter_b || ' = ' || p.label_b,
-                   p.parameter_a, p.level_a, p.label_a, p.parameter_b, p.level_b, p.label_b,
-                   p.n, p.n_correct, p.accuracy, p.wilson_low, p.wilson_high,
-                   a.n + b.n - 2 * p.n, a.n_correct + b.n_correct - 2 * p.n_correct, NULL, NULL,
-                   p.position_a, p.position_b, p.wilson_high < least(a.accuracy, b.accuracy)
-            FROM pair_accuracy p
-            JOIN accuracy a ON a.parameter = p.parameter_a AND a.level = p.level_a
-            JOIN accuracy b ON b.parameter = p.parameter_b AND b.level = p.level_b),
+            SELECT 2, parameter_a || ' = ' || label_a || ' · ' || parameter_b || ' = ' || label_b,
+                   parameter_a, level_a, label_a, parameter_b, level_b, label_b,
+                   n, n_correct, accuracy, wilson_low, wilson_high, n_rest, n_correct_rest, NULL, NULL,
+                   position_a, position_b, wilson_high < accuracy_alone
+            FROM pairs),
         tested AS (
             SELECT r.*, r.n_correct_rest / nullif(r.n_rest, 0) AS accuracy_rest,
                    r.accuracy < r.n_correct_rest / r.n_rest AS below,

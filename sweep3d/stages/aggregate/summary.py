@@ -70,7 +70,7 @@ class Summary:
     min_visible: float | None = None  # the threshold behind the reason "hidden" (None: no truth passes)
     #: control values significantly below the rest of their parameter (``failure_modes``), most certainly bad first
     regions: list[dict[str, Any]] = field(default_factory=list)
-    #: when no value is significant: the one furthest below the rest of its parameter (see :func:`largest_gap`)
+    #: when no value is significant: the one nearest to significance (see :func:`nearest_miss`)
     gap: dict[str, Any] | None = None
 
     @property
@@ -140,7 +140,7 @@ def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit:
     ]
     min_count = region_min_count(counted)
     regions = significant_values(con, columns, min_count)
-    gap = None if regions else largest_gap(con, columns, min_count)
+    gap = None if regions else nearest_miss(con, columns, min_count)
     return Summary(jobs, evaluated, invalid, correct, accuracy, objects, environments, scene_accuracy,
                    scene_count, effects, failures, per_object, counted, sum(reasons.values()), reasons, min_visible,
                    regions, gap)
@@ -165,9 +165,10 @@ def significant_values(con: duckdb.DuckDBPyConnection, columns: list[str], min_c
     return _values(con, columns, min_count, "significant", limit)
 
 
-def largest_gap(con: duckdb.DuckDBPyConnection, columns: list[str], min_count: int) -> dict[str, Any] | None:
-    """The value furthest below the rest of its parameter that is not significantly below it (the
-    smallest p-value), so a run with no failure mode says how large a gap chance may hide."""
+def nearest_miss(con: duckdb.DuckDBPyConnection, columns: list[str], min_count: int) -> dict[str, Any] | None:
+    """The value nearest to significance (the smallest p-value) among those below the rest of
+    their parameter but not significantly, so a run with no failure mode says what it saw (the
+    report's panel names the same one)."""
     gaps = _values(con, columns, min_count, "NOT significant ORDER BY p_value, difference", 1)
     return gaps[0] if gaps else None
 
@@ -239,8 +240,8 @@ def weakest_regions(summary: Summary, top: int = REGION_LIMIT) -> list[Region]:
     return [Region(**r) for r in summary.regions[:top]]
 
 
-def largest_gap_region(summary: Summary) -> Region | None:
-    """The value furthest below the rest of its parameter, not significantly (None if none is below)."""
+def nearest_miss_region(summary: Summary) -> Region | None:
+    """The value nearest to significance, not significant (None if no value is below the rest)."""
     return Region(**summary.gap) if summary.gap else None
 
 

@@ -332,7 +332,7 @@ _FIXED_VIEWS = (
                             ELSE value END AS label
                 FROM (SELECT DISTINCT parameter, absent, bin, value, number, lo, width, digits FROM placed))
             SELECT p.job, p.object, p.environment, p.valid, p.counted, p.correct, p.parameter, p.position, l.level,
-                   l.label
+                   l.label, p.absent
             FROM placed p JOIN levels l ON p.parameter = l.parameter AND p.absent = l.absent
                  AND p.bin IS NOT DISTINCT FROM l.bin AND p.value IS NOT DISTINCT FROM l.value""",
         """CREATE OR REPLACE VIEW control_parameters AS
@@ -342,7 +342,7 @@ _FIXED_VIEWS = (
             GROUP BY l.parameter, l.position ORDER BY l.position""",
         f"""CREATE OR REPLACE VIEW control_accuracy AS
             SELECT *, {_ACCURACY} FROM (
-                SELECT parameter, position, level, any_value(label) AS label,
+                SELECT parameter, position, level, any_value(label) AS label, bool_or(absent) AS absent,
                        count(*) FILTER (WHERE counted) AS n, count(*) FILTER (WHERE counted AND correct) AS n_correct
                 FROM control_levels GROUP BY parameter, position, level)
             ORDER BY position, level""",
