@@ -9,6 +9,10 @@ The fast lane (``pytest -m fast``): every test without a ``blender``, ``browser`
 ``bpy`` fails the importing test (with its import chain) and the session, starting a render
 worker fails the test, and property tests run the ``fast`` Hypothesis profile (those that set
 their own ``max_examples`` go through :func:`examples`).
+
+Once per test run: one headless Chromium (``chromium``) and one ONNX export per model
+(``_one_onnx_export_per_model``). The ``soak`` lane (the 20-kill soak) is left out of the default
+run by pyproject's addopts; ``pytest -m soak`` runs it.
 """
 
 from __future__ import annotations
@@ -36,6 +40,7 @@ FIXTURE_MARKERS = {
     "truth_run": ("slow", "blender", "torch"),  # test_truth: a real run with the mask and depth passes
     "lite0": ("torch",),  # test_infer: the pretrained model
     "large_report": ("slow",),  # test_report_scale: a synthetic store of 10 000 results and its report
+    "chromium": ("browser",),  # the session's headless Chromium
 }
 #: Modules the fast lane must never import.
 LANE_FORBIDDEN = ("torch", "bpy")
@@ -196,6 +201,65 @@ def pytest_terminal_summary(terminalreporter, exitstatus: int, config: pytest.Co
                 terminalreporter.line(f"{test}: {line}")
     else:
         terminalreporter.line("fast lane: no test imported torch or bpy or started a render worker")
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _one_onnx_export_per_model(tmp_path_factory):
+    """One ONNX export per model per test run: every run into a fresh store exports its model again
+    (2-3 s for EfficientNet-Lite0 on 2 cores), so the first export of each model digest is kept here
+    and copied into later stores instead. Only the export is shared: each runner still loads the
+    file and checks it against torch (``OnnxRunner._check``), and a failing export is never kept.
+    Runs in child processes (``python -m sweep3d``) export as before. Not in the fast lane (no inference)."""
+    if LANE:
+        yield
+        return
+    from sweep3d.stages.infer.onnx_backend import OnnxRunner
+
+    cache = tmp_path_factory.mktemp("onnx_exports")
+    export = OnnxRunner._export
+
+    def cached_export(self, classifier, scratch):
+        kept = cache / self.path.name  # named by the model's digest (weights and preprocessing), as in a store
+        if not kept.exists():
+            export(self, classifier, scratch)
+            shutil.copyfile(self.path, kept.with_suffix(".partial"))
+            kept.with_suffix(".partial").rename(kept)
+            return
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        staged = self.path.with_name(f".{self.path.name}.copy.tmp")
+        shutil.copyfile(kept, staged)
+        staged.replace(self.path)
+
+    OnnxRunner._export = cached_export
+    try:
+        yield
+    finally:
+        OnnxRunner._export = export
+
+
+CHROMIUM = Path("/usr/bin/chromium")
+CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
+                 "--disable-component-update", "--no-first-run", "--disable-sync"]
+
+
+@pytest.fixture(scope="session")
+def chromium():
+    """One headless Chromium per test run (the system's, ``/usr/bin/chromium``, driven by Playwright);
+    each page opens in a fresh browser context (its own cookies, storage and cache), see
+    ``tests.test_report.open_page``. Skips the test where Chromium or Playwright is missing."""
+    if not CHROMIUM.exists():
+        pytest.skip(f"headless Chromium not found at {CHROMIUM}; install it with: apt-get install chromium")
+    sync_api = pytest.importorskip("playwright.sync_api", reason="the playwright package is not installed")
+    playwright = sync_api.sync_playwright().start()
+    try:
+        browser = playwright.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        try:
+            yield browser
+        finally:
+            browser.close()
+    finally:
+        playwright.stop()
+
 
 CUBE_OBJ = """\
 # unit cube

@@ -5,6 +5,10 @@ the fix, exit code 2, and leaves the store exactly as it was.
 Spec-level mistakes caught by the loader (unknown keys, empty ranges, NaN in a range, unknown
 labels, ...) are in tests/test_spec.py; this table covers what needs the files' contents, Blender,
 the model or the disk, plus spec values that table does not.
+
+Cases refused before anything renders or loads a model (the loader's checks of files and values,
+the store's folder) run in the fast lane, on a copy of a store holding a synthetic finished run;
+those that reach Blender, a model or a full disk run on a copy of the session's real run.
 """
 
 from __future__ import annotations
@@ -25,9 +29,7 @@ from typer.testing import CliRunner
 
 from sweep3d.cli import app
 from tests import files
-from tests.conftest import CUBE_OBJ, TINY_SPEC
-
-pytestmark = pytest.mark.slow
+from tests.conftest import CUBE_OBJ, TINY_SPEC, write_cube
 
 RNG = np.random.default_rng(0)
 GARBAGE = RNG.integers(0, 256, 4096, dtype=np.uint8).tobytes()
@@ -231,15 +233,54 @@ def _enospc(*args, **kwargs):
     raise OSError(errno.ENOSPC, "No space left on device")
 
 
+def _case(param) -> Case:
+    return param if isinstance(param, Case) else param.values[0]
+
+
+def _reaches_a_run(case: Case) -> bool:
+    """Whether the case gets past the loader: Blender renders, a model loads, or the disk fills."""
+    return case.one_job or case.model_module or case.full_disk
+
+
+LOADER_CASES = [c for c in CASES if not _reaches_a_run(_case(c))]
+RUN_CASES = [c for c in CASES if _reaches_a_run(_case(c))]
+
+
 def test_the_table_has_at_least_thirty_cases() -> None:
     assert len(CASES) >= 30
+    assert len(LOADER_CASES) + len(RUN_CASES) == len(CASES)
 
 
-@pytest.mark.parametrize("case", CASES, ids=[c.id if isinstance(c, Case) else c.values[0].id for c in CASES])
+@pytest.fixture(scope="module")
+def synthetic_run(tmp_path_factory) -> Path:
+    """A folder whose store holds a finished run's tables (synthetic results: no Blender, no model)."""
+    from benchmarks.report_scale import build_store
+
+    folder = build_store(tmp_path_factory.mktemp("synthetic_run"), 64).parent
+    write_cube(folder)  # the cube TINY_SPEC names
+    return folder
+
+
+@pytest.mark.parametrize("case", LOADER_CASES, ids=[_case(c).id for c in LOADER_CASES])
+def test_bad_input_caught_at_load_is_one_line_exit_2_and_leaves_the_store_as_it_was(
+        case: Case, synthetic_run: Path, tmp_path: Path, monkeypatch) -> None:
+    folder = tmp_path / "case"
+    shutil.copytree(synthetic_run, folder)  # a store with a finished (synthetic) run in it
+    _check(case, folder, tmp_path, monkeypatch)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", RUN_CASES, ids=[_case(c).id for c in RUN_CASES])
 def test_bad_input_is_one_line_exit_2_and_leaves_the_store_as_it_was(case: Case, tiny_run: Path, tmp_path: Path,
                                                                       monkeypatch) -> None:
     folder = tmp_path / "case"
     shutil.copytree(tiny_run, folder)  # a store with a finished run in it
+    _check(case, folder, tmp_path, monkeypatch)
+
+
+def _check(case: Case, folder: Path, tmp_path: Path, monkeypatch) -> None:
+    """Run the case's spec in ``folder``: one ``error:`` line as the case expects, exit code 2, the
+    store untouched."""
     spec = folder / "spec.toml"
     text = TINY_SPEC
     if case.edit is not None:
@@ -275,6 +316,7 @@ def test_bad_input_is_one_line_exit_2_and_leaves_the_store_as_it_was(case: Case,
     assert _tree(folder / "store") == before, "the store changed"
 
 
+@pytest.mark.slow
 def test_a_non_manifold_mesh_is_not_an_error_it_renders(tmp_path: Path) -> None:
     """Two triangles touching at one vertex (non-manifold, open): legal, and most real meshes are
     open somewhere, so sweep3d renders it rather than refusing it."""

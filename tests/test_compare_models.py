@@ -221,7 +221,7 @@ def test_adding_a_model_renders_nothing_and_infers_only_it(tiny_copy: Path) -> N
 
 
 @pytest.mark.browser
-def test_comparison_panel_draws_in_chromium(tiny_copy: Path) -> None:
+def test_comparison_panel_draws_in_chromium(tiny_copy: Path, chromium) -> None:
     from sweep3d.report import write_report
     from sweep3d.stages import load_spec
     from tests.test_report import assert_clean, open_page
@@ -231,7 +231,7 @@ def test_comparison_panel_draws_in_chromium(tiny_copy: Path) -> None:
     result = CliRunner().invoke(app, ["run", str(spec), "--no-report"])
     assert result.exit_code == 0, result.output
     path = write_report(load_spec(spec))
-    with open_page(path) as (page, events):
+    with open_page(chromium, path) as (page, events):
         assert page.locator("#compare").count() == 1
         assert "lite0-onnx against efficientnet-lite0" in page.inner_text("#compare")
         traces = page.evaluate("document.getElementById('fig-compare-0').data.map(t => t.name)")

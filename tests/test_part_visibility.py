@@ -174,14 +174,14 @@ def test_report_panel_only_when_asked_for(parts_run: Path, tiny_run: Path) -> No
 
 
 @pytest.mark.browser
-def test_part_visibility_panel_draws_in_chromium(parts_run: Path, tmp_path: Path) -> None:
+def test_part_visibility_panel_draws_in_chromium(parts_run: Path, tmp_path: Path, chromium) -> None:
     folder = tmp_path / "copy"
     shutil.copytree(parts_run, folder)
     spec = folder / "spec.toml"
     spec.write_text(spec.read_text().replace('name = "box"', 'name = "<b>box</b>"'))  # names stay text
     run_cli(spec)
     path = write_report(load_spec(spec))
-    with open_page(path) as (page, events):
+    with open_page(chromium, path) as (page, events):
         panel = page.locator("#part-visibility")
         assert panel.locator("h3").first.inner_text().startswith("<b>box</b>")
         widths = panel.evaluate("p => Array.from(p.querySelectorAll('.part-sides img')).map(i => i.naturalWidth)")

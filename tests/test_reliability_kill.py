@@ -3,9 +3,13 @@ nothing: each rerun resumes, no file is ever read half-written, no committed row
 duplicated, and the final results equal an uninterrupted run's.
 
 The killed runs are real ``sweep3d run`` processes (real Blender, real model) started through a
-small harness that (a) drops marker files when a stage starts and ends, so a kill can be aimed
+small harness that (a) drops marker files when a stage starts, gives a result and ends, so a kill can be aimed
 at a stage (the stages overlap: a kill aimed at inference mostly lands while Blender renders), and (b) pauses 0.4 s halfway through writing each Parquet segment, so a kill can land
 while a segment is half on disk. The product code runs unchanged.
+
+The main lane kills five times, once in each phase (render, postprocess, inference, a segment
+flush, the parent process alone), and checks the same; the 20-kill soak is marked ``soak``: the
+default run leaves it out and ``.ci/run`` runs it after the main lane (``pytest -m soak``).
 
 Also: a run killed alone (its workers are not) takes its render workers with it, and a worker
 killed while starting ends the run with one line, keeping what was rendered.
@@ -50,6 +54,8 @@ _write = pq.write_table
 
 def half_then_rest(table, where, **kwargs):
     """Write the segment's first half, pause, then the rest: a kill in the pause leaves half a file."""
+    if not isinstance(where, (str, os.PathLike)):  # a buffer (the jobs file is compared before written)
+        return _write(table, where, **kwargs)
     buf = io.BytesIO()
     _write(table, buf, **kwargs)
     data = buf.getvalue()
@@ -68,9 +74,13 @@ from sweep3d.stages.render import RenderStage
 def marked(compute):
     def wrapped(self, *args, **kwargs):
         (markers / self.name).touch()  # the stage has started (stages overlap: others may run too)
+        results = compute(self, *args, **kwargs)
         try:
-            yield from compute(self, *args, **kwargs)
+            for result in results:
+                yield result
+                (markers / f"{self.name}.computed").touch()  # it has given a result in this run
         finally:
+            results.close()
             (markers / f"{self.name}.done").touch()
     return wrapped
 
@@ -133,8 +143,9 @@ def _segments(store: Path, table: str) -> int:
 class Killer:
     """Starts harnessed runs of one folder's spec and kills each at a chosen moment."""
 
-    def __init__(self, folder: Path, rng: random.Random) -> None:
-        self.folder, self.rng = folder, rng
+    def __init__(self, folder: Path, rng: random.Random, render_share: float = 1.0) -> None:
+        """``render_share``: a kill aimed mid-render waits for at most this share of the renders left."""
+        self.folder, self.rng, self.render_share = folder, rng, render_share
         self.store = folder / "store"
         self.markers = folder / "markers"
         self.landed: list[str] = []
@@ -154,7 +165,7 @@ class Killer:
         proc = self.start()
         started = time.monotonic()
         predictions = _segments(self.store, "predictions")
-        aim = self.rng.randint(1, max(1, renders_left - 1))  # render blobs to wait for
+        aim = self.rng.randint(1, max(1, int((renders_left - 1) * self.render_share)))  # render blobs to wait for
         delay = self.rng.uniform(0.0, 0.6)  # seconds into inference
         anywhere = self.rng.uniform(0.3, 2.5)  # seconds after start
         predicting_since = None
@@ -169,6 +180,11 @@ class Killer:
                 landed = "random"
             elif target == "render" and rendering and _blobs_since(self.store, wall) >= aim:
                 landed = "render"
+            elif target == "postprocess" and (self.markers / "postprocess.computed").exists() \
+                    and not (self.markers / "postprocess.done").exists():
+                landed = "postprocess"  # postprocessing, with an image of this run made
+            elif target == "parent" and rendering and _blobs_since(self.store, wall) >= aim:
+                landed = "parent"  # the parent alone, mid-render: its workers must not render on
             elif target == "infer-late" and _segments(self.store, "predictions") > predictions:
                 landed = "infer"  # just after a segment of predictions was committed
             elif target == "segment" and any(_tmp_files(self.store, t, wall) for t in ("renders", "images", "predictions")):
@@ -183,7 +199,16 @@ class Killer:
             if now - started > 240:
                 landed = "timeout"
             time.sleep(0.005)
-        if landed != "finished":
+        if landed == "parent":
+            proc.kill()
+            proc.wait()
+            deadline = time.monotonic() + 10
+            while _session(proc.pid) and time.monotonic() < deadline:
+                time.sleep(0.05)
+            alive = _session(proc.pid)
+            _kill_session(proc.pid)
+            assert not alive, f"still running 10 s after the parent was killed: {alive}"
+        elif landed != "finished":
             os.killpg(proc.pid, signal.SIGKILL)
         proc.wait()
         assert landed != "timeout", "the run never reached the kill point"
@@ -211,24 +236,21 @@ def _results(folder: Path) -> list[tuple]:
         "FROM results ORDER BY job").fetchall()
 
 
-def test_twenty_kills_lose_nothing_and_the_resumed_run_equals_an_uninterrupted_one(tmp_path: Path) -> None:
+def _kill_resume_and_compare(tmp_path: Path, aims: list[str], seed: int, render_share: float = 1.0) -> list[str]:
+    """Kill a run at each of ``aims`` in turn, checking the store after each kill; then resume it
+    and compare its results with an uninterrupted run's. Returns where each kill landed."""
     killed, clean = tmp_path / "killed", tmp_path / "clean"
     for folder in (killed, clean):
         folder.mkdir()
         write_spec(folder, SPEC)
-    rng = random.Random(SEED)
-    killer = Killer(killed, rng)
+    rng = random.Random(seed)
+    killer = Killer(killed, rng, render_share)
     plan_renders = 48
-    # Aims: renders and segment writes while rendering is left, then inference and its segment
-    # writes; a few "anywhere" kills land wherever the run happens to be.
-    aims = ["render", "segment", "render", "render", "segment", "render", "random", "segment",
-            "infer", "segment", "infer", "random", "infer", "infer-late", "segment", "infer",
-            "random", "segment", "infer", "infer"]
     committed = {table: set() for table in KEY_COLUMN}
     landed = []
     for aim in aims:
         renders_left = plan_renders - len(Store(killed / "store").keys("renders"))
-        if aim == "render" and renders_left <= 1:
+        if aim in ("render", "parent") and renders_left <= 1:
             aim = "infer"
         where = killer.kill_at(aim, renders_left)
         assert where != "finished", f"the run finished before the kill aimed at {aim!r}"
@@ -242,10 +264,6 @@ def test_twenty_kills_lose_nothing_and_the_resumed_run_equals_an_uninterrupted_o
         assert not (killed / "store" / "quarantine").exists()
         report = verify(killed / "store")
         assert report.ok, [p.line(killed / "store") for p in report.problems]
-
-    assert len(landed) == KILLS
-    for stage in ("render", "segment", "infer"):
-        assert landed.count(stage) >= 3, " ".join(landed)
 
     resumed = run(load_spec(killed / "spec.toml"))
     assert resumed.failed == 0
@@ -262,6 +280,30 @@ def test_twenty_kills_lose_nothing_and_the_resumed_run_equals_an_uninterrupted_o
     for a, b in zip(got, want):
         assert a[:8] == b[:8]  # job, scene, keys, top-1 label, correct
         assert a[8] == pytest.approx(b[8], abs=0.05)  # loss (renders may differ by 1 LSB across processes)
+    return landed
+
+
+@pytest.mark.soak
+def test_twenty_kills_lose_nothing_and_the_resumed_run_equals_an_uninterrupted_one(tmp_path: Path) -> None:
+    # Aims: renders and segment writes while rendering is left, then inference and its segment
+    # writes; a few "anywhere" kills land wherever the run happens to be.
+    aims = ["render", "segment", "render", "render", "segment", "render", "random", "segment",
+            "infer", "segment", "infer", "random", "infer", "infer-late", "segment", "infer",
+            "random", "segment", "infer", "infer"]
+    landed = _kill_resume_and_compare(tmp_path, aims, SEED)
+    assert len(landed) == KILLS
+    for stage in ("render", "segment", "infer"):
+        assert landed.count(stage) >= 3, " ".join(landed)
+
+
+def test_a_kill_in_each_phase_loses_nothing_and_the_resumed_run_equals_an_uninterrupted_one(tmp_path: Path) -> None:
+    """The soak's checks after one aimed kill per phase: mid-postprocess (once it has made an image),
+    the parent alone mid-render, mid-render, a segment half on disk, inference (or
+    its segment write). Kills mid-render wait for at most a quarter of the renders left, so that
+    each later phase still has work to be killed in."""
+    aims = ["postprocess", "parent", "render", "segment", "infer"]
+    landed = _kill_resume_and_compare(tmp_path, aims, SEED, render_share=0.25)
+    assert landed[:4] == aims[:4] and landed[4] in ("infer", "segment"), " ".join(landed)
 
 
 # -- the parent alone killed; a worker killed while starting -------------------------------------

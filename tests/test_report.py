@@ -2,8 +2,9 @@
 
 The browser tests drive the system's headless Chromium (``/usr/bin/chromium``, from apt) through
 the ``playwright`` package; they skip, saying why, where that browser is missing. Screenshots of
-each panel go to ``test-artifacts/`` (git-ignored). ``open_page`` is shared with the explorer and
-scale tests.
+each panel go to ``test-artifacts/`` (git-ignored). One browser serves the whole test run (the
+``chromium`` fixture of ``tests/conftest.py``); ``open_page`` opens each page in a fresh context of
+it, and is shared with the explorer and scale tests.
 """
 
 from __future__ import annotations
@@ -32,9 +33,6 @@ from sweep3d.stages import load_spec
 from sweep3d.stages.aggregate import connect
 from tests.conftest import REPO, TINY_SPEC, write_spec
 
-CHROMIUM = Path("/usr/bin/chromium")
-CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
-                 "--disable-component-update", "--no-first-run", "--disable-sync"]
 ARTIFACTS = REPO / "test-artifacts"
 SCRIPT = re.compile(r"<script\b[^>]*>.*?</script>", re.S | re.I)
 INLINE_SCRIPT = re.compile(r"<script>(.*?)</script>", re.S)
@@ -173,29 +171,26 @@ def test_optional_panels_show_only_with_data(tiny_run: Path) -> None:
 
 
 @contextmanager
-def open_page(path: Path, wait_all: bool = True) -> Iterator[tuple[Any, dict[str, list]]]:
-    """A headless Chromium page showing ``path`` once it is interactive (and, with ``wait_all``,
-    once every figure is drawn and every image loaded); events collected for :func:`assert_clean`."""
-    if not CHROMIUM.exists():
-        pytest.skip(f"headless Chromium not found at {CHROMIUM}; install it with: apt-get install chromium")
-    sync_api = pytest.importorskip("playwright.sync_api", reason="the playwright package is not installed")
-    with sync_api.sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
-        try:
-            page = browser.new_page(viewport={"width": 1280, "height": 900})
-            events: dict[str, list] = {"errors": [], "console": [], "requests": [], "dialogs": []}
-            page.on("pageerror", lambda exc: events["errors"].append(str(exc)))
-            page.on("console", lambda msg: events["console"].append(msg.text) if msg.type == "error" else None)
-            page.on("request", lambda req: events["requests"].append(req.url))
-            page.on("dialog", lambda dialog: (events["dialogs"].append(dialog.message), dialog.dismiss()))
-            page.goto(path.as_uri())
-            page.wait_for_function("() => document.documentElement.dataset.ready === '1'", timeout=60_000)
-            if wait_all:
-                page.wait_for_function("() => document.documentElement.dataset.drawn === '1'", timeout=60_000)
-                page.wait_for_function("() => Array.from(document.images).every(i => i.complete)", timeout=10_000)
-            yield page, events
-        finally:
-            browser.close()
+def open_page(chromium: Any, path: Path, wait_all: bool = True) -> Iterator[tuple[Any, dict[str, list]]]:
+    """A page of the session's headless Chromium (the ``chromium`` fixture), in a fresh browser
+    context, showing ``path`` once it is interactive (and, with ``wait_all``, once every figure is
+    drawn and every image loaded); events collected for :func:`assert_clean`."""
+    context = chromium.new_context(viewport={"width": 1280, "height": 900})
+    try:
+        page = context.new_page()
+        events: dict[str, list] = {"errors": [], "console": [], "requests": [], "dialogs": []}
+        page.on("pageerror", lambda exc: events["errors"].append(str(exc)))
+        page.on("console", lambda msg: events["console"].append(msg.text) if msg.type == "error" else None)
+        page.on("request", lambda req: events["requests"].append(req.url))
+        page.on("dialog", lambda dialog: (events["dialogs"].append(dialog.message), dialog.dismiss()))
+        page.goto(path.as_uri())
+        page.wait_for_function("() => document.documentElement.dataset.ready === '1'", timeout=60_000)
+        if wait_all:
+            page.wait_for_function("() => document.documentElement.dataset.drawn === '1'", timeout=60_000)
+            page.wait_for_function("() => Array.from(document.images).every(i => i.complete)", timeout=10_000)
+        yield page, events
+    finally:
+        context.close()
 
 
 def assert_clean(path: Path, events: dict[str, list]) -> None:
@@ -215,10 +210,10 @@ def screenshot_panels(page: Any, prefix: str) -> None:
 
 
 @pytest.mark.browser
-def test_report_draws_in_chromium(tiny_run: Path) -> None:
+def test_report_draws_in_chromium(tiny_run: Path, chromium) -> None:
     path = write_report(load_spec(tiny_run / "spec.toml"))
     failures = results_count(tiny_run, "valid AND NOT correct")
-    with open_page(path) as (page, events):
+    with open_page(chromium, path) as (page, events):
         figures = page.evaluate("Array.from(document.querySelectorAll('script.fig-data')).map(s => s.dataset.target)")
         drawn = page.evaluate(
             "Array.from(document.querySelectorAll('.js-plotly-plot')).filter(d => d.querySelector('svg.main-svg'))"
@@ -253,7 +248,7 @@ def test_report_draws_in_chromium(tiny_run: Path) -> None:
 
 
 @pytest.mark.browser
-def test_names_are_escaped(tiny_copy: Path) -> None:
+def test_names_are_escaped(tiny_copy: Path, chromium) -> None:
     spec = tiny_copy / "spec.toml"
     text = spec.read_text()
     for old, new in (("box", EVIL_OBJECT), ("white", EVIL_ENV), ("tiny", EVIL_EXPERIMENT)):
@@ -269,7 +264,7 @@ def test_names_are_escaped(tiny_copy: Path) -> None:
         assert raw not in html
     assert "box&lt;script&gt;alert(1)&lt;/script&gt;" in html
 
-    with open_page(path) as (page, events):
+    with open_page(chromium, path) as (page, events):
         assert page.inner_text("#experiment") == EVIL_EXPERIMENT
         assert page.title().startswith(EVIL_EXPERIMENT)
         if results_count(tiny_copy, "valid AND NOT correct"):

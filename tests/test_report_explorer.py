@@ -147,11 +147,11 @@ def click_cell(page: Any, x: int, y: int) -> None:
 
 
 @pytest.mark.browser
-def test_axis_slider_and_cell_click_change_the_plot_and_the_gallery(tiny_run: Path) -> None:
+def test_axis_slider_and_cell_click_change_the_plot_and_the_gallery(tiny_run: Path, chromium) -> None:
     loaded = load_spec(tiny_run / "spec.toml")
     path = write_report(loaded)
     con = connect(Store(loaded.store), loaded.name)
-    with open_page(path, wait_all=False) as (page, events):
+    with open_page(chromium, path, wait_all=False) as (page, events):
         first = heatmap(page)
         assert first["x"] == ["studio", "white"] and first["y"] == ["box"]
         assert first["text"] == [["0%<br>n=4", "0%<br>n=4"]]
@@ -192,12 +192,12 @@ def test_axis_slider_and_cell_click_change_the_plot_and_the_gallery(tiny_run: Pa
 
 
 @pytest.mark.browser
-def test_heat_map_matches_sql_and_shows_right_and_wrong(tmp_path: Path) -> None:
+def test_heat_map_matches_sql_and_shows_right_and_wrong(tmp_path: Path, chromium) -> None:
     spec = build_store(tmp_path / "run", 400, seed=3)
     loaded = load_spec(spec)
     path = write_report(loaded)
     con = connect(Store(loaded.store), loaded.name)
-    with open_page(path, wait_all=False) as (page, events):
+    with open_page(chromium, path, wait_all=False) as (page, events):
         drawn = heatmap(page)
         assert drawn["x"] == ["city", "forest", "night", "studio"]  # environments across, objects down
         for y, obj in enumerate(drawn["y"]):
@@ -261,11 +261,11 @@ def test_heat_map_matches_sql_and_shows_right_and_wrong(tmp_path: Path) -> None:
 
 
 @pytest.mark.browser
-def test_pairs_mode_keeps_any_two_axes_exact_and_switches_sliders_off(synthetic: Path, tmp_path: Path) -> None:
+def test_pairs_mode_keeps_any_two_axes_exact_and_switches_sliders_off(synthetic: Path, tmp_path: Path, chromium) -> None:
     loaded, con, store = opened(synthetic)
     path = tmp_path / "pairs.html"
     path.write_text(render_html(build_context(loaded, con, store, with_max_cells(50))), encoding="utf-8")
-    with open_page(path, wait_all=False) as (page, events):
+    with open_page(chromium, path, wait_all=False) as (page, events):
         assert "Sliders are off" in page.inner_text("#explorer-degraded")
         assert page.evaluate("Array.from(document.querySelectorAll('#explorer-controls option[value=slider]'))"
                              ".every(o => o.disabled)")

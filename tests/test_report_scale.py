@@ -54,12 +54,12 @@ def test_report_of_10000_results_carries_counts_and_a_bounded_sample(large_repor
 
 
 @pytest.mark.browser
-def test_report_of_10000_results_works_in_chromium(large_report: Path) -> None:
+def test_report_of_10000_results_works_in_chromium(large_report: Path, chromium) -> None:
     loaded = load_spec(large_report.parents[2] / "spec.toml")
     con = connect(Store(loaded.store), loaded.name)
     valid, total = con.execute("SELECT count(*) FILTER (WHERE valid), count(*) FROM results WHERE object = "
                                "'basketball' AND environment = 'city'").fetchone()
-    with open_page(large_report, wait_all=False) as (page, events):
+    with open_page(chromium, large_report, wait_all=False) as (page, events):
         everything = con.execute("SELECT count(*) FROM results WHERE valid").fetchone()[0]
         assert page.inner_text("#explorer-status").startswith(f"{everything} valid results")
         page.mouse.click(*cell_centre(page, 0, 0))  # basketball in the city

@@ -521,11 +521,11 @@ def test_a_classification_store_without_unevaluable_jobs_gets_the_report_it_got_
 
 
 @pytest.mark.browser
-def test_the_new_panels_draw_in_chromium(tmp_path: Path) -> None:
+def test_the_new_panels_draw_in_chromium(tmp_path: Path, chromium) -> None:
     spec = make_store(tmp_path, synthetic_jobs(), "detection", images=True)
     spec.write_text(spec.read_text().replace("[evaluator]\n", '[evaluator]\nkind = "detection"\n'))
     path = write_report(load_spec(spec))
-    with open_page(path) as (page, events):
+    with open_page(chromium, path) as (page, events):
         assert page.text_content("#measure") == "detection accuracy"  # the task's own measure, in the headline
         assert "IoU ≥ 0.5" in page.text_content("#measure-rule")
         ticks = page.evaluate("Array.from(document.querySelectorAll('#fig-iou .xtick text')).map(t => t.textContent)")
