@@ -70,7 +70,7 @@ class Summary:
     min_visible: float | None = None  # the threshold behind the reason "hidden" (None: no truth passes)
     #: control values significantly below the rest of their parameter (``failure_modes``), most certainly bad first
     regions: list[dict[str, Any]] = field(default_factory=list)
-    #: when no value is significant: the one nearest to significance (see :func:`nearest_miss`)
+    #: when no value is significant: the one nearest to significance (see :func:`value_findings`)
     gap: dict[str, Any] | None = None
 
     @property
@@ -139,8 +139,7 @@ def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit:
         ).fetchall()
     ]
     min_count = region_min_count(counted)
-    regions = significant_values(con, columns, min_count)
-    gap = None if regions else nearest_miss(con, columns, min_count)
+    regions, gap = value_findings(con, columns, min_count)
     return Summary(jobs, evaluated, invalid, correct, accuracy, objects, environments, scene_accuracy,
                    scene_count, effects, failures, per_object, counted, sum(reasons.values()), reasons, min_visible,
                    regions, gap)
@@ -158,29 +157,27 @@ _REGION_FIELDS = {"parameter_a": "column", "label_a": "label", "accuracy": "accu
                   "difference_low": "difference_low", "difference_high": "difference_high", "q_value": "q_value"}
 
 
-def significant_values(con: duckdb.DuckDBPyConnection, columns: list[str], min_count: int,
-                       limit: int = REGION_LIMIT) -> list[dict[str, Any]]:
-    """Single control values (of ``columns``, object and environment) whose accuracy is significantly
-    below the rest of their parameter's, as ``failure_modes`` ranks and tests them."""
-    return _values(con, columns, min_count, "significant", limit)
+def value_findings(con: duckdb.DuckDBPyConnection, columns: list[str], min_count: int,
+                   limit: int = REGION_LIMIT) -> tuple[list[dict[str, Any]], dict[str, Any] | None]:
+    """What the findings say of single values (of ``columns``, object and environment), from one
+    evaluation of ``failure_modes`` (at 10⁶ results, seconds each):
 
-
-def nearest_miss(con: duckdb.DuckDBPyConnection, columns: list[str], min_count: int) -> dict[str, Any] | None:
-    """The value nearest to significance (the smallest p-value) among those below the rest of
-    their parameter but not significantly, so a run with no failure mode says what it saw (the
-    report's panel names the same one)."""
-    gaps = _values(con, columns, min_count, "NOT significant ORDER BY p_value, difference", 1)
-    return gaps[0] if gaps else None
-
-
-def _values(con: duckdb.DuckDBPyConnection, columns: list[str], min_count: int, where: str,
-            limit: int) -> list[dict[str, Any]]:
-    """``failure_modes``' single values of ``columns`` (with object and environment) under ``where``."""
+    - those significantly below the rest of their parameter, as it ranks them (at most ``limit``);
+    - when there are none, the one nearest to significance (the smallest p-value) among those
+      below the rest but not significantly, so a run with no failure mode says what it saw (the
+      report's panel names the same one); else None.
+    """
     names = ", ".join(_REGION_FIELDS)
     rows = con.execute(
-        f"SELECT {names} FROM failure_modes(min_count := ?) WHERE size = 1 AND list_contains(?, parameter_a) "
-        f"AND {where} LIMIT ?", [min_count, ["object", "environment", *columns], limit]).fetchall()
-    return [dict(zip(_REGION_FIELDS.values(), row)) for row in rows]
+        f"SELECT {names}, significant, p_value FROM failure_modes(min_count := ?) "
+        "WHERE size = 1 AND list_contains(?, parameter_a)", [min_count, ["object", "environment", *columns]]
+    ).fetchall()
+    found = [(dict(zip(_REGION_FIELDS.values(), row)), significant, p) for *row, significant, p in rows]
+    significant = [values for values, is_significant, _ in found if is_significant][:limit]
+    misses = sorted(((p, values["difference"], i) for i, (values, is_significant, p) in enumerate(found)
+                     if not is_significant))
+    nearest = found[misses[0][2]][0] if misses and not significant else None
+    return significant, nearest
 
 
 def not_evaluable_reasons(con: duckdb.DuckDBPyConnection) -> tuple[dict[str, int], float | None]:
