@@ -175,6 +175,9 @@ def _dropped(owner, call: Callable[[], T]) -> T | str:
         os.setuid(owner.pw_uid)
     except OSError as exc:
         return f"skip: cannot drop root's privileges here ({exc})"
+    checkout = Path(__file__).resolve().parents[1]
+    if not os.access(checkout, os.R_OK | os.X_OK):  # a clone in a private folder (mktemp's 0700)
+        return f"skip: the checkout {checkout} is private: {NOBODY!r} cannot read the code it would run"
     try:
         return call()
     except BaseException as exc:  # noqa: BLE001  (reported to the parent, which fails the test)
