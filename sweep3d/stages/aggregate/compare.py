@@ -30,6 +30,8 @@ from __future__ import annotations
 
 import duckdb
 
+from sweep3d.stages.aggregate.quoting import literal
+
 #: Below this many paired jobs a region is not ranked (as ``failure_modes``'s default).
 MIN_REGION = 10
 ALPHA = 0.05
@@ -54,7 +56,7 @@ def register_compare_views(con: duckdb.DuckDBPyConnection, models: list[str], ha
     create_mcnemar(con)
     if len(models) < 2:
         return False
-    ranks = ", ".join(f"({_literal(m)}, {i})" for i, m in enumerate(models))
+    ranks = ", ".join(f"({literal(m)}, {i})" for i, m in enumerate(models))
     top1 = "top1_label" if has_top1 else "NULL::VARCHAR"
     accuracy = ("n_correct_{s} / nullif(n, 0) AS accuracy_{s}, wilson_low(n_correct_{s}, n) AS wilson_low_{s}, "
                 "wilson_high(n_correct_{s}, n) AS wilson_high_{s}")
@@ -137,7 +139,3 @@ def register_compare_views(con: duckdb.DuckDBPyConnection, models: list[str], ha
     ):
         con.execute(sql)
     return True
-
-
-def _literal(text: str) -> str:
-    return "'" + text.replace("'", "''") + "'"

@@ -38,6 +38,7 @@ from __future__ import annotations
 import duckdb
 
 from sweep3d.stages.aggregate.compare import ALPHA
+from sweep3d.stages.aggregate.quoting import identifier, literal
 
 
 def create_failure_modes(con: duckdb.DuckDBPyConnection, min_count: int, parameters: list[tuple[str, bool]]) -> None:
@@ -62,12 +63,12 @@ def _twins_sql(parameters: list[tuple[str, bool]]) -> str:
     names = [name for name, _ in parameters]
     parts = []
     for name, _ in parameters:
-        others = [_identifier(other) for other in names if other != name]
+        others = [identifier(other) for other in names if other != name]
         if not others:
             continue
-        column = _identifier(name)
+        column = identifier(name)
         parts.append(f"""
-            SELECT {_literal(name)} AS parameter,
+            SELECT {literal(name)} AS parameter,
                    count(*) FILTER (WHERE right_lo AND NOT right_hi) AS a_right_b_wrong,
                    count(*) FILTER (WHERE right_hi AND NOT right_lo) AS a_wrong_b_right, count(*) AS n
             FROM (SELECT min({column}) AS lo, max({column}) AS hi, arg_min(correct, {column}) AS right_lo,
@@ -82,12 +83,6 @@ def _twins_sql(parameters: list[tuple[str, bool]]) -> str:
     return "\nUNION ALL ".join(parts)
 
 
-def _identifier(name: str) -> str:
-    return '"' + name.replace('"', '""') + '"'
-
-
-def _literal(text: str) -> str:
-    return "'" + text.replace("'", "''") + "'"
 
 
 def _create_macros(con: duckdb.DuckDBPyConnection) -> None:

@@ -32,6 +32,7 @@ from __future__ import annotations
 import duckdb
 
 from sweep3d.stages.aggregate.compare import create_mcnemar
+from sweep3d.stages.aggregate.quoting import identifier, literal
 
 PAIRED_VIEWS = ("paired_jobs", "paired_values", "paired_environments")
 SCENE = ("object", "environment")
@@ -48,8 +49,8 @@ def register_paired_views(con: duckdb.DuckDBPyConnection, parameters: list[tuple
     image = "image_key" if "image_key" in result_columns else "NULL::VARCHAR AS image_key"
     controls = [name for name, _ in parameters if name not in SCENE]
     ctes = [f"counted AS MATERIALIZED (SELECT job, object, environment, correct, {image}"
-            f"{''.join(', ' + _id(c) for c in controls)} FROM results WHERE {counted})"]
-    flags = "".join(f", count({_id(c)}) > 0 AS applies_{i}" for i, c in enumerate(controls))
+            f"{''.join(', ' + identifier(c) for c in controls)} FROM results WHERE {counted})"]
+    flags = "".join(f", count({identifier(c)}) > 0 AS applies_{i}" for i, c in enumerate(controls))
     ctes.append(f"scenes AS (SELECT object, environment{flags} FROM counted GROUP BY object, environment)")
     branches = []
     for position, (name, numeric) in enumerate(parameters):
@@ -59,7 +60,7 @@ def register_paired_views(con: duckdb.DuckDBPyConnection, parameters: list[tuple
     con.execute("CREATE OR REPLACE VIEW paired_jobs AS WITH " + ",\n".join(ctes) + "\n"
                 + "\nUNION ALL ".join(branches))
     # one branch per parameter, so a filter on ``parameter`` computes only the branches it keeps
-    each = "\nUNION ALL ".join(f"SELECT {_literal(name)} AS parameter, * EXCLUDE (parameter) FROM ({_values_sql(name)})"
+    each = "\nUNION ALL ".join(f"SELECT {literal(name)} AS parameter, * EXCLUDE (parameter) FROM ({_values_sql(name)})"
                                for name, _ in parameters)
     con.execute(f"CREATE OR REPLACE VIEW paired_values AS SELECT * EXCLUDE (rank_a, rank_b) FROM ({each}) "
                 "ORDER BY position, rank_a, rank_b")
@@ -81,7 +82,7 @@ def _values_sql(parameter: str) -> str:
                          count(*) FILTER (WHERE correct_b) AS n_correct_b,
                          count(*) FILTER (WHERE correct_a AND NOT correct_b) AS a_right_b_wrong,
                          count(*) FILTER (WHERE correct_b AND NOT correct_a) AS a_wrong_b_right
-                  FROM paired_jobs WHERE parameter = {_literal(parameter)}
+                  FROM paired_jobs WHERE parameter = {literal(parameter)}
                   GROUP BY parameter, position, value_a, value_b, rank_a, rank_b)),
         ranked AS (
             SELECT *, row_number() OVER (PARTITION BY parameter ORDER BY p_value, rank_a, rank_b) AS k,
@@ -98,7 +99,7 @@ def _scene_branch(name: str, position: int, numeric: bool, controls: list[str]) 
     """Pairs across scenes: ``name`` is object or environment, the other scene column is kept."""
     same = SCENE[1 - SCENE.index(name)]
     p = f"p{position}"
-    keys = ", ".join(f"CASE WHEN s.applies_{i} THEN c.{_id(col)} END AS k{i}" for i, col in enumerate(controls))
+    keys = ", ".join(f"CASE WHEN s.applies_{i} THEN c.{identifier(col)} END AS k{i}" for i, col in enumerate(controls))
     ctes = [
         f"{p}_order AS (SELECT {name} AS value, rank() OVER (ORDER BY min(job)) AS rank FROM results GROUP BY {name})",
         f"""{p}_sides AS (SELECT c.job, c.object, c.environment, c.correct, c.image_key, c.{name} AS value,
@@ -109,7 +110,7 @@ def _scene_branch(name: str, position: int, numeric: bool, controls: list[str]) 
                                                          ORDER BY job) AS occurrence FROM {p}_sides)""",
     ]
     match = "".join(f" AND a.k{i} IS NOT DISTINCT FROM b.k{i}" for i in range(len(controls)))
-    branch = (f"SELECT {_literal(name)} AS parameter, {position} AS position, {_pair_columns('a.value', 'b.value')} "
+    branch = (f"SELECT {literal(name)} AS parameter, {position} AS position, {_pair_columns('a.value', 'b.value')} "
               f"FROM {p}_ranked a JOIN {p}_ranked b ON a.{same} = b.{same} AND a.other = b.value "
               f"AND b.other = a.value AND a.occurrence = b.occurrence{match} "
               f"JOIN {p}_order oa ON oa.value = a.value JOIN {p}_order ob ON ob.value = b.value "
@@ -121,19 +122,19 @@ def _control_branch(name: str, position: int, numeric: bool, controls: list[str]
     """Pairs within a scene: two values of one control parameter, everything else equal."""
     p = f"p{position}"
     others = [c for c in controls if c != name]
-    column = _id(name)
+    column = identifier(name)
     ctes = [
         f"""{p}_order AS (SELECT {column} AS value, dense_rank() OVER (ORDER BY {column}) AS rank
                           FROM counted WHERE {column} IS NOT NULL GROUP BY {column})""",
         f"""{p}_ranked AS (SELECT *, row_number() OVER (PARTITION BY object, environment
-                                                         {''.join(', ' + _id(c) for c in others)}, {column}
+                                                         {''.join(', ' + identifier(c) for c in others)}, {column}
                                                          ORDER BY job) AS occurrence
                            FROM counted WHERE {column} IS NOT NULL)""",
     ]
-    match = "".join(f" AND a.{_id(c)} IS NOT DISTINCT FROM b.{_id(c)}" for c in others)
+    match = "".join(f" AND a.{identifier(c)} IS NOT DISTINCT FROM b.{identifier(c)}" for c in others)
     label = (lambda side: f"level_number_label(CAST({side}.{column} AS DOUBLE))") if numeric else (
         lambda side: f"CAST({side}.{column} AS VARCHAR)")
-    branch = (f"SELECT {_literal(name)} AS parameter, {position} AS position, {_pair_columns(label('a'), label('b'))} "
+    branch = (f"SELECT {literal(name)} AS parameter, {position} AS position, {_pair_columns(label('a'), label('b'))} "
               f"FROM {p}_ranked a JOIN {p}_ranked b ON a.object = b.object AND a.environment = b.environment "
               f"AND a.occurrence = b.occurrence{match} "
               f"JOIN {p}_order oa ON oa.value = a.{column} JOIN {p}_order ob ON ob.value = b.{column} "
@@ -147,11 +148,3 @@ def _pair_columns(value_a: str, value_b: str) -> str:
             "a.object AS object_a, b.object AS object_b, a.environment AS environment_a, "
             "b.environment AS environment_b, a.correct AS correct_a, b.correct AS correct_b, "
             "a.image_key AS image_key_a, b.image_key AS image_key_b")
-
-
-def _id(name: str) -> str:
-    return '"' + name.replace('"', '""') + '"'
-
-
-def _literal(text: str) -> str:
-    return "'" + text.replace("'", "''") + "'"

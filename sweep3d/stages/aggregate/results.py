@@ -33,6 +33,7 @@ import pyarrow.parquet as pq
 
 from sweep3d.evaluation import EvaluatorRecord, Roles, read_record
 from sweep3d.spec.columns import MIN_VISIBLE_METADATA, PREDICTION_COLUMNS
+from sweep3d.stages.aggregate.quoting import identifier, literal
 
 DEFAULT_MIN_VISIBLE = 0.1
 #: ``results.counted``: the rows every accuracy averages. A prediction must be valid (finite
@@ -67,15 +68,15 @@ def register_results(con: duckdb.DuckDBPyConnection, jobs: Path, truths: bool) -
     # experiment whose job has its key, so its own ``model`` is what the first called it.
     own = "model" in job_columns
     kept = [c for c in ("model", "model_digest", "seconds") if c in have and not (c == "model" and own)]
-    picked = [f"p.{_id(c)}" if c in have else f"NULL AS {_id(c)}" for c in record.columns]
-    picked += [f"p.{_id(column)} AS {_id(usual)}" for usual, column in record.roles.aliases().items()
+    picked = [f"p.{identifier(c)}" if c in have else f"NULL AS {identifier(c)}" for c in record.columns]
+    picked += [f"p.{identifier(column)} AS {identifier(usual)}" for usual, column in record.roles.aliases().items()
                if usual != column and column in have]
     valid = record.roles.valid
-    counted = (COUNTED_SQL.format(valid=_id(valid)) if truth is not None else f"p.{_id(valid)}") \
+    counted = (COUNTED_SQL.format(valid=identifier(valid)) if truth is not None else f"p.{identifier(valid)}") \
         if valid in have else None
     exclude = ", model" if own else ""
     con.execute(
-        "CREATE VIEW results AS SELECT j.*" + "".join(f", p.{_id(c)}" for c in kept)
+        "CREATE VIEW results AS SELECT j.*" + "".join(f", p.{identifier(c)}" for c in kept)
         + "".join(f", {c}" for c in picked)
         + (f", g.* EXCLUDE (job, truth_key{exclude})" if truth is not None else "")
         + (f", {counted} AS counted" if counted else "")
@@ -83,8 +84,8 @@ def register_results(con: duckdb.DuckDBPyConnection, jobs: Path, truths: bool) -
         + (" LEFT JOIN ground_truth g ON g.job = j.job" + (" AND g.model = j.model" if own else "")
            if truth is not None else "")
     )
-    roles = "".join(f", ({_literal(role)}, {_literal(column)})" for role, column in record.roles.columns().items())
-    con.execute(f"CREATE VIEW evaluator AS SELECT {_literal(record.kind)} AS kind, role, \"column\" "
+    roles = "".join(f", ({literal(role)}, {literal(column)})" for role, column in record.roles.columns().items())
+    con.execute(f"CREATE VIEW evaluator AS SELECT {literal(record.kind)} AS kind, role, \"column\" "
                 f"FROM (VALUES {roles[2:]}) t(role, \"column\")")
     return record
 
@@ -140,12 +141,4 @@ def _has(con: duckdb.DuckDBPyConnection, name: str) -> bool:
 
 
 def _columns(con: duckdb.DuckDBPyConnection, view: str) -> dict[str, str]:
-    return {name: kind for name, kind, *_ in con.execute(f"DESCRIBE {_id(view)}").fetchall()}
-
-
-def _id(name: str) -> str:
-    return '"' + name.replace('"', '""') + '"'
-
-
-def _literal(text: str) -> str:
-    return "'" + text.replace("'", "''") + "'"
+    return {name: kind for name, kind, *_ in con.execute(f"DESCRIBE {identifier(view)}").fetchall()}

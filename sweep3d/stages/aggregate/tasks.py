@@ -27,6 +27,7 @@ from __future__ import annotations
 import duckdb
 
 from sweep3d.evaluation import OUTCOMES, Roles  # what a box or mask task says (``results.outcome``)
+from sweep3d.stages.aggregate.quoting import literal
 
 TASK_VIEWS = ("not_evaluable", "outcomes_by_value", "iou_by_object")
 #: Why a job is not evaluable (``not_evaluable.reason``).
@@ -62,7 +63,7 @@ def register_task_views(con: duckdb.DuckDBPyConnection, roles: Roles, result_col
 def _not_evaluable_sql(con: duckdb.DuckDBPyConnection, model: str | None, min_visible: float | None) -> str:
     jobs = {row[0] for row in con.execute("DESCRIBE jobs").fetchall()}
     own = " AND g.model = j.model" if "model" in jobs else ""
-    where = f" WHERE j.model = {_literal(model)}" if model is not None and "model" in jobs else ""
+    where = f" WHERE j.model = {literal(model)}" if model is not None and "model" in jobs else ""
     known = min_visible is not None and "truth_key" in jobs  # without truth passes, no threshold applies
     threshold = f"{float(min_visible)!r}::DOUBLE" if known else "NULL::DOUBLE"
     return f"""CREATE OR REPLACE VIEW not_evaluable AS
@@ -103,7 +104,3 @@ def _iou_sql(column: str) -> str:
                   FROM results WHERE counted)
             WHERE isfinite(iou) GROUP BY object)
         ORDER BY object"""
-
-
-def _literal(text: str) -> str:
-    return "'" + text.replace("'", "''") + "'"

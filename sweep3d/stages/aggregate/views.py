@@ -96,6 +96,7 @@ from sweep3d.stages.aggregate.detection import DETECTION_VIEWS, detection_views
 from sweep3d.stages.aggregate.failure_modes import create_failure_modes
 from sweep3d.stages.aggregate.paired import PAIRED_VIEWS, register_paired_views
 from sweep3d.stages.aggregate.parts import register_part_views
+from sweep3d.stages.aggregate.quoting import identifier, literal
 from sweep3d.stages.aggregate.results import plan_min_visible, register_results, results_roles
 from sweep3d.stages.aggregate.tasks import TASK_VIEWS, register_task_views
 
@@ -190,7 +191,7 @@ def _select_model(con: duckdb.DuckDBPyConnection, models: list[str], model: str 
         raise UserError(f"--model {model}: the experiment's models are {', '.join(models) or 'not recorded'}")
     con.execute("ALTER VIEW results RENAME TO results_all")
     chosen = model or (models[0] if models else None)
-    where = f" WHERE model = {_literal(chosen)}" if chosen is not None and len(models) > 1 else ""
+    where = f" WHERE model = {literal(chosen)}" if chosen is not None and len(models) > 1 else ""
     con.execute(f"CREATE VIEW results AS SELECT * FROM results_all{where}")
     return chosen if where else None
 
@@ -439,7 +440,7 @@ def _view_statements(parameters: list[tuple[str, bool]], roles: Roles) -> list[s
     names its predicted class)."""
     statements = ["CREATE OR REPLACE VIEW control_values AS " + _values_sql(parameters), *_FIXED_VIEWS]
     if roles.has("prediction"):
-        wrong_class = f" AND {_identifier(roles.outcome)} = 'wrong_class'" if roles.has("outcome") else ""
+        wrong_class = f" AND {identifier(roles.outcome)} = 'wrong_class'" if roles.has("outcome") else ""
         statements.append(_CONFUSIONS_VIEW.format(wrong_class=wrong_class))
     return statements
 
@@ -459,13 +460,13 @@ def _values_sql(parameters: list[tuple[str, bool]]) -> str:
                                   *(n for n, _ in parameters)]))
     parts = []
     for position, (name, numeric) in enumerate(parameters):
-        column = _identifier(name)
+        column = identifier(name)
         number = f"CAST({column} AS DOUBLE)" if numeric else "NULL::DOUBLE"
         parts.append(
-            f"SELECT job, object, environment, valid, counted, correct, {_literal(name)} AS parameter, "
+            f"SELECT job, object, environment, valid, counted, correct, {literal(name)} AS parameter, "
             f"{position} AS position, CAST({column} AS VARCHAR) AS raw, {number} AS number FROM read_once"
         )
-    return (f"WITH read_once AS MATERIALIZED (SELECT {', '.join(map(_identifier, columns))} FROM results)\n"
+    return (f"WITH read_once AS MATERIALIZED (SELECT {', '.join(map(identifier, columns))} FROM results)\n"
             + "\nUNION ALL ".join(parts))
 
 
@@ -482,8 +483,8 @@ def materialise(con: duckdb.DuckDBPyConnection, views: Sequence[str]) -> None:
         table = f"report_{view}"
         if not has_view(con, view) or _has_table(con, table):
             continue
-        con.execute(f"CREATE TEMP TABLE {table} AS FROM {_identifier(view)}")
-        con.execute(f"CREATE OR REPLACE VIEW {_identifier(view)} AS FROM {table}")
+        con.execute(f"CREATE TEMP TABLE {table} AS FROM {identifier(view)}")
+        con.execute(f"CREATE OR REPLACE VIEW {identifier(view)} AS FROM {table}")
 
 
 # -- helpers ----------------------------------------------------------------------------------
@@ -509,16 +510,8 @@ def _has_table(con: duckdb.DuckDBPyConnection, name: str) -> bool:
 
 def _columns(con: duckdb.DuckDBPyConnection, view: str) -> dict[str, str]:
     """Column name → DuckDB type name of ``view``, in order."""
-    return {name: kind for name, kind, *_ in con.execute(f"DESCRIBE {_identifier(view)}").fetchall()}
+    return {name: kind for name, kind, *_ in con.execute(f"DESCRIBE {identifier(view)}").fetchall()}
 
 
 def _is_numeric(kind: str) -> bool:
     return kind.upper().split("(")[0] in _NUMERIC
-
-
-def _identifier(name: str) -> str:
-    return '"' + name.replace('"', '""') + '"'
-
-
-def _literal(text: str) -> str:
-    return "'" + text.replace("'", "''") + "'"
