@@ -45,9 +45,9 @@ def cache_status(plan: Plan, store: Store, model: ModelHandle, several: bool = F
             for stage in (RenderStage(), PostprocessStage(), InferStage(model, several=several))]
 
 
-def print_plan(console: Console, spec: LoadedSpec, jobs: int = 0) -> None:
+def print_plan(console: Console, spec: LoadedSpec, jobs: int = 0) -> Plan:
     """What ``sweep3d plan`` prints: the counts per stage, cached and to compute, the estimate, and
-    with ``jobs`` the first that many jobs of the first model's plan."""
+    with ``jobs`` the first that many jobs of the first model's plan (which it returns)."""
     store = Store(spec.store)
     models = [ModelHandle.resolve(spec, settings) for settings in spec.models]
     plans = [plan_spec(spec, model) for model in models]
@@ -89,6 +89,7 @@ def print_plan(console: Console, spec: LoadedSpec, jobs: int = 0) -> None:
     print_warning(console, slow_render_warning(spec.render, max(p.framing.crop for p in plans), to_render))
     if jobs:
         print_jobs(console, plan, store, jobs)
+    return plan
 
 
 def load_note(cores: int | None = None, load: float | None = None) -> str:
