@@ -543,16 +543,14 @@ def _load_policy(spec: Spec, fail, catalogue: Catalogue, controls: list[ControlI
 def _check_crossed(name: str, controls: list[ControlInstance], fail) -> None:
     """A crossed name is ``"<control id>.<param>"`` of a listed parameter (a range is drawn, not crossed)."""
     control_id, _, param = name.partition(".")
-    ids = {inst.id: inst for inst in controls}
-    if control_id not in ids or not param:
+    space = next((inst.spaces.get(param) for inst in controls if inst.id == control_id), None)
+    if space is None:
         valid = ", ".join(["environment", "object", *(f"{i.id}.{p}" for i in controls for p, s in i.spaces.items()
                                                        if isinstance(s, Choice))])
-        raise fail("policy.cross", f"{name!r} names no control parameter; give \"<control id>.<param>\" of a list, "
-                                   f"\"environment\" or \"object\" (here: {valid})")
-    space = ids[control_id].spaces.get(param)
+        raise fail("policy.cross", f"{name!r} names no control parameter the spec sets; give \"<control id>.<param>\" "
+                                   f"of a list, \"environment\" or \"object\" (here: {valid})")
     if not isinstance(space, Choice):
-        what = "a range, which the policy draws" if isinstance(space, Range) else \
-            "one value" if isinstance(space, Fixed) else "not set by the spec"
+        what = "a range, which the policy draws" if isinstance(space, Range) else "one value"
         raise fail("policy.cross", f"{name!r} is {what}; only a list of values (e.g. skin = [\"zebra\", \"tiger\"]) "
                                    "is crossed")
 
