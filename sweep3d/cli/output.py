@@ -131,11 +131,13 @@ def print_jobs(console: Console, plan: Plan, store: Store, n: int) -> None:
 
 
 def _pairing(spec: LoadedSpec) -> str:
-    """What ``[policy] paired`` shares, for the plan's first line ("" when it is off)."""
+    """What ``[policy] paired`` shares and ``cross`` crosses, for the plan's first line ("" when neither)."""
     paired = spec.spec.policy.paired
-    if not paired:
-        return ""
-    return " (paired across objects and environments)" if paired == "all" else " (paired across environments)"
+    parts = [] if not paired else ["paired across objects and environments" if paired == "all"
+                                   else "paired across environments"]
+    parts += [f"{name} crossed with {'every draw' if k is None else f'the first {k} draws'}"
+              for name, k in spec.spec.policy.crossed.items()]
+    return f" ({'; '.join(parts)})" if parts else ""
 
 
 def _models_status(plans: list[Plan], models: list[ModelHandle], store: Store) -> list[tuple[str, int, int, int]]:
