@@ -116,7 +116,7 @@ class Experiment:
         from sweep3d.stages.aggregate.sql import arrow, results_connection, select_only
 
         statement = select_only(query, "read the rows and write them with pyarrow or pandas")
-        with results_connection(self.spec, model) as con:
+        with results_connection(self.spec, model, statement=statement) as con:
             return arrow(con, statement)
 
     def results(self, model: str | None = None) -> pa.Table:

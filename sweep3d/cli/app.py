@@ -263,7 +263,8 @@ def query(
     experiment = Experiment(spec)
     statement = select_only(sql)
     export = _export_target(output, experiment.store) if output is not None else None
-    with results_connection(experiment.spec, model, writable=[export[0]] if export else []) as con:
+    with results_connection(experiment.spec, model, writable=[export[0]] if export else [],
+                            statement=statement) as con:
         if export is not None:
             _export(con, statement, output, *export)
         else:

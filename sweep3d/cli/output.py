@@ -22,6 +22,7 @@ from sweep3d.stages.aggregate import (
     weakest_regions,
     wilson_interval,
 )
+from sweep3d.stages.aggregate.boundaries import range_scales
 from sweep3d.stages.aggregate.tasks import HIDDEN
 from sweep3d.stages.code import explain
 from sweep3d.stages.driver import plan_status
@@ -192,7 +193,7 @@ def print_findings(console: Console, plan: Plan, store: Store | None = None) -> 
         store: the run's store object (it has read the segments already), else a new one.
     """
     store = store if store is not None else Store(plan.spec.store)
-    summary = stored_summary(store, plan.spec.name, plan.columns)
+    summary = stored_summary(store, plan.spec.name, plan.columns, scales=range_scales(plan.spec.controls))
     which = f"{escape(plan.model)}: " if len(plan.spec.models) > 1 else ""
     if summary.accuracy is None:
         if summary.invalid:
@@ -216,6 +217,9 @@ def print_findings(console: Console, plan: Plan, store: Store | None = None) -> 
             console.print(f"fails most at: no value is significantly below the rest of its parameter once adjusted "
                           f"for every region tested; the nearest, {describe_region(gap)}, q = {gap.q_value:.2f}, "
                           "does not rule out chance")
+    if summary.boundaries:
+        console.print("fails beyond a boundary: " + "; ".join(map(describe_boundary, summary.boundaries))
+                      + " (step fits with 95% profile-likelihood intervals; false discovery rate 5%)")
 
 
 def describe_region(region: Region) -> str:
@@ -223,6 +227,23 @@ def describe_region(region: Region) -> str:
     return (f"{escape(region.column)} = {escape(region.label)}: {region.accuracy:.0%} of {region.count} against "
             f"{region.accuracy_rest:.0%} of the other {region.count_rest} ({_points(region.difference)}, "
             f"unadjusted 95% CI {_points(region.difference_low)} to {_points(region.difference_high)})")
+
+
+def describe_boundary(row: dict) -> str:
+    """``toaster: camera_elevation fails below 12.1 (95% interval 8.03–15.2), 61% of 40 → 18% of 12``:
+    the accuracy on the side that passes, then on the side that fails."""
+    who = row["object"] if row["scope"] == "object" else row["environment"] if row["scope"] == "environment" else None
+    below = row["fails"] == "below"
+    passing = (row["accuracy_above"], row["n_above"]) if below else (row["accuracy_below"], row["n_below"])
+    failing = (row["accuracy_below"], row["n_below"]) if below else (row["accuracy_above"], row["n_above"])
+    return (f"{escape(who) + ': ' if who else ''}{escape(row['parameter'])} fails {row['fails']} "
+            f"{_number(row['boundary'])} (95% interval {_number(row['boundary_low'])}–{_number(row['boundary_high'])}),"
+            f" {passing[0]:.0%} of {passing[1]} → {failing[0]:.0%} of {failing[1]}")
+
+
+def _number(value: float) -> str:
+    """A control value in three significant digits, without an exponent below 10⁶."""
+    return f"{value:.0f}" if 1e3 <= abs(value) < 1e6 else f"{value:.3g}"
 
 
 def all_invalid_line(summary: Summary) -> str:
@@ -239,7 +260,7 @@ def check_some_valid(plan: Plan, store: Store | None = None) -> None:
         UserError: naming the model, how many predictions were invalid and what to fix.
     """
     store = store if store is not None else Store(plan.spec.store)
-    summary = stored_summary(store, plan.spec.name, plan.columns)
+    summary = stored_summary(store, plan.spec.name, plan.columns, scales=range_scales(plan.spec.controls))
     if summary.accuracy is None and summary.invalid:
         raise UserError(f"{plan.spec.path}: model {plan.model!r}: {all_invalid_line(summary)}; no report was "
                         "written: fix the model (its weights, its preprocessing) and run again (the renders are kept)")

@@ -37,6 +37,7 @@ from sweep3d.stages.aggregate import (
     region_min_count,
     summarise,
 )
+from sweep3d.stages.aggregate.boundaries import range_scales, register_failure_boundaries
 from sweep3d.stages.infer.evaluators import measure_of
 
 STAGES = ("render", "postprocess", "infer")
@@ -137,7 +138,9 @@ def gather(loaded: LoadedSpec, con: duckdb.DuckDBPyConnection, store: Store,
         raise no_results(store, loaded.name, loaded.path)
     materialise_views(con)
     columns = loaded.parameter_columns
-    summary = summarise(con, columns)
+    scales = range_scales(loaded.controls)
+    register_failure_boundaries(con, scales)  # once: the summary's findings and the panel read it
+    summary = summarise(con, columns, scales=scales)
     results = Results(con, ["object", "environment", *columns])
     images = con.execute("SELECT count(DISTINCT image_key) FROM results").fetchone()[0]
     thumbs = Thumbnails(store, images)

@@ -12,7 +12,8 @@ The explorer is ``late``: built after the others, it fills the image budget they
 are some: out of frame, or too little of the object visible), box and mask outcomes (only for
 tasks whose results have an ``outcome`` or ``iou``), the model comparison (only when the spec
 tests several models), the paired comparisons (only when the spec is paired: ``[policy]
-paired``) and the part-visibility panel (accuracy conditioned on which parts of the object's
+paired``), the failure boundaries (only where a range parameter has enough results to fit) and
+the part-visibility panel (accuracy conditioned on which parts of the object's
 surface are visible, from a UV render pass) returns None when the spec did not ask for the pass.
 """
 
@@ -21,6 +22,7 @@ from __future__ import annotations
 from sweep3d.report.panel import Panel
 from sweep3d.report.panels import (
     aggregate,
+    boundaries,
     compare,
     explorer,
     failure_modes,
@@ -44,18 +46,21 @@ CORE_PANELS: tuple[Panel, ...] = (
 
 NOT_EVALUABLE = Panel("not-evaluable", "Not evaluable", "panels/not_evaluable.html.j2", not_evaluable.build)
 OUTCOMES = Panel("outcomes", "Boxes and masks", "panels/outcomes.html.j2", outcomes.build)
+BOUNDARIES = Panel("boundaries", "Failure boundaries", "panels/boundaries.html.j2", boundaries.build)
 
 #: Panels shown only when their data exists (their ``build`` returns None otherwise).
 OPTIONAL_PANELS: tuple[Panel, ...] = (
     NOT_EVALUABLE,
+    BOUNDARIES,
     OUTCOMES,
     Panel("compare", "Model comparison", "panels/compare.html.j2", compare.build),
     Panel("paired", "Paired comparisons", "panels/paired.html.j2", paired.build),
     Panel("part-visibility", "Part visibility", "panels/part_visibility.html.j2", part_visibility.build),
 )
 
-#: Page order: what was left out of the accuracy right after it, box and mask outcomes after
-#: the aggregate plots.
-PANELS: tuple[Panel, ...] = (CORE_PANELS[0], NOT_EVALUABLE, *CORE_PANELS[1:], *OPTIONAL_PANELS[1:])
+#: Page order: what was left out of the accuracy right after it, failure boundaries after the
+#: failure modes, box and mask outcomes after the aggregate plots.
+PANELS: tuple[Panel, ...] = (CORE_PANELS[0], NOT_EVALUABLE, *CORE_PANELS[1:3], BOUNDARIES, *CORE_PANELS[3:],
+                             *OPTIONAL_PANELS[2:])
 
 __all__ = ["CORE_PANELS", "OPTIONAL_PANELS", "PANELS"]

@@ -13,6 +13,7 @@ import pyarrow as pa
 from sweep3d.cache.store import Store, is_select
 from sweep3d.errors import UserError
 from sweep3d.spec.loader import LoadedSpec
+from sweep3d.stages.aggregate.boundaries import names_boundaries, range_scales, register_failure_boundaries
 from sweep3d.stages.aggregate.views import connect, has_view, no_results
 
 QUERY_HINT = "sweep3d query runs one SELECT over the views results, jobs, predictions, renders, images, runs"
@@ -37,14 +38,17 @@ def select_only(sql: str, refusal_hint: str = "write rows to a file with --outpu
 
 
 @contextmanager
-def results_connection(spec: LoadedSpec, model: str | None = None,
-                       writable: Sequence[Path] = ()) -> Iterator[duckdb.DuckDBPyConnection]:
+def results_connection(spec: LoadedSpec, model: str | None = None, writable: Sequence[Path] = (),
+                       statement: str = "") -> Iterator[duckdb.DuckDBPyConnection]:
     """A read-only connection over the experiment's views (``model``'s results, default the
     first model's); a DuckDB error inside the block becomes one line (no results yet: how to
-    make them)."""
+    make them). ``failure_boundaries`` (computed in Python, seconds at scale) is added only when
+    ``statement`` names it, so other queries cost what they did."""
     store = Store(spec.store)
     con = connect(store, spec.name, read_only=True, writable=writable, model=model)
     try:
+        if names_boundaries(statement):
+            register_failure_boundaries(con, range_scales(spec.controls))
         yield con
     except duckdb.Error as exc:
         if isinstance(exc, duckdb.CatalogException) and not has_view(con, "results"):

@@ -23,14 +23,16 @@ import duckdb
 
 from sweep3d.cache.store import Store, atomic_write, safe_filename
 from sweep3d.errors import UserError
+from sweep3d.stages.aggregate.boundaries import Scale, boundary_rows
 from sweep3d.stages.aggregate.results import results_roles
 from sweep3d.stages.aggregate.views import connect, has_view, materialise, register_views
 
 FAILURE_LIMIT = 48  # failures a summary lists, worst first
 REGION_LIMIT = 3  # control values a summary names where the model fails, most certainly bad first
+BOUNDARY_LIMIT = 3  # boundaries of single objects or environments a summary names, most certain first
 #: Bump when :func:`summarise` gives other numbers for the same rows without a change to this
 #: module or to the views' module (both are part of a remembered summary's key).
-SUMMARY_FORMAT = 2
+SUMMARY_FORMAT = 3
 
 
 @dataclass
@@ -72,6 +74,9 @@ class Summary:
     regions: list[dict[str, Any]] = field(default_factory=list)
     #: when no value is significant: the one nearest to significance (see :func:`value_findings`)
     gap: dict[str, Any] | None = None
+    #: significant failure boundaries (``failure_boundaries`` rows): every overall one, then the
+    #: most certain of single objects and environments (see :func:`boundary_findings`)
+    boundaries: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def wrong(self) -> int:
@@ -79,7 +84,8 @@ class Summary:
         return self.counted - self.correct
 
 
-def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit: int = FAILURE_LIMIT) -> Summary:
+def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit: int = FAILURE_LIMIT,
+              scales: dict[str, Scale] | None = None) -> Summary:
     """Summarise the ``results`` view of ``con`` (see :func:`~sweep3d.stages.aggregate.connect`).
 
     ``results`` and the levels are computed once into temp tables that the views then read (as
@@ -88,6 +94,8 @@ def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit:
 
     Args:
         columns: the control-parameter columns of the jobs table.
+        scales: the parameters the spec gives a range (``boundaries.range_scales``), whose failure
+            boundaries the summary names; None: the numeric parameters the level views bin.
     """
     jobs = con.execute("SELECT count(*) FROM jobs").fetchone()[0] if has_view(con, "jobs") else 0
     if not has_view(con, "results"):
@@ -140,9 +148,27 @@ def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit:
     ]
     min_count = region_min_count(counted)
     regions, gap = value_findings(con, columns, min_count)
+    boundaries = boundary_findings(con, scales)
     return Summary(jobs, evaluated, invalid, correct, accuracy, objects, environments, scene_accuracy,
                    scene_count, effects, failures, per_object, counted, sum(reasons.values()), reasons, min_visible,
-                   regions, gap)
+                   regions, gap, boundaries)
+
+
+#: What the findings keep of a boundary (``failure_boundaries`` columns).
+_BOUNDARY_FIELDS = ("parameter", "scope", "object", "environment", "n", "fails", "boundary", "boundary_low",
+                    "boundary_high", "accuracy_below", "n_below", "accuracy_above", "n_above", "q_value")
+
+
+def boundary_findings(con: duckdb.DuckDBPyConnection, scales: dict[str, Scale] | None,
+                      limit: int = BOUNDARY_LIMIT) -> list[dict[str, Any]]:
+    """The significant failure boundaries: each parameter's over all results (spec order), then
+    at most ``limit`` of single objects or environments, most certain first (smallest q-value,
+    then the narrowest interval relative to the parameter's overall span)."""
+    rows = [row for row in boundary_rows(con, scales) if row["significant"]]
+    overall = [row for row in rows if row["scope"] == "all"]
+    groups = sorted((row for row in rows if row["scope"] != "all"),
+                    key=lambda r: (r["q_value"], r["boundary_high"] - r["boundary_low"], r["position"]))
+    return [{k: row[k] for k in _BOUNDARY_FIELDS} for row in overall + groups[:limit]]
 
 
 def region_min_count(counted: int) -> int:
@@ -245,7 +271,8 @@ def nearest_miss_region(summary: Summary) -> Region | None:
 # -- remembered summaries ---------------------------------------------------------------------
 
 
-def stored_summary(store: Store, experiment: str, columns: list[str], failure_limit: int = FAILURE_LIMIT) -> Summary:
+def stored_summary(store: Store, experiment: str, columns: list[str], failure_limit: int = FAILURE_LIMIT,
+                   scales: dict[str, Scale] | None = None) -> Summary:
     """:func:`summarise` of ``experiment``'s results in ``store``, remembered there.
 
     The summary reads the experiment's jobs file, the ``predictions`` segments and the ``truths``
@@ -258,14 +285,14 @@ def stored_summary(store: Store, experiment: str, columns: list[str], failure_li
     computes it again. A summary that cannot be remembered (a full disk, a value JSON does not
     hold) is computed every time.
     """
-    key = summary_key(store, experiment, columns, failure_limit)
+    key = summary_key(store, experiment, columns, failure_limit, scales)
     path = summary_path(store, experiment)
     remembered = _read_summary(path, key)
     if remembered is not None:
         return remembered
     con = connect(store, experiment)
     try:
-        summary = summarise(con, columns, failure_limit)
+        summary = summarise(con, columns, failure_limit, scales)
     finally:
         con.close()
     try:
@@ -281,7 +308,8 @@ def summary_path(store: Store, experiment: str) -> Path:
     return store.root / "cache" / "summary" / f"{safe_filename(experiment)}.json"
 
 
-def summary_key(store: Store, experiment: str, columns: list[str], failure_limit: int = FAILURE_LIMIT) -> str:
+def summary_key(store: Store, experiment: str, columns: list[str], failure_limit: int = FAILURE_LIMIT,
+                scales: dict[str, Scale] | None = None) -> str:
     """What a summary of ``experiment`` is computed from, as a hex digest (see :func:`stored_summary`)."""
     files = [store.jobs_path(experiment), *store.segments("predictions"), *store.segments("truths")]
     states = []
@@ -291,10 +319,13 @@ def summary_key(store: Store, experiment: str, columns: list[str], failure_limit
             states.append([path.name, st.st_size, st.st_mtime_ns, st.st_ctime_ns, st.st_ino])
         except OSError:
             states.append([path.name, None])
-    sources = [Path(__file__).with_name(name).read_bytes() for name in ("views.py", "tasks.py", "results.py", "failure_modes.py", "paired.py")]
+    sources = [Path(__file__).with_name(name).read_bytes() for name in ("views.py", "tasks.py", "results.py",
+                                                                         "failure_modes.py", "paired.py",
+                                                                         "boundaries.py", "step_fit.py")]
     code = hashlib.sha256(b"\0".join([Path(__file__).read_bytes(), *sources])).hexdigest()
     described = {"format": SUMMARY_FORMAT, "experiment": experiment, "columns": list(columns),
-                 "failure_limit": failure_limit, "files": states, "code": code, "duckdb": duckdb.__version__}
+                 "failure_limit": failure_limit, "files": states, "code": code, "duckdb": duckdb.__version__,
+                 "scales": None if scales is None else {c: dataclasses.astuple(s) for c, s in sorted(scales.items())}}
     return hashlib.sha256(json.dumps(described, sort_keys=True).encode()).hexdigest()
 
 

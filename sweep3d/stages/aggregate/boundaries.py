@@ -1,0 +1,206 @@
+"""Failure boundaries: where along a continuous control the model starts to fail.
+
+For each control parameter that the spec gives a range (a continuous control), overall, per
+object and per environment (where there are several and each has enough results), a step is
+fitted to the counted results against the value (:mod:`sweep3d.stages.aggregate.step_fit`): the
+accuracy ``accuracy_below`` up to the boundary and ``accuracy_above`` beyond it. The boundary is
+where the fitted accuracy crosses ``level``, halfway between the two (a step crosses every level
+between its plateaus at the same place), with its 95 % profile-likelihood interval.
+
+Each fit is tested against no change (a permutation test of the best split's likelihood ratio,
+permuted within scenes), and the p-values of every fit in the experiment are adjusted together
+(Benjamini–Hochberg, as ``failure_modes`` does): a row is a boundary (``significant``, with
+``boundary``, ``boundary_low`` and ``boundary_high`` set) only when ``q_value`` < 0.05. Where
+accuracy does not change along the control beyond chance there is no boundary: those columns
+are NULL and the fitted plateaus say what was seen.
+
+A range that covers a whole turn (yaw over 360°) has no below or above, and is not fitted; nor
+is a list of values (``failure_modes`` compares those value by value). The relation is computed
+when asked (numpy, seconds at 10⁶ results): :func:`register_failure_boundaries` adds it to a
+connection as ``failure_boundaries``; ``sweep3d query`` does so only for a statement naming it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import re
+from dataclasses import dataclass
+from typing import Mapping, Sequence
+
+import duckdb
+import numpy as np
+import pyarrow as pa
+
+from sweep3d.spec.loader import ControlInstance
+from sweep3d.spec.params import Range
+from sweep3d.stages.aggregate.compare import ALPHA
+from sweep3d.stages.aggregate.quoting import identifier
+from sweep3d.stages.aggregate.step_fit import fit_step
+from sweep3d.stages.aggregate.views import has_view
+
+VIEW = "failure_boundaries"
+#: The fewest counted results a group needs to be fitted.
+MIN_RESULTS = 20
+#: The fewest distinct values a group needs (two leave the boundary anywhere between them).
+MIN_VALUES = 3
+_NAMED = re.compile(rf"\b{VIEW}\b", re.I)
+
+
+@dataclass(frozen=True)
+class Scale:
+    """How a range parameter's values are spaced: ``log`` (the boundary is the geometric middle
+    of its gap), ``wraps`` (a whole turn: not fitted)."""
+
+    log: bool = False
+    wraps: bool = False
+
+
+def range_scales(controls: Sequence[ControlInstance]) -> dict[str, Scale]:
+    """Column → :class:`Scale` of every parameter the spec gives a range."""
+    out = {}
+    for inst in controls:
+        for param, space in inst.spaces.items():
+            if isinstance(space, Range):
+                period = inst.control.periodic.get(param)
+                wraps = period is not None and space.high - space.low >= period
+                out[f"{inst.id}_{param}"] = Scale(log=space.log, wraps=wraps)
+    return out
+
+
+_SCHEMA = pa.schema([
+    ("parameter", pa.string()), ("scope", pa.string()), ("object", pa.string()), ("environment", pa.string()),
+    ("n", pa.int64()), ("values", pa.int64()), ("fails", pa.string()), ("boundary", pa.float64()),
+    ("boundary_low", pa.float64()), ("boundary_high", pa.float64()), ("estimate", pa.float64()),
+    ("interval_low", pa.float64()), ("interval_high", pa.float64()),
+    ("accuracy_below", pa.float64()), ("n_below", pa.int64()),
+    ("accuracy_above", pa.float64()), ("n_above", pa.int64()), ("level", pa.float64()), ("lr", pa.float64()),
+    ("p_value", pa.float64()), ("permutations", pa.int64()), ("q_value", pa.float64()), ("significant", pa.bool_()),
+    ("position", pa.int64()),
+])
+
+
+def failure_boundaries(con: duckdb.DuckDBPyConnection, scales: Mapping[str, Scale] | None = None) -> pa.Table:
+    """Every fit (see the module) of the ``results`` view of ``con``, as a table.
+
+    Args:
+        scales: the range parameters (:func:`range_scales` of the spec's controls); None (no
+            spec at hand) takes the numeric parameters with too many values to list (those the
+            level views bin) as linear ranges.
+    """
+    rows = []
+    for position, (column, scale) in enumerate(_fitted_parameters(con, scales)):
+        rows += fit_parameter(column, scale, *_results(con, column), position=position)
+    return pa.Table.from_pylist(adjust(rows), schema=_SCHEMA)
+
+
+def fit_parameter(column: str, scale: Scale, x: np.ndarray, correct: np.ndarray, objects: np.ndarray,
+                  environments: np.ndarray, position: int = 0) -> list[dict]:
+    """The fits of one parameter (values ``x``, outcomes ``correct``, each result's object and
+    environment) over all results, per object and per environment, as rows without q-values."""
+    rows = []
+    for scope, name, mask, strata in _groups(objects, environments):
+        if mask.sum() < MIN_RESULTS or len(np.unique(x[mask])) < MIN_VALUES:
+            continue
+        fit = fit_step(x[mask], correct[mask], strata[mask], seed=_seed(column, scope, name))
+        if fit is None:
+            continue
+        middle = (math.sqrt(fit.low_side * fit.high_side) if scale.log and fit.low_side > 0
+                  else (fit.low_side + fit.high_side) / 2)
+        rows.append({
+            "parameter": column, "scope": scope, "object": name if scope == "object" else None,
+            "environment": name if scope == "environment" else None, "n": fit.n, "values": fit.values,
+            "fails": "below" if fit.accuracy_below < fit.accuracy_above else "above", "estimate": middle,
+            "interval_low": fit.interval_low, "interval_high": fit.interval_high,
+            "accuracy_below": fit.accuracy_below, "n_below": fit.n_below, "accuracy_above": fit.accuracy_above,
+            "n_above": fit.n_above, "level": (fit.accuracy_below + fit.accuracy_above) / 2, "lr": fit.lr,
+            "p_value": fit.p_value, "permutations": fit.permutations, "position": position,
+        })
+    return rows
+
+
+def adjust(rows: list[dict]) -> list[dict]:
+    """``rows`` (every fit of the experiment) with their Benjamini–Hochberg q-values and, where
+    q < 0.05, the boundary and its interval (else those are None: no boundary)."""
+    for row, q in zip(rows, _benjamini_hochberg([r["p_value"] for r in rows])):
+        significant = q < ALPHA
+        row.update(q_value=q, significant=significant, boundary=row["estimate"] if significant else None,
+                   boundary_low=row["interval_low"] if significant else None,
+                   boundary_high=row["interval_high"] if significant else None)
+    return rows
+
+
+def register_failure_boundaries(con: duckdb.DuckDBPyConnection, scales: Mapping[str, Scale] | None = None) -> None:
+    """Compute :func:`failure_boundaries` and add it to ``con`` as the relation ``failure_boundaries``
+    (nothing when ``con`` has no ``results``)."""
+    if has_view(con, "results"):
+        con.register(VIEW, failure_boundaries(con, scales))
+
+
+def boundary_rows(con: duckdb.DuckDBPyConnection, scales: Mapping[str, Scale] | None = None) -> list[dict]:
+    """The rows of ``failure_boundaries`` as registered on ``con`` (computed once by its caller),
+    else computed, each as a dict by column name."""
+    if has_view(con, VIEW):
+        cursor = con.execute(f"FROM {VIEW}")
+        names = [d[0] for d in cursor.description]
+        return [dict(zip(names, row)) for row in cursor.fetchall()]
+    return failure_boundaries(con, scales).to_pylist()
+
+
+def names_boundaries(statement: str) -> bool:
+    """Whether ``statement`` reads ``failure_boundaries`` (only then is it computed for a query)."""
+    return bool(_NAMED.search(statement))
+
+
+def _fitted_parameters(con: duckdb.DuckDBPyConnection, scales: Mapping[str, Scale] | None) -> list[tuple[str, Scale]]:
+    """(column, scale) of each parameter to fit, in spec order."""
+    if not has_view(con, "control_parameters"):
+        return []
+    listed = [r[0] for r in con.execute("SELECT parameter FROM control_parameters WHERE numeric AND "
+                                        "parameter NOT IN ('object', 'environment') ORDER BY position").fetchall()]
+    if scales is None:
+        binned = {r[0] for r in con.execute("SELECT parameter FROM control_parameters WHERE binned").fetchall()}
+        return [(column, Scale()) for column in listed if column in binned]
+    return [(column, scales[column]) for column in listed if column in scales and not scales[column].wraps]
+
+
+def _results(con: duckdb.DuckDBPyConnection, column: str) -> tuple[np.ndarray, ...]:
+    """Value, correct, object and environment of the counted results where ``column`` is set."""
+    got = con.execute(f"SELECT CAST({identifier(column)} AS DOUBLE) AS x, correct, object, environment FROM results "
+                      f"WHERE counted AND isfinite(CAST({identifier(column)} AS DOUBLE))").fetchnumpy()
+    return (np.asarray(got["x"], np.float64), np.asarray(got["correct"], bool),
+            np.asarray(got["object"], object), np.asarray(got["environment"], object))
+
+
+def _groups(objects: np.ndarray, environments: np.ndarray):
+    """(scope, name, mask, strata) of each group to fit: all results (strata: scenes), each object
+    (strata: environments) and each environment (strata: objects), the last two only when there
+    are several objects (environments)."""
+    scenes = np.unique(np.stack([objects.astype(str), environments.astype(str)], axis=1), axis=0,
+                       return_inverse=True)[1].reshape(-1) if len(objects) else np.zeros(0, np.int64)
+    yield "all", None, np.ones(len(objects), bool), scenes
+    for scope, names, others in (("object", objects, environments), ("environment", environments, objects)):
+        distinct = sorted(set(names.tolist()))
+        if len(distinct) < 2:
+            continue
+        strata = np.unique(others.astype(str), return_inverse=True)[1] if len(others) else others
+        for name in distinct:
+            yield scope, name, names == name, strata
+
+
+def _seed(*parts: str | None) -> int:
+    """A seed fixed by the fit's names, so a fit's p-value does not depend on the other fits."""
+    return int.from_bytes(hashlib.sha256(repr(parts).encode()).digest()[:8], "little")
+
+
+def _benjamini_hochberg(p: list[float]) -> list[float]:
+    """Benjamini–Hochberg q-values of ``p`` (in the same order)."""
+    m = len(p)
+    order = sorted(range(m), key=lambda i: p[i])
+    q = [1.0] * m
+    running = 1.0
+    for rank in range(m, 0, -1):
+        i = order[rank - 1]
+        running = min(running, p[i] * m / rank)
+        q[i] = min(1.0, running)
+    return q

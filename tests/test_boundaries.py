@@ -1,0 +1,256 @@
+"""Failure boundaries: the step fit's interval covers a known threshold, no boundary where the
+control does not matter, the view, the findings line, ``query`` and the report's panel.
+
+Outcomes are synthetic (a stand-in model that fails below a set elevation, with or without
+label noise); stores are written row by row (``make_store``) or with the report benchmark's
+bulk writer, so nothing renders.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+from typer.testing import CliRunner
+
+from benchmarks.report_scale import build_store
+from sweep3d.cache.store import Store
+from sweep3d.cli import app
+from sweep3d.cli.output import describe_boundary
+from sweep3d.report import build_context, render_html, write_report
+from sweep3d.stages import load_spec
+from sweep3d.stages.aggregate import connect, summarise
+from sweep3d.stages.aggregate.boundaries import Scale, adjust, failure_boundaries, fit_parameter, range_scales
+from sweep3d.stages.aggregate.step_fit import CRITICAL, fit_step
+from tests.test_aggregate_views import make_store
+
+THRESHOLD = 12.0
+LOW, HIGH = 0.0, 60.0
+
+
+def stand_in(rng: np.random.Generator, n: int, noise: float) -> tuple[np.ndarray, np.ndarray]:
+    """Elevations drawn over the range and a model that fails below :data:`THRESHOLD`, each label
+    flipped with probability ``noise``."""
+    x = rng.uniform(LOW, HIGH, n)
+    correct = (x >= THRESHOLD) ^ (rng.random(n) < noise)
+    return x, correct
+
+
+def test_the_critical_value_is_the_95_percent_point_of_the_location_ratio() -> None:
+    # (1 - exp(-c / 2))² = 0.95: both one-sided suprema of 2W(t) - |t| below c
+    assert (1 - np.exp(-CRITICAL / 2)) ** 2 == pytest.approx(0.95)
+    assert CRITICAL == pytest.approx(7.35, abs=0.01)
+
+
+@pytest.mark.parametrize("noise", [0.0, 0.15])
+@pytest.mark.parametrize("n", [30, 60, 200])
+def test_the_interval_covers_the_threshold_in_at_least_90_percent_of_seeds(n: int, noise: float) -> None:
+    covered, widths = 0, []
+    for seed in range(100):
+        x, correct = stand_in(np.random.default_rng([seed, n]), n, noise)
+        fit = fit_step(x, correct, test=False)
+        covered += fit.interval_low <= THRESHOLD <= fit.interval_high
+        widths.append(fit.interval_high - fit.interval_low)
+        assert fit.interval_low <= fit.low_side < fit.high_side <= fit.interval_high
+    assert covered >= 90, f"{covered} of 100"
+    assert np.median(widths) < (HIGH - LOW) / 3  # and it says something
+
+
+def test_a_deterministic_threshold_is_located_between_the_last_failure_and_the_first_success() -> None:
+    x, correct = stand_in(np.random.default_rng(3), 40, 0.0)
+    fit = fit_step(x, correct, seed=1)
+    assert fit.low_side == x[~correct].max() and fit.high_side == x[correct].min()  # complete separation: finite
+    assert (fit.accuracy_below, fit.accuracy_above) == (0.0, 1.0)
+    assert fit.p_value < 0.001 and fit.permutations > 999  # resolved beyond the first 999 permutations
+
+
+@pytest.mark.parametrize("n", [30, 200])
+def test_no_boundary_where_the_control_does_not_matter(n: int) -> None:
+    """The permutation test is exact: under no effect a boundary is called in at most 5 % of
+    seeds; over 400 seeds the observed rate stays within two standard errors of that."""
+    seeds = 400
+    false = 0
+    for seed in range(seeds):
+        rng = np.random.default_rng([seed, n, 7])
+        x = rng.uniform(LOW, HIGH, n)
+        false += fit_step(x, rng.random(n) < 0.6, seed=seed).p_value < 0.05
+    assert false / seeds <= 0.05 + 2 * np.sqrt(0.05 * 0.95 / seeds), f"{false} of {seeds}"
+
+
+def test_permutations_within_scenes_keep_a_scene_effect_from_looking_like_a_step() -> None:
+    # two scenes sampled at different elevations with different base accuracies, no step in either
+    rng = np.random.default_rng(5)
+    x = np.concatenate([rng.uniform(0, 30, 60), rng.uniform(30, 60, 60)])
+    correct = np.concatenate([rng.random(60) < 0.2, rng.random(60) < 0.9])
+    scenes = np.repeat([0, 1], 60)
+    assert fit_step(x, correct, seed=2).p_value < 0.01  # pooled, the scene effect is a step
+    assert fit_step(x, correct, scenes, seed=2).p_value > 0.05  # within scenes, there is none
+
+
+def test_many_values_are_merged_into_groups_and_still_cover() -> None:
+    x, correct = stand_in(np.random.default_rng(9), 5000, 0.1)
+    fit = fit_step(x, correct, seed=0)
+    assert fit.values == 5000 and fit.interval_low <= THRESHOLD <= fit.interval_high
+    assert fit.interval_high - fit.interval_low < 3 and fit.p_value < 0.001
+
+
+def elevation_rows(seed: int = 0) -> list[dict]:
+    """The toaster fails below 12°, the ball never does; blur does not matter; two environments."""
+    rng = np.random.default_rng(seed)
+    rows = []
+    for i in range(240):
+        obj, env = ("toaster", "ball")[i % 2], ("studio", "forest")[i // 2 % 2]
+        x = float(rng.uniform(LOW, HIGH))
+        fails = obj == "toaster" and x < THRESHOLD
+        rows.append({"object": obj, "environment": env, "camera_elevation": x,
+                     "blur_sigma": float(rng.uniform(0, 3)), "orientation_yaw": float(rng.uniform(-180, 180)),
+                     "correct": bool(fails == (rng.random() < 0.05))})
+    return rows
+
+
+SCALES = {"camera_elevation": Scale(), "blur_sigma": Scale(), "orientation_yaw": Scale(wraps=True)}
+
+
+def test_the_view_names_the_boundary_where_it_is_and_none_elsewhere(tmp_path: Path) -> None:
+    con = make_store(tmp_path, elevation_rows())
+    rows = failure_boundaries(con, SCALES).to_pylist()
+    found = {(r["parameter"], r["scope"], r["object"] or r["environment"]): r for r in rows}
+    assert {p for p, _, _ in found} == {"camera_elevation", "blur_sigma"}  # a whole turn is not fitted
+    toaster = found[("camera_elevation", "object", "toaster")]
+    assert toaster["significant"] and toaster["fails"] == "below"
+    assert toaster["boundary_low"] <= THRESHOLD <= toaster["boundary_high"]
+    assert toaster["accuracy_below"] < 0.2 < 0.8 < toaster["accuracy_above"]
+    assert toaster["level"] == pytest.approx((toaster["accuracy_below"] + toaster["accuracy_above"]) / 2)
+    assert not found[("camera_elevation", "object", "ball")]["significant"]
+    boundaries = [key for key, r in found.items() if r["significant"]]
+    assert all(p == "camera_elevation" for p, _, _ in boundaries)  # blur: no boundary anywhere
+    for r in rows:  # no boundary: its columns are empty, the fit still says what was seen
+        assert (r["boundary"] is None) == (not r["significant"]) and r["q_value"] >= r["p_value"]
+    again = failure_boundaries(con, SCALES).to_pylist()
+    assert again == rows  # seeded by names: the same numbers every time
+
+
+def test_without_a_spec_the_binned_numbers_are_fitted(tmp_path: Path) -> None:
+    con = make_store(tmp_path, elevation_rows())
+    fitted = {r["parameter"] for r in failure_boundaries(con).to_pylist()}
+    assert fitted == {"camera_elevation", "blur_sigma", "orientation_yaw"}  # all three have > 12 values
+
+
+def test_the_findings_name_the_boundaries_and_nothing_for_a_control_that_does_not_matter(tmp_path: Path) -> None:
+    con = make_store(tmp_path, elevation_rows())
+    summary = summarise(con, list(SCALES), scales=SCALES)
+    assert summary.boundaries and {b["parameter"] for b in summary.boundaries} == {"camera_elevation"}
+    toaster = next(b for b in summary.boundaries if b["object"] == "toaster")
+    line = describe_boundary(toaster)
+    assert line.startswith("toaster: camera_elevation fails below 1")
+    passing = f"{toaster['accuracy_above']:.0%} of {toaster['n_above']}"
+    assert f"(95% interval {toaster['boundary_low']:.3g}–{toaster['boundary_high']:.3g}), {passing} → " in line
+
+    rng = np.random.default_rng(1)
+    null = [{"camera_elevation": float(rng.uniform(0, 60)), "correct": bool(rng.random() < 0.7)} for _ in range(80)]
+    con = make_store(tmp_path / "null", null)
+    assert summarise(con, ["camera_elevation"], scales={"camera_elevation": Scale()}).boundaries == []
+
+
+def test_the_false_boundary_rate_of_the_view_over_seeds() -> None:
+    """A null model with two objects and two environments (five fits, adjusted together as the view
+    does): in at most 5 % of seeds (within two standard errors, over 100 seeds) is any boundary named."""
+    seeds, named = 100, 0
+    objects, environments = np.array(["a", "b"] * 40, object), np.array(["e", "e", "f", "f"] * 20, object)
+    for seed in range(seeds):
+        rng = np.random.default_rng([seed, 11])
+        rows = fit_parameter("camera_elevation", Scale(), rng.uniform(0, 60, 80), rng.random(80) < 0.6,
+                             objects, environments)
+        assert len(rows) == 5
+        named += any(r["significant"] for r in adjust(rows))
+    assert named / seeds <= 0.05 + 2 * np.sqrt(0.05 * 0.95 / seeds), f"{named} of {seeds}"
+
+
+def test_range_scales_follow_the_spec(tmp_path: Path) -> None:
+    spec = build_store(tmp_path / "run", 40, images=False)
+    scales = range_scales(load_spec(spec).controls)
+    assert scales == {"orientation_yaw": Scale(log=False, wraps=True)}  # elevation and blur are lists
+
+
+# -- query and report ------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def elevation_spec(tmp_path_factory) -> Path:
+    """The report benchmark's synthetic store with its camera elevation a range [0, 60] in the spec
+    and, in the jobs, drawn so that accuracy steps down below 12: its spec's path."""
+    spec = build_store(tmp_path_factory.mktemp("boundary") / "run", 400, seed=3, images=True)
+    spec.write_text(spec.read_text().replace("elevation = [0, 30, 60]", "elevation = { range = [0, 60] }"))
+    loaded = load_spec(spec)
+    store = Store(loaded.store)
+    correct = dict(connect(store, loaded.name).execute("SELECT job, correct FROM results").fetchall())
+    path = store.jobs_path(loaded.name)
+    jobs = pq.read_table(path)
+    rng = np.random.default_rng(0)
+    below = [rng.random() < (0.1 if correct.get(job) else 0.7) for job in jobs.column("job").to_pylist()]
+    x = np.where(below, rng.uniform(0, THRESHOLD, len(below)), rng.uniform(THRESHOLD, 60, len(below)))
+    jobs = jobs.set_column(jobs.schema.get_field_index("camera_elevation"), "camera_elevation", pa.array(x))
+    store.write_table_file(path, jobs)
+    return spec
+
+
+def test_query_computes_the_boundaries_only_when_asked(elevation_spec: Path, monkeypatch) -> None:
+    runner = CliRunner()
+    result = runner.invoke(app, ["query", str(elevation_spec), "SELECT parameter, scope, boundary_low, boundary_high "
+                                 "FROM failure_boundaries WHERE significant AND scope = 'all'", "--format", "csv"])
+    assert result.exit_code == 0, result.output
+    lines = result.output.strip().splitlines()
+    assert lines[0] == "parameter,scope,boundary_low,boundary_high" and len(lines) == 2
+    _, scope, low, high = lines[1].split(",")
+    assert scope == "all" and float(low) <= THRESHOLD <= float(high)
+
+    import sweep3d.stages.aggregate.sql as sql_module
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("computed for a query that does not name it")
+
+    monkeypatch.setattr(sql_module, "register_failure_boundaries", refuse)
+    result = runner.invoke(app, ["query", str(elevation_spec), "SELECT count(*) AS n FROM results", "--format", "csv"])
+    assert result.exit_code == 0 and result.output.split() == ["n", "400"]
+
+
+def test_the_report_draws_the_boundary_with_its_band(elevation_spec: Path) -> None:
+    loaded = load_spec(elevation_spec)
+    store = Store(loaded.store)
+    context = build_context(loaded, connect(store, loaded.name), store)
+    ids = [p.id for p in context["panels"]]
+    assert ids.index("boundaries") == ids.index("failure-modes") + 1
+    data = next(p for p in context["panels"] if p.id == "boundaries").data
+    assert data["figures"] and data["rows"][0]["who"] == "all results" and data["rows"][0]["significant"]
+    overall = next(b for b in context["summary"].boundaries if b["scope"] == "all")
+    assert overall["boundary_low"] <= THRESHOLD <= overall["boundary_high"]
+    html = render_html(context)
+    assert "fig-boundary-1" in html and "Failure boundaries" in html and "failure_boundaries" in html
+
+
+@pytest.mark.browser
+def test_the_boundary_panel_draws_in_chromium(elevation_spec: Path, chromium) -> None:
+    from tests.test_report import ARTIFACTS, assert_clean, open_page
+
+    path = write_report(load_spec(elevation_spec))
+    with open_page(chromium, path) as (page, events):
+        drawn = page.evaluate("Array.from(document.querySelectorAll('#boundaries .js-plotly-plot'))"
+                              ".filter(d => d.querySelector('svg.main-svg')).map(d => d.id)")
+        assert drawn and drawn[0] == "fig-boundary-1"
+        figure = page.evaluate("""() => { const gd = document.getElementById('fig-boundary-1');
+            return {names: gd.data.map(t => t.name), band: gd.layout.shapes[0], counts: gd.data[1].customdata}; }""")
+        assert figure["names"] == ["step fit", "binned accuracy"]
+        assert figure["band"]["x0"] <= THRESHOLD <= figure["band"]["x1"]
+        assert sum(n for _, n in figure["counts"]) == rows_count(elevation_spec)
+        assert "fails below" in page.inner_text("#boundaries")
+        ARTIFACTS.mkdir(exist_ok=True)
+        page.locator("#boundaries").screenshot(path=str(ARTIFACTS / "report-boundaries.png"))
+        assert_clean(path, events)
+
+
+def rows_count(spec: Path) -> int:
+    loaded = load_spec(spec)
+    return connect(Store(loaded.store), loaded.name).execute("SELECT count(*) FROM results WHERE counted").fetchone()[0]
