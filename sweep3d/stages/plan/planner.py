@@ -245,4 +245,4 @@ def _knob(spec: LoadedSpec) -> str:
     """The policy's setting that sets how many jobs a scene has."""
     kind = spec.spec.policy.type
     return ("policy.samples_per_dim or the number of listed values" if kind == "grid" else
-            "policy.samples" if kind in ("random", "sobol", "adaptive") else "the policy's parameters")
+            "policy.samples" if kind in ("random", "sobol", "adaptive", "boundary") else "the policy's parameters")

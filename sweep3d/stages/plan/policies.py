@@ -255,6 +255,88 @@ class AdaptivePolicy(Policy):
         return Point(tuple(unit), choice)
 
 
+@POLICIES.register("boundary")
+class BoundaryPolicy(Policy):
+    """Failure-boundary search under a budget of ``samples`` points per scene.
+
+    Starts with ``initial`` Sobol points; each later round fits a step to the outcomes so far
+    along every continuous dimension that does not wrap (as ``failure_boundaries`` does: see
+    :mod:`sweep3d.stages.aggregate.step_fit`), takes the one with the strongest step (its
+    likelihood ratio at least :data:`BoundaryPolicy.EVIDENCE`) and puts ``batch`` points where
+    that boundary is still uncertain: its 95 % interval widened by ``margin`` of its width on
+    each side, spread evenly across it, the other coordinates and lists drawn at random (so the
+    other dimensions are still explored). An ``explore`` share of each round (default none: at
+    equal budgets it widened the interval, ``benchmarks/boundaries.py``) is uniform over the
+    space; with no step yet, the whole round is.
+    """
+
+    adaptive = True
+    #: The likelihood ratio a step needs before a round aims at it (χ²₁'s 95 % point).
+    EVIDENCE = 3.84
+
+    class Params(PolicyParams):
+        samples: int = Field(64, ge=1, le=1_000_000)
+        initial: int = Field(16, ge=1, le=1_000_000)
+        batch: int = Field(4, ge=1, le=1_000_000)  # small rounds: each aims at what the last one learned
+        margin: float = Field(0.25, ge=0.0, le=10.0)
+        explore: float = Field(0.0, ge=0.0, le=1.0)
+
+    def points(self, shape: SpaceShape, seed: int, history: Mapping[Point, Outcome]) -> list[Point]:
+        p = self.params
+        first = SobolPolicy(SobolPolicy.Params(samples=min(p.initial, p.samples))).points(shape, seed, history)
+        points = list(dict.fromkeys(first))
+        round_index = 1
+        while len(points) < p.samples and all(q in history for q in points):
+            rng = np.random.default_rng([seed, round_index])
+            new = self._round(shape, points, history, rng, min(p.batch, p.samples - len(points)))
+            seen = set(points)
+            fresh = [q for q in dict.fromkeys(new) if q not in seen]
+            if not fresh:
+                break
+            points += fresh
+            round_index += 1
+        return points
+
+    def count(self, shape: SpaceShape) -> int:
+        """The budget: the most points its rounds can reach (one in a space with nothing to vary)."""
+        return self.params.samples if shape.n_continuous or shape.choice_sizes else 1
+
+    def target(self, shape: SpaceShape, points: Sequence[Point],
+               history: Mapping[Point, Outcome]) -> tuple[int, float, float] | None:
+        """(dimension, low, high): the strongest step's 95 % interval in unit coordinates, or None
+        when no dimension shows a step with :data:`EVIDENCE`."""
+        from sweep3d.stages.aggregate.step_fit import fit_step
+
+        if not points:
+            return None
+        unit = np.array([q.unit for q in points], dtype=np.float64).reshape(len(points), shape.n_continuous)
+        passed = np.array([not history[q].failed for q in points])
+        best, found = self.EVIDENCE, None
+        for d in range(shape.n_continuous):
+            if shape.wrapping(d):
+                continue
+            fit = fit_step(unit[:, d], passed, test=False)
+            if fit is not None and fit.lr >= best:
+                best, found = fit.lr, (d, fit.interval_low, fit.interval_high)
+        return found
+
+    def _round(self, shape: SpaceShape, points: list[Point], history: Mapping[Point, Outcome],
+               rng: np.random.Generator, n: int) -> list[Point]:
+        found = self.target(shape, points, history)
+        aimed = n - int(round(n * self.params.explore)) if found else 0
+        out = []
+        for i in range(n):
+            unit = rng.random(shape.n_continuous)
+            if i < aimed:
+                d, low, high = found
+                spread = self.params.margin * (high - low)
+                a, b = max(0.0, low - spread), min(1.0, high + spread)
+                unit[d] = a + (b - a) * (i + rng.random()) / aimed  # one point per equal slice
+            choice = tuple(int(rng.integers(size)) for size in shape.choice_sizes)
+            out.append(Point(tuple(float(u) for u in unit), choice))
+        return out
+
+
 @POLICIES.register("table")
 class TablePolicy(Policy):
     """The jobs a design table lists, row for row (``file``: CSV or Parquet, relative to the spec):
