@@ -254,3 +254,89 @@ def test_the_boundary_panel_draws_in_chromium(elevation_spec: Path, chromium) ->
 def rows_count(spec: Path) -> int:
     loaded = load_spec(spec)
     return connect(Store(loaded.store), loaded.name).execute("SELECT count(*) FROM results WHERE counted").fetchone()[0]
+
+
+# -- the boundary policy -----------------------------------------------------------------------
+
+
+def boundary_policy(**params):
+    from sweep3d.stages.plan.policies import POLICIES
+
+    cls = POLICIES.get("boundary")
+    return cls(cls.Params(**params))
+
+
+def run_rounds(policy, shape, seed: int, fails, rounds: int = 30):
+    """Drive ``policy`` as the pipeline does: (every call's points, the final history)."""
+    from sweep3d.stages.plan.policies import Outcome
+
+    history: dict = {}
+    calls = []
+    for _ in range(rounds):
+        points = policy.points(shape, seed, history)
+        calls.append(points)
+        if all(q in history for q in points):
+            break
+        history.update({q: Outcome(failed=fails(q), loss=float(fails(q))) for q in points if q not in history})
+    return calls, history
+
+
+def test_the_boundary_policy_is_a_pure_function_that_resumes_from_its_history() -> None:
+    from sweep3d.spec.space import SpaceShape
+
+    shape = SpaceShape(2, (3,), wraps=(False, True))
+    policy = boundary_policy(samples=40, initial=8, batch=4)
+    fails = lambda q: q.unit[0] < 0.2  # noqa: E731  (fails below a fifth of the first range)
+    calls, history = run_rounds(policy, shape, 5, fails)
+    final = calls[-1]
+    assert len(final) == 40 and len(set(final)) == 40 and len(calls) == 1 + (40 - 8) // 4 + 1
+    for earlier, later in zip(calls, calls[1:]):
+        assert later[: len(earlier)] == earlier  # earlier rounds never change
+    assert all(0 <= u <= 1 for q in final for u in q.unit) and all(0 <= q.choice[0] < 3 for q in final)
+    again, _ = run_rounds(boundary_policy(samples=40, initial=8, batch=4), shape, 5, fails)
+    assert again == calls  # deterministic for a seed
+    assert run_rounds(policy, shape, 6, fails)[0][-1] != final  # and the seed matters
+    # resumes: given the history a killed run left after any round, it proposes the same points
+    for k, earlier in enumerate(calls[:-1]):
+        known = {q: history[q] for q in earlier}
+        assert policy.points(shape, 5, known) == calls[k + 1]
+    assert policy.count(shape) == 40
+
+
+def test_the_boundary_policy_spends_its_budget_where_the_boundary_is_uncertain() -> None:
+    from sweep3d.spec.space import SpaceShape
+
+    shape = SpaceShape(2, ())
+    fails = lambda q: q.unit[1] < 0.3  # noqa: E731  (the second dimension matters, the first does not)
+    policy = boundary_policy(samples=48, initial=16, batch=4)
+    calls, history = run_rounds(policy, shape, 1, fails)
+    later = calls[-1][16:]
+    near = sum(abs(q.unit[1] - 0.3) < 0.1 for q in later)
+    assert near / len(later) > 0.8  # against 0.2 for uniform sampling
+    assert policy.target(shape, calls[-1], history)[0] == 1
+    _, low, high = policy.target(shape, calls[-1], history)
+    assert low <= 0.3 <= high and high - low < 0.01
+
+
+def test_the_boundary_policy_explores_where_it_sees_no_step() -> None:
+    from sweep3d.spec.space import SpaceShape
+
+    shape = SpaceShape(1, ())
+    calls, _ = run_rounds(boundary_policy(samples=32, initial=8, batch=8), shape, 2, lambda q: False)
+    units = sorted(q.unit[0] for q in calls[-1][8:])
+    assert units[0] < 0.2 and units[-1] > 0.8  # spread over the range, not aimed anywhere
+
+
+@pytest.mark.parametrize("policy, key, says", [
+    ('type = "boundary"\npaired = true', "policy.paired", "learns per scene"),
+    ('type = "boundary"\ncross = ["environment"]', "policy.paired", "learns per scene"),
+    ('type = "boundary"\nmargin = -1', "policy.margin", "greater than or equal to 0"),
+])
+def test_the_boundary_policy_refuses_pairing_in_one_line(tmp_path: Path, policy: str, key: str, says: str) -> None:
+    from tests.conftest import TINY_SPEC, write_spec
+
+    spec = write_spec(tmp_path, TINY_SPEC.replace('[policy]\ntype = "grid"', f"[policy]\n{policy}"))
+    result = CliRunner().invoke(app, ["plan", str(spec)])
+    assert result.exit_code == 2, result.output
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 1 and key in lines[0] and says in lines[0], result.output

@@ -43,7 +43,7 @@ def check_point(point: Point, shape: SpaceShape) -> None:
 def test_policies_are_registered():
     assert {"grid", "random"} <= set(POLICIES.names())
     assert POLICIES.get("grid") is GridPolicy
-    with pytest.raises(UserError, match="valid: adaptive, grid, random, sobol"):
+    with pytest.raises(UserError, match="valid: adaptive, boundary, grid, random, sobol"):
         POLICIES.get("bayesian")
 
 
