@@ -340,3 +340,16 @@ def test_the_boundary_policy_refuses_pairing_in_one_line(tmp_path: Path, policy:
     assert result.exit_code == 2, result.output
     lines = result.output.strip().splitlines()
     assert len(lines) == 1 and key in lines[0] and says in lines[0], result.output
+
+
+def test_scenes_that_are_all_right_keep_their_successes_in_every_permutation() -> None:
+    # a step in one scene; the other scenes all right (they add the same successes to each
+    # permutation, as they do to the observed counts)
+    rng = np.random.default_rng(4)
+    x = np.tile(np.linspace(0, 60, 6), 40)
+    scenes = np.repeat(np.arange(10), 24)
+    correct = np.where(scenes == 0, (x >= 30) ^ (rng.random(240) < 0.1), True)
+    fit = fit_step(x, correct, scenes, seed=3)
+    assert fit.p_value < 0.01
+    null = np.where(scenes == 0, rng.random(240) < 0.5, True)
+    assert fit_step(x, null, scenes, seed=3).p_value > 0.05

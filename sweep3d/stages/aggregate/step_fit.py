@@ -186,26 +186,30 @@ def _permutation_p(group: np.ndarray, sizes: np.ndarray, y: np.ndarray, strata: 
 
 
 def _strata_tables(group: np.ndarray, y: np.ndarray, strata: np.ndarray,
-                   m: int) -> list[tuple[np.ndarray, np.ndarray, int]]:
-    """Per stratum with both outcomes: its non-empty groups, their sizes and its successes."""
+                   m: int) -> tuple[list[tuple[np.ndarray, np.ndarray, int]], np.ndarray]:
+    """Per stratum with both outcomes: its non-empty groups, their sizes and its successes; and
+    the successes per group of the strata that are all right (the same in every permutation)."""
     out = []
+    fixed = np.zeros(m, np.int64)
     for s in np.unique(strata):
         mine = strata == s
         k = int(y[mine].sum())
-        if k in (0, int(mine.sum())):
-            continue  # all right or all wrong: every permutation is the same
         sizes = np.bincount(group[mine], minlength=m)
-        where = np.flatnonzero(sizes)
-        out.append((where, sizes[where], k))
-    return out
+        if k == int(mine.sum()):
+            fixed += sizes  # all right: every permutation is the same
+        elif k:
+            where = np.flatnonzero(sizes)
+            out.append((where, sizes[where], k))
+    return out, fixed
 
 
-def _permuted_wins(tables: list[tuple[np.ndarray, np.ndarray, int]], m: int, batch: int,
+def _permuted_wins(tables: tuple[list[tuple[np.ndarray, np.ndarray, int]], np.ndarray], m: int, batch: int,
                    rng: np.random.Generator) -> np.ndarray:
     """Successes per group (batch, m) of ``batch`` permutations within strata: each stratum's
     successes dealt to its groups as successive hypergeometric draws (a permutation's counts)."""
-    wins = np.zeros((batch, m), np.int64)
-    for where, sizes, k in tables:
+    varying, fixed = tables
+    wins = np.tile(fixed, (batch, 1))
+    for where, sizes, k in varying:
         good = np.full(batch, k, np.int64)
         left = int(sizes.sum())
         for g, size in zip(where[:-1].tolist(), sizes[:-1].tolist()):
