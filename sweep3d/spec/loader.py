@@ -451,6 +451,10 @@ def _control_spaces(control: Control, entry: dict[str, Any], where: str, fail, b
         spaces[name] = _check_space(control, name, space, f"{where}.{name}", fail)
         if is_spec_path(fields[name]):
             spaces[name] = _resolve_paths(spaces[name], base, f"{where}.{name}", fail)
+    for name, (stands_for, *_) in control.folds.items():
+        if name in spaces and stands_for in spaces:
+            raise fail(f"{where}.{name}", f"{name!r} sets the {stands_for!r} of control {control.type_name!r}: "
+                                          f"give {stands_for} or {name}, not both")
     return spaces
 
 

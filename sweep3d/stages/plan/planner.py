@@ -167,8 +167,10 @@ def _in_frame(rendered: list[ControlInstance], batches: dict[str, ControlBatch],
         return np.array([_in_frame_one(applying, batches, r) for r in range(n)], dtype=bool)
     fields: dict[str, np.ndarray] = {}
     for inst, mapping in zip(applying, known):
+        values = batches[inst.id].values
         for param, name in mapping.items():  # type: ignore[union-attr]
-            fields[name] = batches[inst.id].values.floats(param)
+            if param in values.numbers or param in values.dumps[0]:  # else left out: the state's default
+                fields[name] = values.floats(param)
     if not fields:  # nothing moves the object or the camera: one answer for every job
         return np.full(n, _in_frame_one(applying, batches, 0), dtype=bool)
     inside, unsure = in_frame_many(fields, n)
