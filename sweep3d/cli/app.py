@@ -284,8 +284,7 @@ def export(
     from sweep3d.api import Experiment
     from sweep3d.export import export_dataset
 
-    experiment = Experiment(spec)
-    result = export_dataset(experiment.spec, form, output=output, where=where, model=model,
+    result = export_dataset(Experiment(spec).spec, form, output=output, where=where, model=model,
                             unevaluable=unevaluable, append=append, link=link, console=console)
     console.print(escape(result.line()), soft_wrap=True)
 
