@@ -29,8 +29,9 @@ from sweep3d.cli import app
 from sweep3d.errors import UserError
 from sweep3d.export.base import Batch, Item
 from sweep3d.export.coco import CocoWriter
+from sweep3d.export.parquet import ParquetWriter
 from sweep3d.export.selection import IMAGE_DIGEST, MASK_DIGEST, check_where
-from sweep3d.export.target import ExportFolder, Staging, design_table
+from sweep3d.export.target import ExportFolder, Staging, class_folder, design_table
 from sweep3d.progress import StageProgress
 from sweep3d.stages.aggregate import connect
 from sweep3d.stages.aggregate.views import stored_parameters
@@ -190,7 +191,8 @@ def test_coco_round_trip_boxes_masks_areas_sizes_and_categories(export_run: Path
                                       row["gt_y1"] - row["gt_y0"]]
         assert np.array_equal(coco.annToMask(annotation).astype(bool), mask)  # the mask pass, decoded
         assert annotation["iscrowd"] == 0 and annotation.get("ignore", 0) == (0 if row["evaluable"] else 1)
-    assert len({a["id"] for a in coco.dataset["annotations"]}) == len(coco.dataset["annotations"]) == 8
+    shown = sum(1 for row in rows.values() if row["visible_pixels"])
+    assert len({a["id"] for a in coco.dataset["annotations"]}) == len(coco.dataset["annotations"]) == shown >= 6
 
 
 def test_an_oracle_from_the_exported_annotations_scores_ap_one(export_run: Path, tmp_path: Path) -> None:
@@ -314,6 +316,30 @@ def test_parquet_is_a_hugging_face_dataset_of_the_image_bytes_and_every_results_
     assert list(raw["id"]) == list(range(1, 11)) and list(raw["job"]) == sorted(rows)
 
 
+def test_appending_other_columns_to_parquet_rewrites_the_earlier_files_to_one_schema(tmp_path: Path) -> None:
+    """An append from another experiment (other controls) keeps one schema over the files, which
+    ``datasets`` needs: the earlier file gains the new columns as nulls."""
+    store = Store(tmp_path / "store")
+    data = _png(8, 8)
+    store.blob_path("aa0").parent.mkdir(parents=True)
+    store.blob_path("aa0").write_bytes(data)
+    row = {"experiment": "e", "job": 0, "image_key": "aa0", IMAGE_DIGEST: hashlib.sha256(data).hexdigest()}
+    batches = [pa.table({"job": [0], "yaw": [45.0]}), pa.table({"job": [0], "sigma": [2.0], "skin": ["zebra"]})]
+    for n, table in enumerate(batches):
+        folder = ExportFolder(tmp_path / "out", "parquet", fresh=n == 0)
+        staging = Staging(folder)
+        ParquetWriter().write(Batch([Item(n + 1, 0, row, "carton", 1, {})], store, table, table.column_names),
+                              folder, staging, StageProgress(None, None))
+        staging.commit()
+    files = sorted((tmp_path / "out" / "data").glob("*.parquet"))
+    schemas = [pq.read_schema(p) for p in files]
+    assert len(files) == 2 and schemas[0] == schemas[1]
+    assert schemas[0].names == ["image", "id", "label", "job", "yaw", "sigma", "skin"]
+    both = pa.concat_tables(pq.read_table(p) for p in files)
+    assert both.column("yaw").to_pylist() == [45.0, None] and both.column("skin").to_pylist() == [None, "zebra"]
+    assert both.column("image").to_pylist()[1]["bytes"] == data
+
+
 # -- the design table, the selection, ids ------------------------------------------------------
 def test_the_default_exports_the_evaluable_failures_with_their_design_table(export_run: Path, tmp_path: Path) -> None:
     out = exported(export_run, tmp_path / "failures", "--format", "imagefolder")
@@ -387,6 +413,33 @@ def test_an_output_folder_with_other_files_is_refused(tmp_path: Path) -> None:
     assert [p.name for p in out.iterdir()] == ["notes.txt"] and not (tmp_path / "store").exists()
 
 
+def test_a_run_without_the_mask_pass_exports_folders_but_not_coco(tmp_path: Path) -> None:
+    """A classification store (made by hand: no truth passes) exports its failures as an ImageFolder;
+    COCO, which needs the masks, is refused in one line before anything is written."""
+    from datetime import datetime
+
+    from sweep3d.spec.columns import PARAMETERS_METADATA
+
+    write_spec(tmp_path, TINY_SPEC)
+    store = Store(tmp_path / "store")
+    jobs = [{"experiment": "tiny", "job": i, "object": "box", "environment": "white", "orientation_yaw": 45.0 * i,
+             "render_key": f"ab{i}", "image_key": f"ab{i}", "pred_key": f"p{i}", "in_frame": True, "model": "m"}
+            for i in range(3)]
+    table = pa.Table.from_pylist(jobs).replace_schema_metadata({PARAMETERS_METADATA: json.dumps(["orientation_yaw"])})
+    store.write_table_file(store.jobs_path("tiny"), table)
+    store.append("predictions", [{"pred_key": f"p{i}", "image_key": f"ab{i}", "valid": True, "correct": i == 1,
+                                  "top1_label": "x", "loss": 1.0, "created_at": datetime(2024, 1, 1)} for i in range(3)])
+    for i in range(3):
+        store.blob_path(f"ab{i}").parent.mkdir(parents=True, exist_ok=True)
+        store.blob_path(f"ab{i}").write_bytes(_png(4 + i, 4))
+    assert "mask pass" in one_line_error(tmp_path, "--format", "coco", "-o", str(tmp_path / "coco"))
+    assert not (tmp_path / "coco").exists() and not list(tmp_path.glob(".coco*"))
+    out = exported(tmp_path, tmp_path / "folder", "--format", "imagefolder")
+    assert sorted(p.name for p in (out / "carton").iterdir()) == ["000001.png", "000002.png"]  # jobs 0 and 2 failed
+    assert (out / "carton" / "000002.png").read_bytes() == _png(6, 4)
+    assert (out / "design.csv").read_text() == "object,environment,orientation_yaw\nbox,white,0.0\nbox,white,90.0\n"
+
+
 def test_where_is_one_condition_as_duckdb_parses_it() -> None:
     for fine in ("NOT correct", "object = 'a;b' AND job > 1", "job IN (SELECT job FROM results WHERE correct)",
                  "correct -- a comment"):
@@ -401,6 +454,7 @@ def test_the_design_table_leaves_a_control_that_does_not_apply_empty() -> None:
              {"design": {"object": "b", "environment": "w", "yaw": 0.0, "scale_factor": 0.5, "flag": True}}]
     assert design_table(items).decode().splitlines() == [
         "object,environment,yaw,scale_factor,flag", "a,w,45.0,,", "b,w,0.0,0.5,true"]
+    assert class_folder("coffee mug") == "coffee mug" and "/" not in class_folder("a/b") != class_folder("a_b")
 
 
 def test_bad_where_and_a_damaged_blob_on_a_real_run_write_nothing(export_run: Path, tmp_path: Path) -> None:
