@@ -37,6 +37,10 @@ class CocoWriter(DatasetWriter):
 
     def write(self, batch: Batch, folder: ExportFolder, staging: Staging, progress: StageProgress) -> None:
         document = _existing(folder)
+        if batch.items:  # images the manifest does not list: left by an append killed while it committed
+            orphans = {i["id"] for i in document["images"] if i["id"] >= batch.items[0].id}
+            document["images"] = [i for i in document["images"] if i["id"] not in orphans]
+            document["annotations"] = [a for a in document["annotations"] if a["image_id"] not in orphans]
         next_annotation = max((a["id"] for a in document["annotations"]), default=0) + 1
         for item in batch.items:
             data = image_bytes(batch.store, item.row)
