@@ -53,17 +53,30 @@ def plan(
                                    "the material values it renders with (the file's, as the importer read them, "
                                    "and the spec's overrides)."),
     jobs: int = typer.Option(0, "--jobs", min=0, help="Also list the first N jobs: scene, values, cached or not."),
+    design: Optional[Path] = typer.Option(None, "--design", help="Also write every job's object, environment and "
+                                          "control values to this .csv or .parquet file: a design the table policy "
+                                          "replays (type = \"table\", file = \"...\")."),
 ) -> None:
     """Count the jobs a spec expands to, what is already cached, and an estimated time."""
     from sweep3d.cli.output import print_plan
     from sweep3d.stages import load_spec
 
+    if design is not None:
+        from sweep3d.stages.plan.design import check_output
+
+        check_output(design)
     loaded = load_spec(spec)
     if materials:  # first: a part or material only Blender can check fails before anything prints
         from sweep3d.cli.materials import effective_materials, print_materials
 
         described = effective_materials(loaded)
-    print_plan(console, loaded, jobs)
+    made = print_plan(console, loaded, jobs)
+    if design is not None:
+        from sweep3d.stages.plan.design import write_design
+
+        rows = write_design(made.jobs.columns.table(loaded.name, loaded.parameter_columns), loaded.parameter_columns,
+                            design)
+        console.print(f"wrote the design of {rows} jobs to {escape(str(design))}", highlight=False)
     if materials:
         print_materials(console, loaded, described)
 

@@ -45,9 +45,9 @@ def cache_status(plan: Plan, store: Store, model: ModelHandle, several: bool = F
             for stage in (RenderStage(), PostprocessStage(), InferStage(model, several=several))]
 
 
-def print_plan(console: Console, spec: LoadedSpec, jobs: int = 0) -> None:
+def print_plan(console: Console, spec: LoadedSpec, jobs: int = 0) -> Plan:
     """What ``sweep3d plan`` prints: the counts per stage, cached and to compute, the estimate, and
-    with ``jobs`` the first that many jobs of the first model's plan."""
+    with ``jobs`` the first that many jobs of the first model's plan (which it returns)."""
     store = Store(spec.store)
     models = [ModelHandle.resolve(spec, settings) for settings in spec.models]
     plans = [plan_spec(spec, model) for model in models]
@@ -89,6 +89,7 @@ def print_plan(console: Console, spec: LoadedSpec, jobs: int = 0) -> None:
     print_warning(console, slow_render_warning(spec.render, max(p.framing.crop for p in plans), to_render))
     if jobs:
         print_jobs(console, plan, store, jobs)
+    return plan
 
 
 def load_note(cores: int | None = None, load: float | None = None) -> str:
@@ -130,11 +131,13 @@ def print_jobs(console: Console, plan: Plan, store: Store, n: int) -> None:
 
 
 def _pairing(spec: LoadedSpec) -> str:
-    """What ``[policy] paired`` shares, for the plan's first line ("" when it is off)."""
+    """What ``[policy] paired`` shares and ``cross`` crosses, for the plan's first line ("" when neither)."""
     paired = spec.spec.policy.paired
-    if not paired:
-        return ""
-    return " (paired across objects and environments)" if paired == "all" else " (paired across environments)"
+    parts = [] if not paired else ["paired across objects and environments" if paired == "all"
+                                   else "paired across environments"]
+    parts += [f"{name} crossed with {'every draw' if k is None else f'the first {k} draws'}"
+              for name, k in spec.spec.policy.crossed.items()]
+    return f" ({'; '.join(parts)})" if parts else ""
 
 
 def _models_status(plans: list[Plan], models: list[ModelHandle], store: Store) -> list[tuple[str, int, int, int]]:

@@ -25,6 +25,7 @@ from sweep3d.registry import is_user_plugin
 from sweep3d.spec.assets import check_archive, resolve_hdri, resolve_mesh
 from sweep3d.spec.catalogue import Catalogue
 from sweep3d.spec.columns import JOB_COLUMNS, PREDICTION_COLUMNS, TRUTH_RESULT_COLUMNS, parameter_column
+from sweep3d.spec.includes import BASE_KEY, located, merge_includes
 from sweep3d.spec.looks import check_look, valid_keys
 from sweep3d.spec.models import (
     EnvironmentSpec,
@@ -164,8 +165,19 @@ def validate_spec(raw: dict[str, Any], catalogue: Catalogue, *, path: Path, base
         source: the spec's text, for one that has no file to read it back from.
 
     Raises:
-        SpecError: for any mistake, naming ``path``, the key and the fix.
+        SpecError: for any mistake, naming ``path`` (or the included file), the key and the fix.
     """
+    included = merge_includes(raw, str(path), base)
+    if included.texts:  # the runs table records what the spec was made of
+        own = source if source is not None else path.read_text(encoding="utf-8")
+        source = own + "".join(f"\n\n# ---- included: {file} ----\n{text}" for file, text in included.texts)
+    try:
+        return _validated(included.raw, catalogue, path=path, base=base, source=source)
+    except SpecError as exc:
+        raise located(exc, included) from None
+
+
+def _validated(raw: dict[str, Any], catalogue: Catalogue, *, path: Path, base: Path, source: str | None) -> LoadedSpec:
     try:
         spec = Spec.model_validate(raw)
     except ValidationError as exc:
@@ -199,7 +211,7 @@ def validate_spec(raw: dict[str, Any], catalogue: Catalogue, *, path: Path, base
     labels = _resolve_labels(spec, fail, catalogue)
     controls = _load_controls(spec, fail, base, catalogue)
     _check_columns(controls, fail, evaluator)
-    policy = _load_policy(spec, fail, catalogue)
+    policy = _load_policy(spec, fail, catalogue, controls, base)
     store = Path(spec.experiment.store)
     store = (store if store.is_absolute() else base / store).resolve()
     return LoadedSpec(path, spec, store, meshes, hdris, labels, controls, policy, source)
@@ -366,7 +378,8 @@ def _load_controls(spec: Spec, fail, base: Path, catalogue: Catalogue) -> list[C
             raise fail(f"{where}.id", f"control id {control_id!r} is used twice; give this one its own id = '...'")
         ids.add(control_id)
         control = cls(control_id, type_name)
-        spaces = _control_spaces(control, entry, f"{where}", fail, base)
+        folder = Path(entry[BASE_KEY]) if BASE_KEY in entry else base  # an included file's control: its folder
+        spaces = _control_spaces(control, {k: v for k, v in entry.items() if k != BASE_KEY}, f"{where}", fail, folder)
         objects = _name_filter(entry, "objects", object_names, where, fail)
         environments = _name_filter(entry, "environments", env_names, where, fail)
         instances.append(ControlInstance(control, spaces, objects, environments))
@@ -499,7 +512,7 @@ def _name_filter(entry, key, valid: set[str], where: str, fail) -> frozenset[str
     return frozenset(names)
 
 
-def _load_policy(spec: Spec, fail, catalogue: Catalogue):
+def _load_policy(spec: Spec, fail, catalogue: Catalogue, controls: list[ControlInstance], base: Path):
     params = {k: v for k, v in (spec.policy.model_extra or {}).items()}
     try:
         cls = catalogue.policies.get(spec.policy.type)
@@ -508,11 +521,38 @@ def _load_policy(spec: Spec, fail, catalogue: Catalogue):
     if spec.policy.paired and getattr(cls, "adaptive", False):
         raise fail("policy.paired", f"the {spec.policy.type} policy learns per scene, so its points cannot be "
                                     "shared across scenes; use random or sobol, or remove paired")
+    if spec.policy.crossed and getattr(cls, "adaptive", False):
+        raise fail("policy.cross", f"the {spec.policy.type} policy learns per scene from the points it drew; "
+                                   "cross lists with random, sobol or grid")
+    for name in spec.policy.crossed:
+        _check_crossed(name, controls, fail)
     try:
-        return cls(cls.Params(**params))
+        policy = cls(cls.Params(**params))
     except ValidationError as exc:
         err = exc.errors()[0]
         raise fail(f"policy.{_key_path(err['loc'])}", _params_problem(err)) from None
+    if getattr(policy, "lists_jobs", False) and (spec.policy.cross or spec.policy.paired):
+        raise fail("policy.cross" if spec.policy.cross else "policy.paired",
+                   f"the {spec.policy.type} policy lists every job's values itself; remove cross and paired")
+    bind = getattr(policy, "bind", None)
+    if bind is not None:
+        bind(base, controls, [o.name for o in spec.objects], [e.name for e in spec.environments])
+    return policy
+
+
+def _check_crossed(name: str, controls: list[ControlInstance], fail) -> None:
+    """A crossed name is ``"<control id>.<param>"`` of a listed parameter (a range is drawn, not crossed)."""
+    control_id, _, param = name.partition(".")
+    space = next((inst.spaces.get(param) for inst in controls if inst.id == control_id), None)
+    if space is None:
+        valid = ", ".join(["environment", "object", *(f"{i.id}.{p}" for i in controls for p, s in i.spaces.items()
+                                                       if isinstance(s, Choice))])
+        raise fail("policy.cross", f"{name!r} names no control parameter the spec sets; give \"<control id>.<param>\" "
+                                   f"of a list, \"environment\" or \"object\" (here: {valid})")
+    if not isinstance(space, Choice):
+        what = "a range, which the policy draws" if isinstance(space, Range) else "one value"
+        raise fail("policy.cross", f"{name!r} is {what}; only a list of values (e.g. skin = [\"zebra\", \"tiger\"]) "
+                                   "is crossed")
 
 
 def _params_problem(err: dict[str, Any]) -> str:

@@ -300,6 +300,13 @@ class PolicySpec(Typed):
         False, description="Draw the controls from (seed, object, control id), not per scene, so every environment "
                            "of an object gets the same points (\"all\": every object too); for paired statistics.")
 
+    cross: dict[str, int | None] = Field(
+        default_factory=dict,
+        description="Listed values crossed with the policy's draws instead of drawn per job: \"<control id>.<param>\" "
+                    "(every value on every draw; a number k in a table: on the first k draws only, the other draws "
+                    "keeping the first listed value), \"environment\" (the same draws in every environment: "
+                    "paired = true) and \"object\" (every object too: paired = \"all\").")
+
     @field_validator("paired", mode="before")
     @classmethod
     def _paired_word(cls, value: Any) -> Any:
@@ -307,6 +314,43 @@ class PolicySpec(Typed):
         if value is True or value is False or value == "all":
             return value
         raise ValueError(f'must be true, false or "all" (got {value!r})')
+
+    @field_validator("cross", mode="before")
+    @classmethod
+    def _cross_table(cls, value: Any) -> Any:
+        """A list names what is crossed with every draw; a table may limit a list to the first k draws."""
+        if isinstance(value, list) and all(isinstance(v, str) for v in value):
+            value = dict.fromkeys(value, True)
+        if not isinstance(value, dict):
+            raise ValueError('must be a list such as ["environment", "material.skin"] or a table such as '
+                             f'{{ environment = true, "material.skin" = 5 }}; got {value!r}')
+        out: dict[str, int | None] = {}
+        for name, k in value.items():
+            if k is True:
+                out[name] = None
+            elif isinstance(k, int) and not isinstance(k, bool) and k >= 1 and name not in ("environment", "object"):
+                out[name] = k
+            else:
+                what = "true" if name in ("environment", "object") else "true (every draw) or a number k >= 1 (the first k draws)"
+                raise ValueError(f"{name!r} = {k!r}: give {what}")
+        return out
+
+    @model_validator(mode="after")
+    def _cross_scenes(self) -> PolicySpec:
+        """Crossing the environment (object) is what ``paired`` does: the two say it once."""
+        wanted = "all" if "object" in self.cross else True if "environment" in self.cross else self.paired
+        if wanted != self.paired and "paired" in self.model_fields_set and not (wanted is True and self.paired == "all"):
+            raise ValueError(f"cross names {'object' if wanted == 'all' else 'environment'}, which is paired = "
+                             f"{wanted!r}; remove paired or make it agree")
+        if wanted is True and self.paired == "all":
+            wanted = "all"
+        object.__setattr__(self, "paired", wanted)
+        return self
+
+    @property
+    def crossed(self) -> dict[str, int | None]:
+        """The control parameters crossed (``"id.param"`` → the first k draws, None for all)."""
+        return {name: k for name, k in self.cross.items() if name not in ("environment", "object")}
 
 
 class Spec(StrictModel):

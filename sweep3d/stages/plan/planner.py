@@ -20,12 +20,13 @@ from sweep3d.spec.framing import Framing
 from sweep3d.spec.loader import ControlInstance, LoadedSpec
 from sweep3d.spec.models import ModelSpec
 from sweep3d.spec.sniff import unreadable
-from sweep3d.spec.space import Point, SearchSpace
+from sweep3d.spec.space import Column, Point, SearchSpace
 from sweep3d.stages.infer.keys import evaluator_key, infer_base, pred_keys
 from sweep3d.stages.jobs import JobList, Plan, PlanColumns, SceneBlock
 from sweep3d.stages.passes import truth_passes
 from sweep3d.stages.plan.batch import ControlBatch, control_batch, groups, keyed_texts
 from sweep3d.stages.plan.checked import policy_count
+from sweep3d.stages.plan.crossing import crossing
 from sweep3d.stages.plan.memory import check_memory
 from sweep3d.stages.plan.pairing import scene_points
 from sweep3d.stages.plan.policies import Outcome
@@ -92,14 +93,23 @@ def make_plan(spec: LoadedSpec, *, framing: Framing, model_digest: str, blender:
             scene = scene_key(blender, settings, object_digest, env.key_part(hdri_digests[env.name]), obj.look_key())
             scene_controls = [c for c in spec.controls if c.applies_to(obj.name, env.name)]
             space = SearchSpace(scene_controls)
-            unit, choice = scene_points(spec.policy, spec.spec.policy.paired, space, spec.experiment.seed, obj.name,
-                                        env.name, (history or {}).get((obj.name, env.name), {}), spec.spec.policy.type)
+            listing = getattr(spec.policy, "listed", None)  # a user's policy may not subclass Policy
+            listed = listing(space, obj.name, env.name) if listing else None
+            if listed is None:
+                crossed = crossing(space, spec.spec.policy.crossed)
+                unit, choice = crossed.expand(*scene_points(
+                    spec.policy, spec.spec.policy.paired, crossed.drawn, spec.experiment.seed, obj.name, env.name,
+                    (history or {}).get((obj.name, env.name), {}), spec.spec.policy.type))
+            else:
+                unit, choice = listed.unit, listed.choice
             n = len(unit)
             if len(keys.render) + n > spec.experiment.max_jobs:  # a policy that cannot count
                 raise _too_many(spec, f"more than {spec.experiment.max_jobs:,}")
             if n == 0:
                 continue
             columns = space.columns(unit, choice)
+            for (control_id, param), numbers in (listed.exact.items() if listed else ()):
+                columns[control_id][param] = Column(numbers=numbers)
             batches = {c.id: control_batch(c, columns[c.id], n) for c in scene_controls}
             blocks.append(SceneBlock(obj.name, env.name, len(keys.render), n,
                                      {cid: b.values for cid, b in batches.items()}, unit, choice))
@@ -203,8 +213,9 @@ def count_jobs(spec: LoadedSpec) -> int | None:
         for env in spec.environments:
             applying = tuple(i for i, c in enumerate(spec.controls) if c.applies_to(obj.name, env.name))
             if applying not in per_space:
-                shape = SearchSpace([spec.controls[i] for i in applying]).shape
-                per_space[applying] = policy_count(spec.policy, spec.spec.policy.type, shape)
+                crossed = crossing(SearchSpace([spec.controls[i] for i in applying]), spec.spec.policy.crossed)
+                draws = policy_count(spec.policy, spec.spec.policy.type, crossed.drawn.shape)
+                per_space[applying] = None if draws is None else crossed.count(draws)
             if per_space[applying] is None:
                 return None
             total += per_space[applying]

@@ -4,13 +4,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import ClassVar, Mapping
+from pathlib import Path
+from typing import ClassVar, Mapping, Sequence
 
 import numpy as np
 from pydantic import ConfigDict, Field, StrictBool
 
 from sweep3d.registry import Registry
-from sweep3d.spec.space import Point, SpaceShape, as_arrays, as_points
+from sweep3d.spec.loader import ControlInstance
+from sweep3d.spec.params import Range
+from sweep3d.spec.space import Point, SearchSpace, SpaceShape, as_arrays, as_points
 from sweep3d.typed import Typed
 
 
@@ -39,6 +42,8 @@ class Policy:
     #: Its draws of each dimension are independent of the others and it returns as many points
     #: whatever the shape: a paired plan may then draw each control from a stream of its own.
     separable: ClassVar[bool] = False
+    #: It lists each scene's jobs (:meth:`listed`) instead of drawing points: nothing to pair or cross.
+    lists_jobs: ClassVar[bool] = False
 
     def __init__(self, params: PolicyParams) -> None:
         self.params = params
@@ -54,12 +59,35 @@ class Policy:
         """
         return as_arrays(self.points(shape, seed, history), shape)
 
+    def bind(self, base: Path, controls: Sequence[ControlInstance], objects: Sequence[str],
+             environments: Sequence[str]) -> None:
+        """Called once when the spec loads, with its folder, controls and scene names: a policy
+        that reads them (a design table) checks them here and raises ``SpecError``. Others ignore it."""
+
+    def listed(self, space: SearchSpace, object_name: str, environment: str) -> Listed | None:
+        """A scene's jobs with their exact values, for a policy that lists jobs rather than drawing
+        points in the unit cube (a design table); None (every other policy): the planner asks
+        :meth:`arrays`."""
+        return None
+
     def count(self, shape: SpaceShape) -> int | None:
         """How many points ``points`` returns for ``shape`` (at most, over all rounds of an adaptive
         policy), known without making them, so a plan too big to hold is refused before it is
         expanded. None: this policy cannot say (the planner then counts points as they come).
         """
         return None
+
+
+@dataclass(frozen=True)
+class Listed:
+    """A scene's jobs as a listing policy gives them: the points (as :meth:`Policy.arrays` makes
+    them) and each range parameter's exact values, (control id, param) → one value per job, which
+    the planner takes instead of mapping the unit coordinates back (a round trip that can move the
+    last bit)."""
+
+    unit: np.ndarray
+    choice: np.ndarray
+    exact: dict[tuple[str, str], np.ndarray]
 
 
 POLICIES: Registry[type[Policy]] = Registry("policy")
@@ -225,3 +253,60 @@ class AdaptivePolicy(Policy):
         choice = tuple(int(rng.integers(size)) if rng.random() < self.params.switch else c
                        for c, size in zip(parent.choice, shape.choice_sizes))
         return Point(tuple(unit), choice)
+
+
+@POLICIES.register("table")
+class TablePolicy(Policy):
+    """The jobs a design table lists, row for row (``file``: CSV or Parquet, relative to the spec):
+    columns ``object``, ``environment`` and ``<control id>_<param>`` for each parameter the spec
+    varies, as ``sweep3d plan --design`` writes them. Each value is checked against the range or
+    list the spec gives; the seed draws nothing."""
+
+    lists_jobs = True
+
+    class Params(PolicyParams):
+        file: str = Field(min_length=1)
+
+    def bind(self, base: Path, controls: Sequence[ControlInstance], objects: Sequence[str],
+             environments: Sequence[str]) -> None:
+        from sweep3d.errors import SpecError
+        from sweep3d.spec.sniff import check_file
+        from sweep3d.stages.plan.design import SUFFIXES, read_design
+
+        path = Path(self.params.file).expanduser()
+        path = path if path.is_absolute() else base / path
+        if path.suffix.lower() not in SUFFIXES:
+            raise SpecError(str(path), "", f"a design table is a {' or '.join(SUFFIXES)} file")
+        check_file(path, "design table", "paths are relative to the spec file")
+        self.rows = read_design(path, controls, objects, environments)
+
+    def listed(self, space: SearchSpace, object_name: str, environment: str) -> Listed:
+        rows = self.rows.get((object_name, environment))
+        n = rows.count if rows else 0
+        unit = np.zeros((n, len(space.continuous)))
+        choice = np.zeros((n, len(space.discrete)), dtype=np.int64)
+        exact = {}
+        for d, dim in enumerate(space.continuous):
+            values = np.asarray(rows.values[(dim.control_id, dim.param)], dtype=np.float64 if not dim.space.integer
+                                else object) if n else np.zeros(0)
+            exact[(dim.control_id, dim.param)] = values
+            unit[:, d] = _unit_of(dim.space, values.astype(np.float64)) if n else 0.0
+        for d, dim in enumerate(space.discrete):
+            index = {option: i for i, option in enumerate(dim.space.options)}
+            choice[:, d] = [index[v] for v in rows.values[(dim.control_id, dim.param)]] if n else []
+        return Listed(unit, choice, exact)
+
+    def arrays(self, shape: SpaceShape, seed: int, history: Mapping[Point, Outcome]) -> tuple[np.ndarray, np.ndarray]:
+        raise TypeError("the table policy lists each scene's jobs (Policy.listed); it has no points of its own")
+
+    def count(self, shape: SpaceShape) -> None:
+        return None
+
+
+def _unit_of(space: Range, values: np.ndarray) -> np.ndarray:
+    """Where ``values`` lie in the unit cube of ``space`` (what a drawing policy would have given)."""
+    if space.log:
+        u = (np.log(values) - math.log(space.low)) / (math.log(space.high) - math.log(space.low))
+    else:
+        u = (values - space.low) / (space.high - space.low)
+    return np.clip(u, 0.0, 1.0)

@@ -1,0 +1,137 @@
+"""A spec's ``include``: shared tables (objects, environments, controls, …) read from other files.
+
+    include = ["household.toml"]          # relative to the spec; one list of objects, many studies
+
+Lists of tables (``objects``, ``environments``, ``controls``, ``models``) are joined: an
+included file's entries first, in include order, then the spec's own. Tables (``[render]``,
+``[policy]``, …) are merged key by key, the including file's keys winning. An included file
+may include others; a file included twice, or a cycle, is an error. Relative paths in an
+included file (meshes, HDRIs, the store, a design table, a control's files) are relative to
+*that* file, as they would be if it were a spec of its own.
+
+An error in an included entry names the file it comes from and its index there.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from sweep3d.errors import SpecError
+
+LISTS = ("objects", "environments", "controls", "models")
+TABLES = ("experiment", "render", "model", "evaluator", "policy", "report")
+#: A control entry's folder when it came from an included file (its file parameters resolve there).
+BASE_KEY = "__folder__"
+
+
+@dataclass
+class Included:
+    """The spec with its includes merged in, the texts it was made of, and where each list entry came from."""
+
+    raw: dict[str, Any]
+    texts: list[tuple[str, str]] = field(default_factory=list)  # (file, text) of each included file
+    origins: dict[str, list[tuple[str, int]]] = field(default_factory=dict)  # list key → (file, index) per entry
+
+
+def merge_includes(raw: dict[str, Any], file: str, base: Path) -> Included:
+    """``raw`` with its ``include`` resolved (``file`` and ``base``: the spec's name and folder).
+
+    Raises:
+        SpecError: an ``include`` that is not a path or list of paths, a file that cannot be read
+            or parsed, a file included twice or in a cycle, an ``include`` key of another type.
+    """
+    return _merge(raw, file, base, (str(Path(file).resolve()) if Path(file).exists() else file,), [])
+
+
+def _merge(raw: dict[str, Any], file: str, base: Path, chain: tuple[str, ...], texts: list[tuple[str, str]]) -> Included:
+    from sweep3d.spec.loader import parse_toml
+
+    own = dict(raw)
+    names = own.pop("include", [])
+    if isinstance(names, str):
+        names = [names]
+    if not (isinstance(names, list) and all(isinstance(n, str) and n for n in names)):
+        raise SpecError(file, "include", 'must be a path or a list of paths to TOML files, e.g. ["shared.toml"]')
+    merged: dict[str, Any] = {}
+    origins: dict[str, list[tuple[str, int]]] = {}
+    for name in names:
+        path = (base / Path(name).expanduser()).resolve()
+        if str(path) in chain:
+            raise SpecError(file, "include", f"{name!r} includes itself (through {' → '.join(Path(c).name for c in chain)})")
+        if any(str(path) == seen for seen, _ in texts):
+            raise SpecError(file, "include", f"{name!r} is included twice; include it once")
+        try:
+            text = path.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise SpecError(file, "include", f"cannot read {name!r} ({getattr(exc, 'strerror', None) or exc}); "
+                                             "paths are relative to the including file") from None
+        texts.append((str(path), text))
+        inner = _merge(_rebased(parse_toml(text, str(path)), path.parent), str(path), path.parent, (*chain, str(path)),
+                       texts)
+        _join(merged, origins, inner.raw, inner.origins)
+    for key in LISTS:
+        if key in own and not isinstance(own[key], list):
+            return Included({**merged, **own}, texts, origins)  # the spec's validation names the mistake
+    _join(merged, origins, own, {key: [(file, i) for i in range(len(own.get(key, [])))] for key in LISTS})
+    return Included(merged, texts, origins)
+
+
+def _join(into: dict[str, Any], origins: dict[str, list[tuple[str, int]]], raw: dict[str, Any],
+          where: dict[str, list[tuple[str, int]]]) -> None:
+    """Add ``raw``'s tables to ``into``: lists appended, tables merged (``raw``'s keys win)."""
+    for key, value in raw.items():
+        if key in LISTS and isinstance(value, list) and isinstance(into.get(key, []), list):
+            into[key] = [*into.get(key, []), *value]
+            origins[key] = [*origins.get(key, []), *where.get(key, [])]
+        elif key in TABLES and isinstance(value, dict) and isinstance(into.get(key), dict):
+            into[key] = {**into[key], **value}
+        else:
+            into[key] = value
+
+
+def _rebased(raw: dict[str, Any], folder: Path) -> dict[str, Any]:
+    """An included file's relative paths made absolute against its own folder."""
+    out = dict(raw)
+    out["objects"] = [_with_path(o, "mesh", folder) for o in raw.get("objects", [])] if _tables(raw, "objects") else \
+        raw.get("objects")
+    out["environments"] = [_with_path(e, "hdri", folder) for e in raw.get("environments", [])] \
+        if _tables(raw, "environments") else raw.get("environments")
+    if _tables(raw, "controls"):
+        out["controls"] = [{**c, BASE_KEY: str(folder)} for c in raw.get("controls", [])]
+    for table, key in (("experiment", "store"), ("policy", "file")):
+        if isinstance(raw.get(table), dict):
+            out[table] = _with_path(raw[table], key, folder)
+    return {k: v for k, v in out.items() if v is not None or k in raw}
+
+
+def _tables(raw: dict[str, Any], key: str) -> bool:
+    return isinstance(raw.get(key), list) and all(isinstance(t, dict) for t in raw[key])
+
+
+def _with_path(table: dict[str, Any], key: str, folder: Path) -> dict[str, Any]:
+    """``table`` with ``table[key]`` (a path, maybe ``archive.zip#member``) relative to ``folder``."""
+    value = table.get(key)
+    if not isinstance(value, str) or not value or value.startswith("builtin:"):
+        return table
+    head, sep, member = value.partition("#")
+    path = Path(head).expanduser()
+    return table if path.is_absolute() else {**table, key: f"{folder / path}{sep}{member}"}
+
+
+_ENTRY = re.compile(r"^(objects|environments|controls|models)\[(\d+)\](.*)$")
+
+
+def located(error: SpecError, included: Included) -> SpecError:
+    """``error`` naming the file an entry came from, and its index there, when it came from an include."""
+    match = _ENTRY.match(error.key)
+    if not match:
+        return error
+    key, index, rest = match.group(1), int(match.group(2)), match.group(3)
+    entries = included.origins.get(key, [])
+    if index >= len(entries) or entries[index][0] == error.file:
+        return error
+    file, local = entries[index]
+    return SpecError(file, f"{key}[{local}]{rest}", error.problem)

@@ -1,0 +1,235 @@
+"""Designs as tables: a file whose rows are jobs, read by the ``table`` policy and written by ``plan --design``.
+
+A design table has an ``object`` and an ``environment`` column and one column per control
+parameter, named as ``jobs`` and ``results`` name it (``orientation_yaw``). A cell is empty
+where the control does not apply to the row's scene. CSV (numbers as Python writes them, so
+every float reads back bit for bit) and Parquet are read and written.
+
+Reading checks every cell against the spec: an unknown object or column, a value outside the
+range (or list) the spec gives, a missing value, a value for a control that does not apply in
+the row's scene are each one line naming the file, the row (1 is the first row under the header)
+and the column.
+"""
+
+from __future__ import annotations
+
+import csv
+import difflib
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Sequence
+
+import pyarrow as pa
+
+from sweep3d.errors import SpecError
+from sweep3d.spec.columns import parameter_column
+from sweep3d.spec.loader import ControlInstance
+from sweep3d.spec.params import Choice, Fixed, Range
+
+SCENE_COLUMNS = ("object", "environment")
+SUFFIXES = (".csv", ".parquet")
+
+
+@dataclass(frozen=True)
+class Cell:
+    """Where a value sits: what errors name."""
+
+    file: str
+    row: int  # 1-based, under the header
+    column: str
+
+    def fail(self, problem: str) -> SpecError:
+        return SpecError(self.file, f"row {self.row}, column {self.column}", problem)
+
+
+@dataclass
+class SceneRows:
+    """One scene's rows of a design: per open parameter, its values in row order."""
+
+    count: int
+    values: dict[tuple[str, str], list[Any]]
+
+
+def read_design(path: Path, controls: Sequence[ControlInstance], objects: Sequence[str],
+                environments: Sequence[str]) -> dict[tuple[str, str], SceneRows]:
+    """The rows of the design file ``path`` per (object, environment), checked against the spec.
+
+    Raises:
+        SpecError: naming the file, and the row and column of the first bad cell.
+    """
+    names, rows = _read_rows(path)
+    file = str(path)
+    columns = {parameter_column(inst.id, param): (inst, param) for inst in controls for param in inst.spaces}
+    _check_header(file, names, columns)
+    scenes: dict[tuple[str, str], SceneRows] = {}
+    for number, row in enumerate(rows, start=1):
+        cells = dict(zip(names, row))
+        obj = _scene_name(Cell(file, number, "object"), cells.get("object"), objects)
+        env = _scene_name(Cell(file, number, "environment"), cells.get("environment"), environments)
+        scene = scenes.setdefault((obj, env), SceneRows(0, {}))
+        for column, (inst, param) in columns.items():
+            cell = Cell(file, number, column)
+            value = _value(cell, cells.get(column), inst, param, inst.applies_to(obj, env))
+            if value is not _NONE:
+                scene.values.setdefault((inst.id, param), []).append(value)
+        scene.count += 1
+    return scenes
+
+
+_NONE = object()  # a cell with no value to take (the control does not apply, or its parameter is fixed)
+
+
+def _read_rows(path: Path) -> tuple[list[str], list[list[Any]]]:
+    """The header and the rows: CSV cells as text (None for empty), Parquet cells as typed values."""
+    if path.suffix.lower() == ".parquet":
+        import pyarrow.parquet as pq
+
+        try:
+            table = pq.read_table(path)
+        except (OSError, pa.ArrowException) as exc:
+            raise SpecError(str(path), "", f"cannot read the design table: {exc}") from None
+        columns = [table.column(i).to_pylist() for i in range(table.num_columns)]
+        return list(table.column_names), [list(r) for r in zip(*columns)]
+    try:
+        with path.open(newline="", encoding="utf-8") as handle:
+            lines = list(csv.reader(handle))
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise SpecError(str(path), "", f"cannot read the design table: {exc}") from None
+    if not lines:
+        raise SpecError(str(path), "", "the design table is empty; its first line names the columns "
+                                       "(object, environment, then <control id>_<param> for each parameter)")
+    header, body = [name.strip() for name in lines[0]], lines[1:]
+    for number, row in enumerate(body, start=1):
+        if len(row) != len(header):
+            raise SpecError(str(path), f"row {number}", f"has {len(row)} cells where the header has {len(header)}")
+    return header, [[cell.strip() or None for cell in row] for row in body]
+
+
+def _check_header(file: str, names: list[str], columns: dict[str, tuple[ControlInstance, str]]) -> None:
+    valid = [*SCENE_COLUMNS, *columns]
+    for name in names:
+        if name not in valid:
+            close = difflib.get_close_matches(name, valid, n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            raise SpecError(file, f"column {name}", f"names no control parameter of the spec{hint}; columns are "
+                                                    f"{', '.join(valid)}")
+    if len(set(names)) < len(names):
+        twice = next(n for i, n in enumerate(names) if n in names[:i])
+        raise SpecError(file, f"column {twice}", "appears twice; keep one")
+    for name in SCENE_COLUMNS:
+        if name not in names:
+            raise SpecError(file, f"column {name}", "is missing; every row names its object and environment")
+    for name, (inst, param) in columns.items():
+        if name not in names and not isinstance(inst.spaces[param], Fixed):
+            raise SpecError(file, f"column {name}", f"is missing; the spec varies {inst.id}.{param}, so each row "
+                                                    "gives its value (empty where the control does not apply)")
+
+
+def _scene_name(cell: Cell, value: Any, valid: Sequence[str]) -> str:
+    name = "" if value is None else str(value)
+    if name not in valid:
+        close = difflib.get_close_matches(name, valid, n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise cell.fail(f"{name!r} is not one of the spec's {cell.column}s{hint}")
+    return name
+
+
+def _value(cell: Cell, raw: Any, inst: ControlInstance, param: str, applies: bool) -> Any:
+    """The value of one cell, checked against the parameter's space in the spec."""
+    space = inst.spaces[param]
+    if not applies:
+        if raw is not None:
+            raise cell.fail(f"control {inst.id} does not apply in this row's scene (see its objects/environments); "
+                            "leave the cell empty")
+        return _NONE
+    if isinstance(space, Fixed):
+        if raw is not None and not _same(raw, space.value):
+            raise cell.fail(f"{raw!r} differs from {space.value!r}, the value the spec fixes; make it a range or "
+                            "a list in the spec to vary it, or leave the cell empty")
+        return _NONE
+    if raw is None:
+        raise cell.fail(f"is empty where control {inst.id} applies; give its {param}")
+    if isinstance(space, Choice):
+        for option in space.options:
+            if _same(raw, option):
+                return option
+        raise cell.fail(f"{raw!r} is not one of the values the spec lists ({', '.join(map(repr, space.options))})")
+    return _number(cell, raw, space)
+
+
+def _number(cell: Cell, raw: Any, space: Range) -> Any:
+    if isinstance(raw, bool):
+        raise cell.fail(f"{raw!r} is not a number")
+    try:
+        value = float(raw)
+    except (TypeError, ValueError):
+        raise cell.fail(f"{raw!r} is not a number") from None
+    if not math.isfinite(value):
+        raise cell.fail(f"{raw!r} is not a finite number")
+    if not space.low <= value <= space.high:
+        raise cell.fail(f"{raw!r} is outside the range [{_text(space.low)}, {_text(space.high)}] the spec gives")
+    if space.integer:
+        if value != round(value):
+            raise cell.fail(f"{raw!r} is not a whole number, which this parameter takes")
+        return int(round(value))
+    return value
+
+
+def _same(raw: Any, option: Any) -> bool:
+    """Whether a cell holds ``option``: typed (Parquet) or as text (CSV)."""
+    if not isinstance(raw, str):
+        return type(raw) is type(option) and raw == option or (
+            isinstance(raw, (int, float)) and isinstance(option, (int, float))
+            and not isinstance(raw, bool) and not isinstance(option, bool) and raw == option)
+    if isinstance(option, bool):
+        return raw.lower() == str(option).lower()
+    if isinstance(option, (int, float)):
+        try:
+            return float(raw) == option
+        except ValueError:
+            return False
+    return raw == option
+
+
+def _text(number: float) -> str:
+    return str(int(number)) if number == int(number) else repr(number)
+
+
+def check_output(path: Path) -> None:
+    """Refuse a design file ``write_design`` cannot write, before any work (one line: the fix)."""
+    from sweep3d.errors import UserError
+
+    if path.suffix.lower() not in SUFFIXES:
+        raise UserError(f"--design {path}: write a {' or '.join(SUFFIXES)} file")
+    if not path.parent.is_dir():
+        raise UserError(f"--design {path}: folder {path.parent} does not exist")
+    if path.is_dir():
+        raise UserError(f"--design {path}: is a folder; name a file")
+
+
+def write_design(table: pa.Table, parameter_columns: Sequence[str], path: Path) -> int:
+    """Write the design of a jobs table (object, environment, each parameter) to ``path``
+    (.csv or .parquet); returns the number of rows."""
+    names = [*SCENE_COLUMNS, *(c for c in parameter_columns if c in table.column_names)]
+    design = table.select(names)
+    if path.suffix.lower() == ".parquet":
+        import pyarrow.parquet as pq
+
+        pq.write_table(design, path)
+        return design.num_rows
+    with path.open("w", newline="", encoding="utf-8") as handle:
+        writer = csv.writer(handle, lineterminator="\n")
+        writer.writerow(names)
+        for row in zip(*(design.column(n).to_pylist() for n in names)):
+            writer.writerow([_cell(v) for v in row])
+    return design.num_rows
+
+
+def _cell(value: Any) -> str:
+    """A value as CSV text that reads back as the same value (floats by repr: bit for bit)."""
+    if value is None:
+        return ""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    return repr(value) if isinstance(value, float) else str(value)
