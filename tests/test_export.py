@@ -357,6 +357,22 @@ def test_the_default_exports_the_evaluable_failures_with_their_design_table(expo
     assert len(boxes) == 4 and all(line.endswith(",") for line in boxes)  # no scale control on the box: empty
 
 
+def test_the_design_table_replays_as_the_same_jobs_under_the_table_policy(export_run: Path, tmp_path: Path) -> None:
+    """The loop closes: a spec whose ``table`` policy reads an export's ``design.csv`` plans the
+    exported jobs again, in order, with the same keys (for a retrained model, say)."""
+    from sweep3d.pipeline import plan_spec
+    from sweep3d.stages import load_spec
+
+    out = exported(export_run, tmp_path / "failures", "--format", "imagefolder", "--unevaluable", "flag")
+    replay = export_run / "replay.toml"
+    replay.write_text(SPEC.replace('name = "export"', 'name = "replay"').replace(
+        'type = "grid"', f'type = "table"\nfile = "{out / "design.csv"}"'))
+    plan = plan_spec(load_spec(replay))
+    jobs = sorted(plan.jobs + plan.out_of_frame, key=lambda job: job.index)
+    exported_keys = [entry["image_key"] for entry in manifest(out)["items"]]
+    assert [job.image_key for job in jobs] == exported_keys and len(exported_keys) >= 4
+
+
 def test_the_same_export_twice_writes_the_same_files_and_appending_keeps_ids_unique(export_run: Path,
                                                                                     tmp_path: Path) -> None:
     for form in ("coco", "imagefolder", "parquet"):
