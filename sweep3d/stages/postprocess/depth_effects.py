@@ -13,8 +13,9 @@ signed radius c = f_px · a · (1/z_f - 1/z) grows with depth, so quantising it 
 into depth layers; each layer is blurred with its own disk (colour and coverage) and the layers
 are laid far to near, each *over* what is behind it. So a sharp foreground keeps its edge over a
 blurred background (it covers the background's spread), a blurred foreground spreads over a sharp
-background, and no layer gathers colour from another. What a foreground hides is unknown: the
-layers' coverage normalises it away (the background's blur is that of its visible pixels).
+background, and no layer gathers colour from another. A layer's blur is that of its visible
+pixels (normalised by its blurred coverage); what a foreground hides, which its blurred edge lets
+the lens see, is filled in from the layers around it (:func:`completed`).
 """
 
 from __future__ import annotations
@@ -86,8 +87,8 @@ def defocus(image: np.ndarray, coc: np.ndarray) -> np.ndarray:
     if not index.any():
         return image  # everything within the focal layer: nothing to blur
     linear = srgb_to_linear(image).astype(np.float64)
-    colour = np.zeros_like(linear)
-    cover = np.zeros(index.shape, dtype=np.float64)
+    colour = np.zeros_like(linear)  # what lies behind the next layer: premultiplied colour ...
+    cover = np.zeros(index.shape, dtype=np.float64)  # ... and its coverage
     for layer in np.unique(index)[::-1]:  # far (large signed radius) to near
         inside = (index == layer).astype(np.float64)
         stack = np.concatenate([linear * inside[..., None], inside[..., None]], axis=-1)
@@ -95,7 +96,37 @@ def defocus(image: np.ndarray, coc: np.ndarray) -> np.ndarray:
         if radius > 0:
             stack = np.clip(fftconvolve(stack, disk_kernel(radius)[..., None], mode="same", axes=(0, 1)), 0.0, None)
         alpha = np.minimum(stack[..., 3], 1.0)
-        colour = stack[..., :3] + (1.0 - alpha)[..., None] * colour
-        cover = alpha + (1.0 - alpha) * cover
-    out = colour / np.maximum(cover, 1e-12)[..., None]  # every pixel is in a layer: cover > 0
-    return linear_to_srgb(out)
+        if cover.any():  # over what is behind, completed where this layer's pixels hid it
+            colour, cover = stack[..., :3] + (1.0 - alpha)[..., None] * completed(colour, cover), np.ones_like(cover)
+        else:
+            colour, cover = stack[..., :3], alpha
+    return linear_to_srgb(completed(colour, cover))
+
+
+#: Coverage below which a pixel counts as unknown (hidden behind nearer layers) and is filled in.
+KNOWN = 1e-4
+
+
+def completed(colour: np.ndarray, cover: np.ndarray) -> np.ndarray:
+    """Premultiplied ``colour`` with its ``cover`` as a plain, fully covered image: divided by its
+    coverage where that is known, and where nothing reached (what nearer layers hide) filled
+    from around, with normalised Gaussian blurs of doubling width until every pixel has a value.
+    A lens sees part of what a blurred foreground hides; the image never showed it, so it is
+    taken to continue what shows around it."""
+    known = cover > KNOWN
+    out = colour / np.maximum(cover, KNOWN)[..., None]
+    if known.all() or not known.any():
+        return out
+    from scipy.ndimage import gaussian_filter
+
+    weight = known.astype(np.float64)
+    value = out * weight[..., None]
+    missing, sigma = ~known, 1.0
+    while missing.any():
+        total = gaussian_filter(weight, sigma, mode="nearest")
+        spread = gaussian_filter(value, (sigma, sigma, 0), mode="nearest")
+        reached = missing & (total > 1e-8)
+        out[reached] = spread[reached] / total[reached][:, None]
+        missing &= ~reached
+        sigma *= 2.0
+    return out
