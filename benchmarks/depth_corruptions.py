@@ -51,6 +51,10 @@ CONFIGS = [  # (name, post control, its values, what the physical render changes
 ]
 
 
+#: The (scene, effect) pairs of the side-by-side image, one row each.
+PICTURED = [("toaster", "defocus f/0.15"), ("cheeseburger", "fog 0.4"), ("reflex camera", "defocus f/0.15")]
+
+
 def fog_volume_control():
     """A rendered control whose ``edit`` fills a sphere around the camera with the fog medium."""
     from pydantic import Field
@@ -189,21 +193,22 @@ def main() -> None:
                 times.append(time.perf_counter() - started)
             rows[name].append((psnr(post, physical), 255 * float(np.abs(post - physical).mean()),
                                psnr(pinhole, physical), statistics.median(times), physical_seconds))
-            if obj == SCENES[0][0] or name in ("fog 0.4", "defocus f/0.15"):
+            if (obj, name) in PICTURED:
                 tiles.append((obj, name, post, physical))
-    print("| effect | PSNR post vs physical (dB) | mean abs. diff. (8-bit levels) | PSNR pinhole vs physical (no effect) "
-          "| post s/image | physical render s/image |")
+    scenes = " / ".join(obj for obj, *_ in SCENES)
+    print(f"| effect | PSNR post vs physical, dB ({scenes}) | mean abs. diff. (8-bit levels) "
+          "| PSNR pinhole vs physical (no effect) | post s/image | physical render s/image |")
     print("|---|---|---|---|---|---|")
     for name, measured in rows.items():
         cols = list(zip(*measured))
-        print(f"| {name} | {statistics.mean(cols[0]):.1f} ({min(cols[0]):.1f}–{max(cols[0]):.1f}) "
+        print(f"| {name} | {' / '.join(f'{v:.1f}' for v in cols[0])} "
               f"| {statistics.mean(cols[1]):.1f} | {statistics.mean(cols[2]):.1f} "
               f"| {statistics.median(cols[3]):.3f} | {statistics.median(cols[4]):.2f} |")
     pinhole_seconds = statistics.median(found[obj, "pinhole"][2] for obj, *_ in SCENES)
     print(f"pinhole render with its depth pass: {pinhole_seconds:.2f} s/image (median over the scenes)")
     print(f"load average after: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
     if args.image is not None:
-        _side_by_side(args.image, [t for t in tiles if t[0] == SCENES[0][0] and t[1] in ("defocus f/0.15", "fog 0.4")])
+        _side_by_side(args.image, sorted(tiles, key=lambda t: PICTURED.index(t[:2])))
 
 
 def _side_by_side(path: Path, tiles: list[tuple[str, str, np.ndarray, np.ndarray]]) -> None:
@@ -218,7 +223,7 @@ def _side_by_side(path: Path, tiles: list[tuple[str, str, np.ndarray, np.ndarray
     sheet = np.concatenate([r for row in rows for r in (row, np.ones((gap, row.shape[1], 3), np.float32))][:-1], axis=0)
     path.parent.mkdir(parents=True, exist_ok=True)
     Image.fromarray(to_uint8(sheet), "RGB").save(path, optimize=True)
-    print(f"wrote {path} (rows: {', '.join(t[1] for t in tiles)}; left: post control, right: Cycles)")
+    print(f"wrote {path} (rows: {', '.join(f'{t[0]}, {t[1]}' for t in tiles)}; left: post control, right: Cycles)")
 
 
 if __name__ == "__main__":

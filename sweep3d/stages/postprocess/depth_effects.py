@@ -13,9 +13,10 @@ signed radius c = f_px · a · (1/z_f - 1/z) grows with depth, so quantising it 
 into depth layers; each layer is blurred with its own disk (colour and coverage) and the layers
 are laid far to near, each *over* what is behind it. So a sharp foreground keeps its edge over a
 blurred background (it covers the background's spread), a blurred foreground spreads over a sharp
-background, and no layer gathers colour from another. A layer's blur is that of its visible
-pixels (normalised by its blurred coverage); what a foreground hides, which its blurred edge lets
-the lens see, is filled in from the layers around it (:func:`completed`).
+background, and no layer gathers colour from another. What a nearer layer hides, which its
+blurred edge lets the lens see, is unknown: each layer is continued behind the nearer ones with
+the colours around them (:func:`continued`), so a surface split into several layers closes up and
+a blurred foreground shows the background that it hides.
 """
 
 from __future__ import annotations
@@ -90,43 +91,38 @@ def defocus(image: np.ndarray, coc: np.ndarray) -> np.ndarray:
     colour = np.zeros_like(linear)  # what lies behind the next layer: premultiplied colour ...
     cover = np.zeros(index.shape, dtype=np.float64)  # ... and its coverage
     for layer in np.unique(index)[::-1]:  # far (large signed radius) to near
-        inside = (index == layer).astype(np.float64)
-        stack = np.concatenate([linear * inside[..., None], inside[..., None]], axis=-1)
+        own, hidden = index == layer, index < layer  # its pixels, and those nearer layers hide it behind
+        extent = own | hidden
+        stack = np.concatenate([continued(linear, own, hidden) * extent[..., None], extent[..., None]], axis=-1)
         radius = abs(int(layer)) * step
         if radius > 0:
             stack = np.clip(fftconvolve(stack, disk_kernel(radius)[..., None], mode="same", axes=(0, 1)), 0.0, None)
         alpha = np.minimum(stack[..., 3], 1.0)
-        if cover.any():  # over what is behind, completed where this layer's pixels hid it
-            colour, cover = stack[..., :3] + (1.0 - alpha)[..., None] * completed(colour, cover), np.ones_like(cover)
-        else:
-            colour, cover = stack[..., :3], alpha
-    return linear_to_srgb(completed(colour, cover))
+        colour = stack[..., :3] + (1.0 - alpha)[..., None] * colour
+        cover = alpha + (1.0 - alpha) * cover
+    return linear_to_srgb(colour / np.maximum(cover, 1e-12)[..., None])  # < 1 only near the image's edges
 
 
-#: Coverage below which a pixel counts as unknown (hidden behind nearer layers) and is filled in.
-KNOWN = 1e-4
-
-
-def completed(colour: np.ndarray, cover: np.ndarray) -> np.ndarray:
-    """Premultiplied ``colour`` with its ``cover`` as a plain, fully covered image: divided by its
-    coverage where that is known, and where nothing reached (what nearer layers hide) filled
-    from around, with normalised Gaussian blurs of doubling width until every pixel has a value.
-    A lens sees part of what a blurred foreground hides; the image never showed it, so it is
-    taken to continue what shows around it."""
-    known = cover > KNOWN
-    out = colour / np.maximum(cover, KNOWN)[..., None]
-    if known.all() or not known.any():
-        return out
+def continued(values: np.ndarray, known: np.ndarray, wanted: np.ndarray) -> np.ndarray:
+    """``values`` (H, W, C) where ``known``, and at the ``wanted`` pixels that are not, what shows
+    around them: normalised Gaussian blurs of the known values, of doubling width until each has
+    one. A lens sees part of what a blurred foreground hides; the image never showed it, so each
+    layer is taken to continue behind the nearer ones as it looks around them."""
+    missing = wanted & ~known
+    if not missing.any() or not known.any():
+        return values
     from scipy.ndimage import gaussian_filter
 
+    out = values.copy()
     weight = known.astype(np.float64)
-    value = out * weight[..., None]
-    missing, sigma = ~known, 1.0
+    value = values * weight[..., None]
+    sigma = 1.0
     while missing.any():
         total = gaussian_filter(weight, sigma, mode="nearest")
-        spread = gaussian_filter(value, (sigma, sigma, 0), mode="nearest")
         reached = missing & (total > 1e-8)
-        out[reached] = spread[reached] / total[reached][:, None]
-        missing &= ~reached
+        if reached.any():
+            spread = gaussian_filter(value, (sigma, sigma, 0), mode="nearest")
+            out[reached] = spread[reached] / total[reached][:, None]
+            missing &= ~reached
         sigma *= 2.0
     return out
