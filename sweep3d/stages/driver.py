@@ -231,7 +231,9 @@ def split_to_do(stage: Stage, plan: Plan, store: Store, cached: set[str] | None 
 
     Args:
         coming: keys that stages upstream will store in this pass, by table; a job whose input
-            is neither stored nor coming is skipped (its input failed or was never made).
+            is coming waits for it even when it is stored (a render made again for its passes:
+            the job may read them), and one whose input is neither stored nor coming is skipped
+            (its input failed or was never made).
     Returns:
         one job per key: the ready ones in plan order, and the waiting ones by their input's
         (table, key).
@@ -249,12 +251,13 @@ def split_to_do(stage: Stage, plan: Plan, store: Store, cached: set[str] | None 
         source = stage.upstream(job)
         if source is not None:
             table, upstream_key = source
+            if upstream_key in coming.get(table, ()):  # made in this pass, or made again for its passes
+                waiting[source].append(job)  # (a stored render whose truth passes are redone): wait for it
+                continue
             if table not in inputs:
                 inputs[table] = store.keys(table)
             if upstream_key not in inputs[table] or not store.blob_path(upstream_key).exists():
-                if upstream_key in coming.get(table, ()):
-                    waiting[source].append(job)
-                continue  # else skipped
+                continue  # skipped: its input failed or was never made
         ready.append(job)
     return ready, dict(waiting)
 
