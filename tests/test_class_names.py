@@ -17,6 +17,7 @@ from sweep3d.cache.store import Store, segment_name, utc_now
 from sweep3d.cli import app
 from sweep3d.errors import SpecError
 from sweep3d.pipeline import write_jobs
+from sweep3d.report import write_report
 from sweep3d.spec.assets import blender_version
 from sweep3d.spec.framing import Framing
 from sweep3d.stages import load_spec
@@ -78,7 +79,7 @@ def _store(folder: Path, models: str = "", flip: bool = False) -> tuple[Path, du
     spec = write_spec(folder, SPEC.format(models=models))
     loaded = load_spec(spec)
     plans = [make_plan(loaded, framing=Framing.full(32), model_digest=f"stand-in-{i}", blender=blender_version(),
-                       model=settings) for i, settings in enumerate(loaded.models)]
+                       model=settings, view=(256, 224)) for i, settings in enumerate(loaded.models)]
     store = Store(loaded.store)
     write_jobs(plans, store)
     evaluator = ClassificationEvaluator(ClassificationEvaluator.Params())
@@ -125,6 +126,16 @@ def test_a_class_name_from_the_spec_selects_exactly_the_rows_the_model_got_right
     assert printed.exit_code == 0, printed.output
     assert printed.output.splitlines() == ["top1_label,top1_model_label", "running shoe,sneaker", "tea cup,tea cup",
                                            "theater curtain,front curtain"]
+
+
+def test_the_report_names_classes_as_the_spec_does_and_says_what_the_model_saw(tmp_path: Path) -> None:
+    spec, con = _store(tmp_path)
+    con.close()
+    html = write_report(load_spec(spec)).read_text()
+    assert "running shoe" in html and "theater curtain" in html
+    assert "sneaker" not in html and "front curtain" not in html
+    assert ('<p class="meta" id="protocol">resolution = 32: 32² renders, which the model resizes to 256² '
+            "(upsampled 8×) and centre-crops to 224²</p>") in html
 
 
 def test_compare_names_both_models_answers_as_the_spec_does(tmp_path: Path) -> None:

@@ -37,6 +37,7 @@ from sweep3d.stages.aggregate import (
     region_min_count,
     summarise,
 )
+from sweep3d.stages.aggregate.results import plan_protocol
 from sweep3d.stages.infer.evaluators import measure_of
 
 STAGES = ("render", "postprocess", "infer")
@@ -100,6 +101,7 @@ def build_context(loaded: LoadedSpec, con: duckdb.DuckDBPyConnection, store: Sto
     return {
         "name": loaded.name,
         "model": model or loaded.model.label,
+        "protocol": plan_protocol(store.jobs_path(loaded.name), model or loaded.model.label),
         "spec_path": str(loaded.path),
         "store": str(loaded.store),
         "summary": summary,

@@ -28,6 +28,7 @@ predictions' columns and the roles their names suggest (:meth:`Roles.guess`).
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import duckdb
@@ -35,7 +36,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from sweep3d.evaluation import EvaluatorRecord, Roles, read_record
-from sweep3d.spec.columns import MIN_VISIBLE_METADATA, MODEL_NAME_COLUMNS, PREDICTION_COLUMNS
+from sweep3d.spec.columns import MIN_VISIBLE_METADATA, MODEL_NAME_COLUMNS, PREDICTION_COLUMNS, PROTOCOL_METADATA
 from sweep3d.stages.aggregate.class_names import named_columns, read_class_names
 from sweep3d.stages.aggregate.quoting import identifier, literal
 
@@ -116,6 +117,17 @@ def plan_min_visible(jobs: Path) -> float:
     except (OSError, ValueError, pa.ArrowException):
         min_visible = float("nan")
     return min_visible if 0.0 <= min_visible <= 1.0 else DEFAULT_MIN_VISIBLE
+
+
+def plan_protocol(jobs: Path, model: str) -> str:
+    """What ``model`` sees in the plan at ``jobs`` (``Framing.protocol``'s line; "" for a plan from
+    before plans recorded it, or another model's)."""
+    try:
+        raw = (pq.read_schema(jobs).metadata or {}).get(PROTOCOL_METADATA)
+        line = json.loads(raw).get(model, "") if raw is not None else ""
+    except (OSError, ValueError, AttributeError, pa.ArrowException):
+        return ""
+    return line if isinstance(line, str) else ""
 
 
 def _ground_truth_sql(con: duckdb.DuckDBPyConnection, jobs: Path, truths: bool) -> str | None:

@@ -60,7 +60,7 @@ class _Keys:
 
 def make_plan(spec: LoadedSpec, *, framing: Framing, model_digest: str, blender: str,
               history: History | None = None, model: ModelSpec | None = None, device: str | None = None,
-              classes: LabelMap | None = None) -> Plan:
+              classes: LabelMap | None = None, view: tuple[int, int] | None = None) -> Plan:
     """Expand ``spec`` into jobs, sorted by scene so workers reload as little as possible.
 
     Each scene's jobs are made as columns (see :mod:`sweep3d.stages.plan.batch`): values and
@@ -79,6 +79,7 @@ def make_plan(spec: LoadedSpec, *, framing: Framing, model_digest: str, blender:
             default: ``[render] device`` resolved here (see ``stages.render.device``).
         classes: the model's class names (a user's model's, once loaded); default: a built-in
             model's. The plan records the classes the spec names otherwise (see ``spec.class_names``).
+        view: the model's own resize and crop, when known (the plan says what the model sees).
     """
     model = model or spec.model
     renamed = _renamed_classes(spec, classes if classes is not None else builtin_labels(model.name))
@@ -127,7 +128,7 @@ def make_plan(spec: LoadedSpec, *, framing: Framing, model_digest: str, blender:
     mask = np.concatenate(keys.in_frame) if keys.in_frame else np.zeros(0, bool)
     plan = PlanColumns(blocks, keys.render, keys.image, keys.pred, keys.parts, mask, keys.truth)
     return Plan(spec, JobList(plan, np.flatnonzero(mask)), model_digest, JobList(plan, np.flatnonzero(~mask)), framing,
-                model.label, device, renamed)
+                model.label, device, renamed, view)
 
 
 def _renamed_classes(spec: LoadedSpec, classes: LabelMap | None) -> list[tuple[int, str, str, bool]]:
