@@ -27,6 +27,7 @@ if TYPE_CHECKING:
     import pyarrow as pa
     from rich.console import Console
 
+    from sweep3d.export import ExportResult
     from sweep3d.pipeline import RunResult
     from sweep3d.spec.loader import LoadedSpec
     from sweep3d.stages.plan import Plan
@@ -131,6 +132,16 @@ class Experiment:
             raise UserError("results as a DataFrame need pandas: pip install pandas (or use results(), "
                             "a pyarrow Table)") from None
         return self.results(model).to_pandas()
+
+    def export(self, format: str, output: str | Path | None = None, *, where: str | None = None,
+               model: str | None = None, unevaluable: str = "skip", append: bool = False,
+               link: bool = False) -> ExportResult:
+        """Write the results ``where`` chooses (default: the failures) as a ``coco``,
+        ``imagefolder`` or ``parquet`` dataset with ``design.csv``, as ``sweep3d export`` does."""
+        from sweep3d.export import export_dataset
+
+        return export_dataset(self.spec, format, output=Path(output) if output is not None else None, where=where,
+                              model=model, unevaluable=unevaluable, append=append, link=link)
 
     def report(self, path: str | Path | None = None, model: str | None = None) -> Path:
         """Write the HTML report (default ``<store>/reports/<experiment>.html``) and return its path."""

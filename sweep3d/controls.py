@@ -57,6 +57,12 @@ class Control:
     version: ClassVar[int] = 1
     #: Render passes the control needs beside the image ("mask", "depth"; see ``sweep3d.truth``).
     passes: ClassVar[tuple[str, ...]] = ()
+    #: Parameters that stand for another in keys, as parameter → (the one it stands for, the others
+    #: it is read with): the camera's ``fill`` is a ``zoom`` at its ``focal_length``. A spec gives one
+    #: of the two, never both. Such a parameter is left out of a job's values unless given, and
+    #: ``canonical`` (which folds it into the one it stands for) is the base class's without it,
+    #: so the planner keys the control over arrays unless it, or one it is read with, is a range.
+    folds: ClassVar[dict[str, tuple[str, ...]]] = {}
 
     def __init__(self, control_id: str, type_name: str) -> None:
         self.id = control_id

@@ -27,7 +27,7 @@ from sweep3d.cache.store import TABLES, Store, utc_now
 from sweep3d.errors import RenderError, SpecError, UserError
 from sweep3d.progress import RunProgress
 from sweep3d.spec.assets import blender_version
-from sweep3d.spec.columns import MODELS_METADATA
+from sweep3d.spec.columns import CLASS_NAMES_METADATA, MODELS_METADATA, PROTOCOL_METADATA
 from sweep3d.spec.loader import LoadedSpec
 from sweep3d.stages.code import PLUGINS_METADATA
 from sweep3d.stages.code import metadata as plugins_metadata
@@ -68,7 +68,8 @@ def plan_spec(spec: LoadedSpec, model: ModelHandle | None = None, history: Histo
     resolved if not given)."""
     model = model or ModelHandle.resolve(spec)
     return make_plan(spec, framing=model.framing, model_digest=model.digest, blender=blender_version(),
-                     history=history, model=model.settings)
+                     history=history, model=model.settings, classes=model.label_map(),
+                     view=(model.view.resize, model.view.crop) if model.view is not None else None)
 
 
 def outcomes_by_scene(plan: Plan, store: Store) -> History:
@@ -116,8 +117,10 @@ def write_jobs(plans: Plan | list[Plan], store: Store) -> None:
     tables = [plan.table() for plan in plans]
     table = tables[0] if len(tables) == 1 else pa.concat_tables(tables, promote_options="default")
     models = json.dumps([plan.model for plan in plans]).encode()
+    per_model = {key: json.dumps({k: v for t in tables for k, v in json.loads(t.schema.metadata[key]).items()}).encode()
+                 for key in (CLASS_NAMES_METADATA, PROTOCOL_METADATA)}  # each plan's entry under its model
     table = table.replace_schema_metadata({**(tables[0].schema.metadata or {}), MODELS_METADATA: models,
-                                           PLUGINS_METADATA: plugins_metadata(plans[0].spec)})
+                                           **per_model, PLUGINS_METADATA: plugins_metadata(plans[0].spec)})
     store.write_table_file(store.jobs_path(plans[0].spec.name), table, keep_same=True)
 
 

@@ -26,3 +26,16 @@ def decode_png(path: str | Path) -> np.ndarray:
     """A PNG file as float32 (H, W, 3) in [0, 1]."""
     with Image.open(path) as img:
         return np.asarray(img.convert("RGB"), dtype=np.float32) / 255.0
+
+
+def srgb_to_linear(rgb: np.ndarray) -> np.ndarray:
+    """sRGB-encoded values (what the renderer's Standard view transform stores) as linear light,
+    float32: the inverse of :func:`linear_to_srgb`. Values are clipped to [0, 1] first."""
+    c = np.clip(np.asarray(rgb, dtype=np.float32), 0.0, 1.0)
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4).astype(np.float32)
+
+
+def linear_to_srgb(rgb: np.ndarray) -> np.ndarray:
+    """Linear light as sRGB-encoded values in [0, 1], float32 (the piecewise sRGB curve)."""
+    c = np.clip(np.asarray(rgb, dtype=np.float32), 0.0, 1.0)
+    return np.where(c <= 0.0031308, c * 12.92, 1.055 * c ** (1 / 2.4) - 0.055).astype(np.float32)

@@ -22,10 +22,11 @@ from sweep3d.stages.infer import (
 from sweep3d.stages.infer.evaluators import Truth
 from sweep3d.stages.plan.policies import Outcome, Policy, PolicyParams
 from sweep3d.stages.postprocess import PostControl
+from sweep3d.stages.postprocess.frame import RenderFrame
 from sweep3d.stages.render.controls import RenderedControl
 from sweep3d.stages.render.scene_edit import SceneEdit
 from sweep3d.stages.render.state import SceneState
 
 __all__ = ["Classifier", "ControlParams", "Detector", "Evaluator", "EvaluatorParams", "Normalize", "Outcome", "Point",
-           "Policy", "PolicyParams", "PostControl", "Preprocess", "RenderedControl", "Roles", "SceneEdit", "SceneState",
+           "Policy", "PolicyParams", "PostControl", "Preprocess", "RenderFrame", "RenderedControl", "Roles", "SceneEdit", "SceneState",
            "Segmenter", "SpaceShape", "SpecPath", "Truth"]

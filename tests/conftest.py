@@ -38,6 +38,7 @@ FIXTURE_MARKERS = {
     "blender_scene": ("blender",),
     "parts_run": ("slow", "blender", "torch"),  # test_part_visibility: a real run with the UV pass
     "truth_run": ("slow", "blender", "torch"),  # test_truth: a real run with the mask and depth passes
+    "export_run": ("slow", "blender", "torch"),  # test_export: a real detection run with the mask pass
     "lite0": ("torch",),  # test_infer: the pretrained model
     "large_report": ("slow",),  # test_report_scale: a synthetic store of 10 000 results and its report
     "chromium": ("browser",),  # the session's headless Chromium

@@ -265,10 +265,17 @@ def test_a_bad_design_row_is_one_line_naming_the_row_and_column(tmp_path: Path, 
 ])
 def test_a_bad_design_header_is_one_line_naming_the_column(tmp_path: Path, header: list[str], where: str,
                                                            problem: str) -> None:
-    _write_csv(tmp_path / "d.csv", [header])
+    cells = {"object": "box", "environment": "white", "material_skin": "zebra"}
+    _write_csv(tmp_path / "d.csv", [header, [cells.get(name, "0") for name in header]])
     with pytest.raises(SpecError) as caught:
         load_spec(write_spec(tmp_path, _table_spec("d.csv")))
     assert caught.value.key == where and problem in caught.value.problem
+
+
+def test_a_design_without_rows_is_refused(tmp_path: Path) -> None:
+    _write_csv(tmp_path / "d.csv", [HEADER])
+    with pytest.raises(SpecError, match="has no rows"):
+        load_spec(write_spec(tmp_path, _table_spec("d.csv")))
 
 
 def test_plan_design_writes_the_table_and_refuses_a_bad_file_before_planning(tmp_path: Path) -> None:

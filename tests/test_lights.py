@@ -114,6 +114,16 @@ def test_the_key_light_is_in_a_plain_colour_render_key_and_off_is_the_old_key(tm
     assert white.key_part(None) == {"hdri": None, "color": [1.0, 1.0, 1.0], "strength": 1.0}  # as before lights
 
 
+def test_a_camera_relative_key_light_keys_as_before_and_a_world_one_does_not(tmp_path) -> None:
+    default = render_keys(spec_with(tmp_path / "a"))
+    riding = render_keys(spec_with(tmp_path / "b", env='key_light = { relative_to = "camera" }\n'))
+    world = render_keys(spec_with(tmp_path / "c", env='key_light = { relative_to = "world" }\n'))
+    assert riding == default
+    assert all(world["white", yaw] != default["white", yaw] and world["studio", yaw] == default["studio", yaw]
+               for yaw in (0, 45))
+    assert "relative_to" not in KeyLightSpec().key_part() and KeyLightSpec(relative_to="world").key_part()["relative_to"] == "world"
+
+
 # -- geometry ---------------------------------------------------------------------------------
 
 @pytest.mark.parametrize(("azimuth", "elevation"), [(0.0, 20.0), (130.0, -35.0), (-70.0, 89.0)])
@@ -203,6 +213,17 @@ def test_a_world_light_stays_put_while_the_camera_goes_round(blender_scene, sphe
     west = [("sun_light", {"strength": 2.0, "azimuth": -90.0, "elevation": 0.0})]  # the -X side
     assert left_minus_right(blender_scene, sphere, DIM, west, azimuth=0.0) > 0.1  # -X is the front camera's left
     assert left_minus_right(blender_scene, sphere, DIM, west, azimuth=180.0) < -0.1  # and the back camera's right
+
+
+@pytest.mark.parametrize("relative_to", ["camera", "world"])
+def test_a_world_key_light_stays_put_and_a_camera_one_rides_along(blender_scene, sphere, relative_to) -> None:
+    """A key light on the -X side (world) or the image's left (camera): turning the camera to the
+    back moves the lit side across the image for the world's light only."""
+    key = KeyLightSpec(strength=4.0, azimuth=-90.0, elevation=0.0, fill=0.05, relative_to=relative_to)
+    env = EnvironmentRef(color=(1.0, 1.0, 1.0), key_light=key)
+    front, back = (left_minus_right(blender_scene, sphere, env, [], azimuth=a) for a in (0.0, 180.0))
+    assert front > 0.1  # azimuth -90 is the front camera's left, in both frames
+    assert back < -0.1 if relative_to == "world" else back > 0.1
 
 
 def test_an_area_light_lights_its_side_and_its_size_changes_the_image(blender_scene, sphere) -> None:

@@ -144,7 +144,8 @@ def spaces(draw, low: float, high: float, log: bool = False, integer: bool = Fal
 
 CONTROLS = {
     "orientation": {"yaw": (-540, 540), "pitch": (-90, 90)},
-    "camera": {"azimuth": (-180, 180), "elevation": (-90, 90), "zoom": (0.3, 3, True), "focal_length": (20, 90)},
+    "camera": {"azimuth": (-180, 180), "elevation": (-90, 90), "zoom": (0.3, 3, True), "fill": (0.2, 3),
+               "focal_length": (20, 90)},
     "position": {"x": (-2, 2), "y": (-2, 2)},
     "scale": {"factor": (0.2, 3)},
     "occlusion": {"coverage": (0, 1), "direction": (-360, 360)},
@@ -165,6 +166,8 @@ def specs(draw) -> str:
     blocks = []
     for name in chosen:
         params = draw(st.lists(st.sampled_from(sorted(CONTROLS[name])), min_size=1, unique=True))
+        if {"zoom", "fill"} <= set(params):  # one or the other: fill sets the zoom
+            params.remove("zoom")
         lines = [f'[[controls]]\ntype = "{name}"']
         for param in params:
             low, high, *flags = CONTROLS[name][param]

@@ -70,14 +70,17 @@ def load_image(store: Store, key: str, digests: set[str] | None) -> np.ndarray |
     return decode_image(data)
 
 
-def load_pass(store: Store, truth_key: str, name: str) -> np.ndarray | None:
+def load_pass(store: Store, truth_key: str, name: str, digests: set[str] | None = None) -> np.ndarray | None:
     """A truth pass's array ("mask": bool (H, W), "depth": float32 (H, W)) from its blob under
-    ``truth_key``; None if it is missing or does not decode (its row is then dropped by the
-    caller, and the pass rendered again)."""
+    ``truth_key``; None if it is missing, does not decode, or (``digests`` given and not empty)
+    matches none of the digests its rows recorded (its row is then dropped by the caller, and the
+    pass rendered again)."""
     from sweep3d.truth import BLOB_SUFFIX, decode_depth, decode_mask
 
     try:
         data = store.blob_path(truth_key, BLOB_SUFFIX[name]).read_bytes()
+        if digests and sha256_bytes(data) not in digests:
+            return None
         return decode_mask(data) if name == "mask" else decode_depth(data)
     except Exception:  # noqa: BLE001  (missing, truncated or not an image/archive: the same repair)
         return None

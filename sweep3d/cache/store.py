@@ -426,14 +426,15 @@ class Store:
             out.setdefault(k, v)
         return out
 
-    def digests(self, table: str) -> dict[str, set[str]]:
-        """Key → the blob digests its rows recorded (rows written before digests existed add none)."""
+    def digests(self, table: str, column: str = DIGEST_COLUMN) -> dict[str, set[str]]:
+        """Key → the blob digests its rows recorded in ``column`` (a ``truths`` row records one per
+        pass: ``TRUTH_BLOBS``); rows written before digests existed add none."""
         key = KEY_COLUMN[table]
-        data = self.table(table, [key, DIGEST_COLUMN])
+        data = self.table(table, [key, column])
         out: dict[str, set[str]] = {}
         if data is None:
             return out
-        digests = data.column(DIGEST_COLUMN).to_pylist() if DIGEST_COLUMN in data.column_names else [None] * len(data)
+        digests = data.column(column).to_pylist() if column in data.column_names else [None] * len(data)
         for k, d in zip(data.column(key).to_pylist(), digests):
             entry = out.setdefault(k, set())
             if d:
@@ -548,10 +549,12 @@ class Store:
         if not keys:
             return
         self.drop_rows(table, keys)
+        suffixes = TRUTH_BLOBS if table == "truths" else (BLOB_EXT,)  # a truth key owns its pass blobs
         for key in keys:
-            blob = self.blob_path(key)
-            if blob.exists():
-                self.quarantine(blob)
+            for suffix in suffixes:
+                blob = self.blob_path(key, suffix)
+                if blob.exists():
+                    self.quarantine(blob)
         sample = ", ".join(sorted(k[:12] for k in keys)[:3])
         log.warning(f"warning: {len(keys)} {table} blob(s) {why} ({sample}{', …' if len(keys) > 3 else ''}); "
                     "recomputing them")

@@ -273,6 +273,36 @@ def query(
         console.print(f"wrote {output}")
 
 
+@command
+def export(
+    spec: Path = SpecArg,
+    form: str = typer.Option(..., "--format", show_default=False,
+                             help="coco (images, boxes and masks from the mask pass), imagefolder (a folder per "
+                                  "class) or parquet (Hugging Face's layout: image bytes and every column of results)."),
+    where: Optional[str] = typer.Option(None, "--where", show_default=False,
+                                        help="Which results: a condition over the columns of results, e.g. "
+                                             "\"NOT correct AND object = 'mug'\" (default: NOT correct, the failures)."),
+    output: Optional[Path] = typer.Option(None, "--output", "-o", show_default=False,
+                                          help="The export's folder: new or empty (default: "
+                                               "exports/<experiment>-<format> beside the spec)."),
+    model: Optional[str] = ModelOption,
+    unevaluable: str = typer.Option("skip", "--unevaluable", help="Jobs that are not evaluable (too little of the "
+                                    "object visible): skip them, or flag them (attribute evaluable: false)."),
+    append: bool = typer.Option(False, "--append", help="Add to the export of the same format in --output: results "
+                                "it holds already are skipped, ids continue after its largest."),
+    link: bool = typer.Option(False, "--link", help="Hard-link image files to the store's blobs instead of copying "
+                              "them (where the file system allows; coco and imagefolder)."),
+) -> None:
+    """Export a run's results (by default its failures) as a dataset, with design.csv: the
+    configurations that made them, one row per image, to render them again later."""
+    from sweep3d.api import Experiment
+    from sweep3d.export import export_dataset
+
+    result = export_dataset(Experiment(spec).spec, form, output=output, where=where, model=model,
+                            unevaluable=unevaluable, append=append, link=link, console=console)
+    console.print(escape(result.line()), soft_wrap=True)
+
+
 PRINT_FORMATS = ("auto", "table", "records", "csv", "json")
 
 

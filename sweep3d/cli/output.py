@@ -71,6 +71,7 @@ def print_plan(console: Console, spec: LoadedSpec, jobs: int = 0) -> Plan:
     console.print(table)
     for line in explain(plan, store):
         console.print(escape(line), highlight=False)
+    print_protocol(console, plans)
     if len(models) > 1:
         console.print(_sharing(models))
     if plan.out_of_frame:
@@ -181,7 +182,18 @@ def print_run(console: Console, result) -> None:
     skipped = len(result.plan.out_of_frame)
     console.print(f"{len(result.plan.jobs) + skipped} jobs in {result.seconds:.1f} s (run {result.run_id})"
                   + (f"; {skipped} out of frame, not rendered" if skipped else ""))
+    print_protocol(console, result.plans or [result.plan])
     print_findings(console, result.plan, result.store)
+
+
+def print_protocol(console: Console, plans: list[Plan]) -> None:
+    """What the model sees, one line (one per model when models see different things)."""
+    lines = {plan.model: plan.protocol for plan in plans if plan.protocol}
+    if len(set(lines.values())) == 1:
+        console.print(escape(next(iter(lines.values()))), highlight=False, soft_wrap=True)
+    else:
+        for model, line in lines.items():
+            console.print(f"{escape(model)}: {escape(line)}", highlight=False, soft_wrap=True)
 
 
 def print_findings(console: Console, plan: Plan, store: Store | None = None) -> None:

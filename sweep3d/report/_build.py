@@ -39,6 +39,7 @@ from sweep3d.stages.aggregate import (
 )
 from sweep3d.stages.aggregate.boundaries import VIEW as BOUNDARIES_VIEW
 from sweep3d.stages.aggregate.boundaries import range_scales, register_failure_boundaries
+from sweep3d.stages.aggregate.results import plan_protocol
 from sweep3d.stages.infer.evaluators import measure_of
 
 STAGES = ("render", "postprocess", "infer")
@@ -102,6 +103,7 @@ def build_context(loaded: LoadedSpec, con: duckdb.DuckDBPyConnection, store: Sto
     return {
         "name": loaded.name,
         "model": model or loaded.model.label,
+        "protocol": plan_protocol(store.jobs_path(loaded.name), model or loaded.model.label),
         "spec_path": str(loaded.path),
         "store": str(loaded.store),
         "summary": summary,

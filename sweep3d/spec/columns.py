@@ -21,6 +21,16 @@ PARAMETERS_METADATA = b"sweep3d.parameters"
 MODELS_METADATA = b"sweep3d.models"
 #: Parquet metadata key of a jobs file planned with truth passes: ``[evaluator] min_visible``.
 MIN_VISIBLE_METADATA = b"sweep3d.min_visible"
+#: Parquet metadata key of a jobs file holding, per model, the classes the spec names otherwise than
+#: the model does (a JSON object: model → list of [class id, the model's name, the spec's name,
+#: whether another class of the model has the same name]); see ``spec.class_names``.
+CLASS_NAMES_METADATA = b"sweep3d.class_names"
+#: Parquet metadata key of a jobs file holding, per model, what the model sees (a JSON object: model →
+#: ``Framing.protocol``'s line), for the report.
+PROTOCOL_METADATA = b"sweep3d.protocol"
+#: ``results`` shows class names as the spec wrote them; beside each such column, the model's own
+#: names, under these names.
+MODEL_NAME_COLUMNS = {"top1_label": "top1_model_label", "topk_labels": "topk_model_labels"}
 
 
 def parameter_column(control_id: str, param: str) -> str:

@@ -35,6 +35,28 @@ class Framing:
             return {"resolution": self.size}
         return {"resolution": self.size, "crop": self.crop}
 
+    def protocol(self, view: tuple[int, int] | None) -> str:
+        """What the model sees, in one line, for the run's output and the report: the model's own
+        input rendered as it is, or a full frame the model resizes and crops itself (``view``: the
+        model's resize and crop, when known).
+
+        The object is as large in the model's input either way; a full frame of another size is
+        resampled first, and a post control in pixels (blur σ) is scaled with it.
+        """
+        if self.model:
+            return (f'resolution = "model": renders are the model\'s input, the centre {self.crop}² of a '
+                    f"{self.size}² view, never resampled")
+        if view is None:
+            return (f"resolution = {self.size}: {self.size}² renders, which the model's own preprocessing "
+                    "resizes and crops")
+        resize, crop = view
+        scale = resize / self.size
+        if scale == 1:
+            return f"resolution = {self.size}: {self.size}² renders, which the model centre-crops to {crop}² unresized"
+        how = f"{'upsampled' if scale > 1 else 'downsampled'} {scale:.3g}×"
+        return (f"resolution = {self.size}: {self.size}² renders, which the model resizes to {resize}² ({how}) "
+                f"and centre-crops to {crop}²")
+
     @classmethod
     def full(cls, size: int) -> Framing:
         """A plain square frame of ``size`` pixels, all of it rendered."""

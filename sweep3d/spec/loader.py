@@ -24,7 +24,14 @@ from sweep3d.evaluation import declaration_problem
 from sweep3d.registry import is_user_plugin
 from sweep3d.spec.assets import check_archive, resolve_hdri, resolve_mesh
 from sweep3d.spec.catalogue import Catalogue
-from sweep3d.spec.columns import JOB_COLUMNS, PREDICTION_COLUMNS, TRUTH_RESULT_COLUMNS, parameter_column
+from sweep3d.spec.class_names import NameClash, spec_class_names
+from sweep3d.spec.columns import (
+    JOB_COLUMNS,
+    MODEL_NAME_COLUMNS,
+    PREDICTION_COLUMNS,
+    TRUTH_RESULT_COLUMNS,
+    parameter_column,
+)
 from sweep3d.spec.includes import BASE_KEY, located, merge_includes
 from sweep3d.spec.looks import check_look, valid_keys
 from sweep3d.spec.models import (
@@ -336,7 +343,8 @@ def _check_name(key: str, registry: Any, name: str, fail) -> None:
 
 
 def _resolve_labels(spec: Spec, fail, catalogue: Catalogue) -> dict[str, tuple]:
-    """Check labels against a built-in model's classes; a user's model checks its own at run time."""
+    """Check labels against a built-in model's classes (one name per class: see ``spec.class_names``);
+    a user's model checks its own when it is loaded."""
     classes = catalogue.labels(spec.all_models[0].name)
     out: dict[str, tuple] = {}
     for i, obj in enumerate(spec.objects):
@@ -350,6 +358,11 @@ def _resolve_labels(spec: Spec, fail, catalogue: Catalogue) -> dict[str, tuple]:
             except ValueError as exc:
                 raise fail(f"objects[{i}].labels[{j}]", str(exc)) from None
         out[obj.name] = tuple(sorted(set(ids)))
+    if classes is not None:
+        try:
+            spec_class_names([obj.labels for obj in spec.objects], classes)
+        except NameClash as exc:
+            raise fail(exc.key, str(exc)) from None
     return out
 
 
@@ -417,7 +430,7 @@ def _check_columns(controls: list[ControlInstance], fail, evaluator: Any) -> Non
     """Refuse a parameter whose column would collide with another column of ``jobs`` or ``results``
     (``render`` + ``key`` would shadow ``render_key``; ``a`` + ``b_c`` and ``a_b`` + ``c`` would merge)."""
     reserved = (set(JOB_COLUMNS) | set(PREDICTION_COLUMNS) | set(TRUTH_RESULT_COLUMNS) | set(evaluator.schema.names)
-                | set(evaluator.roles.aliases()))
+                | set(evaluator.roles.aliases()) | set(MODEL_NAME_COLUMNS.values()))
     seen: dict[str, str] = {}
     for i, inst in enumerate(controls):
         for param in inst.spaces:
@@ -451,6 +464,10 @@ def _control_spaces(control: Control, entry: dict[str, Any], where: str, fail, b
         spaces[name] = _check_space(control, name, space, f"{where}.{name}", fail)
         if is_spec_path(fields[name]):
             spaces[name] = _resolve_paths(spaces[name], base, f"{where}.{name}", fail)
+    for name, (stands_for, *_) in control.folds.items():
+        if name in spaces and stands_for in spaces:
+            raise fail(f"{where}.{name}", f"{name!r} sets the {stands_for!r} of control {control.type_name!r}: "
+                                          f"give {stands_for} or {name}, not both")
     return spaces
 
 

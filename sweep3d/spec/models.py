@@ -214,20 +214,30 @@ class ObjectSpec(StrictModel):
 
 
 class KeyLightSpec(StrictModel):
-    """The key light of a plain-colour environment: a neutral white sun that rides with the camera,
-    with the plain world's uniform light dimmed to ``fill``, so an object has a lit and a shaded
-    side instead of washing out (a white mug on white). Both scale with the environment's strength."""
+    """The key light of a plain-colour environment: a neutral white sun, riding with the camera by
+    default, with the plain world's uniform light dimmed to ``fill``, so an object has a lit and a
+    shaded side instead of washing out (a white mug on white). Both scale with the environment's
+    strength. Its angles are the ``sun_light`` control's, in the frame ``relative_to`` names."""
 
     strength: float = Field(2.5, gt=0, le=1e6, allow_inf_nan=False,
                             description="The sun's irradiance in W/m² at environment strength 1.")
     azimuth: float = Field(-40.0, ge=-180.0, le=180.0, allow_inf_nan=False,
-                           description="Degrees from the camera, > 0 toward the image's right (-40: camera left).")
+                           description="Degrees, > 0 toward the image's right (-40: camera left) relative to the "
+                                       "camera; relative to the world, the camera control's azimuth (0 in front, "
+                                       "90 the object's +X side).")
     elevation: float = Field(45.0, ge=-90.0, le=90.0, allow_inf_nan=False,
-                             description="Degrees from the camera toward the image's top.")
+                             description="Degrees up: toward the image's top (camera) or above the horizon (world).")
     angle: float = Field(10.0, ge=0.0, le=180.0, allow_inf_nan=False,
                          description="The sun's angular diameter in degrees: larger, softer shadows.")
     fill: float = Field(0.4, ge=0.0, le=1.0, allow_inf_nan=False,
                         description="What share of the plain world's light stays, as fill.")
+    relative_to: Literal["camera", "world"] = Field(
+        "camera", description="'camera': it moves with the camera and lights the same side of every image; "
+                              "'world': it stays put while the camera goes round.")
+
+    def key_part(self) -> dict[str, Any]:
+        """Its part of a render key: riding with the camera (the default) keys as before the choice existed."""
+        return self.model_dump(exclude={"relative_to"} if self.relative_to == "camera" else set())
 
 
 class EnvironmentSpec(StrictModel):
@@ -280,7 +290,7 @@ class EnvironmentSpec(StrictModel):
         part: dict[str, Any] = {"hdri": hdri_digest, "color": list(self.color) if self.color else None,
                                 "strength": self.strength}
         if self.key_light is not None:
-            part["key_light"] = self.key_light.model_dump()
+            part["key_light"] = self.key_light.key_part()
         return part
 
 

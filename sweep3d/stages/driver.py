@@ -29,7 +29,7 @@ from typing import Any, Callable, Iterable, Iterator, Mapping, Protocol, Sequenc
 import pyarrow as pa
 
 from sweep3d.cache.blobs import damaged_blobs
-from sweep3d.cache.store import DIGEST_COLUMN, SegmentWriter, Store
+from sweep3d.cache.store import DIGEST_COLUMN, KEY_COLUMN, SegmentWriter, Store
 from sweep3d.errors import UserError
 from sweep3d.progress import RunProgress, StageProgress
 from sweep3d.stages.jobs import Job, JobList, Plan
@@ -133,10 +133,11 @@ class Feed:
         return ChainMap(_Recorded(self._recorded.get(table, {}), lambda row: row[column]),
                         self._store.column_map(table, column))
 
-    def digests(self, table: str) -> Mapping[str, set[str]]:
-        """Key → the blob digests its rows in ``table`` record (live, as :meth:`column`)."""
-        return ChainMap(_Recorded(self._recorded.get(table, {}), lambda row: {row[DIGEST_COLUMN]}),
-                        self._store.digests(table))
+    def digests(self, table: str, column: str = DIGEST_COLUMN) -> Mapping[str, set[str]]:
+        """Key → the blob digests its rows in ``table`` record in ``column`` (live, as :meth:`column`;
+        a side table's rows, such as ``truths``, are recorded too)."""
+        return ChainMap(_Recorded(self._recorded.get(table, {}), lambda row: {row[column]} if row.get(column) else set()),
+                        self._store.digests(table, column))
 
 
 class _Recorded(Mapping[str, Any]):
@@ -230,7 +231,9 @@ def split_to_do(stage: Stage, plan: Plan, store: Store, cached: set[str] | None 
 
     Args:
         coming: keys that stages upstream will store in this pass, by table; a job whose input
-            is neither stored nor coming is skipped (its input failed or was never made).
+            is coming waits for it even when it is stored (a render made again for its passes:
+            the job may read them), and one whose input is neither stored nor coming is skipped
+            (its input failed or was never made).
     Returns:
         one job per key: the ready ones in plan order, and the waiting ones by their input's
         (table, key).
@@ -248,12 +251,13 @@ def split_to_do(stage: Stage, plan: Plan, store: Store, cached: set[str] | None 
         source = stage.upstream(job)
         if source is not None:
             table, upstream_key = source
+            if upstream_key in coming.get(table, ()):  # made in this pass, or made again for its passes
+                waiting[source].append(job)  # (a stored render whose truth passes are redone): wait for it
+                continue
             if table not in inputs:
                 inputs[table] = store.keys(table)
             if upstream_key not in inputs[table] or not store.blob_path(upstream_key).exists():
-                if upstream_key in coming.get(table, ()):
-                    waiting[source].append(job)
-                continue  # else skipped
+                continue  # skipped: its input failed or was never made
         ready.append(job)
     return ready, dict(waiting)
 
@@ -352,7 +356,8 @@ class _Pass:
     def __init__(self, runs: list[StagePass], plan: Plan, store: Store, bars: list[StageProgress],
                  writers: Writers) -> None:
         self.runs, self.plan, self.store, self.bars, self.writers = runs, plan, store, bars, writers
-        self.recorded: dict[str, dict[str, dict[str, Any]]] = {r.stage.table: {} for r in runs}
+        self.recorded: dict[str, dict[str, dict[str, Any]]] = {
+            table: {} for r in runs for table in (r.stage.table, *r.stage.side_tables)}
         self.feeds = [Feed(store, self.recorded, r.ready, more=bool(r.waiting)) for r in runs]
         self.events: queue.Queue = queue.Queue()
         self.running = [bool(r.ready or r.waiting) for r in runs]  # stages still computing
@@ -434,6 +439,7 @@ class _Pass:
                 self.recorded[stage.table][item.key] = item.row
                 self.writers.add(stage.table, item.row)
             for table, row in item.side.items():
+                self.recorded.setdefault(table, {})[row[KEY_COLUMN[table]]] = row
                 self.writers.add(table, row)
             for later, feed in zip(self.runs[index + 1:], self.feeds[index + 1:]):
                 for job in later.waiting.pop((stage.table, item.key), ()):

@@ -23,7 +23,13 @@ import numpy as np
 import pyarrow as pa
 
 from sweep3d.evaluation import EVALUATOR_METADATA, EvaluatorRecord
-from sweep3d.spec.columns import MIN_VISIBLE_METADATA, PARAMETERS_METADATA, parameter_column
+from sweep3d.spec.columns import (
+    CLASS_NAMES_METADATA,
+    MIN_VISIBLE_METADATA,
+    PARAMETERS_METADATA,
+    PROTOCOL_METADATA,
+    parameter_column,
+)
 from sweep3d.spec.framing import Framing
 from sweep3d.spec.loader import LoadedSpec
 from sweep3d.spec.space import Point
@@ -331,6 +337,10 @@ class Plan:
         model: what results call the model the plan infers (its ``id`` or name).
         device: what renders: ``[render] device`` resolved ("cpu", "cuda", "optix"), as its
             render keys say.
+        class_names: the classes the spec names otherwise than the model, as (class id, the
+            model's name, the spec's name, whether the model's name is another class's too):
+            ``results`` prints the spec's names (see ``spec.class_names``).
+        view: the model's own resize and crop, when known (what a full frame goes through).
     """
 
     spec: LoadedSpec
@@ -340,6 +350,13 @@ class Plan:
     framing: Framing | None = None
     model: str = ""
     device: str = "cpu"
+    class_names: Sequence[tuple[int, str, str, bool]] = ()
+    view: tuple[int, int] | None = None
+
+    @property
+    def protocol(self) -> str:
+        """What the model sees, in one line (see ``Framing.protocol``); "" without a framing."""
+        return self.framing.protocol(self.view) if self.framing is not None else ""
 
     @property
     def columns(self) -> list[str]:
@@ -389,6 +406,9 @@ class Plan:
         if "truth_key" in table.column_names:  # the validity gate's threshold, for the results view
             metadata[MIN_VISIBLE_METADATA] = repr(float(self.spec.evaluator.min_visible)).encode()
         metadata[EVALUATOR_METADATA] = self.evaluator_record().to_json()
+        model = self.model or self.spec.model.label
+        metadata[CLASS_NAMES_METADATA] = json.dumps({model: [list(c) for c in self.class_names]}).encode()
+        metadata[PROTOCOL_METADATA] = json.dumps({model: self.protocol}).encode()
         return table.replace_schema_metadata(metadata)
 
 

@@ -13,8 +13,11 @@ experiment's ``jobs``; this module joins them by the rules of evaluation:
     jobs ⨝ predictions ⨝ ground_truth, with *the experiment's evaluator's* columns only (the
     plan records which: :class:`~sweep3d.evaluation.EvaluatorRecord`), so a store shared with
     another task's experiment adds none of its columns; each role's column also under its usual
-    name (``correct``, ``loss``, ``outcome``, ``top1_label``, …). ``counted`` (:data:`COUNTED_SQL`)
-    is what every accuracy counts: a valid prediction of a job not known to be unevaluable.
+    name (``correct``, ``loss``, ``outcome``, ``top1_label``, …). Class names are the spec's where
+    it names a class otherwise than the model, the model's own beside them (``top1_model_label``,
+    ``topk_model_labels``; :mod:`~sweep3d.stages.aggregate.class_names`). ``counted``
+    (:data:`COUNTED_SQL`) is what every accuracy counts: a valid prediction of a job not known to
+    be unevaluable.
 ``evaluator``
     the experiment's evaluator: its ``kind`` and each ``role`` with its ``column`` (what the
     views, the summary and the report choose their panels by; :func:`results_roles` reads it).
@@ -25,6 +28,7 @@ predictions' columns and the roles their names suggest (:meth:`Roles.guess`).
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import duckdb
@@ -32,7 +36,8 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from sweep3d.evaluation import EvaluatorRecord, Roles, read_record
-from sweep3d.spec.columns import MIN_VISIBLE_METADATA, PREDICTION_COLUMNS
+from sweep3d.spec.columns import MIN_VISIBLE_METADATA, MODEL_NAME_COLUMNS, PREDICTION_COLUMNS, PROTOCOL_METADATA
+from sweep3d.stages.aggregate.class_names import named_columns, read_class_names
 from sweep3d.stages.aggregate.quoting import identifier, literal
 
 DEFAULT_MIN_VISIBLE = 0.1
@@ -68,9 +73,14 @@ def register_results(con: duckdb.DuckDBPyConnection, jobs: Path, truths: bool) -
     # experiment whose job has its key, so its own ``model`` is what the first called it.
     own = "model" in job_columns
     kept = [c for c in ("model", "model_digest", "seconds") if c in have and not (c == "model" and own)]
-    picked = [f"p.{identifier(c)}" if c in have else f"NULL AS {identifier(c)}" for c in record.columns]
-    picked += [f"p.{identifier(column)} AS {identifier(usual)}" for usual, column in record.roles.aliases().items()
-               if usual != column and column in have]
+    # Class names as the spec wrote them (the model's own beside them): see aggregate.class_names.
+    named = named_columns(have, record.columns, record.roles.prediction, read_class_names(jobs), own)
+    picked = [f"{named.get(c, f'p.{identifier(c)}')} AS {identifier(c)}" if c in have else f"NULL AS {identifier(c)}"
+              for c in record.columns]
+    picked += [f"{named.get(usual, f'p.{identifier(column)}')} AS {identifier(usual)}"
+               for usual, column in record.roles.aliases().items() if usual != column and column in have]
+    picked += [f"{named[c]} AS {identifier(c)}" for c in MODEL_NAME_COLUMNS.values()
+               if c in named and c not in record.columns]
     valid = record.roles.valid
     counted = (COUNTED_SQL.format(valid=identifier(valid)) if truth is not None else f"p.{identifier(valid)}") \
         if valid in have else None
@@ -107,6 +117,17 @@ def plan_min_visible(jobs: Path) -> float:
     except (OSError, ValueError, pa.ArrowException):
         min_visible = float("nan")
     return min_visible if 0.0 <= min_visible <= 1.0 else DEFAULT_MIN_VISIBLE
+
+
+def plan_protocol(jobs: Path, model: str) -> str:
+    """What ``model`` sees in the plan at ``jobs`` (``Framing.protocol``'s line; "" for a plan from
+    before plans recorded it, or another model's)."""
+    try:
+        raw = (pq.read_schema(jobs).metadata or {}).get(PROTOCOL_METADATA)
+        line = json.loads(raw).get(model, "") if raw is not None else ""
+    except (OSError, ValueError, AttributeError, pa.ArrowException):
+        return ""
+    return line if isinstance(line, str) else ""
 
 
 def _ground_truth_sql(con: duckdb.DuckDBPyConnection, jobs: Path, truths: bool) -> str | None:

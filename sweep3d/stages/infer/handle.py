@@ -17,10 +17,12 @@ from sweep3d.registry import code_identity
 from sweep3d.spec.framing import Framing
 from sweep3d.spec.loader import LoadedSpec
 from sweep3d.spec.models import ModelSpec
+from sweep3d.stages.infer.labels import LabelMap
 from sweep3d.stages.infer.models import (
     MODELS,
     Classifier,
     Preprocess,
+    builtin_labels,
     builtin_model,
     for_model_framing,
     load_model,
@@ -94,6 +96,13 @@ class ModelHandle:
     def view(self) -> Preprocess | None:
         """The model's resize and crop when they are known (a :class:`Preprocess`), else None."""
         return self.preprocess if isinstance(self.preprocess, Preprocess) else None
+
+    def label_map(self) -> LabelMap | None:
+        """The model's class names: a built-in model's without loading it, a user's as its
+        factory gave them (None when it has not been called)."""
+        if builtin_model(self.name) is not None:
+            return builtin_labels(self.name)
+        return self._classifier.label_map() if self._classifier is not None else None
 
     def classifier(self) -> Classifier:
         """The model ready for inference (loaded on first use), preprocessing for this framing."""

@@ -10,6 +10,8 @@ import difflib
 from functools import cached_property
 from typing import Sequence
 
+from sweep3d.spec.class_names import normal_name
+
 
 class LabelError(ValueError):
     """A label that names no class of the model."""
@@ -30,10 +32,20 @@ class LabelMap:
         table: dict[str, int] = {}
         for i, words in enumerate(self.synonyms):
             for word in words:
-                table.setdefault(_norm(word), i)
+                table.setdefault(normal_name(word), i)
         for i, name in enumerate(self.names):  # primary names win over synonyms
-            table[_norm(name)] = i
+            table[normal_name(name)] = i
         return table
+
+    def renamed(self, names: dict[int, str]) -> list[tuple[int, str, str, bool]]:
+        """The classes ``names`` (class id → a spec's name for it) calls otherwise than this map,
+        as (id, this map's name, the spec's name, whether another class shares this map's name:
+        then only the id tells the two apart), by id."""
+        counts: dict[str, int] = {}
+        for name in self.names:
+            counts[name] = counts.get(name, 0) + 1
+        return [(i, self.names[i], name, counts[self.names[i]] > 1)
+                for i, name in sorted(names.items()) if 0 <= i < len(self) and self.names[i] != name]
 
     def index(self, label: int | str) -> int:
         """Class id of ``label`` (an id, or a name/synonym, case- and separator-insensitive)."""
@@ -43,16 +55,12 @@ class LabelMap:
             if 0 <= label < len(self):
                 return label
             raise LabelError(f"class id {label} is out of range 0..{len(self) - 1}")
-        found = self._lookup.get(_norm(label))
+        found = self._lookup.get(normal_name(label))
         if found is None:
-            close = difflib.get_close_matches(_norm(label), list(self._lookup), n=3)
+            close = difflib.get_close_matches(normal_name(label), list(self._lookup), n=3)
             hint = f"; did you mean {', '.join(repr(c) for c in close)}?" if close else ""
             raise LabelError(f"{label!r} is not a class of the model{hint}")
         return found
-
-
-def _norm(text: str) -> str:
-    return " ".join(text.lower().replace("_", " ").replace("-", " ").split())
 
 
 def _imagenet() -> LabelMap:

@@ -143,7 +143,7 @@ def control_batch(inst: ControlInstance, columns: dict[str, Column], n: int) -> 
     """``inst`` over the ``n`` jobs whose unvalidated values are ``columns`` (parameter → column)."""
     control = inst.control
     ranges = [p for p, c in columns.items() if c.numbers is not None]
-    if ranges and _plain(control, ranges):
+    if ranges and _plain(control, ranges, set(columns)):
         first, group = groups([c.index for c in columns.values() if c.index is not None], n)
         dumps = [control.params(_raw(columns, r)).model_dump() for r in first.tolist()]
         try:
@@ -187,10 +187,13 @@ def _identity(batch: ControlBatch) -> np.ndarray:
     return identity
 
 
-def _plain(control: Control, ranges: list[str]) -> bool:
-    """Whether ``control`` maps range values to key parts as :class:`Control` does, unchanged."""
+def _plain(control: Control, ranges: list[str], given: set[str]) -> bool:
+    """Whether ``control`` maps range values to key parts as :class:`Control` does, unchanged (its
+    ``canonical`` may fold parameters, see ``Control.folds``, none of which ``given`` reads from a range)."""
     cls, model = type(control), control.Params
-    if any(getattr(cls, m) is not getattr(Control, m) for m in ("params", "canonical", "key_part")):
+    if any(getattr(cls, m) is not getattr(Control, m) for m in ("params", "key_part")):
+        return False
+    if cls.canonical is not Control.canonical and not _folds_fixed(control, ranges, given):
         return False
     if any(_own_decorators(model, kind) for kind in _DECORATORS):
         return False
@@ -205,6 +208,14 @@ def _plain(control: Control, ranges: list[str]) -> bool:
         if not all(isinstance(m, INTERVALS) for m in info.metadata):
             return False
     return True
+
+
+def _folds_fixed(control: Control, ranges: list[str], given: set[str]) -> bool:
+    """Whether ``control`` folds parameters and each one ``given`` is folded from fixed values: its
+    ``canonical`` then writes a group's key part, holes and all, as the base method would per job."""
+    folds = type(control).folds
+    return bool(folds) and all(not ({param, *others} & set(ranges)) for param, others in folds.items()
+                               if param in given)
 
 
 def _own_decorators(model: type[BaseModel], kind: str) -> dict[str, Any]:

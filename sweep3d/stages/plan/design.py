@@ -62,6 +62,8 @@ def read_design(path: Path, controls: Sequence[ControlInstance], objects: Sequen
     file = str(path)
     columns = {parameter_column(inst.id, param): (inst, param) for inst in controls for param in inst.spaces}
     _check_header(file, names, columns)
+    if not rows:
+        raise SpecError(file, "", "the design table has no rows; give one row per job under the header")
     scenes: dict[tuple[str, str], SceneRows] = {}
     for number, row in enumerate(rows, start=1):
         cells = dict(zip(names, row))

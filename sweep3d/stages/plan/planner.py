@@ -16,12 +16,15 @@ import numpy as np
 from sweep3d.cache.keys import Template, digests, file_digest
 from sweep3d.errors import SpecError, UserError
 from sweep3d.spec.assets import mesh_digest
+from sweep3d.spec.class_names import NameClash, spec_class_names
 from sweep3d.spec.framing import Framing
 from sweep3d.spec.loader import ControlInstance, LoadedSpec
 from sweep3d.spec.models import ModelSpec
 from sweep3d.spec.sniff import unreadable
 from sweep3d.spec.space import Column, Point, SearchSpace
 from sweep3d.stages.infer.keys import evaluator_key, infer_base, pred_keys
+from sweep3d.stages.infer.labels import LabelMap
+from sweep3d.stages.infer.models import builtin_labels
 from sweep3d.stages.jobs import JobList, Plan, PlanColumns, SceneBlock
 from sweep3d.stages.passes import truth_passes
 from sweep3d.stages.plan.batch import ControlBatch, control_batch, groups, keyed_texts
@@ -56,7 +59,8 @@ class _Keys:
 
 
 def make_plan(spec: LoadedSpec, *, framing: Framing, model_digest: str, blender: str,
-              history: History | None = None, model: ModelSpec | None = None, device: str | None = None) -> Plan:
+              history: History | None = None, model: ModelSpec | None = None, device: str | None = None,
+              classes: LabelMap | None = None, view: tuple[int, int] | None = None) -> Plan:
     """Expand ``spec`` into jobs, sorted by scene so workers reload as little as possible.
 
     Each scene's jobs are made as columns (see :mod:`sweep3d.stages.plan.batch`): values and
@@ -73,8 +77,12 @@ def make_plan(spec: LoadedSpec, *, framing: Framing, model_digest: str, blender:
         model: which of the spec's models the plan infers (default: the first).
         device: what renders ("cpu", "cuda", "optix"; a GPU is part of every render key);
             default: ``[render] device`` resolved here (see ``stages.render.device``).
+        classes: the model's class names (a user's model's, once loaded); default: a built-in
+            model's. The plan records the classes the spec names otherwise (see ``spec.class_names``).
+        view: the model's own resize and crop, when known (the plan says what the model sees).
     """
     model = model or spec.model
+    renamed = _renamed_classes(spec, classes if classes is not None else builtin_labels(model.name))
     device = device or resolve_device(spec.render.device)
     check_size(spec)
     rendered = sorted((c for c in spec.controls if c.control.stage == "render"),
@@ -120,7 +128,23 @@ def make_plan(spec: LoadedSpec, *, framing: Framing, model_digest: str, blender:
     mask = np.concatenate(keys.in_frame) if keys.in_frame else np.zeros(0, bool)
     plan = PlanColumns(blocks, keys.render, keys.image, keys.pred, keys.parts, mask, keys.truth)
     return Plan(spec, JobList(plan, np.flatnonzero(mask)), model_digest, JobList(plan, np.flatnonzero(~mask)), framing,
-                model.label, device)
+                model.label, device, renamed, view)
+
+
+def _renamed_classes(spec: LoadedSpec, classes: LabelMap | None) -> list[tuple[int, str, str, bool]]:
+    """The classes the spec names otherwise than ``classes`` do (none when they are unknown).
+
+    Raises:
+        SpecError: two labels name one class differently (a built-in model's spec was refused
+            at load; a user's model's classes are first known here).
+    """
+    if classes is None:
+        return []
+    try:
+        names = spec_class_names([obj.labels for obj in spec.objects], classes)
+    except NameClash as exc:
+        raise SpecError(str(spec.path), exc.key, str(exc)) from None
+    return classes.renamed(names)
 
 
 def _scene_keys(spec: LoadedSpec, keys: _Keys, scene: str, rendered: list[ControlBatch], post: list[ControlBatch],
@@ -167,8 +191,10 @@ def _in_frame(rendered: list[ControlInstance], batches: dict[str, ControlBatch],
         return np.array([_in_frame_one(applying, batches, r) for r in range(n)], dtype=bool)
     fields: dict[str, np.ndarray] = {}
     for inst, mapping in zip(applying, known):
+        values = batches[inst.id].values
         for param, name in mapping.items():  # type: ignore[union-attr]
-            fields[name] = batches[inst.id].values.floats(param)
+            if param in values.numbers or param in values.dumps[0]:  # else left out: the state's default
+                fields[name] = values.floats(param)
     if not fields:  # nothing moves the object or the camera: one answer for every job
         return np.full(n, _in_frame_one(applying, batches, 0), dtype=bool)
     inside, unsure = in_frame_many(fields, n)

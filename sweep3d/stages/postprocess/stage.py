@@ -5,24 +5,34 @@ A render blob that is missing or damaged (its bytes do not match the digest its 
 or it does not decode) is reported to the driver, which discards it so the run's next pass
 renders it again. Renders arrive while the render stage goes on (see ``stages.driver``), so
 their rows are read through the feed, which knows the rows of this pass before they are flushed.
+
+Controls that declare render passes (``passes = ("depth",)``) get the job's pass arrays and its
+camera as a :class:`RenderFrame`: the stage loads the blobs under the job's truth key, checked
+against the digests its ``truths`` row recorded. A pass blob that is missing or damaged is
+reported like a damaged render: its truth row is dropped and the run's next pass renders the
+passes again (the RGB render is kept).
 """
 
 from __future__ import annotations
 
+import inspect
 import time
+from functools import lru_cache
 from typing import Any, Iterator, Sequence
 
 import numpy as np
 import pyarrow as pa
 
-from sweep3d.cache.blobs import load_image, sha256_bytes
-from sweep3d.cache.store import DIGEST_COLUMN, Store, atomic_write, utc_now
+from sweep3d.cache.blobs import load_image, load_pass, sha256_bytes
+from sweep3d.cache.store import DIGEST_COLUMN, TRUTH_BLOBS, Store, atomic_write, utc_now
 from sweep3d.controls import blamed
 from sweep3d.errors import PluginError
 from sweep3d.pixels import encode_png
 from sweep3d.spec.loader import ControlInstance
 from sweep3d.stages.driver import Computed, Feed
 from sweep3d.stages.jobs import Job, Plan
+from sweep3d.stages.postprocess.frame import RenderFrame, frame_from_state
+from sweep3d.truth import BLOB_SUFFIX, TRUTH_PASSES
 
 IMAGES_SCHEMA = pa.schema([
     ("image_key", pa.string()), ("render_key", pa.string()), ("valid", pa.bool_()),
@@ -31,27 +41,55 @@ IMAGES_SCHEMA = pa.schema([
 
 
 def apply_post(image: np.ndarray, controls: Sequence[ControlInstance], values: dict[str, dict[str, Any]],
-               seed_key: str) -> np.ndarray:
+               seed_key: str, frame: RenderFrame | None = None) -> np.ndarray:
     """Apply the post controls that this job has, in spec order.
 
     Args:
         image: float32 (H, W, 3) in [0, 1].
         seed_key: the job's image key; seeds the random generator so results are reproducible.
+        frame: the job's render passes and camera, for the controls that declare ``passes``.
     """
     rng = np.random.default_rng(int(seed_key[:16], 16))
     out = image
     for inst in controls:
         if inst.id in values and not inst.control.is_identity(values[inst.id]):
-            out = _applied(inst, out, inst.control.params(values[inst.id]), rng)
+            out = _applied(inst, out, inst.control.params(values[inst.id]), rng, frame)
     return np.asarray(out, dtype=np.float32)
 
 
-def _applied(inst: ControlInstance, image: np.ndarray, params: Any, rng: np.random.Generator) -> np.ndarray:
-    """One control's ``apply``; a user's control that raises or returns no image of ``image``'s
-    shape is a :class:`PluginError` naming it (sweep3d's own controls' failures are bugs: raised)."""
+def reads_passes(inst: ControlInstance, values: dict[str, dict[str, Any]]) -> tuple[str, ...]:
+    """The truth passes ``inst`` reads for a job with ``values`` (none when it is neutral there)."""
+    passes = tuple(p for p in getattr(inst.control, "passes", ()) if p in TRUTH_PASSES)
+    if not passes or inst.id not in values or inst.control.is_identity(values[inst.id]):
+        return ()
+    return passes
+
+
+@lru_cache(maxsize=None)
+def takes_frame(cls: type) -> bool:
+    """Whether ``cls.apply`` accepts a fourth argument (the frame): older controls take three."""
+    try:
+        parameters = list(inspect.signature(cls.apply).parameters.values())[1:]  # after self
+    except (TypeError, ValueError):
+        return False
+    if any(p.kind is inspect.Parameter.VAR_POSITIONAL for p in parameters):
+        return True
+    positional = [p for p in parameters if p.kind in (inspect.Parameter.POSITIONAL_ONLY,
+                                                      inspect.Parameter.POSITIONAL_OR_KEYWORD)]
+    return len(positional) >= 4
+
+
+def _applied(inst: ControlInstance, image: np.ndarray, params: Any, rng: np.random.Generator,
+             frame: RenderFrame | None = None) -> np.ndarray:
+    """One control's ``apply`` (with the frame when it declares passes and takes one); a user's
+    control that raises or returns no image of ``image``'s shape is a :class:`PluginError` naming
+    it (sweep3d's own controls' failures are bugs: raised)."""
     control = inst.control
     with blamed(control, "failed in apply()"):
-        out = control.apply(image, params, rng)
+        if getattr(control, "passes", ()) and takes_frame(type(control)):
+            out = control.apply(image, params, rng, frame)
+        else:
+            out = control.apply(image, params, rng)
     try:
         array = np.asarray(out, dtype=np.float32)
     except (TypeError, ValueError):
@@ -61,6 +99,20 @@ def _applied(inst: ControlInstance, image: np.ndarray, params: Any, rng: np.rand
         raise PluginError(f"control {control.type_name!r} (id {inst.id!r}) returned {what} from apply(); return the image as a float array of shape "
                           f"{image.shape} (H, W, 3), values in [0, 1]")
     return array
+
+
+def job_frame(plan: Plan, job: Job, arrays: dict[str, np.ndarray]) -> RenderFrame:
+    """The job's :class:`RenderFrame`: its pass ``arrays`` and the camera its rendered controls
+    pose (in their order, on a fresh ``SceneState``, as the render worker does)."""
+    from sweep3d.stages.render.state import SceneState
+
+    state = SceneState()
+    rendered = sorted((c.control for c in plan.spec.controls if c.control.stage == "render"), key=lambda c: c.order)
+    for control in rendered:
+        if control.id in job.values:
+            with blamed(control, "failed in apply()"):
+                control.apply(state, control.params(job.values[control.id]))
+    return frame_from_state(state, plan.framing.size, plan.framing.crop, arrays.get("depth"), arrays.get("mask"))
 
 
 class PostprocessStage:
@@ -87,6 +139,7 @@ class PostprocessStage:
         post = [c for c in plan.spec.controls if c.control.stage == "post"]
         render_valid = todo.column("renders", "valid")  # live: renders of this pass arrive with their jobs
         render_digests = todo.digests("renders")
+        pass_digests = {name: todo.digests("truths", TRUTH_BLOBS[BLOB_SUFFIX[name]]) for name in TRUTH_PASSES}
         damaged: set[str] = set()
         for job in todo:
             t0 = time.perf_counter()
@@ -96,10 +149,29 @@ class PostprocessStage:
                 damaged.add(job.render_key)
                 yield Computed(job.image_key, damaged=("renders", job.render_key))
                 continue
-            image = apply_post(render, post, job.values, job.image_key)
+            frame = None
+            wanted = sorted({p for inst in post for p in reads_passes(inst, job.values)})
+            if wanted and job.truth_key is None:
+                yield Computed(job.image_key, error="a post control reads render passes the plan did not ask for")
+                continue
+            if wanted:
+                arrays = {name: _pass(store, job, name, pass_digests[name], render.shape[:2]) for name in wanted}
+                if any(a is None for a in arrays.values()):  # its truth row goes: the passes are rendered again
+                    yield Computed(job.image_key, damaged=("truths", job.truth_key))
+                    continue
+                frame = job_frame(plan, job, arrays)
+            image = apply_post(render, post, job.values, job.image_key, frame)
             valid = render_valid.get(job.render_key) is not False and bool(np.isfinite(image).all())
             data = encode_png(image)
             atomic_write(store.blob_path(job.image_key), data)
             yield Computed(job.image_key, {"image_key": job.image_key, "render_key": job.render_key, "valid": valid,
                                            "seconds": time.perf_counter() - t0, "created_at": utc_now(),
                                            DIGEST_COLUMN: sha256_bytes(data)})
+
+
+def _pass(store: Store, job: Job, name: str, digests: Any, shape: tuple[int, ...]) -> np.ndarray | None:
+    """One pass of the job's render, checked against the digests its truth rows recorded (and
+    against the image's size); None when it is missing, damaged or of another size."""
+    assert job.truth_key is not None
+    array = load_pass(store, job.truth_key, name, digests.get(job.truth_key))
+    return array if array is not None and array.shape == tuple(shape) else None

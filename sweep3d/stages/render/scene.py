@@ -373,13 +373,14 @@ class BlenderScene:
 
     @staticmethod
     def _key_light(env: EnvironmentRef, state: SceneState) -> list[SunLight]:
-        """A plain colour's key light: a white sun riding with the camera, scaled like the world's
-        light (the world keeps ``fill`` of it, see world.py); none under a procedural sky."""
+        """A plain colour's key light: a white sun (riding with the camera unless it is world-relative),
+        scaled like the world's light (the world keeps ``fill`` of it, see world.py); none under a
+        procedural sky."""
         key = env.key_light
         if key is None or state.sky is not None:
             return []
         strength = key.strength * env.strength * state.world_strength
-        return [SunLight(WHITE, strength, key.angle, key.azimuth, key.elevation, "camera")]
+        return [SunLight(WHITE, strength, key.angle, key.azimuth, key.elevation, key.relative_to)]
 
     def render(self) -> np.ndarray:
         """Render the current scene.

@@ -19,8 +19,31 @@ if TYPE_CHECKING:
 SENSOR_WIDTH_MM = 36.0
 FRAME_FILL = 0.8  # distance = 1 / (zoom · FRAME_FILL · sin(half fov)): the sphere spans ~78 % at 50 mm (README)
 #: The :class:`SceneState` fields :func:`in_frame` reads.
-FRAME_FIELDS = ("scale", "azimuth", "elevation", "zoom", "focal_length", "frame_x", "frame_y")
+FRAME_FIELDS = ("scale", "azimuth", "elevation", "zoom", "fill", "focal_length", "frame_x", "frame_y")
 EDGE_TOLERANCE = 1e-9  # relative: states this close to the frame's edge are tested one by one
+
+
+def zoom_for_fill(fill: Any, focal_length: Any) -> Any:
+    """The zoom at which the object's bounding sphere spans ``fill`` of the frame's width, at this
+    focal length (mm): the inverse of :func:`fill_of_zoom`, exact for any lens.
+
+    With h the half field of view (tan h = 18 / f), the sphere's outline spans tan a / tan h of
+    the frame where sin a = 0.8 · zoom · sin h (README, "Camera framing"); solved for zoom,
+    zoom = fill · √(f² + 18²) / (0.8 · √(f² + (18 · fill)²)). Only +, ×, ÷ and √ (all correctly
+    rounded), so floats and numpy arrays give the same bits: keys and the in-frame test agree.
+    """
+    half = SENSOR_WIDTH_MM / 2.0
+    share = half * fill
+    return fill * np.sqrt(focal_length * focal_length + half * half) / (
+        FRAME_FILL * np.sqrt(focal_length * focal_length + share * share))
+
+
+def fill_of_zoom(zoom: float, focal_length: float) -> float:
+    """The share of the frame's width the bounding sphere's outline spans at this zoom and focal
+    length (mm); 0 when the camera is inside the sphere (it then covers the whole view)."""
+    half = math.atan(SENSOR_WIDTH_MM / (2.0 * focal_length))
+    sine = FRAME_FILL * zoom * math.sin(half)
+    return math.tan(math.asin(sine)) / math.tan(half) if sine < 1.0 else 0.0
 
 
 @dataclass(frozen=True)
@@ -72,6 +95,7 @@ class SceneState:
     azimuth: float = 0.0
     elevation: float = 20.0
     zoom: float = 1.0
+    fill: float = 0.0  # > 0: the bounding sphere's share of the frame's width, which sets the zoom
     focal_length: float = 50.0
     frame_x: float = 0.0  # object centre in the image, as a fraction of the half-width (+ right)
     frame_y: float = 0.0  # ... of the half-height (+ up)
@@ -95,11 +119,15 @@ class SceneState:
         """Half the camera's field of view in radians (square sensor)."""
         return math.atan(SENSOR_WIDTH_MM / (2.0 * self.focal_length))
 
+    def framing_zoom(self) -> float:
+        """``zoom``, or the zoom ``fill`` stands for at this focal length when it is set."""
+        return float(zoom_for_fill(self.fill, self.focal_length)) if self.fill > 0 else self.zoom
+
     def camera_distance(self) -> float:
         """Distance from which a unit sphere (scale 1) is seen under an angle whose sine is ``FRAME_FILL``
         times the half field of view's (its outline spans tan(asin(0.8 sin h)) / tan h of the
         frame: 78 % at zoom 1 and 50 mm; README, "Camera framing")."""
-        return 1.0 / (self.zoom * FRAME_FILL * math.sin(self.half_fov()))
+        return 1.0 / (self.framing_zoom() * FRAME_FILL * math.sin(self.half_fov()))
 
     def camera_basis(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Camera position, right, up and forward unit vectors (world space, float64, shape (3,)).
@@ -158,7 +186,9 @@ def in_frame_many(fields: Mapping[str, np.ndarray | float], n: int) -> tuple[np.
     f = {name: np.broadcast_to(np.asarray(fields.get(name, getattr(neutral, name)), dtype=np.float64), (n,))
          for name in FRAME_FIELDS}
     half = np.arctan(SENSOR_WIDTH_MM / (2.0 * f["focal_length"]))
-    distance = 1.0 / (f["zoom"] * FRAME_FILL * np.sin(half))
+    fill = f["fill"]
+    zoom = np.where(fill > 0, zoom_for_fill(np.where(fill > 0, fill, 1.0), f["focal_length"]), f["zoom"])
+    distance = 1.0 / (zoom * FRAME_FILL * np.sin(half))
     az, el = np.radians(f["azimuth"]), np.radians(f["elevation"])
     forward = np.stack([-np.cos(el) * np.sin(az), np.cos(el) * np.cos(az), -np.sin(el)])
     up = np.stack([-np.sin(el) * np.sin(az), np.sin(el) * np.cos(az), np.cos(el)])

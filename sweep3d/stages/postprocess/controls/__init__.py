@@ -3,6 +3,7 @@
 from sweep3d.stages.postprocess.controls.artifacts import Cutout, Jpeg
 from sweep3d.stages.postprocess.controls.base import POST_CONTROLS, PostControl
 from sweep3d.stages.postprocess.controls.corruptions import CORRUPTIONS, Corruption
+from sweep3d.stages.postprocess.controls.depth import Defocus, Fog
 from sweep3d.stages.postprocess.controls.photometric import (
            Blur,
            BrightnessContrast,
@@ -10,5 +11,5 @@ from sweep3d.stages.postprocess.controls.photometric import (
            Noise,
 )
 
-__all__ = ["CORRUPTIONS", "POST_CONTROLS", "Blur", "BrightnessContrast", "ColorJitter", "Corruption", "Cutout", "Jpeg", "Noise",
-           "PostControl"]
+__all__ = ["CORRUPTIONS", "POST_CONTROLS", "Blur", "BrightnessContrast", "ColorJitter", "Corruption", "Cutout", "Defocus",
+           "Fog", "Jpeg", "Noise", "PostControl"]

@@ -16,6 +16,12 @@ class PostControl(Control):
     ``apply`` receives and returns float32 arrays of shape (H, W, 3) in [0, 1]. Controls that
     draw random numbers set ``stochastic = True`` and must use only the ``rng`` they are given,
     which is seeded from the job's cache key so cached results are reproducible.
+
+    A control that reads render passes declares them (``passes = ("depth",)``, and/or "mask"):
+    they are then rendered for every job, and ``apply`` is called with a fourth argument, ``frame``,
+    a :class:`~sweep3d.stages.postprocess.frame.RenderFrame` holding the job's pass arrays and its
+    camera (``apply(self, image, params, rng, frame)``). An ``apply`` that takes three arguments
+    is called with three, as before.
     """
 
     stage = "post"

@@ -1,0 +1,173 @@
+"""``sweep3d export``: the chosen results of a run (by default its failures) as a dataset to train
+or test on, in one of :data:`FORMATS`, with ``design.csv`` beside it: the configurations that
+made them, so the same scenes can be rendered again later (for a retrained model, say).
+
+Every check a user's input can fail (the format, ``--where``, the folder) runs before anything is
+written, and the files are written into a staging folder that is moved into place at the end:
+an export that stops (a damaged blob, Ctrl-C) leaves the folder as it was.
+"""
+
+from __future__ import annotations
+
+import datetime
+import decimal
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from sweep3d.cache.store import Store, safe_filename
+from sweep3d.errors import UserError
+from sweep3d.export.base import Batch, DatasetWriter, Item
+from sweep3d.export.coco import CocoWriter
+from sweep3d.export.imagefolder import ImageFolderWriter
+from sweep3d.export.parquet import ParquetWriter
+from sweep3d.export.selection import DEFAULT_WHERE, UNEVALUABLE, Selection, check_where, select
+from sweep3d.export.target import DESIGN, MANIFEST, SCENE, ExportFolder, Staging, design_table, identity, open_folder
+from sweep3d.progress import RunProgress
+from sweep3d.spec.loader import LoadedSpec
+
+if TYPE_CHECKING:
+    from rich.console import Console
+
+#: ``--format`` → the writer of that format.
+FORMATS: dict[str, type[DatasetWriter]] = {w.name: w for w in (CocoWriter, ImageFolderWriter, ParquetWriter)}
+#: Columns of ``results`` an image's attributes carry besides its scene and control values, where they exist.
+VERDICT = ("valid", "correct", "outcome", "top1_label", "evaluable", "visible_fraction")
+
+
+@dataclass(frozen=True)
+class ExportResult:
+    """What an export wrote.
+
+    Attributes:
+        added: images this export added.
+        total: images the export folder holds now.
+        left_out: results chosen but left out as not evaluable (``--unevaluable skip``).
+        already: results chosen that an earlier export into the folder holds already.
+    """
+
+    folder: Path
+    format: str
+    added: int
+    total: int
+    categories: int
+    left_out: int
+    already: int
+
+    def line(self) -> str:
+        """One line for the command line."""
+        notes = []
+        if self.left_out:
+            notes.append(f"{self.left_out} not evaluable left out (--unevaluable flag keeps them)")
+        if self.already:
+            notes.append(f"{self.already} already in the export")
+        extra = f"; {', '.join(notes)}" if notes else ""
+        return (f"exported {self.added} images ({self.total} in all, {self.categories} categories) as {self.format} "
+                f"to {self.folder}, with its design table {DESIGN}{extra}")
+
+
+def writer_for(fmt: str) -> DatasetWriter:
+    """The writer of ``--format fmt``.
+
+    Raises:
+        UserError: ``fmt`` is not a format we write.
+    """
+    if fmt not in FORMATS:
+        raise UserError(f"--format {fmt!r}: unknown; use {', '.join(FORMATS)}")
+    return FORMATS[fmt]()
+
+
+def default_output(spec: LoadedSpec, fmt: str) -> Path:
+    """``exports/<experiment>-<format>`` beside the spec."""
+    return spec.path.parent / "exports" / f"{safe_filename(spec.name)}-{fmt}"
+
+
+def export_dataset(spec: LoadedSpec, fmt: str, *, output: Path | None = None, where: str | None = None,
+                   model: str | None = None, unevaluable: str = "skip", append: bool = False, link: bool = False,
+                   console: Console | None = None) -> ExportResult:
+    """Export the results of ``spec``'s experiment that meet ``where`` (default: the failures).
+
+    Args:
+        output: the export's folder (default :func:`default_output`): new, empty, or with
+            ``append`` an export of the same format to add to.
+        model: whose results (its id; default the spec's first model).
+        unevaluable: ``skip`` leaves out jobs whose ``evaluable`` is false; ``flag`` keeps them,
+            marked (attribute ``evaluable: false``; COCO annotations ``ignore: 1``).
+        link: hard-link image files to the store's blobs where the file system allows it.
+        console: where the progress bar shows (None: none).
+
+    Raises:
+        UserError: an unknown format or ``unevaluable``, a ``where`` that is not one condition,
+            an output folder that holds other files, no results, a damaged blob. Nothing is
+            written then.
+    """
+    writer = writer_for(fmt)
+    if unevaluable not in UNEVALUABLE:
+        raise UserError(f"--unevaluable {unevaluable!r}: use {' or '.join(UNEVALUABLE)}")
+    if link and not writer.files:
+        raise UserError(f"--link: a {fmt} export holds the images' bytes, not files; leave --link out")
+    condition = check_where(DEFAULT_WHERE if where is None else where)
+    folder = open_folder(Path(output) if output is not None else default_output(spec, fmt), spec.store, fmt, append)
+    selection = select(spec, condition, model, unevaluable)
+    if writer.needs_mask and not selection.truth:
+        raise UserError(f"--format {fmt} takes boxes and masks from the mask pass, which {spec.path} does not render: "
+                        "add passes = [\"mask\"] to its [evaluator], run it again, then export")
+    items, already = _new_items(spec, selection, folder, writer)
+    result = ExportResult(folder.root, fmt, len(items), len(folder.items), len(folder.categories),
+                          selection.skipped, already)
+    if not items and not folder.fresh:
+        return result  # nothing new: the folder stays as it is
+    staging = Staging(folder)
+    try:
+        batch = Batch(items, Store(spec.store), selection.table, selection.columns, link)
+        with RunProgress(console) as progress, progress.stage("export", len(items), already) as bar:
+            writer.write(batch, folder, staging, bar)
+        staging.write(DESIGN, design_table(folder.items))
+        staging.write(MANIFEST, folder.manifest())
+        staging.commit()
+    except BaseException:
+        staging.discard()
+        raise
+    return result
+
+
+def _new_items(spec: LoadedSpec, selection: Selection, folder: ExportFolder,
+               writer: DatasetWriter) -> tuple[list[Item], int]:
+    """The selection's results the folder does not hold yet, with their ids and categories (their
+    manifest entries added to ``folder``), and how many it holds already."""
+    labels = {o.name: str(o.labels[0]) for o in spec.objects}
+    for label in labels.values():  # the experiment's labels are the categories, in spec order
+        folder.category(label)
+    known, next_id, items = folder.known(), folder.next_id(), []
+    for index, row in enumerate(selection.rows):
+        entry = {"experiment": row["experiment"], "model": row.get("model"), "job": row["job"],
+                 "image_key": row["image_key"]}
+        if identity(entry) in known:
+            continue
+        known.add(identity(entry))
+        if row["object"] not in labels:
+            raise UserError(f"results name the object {row['object']!r}, which {spec.path} no longer has: run the "
+                            "spec again (sweep3d run) to plan its jobs anew, then export")
+        label = labels[row["object"]]
+        design = {c: _plain(row.get(c)) for c in (*SCENE, *selection.parameters)}
+        attributes = {**entry, **design, "label": label, "labels": [str(x) for x in _labels_of(spec, row["object"])],
+                      **{c: _plain(row[c]) for c in VERDICT if c in row}}
+        item = Item(next_id, index, row, label, folder.category(label), attributes)
+        folder.items.append({"id": item.id, **entry, "label": label, "file": writer.file_of(item),
+                             "attributes": attributes, "design": design})
+        items.append(item)
+        next_id += 1
+    return items, len(selection.rows) - len(items)
+
+
+def _labels_of(spec: LoadedSpec, name: str) -> list[Any]:
+    return next(o.labels for o in spec.objects if o.name == name)
+
+
+def _plain(value: Any) -> Any:
+    """``value`` as JSON holds it (a parameter or verdict is a number, text or bool already)."""
+    if isinstance(value, decimal.Decimal):
+        return float(value)
+    if isinstance(value, (datetime.date, datetime.time)):
+        return value.isoformat()
+    return value
