@@ -188,8 +188,45 @@ class SobolPolicy(Policy):
         return self.params.samples if shape.n_continuous or shape.choice_sizes else 1
 
 
+class RoundsPolicy(Policy):
+    """An adaptive policy that starts with ``initial`` Sobol points and then proposes rounds of
+    ``batch`` points (:meth:`next_round`) from the outcomes so far, up to ``samples`` per scene.
+
+    Its ``Params`` have at least ``samples``, ``initial`` and ``batch``. A round is drawn from
+    ``(seed, round index)``, so a plan replays every round from the history alone (a killed run
+    resumes); a round that proposes no new point ends the search.
+    """
+
+    adaptive = True
+
+    def points(self, shape: SpaceShape, seed: int, history: Mapping[Point, Outcome]) -> list[Point]:
+        p = self.params
+        first = SobolPolicy(SobolPolicy.Params(samples=min(p.initial, p.samples))).points(shape, seed, history)
+        points = list(dict.fromkeys(first))
+        round_index = 1
+        while len(points) < p.samples and all(q in history for q in points):
+            rng = np.random.default_rng([seed, round_index])
+            new = self.next_round(shape, points, history, rng, min(p.batch, p.samples - len(points)), round_index)
+            seen = set(points)
+            fresh = [q for q in dict.fromkeys(new) if q not in seen]
+            if not fresh:
+                break
+            points += fresh
+            round_index += 1
+        return points
+
+    def next_round(self, shape: SpaceShape, points: list[Point], history: Mapping[Point, Outcome],
+                   rng: np.random.Generator, n: int, round_index: int) -> list[Point]:
+        """``n`` points to evaluate next (round ``round_index``, from 1), given ``points`` and their outcomes."""
+        raise NotImplementedError
+
+    def count(self, shape: SpaceShape) -> int:
+        """The budget: the most points its rounds can reach (one in a space with nothing to vary)."""
+        return self.params.samples if shape.n_continuous or shape.choice_sizes else 1
+
+
 @POLICIES.register("adaptive")
-class AdaptivePolicy(Policy):
+class AdaptivePolicy(RoundsPolicy):
     """Failure search under a budget of ``samples`` points per scene.
 
     Starts with ``initial`` Sobol points; each later round proposes ``batch`` points, most of
@@ -210,25 +247,9 @@ class AdaptivePolicy(Policy):
         switch: float = Field(0.2, ge=0.0, le=1.0)
         explore: float = Field(0.25, ge=0.0, le=1.0)
 
-    def points(self, shape: SpaceShape, seed: int, history: Mapping[Point, Outcome]) -> list[Point]:
-        p = self.params
-        first = SobolPolicy(SobolPolicy.Params(samples=min(p.initial, p.samples))).points(shape, seed, history)
-        points = list(dict.fromkeys(first))
-        round_index = 1
-        while len(points) < p.samples and all(q in history for q in points):
-            rng = np.random.default_rng([seed, round_index])
-            wanted = min(p.batch, p.samples - len(points))
-            new = self._round(shape, points, history, rng, wanted, p.radius * p.shrink ** (round_index - 1))
-            fresh = [q for q in dict.fromkeys(new) if q not in set(points)]
-            if not fresh:
-                break
-            points += fresh
-            round_index += 1
-        return points
-
-    def count(self, shape: SpaceShape) -> int:
-        """The budget: the most points its rounds can reach (one in a space with nothing to vary)."""
-        return self.params.samples if shape.n_continuous or shape.choice_sizes else 1
+    def next_round(self, shape: SpaceShape, points: list[Point], history: Mapping[Point, Outcome],
+                   rng: np.random.Generator, n: int, round_index: int) -> list[Point]:
+        return self._round(shape, points, history, rng, n, self.params.radius * self.params.shrink ** (round_index - 1))
 
     def _round(self, shape: SpaceShape, points: list[Point], history: Mapping[Point, Outcome],
                rng: np.random.Generator, n: int, radius: float) -> list[Point]:
@@ -256,7 +277,7 @@ class AdaptivePolicy(Policy):
 
 
 @POLICIES.register("boundary")
-class BoundaryPolicy(Policy):
+class BoundaryPolicy(RoundsPolicy):
     """Failure-boundary search under a budget of ``samples`` points per scene.
 
     Starts with ``initial`` Sobol points; each later round fits a step to the outcomes so far
@@ -270,7 +291,6 @@ class BoundaryPolicy(Policy):
     space; with no step yet, the whole round is.
     """
 
-    adaptive = True
     #: The likelihood ratio a step needs before a round aims at it (χ²₁'s 95 % point).
     EVIDENCE = 3.84
 
@@ -280,26 +300,6 @@ class BoundaryPolicy(Policy):
         batch: int = Field(4, ge=1, le=1_000_000)  # small rounds: each aims at what the last one learned
         margin: float = Field(0.25, ge=0.0, le=10.0)
         explore: float = Field(0.0, ge=0.0, le=1.0)
-
-    def points(self, shape: SpaceShape, seed: int, history: Mapping[Point, Outcome]) -> list[Point]:
-        p = self.params
-        first = SobolPolicy(SobolPolicy.Params(samples=min(p.initial, p.samples))).points(shape, seed, history)
-        points = list(dict.fromkeys(first))
-        round_index = 1
-        while len(points) < p.samples and all(q in history for q in points):
-            rng = np.random.default_rng([seed, round_index])
-            new = self._round(shape, points, history, rng, min(p.batch, p.samples - len(points)))
-            seen = set(points)
-            fresh = [q for q in dict.fromkeys(new) if q not in seen]
-            if not fresh:
-                break
-            points += fresh
-            round_index += 1
-        return points
-
-    def count(self, shape: SpaceShape) -> int:
-        """The budget: the most points its rounds can reach (one in a space with nothing to vary)."""
-        return self.params.samples if shape.n_continuous or shape.choice_sizes else 1
 
     def target(self, shape: SpaceShape, points: Sequence[Point],
                history: Mapping[Point, Outcome]) -> tuple[int, float, float] | None:
@@ -320,8 +320,8 @@ class BoundaryPolicy(Policy):
                 best, found = fit.lr, (d, fit.interval_low, fit.interval_high)
         return found
 
-    def _round(self, shape: SpaceShape, points: list[Point], history: Mapping[Point, Outcome],
-               rng: np.random.Generator, n: int) -> list[Point]:
+    def next_round(self, shape: SpaceShape, points: list[Point], history: Mapping[Point, Outcome],
+                   rng: np.random.Generator, n: int, round_index: int) -> list[Point]:
         found = self.target(shape, points, history)
         aimed = n - int(round(n * self.params.explore)) if found else 0
         out = []
