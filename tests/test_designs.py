@@ -336,3 +336,88 @@ def test_a_bad_include_is_one_line(tmp_path: Path, include: str, problem: str) -
     with pytest.raises(SpecError) as caught:
         load_spec(tmp_path / "spec.toml")
     assert caught.value.key == "include" and problem in caught.value.problem
+
+
+# -- what a new user ran into ---------------------------------------------------------------------------
+
+
+def test_sobol_crossed_with_the_environment_pairs_scenes_that_differ_only_in_a_crossed_control(
+        tmp_path: Path) -> None:
+    """The skin applies on white only; crossed, it leaves nothing to draw, so it leaves Sobol's seed
+    and white gets grey's points."""
+    body = PROTOCOL.format(seed=1, samples=8, first=2, skins=SKINS).replace('type = "random"', 'type = "sobol"')
+    plan = planned(tmp_path / "a", body)
+    for obj in ("box", "crate"):
+        assert list(dict.fromkeys(poses(plan, (obj, "white")))) == poses(plan, (obj, "grey")) == \
+            poses(plan, (obj, "black"))
+
+
+def test_a_csv_design_reads_back_an_empty_listed_value_a_bom_and_blank_lines(tmp_path: Path) -> None:
+    body = SPEC.format(seed=3, policy='type = "random"\nsamples = 3') + \
+        '\n[[controls]]\ntype = "background"\ncolor = ["", "#ffffff"]\n'
+    first = planned(tmp_path / "a", body.replace("[policy]", "[policy]\n", 1))
+    design = tmp_path / "d.csv"
+    write_design(first.jobs.columns.table("e", first.spec.parameter_columns), first.spec.parameter_columns, design)
+    assert ",," in design.read_text() or design.read_text().count(",\n")  # "" is written as an empty cell
+    design.write_text("\ufeff" + design.read_text() + "\n\n")  # Excel's byte order mark, blank lines at the end
+    table = body[: body.index("[policy]")] + '[policy]\ntype = "table"\nfile = "../d.csv"\n' + \
+        body[body.index("[policy]") + len('[policy]\ntype = "random"\nsamples = 3'):]
+    again = planned(tmp_path / "b", table)
+    key = lambda j: (j.scene, j.values, j.render_key)  # noqa: E731
+    assert [key(j) for j in every_job(again)] == [key(j) for j in every_job(first)]
+
+
+def test_a_design_cell_may_name_a_file_as_the_spec_does(tmp_path: Path) -> None:
+    from PIL import Image
+
+    Image.new("RGB", (4, 4), (200, 10, 10)).save(tmp_path / "a.png")
+    Image.new("RGB", (4, 4), (10, 10, 200)).save(tmp_path / "b.png")
+    spec = _table_spec("d.csv").replace('skin = ["original", "zebra", "tiger", "cow"]',
+                                        'skin = "image"\nimage = ["a.png", "b.png"]')
+    _write_csv(tmp_path / "d.csv", [["object", "environment", "orientation_yaw", "orientation_pitch",
+                                     "material_image"], ["box", "white", "0", "0", "b.png"],
+                                    ["box", "white", "0", "0", str(tmp_path / "a.png")]])
+    plan = planned(tmp_path, spec)
+    images = [j.values["material"]["image"] for j in every_job(plan)]
+    assert images == [str((tmp_path / "b.png").resolve()), str((tmp_path / "a.png").resolve())]
+
+
+def test_errors_after_an_include_name_the_entry_in_its_own_file(tmp_path: Path) -> None:
+    _shared(tmp_path)
+    (tmp_path / "shared.toml").write_text((tmp_path / "shared.toml").read_text()
+                                          + '\n[[controls]]\ntype = "orientation"\nyaw = [0, 90]\n')
+    (tmp_path / "spec.toml").write_text('include = "shared.toml"\n[experiment]\nname = "s"\n\n'
+                                        '[[controls]]\ntype = "blur"\nsigma = [0, -1]\n')
+    with pytest.raises(SpecError) as caught:
+        load_spec(tmp_path / "spec.toml")
+    assert caught.value.file == str(tmp_path / "spec.toml") and caught.value.key == "controls[0].sigma"
+    (tmp_path / "shared.toml").write_text('[experiment]\nnmae = "x"\n' + (tmp_path / "shared.toml").read_text())
+    (tmp_path / "spec.toml").write_text('include = "shared.toml"\n[experiment]\nname = "s"\n')
+    with pytest.raises(SpecError) as caught:
+        load_spec(tmp_path / "spec.toml")
+    assert caught.value.file == str(tmp_path / "shared.toml") and caught.value.key == "experiment.nmae"
+
+
+def test_a_policy_of_another_type_replaces_the_included_one_whole(tmp_path: Path) -> None:
+    _shared(tmp_path)
+    (tmp_path / "shared.toml").write_text((tmp_path / "shared.toml").read_text()
+                                          + '\n[policy]\ntype = "grid"\nsamples_per_dim = 3\n')
+    (tmp_path / "spec.toml").write_text('include = "shared.toml"\n[experiment]\nname = "s"\n'
+                                        '[policy]\ntype = "random"\nsamples = 5\n')
+    assert load_spec(tmp_path / "spec.toml").spec.policy.model_extra == {"samples": 5}
+    (tmp_path / "spec.toml").write_text('include = "shared.toml"\n[experiment]\nname = "s"\n'
+                                        '[policy]\nsamples_per_dim = 2\n')
+    assert load_spec(tmp_path / "spec.toml").policy.params.samples_per_dim == 2  # same type: merged
+
+
+def test_a_plug_in_beside_an_included_file_is_found(tmp_path: Path) -> None:
+    shared = tmp_path / "shared"
+    _shared(shared)
+    (shared / "sharedpost.py").write_text(
+        "from sweep3d.plugins import PostControl, ControlParams\n\n"
+        "class Dim(PostControl):\n    class Params(ControlParams):\n        by: float = 1.0\n\n"
+        "    def apply(self, image, params, rng):\n        return image * params.by\n")
+    (shared / "shared.toml").write_text((shared / "shared.toml").read_text()
+                                        + '\n[[controls]]\ntype = "sharedpost:Dim"\nby = [1.0, 0.5]\n')
+    (tmp_path / "spec.toml").write_text('include = "shared/shared.toml"\n[experiment]\nname = "s"\n')
+    assert [c.id for c in load_spec(tmp_path / "spec.toml").controls] == ["Dim"]

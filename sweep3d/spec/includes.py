@@ -34,6 +34,12 @@ class Included:
     raw: dict[str, Any]
     texts: list[tuple[str, str]] = field(default_factory=list)  # (file, text) of each included file
     origins: dict[str, list[tuple[str, int]]] = field(default_factory=dict)  # list key → (file, index) per entry
+    keys: dict[str, str] = field(default_factory=dict)  # "table.key" → the file it came from
+
+    @property
+    def folders(self) -> list[Path]:
+        """The folders of the included files (a plug-in module beside one is importable)."""
+        return list(dict.fromkeys(Path(file).parent for file, _ in self.texts))
 
 
 def merge_includes(raw: dict[str, Any], file: str, base: Path) -> Included:
@@ -57,6 +63,7 @@ def _merge(raw: dict[str, Any], file: str, base: Path, chain: tuple[str, ...], t
         raise SpecError(file, "include", 'must be a path or a list of paths to TOML files, e.g. ["shared.toml"]')
     merged: dict[str, Any] = {}
     origins: dict[str, list[tuple[str, int]]] = {}
+    keys: dict[str, str] = {}
     for name in names:
         path = (base / Path(name).expanduser()).resolve()
         if str(path) in chain:
@@ -71,25 +78,38 @@ def _merge(raw: dict[str, Any], file: str, base: Path, chain: tuple[str, ...], t
         texts.append((str(path), text))
         inner = _merge(_rebased(parse_toml(text, str(path)), path.parent), str(path), path.parent, (*chain, str(path)),
                        texts)
-        _join(merged, origins, inner.raw, inner.origins)
+        _join(merged, origins, keys, inner.raw, inner.origins, inner.keys)
     for key in LISTS:
         if key in own and not isinstance(own[key], list):
-            return Included({**merged, **own}, texts, origins)  # the spec's validation names the mistake
-    _join(merged, origins, own, {key: [(file, i) for i in range(len(own.get(key, [])))] for key in LISTS})
-    return Included(merged, texts, origins)
+            return Included({**merged, **own}, texts, origins, keys)  # the spec's validation names the mistake
+    mine = {f"{table}.{key}": file for table in TABLES if isinstance(own.get(table), dict) for key in own[table]}
+    _join(merged, origins, keys, own, {key: [(file, i) for i in range(len(own.get(key, [])))] for key in LISTS}, mine)
+    return Included(merged, texts, origins, keys)
 
 
-def _join(into: dict[str, Any], origins: dict[str, list[tuple[str, int]]], raw: dict[str, Any],
-          where: dict[str, list[tuple[str, int]]]) -> None:
-    """Add ``raw``'s tables to ``into``: lists appended, tables merged (``raw``'s keys win)."""
+#: A table whose other keys belong to what this key picks: a different pick replaces the table whole.
+PICKS = {"policy": "type", "evaluator": "kind", "model": "name"}
+
+
+def _join(into: dict[str, Any], origins: dict[str, list[tuple[str, int]]], keys: dict[str, str],
+          raw: dict[str, Any], where: dict[str, list[tuple[str, int]]], whose: dict[str, str]) -> None:
+    """Add ``raw``'s tables to ``into``: lists appended, tables merged (``raw``'s keys win; a table
+    that picks another policy, evaluator or model replaces the included one whole)."""
     for key, value in raw.items():
         if key in LISTS and isinstance(value, list) and isinstance(into.get(key, []), list):
             into[key] = [*into.get(key, []), *value]
             origins[key] = [*origins.get(key, []), *where.get(key, [])]
         elif key in TABLES and isinstance(value, dict) and isinstance(into.get(key), dict):
-            into[key] = {**into[key], **value}
+            pick = PICKS.get(key)
+            if pick in value and value[pick] != into[key].get(pick):
+                for name in [k for k in keys if k.startswith(f"{key}.")]:
+                    del keys[name]
+                into[key] = dict(value)
+            else:
+                into[key] = {**into[key], **value}
         else:
             into[key] = value
+    keys.update(whose)
 
 
 def _rebased(raw: dict[str, Any], folder: Path) -> dict[str, Any]:
@@ -125,13 +145,18 @@ _ENTRY = re.compile(r"^(objects|environments|controls|models)\[(\d+)\](.*)$")
 
 
 def located(error: SpecError, included: Included) -> SpecError:
-    """``error`` naming the file an entry came from, and its index there, when it came from an include."""
+    """``error`` naming the file an entry or a table's key came from, and the entry's index in
+    that file (the spec's own entries come after the included ones in the merged lists)."""
+    if not included.texts:
+        return error
     match = _ENTRY.match(error.key)
-    if not match:
-        return error
-    key, index, rest = match.group(1), int(match.group(2)), match.group(3)
-    entries = included.origins.get(key, [])
-    if index >= len(entries) or entries[index][0] == error.file:
-        return error
-    file, local = entries[index]
-    return SpecError(file, f"{key}[{local}]{rest}", error.problem)
+    if match:
+        key, index, rest = match.group(1), int(match.group(2)), match.group(3)
+        entries = included.origins.get(key, [])
+        if index >= len(entries):
+            return error
+        file, local = entries[index]
+        return SpecError(file, f"{key}[{local}]{rest}", error.problem)
+    table_key = ".".join(error.key.split(".")[:2])
+    file = included.keys.get(table_key)
+    return SpecError(file, error.key, error.problem) if file and file != error.file else error

@@ -179,12 +179,13 @@ def validate_spec(raw: dict[str, Any], catalogue: Catalogue, *, path: Path, base
         own = source if source is not None else path.read_text(encoding="utf-8")
         source = own + "".join(f"\n\n# ---- included: {file} ----\n{text}" for file, text in included.texts)
     try:
-        return _validated(included.raw, catalogue, path=path, base=base, source=source)
+        return _validated(included.raw, catalogue, path=path, base=base, source=source, folders=included.folders)
     except SpecError as exc:
         raise located(exc, included) from None
 
 
-def _validated(raw: dict[str, Any], catalogue: Catalogue, *, path: Path, base: Path, source: str | None) -> LoadedSpec:
+def _validated(raw: dict[str, Any], catalogue: Catalogue, *, path: Path, base: Path, source: str | None,
+               folders: list[Path]) -> LoadedSpec:
     try:
         spec = Spec.model_validate(raw)
     except ValidationError as exc:
@@ -212,7 +213,8 @@ def _validated(raw: dict[str, Any], catalogue: Catalogue, *, path: Path, base: P
             log.warning(f"warning: {path}: environments[{i}].hdri: {_naming(env.hdri or '', warning)}")
 
     if _names_user_plugins(spec):
-        plugin_folder(base)
+        for folder in reversed([base, *folders]):  # the spec's folder first on the path, then the included files'
+            plugin_folder(folder)
     _check_model(spec, fail, catalogue)
     evaluator = _load_evaluator(spec, fail, catalogue)
     labels = _resolve_labels(spec, fail, catalogue)
@@ -536,8 +538,9 @@ def _load_policy(spec: Spec, fail, catalogue: Catalogue, controls: list[ControlI
     except UserError as exc:
         raise fail("policy.type", str(exc)) from None
     if spec.policy.paired and getattr(cls, "adaptive", False):
-        raise fail("policy.paired", f"the {spec.policy.type} policy learns per scene, so its points cannot be "
-                                    "shared across scenes; use random or sobol, or remove paired")
+        key = "cross" if {"environment", "object"} & set(spec.policy.cross) else "paired"
+        raise fail(f"policy.{key}", f"the {spec.policy.type} policy learns per scene, so its points cannot be "
+                                    f"shared across scenes; use random or sobol, or remove {key}")
     if spec.policy.crossed and getattr(cls, "adaptive", False):
         raise fail("policy.cross", f"the {spec.policy.type} policy learns per scene from the points it drew; "
                                    "cross lists with random, sobol or grid")
@@ -553,7 +556,12 @@ def _load_policy(spec: Spec, fail, catalogue: Catalogue, controls: list[ControlI
                    f"the {spec.policy.type} policy lists every job's values itself; remove cross and paired")
     bind = getattr(policy, "bind", None)
     if bind is not None:
-        bind(base, controls, [o.name for o in spec.objects], [e.name for e in spec.environments])
+        try:
+            bind(base, controls, [o.name for o in spec.objects], [e.name for e in spec.environments])
+        except SpecError:  # names its own file (a design table's row and column)
+            raise
+        except UserError as exc:
+            raise fail("policy", str(exc)) from None
     return policy
 
 
@@ -568,8 +576,8 @@ def _check_crossed(name: str, controls: list[ControlInstance], fail) -> None:
                                    f"of a list, \"environment\" or \"object\" (here: {valid})")
     if not isinstance(space, Choice):
         what = "a range, which the policy draws" if isinstance(space, Range) else "one value"
-        raise fail("policy.cross", f"{name!r} is {what}; only a list of values (e.g. skin = [\"zebra\", \"tiger\"]) "
-                                   "is crossed")
+        raise fail("policy.cross", f"{name!r} is {what}; only a list of two or more values (e.g. skin = "
+                                   "[\"zebra\", \"tiger\"]) is crossed")
 
 
 def _params_problem(err: dict[str, Any]) -> str:
@@ -577,5 +585,7 @@ def _params_problem(err: dict[str, Any]) -> str:
     value it got (a value error's own message already says it)."""
     if err["type"] == "extra_forbidden":
         return "unknown key; remove it or check its spelling"
+    if err["type"] == "missing":
+        return "required key is missing"
     problem = err["msg"].removeprefix("Value error, ")
     return problem if "input" not in err or err["type"] == "value_error" else f"{problem} (got {err['input']!r})"

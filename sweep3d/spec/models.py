@@ -329,6 +329,8 @@ class PolicySpec(Typed):
     @classmethod
     def _cross_table(cls, value: Any) -> Any:
         """A list names what is crossed with every draw; a table may limit a list to the first k draws."""
+        if isinstance(value, str):
+            value = [value]
         if isinstance(value, list) and all(isinstance(v, str) for v in value):
             value = dict.fromkeys(value, True)
         if not isinstance(value, dict):
@@ -350,8 +352,9 @@ class PolicySpec(Typed):
         """Crossing the environment (object) is what ``paired`` does: the two say it once."""
         wanted = "all" if "object" in self.cross else True if "environment" in self.cross else self.paired
         if wanted != self.paired and "paired" in self.model_fields_set and not (wanted is True and self.paired == "all"):
+            toml = '"all"' if wanted == "all" else "true"
             raise ValueError(f"cross names {'object' if wanted == 'all' else 'environment'}, which is paired = "
-                             f"{wanted!r}; remove paired or make it agree")
+                             f"{toml}; remove paired or make it agree")
         if wanted is True and self.paired == "all":
             wanted = "all"
         object.__setattr__(self, "paired", wanted)

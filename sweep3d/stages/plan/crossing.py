@@ -8,7 +8,8 @@ draw by draw, each draw's values in list order (so the first listed value is a d
 which is the one the paired views match across scenes).
 
 The policy sees the space without the crossed lists, so its draws of the rest do not depend on
-how many values a crossed list has.
+how many values a crossed list has; a control with nothing left to draw is left out of it (and of
+a jointly seeded policy's seed), so scenes that differ only in crossed controls share their draws.
 """
 
 from __future__ import annotations
@@ -78,9 +79,18 @@ def crossing(space: SearchSpace, crossed: Mapping[str, int | None]) -> Crossing:
         return Crossing(space, (), (), ())
     fixed = {(space.discrete[i].control_id, space.discrete[i].param) for i in positions}
     controls = [_fixed_first(inst, fixed) for inst in space.controls]
+    # a control left with nothing to draw once crossed leaves the seed too: the scenes it does not
+    # apply in (a skin on white only) then draw jointly seeded policies' (Sobol's) same points
+    crossed_ids = {control_id for control_id, _ in fixed}
+    controls = [c for c in controls if c.id not in crossed_ids or _draws(c)]
     return Crossing(SearchSpace(controls), positions,
                     tuple(len(space.discrete[i].space.options) for i in positions),
                     tuple(crossed[names[i]] for i in positions))
+
+
+def _draws(inst: ControlInstance) -> bool:
+    """Whether a policy has anything of ``inst`` to draw (a range or a list)."""
+    return any(not isinstance(space, Fixed) for space in inst.spaces.values())
 
 
 def _fixed_first(inst: ControlInstance, fixed: set[tuple[str, str]]) -> ControlInstance:

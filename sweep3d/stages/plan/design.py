@@ -52,8 +52,9 @@ class SceneRows:
 
 
 def read_design(path: Path, controls: Sequence[ControlInstance], objects: Sequence[str],
-                environments: Sequence[str]) -> dict[tuple[str, str], SceneRows]:
-    """The rows of the design file ``path`` per (object, environment), checked against the spec.
+                environments: Sequence[str], base: Path) -> dict[tuple[str, str], SceneRows]:
+    """The rows of the design file ``path`` per (object, environment), checked against the spec
+    (``base``: the spec's folder, against which a file a cell names may be relative).
 
     Raises:
         SpecError: naming the file, and the row and column of the first bad cell.
@@ -65,14 +66,14 @@ def read_design(path: Path, controls: Sequence[ControlInstance], objects: Sequen
     if not rows:
         raise SpecError(file, "", "the design table has no rows; give one row per job under the header")
     scenes: dict[tuple[str, str], SceneRows] = {}
-    for number, row in enumerate(rows, start=1):
+    for number, row in rows:
         cells = dict(zip(names, row))
         obj = _scene_name(Cell(file, number, "object"), cells.get("object"), objects)
         env = _scene_name(Cell(file, number, "environment"), cells.get("environment"), environments)
         scene = scenes.setdefault((obj, env), SceneRows(0, {}))
         for column, (inst, param) in columns.items():
             cell = Cell(file, number, column)
-            value = _value(cell, cells.get(column), inst, param, inst.applies_to(obj, env))
+            value = _value(cell, cells.get(column), inst, param, inst.applies_to(obj, env), base)
             if value is not _NONE:
                 scene.values.setdefault((inst.id, param), []).append(value)
         scene.count += 1
@@ -82,8 +83,8 @@ def read_design(path: Path, controls: Sequence[ControlInstance], objects: Sequen
 _NONE = object()  # a cell with no value to take (the control does not apply, or its parameter is fixed)
 
 
-def _read_rows(path: Path) -> tuple[list[str], list[list[Any]]]:
-    """The header and the rows: CSV cells as text (None for empty), Parquet cells as typed values."""
+def _read_rows(path: Path) -> tuple[list[str], list[tuple[int, list[Any]]]]:
+    """The header and the numbered rows: CSV cells as text (None for empty), Parquet cells as typed values."""
     if path.suffix.lower() == ".parquet":
         import pyarrow.parquet as pq
 
@@ -92,20 +93,25 @@ def _read_rows(path: Path) -> tuple[list[str], list[list[Any]]]:
         except (OSError, pa.ArrowException) as exc:
             raise SpecError(str(path), "", f"cannot read the design table: {exc}") from None
         columns = [table.column(i).to_pylist() for i in range(table.num_columns)]
-        return list(table.column_names), [list(r) for r in zip(*columns)]
-    try:
-        with path.open(newline="", encoding="utf-8") as handle:
+        return list(table.column_names), [(number, list(r)) for number, r in enumerate(zip(*columns), start=1)]
+    try:  # utf-8-sig: a byte order mark (Excel's "CSV UTF-8") is not part of the first column's name
+        with path.open(newline="", encoding="utf-8-sig") as handle:
             lines = list(csv.reader(handle))
     except (OSError, UnicodeDecodeError, csv.Error) as exc:
         raise SpecError(str(path), "", f"cannot read the design table: {exc}") from None
     if not lines:
         raise SpecError(str(path), "", "the design table is empty; its first line names the columns "
                                        "(object, environment, then <control id>_<param> for each parameter)")
-    header, body = [name.strip() for name in lines[0]], lines[1:]
-    for number, row in enumerate(body, start=1):
+    header, rows = [name.strip() for name in lines[0]], []
+    for number, row in enumerate(lines[1:], start=1):
+        if not any(cell.strip() for cell in row):
+            continue  # a blank line (often the last): no job, but row numbers still count it
         if len(row) != len(header):
-            raise SpecError(str(path), f"row {number}", f"has {len(row)} cells where the header has {len(header)}")
-    return header, [[cell.strip() or None for cell in row] for row in body]
+            raise SpecError(str(path), f"row {number}", f"has {len(row)} cells where the header has {len(header)}"
+                            + (" (is the file separated by semicolons? write it with commas)"
+                               if len(header) == 1 and ";" in header[0] else ""))
+        rows.append((number, [cell.strip() or None for cell in row]))
+    return header, rows
 
 
 def _check_header(file: str, names: list[str], columns: dict[str, tuple[ControlInstance, str]]) -> None:
@@ -137,9 +143,11 @@ def _scene_name(cell: Cell, value: Any, valid: Sequence[str]) -> str:
     return name
 
 
-def _value(cell: Cell, raw: Any, inst: ControlInstance, param: str, applies: bool) -> Any:
+def _value(cell: Cell, raw: Any, inst: ControlInstance, param: str, applies: bool, base: Path) -> Any:
     """The value of one cell, checked against the parameter's space in the spec."""
     space = inst.spaces[param]
+    if raw is None and applies and isinstance(space, (Choice, Fixed)) and "" in space.values():
+        raw = ""  # CSV writes "" (a listed value, e.g. background colour "": the environment's) as nothing
     if not applies:
         if raw is not None:
             raise cell.fail(f"control {inst.id} does not apply in this row's scene (see its objects/environments); "
@@ -154,9 +162,14 @@ def _value(cell: Cell, raw: Any, inst: ControlInstance, param: str, applies: boo
         raise cell.fail(f"is empty where control {inst.id} applies; give its {param}")
     if isinstance(space, Choice):
         for option in space.options:
-            if _same(raw, option):
+            if _same(raw, option) or _same_file(raw, option, base):
                 return option
-        raise cell.fail(f"{raw!r} is not one of the values the spec lists ({', '.join(map(repr, space.options))})")
+        close = difflib.get_close_matches(str(raw), [str(o) for o in space.options], n=1)
+        if not close:
+            close = [str(o) for o in space.options if str(o).lower() == str(raw).lower()]
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise cell.fail(f"{raw!r} is not one of the values the spec lists{hint}: "
+                        f"{', '.join(map(repr, space.options))}")
     return _number(cell, raw, space)
 
 
@@ -192,6 +205,14 @@ def _same(raw: Any, option: Any) -> bool:
         except ValueError:
             return False
     return raw == option
+
+
+def _same_file(raw: Any, option: Any, base: Path) -> bool:
+    """Whether a cell names the file ``option`` (an absolute path the loader made), relative to the spec."""
+    if not (isinstance(raw, str) and isinstance(option, str) and raw and Path(option).is_absolute()):
+        return False
+    path = Path(raw).expanduser()
+    return str((path if path.is_absolute() else base / path).resolve()) == option
 
 
 def _text(number: float) -> str:

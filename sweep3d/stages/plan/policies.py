@@ -360,7 +360,7 @@ class TablePolicy(Policy):
         if path.suffix.lower() not in SUFFIXES:
             raise SpecError(str(path), "", f"a design table is a {' or '.join(SUFFIXES)} file")
         check_file(path, "design table", "paths are relative to the spec file")
-        self.rows = read_design(path, controls, objects, environments)
+        self.rows = read_design(path, controls, objects, environments, base)
 
     def listed(self, space: SearchSpace, object_name: str, environment: str) -> Listed:
         rows = self.rows.get((object_name, environment))
