@@ -329,7 +329,7 @@ def test_the_boundary_policy_explores_where_it_sees_no_step() -> None:
 
 @pytest.mark.parametrize("policy, key, says", [
     ('type = "boundary"\npaired = true', "policy.paired", "learns per scene"),
-    ('type = "boundary"\ncross = ["environment"]', "policy.paired", "learns per scene"),
+    ('type = "boundary"\ncross = ["environment"]', "policy.cross", "learns per scene"),
     ('type = "boundary"\nmargin = -1', "policy.margin", "greater than or equal to 0"),
 ])
 def test_the_boundary_policy_refuses_pairing_in_one_line(tmp_path: Path, policy: str, key: str, says: str) -> None:

@@ -414,3 +414,40 @@ def test_on_real_renders_neutral_values_change_no_pixel_and_fog_grows_with_dista
     assert change[mask & (depth >= far)].mean() > change[mask & (depth <= near)].mean() + 0.02
     assert change[~mask].min() > change[mask].max() - 1 / 255  # no surface: fully fogged, changed most
     assert np.allclose(fogged[~mask], [1.0, 0.0, 0.0], atol=1 / 255)
+
+
+def test_a_tiny_f_number_blurs_at_most_the_whole_image_without_a_huge_kernel() -> None:
+    """f/0.001 would ask for a blur thousands of pixels wide; it is capped at the image's diagonal
+    (wider changes nothing), so the run neither stops nor fills memory."""
+    control = catalogue().controls.get("defocus")("defocus", "defocus")
+    depth = np.full((48, 48), 3.0)
+    depth[:, 24:] = 12.0
+    image = np.random.default_rng(0).random((48, 48, 3)).astype(np.float32)
+    out = control.apply(image, control.Params(fstop=0.001, focus_distance=0.5), np.random.default_rng(0),
+                        frame(depth))
+    assert out.shape == image.shape and np.isfinite(out).all()
+    assert out.std() < image.std() / 4  # blurred to near its mean
+    assert disk_kernel(300.0).shape == (601, 601) and abs(disk_kernel(300.0).sum() - 1.0) < 1e-9
+
+
+def test_a_control_s_passes_do_not_change_which_results_are_counted(tmp_path: Path) -> None:
+    """Fog brings the depth (and mask) pass, but only the evaluation's own passes switch
+    ``evaluable`` to the visibility gate: adding fog keeps the counted results of the spec without it."""
+    from sweep3d.spec.columns import MIN_VISIBLE_METADATA, MIN_VISIBLE_OFF
+    from sweep3d.stages.aggregate.results import plan_min_visible
+    from sweep3d.stages.passes import visibility_gated
+
+    fog = TINY_SPEC.replace('type = "blur"\nsigma = [0.0, 1.5]', 'type = "fog"\ndensity = [0.0, 0.3]')
+    for i, (body, gated) in enumerate([(fog, False), (fog.replace("[model]", '[evaluator]\npasses = ["mask"]\n\n'
+                                                                             "[model]"), True)]):
+        folder = tmp_path / str(i)
+        folder.mkdir()
+        loaded = load_spec(write_spec(folder, body))
+        assert visibility_gated(loaded) is gated
+        table = plan_for(loaded, "0" * 64).table()
+        recorded = table.schema.metadata[MIN_VISIBLE_METADATA]
+        assert (recorded == MIN_VISIBLE_OFF) is not gated
+        import pyarrow.parquet as pq
+
+        pq.write_table(table, folder / "jobs.parquet")
+        assert plan_min_visible(folder / "jobs.parquet") == (None if not gated else loaded.evaluator.min_visible)

@@ -329,13 +329,15 @@ def test_an_error_in_an_included_entry_names_its_file_and_index(tmp_path: Path) 
     ('["shared.toml", "shared.toml"]', "included twice"),
     ('"spec.toml"', "includes itself"),
     ("3", "must be a path or a list of paths"),
+    ('"bad.toml"', "must be an array of tables"),
 ])
 def test_a_bad_include_is_one_line(tmp_path: Path, include: str, problem: str) -> None:
     _shared(tmp_path)
+    (tmp_path / "bad.toml").write_text('objects = "box"\n')
     (tmp_path / "spec.toml").write_text(f'include = {include}\n[experiment]\nname = "s"\n')
     with pytest.raises(SpecError) as caught:
         load_spec(tmp_path / "spec.toml")
-    assert caught.value.key == "include" and problem in caught.value.problem
+    assert caught.value.key in ("include", "objects") and problem in caught.value.problem
 
 
 # -- what a new user ran into ---------------------------------------------------------------------------

@@ -76,8 +76,11 @@ def _merge(raw: dict[str, Any], file: str, base: Path, chain: tuple[str, ...], t
             raise SpecError(file, "include", f"cannot read {name!r} ({getattr(exc, 'strerror', None) or exc}); "
                                              "paths are relative to the including file") from None
         texts.append((str(path), text))
-        inner = _merge(_rebased(parse_toml(text, str(path)), path.parent), str(path), path.parent, (*chain, str(path)),
-                       texts)
+        raw_inner = parse_toml(text, str(path))
+        for key in LISTS:  # a list the spec also has would hide a malformed one here: say so now
+            if key in raw_inner and not _tables(raw_inner, key):
+                raise SpecError(str(path), key, f"must be an array of tables, written [[{key}]]")
+        inner = _merge(_rebased(raw_inner, path.parent), str(path), path.parent, (*chain, str(path)), texts)
         _join(merged, origins, keys, inner.raw, inner.origins, inner.keys)
     for key in LISTS:
         if key in own and not isinstance(own[key], list):

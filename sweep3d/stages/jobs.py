@@ -26,6 +26,7 @@ from sweep3d.evaluation import EVALUATOR_METADATA, EvaluatorRecord
 from sweep3d.spec.columns import (
     CLASS_NAMES_METADATA,
     MIN_VISIBLE_METADATA,
+    MIN_VISIBLE_OFF,
     PARAMETERS_METADATA,
     PROTOCOL_METADATA,
     parameter_column,
@@ -404,7 +405,11 @@ class Plan:
             table = pa.Table.from_pylist(self.rows())
         metadata = {PARAMETERS_METADATA: json.dumps(self.columns).encode()}
         if "truth_key" in table.column_names:  # the validity gate's threshold, for the results view
-            metadata[MIN_VISIBLE_METADATA] = repr(float(self.spec.evaluator.min_visible)).encode()
+            from sweep3d.stages.passes import visibility_gated
+
+            gated = visibility_gated(self.spec)
+            metadata[MIN_VISIBLE_METADATA] = repr(float(self.spec.evaluator.min_visible)).encode() if gated \
+                else MIN_VISIBLE_OFF
         metadata[EVALUATOR_METADATA] = self.evaluator_record().to_json()
         model = self.model or self.spec.model.label
         metadata[CLASS_NAMES_METADATA] = json.dumps({model: [list(c) for c in self.class_names]}).encode()

@@ -39,3 +39,13 @@ def needed_passes(spec: LoadedSpec) -> tuple[str, ...]:
 def truth_passes(spec: LoadedSpec) -> tuple[str, ...]:
     """The truth passes of :func:`needed_passes` (they make a ``truths`` row); () for none."""
     return tuple(p for p in needed_passes(spec) if p in TRUTH_PASSES)
+
+
+def visibility_gated(spec: LoadedSpec) -> bool:
+    """Whether ``evaluable`` is decided by ``[evaluator] min_visible``: when the evaluation asked
+    for a truth pass (``[evaluator] passes`` or the evaluator's own), not when only a control did
+    (fog reads the depth pass: adding it must not change which results are counted)."""
+    from sweep3d.stages.infer.evaluators import EVALUATORS
+
+    asked = set(spec.evaluator.passes) | set(getattr(EVALUATORS.get(spec.evaluator.kind), "passes", ()))
+    return bool(asked & set(TRUTH_PASSES))

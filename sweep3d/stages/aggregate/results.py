@@ -36,7 +36,13 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from sweep3d.evaluation import EvaluatorRecord, Roles, read_record
-from sweep3d.spec.columns import MIN_VISIBLE_METADATA, MODEL_NAME_COLUMNS, PREDICTION_COLUMNS, PROTOCOL_METADATA
+from sweep3d.spec.columns import (
+    MIN_VISIBLE_METADATA,
+    MIN_VISIBLE_OFF,
+    MODEL_NAME_COLUMNS,
+    PREDICTION_COLUMNS,
+    PROTOCOL_METADATA,
+)
 from sweep3d.stages.aggregate.class_names import named_columns, read_class_names
 from sweep3d.stages.aggregate.quoting import identifier, literal
 
@@ -108,11 +114,14 @@ def results_roles(con: duckdb.DuckDBPyConnection) -> Roles:
     return Roles.guess(set(_columns(con, "results")) if _has(con, "results") else set())
 
 
-def plan_min_visible(jobs: Path) -> float:
+def plan_min_visible(jobs: Path) -> float | None:
     """``[evaluator] min_visible`` as the plan at ``jobs`` recorded it (the default when it did not,
-    or recorded something unusable): the threshold ``evaluable`` applies."""
+    or recorded something unusable): the threshold ``evaluable`` applies; None where the plan has
+    truth passes only for a control (no gate: ``evaluable`` is ``in_frame``)."""
     try:
         metadata = pq.read_schema(jobs).metadata or {}
+        if metadata.get(MIN_VISIBLE_METADATA) == MIN_VISIBLE_OFF:
+            return None
         min_visible = float(metadata.get(MIN_VISIBLE_METADATA, b"nan").decode())
     except (OSError, ValueError, pa.ArrowException):
         min_visible = float("nan")
@@ -149,10 +158,11 @@ def _ground_truth_sql(con: duckdb.DuckDBPyConnection, jobs: Path, truths: bool) 
          "NULL::INTEGER AS gt_x1, NULL::INTEGER AS gt_y1, NULL::BIGINT AS visible_pixels, "
          "NULL::BIGINT AS silhouette_pixels, NULL::DOUBLE AS visible_fraction WHERE false)")
     model = "j.model, " if "model" in columns else ""  # a spec with several models: a row per (job, model)
+    evaluable = "j.in_frame" if min_visible is None else (  # no gate: the passes are a control's
+        "CASE WHEN NOT j.in_frame THEN false WHEN t.truth_key IS NULL THEN NULL "
+        f"ELSE coalesce(t.visible_fraction >= {min_visible!r}, false) END")
     return (f"CREATE VIEW ground_truth AS SELECT j.job, {model}j.truth_key, t.gt_x0, t.gt_y0, t.gt_x1, t.gt_y1, "
-            "t.visible_pixels, t.silhouette_pixels, t.visible_fraction, "
-            "CASE WHEN NOT j.in_frame THEN false WHEN t.truth_key IS NULL THEN NULL "
-            f"ELSE coalesce(t.visible_fraction >= {min_visible!r}, false) END AS evaluable "
+            f"t.visible_pixels, t.silhouette_pixels, t.visible_fraction, {evaluable} AS evaluable "
             f"FROM jobs j LEFT JOIN {source} t ON t.truth_key = j.truth_key")
 
 

@@ -319,10 +319,9 @@ def summary_key(store: Store, experiment: str, columns: list[str], failure_limit
             states.append([path.name, st.st_size, st.st_mtime_ns, st.st_ctime_ns, st.st_ino])
         except OSError:
             states.append([path.name, None])
-    sources = [Path(__file__).with_name(name).read_bytes() for name in ("views.py", "tasks.py", "results.py",
-                                                                         "failure_modes.py", "paired.py",
-                                                                         "boundaries.py", "step_fit.py")]
-    code = hashlib.sha256(b"\0".join([Path(__file__).read_bytes(), *sources])).hexdigest()
+    # every module of this package: a view's code (class names, boundaries, ...) changes what is summarised
+    sources = [path.read_bytes() for path in sorted(Path(__file__).parent.glob("*.py"))]
+    code = hashlib.sha256(b"\0".join(sources)).hexdigest()
     described = {"format": SUMMARY_FORMAT, "experiment": experiment, "columns": list(columns),
                  "failure_limit": failure_limit, "files": states, "code": code, "duckdb": duckdb.__version__,
                  "scales": None if scales is None else {c: dataclasses.astuple(s) for c, s in sorted(scales.items())}}

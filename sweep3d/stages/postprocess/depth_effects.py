@@ -61,7 +61,9 @@ def disk_kernel(radius: float) -> np.ndarray:
     """A uniform disk of ``radius`` pixels, each pixel weighted by the part of it the disk covers,
     summing to 1 (float64, odd square)."""
     half = int(np.ceil(radius))
-    s = KERNEL_SUPERSAMPLING
+    # sub-samples per pixel and axis: fewer on a wide disk, whose edge pixels are a small share of it
+    # (the grid has (2 · radius · s)² cells: a fixed s would take gigabytes at a few hundred pixels)
+    s = max(1, min(KERNEL_SUPERSAMPLING, int(KERNEL_SUPERSAMPLING * 16 / max(radius, 1.0))))
     offsets = (np.arange(s) + 0.5) / s - 0.5
     grid = np.arange(-half, half + 1)
     fine = (grid[:, None] + offsets[None, :]).reshape(-1)  # every sub-sample coordinate, one axis

@@ -97,4 +97,6 @@ class Defocus(PostControl):
         frame = _depth(frame, "defocus")
         focus = params.focus_distance or frame.subject_distance
         aperture = frame.focal_length * 1e-3 / (2.0 * params.fstop)  # radius, in object radii (metres)
-        return defocus(image, signed_coc(frame.depth, focus, frame.focal_px, aperture))
+        coc = signed_coc(frame.depth, focus, frame.focal_px, aperture)
+        widest = float(np.hypot(*image.shape[:2]))  # a wider blur than the image's diagonal changes nothing more
+        return defocus(image, np.clip(coc, -widest, widest))
