@@ -295,7 +295,9 @@ def test_names_are_escaped(tiny_copy: Path, chromium) -> None:
 
 
 def cell_centre(page: Any, x: int, y: int) -> tuple[float, float]:
-    """Page coordinates of the centre of the explorer heat map's cell (x, y)."""
+    """Page coordinates of the centre of the explorer heat map's cell (x, y), scrolled into view
+    first (a click outside the viewport reaches nothing)."""
+    page.locator("#explorer-plot").scroll_into_view_if_needed()
     return tuple(page.evaluate(
         """([x, y]) => {
              const gd = document.getElementById('explorer-plot'), box = gd.getBoundingClientRect();
