@@ -10,8 +10,6 @@ or the machine: the same export twice writes the same bytes.
 
 from __future__ import annotations
 
-import csv
-import io
 import json
 import os
 import shutil
@@ -21,6 +19,7 @@ from pathlib import Path
 from typing import Any, Iterable
 
 from sweep3d.cache.store import safe_filename
+from sweep3d.csv_text import csv_text
 from sweep3d.errors import UserError
 
 MANIFEST = "sweep3d-export.json"
@@ -170,24 +169,8 @@ def design_table(items: Iterable[dict[str, Any]]) -> bytes:
 
 
 def csv_bytes(columns: list[str], rows: Iterable[list[Any]]) -> bytes:
-    """CSV as DuckDB writes it: a header; empty for null, ``true``/``false``, floats in shortest
-    round-trip form."""
-    buffer = io.StringIO()
-    writer = csv.writer(buffer, lineterminator="\n")
-    writer.writerow(columns)
-    writer.writerows([cell(v) for v in row] for row in rows)
-    return buffer.getvalue().encode()
-
-
-def cell(value: Any) -> str:
-    """One CSV cell (a list, such as an object's labels, as JSON)."""
-    if value is None:
-        return ""
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, (list, dict)):
-        return json.dumps(value, allow_nan=False, ensure_ascii=False)
-    return repr(value) if isinstance(value, float) else str(value)
+    """CSV as DuckDB writes it (see :mod:`sweep3d.csv_text`), as bytes."""
+    return csv_text(columns, rows).encode()
 
 
 def json_bytes(document: Any, indent: int | None = None) -> bytes:

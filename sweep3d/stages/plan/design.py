@@ -22,6 +22,7 @@ from typing import Any, Sequence
 
 import pyarrow as pa
 
+from sweep3d.csv_text import csv_text
 from sweep3d.errors import SpecError
 from sweep3d.spec.columns import parameter_column
 from sweep3d.spec.loader import ControlInstance
@@ -241,18 +242,5 @@ def write_design(table: pa.Table, parameter_columns: Sequence[str], path: Path) 
 
         pq.write_table(design, path)
         return design.num_rows
-    with path.open("w", newline="", encoding="utf-8") as handle:
-        writer = csv.writer(handle, lineterminator="\n")
-        writer.writerow(names)
-        for row in zip(*(design.column(n).to_pylist() for n in names)):
-            writer.writerow([_cell(v) for v in row])
+    path.write_text(csv_text(names, zip(*(design.column(n).to_pylist() for n in names))), encoding="utf-8")
     return design.num_rows
-
-
-def _cell(value: Any) -> str:
-    """A value as CSV text that reads back as the same value (floats by repr: bit for bit)."""
-    if value is None:
-        return ""
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    return repr(value) if isinstance(value, float) else str(value)
