@@ -22,7 +22,7 @@ from sweep3d.stages.aggregate import (
     weakest_regions,
     wilson_interval,
 )
-from sweep3d.stages.aggregate.boundaries import range_scales
+from sweep3d.stages.aggregate.boundaries import control_number, range_scales
 from sweep3d.stages.aggregate.tasks import HIDDEN
 from sweep3d.stages.code import explain
 from sweep3d.stages.driver import plan_status
@@ -249,13 +249,8 @@ def describe_boundary(row: dict) -> str:
     passing = (row["accuracy_above"], row["n_above"]) if below else (row["accuracy_below"], row["n_below"])
     failing = (row["accuracy_below"], row["n_below"]) if below else (row["accuracy_above"], row["n_above"])
     return (f"{escape(who) + ': ' if who else ''}{escape(row['parameter'])} fails {row['fails']} "
-            f"{_number(row['boundary'])} (95% interval {_number(row['boundary_low'])}–{_number(row['boundary_high'])}),"
+            f"{control_number(row['boundary'])} (95% interval {control_number(row['boundary_low'])}–{control_number(row['boundary_high'])}),"
             f" {passing[0]:.0%} of {passing[1]} → {failing[0]:.0%} of {failing[1]}")
-
-
-def _number(value: float) -> str:
-    """A control value in three significant digits, without an exponent below 10⁶."""
-    return f"{value:.0f}" if 1e3 <= abs(value) < 1e6 else f"{value:.3g}"
 
 
 def all_invalid_line(summary: Summary) -> str:

@@ -14,7 +14,7 @@ from typing import Any
 
 from sweep3d.report.figures import ACCURACY_AXIS, COLORS, Figure, layout, make_figure, p_text, pct, title
 from sweep3d.report.panel import PanelInputs
-from sweep3d.stages.aggregate.boundaries import VIEW, Scale, range_scales
+from sweep3d.stages.aggregate.boundaries import VIEW, Scale, control_number, range_scales
 from sweep3d.stages.aggregate.quoting import identifier, literal
 from sweep3d.stages.aggregate.views import has_view
 
@@ -44,7 +44,7 @@ def _who(fit: dict[str, Any]) -> str:
 
 
 def _value(value: float | None) -> str:
-    return "–" if value is None else f"{value:.0f}" if 1e3 <= abs(value) < 1e6 else f"{value:.3g}"
+    return "–" if value is None else control_number(value)
 
 
 def _row(fit: dict[str, Any]) -> dict[str, Any]:

@@ -204,3 +204,8 @@ def _benjamini_hochberg(p: list[float]) -> list[float]:
         running = min(running, p[i] * m / rank)
         q[i] = min(1.0, running)
     return q
+
+
+def control_number(value: float) -> str:
+    """A control value as findings and the report print it: three significant digits, no exponent below 10⁶."""
+    return f"{value:.0f}" if 1e3 <= abs(value) < 1e6 else f"{value:.3g}"
