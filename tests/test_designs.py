@@ -302,15 +302,15 @@ def _shared(folder: Path) -> None:
 
 
 def test_include_joins_lists_merges_tables_and_resolves_paths_against_the_included_file(tmp_path: Path) -> None:
-    _shared(tmp_path / "shared")
+    _shared(tmp_path / "common")
     study = tmp_path / "study"
     study.mkdir()
     (study / "spec.toml").write_text(
-        'include = ["../shared/shared.toml"]\n[experiment]\nname = "s"\n[render]\nsamples = 2\n\n'
-        '[[objects]]\nname = "crate"\nmesh = "../shared/cube.obj"\nlabels = ["crate"]\n')
+        'include = ["../common/shared.toml"]\n[experiment]\nname = "s"\n[render]\nsamples = 2\n\n'
+        '[[objects]]\nname = "crate"\nmesh = "../common/cube.obj"\nlabels = ["crate"]\n')
     loaded = load_spec(study / "spec.toml")
     assert [o.name for o in loaded.objects] == ["box", "crate"]
-    assert loaded.meshes["box"] == str((tmp_path / "shared" / "cube.obj").resolve())
+    assert loaded.meshes["box"] == str((tmp_path / "common" / "cube.obj").resolve())
     assert (loaded.render.resolution, loaded.render.samples) == (32, 2)  # the including file's keys win
     assert "# ---- included:" in loaded.text() and 'name = "box"' in loaded.text()
 
@@ -413,7 +413,7 @@ def test_a_policy_of_another_type_replaces_the_included_one_whole(tmp_path: Path
 
 
 def test_a_plug_in_beside_an_included_file_is_found(tmp_path: Path) -> None:
-    shared = tmp_path / "shared"
+    shared = tmp_path / "common"
     _shared(shared)
     (shared / "sharedpost.py").write_text(
         "from sweep3d.plugins import PostControl, ControlParams\n\n"
@@ -421,5 +421,5 @@ def test_a_plug_in_beside_an_included_file_is_found(tmp_path: Path) -> None:
         "    def apply(self, image, params, rng):\n        return image * params.by\n")
     (shared / "shared.toml").write_text((shared / "shared.toml").read_text()
                                         + '\n[[controls]]\ntype = "sharedpost:Dim"\nby = [1.0, 0.5]\n')
-    (tmp_path / "spec.toml").write_text('include = "shared/shared.toml"\n[experiment]\nname = "s"\n')
+    (tmp_path / "spec.toml").write_text('include = "common/shared.toml"\n[experiment]\nname = "s"\n')
     assert [c.id for c in load_spec(tmp_path / "spec.toml").controls] == ["Dim"]
