@@ -19,11 +19,11 @@ from typer.testing import CliRunner
 from benchmarks.report_scale import build_store
 from sweep3d.cache.store import Store
 from sweep3d.cli import app
-from sweep3d.cli.output import describe_boundary
+from sweep3d.cli.output import by_parameter, describe_boundary, describe_flat
 from sweep3d.report import build_context, render_html, write_report
 from sweep3d.stages import load_spec
 from sweep3d.stages.aggregate import connect, summarise
-from sweep3d.stages.aggregate.boundaries import Scale, adjust, failure_boundaries, fit_parameter, range_scales
+from sweep3d.stages.aggregate.boundaries import Scale, adjust, failure_boundaries, fit_parameter, numeric_scales
 from sweep3d.stages.aggregate.step_fit import CRITICAL, fit_step
 from tests.test_aggregate_views import make_store
 
@@ -169,10 +169,59 @@ def test_the_false_boundary_rate_of_the_view_over_seeds() -> None:
     assert named / seeds <= 0.05 + 2 * np.sqrt(0.05 * 0.95 / seeds), f"{named} of {seeds}"
 
 
-def test_range_scales_follow_the_spec(tmp_path: Path) -> None:
+def test_numeric_scales_follow_the_spec(tmp_path: Path) -> None:
     spec = build_store(tmp_path / "run", 40, images=False)
-    scales = range_scales(load_spec(spec).controls)
-    assert scales == {"orientation_yaw": Scale(log=False, wraps=True)}  # elevation and blur are lists
+    scales = numeric_scales(load_spec(spec).controls)
+    assert scales == {"orientation_yaw": Scale(wraps=True), "camera_elevation": Scale(), "blur_sigma": Scale()}
+
+
+@pytest.mark.parametrize("yaws, wraps", [
+    ("[-120, 0, 120]", True),  # round the turn, evenly
+    ("[0, 180]", True),  # two opposite views: neither is below the other
+    ("[0, 90, 180, 270]", True),
+    ("[0, 30, 60]", False),  # a sector: below and above mean something
+    ("[-45, 0, 45, 90]", False),
+])
+def test_a_list_of_a_periodic_parameter_wraps_when_it_goes_round_the_turn(tmp_path: Path, yaws: str,
+                                                                       wraps: bool) -> None:
+    spec = build_store(tmp_path / "run", 8, images=False)
+    spec.write_text(spec.read_text().replace("yaw = { range = [-180, 180] }", f"yaw = {yaws}")
+                    .replace('sigma = [0.0, 1.0, 2.0]', 'sigma = [0.0]'))
+    scales = numeric_scales(load_spec(spec).controls)
+    assert scales == {"orientation_yaw": Scale(wraps=wraps), "camera_elevation": Scale()}  # one blur: nothing to fit
+
+
+def test_two_values_are_tested_and_the_interval_is_the_gap_between_them() -> None:
+    rng = np.random.default_rng(4)
+    x = np.repeat([5.0, 35.0], 120)
+    objects, environments = np.array(["a"] * 240, object), np.array(["e"] * 240, object)
+    stepped = fit_parameter("camera_elevation", Scale(), x, rng.random(240) < np.where(x < 20, 0.3, 0.8),
+                            objects, environments)
+    flat = fit_parameter("camera_elevation", Scale(), x, rng.random(240) < 0.7, objects, environments)
+    (step,), (none,) = adjust(stepped), adjust(flat)
+    assert step["significant"] and step["fails"] == "below" and step["values"] == 2
+    assert (step["boundary"], step["boundary_low"], step["boundary_high"]) == (20.0, 5.0, 35.0)
+    assert not none["significant"] and none["boundary"] is None and none["p_value"] > 0.05
+
+
+def test_the_findings_say_where_there_is_no_boundary(tmp_path: Path) -> None:
+    """Per parameter: over all results with its largest step when nothing steps overall, else the
+    objects and environments without a boundary."""
+    con = make_store(tmp_path, elevation_rows())
+    summary = summarise(con, list(SCALES), scales=SCALES)
+    flat = {(r["parameter"], r["scope"], r["object"] or r["environment"]) for r in summary.no_boundaries}
+    assert ("blur_sigma", "all", None) in flat and ("camera_elevation", "object", "ball") in flat
+    assert not {key for key in flat if key[0] == "camera_elevation"} & {("camera_elevation", "all", None),
+                                                                      ("camera_elevation", "object", "toaster")}
+    lines = {rows[0]["parameter"]: describe_flat(rows) for rows in by_parameter(summary.no_boundaries)}
+    blur = next(r for r in summary.no_boundaries if r["parameter"] == "blur_sigma" and r["scope"] == "all")
+    assert lines["blur_sigma"].startswith(f"blur_sigma: all results, largest step {blur['accuracy_below']:.0%} of "
+                                          f"{blur['n_below']} → ")
+    assert lines["blur_sigma"].endswith(f", q = {blur['q_value']:.2f}")
+    assert lines["camera_elevation"].startswith("camera_elevation for objects ") and "ball" in lines["camera_elevation"]
+    many = [{"parameter": "p", "scope": "object", "object": f"o{i}", "environment": None} for i in range(10)]
+    assert describe_flat(many + [{"parameter": "p", "scope": "environment", "object": None, "environment": "[red]"}]) \
+        == "p for objects o0, o1, o2, o3, o4, o5, o6, o7 and 2 more and environments \\[red]"
 
 
 # -- query and report ------------------------------------------------------------------------
@@ -200,7 +249,8 @@ def elevation_spec(tmp_path_factory) -> Path:
 def test_query_computes_the_boundaries_only_when_asked(elevation_spec: Path, monkeypatch) -> None:
     runner = CliRunner()
     result = runner.invoke(app, ["query", str(elevation_spec), "SELECT parameter, scope, boundary_low, boundary_high "
-                                 "FROM failure_boundaries WHERE significant AND scope = 'all'", "--format", "csv"])
+                                 "FROM failure_boundaries WHERE significant AND scope = 'all' AND "
+                                 "parameter = 'camera_elevation'", "--format", "csv"])
     assert result.exit_code == 0, result.output
     lines = result.output.strip().splitlines()
     assert lines[0] == "parameter,scope,boundary_low,boundary_high" and len(lines) == 2

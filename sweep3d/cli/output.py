@@ -22,7 +22,7 @@ from sweep3d.stages.aggregate import (
     weakest_regions,
     wilson_interval,
 )
-from sweep3d.stages.aggregate.boundaries import control_number, range_scales
+from sweep3d.stages.aggregate.boundaries import control_number, numeric_scales
 from sweep3d.stages.aggregate.tasks import HIDDEN
 from sweep3d.stages.code import explain
 from sweep3d.stages.driver import plan_status
@@ -205,7 +205,7 @@ def print_findings(console: Console, plan: Plan, store: Store | None = None) -> 
         store: the run's store object (it has read the segments already), else a new one.
     """
     store = store if store is not None else Store(plan.spec.store)
-    summary = stored_summary(store, plan.spec.name, plan.columns, scales=range_scales(plan.spec.controls))
+    summary = stored_summary(store, plan.spec.name, plan.columns, scales=numeric_scales(plan.spec.controls))
     which = f"{escape(plan.model)}: " if len(plan.spec.models) > 1 else ""
     if summary.accuracy is None:
         if summary.invalid:
@@ -232,6 +232,9 @@ def print_findings(console: Console, plan: Plan, store: Store | None = None) -> 
     if summary.boundaries:
         console.print("fails beyond a boundary: " + "; ".join(map(describe_boundary, summary.boundaries))
                       + " (step fits with 95% profile-likelihood intervals; false discovery rate 5%)")
+    if summary.no_boundaries:
+        console.print("no boundary (accuracy does not step beyond chance): "
+                      + "; ".join(describe_flat(rows) for rows in by_parameter(summary.no_boundaries)))
 
 
 def describe_region(region: Region) -> str:
@@ -253,6 +256,37 @@ def describe_boundary(row: dict) -> str:
             f" {passing[0]:.0%} of {passing[1]} → {failing[0]:.0%} of {failing[1]}")
 
 
+#: Objects or environments a "no boundary" finding names per parameter.
+FLAT_NAMES = 8
+
+
+def by_parameter(rows: list[dict]) -> list[list[dict]]:
+    """``rows`` grouped by their parameter, in the order each parameter first appears."""
+    groups: dict[str, list[dict]] = {}
+    for row in rows:
+        groups.setdefault(row["parameter"], []).append(row)
+    return list(groups.values())
+
+
+def describe_flat(rows: list[dict]) -> str:
+    """One parameter's fits without a boundary: over all results with its largest step, which
+    chance explains (``camera_elevation: all results, largest step 70% of 240 → 75% of 240 at 20,
+    q = 0.31``), else for the objects and environments (``blur_sigma for objects soccer ball and environments
+    studio``)."""
+    overall = next((row for row in rows if row["scope"] == "all"), None)
+    if overall is not None:
+        return (f"{escape(overall['parameter'])}: all results, largest step {overall['accuracy_below']:.0%} of "
+                f"{overall['n_below']} → {overall['accuracy_above']:.0%} of {overall['n_above']} at "
+                f"{control_number(overall['estimate'])}, q = {overall['q_value']:.2f}")
+    parts = []
+    for scope in ("object", "environment"):
+        names = [escape(str(row[scope])) for row in rows if row["scope"] == scope]
+        more = len(names) - FLAT_NAMES
+        if names:
+            parts.append(f"{scope}s " + ", ".join(names[:FLAT_NAMES]) + (f" and {more} more" if more > 0 else ""))
+    return f"{escape(rows[0]['parameter'])} for " + " and ".join(parts)
+
+
 def all_invalid_line(summary: Summary) -> str:
     """What a run whose every prediction is invalid found (nothing to count)."""
     return (f"all {summary.invalid} predictions are invalid (the model's outputs are NaN or infinite), so none is "
@@ -267,7 +301,7 @@ def check_some_valid(plan: Plan, store: Store | None = None) -> None:
         UserError: naming the model, how many predictions were invalid and what to fix.
     """
     store = store if store is not None else Store(plan.spec.store)
-    summary = stored_summary(store, plan.spec.name, plan.columns, scales=range_scales(plan.spec.controls))
+    summary = stored_summary(store, plan.spec.name, plan.columns, scales=numeric_scales(plan.spec.controls))
     if summary.accuracy is None and summary.invalid:
         raise UserError(f"{plan.spec.path}: model {plan.model!r}: {all_invalid_line(summary)}; no report was "
                         "written: fix the model (its weights, its preprocessing) and run again (the renders are kept)")

@@ -38,7 +38,7 @@ from sweep3d.stages.aggregate import (
     summarise,
 )
 from sweep3d.stages.aggregate.boundaries import VIEW as BOUNDARIES_VIEW
-from sweep3d.stages.aggregate.boundaries import range_scales, register_failure_boundaries
+from sweep3d.stages.aggregate.boundaries import numeric_scales, register_failure_boundaries
 from sweep3d.stages.aggregate.results import plan_protocol
 from sweep3d.stages.infer.evaluators import measure_of
 
@@ -141,7 +141,7 @@ def gather(loaded: LoadedSpec, con: duckdb.DuckDBPyConnection, store: Store,
         raise no_results(store, loaded.name, loaded.path)
     materialise_views(con)
     columns = loaded.parameter_columns
-    scales = range_scales(loaded.controls)
+    scales = numeric_scales(loaded.controls)
     register_failure_boundaries(con, scales)  # once: the summary's findings and the panel read it
     summary = summarise(con, columns, scales=scales)
     results = Results(con, ["object", "environment", *columns])

@@ -1,4 +1,4 @@
-"""Failure boundaries: where along each continuous control the model starts to fail.
+"""Failure boundaries: where along each numeric control the model starts to fail.
 
 One figure per significant boundary (overall first, then single objects and environments, most
 certain first): the accuracy of the group's results in equal-width bins of the value (points
@@ -14,7 +14,7 @@ from typing import Any
 
 from sweep3d.report.figures import ACCURACY_AXIS, COLORS, Figure, layout, make_figure, p_text, pct, title
 from sweep3d.report.panel import PanelInputs
-from sweep3d.stages.aggregate.boundaries import VIEW, Scale, control_number, range_scales
+from sweep3d.stages.aggregate.boundaries import VIEW, Scale, control_number, numeric_scales
 from sweep3d.stages.aggregate.quoting import identifier, literal
 from sweep3d.stages.aggregate.views import has_view
 
@@ -23,7 +23,7 @@ BINS = 10  # equal-width bins of a group's values in its figure
 
 
 def build(inputs: PanelInputs) -> dict[str, Any] | None:
-    """Every fit's row, figures of the significant ones; None when nothing was fitted (no range
+    """Every fit's row, figures of the significant ones; None when nothing was fitted (no numeric
     parameter, or none with enough results)."""
     if not has_view(inputs.con, VIEW):
         return None
@@ -31,7 +31,7 @@ def build(inputs: PanelInputs) -> dict[str, Any] | None:
                        "object NULLS FIRST, environment NULLS FIRST")
     if not fits:
         return None
-    scales = range_scales(inputs.loaded.controls)
+    scales = numeric_scales(inputs.loaded.controls)
     shown = [fit for fit in fits if fit["significant"]][:FIGURES]
     figures = [_figure(inputs, i, fit, scales.get(fit["parameter"], Scale())) for i, fit in enumerate(shown, 1)]
     return {"figures": figures, "rows": [_row(fit) for fit in fits],

@@ -1,6 +1,6 @@
-"""Failure boundaries: where along a continuous control the model starts to fail.
+"""Failure boundaries: where along a numeric control the model starts to fail.
 
-For each control parameter that the spec gives a range (a continuous control), overall, per
+For each control parameter that the spec gives a range or a list of numbers, overall, per
 object and per environment (where there are several and each has enough results), a step is
 fitted to the counted results against the value (:mod:`sweep3d.stages.aggregate.step_fit`): the
 accuracy ``accuracy_below`` up to the boundary and ``accuracy_above`` beyond it. The boundary is
@@ -14,8 +14,11 @@ permuted within scenes), and the p-values of every fit in the experiment are adj
 accuracy does not change along the control beyond chance there is no boundary: those columns
 are NULL and the fitted plateaus say what was seen.
 
-A range that covers a whole turn (yaw over 360°) has no below or above, and is not fitted; nor
-is a list of values (``failure_modes`` compares those value by value). The relation is computed
+A list is fitted as its values are ordered: with two values the boundary's interval is the
+whole gap between them (the test still says whether the control matters), and more values, or
+the ``boundary`` policy on a range, place it more finely. A parameter that covers a whole turn
+(yaw over 360°, as a range or as a list spaced round the circle) has no below or above, and is
+not fitted. The relation is computed
 when asked (numpy, seconds at 10⁶ results): :func:`register_failure_boundaries` adds it to a
 connection as ``failure_boundaries``; ``sweep3d query`` does so only for a statement naming it.
 """
@@ -33,7 +36,7 @@ import numpy as np
 import pyarrow as pa
 
 from sweep3d.spec.loader import ControlInstance
-from sweep3d.spec.params import Range
+from sweep3d.spec.params import Choice, Range
 from sweep3d.stages.aggregate.compare import ALPHA
 from sweep3d.stages.aggregate.quoting import identifier
 from sweep3d.stages.aggregate.step_fit import fit_step
@@ -42,8 +45,8 @@ from sweep3d.stages.aggregate.views import has_view
 VIEW = "failure_boundaries"
 #: The fewest counted results a group needs to be fitted.
 MIN_RESULTS = 20
-#: The fewest distinct values a group needs (two leave the boundary anywhere between them).
-MIN_VALUES = 3
+#: The fewest distinct values a group needs (with two, the boundary is somewhere between them).
+MIN_VALUES = 2
 _NAMED = re.compile(rf"\b{VIEW}\b", re.I)
 
 
@@ -56,16 +59,34 @@ class Scale:
     wraps: bool = False
 
 
-def range_scales(controls: Sequence[ControlInstance]) -> dict[str, Scale]:
-    """Column → :class:`Scale` of every parameter the spec gives a range."""
+def numeric_scales(controls: Sequence[ControlInstance]) -> dict[str, Scale]:
+    """Column → :class:`Scale` of every parameter the spec gives a range or a list of numbers
+    (two or more)."""
     out = {}
     for inst in controls:
         for param, space in inst.spaces.items():
+            period = inst.control.periodic.get(param)
             if isinstance(space, Range):
-                period = inst.control.periodic.get(param)
                 wraps = period is not None and space.high - space.low >= period
                 out[f"{inst.id}_{param}"] = Scale(log=space.log, wraps=wraps)
+            elif isinstance(space, Choice) and _numbers(space.options):
+                out[f"{inst.id}_{param}"] = Scale(wraps=period is not None and _round_the_turn(space.options, period))
     return out
+
+
+def _numbers(options: Sequence[object]) -> bool:
+    """Whether ``options`` are two or more distinct finite numbers (not booleans)."""
+    numbers = [o for o in options if isinstance(o, (int, float)) and not isinstance(o, bool)]
+    return len(numbers) == len(options) and len(set(numbers)) >= 2 and all(math.isfinite(o) for o in numbers)
+
+
+def _round_the_turn(options: Sequence[float], period: float) -> bool:
+    """Whether listed values of a periodic parameter go round the turn: the gap from the last
+    back to the first (across the period) is no wider than the widest gap between neighbours,
+    so no value is "below" another (yaw at -120, 0 and 120, or 0 and 180; not 0, 30 and 60)."""
+    values = sorted({float(o) for o in options})
+    widest = max(b - a for a, b in zip(values, values[1:]))
+    return period - (values[-1] - values[0]) <= widest
 
 
 _SCHEMA = pa.schema([
@@ -84,7 +105,7 @@ def failure_boundaries(con: duckdb.DuckDBPyConnection, scales: Mapping[str, Scal
     """Every fit (see the module) of the ``results`` view of ``con``, as a table.
 
     Args:
-        scales: the range parameters (:func:`range_scales` of the spec's controls); None (no
+        scales: the numeric parameters (:func:`numeric_scales` of the spec's controls); None (no
             spec at hand) takes the numeric parameters with too many values to list (those the
             level views bin) as linear ranges.
     """

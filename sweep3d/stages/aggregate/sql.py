@@ -13,7 +13,7 @@ import pyarrow as pa
 from sweep3d.cache.store import Store, is_select
 from sweep3d.errors import UserError
 from sweep3d.spec.loader import LoadedSpec
-from sweep3d.stages.aggregate.boundaries import names_boundaries, range_scales, register_failure_boundaries
+from sweep3d.stages.aggregate.boundaries import names_boundaries, numeric_scales, register_failure_boundaries
 from sweep3d.stages.aggregate.views import connect, has_view, no_results
 
 QUERY_HINT = "sweep3d query runs one SELECT over the views results, jobs, predictions, renders, images, runs"
@@ -48,7 +48,7 @@ def results_connection(spec: LoadedSpec, model: str | None = None, writable: Seq
     con = connect(store, spec.name, read_only=True, writable=writable, model=model)
     try:
         if names_boundaries(statement):
-            register_failure_boundaries(con, range_scales(spec.controls))
+            register_failure_boundaries(con, numeric_scales(spec.controls))
         yield con
     except duckdb.Error as exc:
         if isinstance(exc, duckdb.CatalogException) and not has_view(con, "results"):

@@ -32,7 +32,7 @@ REGION_LIMIT = 3  # control values a summary names where the model fails, most c
 BOUNDARY_LIMIT = 3  # boundaries of single objects or environments a summary names, most certain first
 #: Bump when :func:`summarise` gives other numbers for the same rows without a change to this
 #: module or to the views' module (both are part of a remembered summary's key).
-SUMMARY_FORMAT = 3
+SUMMARY_FORMAT = 4
 
 
 @dataclass
@@ -77,6 +77,10 @@ class Summary:
     #: significant failure boundaries (``failure_boundaries`` rows): every overall one, then the
     #: most certain of single objects and environments (see :func:`boundary_findings`)
     boundaries: list[dict[str, Any]] = field(default_factory=list)
+    #: fits without a significant step (over all results, then objects and environments, in
+    #: ``failure_boundaries`` order): where accuracy does not change along a control beyond
+    #: chance (same fields as ``boundaries``, the boundary columns None)
+    no_boundaries: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def wrong(self) -> int:
@@ -94,7 +98,7 @@ def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit:
 
     Args:
         columns: the control-parameter columns of the jobs table.
-        scales: the parameters the spec gives a range (``boundaries.range_scales``), whose failure
+        scales: the numeric parameters of the spec (``boundaries.numeric_scales``), whose failure
             boundaries the summary names; None: the numeric parameters the level views bin.
     """
     jobs = con.execute("SELECT count(*) FROM jobs").fetchone()[0] if has_view(con, "jobs") else 0
@@ -148,27 +152,31 @@ def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit:
     ]
     min_count = region_min_count(counted)
     regions, gap = value_findings(con, columns, min_count)
-    boundaries = boundary_findings(con, scales)
+    boundaries, no_boundaries = boundary_findings(con, scales)
     return Summary(jobs, evaluated, invalid, correct, accuracy, objects, environments, scene_accuracy,
                    scene_count, effects, failures, per_object, counted, sum(reasons.values()), reasons, min_visible,
-                   regions, gap, boundaries)
+                   regions, gap, boundaries, no_boundaries)
 
 
 #: What the findings keep of a boundary (``failure_boundaries`` columns).
-_BOUNDARY_FIELDS = ("parameter", "scope", "object", "environment", "n", "fails", "boundary", "boundary_low",
+_BOUNDARY_FIELDS = ("parameter", "scope", "object", "environment", "n", "fails", "estimate", "boundary", "boundary_low",
                     "boundary_high", "accuracy_below", "n_below", "accuracy_above", "n_above", "q_value")
 
 
 def boundary_findings(con: duckdb.DuckDBPyConnection, scales: dict[str, Scale] | None,
-                      limit: int = BOUNDARY_LIMIT) -> list[dict[str, Any]]:
+                      limit: int = BOUNDARY_LIMIT) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
     """The significant failure boundaries: each parameter's over all results (spec order), then
     at most ``limit`` of single objects or environments, most certain first (smallest q-value,
-    then the narrowest interval relative to the parameter's overall span)."""
-    rows = [row for row in boundary_rows(con, scales) if row["significant"]]
+    then the narrowest interval relative to the parameter's overall span); and the fits without
+    one, in the view's order."""
+    fits = boundary_rows(con, scales)
+    rows = [row for row in fits if row["significant"]]
     overall = [row for row in rows if row["scope"] == "all"]
     groups = sorted((row for row in rows if row["scope"] != "all"),
                     key=lambda r: (r["q_value"], r["boundary_high"] - r["boundary_low"], r["position"]))
-    return [{k: row[k] for k in _BOUNDARY_FIELDS} for row in overall + groups[:limit]]
+    flat = [row for row in fits if not row["significant"]]
+    return ([{k: row[k] for k in _BOUNDARY_FIELDS} for row in overall + groups[:limit]],
+            [{k: row[k] for k in _BOUNDARY_FIELDS} for row in flat])
 
 
 def region_min_count(counted: int) -> int:
