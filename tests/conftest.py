@@ -10,13 +10,17 @@ The fast lane (``pytest -m fast``): every test without a ``blender``, ``browser`
 worker fails the test, and property tests run the ``fast`` Hypothesis profile (those that set
 their own ``max_examples`` go through :func:`examples`).
 
-Once per test run: one headless Chromium (``chromium``) and one ONNX export per model
+The suite runs in two processes (pytest-xdist, ``-n 2`` in pyproject's addopts; the fast lane in
+one, where its guard can see every import). Once per process: one headless Chromium
+(``chromium``); once per test run, whatever the processes: one ONNX export per model
 (``_one_onnx_export_per_model``). The ``soak`` lane (the 20-kill soak) is left out of the default
 run by pyproject's addopts; ``pytest -m soak`` runs it.
 """
 
 from __future__ import annotations
 
+import fcntl
+import os
 import re
 import shutil
 import sys
@@ -28,6 +32,12 @@ import pytest
 from hypothesis import settings as hypothesis_settings
 
 REPO = Path(__file__).resolve().parents[1]
+
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    # xdist's workers start with COLUMNS=80 and LINES=24 set, which would fix the width of the CLI's
+    # consoles when they are made (at import): tests set the width per call, as a terminal would
+    os.environ.pop("COLUMNS", None)
+    os.environ.pop("LINES", None)
 
 #: Markers of tests that need more than plain Python (the rest are marked ``fast``).
 HEAVY = ("blender", "browser", "slow", "torch")
@@ -137,6 +147,13 @@ def _refuse_workers(guard: _LaneGuard) -> None:
 _GUARD = pytest.StashKey[_LaneGuard]()
 
 
+@pytest.hookimpl(tryfirst=True)
+def pytest_cmdline_main(config: pytest.Config) -> None:
+    """The fast lane runs in one process: its guard must see every import, collection's included."""
+    if _selects_lane(config.getoption("markexpr") or "") and hasattr(config.option, "numprocesses"):
+        config.option.numprocesses = 0
+
+
 def pytest_configure(config: pytest.Config) -> None:
     global LANE
     LANE = _selects_lane(config.getoption("markexpr") or "")
@@ -216,16 +233,20 @@ def _one_onnx_export_per_model(tmp_path_factory):
         return
     from sweep3d.stages.infer.onnx_backend import OnnxRunner
 
-    cache = tmp_path_factory.mktemp("onnx_exports")
+    base = tmp_path_factory.getbasetemp()
+    cache = (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / "onnx_exports"  # the processes' own
+    cache.mkdir(exist_ok=True)
     export = OnnxRunner._export
 
     def cached_export(self, classifier, scratch):
         kept = cache / self.path.name  # named by the model's digest (weights and preprocessing), as in a store
-        if not kept.exists():
-            export(self, classifier, scratch)
-            shutil.copyfile(self.path, kept.with_suffix(".partial"))
-            kept.with_suffix(".partial").rename(kept)
-            return
+        with open(cache / f"{self.path.name}.lock", "w") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)  # another process exporting the same model: wait for its file
+            if not kept.exists():
+                export(self, classifier, scratch)
+                shutil.copyfile(self.path, kept.with_suffix(".partial"))
+                kept.with_suffix(".partial").rename(kept)
+                return
         self.path.parent.mkdir(parents=True, exist_ok=True)
         staged = self.path.with_name(f".{self.path.name}.copy.tmp")
         shutil.copyfile(kept, staged)
@@ -245,7 +266,7 @@ CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networki
 
 @pytest.fixture(scope="session")
 def chromium():
-    """One headless Chromium per test run (the system's, ``/usr/bin/chromium``, driven by Playwright);
+    """One headless Chromium per test process (the system's, ``/usr/bin/chromium``, driven by Playwright);
     each page opens in a fresh browser context (its own cookies, storage and cache), see
     ``tests.test_report.open_page``. Skips the test where Chromium or Playwright is missing."""
     if not CHROMIUM.exists():
