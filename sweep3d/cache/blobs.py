@@ -141,18 +141,23 @@ _UNREADABLE = -2  # ... when stat failed otherwise
 
 def file_states(store: Store, keys: list[str]) -> np.ndarray:
     """(size, mtime_ns, ctime_ns, inode) of each key's blob as an int64 array (n, 4); the size is
-    :data:`MISSING` for a blob that is not there and negative for one that cannot be stat'ed."""
-    out = []
+    :data:`MISSING` for a blob that is not there and negative for one that cannot be stat'ed.
+
+    At 10⁶ blobs this is a run's largest single cost after the ``stat`` calls themselves, so the
+    paths are made in one comprehension and the states gathered into one flat list."""
+    blob_file = store.blob_file
+    flat: list[int] = []
+    extend = flat.extend
     stat = os.stat
-    for key in keys:
+    for path in [blob_file(key) for key in keys]:
         try:
-            st = stat(store.blob_file(key))
-            out.append((st.st_size, st.st_mtime_ns, st.st_ctime_ns, st.st_ino))
+            st = stat(path)
+            extend((st.st_size, st.st_mtime_ns, st.st_ctime_ns, st.st_ino))
         except FileNotFoundError:
-            out.append((MISSING, 0, 0, 0))
+            extend((MISSING, 0, 0, 0))
         except OSError:
-            out.append((_UNREADABLE, 0, 0, 0))
-    return np.array(out, dtype=np.int64).reshape(len(keys), 4)
+            extend((_UNREADABLE, 0, 0, 0))
+    return np.array(flat, dtype=np.int64).reshape(len(keys), 4)
 
 
 def _recorded(rows: pa.Table | None, table: str) -> dict[str, pa.Array]:
