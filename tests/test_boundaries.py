@@ -25,6 +25,7 @@ from sweep3d.stages import load_spec
 from sweep3d.stages.aggregate import connect, summarise
 from sweep3d.stages.aggregate.boundaries import Scale, adjust, failure_boundaries, fit_parameter, numeric_scales
 from sweep3d.stages.aggregate.step_fit import CRITICAL, fit_step
+from sweep3d.stages.aggregate.summary import boundary_findings
 from tests.test_aggregate_views import make_store
 
 THRESHOLD = 12.0
@@ -148,6 +149,9 @@ def test_the_findings_name_the_boundaries_and_nothing_for_a_control_that_does_no
     assert line.startswith("toaster: camera_elevation fails below 1")
     passing = f"{toaster['accuracy_above']:.0%} of {toaster['n_above']}"
     assert f"(95% interval {toaster['boundary_low']:.3g}–{toaster['boundary_high']:.3g}), {passing} → " in line
+    groups = [r for r in failure_boundaries(con, SCALES).to_pylist() if r["significant"] and r["scope"] != "all"]
+    named, _, left_out = boundary_findings(con, SCALES, limit=1)  # the rest are counted for the findings line
+    assert len(groups) >= 2 and left_out == len(groups) - 1 and sum(r["scope"] != "all" for r in named) == 1
 
     rng = np.random.default_rng(1)
     null = [{"camera_elevation": float(rng.uniform(0, 60)), "correct": bool(rng.random() < 0.7)} for _ in range(80)]
@@ -179,8 +183,11 @@ def test_numeric_scales_follow_the_spec(tmp_path: Path) -> None:
     ("[-120, 0, 120]", True),  # round the turn, evenly
     ("[0, 180]", True),  # two opposite views: neither is below the other
     ("[0, 90, 180, 270]", True),
+    ("[0, 51, 102, 153, 204, 255, 306]", True),  # nearly even: 54° back to the first
+    ("[0, 90]", True),  # either arc of the circle separates two values
     ("[0, 30, 60]", False),  # a sector: below and above mean something
     ("[-45, 0, 45, 90]", False),
+    ("[0, 90, 180]", False),  # half the turn
 ])
 def test_a_list_of_a_periodic_parameter_wraps_when_it_goes_round_the_turn(tmp_path: Path, yaws: str,
                                                                        wraps: bool) -> None:
@@ -202,6 +209,12 @@ def test_two_values_are_tested_and_the_interval_is_the_gap_between_them() -> Non
     assert step["significant"] and step["fails"] == "below" and step["values"] == 2
     assert (step["boundary"], step["boundary_low"], step["boundary_high"]) == (20.0, 5.0, 35.0)
     assert not none["significant"] and none["boundary"] is None and none["p_value"] > 0.05
+    # the midpoint was never rendered: the findings name the value it fails at against the other
+    line = describe_boundary(step)
+    assert line.startswith("camera_elevation fails at 5 against 35, ") and "interval" not in line
+    assert line.endswith(f"{step['accuracy_above']:.0%} of 120 → {step['accuracy_below']:.0%} of 120")
+    above = dict(step, fails="above")
+    assert describe_boundary(above).startswith("camera_elevation fails at 35 against 5, ")
 
 
 def test_the_findings_say_where_there_is_no_boundary(tmp_path: Path) -> None:
@@ -219,6 +232,9 @@ def test_the_findings_say_where_there_is_no_boundary(tmp_path: Path) -> None:
                                           f"{blur['n_below']} → ")
     assert lines["blur_sigma"].endswith(f", q = {blur['q_value']:.2f}")
     assert lines["camera_elevation"].startswith("camera_elevation for objects ") and "ball" in lines["camera_elevation"]
+    always = {"parameter": "q", "scope": "all", "object": None, "environment": None, "accuracy_below": 1.0,
+              "accuracy_above": 1.0, "n_below": 5, "n_above": 7, "estimate": 1.0, "q_value": 1.0}
+    assert describe_flat([always]) == "q: all results, always right"
     many = [{"parameter": "p", "scope": "object", "object": f"o{i}", "environment": None} for i in range(10)]
     assert describe_flat(many + [{"parameter": "p", "scope": "environment", "object": None, "environment": "[red]"}]) \
         == "p for objects o0, o1, o2, o3, o4, o5, o6, o7 and 2 more and environments \\[red]"

@@ -22,7 +22,7 @@ from sweep3d.stages.aggregate import (
     weakest_regions,
     wilson_interval,
 )
-from sweep3d.stages.aggregate.boundaries import control_number, numeric_scales
+from sweep3d.stages.aggregate.boundaries import boundary_phrase, control_number, numeric_scales
 from sweep3d.stages.aggregate.tasks import HIDDEN
 from sweep3d.stages.code import explain
 from sweep3d.stages.driver import plan_status
@@ -230,10 +230,12 @@ def print_findings(console: Console, plan: Plan, store: Store | None = None) -> 
                           f"for every region tested; the nearest, {describe_region(gap)}, q = {gap.q_value:.2f}, "
                           "does not rule out chance")
     if summary.boundaries:
+        more = summary.boundaries_left_out
         console.print("fails beyond a boundary: " + "; ".join(map(describe_boundary, summary.boundaries))
+                      + (f"; {more} more of single objects or environments in the report" if more else "")
                       + " (step fits with 95% profile-likelihood intervals; false discovery rate 5%)")
     if summary.no_boundaries:
-        console.print("no boundary (accuracy does not step beyond chance): "
+        console.print("no significant boundary (q ≥ 0.05): "
                       + "; ".join(describe_flat(rows) for rows in by_parameter(summary.no_boundaries)))
 
 
@@ -246,13 +248,15 @@ def describe_region(region: Region) -> str:
 
 def describe_boundary(row: dict) -> str:
     """``toaster: camera_elevation fails below 12.1 (95% interval 8.03–15.2), 61% of 40 → 18% of 12``:
-    the accuracy on the side that passes, then on the side that fails."""
+    the accuracy on the side that passes, then on the side that fails. With two values, the value
+    it fails at against the other (``fails at 5 against 35, 53% of 96 → 19% of 96``)."""
     who = row["object"] if row["scope"] == "object" else row["environment"] if row["scope"] == "environment" else None
     below = row["fails"] == "below"
     passing = (row["accuracy_above"], row["n_above"]) if below else (row["accuracy_below"], row["n_below"])
     failing = (row["accuracy_below"], row["n_below"]) if below else (row["accuracy_above"], row["n_above"])
-    return (f"{escape(who) + ': ' if who else ''}{escape(row['parameter'])} fails {row['fails']} "
-            f"{control_number(row['boundary'])} (95% interval {control_number(row['boundary_low'])}–{control_number(row['boundary_high'])}),"
+    where = ("" if row["values"] == 2 else
+             f" (95% interval {control_number(row['boundary_low'])}–{control_number(row['boundary_high'])})")
+    return (f"{escape(who) + ': ' if who else ''}{escape(row['parameter'])} {boundary_phrase(row)}{where},"
             f" {passing[0]:.0%} of {passing[1]} → {failing[0]:.0%} of {failing[1]}")
 
 
@@ -269,15 +273,18 @@ def by_parameter(rows: list[dict]) -> list[list[dict]]:
 
 
 def describe_flat(rows: list[dict]) -> str:
-    """One parameter's fits without a boundary: over all results with its largest step, which
-    chance explains (``camera_elevation: all results, largest step 70% of 240 → 75% of 240 at 20,
-    q = 0.31``), else for the objects and environments (``blur_sigma for objects soccer ball and environments
-    studio``)."""
+    """One parameter's fits without a significant boundary: over all results with its largest
+    step (``camera_elevation: all results, largest step 70% of 240 → 75% of 240 at 20, q = 0.31``;
+    ``always right`` where there is none), else for the objects and environments
+    (``blur_sigma for objects soccer ball and environments studio``)."""
     overall = next((row for row in rows if row["scope"] == "all"), None)
     if overall is not None:
-        return (f"{escape(overall['parameter'])}: all results, largest step {overall['accuracy_below']:.0%} of "
-                f"{overall['n_below']} → {overall['accuracy_above']:.0%} of {overall['n_above']} at "
-                f"{control_number(overall['estimate'])}, q = {overall['q_value']:.2f}")
+        below, above = overall["accuracy_below"], overall["accuracy_above"]
+        if below == above and below in (0.0, 1.0):
+            return f"{escape(overall['parameter'])}: all results, always {'right' if below else 'wrong'}"
+        return (f"{escape(overall['parameter'])}: all results, largest step {below:.0%} of {overall['n_below']} → "
+                f"{above:.0%} of {overall['n_above']} at {control_number(overall['estimate'])}, "
+                f"q = {overall['q_value']:.2f}")
     parts = []
     for scope in ("object", "environment"):
         names = [escape(str(row[scope])) for row in rows if row["scope"] == scope]

@@ -12,7 +12,7 @@ The explorer is ``late``: built after the others, it fills the image budget they
 are some: out of frame, or too little of the object visible), box and mask outcomes (only for
 tasks whose results have an ``outcome`` or ``iou``), the model comparison (only when the spec
 tests several models), the paired comparisons (only when the spec is paired: ``[policy]
-paired``), the failure boundaries (only where a range parameter has enough results to fit) and
+paired``), the failure boundaries (only where a numeric parameter has enough results to fit) and
 the part-visibility panel (accuracy conditioned on which parts of the object's
 surface are visible, from a UV render pass) returns None when the spec did not ask for the pass.
 """

@@ -14,7 +14,7 @@ from typing import Any
 
 from sweep3d.report.figures import ACCURACY_AXIS, COLORS, Figure, layout, make_figure, p_text, pct, title
 from sweep3d.report.panel import PanelInputs
-from sweep3d.stages.aggregate.boundaries import VIEW, Scale, control_number, numeric_scales
+from sweep3d.stages.aggregate.boundaries import VIEW, Scale, boundary_phrase, control_number, numeric_scales
 from sweep3d.stages.aggregate.quoting import identifier, literal
 from sweep3d.stages.aggregate.views import has_view
 
@@ -51,6 +51,7 @@ def _row(fit: dict[str, Any]) -> dict[str, Any]:
     """A table row: the group, the boundary (or none) with its interval, the two plateaus and the test."""
     return {"parameter": fit["parameter"], "who": _who(fit), "significant": fit["significant"],
             "fails": fit["fails"], "boundary": _value(fit["boundary"]),
+            "verdict": boundary_phrase(fit) if fit["significant"] else None,
             "interval": f"{_value(fit['boundary_low'])}–{_value(fit['boundary_high'])}",
             "below": f"{pct(fit['accuracy_below'], 0)} of {fit['n_below']}",
             "above": f"{pct(fit['accuracy_above'], 0)} of {fit['n_above']}",
@@ -102,8 +103,8 @@ def _figure(inputs: PanelInputs, index: int, fit: dict[str, Any], scale: Scale) 
         {"type": "line", "xref": "x", "yref": "paper", "x0": boundary, "x1": boundary, "y0": 0, "y1": 1,
          "line": {"color": COLORS["wrong"], "dash": "dash", "width": 1.5}},
     ]
-    heading = (f"{_who(fit)}: fails {fit['fails']} {_value(boundary)} "
-               f"({_value(fit['boundary_low'])}–{_value(fit['boundary_high'])})")
+    heading = f"{_who(fit)}: {boundary_phrase(fit)}" + (
+        "" if fit["values"] == 2 else f" ({_value(fit['boundary_low'])}–{_value(fit['boundary_high'])})")
     figure_layout = layout(
         title=title(heading), height=320, shapes=shapes, showlegend=False,
         xaxis={"title": {"text": fit["parameter"]}, "type": "log" if scale.log else "linear", "zeroline": False},

@@ -52,8 +52,8 @@ _NAMED = re.compile(rf"\b{VIEW}\b", re.I)
 
 @dataclass(frozen=True)
 class Scale:
-    """How a range parameter's values are spaced: ``log`` (the boundary is the geometric middle
-    of its gap), ``wraps`` (a whole turn: not fitted)."""
+    """How a numeric parameter's values are spaced: ``log`` (a log range: the boundary is the
+    geometric middle of its gap), ``wraps`` (a whole turn: not fitted)."""
 
     log: bool = False
     wraps: bool = False
@@ -80,13 +80,22 @@ def _numbers(options: Sequence[object]) -> bool:
     return len(numbers) == len(options) and len(set(numbers)) >= 2 and all(math.isfinite(o) for o in numbers)
 
 
+#: A list of a periodic parameter goes round the turn when the gap from its last value back to
+#: its first is at most this many times its widest gap between neighbours.
+ROUND_THE_TURN = 1.5
+
+
 def _round_the_turn(options: Sequence[float], period: float) -> bool:
-    """Whether listed values of a periodic parameter go round the turn: the gap from the last
-    back to the first (across the period) is no wider than the widest gap between neighbours,
-    so no value is "below" another (yaw at -120, 0 and 120, or 0 and 180; not 0, 30 and 60)."""
+    """Whether listed values of a periodic parameter leave no "below" and "above": two values
+    (either arc of the circle separates them), or values spaced round the circle, evenly or
+    nearly (the gap from the last back to the first, across the period, at most
+    :data:`ROUND_THE_TURN` times the widest gap between neighbours: yaw at -120, 0 and 120, or
+    every 51° from 0 to 306; not 0, 30 and 60, nor 0, 90 and 180)."""
     values = sorted({float(o) for o in options})
+    if len(values) <= 2:
+        return True
     widest = max(b - a for a, b in zip(values, values[1:]))
-    return period - (values[-1] - values[0]) <= widest
+    return period - (values[-1] - values[0]) <= ROUND_THE_TURN * widest
 
 
 _SCHEMA = pa.schema([
@@ -225,6 +234,16 @@ def _benjamini_hochberg(p: list[float]) -> list[float]:
         running = min(running, p[i] * m / rank)
         q[i] = min(1.0, running)
     return q
+
+
+def boundary_phrase(row: Mapping) -> str:
+    """What a significant fit says: ``fails below 12.1``; with two values, where the step can be
+    anywhere between them, the value it fails at against the other (``fails at 5 against 35``)."""
+    if row["values"] == 2:
+        at, other = ((row["boundary_low"], row["boundary_high"]) if row["fails"] == "below"
+                     else (row["boundary_high"], row["boundary_low"]))
+        return f"fails at {control_number(at)} against {control_number(other)}"
+    return f"fails {row['fails']} {control_number(row['boundary'])}"
 
 
 def control_number(value: float) -> str:

@@ -32,7 +32,7 @@ REGION_LIMIT = 3  # control values a summary names where the model fails, most c
 BOUNDARY_LIMIT = 3  # boundaries of single objects or environments a summary names, most certain first
 #: Bump when :func:`summarise` gives other numbers for the same rows without a change to this
 #: module or to the views' module (both are part of a remembered summary's key).
-SUMMARY_FORMAT = 4
+SUMMARY_FORMAT = 5
 
 
 @dataclass
@@ -81,6 +81,8 @@ class Summary:
     #: ``failure_boundaries`` order): where accuracy does not change along a control beyond
     #: chance (same fields as ``boundaries``, the boundary columns None)
     no_boundaries: list[dict[str, Any]] = field(default_factory=list)
+    #: significant boundaries of single objects or environments beyond the ones named
+    boundaries_left_out: int = 0
 
     @property
     def wrong(self) -> int:
@@ -152,23 +154,24 @@ def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit:
     ]
     min_count = region_min_count(counted)
     regions, gap = value_findings(con, columns, min_count)
-    boundaries, no_boundaries = boundary_findings(con, scales)
+    boundaries, no_boundaries, left_out = boundary_findings(con, scales)
     return Summary(jobs, evaluated, invalid, correct, accuracy, objects, environments, scene_accuracy,
                    scene_count, effects, failures, per_object, counted, sum(reasons.values()), reasons, min_visible,
-                   regions, gap, boundaries, no_boundaries)
+                   regions, gap, boundaries, no_boundaries, left_out)
 
 
 #: What the findings keep of a boundary (``failure_boundaries`` columns).
-_BOUNDARY_FIELDS = ("parameter", "scope", "object", "environment", "n", "fails", "estimate", "boundary", "boundary_low",
-                    "boundary_high", "accuracy_below", "n_below", "accuracy_above", "n_above", "q_value")
+_BOUNDARY_FIELDS = ("parameter", "scope", "object", "environment", "n", "values", "fails", "estimate", "boundary",
+                    "boundary_low", "boundary_high", "accuracy_below", "n_below", "accuracy_above", "n_above",
+                    "q_value")
 
 
 def boundary_findings(con: duckdb.DuckDBPyConnection, scales: dict[str, Scale] | None,
-                      limit: int = BOUNDARY_LIMIT) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+                      limit: int = BOUNDARY_LIMIT) -> tuple[list[dict[str, Any]], list[dict[str, Any]], int]:
     """The significant failure boundaries: each parameter's over all results (spec order), then
     at most ``limit`` of single objects or environments, most certain first (smallest q-value,
-    then the narrowest interval relative to the parameter's overall span); and the fits without
-    one, in the view's order."""
+    then the narrowest interval relative to the parameter's overall span); the fits without one,
+    in the view's order; and how many significant ones of single groups were left out."""
     fits = boundary_rows(con, scales)
     rows = [row for row in fits if row["significant"]]
     overall = [row for row in rows if row["scope"] == "all"]
@@ -176,7 +179,7 @@ def boundary_findings(con: duckdb.DuckDBPyConnection, scales: dict[str, Scale] |
                     key=lambda r: (r["q_value"], r["boundary_high"] - r["boundary_low"], r["position"]))
     flat = [row for row in fits if not row["significant"]]
     return ([{k: row[k] for k in _BOUNDARY_FIELDS} for row in overall + groups[:limit]],
-            [{k: row[k] for k in _BOUNDARY_FIELDS} for row in flat])
+            [{k: row[k] for k in _BOUNDARY_FIELDS} for row in flat], max(0, len(groups) - limit))
 
 
 def region_min_count(counted: int) -> int:

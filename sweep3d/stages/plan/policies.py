@@ -281,8 +281,8 @@ class BoundaryPolicy(RoundsPolicy):
     """Failure-boundary search under a budget of ``samples`` points per scene.
 
     Starts with ``initial`` Sobol points; each later round fits a step to the outcomes so far
-    along every continuous dimension that does not wrap (as ``failure_boundaries`` does: see
-    :mod:`sweep3d.stages.aggregate.step_fit`), takes the one with the strongest step (its
+    along every continuous dimension that does not wrap (the fit ``failure_boundaries`` makes:
+    see :mod:`sweep3d.stages.aggregate.step_fit`), takes the one with the strongest step (its
     likelihood ratio at least :data:`BoundaryPolicy.EVIDENCE`) and puts ``batch`` points where
     that boundary is still uncertain: its 95 % interval widened by ``margin`` of its width on
     each side, spread evenly across it, the other coordinates and lists drawn at random (so the
