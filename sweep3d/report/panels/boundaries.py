@@ -102,7 +102,7 @@ def _figure(inputs: PanelInputs, index: int, fit: dict[str, Any], scale: Scale) 
          "y0": 0, "y1": 1, "fillcolor": "rgba(214, 69, 69, 0.15)", "line": {"width": 0}, "layer": "below"},
         {"type": "line", "xref": "x", "yref": "paper", "x0": boundary, "x1": boundary, "y0": 0, "y1": 1,
          "line": {"color": COLORS["wrong"], "dash": "dash", "width": 1.5}},
-    ]
+    ][: 1 if fit["values"] == 2 else 2]  # two values: the band is the whole gap, and no place in it is the boundary
     heading = f"{_who(fit)}: {boundary_phrase(fit)}" + (
         "" if fit["values"] == 2 else f" ({_value(fit['boundary_low'])}–{_value(fit['boundary_high'])})")
     figure_layout = layout(
