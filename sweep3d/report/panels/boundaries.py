@@ -50,7 +50,6 @@ def _value(value: float | None) -> str:
 def _row(fit: dict[str, Any]) -> dict[str, Any]:
     """A table row: the group, the boundary (or none) with its interval, the two plateaus and the test."""
     return {"parameter": fit["parameter"], "who": _who(fit), "significant": fit["significant"],
-            "fails": fit["fails"], "boundary": _value(fit["boundary"]),
             "verdict": boundary_phrase(fit) if fit["significant"] else None,
             "interval": f"{_value(fit['boundary_low'])}–{_value(fit['boundary_high'])}",
             "below": f"{pct(fit['accuracy_below'], 0)} of {fit['n_below']}",
