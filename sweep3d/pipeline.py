@@ -37,7 +37,7 @@ from sweep3d.stages.outcome import StageOutcome
 from sweep3d.stages.plan import History, Outcome, Plan, make_plan
 from sweep3d.stages.postprocess import PostprocessStage
 from sweep3d.stages.render import LOCAL, Executor, RenderStage
-from sweep3d.stages.render.device import fallback_note
+from sweep3d.stages.render.device import device_note
 from sweep3d.stages.render.estimate import slow_render_warning
 from sweep3d.stages.render.pool import remove_stale_scratch, scratch_root
 
@@ -165,7 +165,7 @@ def _run_locked(spec: LoadedSpec, store: Store, console: Console | None, wait: f
         plans = [plan_spec(spec, model) for model in models]
         result = RunResult(uuid.uuid4().hex[:12], plans[0], plans=plans, store=store)
         missing = _missing_renders(plans, store, executor)
-        _note_fallback(plans, missing, console)
+        _note_device(plans, missing, console)
         _warn_if_slow(plans, store, executor, console, missing)
         infers = [InferStage(model, on_ray=executor.kind == "ray", several=len(models) > 1) for model in models]
         for plan, infer in zip(plans, infers):
@@ -219,9 +219,10 @@ def _missing_renders(plans: list[Plan], store: Store, executor: Executor) -> dic
     return missing
 
 
-def _note_fallback(plans: list[Plan], missing: dict[int, int], console: Console | None) -> None:
-    """One line before a run that renders when ``device = "auto"`` found no GPU: it renders on the CPU."""
-    note = fallback_note(plans[0].spec.render, plans[0].device)
+def _note_device(plans: list[Plan], missing: dict[int, int], console: Console | None) -> None:
+    """One line before a run that renders when ``device = "auto"`` found no GPU (it renders on the
+    CPU), or when the driver must compile Cycles' kernels for this GPU first (minutes, once)."""
+    note = device_note(plans[0].spec.render, plans[0].device)
     if note and any(missing.values()) and console is not None:
         console.print(f"[dim]note: {escape(note)}[/]", highlight=False, soft_wrap=True)
 

@@ -20,7 +20,7 @@ from sweep3d.pixels import decode_png
 from sweep3d.spec.models import RenderSpec
 from sweep3d.stages import load_spec
 from sweep3d.stages.render import device as device_module
-from sweep3d.stages.render.device import fallback_note, resolve_device, worker_count
+from sweep3d.stages.render.device import device_note, resolve_device, worker_count
 from sweep3d.stages.render.protocol import EnvironmentRef, RenderJob, RenderSettings, WorkerLimits
 from sweep3d.stages.render.stage import recycled_note
 from sweep3d.stages.render.worker import resident_mb
@@ -102,18 +102,78 @@ def test_the_probe_starts_no_process_without_an_nvidia_driver(monkeypatch) -> No
         device_module.probe.cache_clear()
 
 
+def test_the_probe_reads_the_childs_gpu_counts_and_the_capabilities_it_must_compile(monkeypatch) -> None:
+    import subprocess
+
+    line = '{"optix": 2, "cuda": 2, "compiles": ["9.0"], "other": 7}'
+    monkeypatch.setattr(device_module, "DRIVER_PATHS", (os.devnull,))
+    monkeypatch.setattr(device_module.subprocess, "run",
+                        lambda *a, **k: subprocess.CompletedProcess(a, 0, f"Blender says hello\n{line}\n", ""))
+    device_module.probe.cache_clear()
+    try:
+        assert device_module.probe() == {"optix": 2, "cuda": 2, "compiles": ["9.0"]}
+        assert resolve_device("auto") == "optix" and device_module.gpu_count("cuda") == 2
+    finally:
+        device_module.probe.cache_clear()
+
+
 def test_a_run_says_once_that_auto_renders_on_the_cpu_and_only_when_it_renders(tmp_path, gpus) -> None:
-    from sweep3d.pipeline import _note_fallback
+    from sweep3d.pipeline import _note_device
 
     auto, cpu = plan_with(tmp_path), plan_with(tmp_path, 'device = "cpu"')
     console = Console(record=True, width=400)
-    _note_fallback([auto], {32: 0}, console)  # everything stored: nothing to say
-    _note_fallback([cpu], {32: 4}, console)  # asked for: nothing to say
+    _note_device([auto], {32: 0}, console)  # everything stored: nothing to say
+    _note_device([cpu], {32: 4}, console)  # asked for: nothing to say
     assert console.export_text() == ""
-    _note_fallback([auto, auto], {32: 4}, console)
+    _note_device([auto, auto], {32: 4}, console)
     (line,) = console.export_text().splitlines()
-    assert line == f"note: {fallback_note(RenderSpec(), 'cpu')}" and 'render.device = "auto"' in line
-    assert fallback_note(RenderSpec(), "optix") is None
+    assert line == f"note: {device_note(RenderSpec(), 'cpu')}" and 'render.device = "auto"' in line
+    assert device_note(RenderSpec(), "optix") is None
+
+
+def test_a_gpu_blender_ships_no_kernel_for_is_said_before_rendering(tmp_path, gpus) -> None:
+    from sweep3d.pipeline import _note_device
+
+    optix = plan_with(tmp_path, 'device = "optix"')
+    console = Console(record=True, width=400)
+    gpus({"optix": 1, "cuda": 1, "compiles": []})  # a GPU Blender has kernels for: nothing to say
+    _note_device([optix], {32: 4}, console)
+    assert console.export_text() == ""
+    gpus({"optix": 1, "cuda": 1, "compiles": ["9.0"]})
+    _note_device([optix], {32: 0}, console)  # nothing to render: nothing compiles
+    _note_device([plan_with(tmp_path, 'device = "cpu"')], {32: 4}, console)
+    assert console.export_text() == ""
+    _note_device([optix], {32: 4}, console)
+    (line,) = console.export_text().splitlines()
+    assert line.startswith('note: render.device = "optix": Blender ships no CUDA kernel for this GPU (compute '
+                           'capability 9.0)') and "CUDA_CACHE_PATH" in line
+
+
+def test_capabilities_without_a_shipped_cubin_are_the_ones_the_driver_compiles(tmp_path) -> None:
+    from sweep3d.stages.render.gpus import uncompiled
+
+    for name in ("kernel_sm_86.cubin.zst", "kernel_sm_120.cubin.zst", "kernel_compute_75.ptx.zst",
+                 "kernel_optix.ptx.zst"):
+        (tmp_path / name).write_bytes(b"")
+    assert uncompiled(["8.6", "9.0", "12.0", "8.7", "9.0"], tmp_path) == ["8.7", "9.0"]
+    assert uncompiled([], tmp_path) == []
+
+
+def test_a_gpu_workers_first_job_may_compile_kernels_and_its_cache_is_sized(tmp_path, monkeypatch) -> None:
+    from sweep3d.stages.render.pool import RenderPool, _Worker
+
+    monkeypatch.delenv("CUDA_CACHE_MAXSIZE", raising=False)
+    monkeypatch.setenv("TMPDIR", str(tmp_path))
+    first, later = _Worker(None, None, 0), _Worker(None, None, 0, rendered=1)
+    with RenderPool(RenderSettings(resolution=32), timeout=5) as cpu:
+        assert cpu.allowed(first) == cpu.allowed(later) == 5
+    assert "CUDA_CACHE_MAXSIZE" not in os.environ
+    with RenderPool(RenderSettings(resolution=32, device="optix"), timeout=5) as gpu:
+        assert gpu.allowed(first) == 5 + device_module.KERNEL_GRACE and gpu.allowed(later) == 5
+    assert os.environ["CUDA_CACHE_MAXSIZE"] == str(4 * 2**30)
+    monkeypatch.setenv("CUDA_CACHE_MAXSIZE", "1000")  # the user's own size is kept
+    with RenderPool(RenderSettings(resolution=32, device="cuda"), timeout=5):
+        assert os.environ["CUDA_CACHE_MAXSIZE"] == "1000"
 
 
 # -- worker limits -------------------------------------------------------------------------------
@@ -213,3 +273,22 @@ def test_auto_reuses_a_cpu_runs_renders_and_an_absent_gpu_is_one_line_exit_2_ren
     (line,) = [line for line in result.output.splitlines() if line.startswith("error:")]
     assert line.startswith('error: render.device = "cuda": Cycles finds no CUDA GPU') and '"cpu"' in line, line
     assert Store(tiny_copy / "store").keys("renders") == renders  # nothing rendered
+
+
+def test_the_gpu_benchmark_table_rates_renders_after_the_first_and_compares_pixels_with_the_cpu(
+        tmp_path, capsys) -> None:
+    from PIL import Image
+
+    from benchmarks import gpu
+
+    for run, level in (("cpu-1", 100), ("cuda-1", 103)):
+        (tmp_path / run).mkdir()
+        for key in ("a", "b"):
+            Image.fromarray(np.full((4, 4, 4), level, np.uint8)).save(tmp_path / run / f"{key}.png")
+        device = run.split("-")[0]
+        (tmp_path / f"{run}.json").write_text(
+            f'Blender 4.5 says hello\n{{"setup": 2.0, "first": 1.0, "loop": 11.0, "n": 21, "device": "{device}"}}\n')
+    gpu.report(tmp_path)
+    rows = [line for line in capsys.readouterr().out.splitlines() if line.startswith("| c")]
+    assert rows == ["| cpu-1 | 2.0 | 1.00 | 2.0 | 11.0 | – |",
+                    "| cuda-1 | 2.0 | 1.00 | 2.0 | 11.0 | 3.00 (max 3.00, 2 frames) |"]

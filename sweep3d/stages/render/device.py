@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import functools
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -28,6 +29,21 @@ PROBE_TIMEOUT = 120.0  # seconds the probe may take to import bpy and list Cycle
 #: What shows an NVIDIA driver: its /proc entry and device node (Linux), or WSL's GPU node.
 DRIVER_PATHS = ("/proc/driver/nvidia/version", "/dev/nvidiactl", "/dev/dxg")
 NAMES = {"optix": "OptiX", "cuda": "CUDA"}
+#: Where the driver keeps the kernels it compiled, and the size a GPU run raises its cache to
+#: (the most it allows) unless the user set one: its default (256 MiB or 1 GiB, by driver) is
+#: shared with every other program's kernels, and a recompile costs minutes.
+CUDA_CACHE = "CUDA_CACHE_PATH, default ~/.nv/ComputeCache"
+CUDA_CACHE_SIZE = ("CUDA_CACHE_MAXSIZE", str(4 * 2**30))
+#: Seconds a GPU worker's first job may take beyond ``render.timeout``: the driver may compile
+#: Cycles' kernels there (more than 5 minutes measured on an H200), OptiX its pipeline.
+KERNEL_GRACE = 3600.0
+
+
+def prepare_gpu_environment(device: str) -> None:
+    """Before GPU workers start: let the driver's kernel cache hold Cycles' kernels (workers
+    inherit the environment), unless the user sized it."""
+    if device != "cpu":
+        os.environ.setdefault(*CUDA_CACHE_SIZE)
 
 
 def resolve_device(requested: str) -> str:
@@ -40,12 +56,13 @@ def resolve_device(requested: str) -> str:
 
 def gpu_count(device: str) -> int:
     """How many GPUs Cycles finds here through ``device``'s back-end (0 for "cpu")."""
-    return probe().get(device, 0)
+    return int(probe().get(device, 0))
 
 
 @functools.cache
-def probe() -> dict[str, int]:
-    """GPUs per back-end ("optix", "cuda"), as a child importing bpy sees them; empty without an
+def probe() -> dict[str, Any]:
+    """GPUs per back-end ("optix", "cuda": counts), and under "compiles" the compute capabilities
+    Blender ships no CUDA kernel for, as a child importing bpy sees them; empty without an
     NVIDIA driver, or when the child fails (no bpy, a crashing driver): then auto is the CPU."""
     if not any(Path(p).exists() for p in DRIVER_PATHS):
         return {}
@@ -55,7 +72,10 @@ def probe() -> dict[str, int]:
         found = json.loads(done.stdout.strip().splitlines()[-1])
     except (OSError, subprocess.SubprocessError, ValueError, IndexError):
         return {}
-    return {k: int(v) for k, v in found.items()} if isinstance(found, dict) else {}
+    if not isinstance(found, dict):
+        return {}
+    counts = {k: int(v) for k, v in found.items() if k in NAMES}
+    return {**counts, "compiles": [str(c) for c in found.get("compiles", [])]}
 
 
 def worker_count(spec: RenderSpec, device: str) -> int:
@@ -65,11 +85,18 @@ def worker_count(spec: RenderSpec, device: str) -> int:
     return max(gpu_count(device), 1)
 
 
-def fallback_note(spec: RenderSpec, device: str) -> str | None:
-    """The line a run says when auto found no GPU (None otherwise)."""
-    if spec.device != "auto" or device != "cpu":
+def device_note(spec: RenderSpec, device: str) -> str | None:
+    """The line a run that renders says first about its device: that auto found no GPU, or that
+    the driver must first compile Cycles' kernels for this GPU (None: nothing to say)."""
+    if spec.device == "auto" and device == "cpu":
+        return ('render.device = "auto" found no NVIDIA GPU that Cycles can use (OptiX or CUDA): rendering on '
+                'the CPU')
+    compiles = probe().get("compiles", []) if device != "cpu" else []
+    if not compiles:
         return None
-    return 'render.device = "auto" found no NVIDIA GPU that Cycles can use (OptiX or CUDA): rendering on the CPU'
+    return (f'render.device = "{device}": Blender ships no CUDA kernel for this GPU (compute capability '
+            f'{", ".join(compiles)}), so the NVIDIA driver compiles Cycles\' kernels at the first render: more '
+            f'than 5 minutes on an H200, then kept in its cache ({CUDA_CACHE}) for later runs')
 
 
 def use_device(bpy: Any, scene: Any, device: str, gpu: int | None = None) -> None:
@@ -82,15 +109,7 @@ def use_device(bpy: Any, scene: Any, device: str, gpu: int | None = None) -> Non
     if device == "cpu":
         scene.cycles.device = "CPU"
         return
-    backend = device.upper()
-    found = gpus_module.gpus(bpy, backend)
-    if not found:
+    if not gpus_module.enable(bpy, scene, device.upper(), gpu):
         raise UserError(f'render.device = "{device}": Cycles finds no {NAMES[device]} GPU on this machine (is the '
                         'NVIDIA driver installed and the GPU visible?); set device = "auto" (the best GPU back-end '
                         'that works, else the CPU) or "cpu"')
-    chosen = {found[gpu % len(found)].id} if gpu is not None else {d.id for d in found}
-    prefs = bpy.context.preferences.addons["cycles"].preferences
-    prefs.compute_device_type = backend
-    for entry in prefs.devices:  # the CPU too: GPUs alone, as the key says
-        entry.use = entry.type == backend and entry.id in chosen
-    scene.cycles.device = "GPU"

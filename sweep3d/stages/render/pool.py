@@ -28,6 +28,7 @@ from typing import Any, Iterator
 
 from sweep3d.errors import RenderError, UserError
 from sweep3d.registry import is_user_plugin
+from sweep3d.stages.render.device import KERNEL_GRACE, prepare_gpu_environment
 from sweep3d.stages.render.protocol import (
     NO_LIMITS,
     Fatal,
@@ -87,6 +88,7 @@ class _Worker:
     current: str | None = None
     started: float = 0.0
     retired: Retired | None = None  # it reached a limit after a job and exits
+    rendered: int = 0  # jobs it has answered, over all its lists
 
 
 class RenderPool:
@@ -99,6 +101,8 @@ class RenderPool:
         self.n_workers = workers
         self.timeout = timeout
         self.limits = limits
+        self.grace = KERNEL_GRACE if settings.device != "cpu" else 0.0  # a GPU worker's first job compiles
+        prepare_gpu_environment(settings.device)
         self.recycled: Counter[str] = Counter()  # workers retired between jobs, by the limit reached
         self.ctx = mp.get_context("spawn")
         root = scratch_root()
@@ -154,15 +158,21 @@ class RenderPool:
                 if worker.retired is not None:
                     self._recycle(worker, queue)
                     continue
-                timed_out = worker.current is not None and time.monotonic() - worker.started > self.timeout
+                timed_out = worker.current is not None and time.monotonic() - worker.started > self.allowed(worker)
                 if worker.task is not None and (not worker.process.is_alive() or timed_out):
                     yield from self._replace(worker, queue, retried, timed_out)
+
+    def allowed(self, worker: _Worker) -> float:
+        """Seconds ``worker``'s current job may take: ``timeout``, and on a GPU worker's first job
+        the time its driver may spend compiling Cycles' kernels too."""
+        return self.timeout + (self.grace if worker.rendered == 0 else 0.0)
 
     def _handle(self, worker: _Worker, message: Started | RenderReply | Idle | Retired) -> Iterator[RenderReply]:
         if isinstance(message, Started):
             worker.current, worker.started = message.render_key, time.monotonic()
         elif isinstance(message, RenderReply):
             worker.done.add(message.render_key)
+            worker.rendered += 1
             worker.current = None
             yield message
         elif isinstance(message, Idle):
