@@ -22,7 +22,6 @@ a blurred foreground shows the background that it hides.
 from __future__ import annotations
 
 import numpy as np
-from scipy.signal import fftconvolve
 
 from sweep3d.pixels import linear_to_srgb, srgb_to_linear
 
@@ -89,6 +88,8 @@ def defocus(image: np.ndarray, coc: np.ndarray) -> np.ndarray:
     index, step = layers(coc)
     if not index.any():
         return image  # everything within the focal layer: nothing to blur
+    from scipy.signal import fftconvolve  # here: importing scipy.signal costs every process ~1 s
+
     linear = srgb_to_linear(image).astype(np.float64)
     colour = np.zeros_like(linear)  # what lies behind the next layer: premultiplied colour ...
     cover = np.zeros(index.shape, dtype=np.float64)  # ... and its coverage

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 from pydantic import Field
-from scipy import ndimage
 
 from sweep3d.controls import ControlParams
 from sweep3d.stages.postprocess.controls.base import POST_CONTROLS, PostControl
@@ -20,6 +19,8 @@ class Blur(PostControl):
     def apply(self, image: np.ndarray, params: Params, rng: np.random.Generator) -> np.ndarray:
         if params.sigma == 0:
             return image
+        from scipy import ndimage  # here: render workers and the CLI import this module, not scipy
+
         return ndimage.gaussian_filter(image, sigma=(params.sigma, params.sigma, 0), mode="nearest")
 
 
