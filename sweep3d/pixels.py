@@ -22,6 +22,13 @@ def encode_png(rgb: np.ndarray) -> bytes:
     return buf.getvalue()
 
 
+def png_size(data: bytes) -> tuple[int, int]:
+    """Width and height of PNG bytes, from their header (nothing is decoded)."""
+    if data[:8] != b"\x89PNG\r\n\x1a\n" or data[12:16] != b"IHDR":
+        raise ValueError("not a PNG")
+    return int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")
+
+
 def decode_png(path: str | Path) -> np.ndarray:
     """A PNG file as float32 (H, W, 3) in [0, 1]."""
     with Image.open(path) as img:

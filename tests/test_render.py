@@ -82,6 +82,25 @@ def test_hdri_environment_fills_the_background(scene) -> None:
     assert scene.scene.render.film_transparent is False
 
 
+def test_an_hdri_renders_blob_is_blenders_own_file_with_the_pixels_render_gives(scene) -> None:
+    from sweep3d.pixels import decode_png, encode_png, png_size
+
+    forest = EnvironmentRef(hdri=str(builtin_hdris()["forest"]))
+    scene.prepare(scene.cube, forest)
+    scene.pose_scene(SceneState(yaw=30.0))
+    blob = scene.render_png()
+    assert blob == scene.frame.read_bytes(), "the file Blender wrote, not decoded and encoded again"
+    assert b"tEXt" not in blob, "no dates or render times: the same render gives the same bytes"
+    assert blob == scene.render_png()
+    assert png_size(blob) == (32, 32) and scene.scene.render.image_settings.color_mode == "RGB"
+    scene.frame.write_bytes(blob)
+    assert np.array_equal(decode_png(scene.frame), scene.render()), "what the old path decoded and encoded"
+    scene.prepare(scene.cube, WHITE)  # a plain colour is composited behind the render: encoded by sweep3d
+    scene.pose_scene(SceneState(yaw=30.0))
+    assert scene.render_png() == encode_png(scene.render())
+    assert scene.scene.render.image_settings.color_mode == "RGBA"
+
+
 def test_pose_change_does_not_reload_the_scene(scene) -> None:
     render(scene, SceneState())
     mesh = scene.meshes[0]

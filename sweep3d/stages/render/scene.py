@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from sweep3d.errors import UserError
+from sweep3d.pixels import encode_png
 from sweep3d.stages.render._bpy import import_bpy
 from sweep3d.stages.render._rna import assign
 from sweep3d.stages.render.device import use_device
@@ -61,6 +62,7 @@ MAX_KEPT_OBJECTS = 16
 MAX_KEPT_FACES = 2_000_000
 MAX_KEPT_WORLDS = 8
 MAX_KEPT_HDRI_PIXELS = 32 * 2**20
+BLOB_COMPRESSION = 15  # Blender's PNG compression in percent: zlib level 1, as encode_png writes
 
 
 @dataclass
@@ -174,6 +176,9 @@ class BlenderScene:
         scene.render.image_settings.color_mode = "RGBA"
         scene.render.image_settings.color_depth = "8"
         scene.render.image_settings.compression = 0
+        for prop in scene.render.bl_rna.properties:  # no dates or timings in the file: blobs are reproducible
+            if prop.identifier.startswith("use_stamp_") and prop.identifier != "use_stamp_labels":
+                setattr(scene.render, prop.identifier, False)
 
     # -- loading -------------------------------------------------------------------------------
     def prepare(self, mesh_path: str, environment: EnvironmentRef, look: Look | None = None) -> None:
@@ -359,6 +364,10 @@ class BlenderScene:
             self.load_seconds += time.perf_counter() - started
         self.background = state.background or (tuple(env.color) if env.color and state.sky is None else None)
         assign(self.scene.render, "film_transparent", self.background is not None)
+        # Nothing to composite: Blender's own RGB file is the blob (see render_png); else RGBA to composite
+        image = self.scene.render.image_settings
+        assign(image, "color_mode", "RGBA" if self.background is not None else "RGB")
+        assign(image, "compression", 0 if self.background is not None else BLOB_COMPRESSION)
         if self.skins.changes(state.skin, state.skin_scale, state.skin_image):
             self.material_edits.restore()  # the skin swaps the slots' materials: edits go on top again
         self.skins.sync(state.skin, state.skin_scale, state.skin_image)
@@ -394,6 +403,25 @@ class BlenderScene:
         """
         from PIL import Image  # noqa: PLC0415
 
+        self._render_frame()
+        with Image.open(self.frame) as img:
+            rgba = np.asarray(img.convert("RGBA"), dtype=np.float32) / 255.0
+        rgb, alpha = rgba[..., :3], rgba[..., 3:]
+        if self.background is not None:
+            rgb = rgb * alpha + np.asarray(self.background, dtype=np.float32) * (1.0 - alpha)
+        return rgb
+
+    def render_png(self) -> bytes:
+        """Render the current scene as the blob's PNG (RGB, 8 bits): the file Blender wrote when
+        nothing is composited behind the render, so it is neither decoded nor encoded again (the
+        pixels :meth:`render` gives, quantised); else :meth:`render`'s image encoded."""
+        if self.background is not None:
+            return encode_png(self.render())
+        self._render_frame()
+        return self.frame.read_bytes()
+
+    def _render_frame(self) -> None:
+        """Render into :attr:`frame` and read the passes; times a scene switch's set-up (see :meth:`render`)."""
         if self.log is not None:
             self.log.clear()
         self.bpy.ops.render.render(write_still=True)
@@ -403,12 +431,6 @@ class BlenderScene:
             self.parts = self.uv_pass.read()
         if self.truth_pass is not None:
             self.truth_pass.read(self)  # may render again, index only, for the visible fraction
-        with Image.open(self.frame) as img:
-            rgba = np.asarray(img.convert("RGBA"), dtype=np.float32) / 255.0
-        rgb, alpha = rgba[..., :3], rgba[..., 3:]
-        if self.background is not None:
-            rgb = rgb * alpha + np.asarray(self.background, dtype=np.float32) * (1.0 - alpha)
-        return rgb
 
 
 def _crop_to_centre(render, size: int, crop: int) -> None:

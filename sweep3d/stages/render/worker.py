@@ -154,7 +154,7 @@ def render_job(scene, job: RenderJob, keep_pixels: bool = False) -> RenderReply:
     """
     from sweep3d.cache.store import atomic_write
     from sweep3d.errors import PluginError
-    from sweep3d.pixels import encode_png
+    from sweep3d.pixels import encode_png, png_size
     from sweep3d.stages.render.scene_edit import render_edited
 
     key = job.render_key
@@ -163,19 +163,22 @@ def render_job(scene, job: RenderJob, keep_pixels: bool = False) -> RenderReply:
         scene.prepare(job.mesh, job.environment, job.look)
         scene.pose_scene(posed_state(job))
         edits = [(control, params) for control, params in job.controls if control.edits_scene]
-        rgb, rebuilt = render_edited(scene, edits, job.object_name, job.environment_name) if edits \
-            else (scene.render(), ())
-        finite = bool(np.isfinite(rgb).all())
-        png = None
-        if job.blob is not None:  # None: the render is cached, the job is here for its UV pass
-            png = encode_png(rgb)
+        if edits:
+            rgb, rebuilt = render_edited(scene, edits, job.object_name, job.environment_name)
+            finite, png = bool(np.isfinite(rgb).all()), encode_png(rgb)
+        else:  # Blender's 8-bit file: finite by construction
+            finite, png, rebuilt = True, scene.render_png(), ()
+        width, height = png_size(png)
+        if job.blob is None:  # the render is cached, the job is here for its UV pass
+            png = None
+        else:
             if not keep_pixels:
                 if orphaned():  # its run was killed: the store is no longer ours to write
                     os._exit(1)
                 atomic_write(Path(job.blob), png)
         truth = getattr(scene, "truth_pass", None)
-        info = RenderInfo(seconds=time.perf_counter() - started, valid=finite, width=rgb.shape[1],
-                          height=rgb.shape[0], parts=scene.parts, load_seconds=scene.load_seconds,
+        info = RenderInfo(seconds=time.perf_counter() - started, valid=finite, width=width,
+                          height=height, parts=scene.parts, load_seconds=scene.load_seconds,
                           truth=truth.truth if truth is not None else None, rebuilt=rebuilt)
         return RenderReply(key, True, info, png=png if keep_pixels else None,
                            truth=dict(truth.blobs) if truth is not None else None)
