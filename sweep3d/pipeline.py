@@ -167,38 +167,13 @@ def _run_locked(spec: LoadedSpec, store: Store, console: Console | None, wait: f
         missing = _missing_renders(plans, store, executor)
         _note_device(plans, missing, console)
         _warn_if_slow(plans, store, executor, console, missing)
-        infers = [InferStage(model, on_ray=executor.kind == "ray", several=len(models) > 1) for model in models]
-        for plan, infer in zip(plans, infers):
-            if pending_predictions(plan, store, infer):
-                infer.prepare(plan, store)  # a broken model fails now, before anything renders
         render, post = RenderStage(executor), PostprocessStage()
-        with RunProgress(console) as progress:
-            history: History = {}
-            while True:  # one pass for fixed policies; one per round for adaptive ones
-                if history:
-                    plans = [plan_spec(spec, model, history) for model in models]
-                try:
-                    # Models share renders (same framing: the later passes find them cached) and
-                    # the first model's outcomes steer adaptive policies.
-                    outcomes: list[StageOutcome] = []
-                    for i, (plan, infer) in enumerate(zip(plans, infers)):
-                        now = run_stages((render, post, infer), plan, store, progress, overlap=overlap)
-                        shared = any(p.framing == plan.framing for p in plans[:i])  # the same renders again
-                        both = merge_outcomes if shared else add_outcomes
-                        outcomes = both(outcomes[:2], now[:2]) + outcomes[2:] + now[2:]
-                except KeyboardInterrupt:
-                    write_jobs(plans, store)  # what finished is stored: let query and report show it
-                    raise
-                except RenderError as exc:  # a worker died while starting: Blender or the machine
-                    write_jobs(plans, store)
-                    raise RenderError(f"{exc}; what finished is stored: run again to resume") from None
-                write_jobs(plans, store)
-                result.outcomes = merge_outcomes(result.outcomes, outcomes)
-                grown = len(plans[0].jobs) > len(result.plan.jobs) or not history
-                result.plan, result.plans = plans[0], plans
-                if not spec.policy.adaptive or not grown:
-                    break
-                history = outcomes_by_scene(plans[0], store)
+        try:
+            if any(missing.values()):
+                render.warm_up(plans[0])  # Blender starts while the model is checked (both take seconds)
+            _run_passes(spec, store, console, overlap, models, render, post, result)
+        finally:
+            render.close()  # a worker started ahead that nothing rendered with (a broken model)
         result.seconds = time.perf_counter() - started
         store.append("runs", [{
             "run_id": result.run_id, "experiment": spec.name, "spec_path": str(spec.path),
@@ -208,6 +183,44 @@ def _run_locked(spec: LoadedSpec, store: Store, console: Console | None, wait: f
         }])
         compact_crowded_tables(store)
     return result
+
+
+def _run_passes(spec: LoadedSpec, store: Store, console: Console | None, overlap: bool, models: list[ModelHandle],
+                render: RenderStage, post: PostprocessStage, result: RunResult) -> None:
+    """Check the models, then run the stages pass after pass (one per round for adaptive
+    policies) into ``result``, starting from its plans."""
+    plans = result.plans
+    infers = [InferStage(model, on_ray=render.executor.kind == "ray", several=len(models) > 1) for model in models]
+    for plan, infer in zip(plans, infers):
+        if pending_predictions(plan, store, infer):
+            infer.prepare(plan, store)  # a broken model fails now, before anything renders
+    with RunProgress(console) as progress:
+        history: History = {}
+        while True:  # one pass for fixed policies; one per round for adaptive ones
+            if history:
+                plans = [plan_spec(spec, model, history) for model in models]
+            try:
+                # Models share renders (same framing: the later passes find them cached) and
+                # the first model's outcomes steer adaptive policies.
+                outcomes: list[StageOutcome] = []
+                for i, (plan, infer) in enumerate(zip(plans, infers)):
+                    now = run_stages((render, post, infer), plan, store, progress, overlap=overlap)
+                    shared = any(p.framing == plan.framing for p in plans[:i])  # the same renders again
+                    both = merge_outcomes if shared else add_outcomes
+                    outcomes = both(outcomes[:2], now[:2]) + outcomes[2:] + now[2:]
+            except KeyboardInterrupt:
+                write_jobs(plans, store)  # what finished is stored: let query and report show it
+                raise
+            except RenderError as exc:  # a worker died while starting: Blender or the machine
+                write_jobs(plans, store)
+                raise RenderError(f"{exc}; what finished is stored: run again to resume") from None
+            write_jobs(plans, store)
+            result.outcomes = merge_outcomes(result.outcomes, outcomes)
+            grown = len(plans[0].jobs) > len(result.plan.jobs) or not history
+            result.plan, result.plans = plans[0], plans
+            if not spec.policy.adaptive or not grown:
+                break
+            history = outcomes_by_scene(plans[0], store)
 
 
 def _missing_renders(plans: list[Plan], store: Store, executor: Executor) -> dict[int, int]:

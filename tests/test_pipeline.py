@@ -83,6 +83,33 @@ def test_adding_an_object_renders_only_its_scenes(tiny_copy: Path) -> None:
     assert computed(tiny_copy) == {"render": 4, "postprocess": 4, "infer": 8}
 
 
+def test_blender_starts_while_the_model_is_checked_and_a_broken_model_leaves_no_worker(tiny_copy, monkeypatch) -> None:
+    import multiprocessing
+
+    from sweep3d.errors import UserError
+    from sweep3d.stages.infer import InferStage
+    from sweep3d.stages.render.pool import RenderPool
+
+    edit_spec(tiny_copy, "yaw = [0, 45]", "yaw = [10, 55]")  # renders to make
+    starts: list[int] = []
+    real_start = RenderPool._start
+    monkeypatch.setattr(RenderPool, "_start", lambda pool, slot: starts.append(slot) or real_start(pool, slot))
+    check = InferStage.prepare
+
+    def broken(stage, plan, store):
+        assert starts == [0], "the first worker is starting before the model's check"
+        raise UserError("model.name: the model is broken")
+
+    monkeypatch.setattr(InferStage, "prepare", broken)
+    with pytest.raises(UserError, match="broken"):
+        run(load_spec(tiny_copy / "spec.toml"))
+    assert multiprocessing.active_children() == [], "the worker started ahead is stopped"
+    monkeypatch.setattr(InferStage, "prepare", check)
+    starts.clear()
+    assert computed(tiny_copy) == {"render": 4, "postprocess": 4, "infer": 8}
+    assert starts == [0], "the worker started ahead renders: no second one"
+
+
 def test_cli_run_prints_stage_counts_and_writes_report(tiny_copy: Path) -> None:
     result = CliRunner().invoke(app, ["run", str(tiny_copy / "spec.toml")])
     assert result.exit_code == 0, result.output

@@ -109,6 +109,7 @@ class RenderPool:
         remove_stale_scratch(root)
         self.scratch = Path(tempfile.mkdtemp(prefix=f"{SCRATCH_PREFIX}{os.getpid()}-", dir=root))
         self.workers: list[_Worker] = []
+        self._started: tuple[Any, Connection] | None = None  # slot 0's process, started ahead (prestart)
 
     def __enter__(self) -> "RenderPool":
         return self
@@ -116,7 +117,13 @@ class RenderPool:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-    def _spawn(self, slot: int) -> _Worker:
+    def prestart(self) -> None:
+        """Start the first worker's process now without waiting for it, so that its import of
+        Blender and its scene overlap the caller's own work; :meth:`run` waits for it."""
+        if not self.workers and self._started is None:
+            self._started = self._start(0)
+
+    def _start(self, slot: int) -> tuple[Any, Connection]:
         parent, child = self.ctx.Pipe()
         gpu = slot if self.settings.device != "cpu" and self.n_workers > 1 else None  # one GPU per worker
         process = self.ctx.Process(
@@ -125,6 +132,11 @@ class RenderPool:
         )
         process.start()
         child.close()
+        return process, parent
+
+    def _spawn(self, slot: int) -> _Worker:
+        started, self._started = (self._started, None) if slot == 0 else (None, self._started)
+        process, parent = started or self._start(slot)
         message = _first_message(parent, process)
         if not isinstance(message, Ready):
             process.kill()
@@ -220,6 +232,12 @@ class RenderPool:
             self.workers.append(self._spawn(worker.slot))
 
     def close(self) -> None:
+        if self._started is not None:  # started ahead and never given a job: nothing of it to keep
+            process, conn = self._started
+            self._started = None
+            process.kill()
+            process.join(5)
+            conn.close()
         for worker in self.workers:
             try:
                 worker.conn.send(None)

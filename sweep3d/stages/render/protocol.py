@@ -264,6 +264,10 @@ class RenderExecutor(Protocol):
         """Render every job of every group (a group shares one scene), yielding one reply per job."""
         ...
 
+    def prestart(self) -> None:
+        """Start the first worker ahead of :meth:`run`, where that can overlap other work."""
+        ...
+
     def close(self) -> None:
         """Stop the workers and remove their scratch files."""
         ...

@@ -212,6 +212,9 @@ class RayRenderPool:
         if self.actors:
             self.ray.kill(self.actors[0], no_restart=True)
 
+    def prestart(self) -> None:
+        """Nothing: actors start on the cluster when :meth:`run` asks for them."""
+
     def close(self) -> None:
         for actor in self.actors:
             try:

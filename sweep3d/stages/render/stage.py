@@ -121,6 +121,24 @@ class RenderStage:
     def __init__(self, executor: Executor = LOCAL, timings: dict[str, RenderInfo] | None = None) -> None:
         self.executor = executor
         self.timings = timings
+        self._warm: tuple[RenderSettings, RenderExecutor] | None = None  # see warm_up
+
+    def warm_up(self, plan: Plan) -> None:
+        """Start ``plan``'s first local render worker now, so that Blender's start overlaps the
+        caller's own work (a run checks its model meanwhile); :meth:`compute` renders with it.
+        The caller closes the stage (:meth:`close`) whether or not it computes."""
+        if self.executor.kind != "local" or self._warm is not None:
+            return
+        settings, spec = render_settings(plan), plan.spec.render
+        pool = self.executor.pool(settings, worker_count(spec, plan.device), spec.timeout, WorkerLimits.from_spec(spec))
+        pool.prestart()
+        self._warm = settings, pool
+
+    def close(self) -> None:
+        """Stop a worker started by :meth:`warm_up` that no :meth:`compute` used."""
+        if self._warm is not None:
+            self._warm[1].close()
+            self._warm = None
 
     def schema(self, plan: Plan) -> pa.Schema:
         return RENDERS_SCHEMA
@@ -151,9 +169,14 @@ class RenderStage:
         stored = {j.render_key for j in todo if store.blob_path(j.render_key).exists()} & store.keys("renders")
         groups = _groups(plan, store, todo, stored)
         jobs = {j.render_key: j for j in todo}
-        spec = plan.spec.render
+        spec, settings = plan.spec.render, render_settings(plan)
+        warm, self._warm = self._warm, None
+        if warm is not None and warm[0] != settings:  # planned again with other settings: not this worker
+            warm[1].close()
         workers = min(worker_count(spec, plan.device), len(groups))
-        with self.executor.pool(render_settings(plan), workers, spec.timeout, WorkerLimits.from_spec(spec)) as pool:
+        pool = warm[1] if warm is not None and warm[0] == settings \
+            else self.executor.pool(settings, workers, spec.timeout, WorkerLimits.from_spec(spec))
+        with pool:
             yield from self._replies(pool.run(groups), plan, store, jobs, stored)
             if pool.recycled:
                 log.warning(recycled_note(spec, pool.recycled))
