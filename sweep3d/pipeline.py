@@ -31,7 +31,7 @@ from sweep3d.spec.columns import CLASS_NAMES_METADATA, MODELS_METADATA, PROTOCOL
 from sweep3d.spec.loader import LoadedSpec
 from sweep3d.stages.code import PLUGINS_METADATA
 from sweep3d.stages.code import metadata as plugins_metadata
-from sweep3d.stages.driver import add_outcomes, merge_outcomes, plan_status, run_stages
+from sweep3d.stages.driver import Found, add_outcomes, merge_outcomes, plan_status, rows_and_cached, run_stages
 from sweep3d.stages.infer import InferStage, ModelHandle, pending_predictions
 from sweep3d.stages.outcome import StageOutcome
 from sweep3d.stages.plan import History, Outcome, Plan, make_plan
@@ -160,18 +160,19 @@ def _run_locked(spec: LoadedSpec, store: Store, console: Console | None, wait: f
     with store.lock(wait):
         started = time.perf_counter()  # time spent waiting for the lock is not the run's
         started_at = utc_now()
+        store.snapshot_states()  # every blob's state, taken on the other core while this one plans
         remove_leftovers(store)
         models = [ModelHandle.resolve(spec, settings) for settings in spec.models]
         plans = [plan_spec(spec, model) for model in models]
         result = RunResult(uuid.uuid4().hex[:12], plans[0], plans=plans, store=store)
-        missing = _missing_renders(plans, store, executor)
+        missing, found = _missing_renders(plans, store, executor)
         _note_device(plans, missing, console)
         _warn_if_slow(plans, store, executor, console, missing)
         render, post = RenderStage(executor), PostprocessStage()
         try:
             if any(missing.values()):
                 render.warm_up(plans[0])  # Blender starts while the model is checked (both take seconds)
-            _run_passes(spec, store, console, overlap, models, render, post, result)
+            _run_passes(spec, store, console, overlap, models, render, post, result, found)
         finally:
             render.close()  # a worker started ahead that nothing rendered with (a broken model)
         result.seconds = time.perf_counter() - started
@@ -186,9 +187,10 @@ def _run_locked(spec: LoadedSpec, store: Store, console: Console | None, wait: f
 
 
 def _run_passes(spec: LoadedSpec, store: Store, console: Console | None, overlap: bool, models: list[ModelHandle],
-                render: RenderStage, post: PostprocessStage, result: RunResult) -> None:
+                render: RenderStage, post: PostprocessStage, result: RunResult, found: list[Found]) -> None:
     """Check the models, then run the stages pass after pass (one per round for adaptive
-    policies) into ``result``, starting from its plans."""
+    policies) into ``result``, starting from its plans (``found``: what their render stage found
+    stored, one per plan, for the first round)."""
     plans = result.plans
     infers = [InferStage(model, on_ray=render.executor.kind == "ray", several=len(models) > 1) for model in models]
     for plan, infer in zip(plans, infers):
@@ -204,7 +206,8 @@ def _run_passes(spec: LoadedSpec, store: Store, console: Console | None, overlap
                 # the first model's outcomes steer adaptive policies.
                 outcomes: list[StageOutcome] = []
                 for i, (plan, infer) in enumerate(zip(plans, infers)):
-                    now = run_stages((render, post, infer), plan, store, progress, overlap=overlap)
+                    first = {render.table: found[i]} if not history and i == 0 else None  # later: written since
+                    now = run_stages((render, post, infer), plan, store, progress, overlap=overlap, found=first)
                     shared = any(p.framing == plan.framing for p in plans[:i])  # the same renders again
                     both = merge_outcomes if shared else add_outcomes
                     outcomes = both(outcomes[:2], now[:2]) + outcomes[2:] + now[2:]
@@ -223,13 +226,16 @@ def _run_passes(spec: LoadedSpec, store: Store, console: Console | None, overlap
             history = outcomes_by_scene(plans[0], store)
 
 
-def _missing_renders(plans: list[Plan], store: Store, executor: Executor) -> dict[int, int]:
-    """Renders to make, by frame side (models framed alike share them)."""
-    missing = {}
+def _missing_renders(plans: list[Plan], store: Store, executor: Executor) -> tuple[dict[int, int], list[Found]]:
+    """Renders to make, by frame side (models framed alike share them), and what each plan's
+    render stage found stored (its first pass starts from it: at 10⁶ jobs, looking costs seconds)."""
+    missing, found = {}, []
+    stage = RenderStage(executor)
     for plan in plans:
-        needed, cached = plan_status(RenderStage(executor), plan, store)
+        found.append(rows_and_cached(stage, plan, store))
+        needed, cached = plan_status(stage, plan, store, found[-1])
         missing[plan.framing.crop] = needed - cached
-    return missing
+    return missing, found
 
 
 def _note_device(plans: list[Plan], missing: dict[int, int], console: Console | None) -> None:

@@ -193,6 +193,72 @@ def test_a_run_hashes_a_blob_again_only_when_its_file_changed(tmp_path, monkeypa
     assert damaged_blobs(store, "renders", keys) == {flipped} and hashed.calls == 9  # not remembered as good
 
 
+def test_blob_states_taken_ahead_by_a_child_are_the_states_and_damage_is_still_found(tmp_path, monkeypatch):
+    from sweep3d.cache import blobs, snapshot
+
+    monkeypatch.setattr(snapshot, "MIN_BLOBS", 0)
+    store = Store(tmp_path / "store")
+    keys = [f"{i:02x}" * 20 for i in range(6)]
+    for i, key in enumerate(keys):
+        add_render(store, key, i)
+    (store.root / "blobs" / keys[0][:2] / "leftover.png.tmp").write_bytes(b"")  # not a blob
+    time.sleep(0.05)
+    assert damaged_blobs(store, "renders", set(keys)) == set()  # the memo of verified blobs
+    with store.lock():
+        store.snapshot_states()
+        assert store.state_snapshot is not None
+        flipped = keys[1]
+        stat = store.blob_path(flipped).stat()
+        flip_bytes(store.blob_path(flipped), n=8)  # in place, mtime put back: only the change time tells
+        os.utime(store.blob_path(flipped), ns=(stat.st_atime_ns, stat.st_mtime_ns))
+        store.forget_states()
+        store.snapshot_states()  # taken after the damage, as a run takes it before anything else
+        later = "ff" * 20
+        add_render(store, later)  # written after the snapshot: stat'ed directly
+        asked = [*keys, later, "ee" * 20]  # and one that is not there
+        assert (blobs.file_states(store, asked) == blobs._stat_states(store, asked)).all()
+        assert damaged_blobs(store, "renders", set(keys)) == {flipped}
+    assert store.state_snapshot is None, "a snapshot does not outlive the lock it was taken under"
+
+    with store.lock():  # a child that fails: the states are taken in-process, nothing is lost
+        monkeypatch.setattr(snapshot.stat_blobs, "__file__", str(tmp_path / "absent.py"))
+        store.snapshot_states()
+        assert store.state_snapshot.states(keys) is None
+        assert (blobs.file_states(store, keys) == blobs._stat_states(store, keys)).all()
+
+
+def test_a_run_forgets_its_snapshot_of_blob_states_before_it_computes(tiny_copy, monkeypatch) -> None:
+    from sweep3d.cache import snapshot
+    from sweep3d.stages import driver
+
+    monkeypatch.setattr(snapshot, "MIN_BLOBS", 0)
+    taken: list[bool] = []
+    real_begin = driver.begin
+
+    def begin(stage, plan, store, coming, found=None):
+        taken.append(store.state_snapshot is not None)
+        return real_begin(stage, plan, store, coming, found)
+
+    monkeypatch.setattr(driver, "begin", begin)
+    computing: list[bool] = []
+    real_run = driver._Pass.run
+
+    def compute(self):
+        computing.append(self.store.state_snapshot is not None)
+        return real_run(self)
+
+    monkeypatch.setattr(driver._Pass, "run", compute)
+    looked: list[str] = []
+    real_look = driver.rows_and_cached
+    monkeypatch.setattr(driver, "rows_and_cached", lambda stage, *a: looked.append(stage.table) or real_look(stage, *a))
+    (tiny_copy / "spec.toml").write_text((tiny_copy / "spec.toml").read_text().replace("yaw = [0, 45]", "yaw = [0, 90]"))
+    result = run(load_spec(tiny_copy / "spec.toml"))
+    assert result.failed == 0 and [o.computed for o in result.outcomes] == [2, 2, 4]
+    assert taken == [True, True, True], "every stage's first look at the store reads the snapshot"
+    assert computing == [False], "gone before anything is computed and written"
+    assert looked == ["images", "predictions"], "the renders found before the pass are not looked up again"
+
+
 def test_the_memo_forgets_dropped_keys_and_survives_its_own_damage(tmp_path, monkeypatch):
     store = Store(tmp_path / "store")
     keys = {"aa" * 20, "bb" * 20}

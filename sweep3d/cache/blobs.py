@@ -143,8 +143,22 @@ def file_states(store: Store, keys: list[str]) -> np.ndarray:
     """(size, mtime_ns, ctime_ns, inode) of each key's blob as an int64 array (n, 4); the size is
     :data:`MISSING` for a blob that is not there and negative for one that cannot be stat'ed.
 
-    At 10⁶ blobs this is a run's largest single cost after the ``stat`` calls themselves, so the
-    paths are made in one comprehension and the states gathered into one flat list."""
+    Read from the store's snapshot where a run took one (:meth:`Store.snapshot_states`: a child
+    stat'ed every blob while the run planned); the keys it lacks are stat'ed here."""
+    taken = store.state_snapshot.states(keys) if store.state_snapshot is not None else None
+    if taken is None:
+        return _stat_states(store, keys)
+    states, found = taken
+    lacking = np.flatnonzero(~found)
+    if len(lacking):
+        states[lacking] = _stat_states(store, [keys[i] for i in lacking.tolist()])
+    return states
+
+
+def _stat_states(store: Store, keys: list[str]) -> np.ndarray:
+    """:func:`file_states` by one ``stat`` per key. At 10⁶ blobs this is a run's largest single
+    cost after the ``stat`` calls themselves, so the paths are made in one comprehension and the
+    states gathered into one flat list."""
     blob_file = store.blob_file
     flat: list[int] = []
     extend = flat.extend

@@ -40,6 +40,8 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
+from sweep3d.cache import snapshot
+from sweep3d.cache.snapshot import StateSnapshot
 from sweep3d.errors import StoreBusyError, UserError
 
 TABLES = ("renders", "images", "predictions", "runs", "parts", "truths")
@@ -116,6 +118,7 @@ class Store:
         self._keys: dict[str, tuple[tuple, frozenset[str]]] = {}  # table -> (segment state, its keys)
         self._listed: dict[str, tuple[tuple[int, ...], BlobListing]] = {}  # blob folder -> (its state, listing)
         self._joined: tuple[list[BlobListing], frozenset[str]] | None = None  # listings, their keys together
+        self.state_snapshot: StateSnapshot | None = None  # every blob's file state, taken ahead (see snapshot_states)
 
     # -- paths -------------------------------------------------------------------------------
     def blob_path(self, key: str, ext: str = "png") -> Path:
@@ -146,6 +149,23 @@ class Store:
         if joined is None or len(joined[0]) != len(listings) or any(a is not b for a, b in zip(joined[0], listings)):
             self._joined = joined = (listings, frozenset().union(*(listing.keys for listing in listings)))
         return keys & joined[1]
+
+    def snapshot_states(self) -> None:
+        """Start taking every blob's file state in a child process, when the store holds many
+        (see :mod:`sweep3d.cache.snapshot`); call it holding the lock, and :meth:`forget_states`
+        before anything writes a blob."""
+        blobs = self.root / "blobs"
+        if self.state_snapshot is not None or blobs.is_symlink() or not blobs.is_dir():
+            return
+        folders = [self.root / "blobs" / e.name for e in scan(blobs) if len(e.name) == 2]
+        if sum(_folder_entries(folder) for folder in folders) >= snapshot.MIN_BLOBS:
+            self.state_snapshot = snapshot.StateSnapshot(blobs)
+
+    def forget_states(self) -> None:
+        """Drop the snapshot of blob states (blobs are about to be written: it would go stale)."""
+        taken, self.state_snapshot = self.state_snapshot, None
+        if taken is not None:
+            taken.close()
 
     def blob_listing(self, folder: str) -> BlobListing:
         """What the blob folder ``blobs/<folder>`` holds (nothing when it is not there).
@@ -603,6 +623,7 @@ class Store:
                 yield
             finally:
                 _HELD.discard(held)
+                self.forget_states()  # taken under this lock: not to be trusted after it
         finally:
             fh.close()
 

@@ -207,12 +207,16 @@ def unique_jobs(stage: Stage, jobs: Iterable[Job]) -> dict[str, Job]:
     return unique
 
 
+#: (keys of a plan at a stage that have a row, those of them that are cached): see :func:`rows_and_cached`.
+Found = tuple[set[str], set[str]]
+
+
 def cached_keys(stage: Stage, plan: Plan, store: Store) -> set[str]:
     """Keys of ``plan`` at ``stage`` that have a row (and a blob, where rows own one)."""
-    return _rows_and_cached(stage, plan, store)[1]
+    return rows_and_cached(stage, plan, store)[1]
 
 
-def _rows_and_cached(stage: Stage, plan: Plan, store: Store) -> tuple[set[str], set[str]]:
+def rows_and_cached(stage: Stage, plan: Plan, store: Store) -> Found:
     """(keys of ``plan`` at ``stage`` that have a row, those of them that are cached: with their
     blob, where rows own one)."""
     rows = store.key_set(stage.table)
@@ -262,9 +266,10 @@ def split_to_do(stage: Stage, plan: Plan, store: Store, cached: set[str] | None 
     return ready, dict(waiting)
 
 
-def plan_status(stage: Stage, plan: Plan, store: Store) -> tuple[int, int]:
-    """(distinct keys ``plan`` needs at ``stage``, how many the store holds complete)."""
-    cached = cached_keys(stage, plan, store)
+def plan_status(stage: Stage, plan: Plan, store: Store, found: Found | None = None) -> tuple[int, int]:
+    """(distinct keys ``plan`` needs at ``stage``, how many the store holds complete), from
+    ``found`` where the caller already looked (:func:`rows_and_cached`)."""
+    cached = (found if found is not None else rows_and_cached(stage, plan, store))[1]
     return len(unique_jobs(stage, plan.jobs)), len(cached - stage.incomplete(plan, store, cached))
 
 
@@ -303,11 +308,13 @@ class StagePass:
         return {self.stage.key(j) for j in self.ready} | {self.stage.key(j) for js in self.waiting.values() for j in js}
 
 
-def begin(stage: Stage, plan: Plan, store: Store, coming: Mapping[str, set[str]]) -> StagePass:
-    """What ``stage`` must compute in a pass whose earlier stages will store ``coming`` (by table)."""
+def begin(stage: Stage, plan: Plan, store: Store, coming: Mapping[str, set[str]],
+          found: Found | None = None) -> StagePass:
+    """What ``stage`` must compute in a pass whose earlier stages will store ``coming`` (by table);
+    ``found``: what :func:`rows_and_cached` gave, when nothing was written since (it is consumed)."""
     started = time.perf_counter()
     unique = unique_jobs(stage, plan.jobs)
-    have, cached = _rows_and_cached(stage, plan, store)
+    have, cached = found if found is not None else rows_and_cached(stage, plan, store)
     if stage.owns_blobs:  # rows whose blob has gone (deleted, quarantined): computed again, one row each
         store.drop_rows(stage.table, have - cached)
         cached -= discard_damaged(stage, store, cached)
@@ -463,14 +470,17 @@ class _Pass:
                 self.feeds[later].close()
 
 
-def run_pass(stages: Sequence[Stage], plan: Plan, store: Store, progress: RunProgress) -> list[StageOutcome]:
+def run_pass(stages: Sequence[Stage], plan: Plan, store: Store, progress: RunProgress,
+             found: Mapping[str, Found] | None = None) -> list[StageOutcome]:
     """Run ``stages`` once over ``plan``, overlapped: each computes what the store lacks as its
-    inputs land, and records it as it comes. Returns each stage's outcome."""
+    inputs land, and records it as it comes (``found``: by table, what :func:`rows_and_cached`
+    gave the caller, with nothing written since). Returns each stage's outcome."""
     runs: list[StagePass] = []
     coming: dict[str, set[str]] = {}
     for stage in stages:
-        runs.append(begin(stage, plan, store, coming))
+        runs.append(begin(stage, plan, store, coming, (found or {}).get(stage.table)))
         coming[stage.table] = runs[-1].keys
+    store.forget_states()  # blobs are written from here on: a snapshot of their states would go stale
     busy = [bool(r.ready or r.waiting) for r in runs]
     schemas = [item for r, b in zip(runs, busy) if b
                for item in [(r.stage.table, r.stage.schema(plan)), *r.stage.side_tables.items()]]
@@ -505,12 +515,14 @@ def run_stage(stage: Stage, plan: Plan, store: Store, progress: RunProgress) -> 
 
 
 def run_stages(stages: Sequence[Stage], plan: Plan, store: Store, progress: RunProgress,
-               strict: bool = False, overlap: bool = False) -> list[StageOutcome]:
+               strict: bool = False, overlap: bool = False, found: Mapping[str, Found] | None = None) -> list[StageOutcome]:
     """Run ``stages`` over ``plan``; again while one repaired a damaged blob.
 
     Args:
         strict: raise on a failed key instead of reporting it (for callers that need every
             result, such as the bench and the contact sheet).
+        found: for the first pass, by table, what :func:`rows_and_cached` gave the caller with
+            nothing written since (a run looks before it starts, to say what it will render).
         overlap: run the stages together, each on what the ones before have stored so far (as
             a run does); else one after the other, each over the whole plan: the same keys, rows
             and counts, and renders timed without inference beside them (as the bench needs).
@@ -521,9 +533,10 @@ def run_stages(stages: Sequence[Stage], plan: Plan, store: Store, progress: RunP
     outcomes: list[StageOutcome] = []
     for _ in range(1 + REPAIR_PASSES):
         if overlap:
-            now = run_pass(stages, plan, store, progress)
+            now = run_pass(stages, plan, store, progress, found)
         else:
-            now = [run_stage(stage, plan, store, progress) for stage in stages]
+            now = [run_pass([stage], plan, store, progress, found)[0] for stage in stages]
+        found = None  # the pass wrote: look again
         outcomes = merge_outcomes(outcomes, now)
         if not any(o.repaired for o in now):
             break

@@ -1,0 +1,79 @@
+"""The file states of a store's blobs, taken by a child process while the run plans.
+
+A rerun checks each cached blob's file state against the memo of verified blobs
+(:func:`sweep3d.cache.blobs.damaged_blobs`): one ``stat`` per blob, about 3 s of one core at
+10⁶ blobs. The states do not depend on the plan, so a run holding the lock starts a child
+(:mod:`.stat_blobs`, standard library only) that takes them all while the parent plans on the
+other core, and :func:`~sweep3d.cache.blobs.file_states` reads them from it.
+
+A snapshot is right only while nothing writes a blob: a run takes it after removing what killed
+runs left and forgets it (:meth:`Store.forget_states`) once its first pass has found what is
+cached, before anything is computed. A key the snapshot lacks is stat'ed directly, and a child
+that fails or hangs costs only the time waited: the states are then taken as before.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
+
+from sweep3d.cache import stat_blobs
+
+MIN_BLOBS = 20_000  # below this many blob files, a child (~30 ms to start) wins nothing
+WAIT = 120.0  # seconds to wait for the child before stat'ing in-process
+
+
+class StateSnapshot:
+    """The child taking the states of every PNG blob under ``blobs`` (a store's blob folder)."""
+
+    def __init__(self, blobs: Path) -> None:
+        self.process: subprocess.Popen | None = subprocess.Popen(
+            [sys.executable, stat_blobs.__file__, str(blobs)], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
+        self.taken: tuple[pa.Array, np.ndarray] | None = None  # (keys, their states) once read
+
+    def states(self, keys: list[str]) -> tuple[np.ndarray, np.ndarray] | None:
+        """(the states of ``keys`` in their order, whether the snapshot has each one), waiting for
+        the child; None when it failed."""
+        taken = self._read()
+        if taken is None:
+            return None
+        names, states = taken
+        where = pc.index_in(pa.array(keys, type=pa.string()), value_set=names)
+        found = pc.is_valid(where).to_numpy(zero_copy_only=False)
+        return states[pc.fill_null(where, 0).to_numpy(zero_copy_only=False)], found
+
+    def _read(self) -> tuple[pa.Array, np.ndarray] | None:
+        process, self.process = self.process, None
+        if process is None:
+            return self.taken
+        try:
+            data, _ = process.communicate(timeout=WAIT)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.communicate()
+            return None
+        if process.returncode != 0 or len(data) < 8:
+            return None
+        n = int.from_bytes(data[:8], "little")
+        end = 8 + 32 * n
+        if len(data) < end:
+            return None
+        states = np.frombuffer(data, dtype=np.int64, count=4 * n, offset=8).reshape(n, 4)
+        text = data[end:].decode()
+        names = pc.split_pattern(pa.array([text]), "\n").flatten() if n else pa.array([], type=pa.string())
+        if len(names) != n:
+            return None
+        self.taken = names, states
+        return self.taken
+
+    def close(self) -> None:
+        """Stop the child if it still runs (its answer is not needed)."""
+        process, self.process = self.process, None
+        if process is not None:
+            process.kill()
+            process.communicate()
