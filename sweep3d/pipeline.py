@@ -252,7 +252,7 @@ def _warn_if_slow(plans: list[Plan], store: Store, executor: Executor, console: 
     CPU (the estimate's costs are CPU costs: nothing is said for a GPU)."""
     if plans[0].device != "cpu":
         return
-    missing = _missing_renders(plans, store, executor) if missing is None else missing
+    missing = _missing_renders(plans, store, executor)[0] if missing is None else missing
     line = slow_render_warning(plans[0].spec.render, max(missing), sum(missing.values()))
     if line and console is not None:
         console.print(f"[bold yellow]warning:[/] {escape(line)}", highlight=False, soft_wrap=True)
