@@ -6,9 +6,10 @@ A rerun checks each cached blob's file state against the memo of verified blobs
 (:mod:`.stat_blobs`, standard library only) that takes them all while the parent plans on the
 other core, and :func:`~sweep3d.cache.blobs.file_states` reads them from it.
 
-A snapshot is right only while nothing writes a blob: a run takes it after removing what killed
-runs left and forgets it (:meth:`Store.forget_states`) once its first pass has found what is
-cached, before anything is computed. A key the snapshot lacks is stat'ed directly, and a child
+A snapshot is right only while nothing writes a blob: a run takes it as soon as it holds the
+lock (what killed runs left are temp files, not blobs: the child lists only ``*.png``) and
+forgets it (:meth:`Store.forget_states`) once its first pass has found what is cached, before
+anything is computed. A key the snapshot lacks is stat'ed directly, and a child
 that fails or hangs costs only the time waited: the states are then taken as before.
 """
 

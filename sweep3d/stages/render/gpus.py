@@ -3,8 +3,8 @@
 Run as a script (``python gpus.py``), it imports bpy and prints, as one JSON line, how many GPUs
 each back-end finds and the compute capabilities Blender ships no CUDA kernel for (there the
 driver compiles Cycles' kernels from PTX at the first render: minutes, once): the parent's probe
-(see :mod:`.device`), which never imports bpy itself. Cycles can crash while listing devices on some drivers: in a child, that costs
-nothing but the answer. Render workers call :func:`enable` to render on a GPU; so does the
+(see :mod:`.device`), which never imports bpy itself. Cycles can crash while listing devices on
+some drivers: in a child, that costs nothing but the answer. Render workers call :func:`enable` to render on a GPU; so does the
 bpy-only GPU benchmark (``benchmarks/gpu.py``), which loads this file by its path.
 """
 

@@ -135,8 +135,10 @@ class RenderPool:
         return process, parent
 
     def _spawn(self, slot: int) -> _Worker:
-        started, self._started = (self._started, None) if slot == 0 else (None, self._started)
-        process, parent = started or self._start(slot)
+        if slot == 0 and self._started is not None:  # started ahead by prestart
+            (process, parent), self._started = self._started, None
+        else:
+            process, parent = self._start(slot)
         message = _first_message(parent, process)
         if not isinstance(message, Ready):
             process.kill()
