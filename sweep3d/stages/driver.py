@@ -220,7 +220,7 @@ def rows_and_cached(stage: Stage, plan: Plan, store: Store) -> Found:
     """(keys of ``plan`` at ``stage`` that have a row, those of them that are cached: with their
     blob, where rows own one)."""
     rows = store.key_set(stage.table)
-    have = {key for key in unique_jobs(stage, plan.jobs) if key in rows}
+    have = set(rows.intersection(unique_jobs(stage, plan.jobs)))  # in C: 10⁶ keys in a fraction of a second
     return have, (store.existing_blobs(have) if stage.owns_blobs else have)
 
 

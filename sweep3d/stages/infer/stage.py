@@ -257,15 +257,14 @@ class InferStage:
         return self._made[1]
 
 
-def pending_predictions(plan: Plan, store: Store, stage: InferStage | None = None) -> set[str]:
-    """Prediction keys of the plan that the store lacks.
+def pending_predictions(plan: Plan, store: Store, stage: InferStage | None = None) -> bool:
+    """Whether the store lacks any prediction key of the plan.
 
     Args:
         stage: the run's infer stage, whose distinct keys the plan then remembers for its pass.
     """
-    have = store.key_set("predictions")
     keys = unique_jobs(stage, plan.jobs) if stage is not None else {j.pred_key for j in plan.jobs}
-    return {key for key in keys if key not in have}
+    return not store.key_set("predictions").issuperset(keys)
 
 
 def _load(store: Store, jobs: list[Job], valid: dict[str, Mapping[str, Any]],
