@@ -23,9 +23,8 @@ from typing import Iterable, Literal
 import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
-import pyarrow.parquet as pq
 
-from sweep3d.cache.store import DIGEST_COLUMN, KEY_COLUMN, READ_ERRORS, Store
+from sweep3d.cache.store import DIGEST_COLUMN, KEY_COLUMN, READ_ERRORS, Store, read_parquet
 
 #: Columns of a ``verified/<table>.parquet`` memo: a blob's key, its file state when it was last
 #: hashed, and the digest it had then.
@@ -228,7 +227,7 @@ def _read_memo_table(store: Store, table: str) -> pa.Table:
     """The memo of ``table`` (empty when there is none or it does not read: every blob is then
     hashed again and the memo rewritten; nothing to quarantine)."""
     try:
-        memo = pq.read_table(memo_path(store, table), page_checksum_verification=True)
+        memo = read_parquet(memo_path(store, table), verify=True)
         return memo.select(MEMO_SCHEMA.names).cast(MEMO_SCHEMA)
     except (*READ_ERRORS, KeyError):
         return MEMO_SCHEMA.empty_table()
