@@ -12,6 +12,10 @@ own `gpus.enable`. Three steps:
     # anywhere with numpy and Pillow: the table, from those JSON lines and frames
     python benchmarks/gpu.py report /tmp/frames
 
+Where the GPU machine has no Python 3.11, `gpu_bundle.sh` packs this checkout's Python, bpy,
+numpy, the libraries they load and the jobs into one tarball (in parts, if uploads are limited),
+and `gpu_device.sh` unpacks it there and runs the last two steps for every device.
+
 The first render of a process includes loading the device's kernels (on a GPU newer than the
 kernels Blender ships, the driver compiles them from PTX once and caches them): the table gives
 it apart, and renders/s counts the renders after it.
