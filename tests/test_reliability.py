@@ -15,6 +15,7 @@ import time
 from datetime import datetime, timedelta
 from pathlib import Path
 
+import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 from typer.testing import CliRunner
@@ -223,7 +224,7 @@ def test_blob_states_taken_ahead_by_a_child_are_the_states_and_damage_is_still_f
     with store.lock():  # a child that fails: the states are taken in-process, nothing is lost
         monkeypatch.setattr(snapshot.stat_blobs, "__file__", str(tmp_path / "absent.py"))
         store.snapshot_states()
-        assert store.state_snapshot.states(keys) is None
+        assert store.state_snapshot.states(pa.array(keys)) is None
         assert (blobs.file_states(store, keys) == blobs._stat_states(store, keys)).all()
 
 

@@ -114,7 +114,7 @@ def damaged_blobs(store: Store, table: str, keys: Iterable[str]) -> set[str]:
     rows = store.table(table, [KEY_COLUMN[table], DIGEST_COLUMN])
     recorded = _recorded(rows, table)
     memo = _read_memo_table(store, table)
-    states = file_states(store, listed)
+    states = file_states(store, listed, keys)
     trusted = _trusted(keys, states, memo, recorded, rows, table)
     damaged: set[str] = set()
     fresh: dict[str, Verified] = {}
@@ -138,13 +138,17 @@ MISSING = -1  # a file state's size when the file is not there
 _UNREADABLE = -2  # ... when stat failed otherwise
 
 
-def file_states(store: Store, keys: list[str]) -> np.ndarray:
+def file_states(store: Store, keys: list[str], arrow: pa.Array | None = None) -> np.ndarray:
     """(size, mtime_ns, ctime_ns, inode) of each key's blob as an int64 array (n, 4); the size is
     :data:`MISSING` for a blob that is not there and negative for one that cannot be stat'ed.
 
     Read from the store's snapshot where a run took one (:meth:`Store.snapshot_states`: a child
-    stat'ed every blob while the run planned); the keys it lacks are stat'ed here."""
-    taken = store.state_snapshot.states(keys) if store.state_snapshot is not None else None
+    stat'ed every blob while the run planned); the keys it lacks are stat'ed here. ``arrow``:
+    ``keys`` as an Arrow array, where the caller has made one."""
+    snapshot = store.state_snapshot
+    if snapshot is not None and arrow is None:
+        arrow = pa.array(keys, type=pa.string())
+    taken = snapshot.states(arrow) if snapshot is not None else None
     if taken is None:
         return _stat_states(store, keys)
     states, found = taken

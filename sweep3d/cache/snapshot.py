@@ -37,14 +37,14 @@ class StateSnapshot:
             [sys.executable, stat_blobs.__file__, str(blobs)], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
         self.taken: tuple[pa.Array, np.ndarray] | None = None  # (keys, their states) once read
 
-    def states(self, keys: list[str]) -> tuple[np.ndarray, np.ndarray] | None:
+    def states(self, keys: pa.Array) -> tuple[np.ndarray, np.ndarray] | None:
         """(the states of ``keys`` in their order, whether the snapshot has each one), waiting for
         the child; None when it failed."""
         taken = self._read()
         if taken is None:
             return None
         names, states = taken
-        where = pc.index_in(pa.array(keys, type=pa.string()), value_set=names)
+        where = pc.index_in(keys, value_set=names)
         found = pc.is_valid(where).to_numpy(zero_copy_only=False)
         return states[pc.fill_null(where, 0).to_numpy(zero_copy_only=False)], found
 

@@ -157,7 +157,7 @@ class Store:
         blobs = self.root / "blobs"
         if self.state_snapshot is not None or blobs.is_symlink() or not blobs.is_dir():
             return
-        folders = [self.root / "blobs" / e.name for e in scan(blobs) if len(e.name) == 2]
+        folders = [blobs / e.name for e in scan(blobs) if len(e.name) == 2]
         if sum(_folder_entries(folder) for folder in folders) >= snapshot.MIN_BLOBS:
             self.state_snapshot = snapshot.StateSnapshot(blobs)
 

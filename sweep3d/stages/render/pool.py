@@ -101,7 +101,6 @@ class RenderPool:
         self.n_workers = workers
         self.timeout = timeout
         self.limits = limits
-        self.grace = KERNEL_GRACE if settings.device != "cpu" else 0.0  # a GPU worker's first job compiles
         prepare_gpu_environment(settings.device)
         self.recycled: Counter[str] = Counter()  # workers retired between jobs, by the limit reached
         self.ctx = mp.get_context("spawn")
@@ -179,7 +178,8 @@ class RenderPool:
     def allowed(self, worker: _Worker) -> float:
         """Seconds ``worker``'s current job may take: ``timeout``, and on a GPU worker's first job
         the time its driver may spend compiling Cycles' kernels too."""
-        return self.timeout + (self.grace if worker.rendered == 0 else 0.0)
+        compiles = self.settings.device != "cpu" and worker.rendered == 0
+        return self.timeout + (KERNEL_GRACE if compiles else 0.0)
 
     def _handle(self, worker: _Worker, message: Started | RenderReply | Idle | Retired) -> Iterator[RenderReply]:
         if isinstance(message, Started):

@@ -171,11 +171,13 @@ class RenderStage:
         jobs = {j.render_key: j for j in todo}
         spec, settings = plan.spec.render, render_settings(plan)
         warm, self._warm = self._warm, None
-        if warm is not None and warm[0] != settings:  # planned again with other settings: not this worker
-            warm[1].close()
-        workers = min(worker_count(spec, plan.device), len(groups))
-        pool = warm[1] if warm is not None and warm[0] == settings \
-            else self.executor.pool(settings, workers, spec.timeout, WorkerLimits.from_spec(spec))
+        if warm is not None and warm[0] == settings:
+            pool = warm[1]
+        else:
+            if warm is not None:  # planned again with other settings: not this worker
+                warm[1].close()
+            workers = min(worker_count(spec, plan.device), len(groups))
+            pool = self.executor.pool(settings, workers, spec.timeout, WorkerLimits.from_spec(spec))
         with pool:
             yield from self._replies(pool.run(groups), plan, store, jobs, stored)
             if pool.recycled:
