@@ -14,6 +14,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 import pyarrow as pa
+import pyarrow.parquet as pq
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -340,3 +341,35 @@ yaw = {{ range = [-180, 180] }}
 [policy]
 {policy}
 """
+
+
+def test_an_unchanged_plan_is_not_written_again_and_a_changed_one_is(tmp_path: Path, monkeypatch) -> None:
+    from sweep3d.cache.store import Store
+    from sweep3d.pipeline import write_jobs
+    from sweep3d.stages.jobs import Plan
+
+    spec = load_spec(write_spec(tmp_path, specs_example('type = "random"\nsamples = 9')))
+    store = Store(tmp_path / "store")
+    plan = make_plan(spec, framing=Framing.full(32), model_digest="m", blender="4.5")
+    write_jobs(plan, store)
+    path = store.jobs_path(spec.name)
+    written = path.stat()
+    again = make_plan(spec, framing=Framing.full(32), model_digest="m", blender="4.5")
+    assert again.fingerprint() == plan.fingerprint()
+    with monkeypatch.context() as patched:
+        patched.setattr(Plan, "table", lambda self: pytest.fail("an unchanged plan's table is built again"))
+        write_jobs(again, store)
+    assert (path.stat().st_ino, path.stat().st_mtime_ns) == (written.st_ino, written.st_mtime_ns)
+    other = make_plan(spec, framing=Framing.full(32), model_digest="n", blender="4.5")  # other prediction keys
+    assert other.fingerprint() != plan.fingerprint()
+    write_jobs(other, store)
+    assert pq.read_table(path).column("pred_key").to_pylist() == [j.pred_key for j in other.jobs]
+
+
+@settings(max_examples=examples(200), deadline=None)
+@given(st.lists(st.none() | st.text(alphabet="a\n", max_size=3), max_size=4),
+       st.lists(st.none() | st.text(alphabet="a\n", max_size=3), max_size=4))
+def test_columns_written_for_the_fingerprint_tell_different_values_apart(a: list, b: list) -> None:
+    from sweep3d.stages.jobs import _list_bytes
+
+    assert (_list_bytes(a) == _list_bytes(b)) == (a == b)

@@ -24,6 +24,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
+from sweep3d.cache.key_join import positions, sorted_keys
 from sweep3d.cache.store import DIGEST_COLUMN, KEY_COLUMN, READ_ERRORS, Store, read_parquet
 
 #: Columns of a ``verified/<table>.parquet`` memo: a blob's key, its file state when it was last
@@ -106,19 +107,20 @@ def damaged_blobs(store: Store, table: str, keys: Iterable[str]) -> set[str]:
     check digests, and ``sweep3d cache verify`` hashes every blob. A copied store hashes each
     blob once (new inodes). Call it holding the writer lock.
 
-    A rerun of a million cached jobs costs one ``stat`` per blob: the memo and the table's rows
-    are compared as Arrow columns, never as a dict per blob.
+    A rerun of a million cached jobs costs one ``stat`` per blob (taken ahead by a child, see
+    :mod:`.snapshot`): the keys, the memo, the blob states and the rows are compared as sorted
+    Arrow columns (:mod:`.key_join`), never as a dict per blob.
     """
-    listed = list(keys if isinstance(keys, (set, frozenset)) else set(keys))
-    keys = pa.array(listed, type=pa.string())
+    keys = sorted_keys(keys if isinstance(keys, (set, frozenset)) else set(keys))  # distinct, in order
     rows = store.table(table, [KEY_COLUMN[table], DIGEST_COLUMN])
     recorded = _recorded(rows, table)
     memo = _read_memo_table(store, table)
-    states = file_states(store, listed, keys)
-    trusted = _trusted(keys, states, memo, recorded, rows, table)
+    states = file_states(store, keys)
+    in_memo, in_rows = positions(keys, memo.column("key")), positions(keys, recorded["keys"])
+    trusted = _trusted(keys, states, memo, in_memo, recorded, in_rows, rows, table)
     damaged: set[str] = set()
     fresh: dict[str, Verified] = {}
-    again = keys.take(pa.array(np.flatnonzero(~trusted & (states[:, 0] != MISSING)))).to_pylist()  # changed, new
+    again = keys.filter(pa.array(~trusted & (states[:, 0] != MISSING))).to_pylist()  # changed, new
     digests = _digests_of(rows, table, again)
     for key in again:
         verdict = check_blob(store.blob_file(key), digests.get(key, set()), None)
@@ -126,6 +128,8 @@ def damaged_blobs(store: Store, table: str, keys: Iterable[str]) -> set[str]:
             damaged.add(key)
         elif isinstance(verdict, Verified):
             fresh[key] = verdict
+    if not fresh and not damaged and (in_rows >= 0).all() and np.count_nonzero(in_memo >= 0) == memo.num_rows:
+        return damaged  # every memo entry is a recorded key's, and still right: the memo stays as it is
     kept = memo.filter(pc.and_(pc.is_in(memo.column("key"), value_set=recorded["keys"]),
                                pc.invert(pc.is_in(memo.column("key"), value_set=pa.array(sorted(damaged | set(fresh)),
                                                                                           type=pa.string())))))
@@ -138,23 +142,21 @@ MISSING = -1  # a file state's size when the file is not there
 _UNREADABLE = -2  # ... when stat failed otherwise
 
 
-def file_states(store: Store, keys: list[str], arrow: pa.Array | None = None) -> np.ndarray:
+def file_states(store: Store, keys: pa.Array | list[str]) -> np.ndarray:
     """(size, mtime_ns, ctime_ns, inode) of each key's blob as an int64 array (n, 4); the size is
     :data:`MISSING` for a blob that is not there and negative for one that cannot be stat'ed.
 
     Read from the store's snapshot where a run took one (:meth:`Store.snapshot_states`: a child
-    stat'ed every blob while the run planned); the keys it lacks are stat'ed here. ``arrow``:
-    ``keys`` as an Arrow array, where the caller has made one."""
+    stat'ed every blob while the run planned); the keys it lacks are stat'ed here."""
     snapshot = store.state_snapshot
-    if snapshot is not None and arrow is None:
-        arrow = pa.array(keys, type=pa.string())
+    arrow = keys if isinstance(keys, pa.Array) else pa.array(keys, type=pa.string())
     taken = snapshot.states(arrow) if snapshot is not None else None
     if taken is None:
-        return _stat_states(store, keys)
+        return _stat_states(store, arrow.to_pylist() if isinstance(keys, pa.Array) else keys)
     states, found = taken
     lacking = np.flatnonzero(~found)
     if len(lacking):
-        states[lacking] = _stat_states(store, [keys[i] for i in lacking.tolist()])
+        states[lacking] = _stat_states(store, arrow.take(pa.array(lacking)).to_pylist())
     return states
 
 
@@ -188,19 +190,19 @@ def _recorded(rows: pa.Table | None, table: str) -> dict[str, pa.Array]:
     return {"keys": keys, "digests": pc.if_else(pc.equal(pc.fill_null(digests, ""), ""), None, digests)}
 
 
-def _trusted(keys: pa.Array, states: np.ndarray, memo: pa.Table, recorded: dict[str, pa.Array],
-             rows: pa.Table | None, table: str) -> np.ndarray:
+def _trusted(keys: pa.Array, states: np.ndarray, memo: pa.Table, in_memo: np.ndarray,
+             recorded: dict[str, pa.Array], in_rows: np.ndarray, rows: pa.Table | None, table: str) -> np.ndarray:
     """Per key, whether its memo entry vouches for it: same file state, and its digest one its
-    rows recorded (or they recorded none)."""
-    where = pc.index_in(keys, value_set=memo.column("key"))
-    found = _flags(pc.is_valid(where))
+    rows recorded (or they recorded none). ``in_memo``, ``in_rows``: each key's position in the
+    memo and among the rows (its first), or -1."""
+    found = in_memo >= 0
     if not found.any():
         return found
-    at = pc.fill_null(where, 0).to_numpy(zero_copy_only=False)
+    at = np.where(found, in_memo, 0)
     remembered = np.stack([memo.column(c).to_numpy()[at] for c in ("size", "mtime_ns", "ctime_ns", "inode")], axis=1)
     same = found & (remembered == states).all(axis=1)
     digest = pc.take(memo.column(DIGEST_COLUMN), pa.array(at))
-    first = pc.take(recorded["digests"], pc.index_in(keys, value_set=recorded["keys"]))  # the key's first row's
+    first = pc.take(recorded["digests"], pa.array(in_rows, mask=in_rows < 0))  # the key's first row's
     trusted = same & _flags(pc.equal(digest, first))
     unsure = np.flatnonzero(same & ~trusted)  # another row's digest, or none recorded: as the rows say
     if len(unsure):

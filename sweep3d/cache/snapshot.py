@@ -24,6 +24,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 
 from sweep3d.cache import stat_blobs
+from sweep3d.cache.key_join import positions
 
 MIN_BLOBS = 20_000  # below this many blob files, a child (~30 ms to start) wins nothing
 WAIT = 120.0  # seconds to wait for the child before stat'ing in-process
@@ -44,9 +45,9 @@ class StateSnapshot:
         if taken is None:
             return None
         names, states = taken
-        where = pc.index_in(keys, value_set=names)
-        found = pc.is_valid(where).to_numpy(zero_copy_only=False)
-        return states[pc.fill_null(where, 0).to_numpy(zero_copy_only=False)], found
+        where = positions(keys, names)  # the child lists in key order: sorted keys meet them in place
+        found = where >= 0
+        return states[np.where(found, where, 0)], found
 
     def _read(self) -> tuple[pa.Array, np.ndarray] | None:
         process, self.process = self.process, None

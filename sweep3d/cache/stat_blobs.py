@@ -4,8 +4,9 @@ that it runs as a script in a child process (see :class:`sweep3d.cache.snapshot.
     python stat_blobs.py STORE/blobs
 
 writes to standard output the number of blobs n (8 bytes, little-endian), their states (n × 4
-native int64: size, mtime_ns, ctime_ns, inode) and their keys (UTF-8, one per line), folder by
-folder. Everything is stat'ed before anything is written: the reader then only streams.
+native int64: size, mtime_ns, ctime_ns, inode) and their keys (UTF-8, one per line), in key
+order (folder by folder, each sorted: the parent's sorted keys then meet them without a lookup).
+Everything is stat'ed before anything is written: the reader then only streams.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ def stat_folder(path: str, names: list[str], states: array.array) -> None:
     fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY)
     try:
         append = states.extend
-        for name in os.listdir(fd):
+        for name in sorted(os.listdir(fd)):
             if not name.endswith(EXT):
                 continue
             try:

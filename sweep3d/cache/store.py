@@ -843,15 +843,13 @@ def _split_listing(names: Iterable[str], folder: str, suffix: str) -> tuple[list
     """``names`` of the blob folder ``folder`` as (the keys whose blob they are, the rest): a
     blob is ``<key><suffix>``, its key beginning with the folder's name (as :meth:`Store.blob_file`
     places it)."""
-    cut = -len(suffix)
-    keys: list[str] = []
-    others: list[str] = []
-    for name in names:
-        if name.endswith(suffix) and name[:cut][:2] == folder:
-            keys.append(name[:cut])
-        else:
-            others.append(name)
-    return keys, others
+    cut, least = -len(suffix), len(folder) + len(suffix)
+    names = names if isinstance(names, list) else list(names)
+    keys = [name[:cut] for name in names if name.endswith(suffix) and name.startswith(folder) and len(name) >= least]
+    if len(keys) == len(names):  # a blob folder holds blobs only, but for a killed writer's temp file
+        return keys, []
+    return keys, [name for name in names
+                  if not (name.endswith(suffix) and name.startswith(folder) and len(name) >= least)]
 
 
 def _unlink_quietly(path: Path) -> None:

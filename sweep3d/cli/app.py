@@ -426,6 +426,9 @@ def _write_report(experiment: Experiment, output: Optional[Path], model: Optiona
 
 def main() -> None:
     """Console entry point."""
+    from sweep3d.cache.pandas_probe import skip_pandas_probe
+
+    skip_pandas_probe()
     app()
 
 

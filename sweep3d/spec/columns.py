@@ -19,6 +19,8 @@ PREDICTION_COLUMNS = ("pred_key", "image_key", "model", "model_digest", "seconds
 PARAMETERS_METADATA = b"sweep3d.parameters"
 #: Parquet metadata key of a jobs file holding the models its rows name (a JSON list, in spec order).
 MODELS_METADATA = b"sweep3d.models"
+#: the jobs file's digest of what it was written from (see ``Plan.fingerprint``): an unchanged plan is not written again
+FINGERPRINT_METADATA = b"sweep3d.fingerprint"
 #: Parquet metadata key of a jobs file planned with truth passes: ``[evaluator] min_visible``.
 MIN_VISIBLE_METADATA = b"sweep3d.min_visible"
 #: Its value when no gate applies (the truth passes were asked for by a control, not the evaluation).
