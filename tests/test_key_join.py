@@ -9,6 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sweep3d.cache.key_join import ABSENT, positions, sorted_keys
+from tests.conftest import examples
 
 HEX = st.text(alphabet="0123456789abcdef", min_size=4, max_size=4)  # one width: the sorted path
 ANY = st.text(alphabet="ab\x00é", max_size=3)  # mixed widths, NUL bytes, non-ASCII: the fallback
@@ -19,7 +20,7 @@ def _index_in(query: list[str], values: list[str]) -> list[int]:
     return pc.fill_null(found, ABSENT).to_pylist()
 
 
-@settings(max_examples=150, deadline=None)
+@settings(max_examples=examples(100), deadline=None)
 @given(st.lists(HEX | ANY, max_size=12), st.lists(HEX | ANY, max_size=12), st.booleans())
 def test_positions_match_a_hash_lookup(query: list[str], values: list[str], sort_values: bool) -> None:
     if sort_values:
@@ -28,7 +29,7 @@ def test_positions_match_a_hash_lookup(query: list[str], values: list[str], sort
     assert got.tolist() == _index_in(query, values)
 
 
-@settings(max_examples=100, deadline=None)
+@settings(max_examples=examples(60), deadline=None)
 @given(st.lists(HEX, max_size=20), st.lists(HEX, max_size=20))
 def test_same_width_keys_join_through_the_sorted_path(query: list[str], values: list[str]) -> None:
     values = values + query[: len(query) // 2]  # some found, some repeated, some absent
@@ -36,7 +37,7 @@ def test_same_width_keys_join_through_the_sorted_path(query: list[str], values: 
     assert positions(pa.array(query, pa.large_string()), chunked).tolist() == _index_in(query, values)
 
 
-@settings(max_examples=100, deadline=None)
+@settings(max_examples=examples(60), deadline=None)
 @given(st.lists(HEX | ANY, max_size=15))
 def test_sorted_keys_orders_bytes_and_keeps_repeats(keys: list[str]) -> None:
     out = sorted_keys(keys)

@@ -54,3 +54,19 @@ def test_a_parameter_named_key_is_still_a_parameter(tmp_path: Path) -> None:
     rows = connect(store, "e").execute(
         "SELECT parameter, label, accuracy FROM control_accuracy WHERE parameter = 'lock_key' ORDER BY label").fetchall()
     assert rows == [("lock_key", "k0", 1.0), ("lock_key", "k1", 0.0)]
+
+
+def test_the_command_line_converts_lists_without_importing_pandas_and_can_still_make_a_dataframe() -> None:
+    loaded = _modules_after("""
+        import contextlib, io, sys
+        import pyarrow as pa
+        from sweep3d.cli import main
+        sys.argv = ["sweep3d", "--help"]
+        with contextlib.suppress(SystemExit), contextlib.redirect_stdout(io.StringIO()):
+            main()
+        pa.array(["a key"])  # pyarrow's first list conversion: it would import pandas to probe it
+        assert "pandas" not in sys.modules
+        frame = pa.table({"a": [1, 2]}).to_pandas()  # pyarrow's pandas conversion still imports it
+        assert type(frame).__name__ == "DataFrame" and len(frame) == 2
+    """)
+    assert "pandas" in loaded

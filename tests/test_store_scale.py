@@ -72,6 +72,24 @@ def test_a_missing_or_unremembered_blob_among_many_is_told_apart(tmp_path: Path,
     assert damaged_blobs(store, "renders", keys) == {keys[1]} and hashed.calls == 1
 
 
+def test_the_memo_keeps_other_plans_blobs_and_forgets_those_whose_rows_are_gone(tmp_path: Path, monkeypatch) -> None:
+    from sweep3d.cache.blobs import memo_path
+    from sweep3d.cache.store import read_parquet
+
+    store = Store(tmp_path)
+    keys = [f"{i:02x}" * 20 for i in range(5)]
+    for i, key in enumerate(keys):
+        add_render(store, key, i)
+    time.sleep(0.05)
+    assert damaged_blobs(store, "renders", keys) == set()
+    hashed = HashCounter(monkeypatch)
+    assert damaged_blobs(store, "renders", keys[:3]) == set() and hashed.calls == 0  # a plan with fewer jobs
+    assert sorted(read_parquet(memo_path(store, "renders")).column("key").to_pylist()) == keys
+    store.drop_rows("renders", {keys[4]})
+    assert damaged_blobs(store, "renders", keys[:3]) == set() and hashed.calls == 0
+    assert sorted(read_parquet(memo_path(store, "renders")).column("key").to_pylist()) == keys[:4]
+
+
 class _Clock:
     """The store's ``time`` module, with its clock ``ahead`` seconds ahead: every folder then
     changed long before a listing is taken (``os.utime`` cannot date a change back, it moves the
