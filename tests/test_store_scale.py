@@ -59,13 +59,19 @@ def test_the_memo_vouches_for_a_blob_whose_rows_recorded_several_digests(tmp_pat
     assert damaged_blobs(store, "renders", {key}) == {key} and hashed.calls == 2
 
 
-def test_a_missing_or_unremembered_blob_among_many_is_told_apart(tmp_path: Path, monkeypatch) -> None:
-    store = Store(tmp_path)
-    keys = [f"{i:02x}" * 20 for i in range(5)]
+def _verified_renders(root: Path, n: int) -> tuple[Store, list[str]]:
+    """A store of ``n`` renders whose blobs a first check verified (the memo holds them all)."""
+    store = Store(root)
+    keys = [f"{i:02x}" * 20 for i in range(n)]
     for i, key in enumerate(keys):
         add_render(store, key, i)
-    time.sleep(0.05)
+    time.sleep(0.05)  # the blobs' change time is a clock tick behind what follows
     assert damaged_blobs(store, "renders", keys) == set()
+    return store, keys
+
+
+def test_a_missing_or_unremembered_blob_among_many_is_told_apart(tmp_path: Path, monkeypatch) -> None:
+    store, keys = _verified_renders(tmp_path, 5)
     store.blob_path(keys[0]).unlink()
     atomic_write(store.blob_path(keys[1]), b"not a png")  # a new file: hashed again, found damaged
     hashed = HashCounter(monkeypatch)
@@ -76,12 +82,7 @@ def test_the_memo_keeps_other_plans_blobs_and_forgets_those_whose_rows_are_gone(
     from sweep3d.cache.blobs import memo_path
     from sweep3d.cache.store import read_parquet
 
-    store = Store(tmp_path)
-    keys = [f"{i:02x}" * 20 for i in range(5)]
-    for i, key in enumerate(keys):
-        add_render(store, key, i)
-    time.sleep(0.05)
-    assert damaged_blobs(store, "renders", keys) == set()
+    store, keys = _verified_renders(tmp_path, 5)
     hashed = HashCounter(monkeypatch)
     assert damaged_blobs(store, "renders", keys[:3]) == set() and hashed.calls == 0  # a plan with fewer jobs
     assert sorted(read_parquet(memo_path(store, "renders")).column("key").to_pylist()) == keys
