@@ -18,19 +18,20 @@ import json
 import time
 import uuid
 from dataclasses import dataclass, field
+from functools import lru_cache
 from pathlib import Path
 
 import pyarrow as pa
-import pyarrow.parquet as pq
 from rich.console import Console
 from rich.markup import escape
 
 from sweep3d.cache.maintenance import compact_table, remove_killed_writers_temp_files
 from sweep3d.cache.store import TABLES, Store, utc_now
+from sweep3d.cache.written import remember_written, written_from
 from sweep3d.errors import RenderError, SpecError, UserError
 from sweep3d.progress import RunProgress
 from sweep3d.spec.assets import blender_version
-from sweep3d.spec.columns import CLASS_NAMES_METADATA, FINGERPRINT_METADATA, MODELS_METADATA, PROTOCOL_METADATA
+from sweep3d.spec.columns import CLASS_NAMES_METADATA, MODELS_METADATA, PROTOCOL_METADATA
 from sweep3d.spec.loader import LoadedSpec
 from sweep3d.stages.code import PLUGINS_METADATA
 from sweep3d.stages.code import metadata as plugins_metadata
@@ -117,33 +118,39 @@ def write_jobs(plans: Plan | list[Plan], store: Store) -> None:
     """Record the plans (one per model) as the experiment's jobs table (what ``results`` joins
     against); an unchanged table leaves the file as it is.
 
-    The file's metadata holds a digest of what it was written from (:meth:`Plan.fingerprint`):
-    a rerun of the same plan compares digests instead of building and encoding 10⁶ rows again.
+    A plan's digest (:meth:`Plan.fingerprint`, with :func:`_jobs_format`) is remembered with the
+    file it was written to (:mod:`sweep3d.cache.written`): a rerun of the same plan compares
+    digests instead of building and encoding 10⁶ rows again, unless the file changed since.
     """
     plans = [plans] if isinstance(plans, Plan) else plans
     path = store.jobs_path(plans[0].spec.name)
     models = json.dumps([plan.model for plan in plans]).encode()
     plugins = plugins_metadata(plans[0].spec)
     prints = [plan.fingerprint() for plan in plans]
-    fingerprint = None if None in prints else hashlib.sha256(b"\n".join([*map(str.encode, prints), models, plugins]))
-    if fingerprint is not None and _stored_fingerprint(path) == fingerprint.hexdigest().encode():
+    digest = None if None in prints else \
+        hashlib.sha256(b"\n".join([_jobs_format(), *map(str.encode, prints), models, plugins])).hexdigest()
+    if digest is not None and written_from(store, path) == digest:
         return
     tables = [plan.table() for plan in plans]
     table = tables[0] if len(tables) == 1 else pa.concat_tables(tables, promote_options="default")
     per_model = {key: json.dumps({k: v for t in tables for k, v in json.loads(t.schema.metadata[key]).items()}).encode()
                  for key in (CLASS_NAMES_METADATA, PROTOCOL_METADATA)}  # each plan's entry under its model
-    stamp = {FINGERPRINT_METADATA: fingerprint.hexdigest().encode()} if fingerprint is not None else {}
     table = table.replace_schema_metadata({**(tables[0].schema.metadata or {}), MODELS_METADATA: models,
-                                           **per_model, PLUGINS_METADATA: plugins, **stamp})
+                                           **per_model, PLUGINS_METADATA: plugins})
     store.write_table_file(path, table, keep_same=True)
+    if digest is not None:
+        remember_written(store, path, digest)
 
 
-def _stored_fingerprint(path: Path) -> bytes | None:
-    """The fingerprint the jobs file at ``path`` was written with (None: none, or no such file)."""
-    try:
-        return (pq.read_schema(path).metadata or {}).get(FINGERPRINT_METADATA)
-    except (OSError, pa.ArrowException):
-        return None
+@lru_cache(maxsize=1)
+def _jobs_format() -> bytes:
+    """What makes the jobs file's bytes besides the plan: the code that builds its table and the
+    store's writer, and pyarrow's version (a change to any of them writes the file again)."""
+    from sweep3d.cache import store as store_module
+    from sweep3d.stages import jobs as jobs_module
+
+    code = b"".join(Path(m.__file__).read_bytes() for m in (jobs_module, store_module))  # type: ignore[arg-type]
+    return f"jobs file 1, pyarrow {pa.__version__}, code {hashlib.sha256(code).hexdigest()}".encode()
 
 
 def _writable(spec: LoadedSpec, store: Store) -> None:

@@ -56,7 +56,7 @@ def test_a_parameter_named_key_is_still_a_parameter(tmp_path: Path) -> None:
     assert rows == [("lock_key", "k0", 1.0), ("lock_key", "k1", 0.0)]
 
 
-def test_the_command_line_converts_lists_without_importing_pandas_and_can_still_make_a_dataframe() -> None:
+def test_the_command_line_converts_lists_without_importing_pandas_and_pandas_objects_as_ever() -> None:
     loaded = _modules_after("""
         import contextlib, io, sys
         import pyarrow as pa
@@ -66,7 +66,10 @@ def test_the_command_line_converts_lists_without_importing_pandas_and_can_still_
             main()
         pa.array(["a key"])  # pyarrow's first list conversion: it would import pandas to probe it
         assert "pandas" not in sys.modules
-        frame = pa.table({"a": [1, 2]}).to_pandas()  # pyarrow's pandas conversion still imports it
+        import pandas as pd  # a plug-in's: pandas objects then convert as they always do
+        assert pa.array(pd.Series([1.0, None])).null_count == 1
+        assert pa.types.is_dictionary(pa.array(pd.Categorical(["a", "b"])).type)
+        frame = pa.table({"a": [1, 2]}).to_pandas()
         assert type(frame).__name__ == "DataFrame" and len(frame) == 2
     """)
     assert "pandas" in loaded

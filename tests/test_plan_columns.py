@@ -9,6 +9,7 @@ slow paths, every policy — both must give the same jobs, bit for bit.
 from __future__ import annotations
 
 import math
+import os
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -224,6 +225,30 @@ def test_the_columnar_plan_is_the_per_job_plan(tmp_path_factory, body: str) -> N
     expected = reference_jobs(spec, framing=framing, model_digest="model-x", blender=blender)
     assert [repr(g) for g in got] == [repr(e) for e in expected]  # repr: -0.0 and 0.0 differ
     assert plan.table().equals(pa.Table.from_pylist(plan.rows()).replace_schema_metadata(plan.table().schema.metadata))
+    _check_distinct_keys_from_columns(plan)
+
+
+def _check_distinct_keys_from_columns(plan) -> None:
+    """Each stage's distinct keys read from the columns are those its ``key`` gives job by job,
+    in the same order, each with its first job."""
+    from sweep3d.stages.infer.stage import InferStage
+    from sweep3d.stages.jobs import JobList
+    from sweep3d.stages.postprocess.stage import PostprocessStage
+    from sweep3d.stages.render.stage import RenderStage
+
+    for jobs in (plan.jobs, plan.out_of_frame):
+        if not isinstance(jobs, JobList):
+            continue
+        for stage in (RenderStage, PostprocessStage, InferStage):
+            expected: dict[str, Any] = {}
+            for job in jobs:
+                key = stage.key(None, job)
+                if key is not None:
+                    expected.setdefault(key, job)
+            fresh = JobList(jobs.columns, jobs.indices)  # nothing remembered, no job made
+            got = fresh.unique_by(lambda j, s=stage: s.key(None, j), lambda js, s=stage: s.keys_of(None, js))
+            assert fresh._jobs is None and list(got.keys()) == list(expected) and len(got) == len(expected)
+            assert [got[key] for key in got] == list(expected.values())
 
 
 # -- the vectorised pieces against their scalar forms ------------------------------------------
@@ -353,13 +378,20 @@ def test_an_unchanged_plan_is_not_written_again_and_a_changed_one_is(tmp_path: P
     plan = make_plan(spec, framing=Framing.full(32), model_digest="m", blender="4.5")
     write_jobs(plan, store)
     path = store.jobs_path(spec.name)
-    written = path.stat()
+    written, original = path.stat(), path.read_bytes()
     again = make_plan(spec, framing=Framing.full(32), model_digest="m", blender="4.5")
     assert again.fingerprint() == plan.fingerprint()
     with monkeypatch.context() as patched:
         patched.setattr(Plan, "table", lambda self: pytest.fail("an unchanged plan's table is built again"))
         write_jobs(again, store)
     assert (path.stat().st_ino, path.stat().st_mtime_ns) == (written.st_ino, written.st_mtime_ns)
+    data = bytearray(path.read_bytes())
+    data[len(data) // 3] ^= 0xFF
+    with open(path, "r+b") as fh:  # damaged in place, its size and mtime put back
+        fh.write(data)
+    os.utime(path, ns=(written.st_atime_ns, written.st_mtime_ns))
+    write_jobs(again, store)
+    assert path.read_bytes() == original, "a changed jobs file is written again"
     other = make_plan(spec, framing=Framing.full(32), model_digest="n", blender="4.5")  # other prediction keys
     assert other.fingerprint() != plan.fingerprint()
     write_jobs(other, store)

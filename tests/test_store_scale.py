@@ -9,11 +9,14 @@ import time
 from pathlib import Path
 
 import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import sweep3d.cache.store as store_module
 from sweep3d.cache.blobs import damaged_blobs, sha256_bytes
 from sweep3d.cache.store import Store, atomic_write
 from sweep3d.pixels import encode_png
+from tests.conftest import examples
 from tests.test_reliability import HashCounter, add_render, render_row
 
 
@@ -182,3 +185,13 @@ def test_a_table_file_written_again_with_the_same_rows_keeps_its_state(tmp_path:
     path.write_bytes(bytes(flipped))  # damaged: rewritten whole
     assert store.write_table_file(path, changed, keep_same=True)
     assert Store(tmp_path).read_segment(path).equals(changed)
+
+
+@settings(max_examples=examples(150), deadline=None)
+@given(st.lists(st.sampled_from(["ab12.png", "ab.png", "a.png", ".png", "ab1.tmp", ".ab1.png.x.tmp", "cd12.png",
+                                 "ab", "abpng", "ab12.png.png"]), max_size=8),
+       st.sampled_from(["ab", "a", "", "abc"]))
+def test_a_listing_splits_into_keys_and_the_rest_as_a_name_by_name_check_does(names: list[str], folder: str) -> None:
+    blob = [name.endswith(".png") and name[:-4][:2] == folder for name in names]  # <key>.png, the key in its folder
+    expected = ([n[:-4] for n, b in zip(names, blob) if b], [n for n, b in zip(names, blob) if not b])
+    assert store_module._split_listing(names, folder, ".png") == expected

@@ -111,7 +111,7 @@ def damaged_blobs(store: Store, table: str, keys: Iterable[str]) -> set[str]:
     :mod:`.snapshot`): the keys, the memo, the blob states and the rows are compared as sorted
     Arrow columns (:mod:`.key_join`), never as a dict per blob.
     """
-    keys = sorted_keys(keys if isinstance(keys, (set, frozenset)) else set(keys))  # distinct, in order
+    keys = sorted_keys(keys if isinstance(keys, (set, frozenset)) else set(keys))  # distinct, in byte order
     rows = store.table(table, [KEY_COLUMN[table], DIGEST_COLUMN])
     recorded = _recorded(rows, table)
     memo = _read_memo_table(store, table)
@@ -129,7 +129,7 @@ def damaged_blobs(store: Store, table: str, keys: Iterable[str]) -> set[str]:
         elif isinstance(verdict, Verified):
             fresh[key] = verdict
     if not fresh and not damaged and (in_rows >= 0).all() and np.count_nonzero(in_memo >= 0) == memo.num_rows:
-        return damaged  # every memo entry is a recorded key's, and still right: the memo stays as it is
+        return damaged  # nothing hashed again, every memo entry a recorded key's: no entry to add or drop
     kept = memo.filter(pc.and_(pc.is_in(memo.column("key"), value_set=recorded["keys"]),
                                pc.invert(pc.is_in(memo.column("key"), value_set=pa.array(sorted(damaged | set(fresh)),
                                                                                           type=pa.string())))))

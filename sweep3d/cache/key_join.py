@@ -32,9 +32,10 @@ def sorted_keys(keys: Iterable[str] | pa.Array | pa.ChunkedArray) -> pa.Array:
     if _ascending(fixed):
         return array
     data = np.sort(fixed)
-    width = data.dtype.itemsize
-    offsets = np.arange(len(data) + 1, dtype=np.int32) * width
-    return pa.StringArray.from_buffers(len(data), pa.py_buffer(offsets), pa.py_buffer(data.view(np.uint8)))
+    large = pa.types.is_large_string(array.type)  # the type it came with, and offsets that fit it
+    offsets = np.arange(len(data) + 1, dtype=np.int64 if large else np.int32) * data.dtype.itemsize
+    kind = pa.LargeStringArray if large else pa.StringArray
+    return kind.from_buffers(len(data), pa.py_buffer(offsets), pa.py_buffer(data.view(np.uint8)))
 
 
 def positions(query: pa.Array | pa.ChunkedArray, values: pa.Array | pa.ChunkedArray) -> np.ndarray:

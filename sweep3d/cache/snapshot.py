@@ -45,7 +45,7 @@ class StateSnapshot:
         if taken is None:
             return None
         names, states = taken
-        where = positions(keys, names)  # the child lists in key order: sorted keys meet them in place
+        where = positions(keys, names)  # both in key order: a binary search (none for the very same keys)
         found = where >= 0
         return states[np.where(found, where, 0)], found
 

@@ -843,13 +843,12 @@ def _split_listing(names: Iterable[str], folder: str, suffix: str) -> tuple[list
     """``names`` of the blob folder ``folder`` as (the keys whose blob they are, the rest): a
     blob is ``<key><suffix>``, its key beginning with the folder's name (as :meth:`Store.blob_file`
     places it)."""
-    cut, least = -len(suffix), len(folder) + len(suffix)
+    cut = -len(suffix)
     names = names if isinstance(names, list) else list(names)
-    keys = [name[:cut] for name in names if name.endswith(suffix) and name.startswith(folder) and len(name) >= least]
+    keys = [name[:cut] for name in names if name.endswith(suffix) and name[:cut][:2] == folder]
     if len(keys) == len(names):  # a blob folder holds blobs only, but for a killed writer's temp file
         return keys, []
-    return keys, [name for name in names
-                  if not (name.endswith(suffix) and name.startswith(folder) and len(name) >= least)]
+    return keys, [name for name in names if not (name.endswith(suffix) and name[:cut][:2] == folder)]
 
 
 def _unlink_quietly(path: Path) -> None:

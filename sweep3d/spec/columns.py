@@ -19,9 +19,6 @@ PREDICTION_COLUMNS = ("pred_key", "image_key", "model", "model_digest", "seconds
 PARAMETERS_METADATA = b"sweep3d.parameters"
 #: Parquet metadata key of a jobs file holding the models its rows name (a JSON list, in spec order).
 MODELS_METADATA = b"sweep3d.models"
-#: Parquet metadata key of a jobs file holding a digest of the plan it was written from
-#: (``Plan.fingerprint``): a run leaves the file alone while the digest is its plan's.
-FINGERPRINT_METADATA = b"sweep3d.fingerprint"
 #: Parquet metadata key of a jobs file planned with truth passes: ``[evaluator] min_visible``.
 MIN_VISIBLE_METADATA = b"sweep3d.min_visible"
 #: Its value when no gate applies (the truth passes were asked for by a control, not the evaluation).

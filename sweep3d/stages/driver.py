@@ -181,7 +181,11 @@ class Stage(Protocol):
         """The columns of :attr:`table`."""
 
     def key(self, job: Job) -> str | None:
-        """The job's key at this stage (a function of the job alone); None when it has nothing to do here."""
+        """The job's key at this stage (a function of the job alone); None when it has nothing to do here.
+
+        A stage may also define ``keys_of(jobs: JobList) -> list[str | None]``, :meth:`key` of
+        every job read from the plan's columns (``JobList.key_column``), so that finding the
+        distinct keys of 10⁶ jobs makes no job."""
 
     def upstream(self, job: Job) -> tuple[str, str] | None:
         """(table, key) of the stored blob the job reads, or None when it reads none."""
@@ -194,11 +198,12 @@ class Stage(Protocol):
         :class:`Computed` per job; it may run in a thread of its own."""
 
 
-def unique_jobs(stage: Stage, jobs: Iterable[Job]) -> dict[str, Job]:
+def unique_jobs(stage: Stage, jobs: Iterable[Job]) -> Mapping[str, Job]:
     """The first job of each distinct key at ``stage``, in plan order (read-only: a planned plan's
-    jobs remember it per key function, as a run asks for it several times per stage)."""
+    jobs remember it per key function, as a run asks for it several times per stage, and make
+    no job for it where the stage reads its keys from the plan's columns: ``keys_of``)."""
     if isinstance(jobs, JobList):
-        return jobs.unique_by(stage.key)
+        return jobs.unique_by(stage.key, getattr(stage, "keys_of", None))
     unique: dict[str, Job] = {}
     for job in jobs:
         key = stage.key(job)
@@ -249,9 +254,10 @@ def split_to_do(stage: Stage, plan: Plan, store: Store, cached: set[str] | None 
     inputs: dict[str, set[str]] = {}
     ready: list[Job] = []
     waiting: dict[tuple[str, str], list[Job]] = defaultdict(list)
-    for key, job in unique.items():
+    for key in unique:  # plan order; a job is read only where it has work (a rerun reads none)
         if key not in needed:
             continue
+        job = unique[key]
         source = stage.upstream(job)
         if source is not None:
             table, upstream_key = source

@@ -18,7 +18,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from itertools import repeat
 from operator import itemgetter
-from typing import Any, Callable, Iterator, Sequence, overload
+from typing import Any, Callable, Iterator, Mapping, Sequence, overload
 
 import numpy as np
 import pyarrow as pa
@@ -323,20 +323,39 @@ class JobList(Sequence[Job]):
         self.columns = columns
         self.indices = indices
         self._jobs: list[Job] | None = None
-        self._unique: dict[Callable, dict[str, Job]] = {}
+        self._unique: dict[Callable, Mapping[str, Job]] = {}
 
-    def unique_by(self, key: Callable[[Job], str | None]) -> dict[str, Job]:
+    def unique_by(self, key: Callable[[Job], str | None],
+                  keys_of: Callable[[JobList], list[str | None]] | None = None) -> Mapping[str, Job]:
         """The first job of each distinct ``key`` (None left out), in order; remembered per key
-        function, as a run asks each stage's several times. Do not change the dict returned."""
+        function, as a run asks each stage's several times. Do not change the mapping returned.
+
+        Args:
+            keys_of: ``key`` of every job, from the columns (:meth:`key_column`): the distinct keys
+                are then found without making a job, and the jobs are made only when one is read
+                (a rerun that finds every key cached reads none).
+        """
         function = getattr(key, "__func__", key)  # a stage's bound method: the same for every instance
         if function not in self._unique:
-            unique: dict[str, Job] = {}
-            for job in self._all():
-                k = key(job)
-                if k is not None:
-                    unique.setdefault(k, job)
-            self._unique[function] = unique
+            if keys_of is not None:
+                self._unique[function] = FirstJobs(self, _first_positions(keys_of(self)))
+            else:
+                unique: dict[str, Job] = {}
+                for job in self._all():
+                    k = key(job)
+                    if k is not None:
+                        unique.setdefault(k, job)
+                self._unique[function] = unique
         return self._unique[function]
+
+    def key_column(self, field: str) -> list[str | None]:
+        """The ``field`` (``render_key``, ``image_key``, ``pred_key``) of each job, in order,
+        read from the columns without making the jobs."""
+        column = {"render_key": self.columns.render_keys, "image_key": self.columns.image_keys,
+                  "pred_key": self.columns.pred_keys}[field]
+        if len(self.indices) == len(column):  # every job of the plan (the indices ascend, distinct)
+            return column
+        return [column[i] for i in self.indices.tolist()]
 
     def _all(self) -> list[Job]:
         if self._jobs is None:
@@ -475,6 +494,41 @@ class Plan:
         metadata[CLASS_NAMES_METADATA] = json.dumps({model: [list(c) for c in self.class_names]}).encode()
         metadata[PROTOCOL_METADATA] = json.dumps({model: self.protocol}).encode()
         return metadata
+
+
+class FirstJobs(Mapping[str, Job]):
+    """Distinct keys → the first job with each (see :meth:`JobList.unique_by`): the keys are
+    known from the columns, the jobs made (all at once) the first time one is read."""
+
+    def __init__(self, jobs: JobList, first: dict[str, int]) -> None:
+        self._jobs = jobs
+        self._first = first
+
+    def __getitem__(self, key: str) -> Job:
+        return self._jobs[self._first[key]]
+
+    def __contains__(self, key: object) -> bool:
+        return key in self._first
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._first)
+
+    def __len__(self) -> int:
+        return len(self._first)
+
+    def keys(self):  # type: ignore[override]  (the dict's own view: set operations in C)
+        return self._first.keys()
+
+
+def _first_positions(keys: list[str | None]) -> dict[str, int]:
+    """Each distinct key (None left out) → where it first is, in order of first appearance."""
+    first = dict(zip(keys, range(len(keys))))  # the last position, in order of first appearance
+    if len(first) < len(keys):  # some key repeats: take the first position of each
+        first = {}
+        for i, key in enumerate(keys):
+            first.setdefault(key, i)  # type: ignore[arg-type]
+    first.pop(None, None)  # type: ignore[call-overload]
+    return first  # type: ignore[return-value]
 
 
 def _whole(plan: Plan) -> PlanColumns | None:

@@ -35,7 +35,7 @@ from sweep3d.stages.infer.kept_outputs import KeptOutputs
 from sweep3d.stages.infer.labels import LabelMap
 from sweep3d.stages.infer.models import builtin_model
 from sweep3d.stages.infer.tasks import check_task, model_outputs
-from sweep3d.stages.jobs import Job, Plan
+from sweep3d.stages.jobs import Job, JobList, Plan
 
 if TYPE_CHECKING:
     from sweep3d.stages.infer.onnx_backend import OnnxRunner
@@ -101,6 +101,9 @@ class InferStage:
 
     def key(self, job: Job) -> str:
         return job.pred_key
+
+    def keys_of(self, jobs: JobList) -> list[str | None]:
+        return jobs.key_column("pred_key")
 
     def upstream(self, job: Job) -> tuple[str, str]:
         return (_table(job), job.image_key)

@@ -30,7 +30,7 @@ from sweep3d.errors import PluginError
 from sweep3d.pixels import encode_png
 from sweep3d.spec.loader import ControlInstance
 from sweep3d.stages.driver import Computed, Feed
-from sweep3d.stages.jobs import Job, Plan
+from sweep3d.stages.jobs import Job, JobList, Plan
 from sweep3d.stages.postprocess.frame import RenderFrame, frame_from_state
 from sweep3d.truth import BLOB_SUFFIX, TRUTH_PASSES
 
@@ -128,6 +128,10 @@ class PostprocessStage:
 
     def key(self, job: Job) -> str | None:
         return job.image_key if job.image_key != job.render_key else None
+
+    def keys_of(self, jobs: JobList) -> list[str | None]:
+        return [image if image != render else None
+                for render, image in zip(jobs.key_column("render_key"), jobs.key_column("image_key"))]
 
     def upstream(self, job: Job) -> tuple[str, str]:
         return ("renders", job.render_key)

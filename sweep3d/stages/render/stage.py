@@ -38,7 +38,7 @@ from sweep3d.spec.assets import materialise_mesh
 from sweep3d.spec.loader import LoadedSpec
 from sweep3d.spec.models import RenderSpec
 from sweep3d.stages.driver import Computed, Feed
-from sweep3d.stages.jobs import Job, Plan
+from sweep3d.stages.jobs import Job, JobList, Plan
 from sweep3d.stages.passes import needed_passes, truth_passes
 from sweep3d.stages.render.device import worker_count
 from sweep3d.stages.render.pool import RenderPool
@@ -145,6 +145,9 @@ class RenderStage:
 
     def key(self, job: Job) -> str:
         return job.render_key
+
+    def keys_of(self, jobs: JobList) -> list[str | None]:
+        return jobs.key_column("render_key")
 
     def upstream(self, job: Job) -> None:
         return None
