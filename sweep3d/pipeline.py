@@ -189,10 +189,10 @@ def _run_locked(spec: LoadedSpec, store: Store, console: Console | None, wait: f
     with store.lock(wait):
         started = time.perf_counter()  # time spent waiting for the lock is not the run's
         started_at = utc_now()
-        store.snapshot_states()  # every blob's state, taken on the other core while this one plans
-        remove_leftovers(store)
+        store.snapshot_states()  # every blob's listing and state, taken on the other core while this one plans
         models = [ModelHandle.resolve(spec, settings) for settings in spec.models]
         plans = [plan_spec(spec, model) for model in models]
+        remove_leftovers(store)  # before anything is written (planning reads no blob folder)
         result = RunResult(uuid.uuid4().hex[:12], plans[0], plans=plans, store=store)
         missing, found = _missing_renders(plans, store, executor)
         _note_device(plans, missing, console)

@@ -167,6 +167,33 @@ def test_a_run_sweeps_temp_files_and_checks_blobs_from_one_listing(tmp_path: Pat
     assert listings[0] == 3  # "ab" changed (its temp file went): listed again; "cd" was not
 
 
+def test_a_run_over_many_blobs_reads_the_blob_folders_from_its_snapshot_alone(tmp_path: Path, monkeypatch) -> None:
+    from sweep3d.cache import snapshot
+    from sweep3d.cache.maintenance import remove_killed_writers_temp_files
+
+    monkeypatch.setattr(snapshot, "MIN_BLOBS", 0)
+    store = Store(tmp_path)
+    keys = [f"{f}{i:038x}" for f in ("ab", "cd") for i in range(800)]
+    for key in keys:
+        store.blob_path(key).parent.mkdir(parents=True, exist_ok=True)
+        store.blob_path(key).write_bytes(b"x")
+    folder = store.blob_path(keys[0]).parent
+    temp, stray = folder / f".{keys[0]}.png.dead.tmp", folder / "stray" / ".deep.tmp"
+    stray.parent.mkdir()
+    for path in (temp, stray, folder / f"{keys[1]}.depth.npz", folder / "cd0123.png"):  # not blobs of "ab"
+        path.write_bytes(b"half")
+    listed = {name: sorted(Store(tmp_path).blob_listing(name).others) for name in ("ab", "cd")}
+    with store.lock():
+        store.snapshot_states()
+        listings = _count_listings(monkeypatch)
+        assert {name: sorted(store.blob_others(name)) for name in ("ab", "cd")} == listed
+        assert store.existing_blobs([*keys, "ab" + "f" * 38]) == set(keys)
+        assert remove_killed_writers_temp_files(tmp_path, store) == 2
+        assert listings[0] == 0, "the parent lists no blob folder the child listed"
+    assert not temp.exists() and not stray.exists()
+    assert store.existing_blobs(keys) == set(keys)  # the snapshot gone with the lock: listed as before
+
+
 def test_a_table_file_written_again_with_the_same_rows_keeps_its_state(tmp_path: Path) -> None:
     import pyarrow as pa
 

@@ -271,9 +271,10 @@ def remove_killed_writers_temp_files(root: Path, store: Store | None = None) -> 
     writer's (a live one would hold the lock), so unlike gc it need not wait for it to age.
 
     Args:
-        store: the caller's store object: the blob folders are read through its listings
-            (:meth:`Store.blob_listing`), which it then remembers for its own existence checks,
-            so a run lists its million blobs once.
+        store: the caller's store object: the blob folders are read through it
+            (:meth:`Store.blob_others`): from the listing its snapshot took (a run over many
+            blobs), else from its own listings, which it remembers for its existence checks, so
+            a run lists its million blobs once.
     """
     store = store if store is not None else Store(root)
     removed = 0
@@ -310,7 +311,7 @@ def _blob_temp_files(store: Store) -> Iterator[Path]:
             yield Path(entry.path)
         if not entry.is_dir():
             continue
-        for name in store.blob_listing(entry.name).others:
+        for name in store.blob_others(entry.name):
             path = blobs / entry.name / name
             if path.is_symlink():
                 continue

@@ -1,13 +1,16 @@
-"""The file states of a store's blobs, taken by a child process while the run plans.
+"""The listing and file states of a store's blobs, taken by a child process while the run plans.
 
 A rerun checks each cached blob's file state against the memo of verified blobs
 (:func:`sweep3d.cache.blobs.damaged_blobs`): one ``stat`` per blob, about 3 s of one core at
 10⁶ blobs. The states do not depend on the plan, so a run holding the lock starts a child
 (:mod:`.stat_blobs`, standard library only) that takes them all while the parent plans on the
-other core, and :func:`~sweep3d.cache.blobs.file_states` reads them from it.
+other core, and :func:`~sweep3d.cache.blobs.file_states` reads them from it. The child lists every
+blob folder to do so, and that listing serves the run's other looks at the folders as well: which
+blobs exist (:meth:`Store.existing_blobs`) and which temp files killed writers left
+(:func:`~sweep3d.cache.maintenance.remove_killed_writers_temp_files`), so the parent lists none.
 
 A snapshot is right only while nothing writes a blob: a run takes it as soon as it holds the
-lock (what killed runs left are temp files, not blobs: the child lists only ``*.png``) and
+lock (what killed runs left are temp files, not blobs: removing them changes no blob) and
 forgets it (:meth:`Store.forget_states`) once its first pass has found what is cached, before
 anything is computed. A key the snapshot lacks is stat'ed directly, and a child
 that fails or hangs costs only the time waited: the states are then taken as before.
@@ -17,6 +20,8 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -30,26 +35,41 @@ MIN_BLOBS = 20_000  # below this many blob files, a child (~30 ms to start) wins
 WAIT = 120.0  # seconds to wait for the child before stat'ing in-process
 
 
+@dataclass(frozen=True)
+class Taken:
+    """What the child found: every blob's key (in key order) and file state, and each blob
+    folder's other names (a killed writer's temp file, a pass's blob)."""
+
+    keys: pa.Array
+    states: np.ndarray
+    others: dict[str, list[str]]
+
+    @cached_property
+    def key_set(self) -> frozenset[str]:
+        """:attr:`keys` as a set, for existence checks."""
+        return frozenset(self.keys.to_pylist())
+
+
 class StateSnapshot:
-    """The child taking the states of every PNG blob under ``blobs`` (a store's blob folder)."""
+    """The child listing and stat'ing every blob under ``blobs`` (a store's blob folder)."""
 
     def __init__(self, blobs: Path) -> None:
         self.process: subprocess.Popen | None = subprocess.Popen(
             [sys.executable, stat_blobs.__file__, str(blobs)], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
-        self.taken: tuple[pa.Array, np.ndarray] | None = None  # (keys, their states) once read
+        self.taken: Taken | None = None  # once read
 
     def states(self, keys: pa.Array) -> tuple[np.ndarray, np.ndarray] | None:
         """(the states of ``keys`` in their order, whether the snapshot has each one), waiting for
         the child; None when it failed."""
-        taken = self._read()
+        taken = self.read()
         if taken is None:
             return None
-        names, states = taken
-        where = positions(keys, names)  # both in key order: a binary search (none for the very same keys)
+        where = positions(keys, taken.keys)  # both in key order: a binary search (none for the very same keys)
         found = where >= 0
-        return states[np.where(found, where, 0)], found
+        return taken.states[np.where(found, where, 0)], found
 
-    def _read(self) -> tuple[pa.Array, np.ndarray] | None:
+    def read(self) -> Taken | None:
+        """What the child found, waiting for it; None when it failed or hung."""
         process, self.process = self.process, None
         if process is None:
             return self.taken
@@ -59,18 +79,22 @@ class StateSnapshot:
             process.kill()
             process.communicate()
             return None
-        if process.returncode != 0 or len(data) < 8:
+        if process.returncode != 0 or len(data) < 16:
             return None
-        n = int.from_bytes(data[:8], "little")
-        end = 8 + 32 * n
-        if len(data) < end:
+        n, length = int.from_bytes(data[:8], "little"), int.from_bytes(data[8:16], "little")
+        end = 16 + 32 * n
+        if len(data) < end + length:
             return None
-        states = np.frombuffer(data, dtype=np.int64, count=4 * n, offset=8).reshape(n, 4)
-        text = data[end:].decode()
-        names = pc.split_pattern(pa.array([text]), "\n").flatten() if n else pa.array([], type=pa.string())
-        if len(names) != n:
+        states = np.frombuffer(data, dtype=np.int64, count=4 * n, offset=16).reshape(n, 4)
+        text = data[end:end + length].decode()
+        keys = pc.split_pattern(pa.array([text]), "\n").flatten() if n else pa.array([], type=pa.string())
+        if len(keys) != n:
             return None
-        self.taken = names, states
+        others: dict[str, list[str]] = {}
+        for line in data[end + length:].decode().split("\n") if len(data) > end + length else ():
+            folder, _, name = line.partition("/")
+            others.setdefault(folder, []).append(name)
+        self.taken = Taken(keys, states, others)
         return self.taken
 
     def close(self) -> None:

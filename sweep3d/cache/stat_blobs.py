@@ -1,12 +1,15 @@
-"""Stat every PNG blob of a store's blob folders; imports nothing but the standard library, so
-that it runs as a script in a child process (see :class:`sweep3d.cache.snapshot.StateSnapshot`).
+"""List and stat every blob of a store's blob folders; imports nothing but the standard library,
+so that it runs as a script in a child process (see :class:`sweep3d.cache.snapshot.StateSnapshot`).
 
     python stat_blobs.py STORE/blobs
 
-writes to standard output the number of blobs n (8 bytes, little-endian), their states (n × 4
-native int64: size, mtime_ns, ctime_ns, inode) and their keys (UTF-8, one per line), in key
-order (folder by folder, each sorted: the parent's sorted keys then meet them without a lookup).
-Everything is stat'ed before anything is written: the reader then only streams.
+writes to standard output the number of blobs n and the byte length k of their keys' text (8
+bytes each, little-endian), their states (n × 4 native int64: size, mtime_ns, ctime_ns, inode),
+their keys (k bytes of UTF-8, one per line) in key order (folder by folder, each sorted: the
+parent's sorted keys then meet them without a hash lookup), and then every other name in the
+blob folders as ``<folder>/<name>``, one per line (a killed writer's temp file, a pass's blob).
+A blob is ``<key>.png`` in the folder named by its key's first two characters, as the store
+places it. Everything is listed and stat'ed before anything is written: the reader only streams.
 """
 
 from __future__ import annotations
@@ -18,35 +21,40 @@ import sys
 EXT = ".png"
 
 
-def stat_folder(path: str, names: list[str], states: array.array) -> None:
-    """Add the PNG blobs of folder ``path`` (names without the extension) and their states."""
+def stat_folder(path: str, folder: str, keys: list[str], states: array.array, others: list[str]) -> None:
+    """Add the blobs of the folder at ``path`` (their keys and states), and its other names."""
     fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY)
     try:
         append = states.extend
         for name in sorted(os.listdir(fd)):
-            if not name.endswith(EXT):
+            key = name[: -len(EXT)]
+            if not name.endswith(EXT) or key[:2] != folder:
+                others.append(f"{folder}/{name}")
                 continue
             try:
                 st = os.stat(name, dir_fd=fd)
             except OSError:
                 continue  # gone or unreadable: the caller stats what it does not find here
-            names.append(name[: -len(EXT)])
+            keys.append(key)
             append((st.st_size, st.st_mtime_ns, st.st_ctime_ns, st.st_ino))
     finally:
         os.close(fd)
 
 
 def main(blobs: str) -> None:
-    names: list[str] = []
+    keys: list[str] = []
+    others: list[str] = []
     states = array.array("q")
     for folder in sorted(os.listdir(blobs)):
         path = os.path.join(blobs, folder)
         if len(folder) == 2 and os.path.isdir(path):
-            stat_folder(path, names, states)
+            stat_folder(path, folder, keys, states, others)
+    text = "\n".join(keys).encode()
     out = sys.stdout.buffer
-    out.write(len(names).to_bytes(8, "little"))
+    out.write(len(keys).to_bytes(8, "little") + len(text).to_bytes(8, "little"))
     states.tofile(out)
-    out.write("\n".join(names).encode())
+    out.write(text)
+    out.write("\n".join(others).encode())
     out.flush()
 
 

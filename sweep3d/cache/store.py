@@ -132,11 +132,15 @@ class Store:
     def existing_blobs(self, keys: Iterable[str], ext: str = "png") -> set[str]:
         """The ``keys`` whose blob is there.
 
-        Many keys are looked up in a listing of the blob folders (:meth:`blob_listing`), which
-        reads a name where a check per key costs a ``stat`` (about five times as much); few are
-        checked one by one.
+        Many keys are looked up in a listing of the blob folders: the snapshot's, where a run took
+        one (:meth:`snapshot_states`), else :meth:`blob_listing`, which reads a name where a check
+        per key costs a ``stat`` (about five times as much); few are checked one by one.
         """
         keys = keys if isinstance(keys, (set, frozenset)) else set(keys)
+        taken = self.state_snapshot.read() if self.state_snapshot is not None and ext == BLOB_EXT \
+            and len(keys) > 1000 else None
+        if taken is not None:  # the child listed every blob folder while the run planned
+            return keys & taken.key_set
         folders = sorted({key[:2] for key in keys})
         entries = sum(_folder_entries(self.root / "blobs" / f) for f in folders) if len(keys) > 1000 else None
         if entries is None or entries > LISTING_ADVANTAGE * len(keys):
@@ -166,6 +170,12 @@ class Store:
         taken, self.state_snapshot = self.state_snapshot, None
         if taken is not None:
             taken.close()
+
+    def blob_others(self, folder: str) -> Iterable[str]:
+        """What the blob folder ``blobs/<folder>`` holds besides blobs: from the snapshot's
+        listing where a run took one (:meth:`snapshot_states`), else from :meth:`blob_listing`."""
+        taken = self.state_snapshot.read() if self.state_snapshot is not None and len(folder) == 2 else None
+        return taken.others.get(folder, ()) if taken is not None else self.blob_listing(folder).others
 
     def blob_listing(self, folder: str) -> BlobListing:
         """What the blob folder ``blobs/<folder>`` holds (nothing when it is not there).

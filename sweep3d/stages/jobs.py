@@ -523,10 +523,9 @@ class FirstJobs(Mapping[str, Job]):
 def _first_positions(keys: list[str | None]) -> dict[str, int]:
     """Each distinct key (None left out) → where it first is, in order of first appearance."""
     first = dict(zip(keys, range(len(keys))))  # the last position, in order of first appearance
-    if len(first) < len(keys):  # some key repeats: take the first position of each
-        first = {}
-        for i, key in enumerate(keys):
-            first.setdefault(key, i)  # type: ignore[arg-type]
+    if len(first) < len(keys):  # some key repeats (or is None throughout): each key's first position
+        earliest = dict(zip(reversed(keys), range(len(keys) - 1, -1, -1)))
+        first = {key: earliest[key] for key in first}
     first.pop(None, None)  # type: ignore[call-overload]
     return first  # type: ignore[return-value]
 
