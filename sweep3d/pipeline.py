@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import sys
 import time
 import uuid
 from dataclasses import dataclass, field
@@ -126,9 +127,9 @@ def write_jobs(plans: Plan | list[Plan], store: Store) -> None:
     path = store.jobs_path(plans[0].spec.name)
     models = json.dumps([plan.model for plan in plans]).encode()
     plugins = plugins_metadata(plans[0].spec)
-    prints = [plan.fingerprint() for plan in plans]
-    digest = None if None in prints else \
-        hashlib.sha256(b"\n".join([_jobs_format(), *map(str.encode, prints), models, plugins])).hexdigest()
+    prints, salt = [plan.fingerprint() for plan in plans], _jobs_format()
+    digest = None if None in prints or salt is None else \
+        hashlib.sha256(b"\n".join([salt, *map(str.encode, prints), models, plugins])).hexdigest()
     if digest is not None and written_from(store, path) == digest:
         return
     tables = [plan.table() for plan in plans]
@@ -143,13 +144,20 @@ def write_jobs(plans: Plan | list[Plan], store: Store) -> None:
 
 
 @lru_cache(maxsize=1)
-def _jobs_format() -> bytes:
-    """What makes the jobs file's bytes besides the plan: the code that builds its table and the
-    store's writer, and pyarrow's version (a change to any of them writes the file again)."""
+def _jobs_format() -> bytes | None:
+    """What makes the jobs file's bytes besides the plan: the code that builds its table, its
+    metadata and the store's writer, and pyarrow's version (a change to any of them writes the
+    file again); None where the code cannot be read (installed in a zip: the file is compared)."""
     from sweep3d.cache import store as store_module
+    from sweep3d.spec import columns as columns_module
+    from sweep3d.stages import code as code_module
     from sweep3d.stages import jobs as jobs_module
 
-    code = b"".join(Path(m.__file__).read_bytes() for m in (jobs_module, store_module))  # type: ignore[arg-type]
+    try:
+        code = b"".join(Path(m.__file__).read_bytes()  # type: ignore[arg-type]
+                        for m in (jobs_module, store_module, columns_module, code_module, sys.modules[__name__]))
+    except (OSError, TypeError):
+        return None
     return f"jobs file 1, pyarrow {pa.__version__}, code {hashlib.sha256(code).hexdigest()}".encode()
 
 

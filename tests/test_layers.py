@@ -66,6 +66,8 @@ def test_the_command_line_converts_lists_without_importing_pandas_and_pandas_obj
             main()
         pa.array(["a key"])  # pyarrow's first list conversion: it would import pandas to probe it
         assert "pandas" not in sys.modules
+        import importlib.util
+        assert importlib.util.find_spec("pandas") is not None  # a plug-in asking whether pandas is there
         import pandas as pd  # a plug-in's: pandas objects then convert as they always do
         assert pa.array(pd.Series([1.0, None])).null_count == 1
         assert pa.types.is_dictionary(pa.array(pd.Categorical(["a", "b"])).type)

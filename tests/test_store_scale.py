@@ -222,3 +222,16 @@ def test_a_listing_splits_into_keys_and_the_rest_as_a_name_by_name_check_does(na
     blob = [name.endswith(".png") and name[:-4][:2] == folder for name in names]  # <key>.png, the key in its folder
     expected = ([n[:-4] for n, b in zip(names, blob) if b], [n for n, b in zip(names, blob) if not b])
     assert store_module._split_listing(names, folder, ".png") == expected
+
+
+def test_a_pass_blob_whose_name_ends_like_a_blob_is_found_by_a_listing(tmp_path: Path, monkeypatch) -> None:
+    monkeypatch.setattr(store_module, "LISTING_ADVANTAGE", 100)  # list the folder (as on tmpfs), not a stat per key
+    store = Store(tmp_path)
+    keys = [f"ab{i:038x}" for i in range(1200)]
+    for key in keys:
+        store.blob_path(key, "mask.png").parent.mkdir(parents=True, exist_ok=True)
+        store.blob_path(key, "mask.png").write_bytes(b"x")
+        store.blob_path(key, "depth.npz").write_bytes(b"x")
+    assert store.existing_blobs(keys, "mask.png") == set(keys)
+    assert store.existing_blobs(keys, "depth.npz") == set(keys)
+    assert store.existing_blobs(keys) == set()  # no RGB blob among them

@@ -13,16 +13,20 @@ sweep3d keeps pyarrow's behaviour unchanged.
 
 from __future__ import annotations
 
-import importlib.util
 import sys
 from importlib.machinery import ModuleSpec
 from types import ModuleType
+from typing import Any
+
+
+_skipped = False
 
 
 def skip_pandas_probe() -> None:
     """Make pyarrow's first "is this a pandas object?" check find no pandas, until pandas is
-    imported (call it before anything converts a Python sequence to Arrow)."""
-    if "pandas" in sys.modules:  # already imported: pyarrow finds it at no cost
+    imported (call it before anything converts a Python sequence to Arrow; once per process)."""
+    global _skipped
+    if _skipped or "pandas" in sys.modules:  # done already, or imported: pyarrow finds it at no cost
         return
     import pyarrow as pa
 
@@ -33,6 +37,7 @@ def skip_pandas_probe() -> None:
     finally:
         sys.meta_path.remove(blocker)
     sys.meta_path.insert(0, _LookAgainAfterPandas())
+    _skipped = True
 
 
 class _NoPandas:
@@ -45,23 +50,50 @@ class _NoPandas:
 
 
 class _LookAgainAfterPandas:
-    """An import finder that, when pandas is first imported, lets the import run as usual and
-    then has pyarrow look for pandas again (it would otherwise keep the probe's "no pandas")."""
+    """An import finder that finds pandas as the others do, with a loader that, once pandas has
+    run, has pyarrow look for it again (pyarrow would otherwise keep the probe's "no pandas")."""
 
     def find_spec(self, name: str, path: object = None, target: object = None) -> ModuleSpec | None:
         if name != "pandas":
             return None
-        sys.meta_path.remove(self)  # once: the other finders now find pandas as usual
-        spec = importlib.util.find_spec(name)
-        if spec is None or spec.loader is None or not hasattr(spec.loader, "exec_module"):
-            return spec
-        loader, run = spec.loader, spec.loader.exec_module
+        for finder in list(sys.meta_path):  # as the import system would, without this finder
+            if finder is self or not hasattr(finder, "find_spec"):
+                continue
+            spec = finder.find_spec(name, path, target)
+            if spec is not None:
+                if spec.loader is not None and hasattr(spec.loader, "exec_module"):
+                    spec.loader = _ThenLookAgain(spec.loader, self)  # this spec's own: a shared loader stays as it is
+                return spec
+        return None
 
-        def exec_module(module: ModuleType) -> None:
-            run(module)
+    def done(self) -> None:
+        """Leave the import system: pandas is imported and pyarrow knows it."""
+        try:
+            sys.meta_path.remove(self)
+        except ValueError:  # another thread's import of pandas came first
+            pass
+
+
+class _ThenLookAgain:
+    """pandas' own loader (everything is asked of it), that tells pyarrow once pandas has run."""
+
+    def __init__(self, loader: Any, finder: _LookAgainAfterPandas) -> None:
+        self._loader = loader
+        self._finder = finder
+
+    def create_module(self, spec: ModuleSpec) -> ModuleType | None:
+        create = getattr(self._loader, "create_module", None)
+        return create(spec) if create is not None else None
+
+    def exec_module(self, module: ModuleType) -> None:
+        self._loader.exec_module(module)
+        self._finder.done()
+        try:
             import pyarrow as pa
 
             pa.lib._pandas_api.compat  # noqa: B018  (pyarrow's shim imports pandas' parts now: it is there)
+        except Exception:  # noqa: BLE001  (a pandas pyarrow refuses: as without the probe, it is not used)
+            pass
 
-        loader.exec_module = exec_module  # type: ignore[method-assign]
-        return spec
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._loader, name)

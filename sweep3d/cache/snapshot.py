@@ -86,13 +86,18 @@ class StateSnapshot:
         if len(data) < end + length:
             return None
         states = np.frombuffer(data, dtype=np.int64, count=4 * n, offset=16).reshape(n, 4)
-        text = data[end:end + length].decode()
-        keys = pc.split_pattern(pa.array([text]), "\n").flatten() if n else pa.array([], type=pa.string())
+        try:
+            text = data[end:end + length].decode()
+        except UnicodeDecodeError:  # a blob's name that is not UTF-8: the parent looks for itself
+            return None
+        sep = stat_blobs.SEPARATOR
+        keys = pc.split_pattern(pa.array([text]), sep).flatten() if n else pa.array([], type=pa.string())
         if len(keys) != n:
             return None
         others: dict[str, list[str]] = {}
-        for line in data[end + length:].decode().split("\n") if len(data) > end + length else ():
-            folder, _, name = line.partition("/")
+        rest = data[end + length:].decode("utf-8", "surrogateescape")  # as os.listdir would name them
+        for entry in rest.split(sep) if rest else ():
+            folder, _, name = entry.partition("/")
             others.setdefault(folder, []).append(name)
         self.taken = Taken(keys, states, others)
         return self.taken

@@ -5,9 +5,10 @@ so that it runs as a script in a child process (see :class:`sweep3d.cache.snapsh
 
 writes to standard output the number of blobs n and the byte length k of their keys' text (8
 bytes each, little-endian), their states (n × 4 native int64: size, mtime_ns, ctime_ns, inode),
-their keys (k bytes of UTF-8, one per line) in key order (folder by folder, each sorted: the
+their keys (k bytes of UTF-8, NUL between two) in key order (folder by folder, each sorted: the
 parent's sorted keys then meet them without a hash lookup), and then every other name in the
-blob folders as ``<folder>/<name>``, one per line (a killed writer's temp file, a pass's blob).
+blob folders as ``<folder>/<name>``, NUL between two (a killed writer's temp file, a pass's blob);
+a name that is not UTF-8 is written as the file system gave it (``surrogateescape``).
 A blob is ``<key>.png`` in the folder named by its key's first two characters, as the store
 places it. Everything is listed and stat'ed before anything is written: the reader only streams.
 """
@@ -19,6 +20,7 @@ import os
 import sys
 
 EXT = ".png"
+SEPARATOR = "\0"  # between names: the one character no file name holds
 
 
 def stat_folder(path: str, folder: str, keys: list[str], states: array.array, others: list[str]) -> None:
@@ -49,12 +51,12 @@ def main(blobs: str) -> None:
         path = os.path.join(blobs, folder)
         if len(folder) == 2 and os.path.isdir(path):
             stat_folder(path, folder, keys, states, others)
-    text = "\n".join(keys).encode()
+    text = SEPARATOR.join(keys).encode("utf-8", "surrogateescape")  # names as the file system gave them
     out = sys.stdout.buffer
     out.write(len(keys).to_bytes(8, "little") + len(text).to_bytes(8, "little"))
     states.tofile(out)
     out.write(text)
-    out.write("\n".join(others).encode())
+    out.write(SEPARATOR.join(others).encode("utf-8", "surrogateescape"))
     out.flush()
 
 

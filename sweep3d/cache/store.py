@@ -146,9 +146,11 @@ class Store:
         if entries is None or entries > LISTING_ADVANTAGE * len(keys):
             return {key for key in keys if os.path.exists(self.blob_file(key, ext))}
         listings = [self.blob_listing(folder) for folder in folders]
-        if ext != BLOB_EXT:
+        if ext != BLOB_EXT:  # a pass's blob: "<key>.mask.png" is listed as the blob key "<key>.mask"
+            inner = f".{ext.removesuffix(f'.{BLOB_EXT}')}" if ext.endswith(f".{BLOB_EXT}") else None
             return keys & {key for folder, listing in zip(folders, listings)
-                           for key in _split_listing(listing.others, folder, f".{ext}")[0]}
+                           for names, suffix in ((listing.others, f".{ext}"), (listing.keys, inner)) if suffix
+                           for key in _split_listing(names, folder, suffix)[0]}
         joined = self._joined  # the same listings as last time: their keys joined then
         if joined is None or len(joined[0]) != len(listings) or any(a is not b for a, b in zip(joined[0], listings)):
             self._joined = joined = (listings, frozenset().union(*(listing.keys for listing in listings)))
