@@ -405,3 +405,20 @@ def test_columns_written_for_the_fingerprint_tell_different_values_apart(a: list
     from sweep3d.stages.jobs import _list_bytes
 
     assert (_list_bytes(a) == _list_bytes(b)) == (a == b)
+
+
+def test_a_stage_that_changes_its_key_alone_gets_its_own_keys_not_its_parents(tmp_path: Path) -> None:
+    from sweep3d.stages.driver import unique_jobs
+    from sweep3d.stages.jobs import JobList
+    from sweep3d.stages.render import LOCAL
+    from sweep3d.stages.render.stage import RenderStage
+
+    class Prefixed(RenderStage):
+        def key(self, job):
+            return "x" + job.render_key
+
+    spec = load_spec(write_spec(tmp_path, specs_example('type = "random"\nsamples = 9')))
+    plan = make_plan(spec, framing=Framing.full(32), model_digest="m", blender="4.5")
+    jobs = JobList(plan.jobs.columns, plan.jobs.indices)
+    assert list(unique_jobs(Prefixed(LOCAL), jobs)) == ["x" + k for k in dict.fromkeys(j.render_key for j in jobs)]
+    assert list(unique_jobs(RenderStage(LOCAL), jobs)) == list(dict.fromkeys(j.render_key for j in jobs))

@@ -203,13 +203,22 @@ def unique_jobs(stage: Stage, jobs: Iterable[Job]) -> Mapping[str, Job]:
     jobs remember it per key function, as a run asks for it several times per stage, and make
     no job for it where the stage reads its keys from the plan's columns: ``keys_of``)."""
     if isinstance(jobs, JobList):
-        return jobs.unique_by(stage.key, getattr(stage, "keys_of", None))
+        return jobs.unique_by(stage.key, _keys_of(stage))
     unique: dict[str, Job] = {}
     for job in jobs:
         key = stage.key(job)
         if key is not None:
             unique.setdefault(key, job)
     return unique
+
+
+def _keys_of(stage: Stage) -> Callable[[JobList], list[str | None]] | None:
+    """The stage's ``keys_of``, where the class that defines it also defines its ``key`` (a
+    subclass that changes ``key`` alone gets its keys job by job, never its parent's)."""
+    mro = type(stage).__mro__
+    owner = next((c for c in mro if "keys_of" in c.__dict__), None)
+    return getattr(stage, "keys_of") if owner is not None and owner is next(c for c in mro if "key" in c.__dict__) \
+        else None
 
 
 #: (keys of a plan at a stage that have a row, those of them that are cached): see :func:`rows_and_cached`.
