@@ -217,8 +217,9 @@ def _keys_of(stage: Stage) -> Callable[[JobList], list[str | None]] | None:
     subclass that changes ``key`` alone gets its keys job by job, never its parent's)."""
     mro = type(stage).__mro__
     owner = next((c for c in mro if "keys_of" in c.__dict__), None)
-    return getattr(stage, "keys_of") if owner is not None and owner is next(c for c in mro if "key" in c.__dict__) \
-        else None
+    if owner is None or owner is not next(c for c in mro if "key" in c.__dict__):
+        return None
+    return stage.keys_of  # type: ignore[attr-defined]  (optional: see Stage.key)
 
 
 #: (keys of a plan at a stage that have a row, those of them that are cached): see :func:`rows_and_cached`.
