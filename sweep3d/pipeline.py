@@ -26,6 +26,7 @@ import pyarrow as pa
 from rich.console import Console
 from rich.markup import escape
 
+from sweep3d.cache import snapshot
 from sweep3d.cache.maintenance import compact_table, remove_killed_writers_temp_files
 from sweep3d.cache.store import TABLES, Store, utc_now
 from sweep3d.cache.written import remember_written, written_from
@@ -200,6 +201,8 @@ def _run_locked(spec: LoadedSpec, store: Store, console: Console | None, wait: f
         store.snapshot_states()  # every blob's listing and state, taken on the other core while this one plans
         models = [ModelHandle.resolve(spec, settings) for settings in spec.models]
         plans = [plan_spec(spec, model) for model in models]
+        if max(len(plan.jobs) for plan in plans) < snapshot.MIN_JOBS:
+            store.forget_states()  # few blobs to check: waiting for the child's look at every blob costs more
         remove_leftovers(store)  # before anything is written (planning reads no blob folder)
         result = RunResult(uuid.uuid4().hex[:12], plans[0], plans=plans, store=store)
         missing, found = _missing_renders(plans, store, executor)

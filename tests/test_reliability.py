@@ -233,6 +233,7 @@ def test_a_run_forgets_its_snapshot_of_blob_states_before_it_computes(tiny_copy,
     from sweep3d.stages import driver
 
     monkeypatch.setattr(snapshot, "MIN_BLOBS", 0)
+    monkeypatch.setattr(snapshot, "MIN_JOBS", 0)
     taken: list[bool] = []
     real_begin = driver.begin
 
@@ -258,6 +259,10 @@ def test_a_run_forgets_its_snapshot_of_blob_states_before_it_computes(tiny_copy,
     assert taken == [True, True, True], "every stage's first look at the store reads the snapshot"
     assert computing == [False], "gone before anything is computed and written"
     assert looked == ["images", "predictions"], "the renders found before the pass are not looked up again"
+    monkeypatch.setattr(snapshot, "MIN_JOBS", 10**9)
+    taken.clear()
+    assert run(load_spec(tiny_copy / "spec.toml")).failed == 0
+    assert taken == [False, False, False], "a plan of few jobs does not wait for the child's look at every blob"
 
 
 def test_the_memo_forgets_dropped_keys_and_survives_its_own_damage(tmp_path, monkeypatch):

@@ -8,6 +8,8 @@ other core, and :func:`~sweep3d.cache.blobs.file_states` reads them from it. The
 blob folder to do so, and that listing serves the run's other looks at the folders as well: which
 blobs exist (:meth:`Store.existing_blobs`) and which temp files killed writers left
 (:func:`~sweep3d.cache.maintenance.remove_killed_writers_temp_files`), so the parent lists none.
+A run whose plan is small (:data:`MIN_JOBS`) stops the child once it has planned: it would wait
+for a look at every blob of a large store to check a few of them.
 
 A snapshot is right only while nothing writes a blob: a run takes it as soon as it holds the
 lock (what killed runs left are temp files, not blobs: removing them changes no blob) and
@@ -32,6 +34,7 @@ from sweep3d.cache import stat_blobs
 from sweep3d.cache.key_join import positions
 
 MIN_BLOBS = 20_000  # below this many blob files, a child (~30 ms to start) wins nothing
+MIN_JOBS = 20_000  # a plan of fewer jobs checks too few blobs for the child's look at every blob to pay
 WAIT = 120.0  # seconds to wait for the child before stat'ing in-process
 
 
