@@ -55,6 +55,7 @@ DIGEST_COLUMN = "sha256"  # hex SHA-256 of a blob's bytes, recorded in its row w
 BLOB_EXT = "png"  # the file type of the blobs a run makes
 BLOB_SUFFIXES = (f".{BLOB_EXT}", *(f".{suffix}" for suffix in TRUTH_BLOBS))  # the names of blobs end so
 _HEX = re.compile(r"[0-9a-f]+")  # a key, as :mod:`sweep3d.cache.keys` writes it
+FEW_KEYS = 1000  # up to this many keys are checked one by one: no listing is worth its set-up
 LISTING_ADVANTAGE = 4  # listing a folder's entries costs about a quarter of a stat per entry
 LISTING_SETTLED = 2.0  # seconds since a blob folder last changed before its listing is remembered
 SUPERSEDED_GRACE = 600.0  # seconds a compaction keeps the segments it merged, for readers that listed them
@@ -137,13 +138,13 @@ class Store:
         per key costs a ``stat`` (about five times as much); few are checked one by one.
         """
         keys = keys if isinstance(keys, (set, frozenset)) else set(keys)
-        taken = self.state_snapshot.read() if self.state_snapshot is not None and ext == BLOB_EXT \
-            and len(keys) > 1000 else None
+        if len(keys) <= FEW_KEYS:
+            return {key for key in keys if os.path.exists(self.blob_file(key, ext))}
+        taken = self.state_snapshot.read() if self.state_snapshot is not None and ext == BLOB_EXT else None
         if taken is not None:  # the child listed every blob folder while the run planned
             return keys & taken.key_set
         folders = sorted({key[:2] for key in keys})
-        entries = sum(_folder_entries(self.root / "blobs" / f) for f in folders) if len(keys) > 1000 else None
-        if entries is None or entries > LISTING_ADVANTAGE * len(keys):
+        if sum(_folder_entries(self.root / "blobs" / f) for f in folders) > LISTING_ADVANTAGE * len(keys):
             return {key for key in keys if os.path.exists(self.blob_file(key, ext))}
         listings = [self.blob_listing(folder) for folder in folders]
         if ext != BLOB_EXT:  # a pass's blob: "<key>.mask.png" is listed as the blob key "<key>.mask"
