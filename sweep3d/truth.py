@@ -26,8 +26,13 @@ import numpy as np
 TRUTH_PASSES = ("mask", "depth")
 #: Every pass a consumer may ask for.
 PASSES = ("depth", "mask", "uv")
-#: Bumped when the truth passes or their columns change for the same render.
+#: Bumped when the truth passes or their columns change for the same render (not for a column
+#: that rows from before may lack and readers take as unknown: ``framed_pixels``).
 TRUTH_VERSION = 1
+#: Bumped when the truth rows change for a render that a control's ``edit`` touched (keyed only
+#: there, so other renders keep their rows): 2, what an edit adds is an occluder of the silhouette
+#: unless it is ``part_of_object`` (it was left in the silhouette render, or ignored).
+EDITED_TRUTH_VERSION = 2
 #: Blob suffixes under the truth key (``blobs/ab/<truth_key>.<suffix>``).
 BLOB_SUFFIX = {"mask": "mask.png", "depth": "depth.npz"}
 #: Columns a truth row adds to ``results`` (besides its key).
@@ -45,9 +50,10 @@ def box(mask: np.ndarray) -> tuple[int, int, int, int] | None:
     return int(xs.min()), int(ys.min()), int(xs.max()) + 1, int(ys.max()) + 1
 
 
-def ground_truth(mask: np.ndarray, silhouette: float | None) -> dict[str, Any]:
-    """The truth row's numbers from the visible ``mask`` and the unoccluded, unclipped silhouette's
-    pixel count (None: unknown, e.g. the object reaches behind the camera)."""
+def ground_truth(mask: np.ndarray, silhouette: float | None, framed: float | None = None) -> dict[str, Any]:
+    """The truth row's numbers from the visible ``mask``, the unoccluded, unclipped silhouette's
+    pixel count (None: unknown, e.g. the object reaches behind the camera) and how many of those
+    pixels lie in the image (``framed``: with no visible pixel, 0 is out of frame, more is occluded)."""
     visible = int(np.count_nonzero(mask))
     found = box(mask)
     x0, y0, x1, y1 = found if found is not None else (None,) * 4
@@ -56,7 +62,7 @@ def ground_truth(mask: np.ndarray, silhouette: float | None) -> dict[str, Any]:
         fraction = 0.0 if visible == 0 else min(1.0, visible / silhouette) if silhouette > 0 else None
     return {"gt_x0": x0, "gt_y0": y0, "gt_x1": x1, "gt_y1": y1, "visible_pixels": visible,
             "silhouette_pixels": None if silhouette is None else int(round(silhouette)),
-            "visible_fraction": fraction}
+            "framed_pixels": None if framed is None else int(round(framed)), "visible_fraction": fraction}
 
 
 def encode_mask(mask: np.ndarray) -> bytes:

@@ -92,6 +92,7 @@ class Job:
     in_frame: bool = True
     visible: int = 600  # visible pixels of the object
     fraction: float | None = 0.8
+    framed: int = 750  # pixels of its unoccluded silhouette in the image
     truth: bool = True  # a truth row exists (else evaluable is unknown: counted)
     valid: bool = True
     outcome: str = "correct"
@@ -112,7 +113,9 @@ class Job:
 
     @property
     def reason(self) -> str:
-        return "out of frame" if not self.in_frame or self.visible == 0 or self.fraction is None else "hidden"
+        if not self.in_frame or self.fraction is None or self.framed == 0:
+            return "out of frame"
+        return "fully occluded" if self.visible == 0 else "hidden"
 
 
 def synthetic_jobs() -> list[Job]:
@@ -132,7 +135,9 @@ def synthetic_jobs() -> list[Job]:
             job.in_frame, job.visible, job.fraction = False, 0, None
         elif i % 10 == 3:  # hidden: some of it shows, less than min_visible; wrong on purpose
             job.visible, job.fraction, job.outcome, job.iou = 40, 0.05, "wrong_class", 0.7
-        elif i == 4:  # in frame by the plan's geometry, but no pixel reached the image
+        elif i == 4:  # in frame by the plan's geometry, but no pixel would reach the image even unoccluded
+            job.visible, job.fraction, job.framed, job.outcome, job.iou = 0, 0.0, 0, "missed", None
+        elif i == 10:  # in the image, but wholly behind an occluder
             job.visible, job.fraction, job.outcome, job.iou = 0, 0.0, "missed", None
         elif i == 8:
             job.truth = False
@@ -155,10 +160,10 @@ def pred_box(job: Job) -> tuple[float, float, float, float] | None:
 
 
 def make_store(folder: Path, jobs: list[Job], kind: str = "localization", models: tuple[str, ...] = ("m",),
-               images: bool = False) -> Path:
+               images: bool = False, framed: bool = True) -> Path:
     """A spec and a store holding ``jobs`` with the columns of ``kind``'s evaluator (``localization``,
     ``detection`` (its box columns only), ``segmentation``, or ``classification``: none of the box or
-    mask columns); returns the spec."""
+    mask columns); returns the spec. Without ``framed``, the truth rows are from before ``framed_pixels``."""
     folder.mkdir(parents=True, exist_ok=True)
     spec = write_spec(folder, SPEC)
     store = Store(folder / "store")
@@ -177,14 +182,14 @@ def make_store(folder: Path, jobs: list[Job], kind: str = "localization", models
         if job.in_frame and job.truth:
             truths.append({"truth_key": f"t{job.job}", "render_key": f"r{job.job}", "passes": ["mask"],
                            **dict(zip(("gt_x0", "gt_y0", "gt_x1", "gt_y1"), TRUE_BOX if job.visible else [None] * 4)),
-                           "visible_pixels": job.visible, "silhouette_pixels": 750,
+                           "visible_pixels": job.visible, "silhouette_pixels": 750, "framed_pixels": job.framed,
                            "visible_fraction": job.fraction, "created_at": T0})
     metadata = {PARAMETERS_METADATA: json.dumps(PARAMETERS).encode(), MIN_VISIBLE_METADATA: str(MIN_VISIBLE).encode()}
     if len(models) > 1:
         metadata[MODELS_METADATA] = json.dumps(list(models)).encode()
     store.write_table_file(store.jobs_path("tasks"), pa.Table.from_pylist(rows).replace_schema_metadata(metadata))
     store.append("predictions", predictions)
-    store.append("truths", truths)
+    store.append("truths", truths if framed else [{k: v for k, v in t.items() if k != "framed_pixels"} for t in truths])
     if images:
         write_blobs(store, jobs)
     return spec
@@ -255,7 +260,7 @@ def test_unevaluable_jobs_are_never_averaged_and_are_counted_apart_with_their_re
     unevaluable = [j for j in jobs if j.evaluable is False]
     assert summary.not_evaluable == len(unevaluable) and summary.min_visible == MIN_VISIBLE
     assert summary.not_evaluable_reasons == {
-        reason: sum(j.reason == reason for j in unevaluable) for reason in ("hidden", "out of frame")}
+        reason: sum(j.reason == reason for j in unevaluable) for reason in ("fully occluded", "hidden", "out of frame")}
     assert summary.invalid == sum(not j.valid and j.evaluable is not False for j in jobs)
     assert summary.counted + summary.invalid + summary.not_evaluable == len(jobs)
     assert all(f["job"] in {j.job for j in counted} for f in summary.failures)
@@ -278,6 +283,17 @@ def test_unevaluable_jobs_are_never_averaged_and_are_counted_apart_with_their_re
     assert all(r["min_visible"] == MIN_VISIBLE and r["object_jobs"] == 36 for r in found.values())
     assert found["mug", "out of frame"]["share"] == pytest.approx(expected["mug", "out of frame"] / 36)
     assert stored_summary(store, "tasks", PARAMETERS).not_evaluable == len(unevaluable)
+
+
+def test_truth_rows_from_before_framed_pixels_call_an_unseen_object_in_frame_fully_occluded(tmp_path: Path) -> None:
+    """Such a row cannot tell an occluder from a frame's edge that cuts all of the object off: in
+    frame by the plan's geometry and not a pixel visible reads as fully occluded."""
+    jobs = synthetic_jobs()
+    _, con, _ = opened(make_store(tmp_path, jobs, framed=False))
+    found = {r["reason"]: r["n"] for r in rows_of(con, "SELECT reason, sum(n)::BIGINT AS n FROM not_evaluable GROUP BY 1")}
+    unseen = [j for j in jobs if j.in_frame and j.truth and j.visible == 0]
+    assert {j.job for j in unseen} == {4, 10} and found["fully occluded"] == len(unseen)
+    assert found["out of frame"] == sum(not j.in_frame for j in jobs)
 
 
 def test_the_explorer_counts_and_galleries_leave_unevaluable_jobs_out(tmp_path: Path) -> None:
@@ -313,7 +329,9 @@ def test_the_printed_findings_say_how_many_were_not_evaluable_and_why(tmp_path: 
     line = not_evaluable_line(summary)
     hidden = sum(j.evaluable is False and j.reason == "hidden" for j in jobs)
     out = sum(j.evaluable is False and j.reason == "out of frame" for j in jobs)
-    assert line == f"{hidden + out} jobs not evaluable, excluded: {hidden} hidden (< 20% visible), {out} out of frame"
+    occluded = sum(j.evaluable is False and j.reason == "fully occluded" for j in jobs)
+    assert occluded == 1 and line == (f"{hidden + out + occluded} jobs not evaluable, excluded: {occluded} fully occluded, "
+                                      f"{hidden} hidden (< 20% visible), {out} out of frame")
     assert load_spec(spec).name == "tasks"
 
 

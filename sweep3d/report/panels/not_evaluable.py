@@ -1,4 +1,5 @@
-"""Not evaluable: the jobs no accuracy counts, and why (out of frame, or too little of the object visible).
+"""Not evaluable: the jobs no accuracy counts, and why (out of frame, fully occluded, or too little of the
+object visible).
 
 A model cannot be right or wrong about an object it was not shown, so these jobs are counted
 apart, never as failures. Every number comes from the ``not_evaluable`` view (see
@@ -13,10 +14,10 @@ from typing import Any
 from sweep3d.report.figures import Figure, layout, make_figure, pct, plot_text
 from sweep3d.report.panel import PanelInputs
 from sweep3d.stages.aggregate import has_view
-from sweep3d.stages.aggregate.tasks import HIDDEN, OUT_OF_FRAME
+from sweep3d.stages.aggregate.tasks import HIDDEN, OCCLUDED, OUT_OF_FRAME
 
-REASONS = (OUT_OF_FRAME, HIDDEN)
-REASON_COLORS = {OUT_OF_FRAME: "#9aa0a6", HIDDEN: "#dd8452"}
+REASONS = (OUT_OF_FRAME, OCCLUDED, HIDDEN)
+REASON_COLORS = {OUT_OF_FRAME: "#9aa0a6", OCCLUDED: "#8c6d5a", HIDDEN: "#dd8452"}
 
 
 def build(inputs: PanelInputs) -> dict[str, Any] | None:

@@ -9,8 +9,11 @@ whatever else its store holds:
     per (object, reason): ``n`` jobs with ``evaluable = false``, ``object_jobs`` (all the
     object's jobs), ``share`` of them, and ``min_visible`` (the plan's threshold; null without
     truth passes). ``reason`` is ``out of frame`` (the planner put the object outside the frame,
-    no pixel of it reached the image, or it reaches behind the camera, so no visible fraction)
-    or ``hidden`` (some of it is in the image, but less than ``min_visible`` of its silhouette:
+    it reaches behind the camera, so no visible fraction, or no pixel of it would reach the image
+    even unoccluded: the truth row's ``framed_pixels`` is 0), ``fully occluded`` (in frame, and
+    no pixel of it visible: something in front hides all of it; a truth row from before
+    ``framed_pixels`` cannot tell this from a frame's edge that cuts all of it off) or
+    ``hidden`` (some of it is in the image, but less than ``min_visible`` of its silhouette:
     occluded or mostly clipped). Jobs out of frame are never rendered, so they are counted from
     the plan, not from ``results``.
 ``outcomes_by_value`` (the ``outcome`` role: box and mask tasks)
@@ -31,7 +34,7 @@ from sweep3d.stages.aggregate.quoting import literal
 
 TASK_VIEWS = ("not_evaluable", "outcomes_by_value", "iou_by_object")
 #: Why a job is not evaluable (``not_evaluable.reason``).
-OUT_OF_FRAME, HIDDEN = "out of frame", "hidden"
+OUT_OF_FRAME, OCCLUDED, HIDDEN = "out of frame", "fully occluded", "hidden"
 QUANTILES = {"p10": 0.1, "p25": 0.25, "median": 0.5, "p75": 0.75, "p90": 0.9}
 
 
@@ -66,17 +69,32 @@ def _not_evaluable_sql(con: duckdb.DuckDBPyConnection, model: str | None, min_vi
     where = f" WHERE j.model = {literal(model)}" if model is not None and "model" in jobs else ""
     known = min_visible is not None and "truth_key" in jobs  # without truth passes, no threshold applies
     threshold = f"{float(min_visible)!r}::DOUBLE" if known else "NULL::DOUBLE"
+    framed, framing = _framed_pixels(con)
     return f"""CREATE OR REPLACE VIEW not_evaluable AS
         WITH planned AS (
-            SELECT j.object, j.in_frame, g.evaluable, g.visible_pixels, g.visible_fraction
-            FROM jobs j JOIN ground_truth g ON g.job = j.job{own}{where}),
+            SELECT j.object, j.in_frame, g.evaluable, g.visible_pixels, g.visible_fraction, {framed} AS framed_pixels
+            FROM jobs j JOIN ground_truth g ON g.job = j.job{own}{framing}{where}),
         per_object AS (SELECT object, count(*) AS object_jobs FROM planned GROUP BY object)
         SELECT object, reason, n, object_jobs, n / object_jobs AS share, {threshold} AS min_visible
-        FROM (SELECT object, CASE WHEN NOT in_frame OR coalesce(visible_pixels, 0) = 0 OR visible_fraction IS NULL
-                                  THEN '{OUT_OF_FRAME}' ELSE '{HIDDEN}' END AS reason, count(*) AS n
+        FROM (SELECT object, CASE WHEN NOT in_frame OR visible_fraction IS NULL OR framed_pixels = 0 THEN '{OUT_OF_FRAME}'
+                                  WHEN coalesce(visible_pixels, 0) = 0 THEN '{OCCLUDED}'
+                                  ELSE '{HIDDEN}' END AS reason, count(*) AS n
               FROM planned WHERE evaluable = false GROUP BY ALL)
         JOIN per_object USING (object)
         ORDER BY object, reason"""
+
+
+def _framed_pixels(con: duckdb.DuckDBPyConnection) -> tuple[str, str]:
+    """The column of ``framed_pixels`` (the unoccluded silhouette's pixels in the image, which
+    tells a wholly occluded object from one the frame's edge cuts off) and the join that brings
+    it; NULL where the store's truth rows are all from before it."""
+    try:
+        columns = {row[0] for row in con.execute("DESCRIBE truths").fetchall()}
+    except duckdb.CatalogException:  # a store without truth rows
+        columns = set()
+    if "framed_pixels" not in columns:
+        return "NULL::BIGINT", ""
+    return "t.framed_pixels", " LEFT JOIN (SELECT truth_key, framed_pixels FROM truths) t ON t.truth_key = g.truth_key"
 
 
 def _outcomes_sql() -> str:

@@ -168,7 +168,25 @@ def _scene_keys(spec: LoadedSpec, keys: _Keys, scene: str, rendered: list[Contro
     if keys.parts is not None:
         keys.parts += parts_keys(renders)
     if keys.truth is not None:
-        keys.truth += truth_keys(renders, keys.truth_passes)
+        keys.truth += _truth_keys(renders, keys.truth_passes, rendered, rows)
+
+
+def _truth_keys(renders: list[str], passes: tuple[str, ...], rendered: list[ControlBatch],
+                rows: np.ndarray) -> list[str]:
+    """The truth keys of the jobs of ``rows``: those a control's ``edit`` acts on (not at its
+    neutral values) are keyed as edited, the others as before (see ``truth.EDITED_TRUTH_VERSION``)."""
+    edited = np.zeros(len(rows), dtype=bool)
+    for batch in rendered:
+        if batch.inst.control.edits_scene:
+            edited |= ~batch.identity[rows]
+    if not edited.any():
+        return truth_keys(renders, passes)
+    out = [""] * len(renders)
+    for flag in (False, True):
+        at = np.flatnonzero(edited == flag).tolist()
+        for i, key in zip(at, truth_keys([renders[i] for i in at], passes, flag)):
+            out[i] = key
+    return out
 
 
 def _render_keys(scene: str, rendered: list[ControlBatch], rows: np.ndarray, repeats: bool) -> list[str]:

@@ -14,7 +14,7 @@ from typing import Any, Sequence
 
 from sweep3d.cache.keys import Hole, Template, digest, digests
 from sweep3d.parts import PARTS_LAYOUT
-from sweep3d.truth import TRUTH_VERSION
+from sweep3d.truth import EDITED_TRUTH_VERSION, TRUTH_VERSION
 
 #: Bumped when rendering changes pixels for the same inputs, so old renders are not reused.
 RENDER_STAGE_VERSION = 1
@@ -64,15 +64,19 @@ def _parts_value(render: str | Hole) -> dict[str, Any]:
     return {"stage": "parts", "layout": PARTS_LAYOUT, "render": render}
 
 
-def truth_key(render: str, passes: Sequence[str]) -> str:
-    """The key of the ground truth (mask, depth, box, visibility) the truth passes give one render."""
-    return digest(_truth_value(render, passes))
+def truth_key(render: str, passes: Sequence[str], edited: bool = False) -> str:
+    """The key of the ground truth (mask, depth, box, visibility) the truth passes give one render;
+    ``edited``: a control of its scene has an ``edit`` (:data:`EDITED_TRUTH_VERSION` applies)."""
+    return digest(_truth_value(render, passes, edited))
 
 
-def truth_keys(renders: Sequence[str], passes: Sequence[str]) -> list[str]:
+def truth_keys(renders: Sequence[str], passes: Sequence[str], edited: bool = False) -> list[str]:
     """:func:`truth_key` of many renders."""
-    return digests(Template(_truth_value(Hole("render"), passes)).fill(["render"], render=renders))
+    return digests(Template(_truth_value(Hole("render"), passes, edited)).fill(["render"], render=renders))
 
 
-def _truth_value(render: str | Hole, passes: Sequence[str]) -> dict[str, Any]:
-    return {"stage": "truth", "v": TRUTH_VERSION, "passes": sorted(passes), "render": render}
+def _truth_value(render: str | Hole, passes: Sequence[str], edited: bool) -> dict[str, Any]:
+    value = {"stage": "truth", "v": TRUTH_VERSION, "passes": sorted(passes), "render": render}
+    if edited:  # only there: the other renders' truth rows stay valid
+        value["edited"] = EDITED_TRUTH_VERSION
+    return value

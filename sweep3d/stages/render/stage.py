@@ -72,7 +72,7 @@ TRUTHS_SCHEMA = pa.schema([
     ("truth_key", pa.string()), ("render_key", pa.string()), ("passes", pa.list_(pa.string())),
     ("gt_x0", pa.int32()), ("gt_y0", pa.int32()), ("gt_x1", pa.int32()), ("gt_y1", pa.int32()),
     ("visible_pixels", pa.int64()), ("silhouette_pixels", pa.int64()), ("visible_fraction", pa.float64()),
-    ("silhouette", pa.string()), ("truth_seconds", pa.float64()),
+    ("silhouette", pa.string()), ("framed_pixels", pa.int64()), ("truth_seconds", pa.float64()),
     ("mask_sha256", pa.string()), ("depth_sha256", pa.string()), ("created_at", pa.timestamp("us")),
 ])
 
