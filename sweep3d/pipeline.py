@@ -21,6 +21,7 @@ import uuid
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
+from typing import Iterable, Iterator
 
 import pyarrow as pa
 from rich.console import Console
@@ -28,20 +29,29 @@ from rich.markup import escape
 
 from sweep3d.cache import snapshot
 from sweep3d.cache.maintenance import compact_table, remove_killed_writers_temp_files
-from sweep3d.cache.store import TABLES, Store, utc_now
+from sweep3d.cache.store import TABLES, Store, atomic_write, utc_now
 from sweep3d.cache.written import remember_written, written_from
 from sweep3d.errors import RenderError, SpecError, UserError
+from sweep3d.pixels import encode_png8
 from sweep3d.progress import RunProgress
 from sweep3d.spec.assets import blender_version
 from sweep3d.spec.columns import CLASS_NAMES_METADATA, MODELS_METADATA, PROTOCOL_METADATA
 from sweep3d.spec.loader import LoadedSpec
 from sweep3d.stages.code import PLUGINS_METADATA
 from sweep3d.stages.code import metadata as plugins_metadata
-from sweep3d.stages.driver import Found, add_outcomes, merge_outcomes, plan_status, rows_and_cached, run_stages
+from sweep3d.stages.driver import (
+    Found,
+    add_outcomes,
+    merge_outcomes,
+    plan_status,
+    rows_and_cached,
+    run_stages,
+    unique_jobs,
+)
 from sweep3d.stages.infer import InferStage, ModelHandle, pending_predictions
 from sweep3d.stages.outcome import StageOutcome
 from sweep3d.stages.plan import History, Outcome, Plan, make_plan
-from sweep3d.stages.postprocess import PostprocessStage
+from sweep3d.stages.postprocess import ImageHandoff, PostprocessStage, make_image, post_controls, truth_digests
 from sweep3d.stages.render import LOCAL, Executor, RenderStage
 from sweep3d.stages.render.device import device_note
 from sweep3d.stages.render.estimate import slow_render_warning
@@ -208,7 +218,8 @@ def _run_locked(spec: LoadedSpec, store: Store, console: Console | None, wait: f
         missing, found = _missing_renders(plans, store, executor)
         _note_device(plans, missing, console)
         _warn_if_slow(plans, store, executor, console, missing)
-        render, post = RenderStage(executor), PostprocessStage()
+        render = RenderStage(executor)
+        post = PostprocessStage.for_spec(spec, ImageHandoff())
         try:
             if any(missing.values()):
                 render.warm_up(plans[0])  # Blender starts while the model is checked (both take seconds)
@@ -232,7 +243,8 @@ def _run_passes(spec: LoadedSpec, store: Store, console: Console | None, overlap
     policies) into ``result``, starting from its plans (``found``: what their render stage found
     stored, one per plan, for the first round)."""
     plans = result.plans
-    infers = [InferStage(model, on_ray=render.executor.kind == "ray", several=len(models) > 1) for model in models]
+    infers = [InferStage(model, on_ray=render.executor.kind == "ray", several=len(models) > 1, handoff=post.handoff,
+                         images_stored=post.store_images) for model in models]
     for plan, infer in zip(plans, infers):
         if pending_predictions(plan, store, infer):
             infer.prepare(plan, store)  # a broken model fails now, before anything renders
@@ -264,6 +276,42 @@ def _run_passes(spec: LoadedSpec, store: Store, console: Console | None, overlap
             if not spec.policy.adaptive or not grown:
                 break
             history = outcomes_by_scene(plans[0], store)
+
+
+def write_unstored_images(spec: LoadedSpec, store: Store, keys: Iterable[str]) -> int:
+    """Write the blobs of post-processed images that runs made in memory only (``[postprocess]
+    store = "none"``), for what looks at them (the report's thumbnails, ``export``): each made
+    again from its stored render, as inference made it. Keys with a blob, with no images row, or
+    that no plan of ``spec`` holds (another spec's) are left alone. Returns how many were written.
+    """
+    wanted = {k for k in keys if k and not store.blob_path(k).exists()} & store.key_set("images")
+    written = 0
+    for plan in _plans_holding(spec, store, wanted):
+        jobs = unique_jobs(PostprocessStage(), plan.jobs)
+        post, renders, passes = post_controls(plan), store.digests("renders"), truth_digests(store)
+        for key in sorted(wanted & jobs.keys()):
+            made = make_image(store, plan, jobs[key], post, renders.get(jobs[key].render_key), passes)
+            if made.pixels is not None:
+                atomic_write(store.blob_path(key), encode_png8(made.pixels), durable=False)
+                written += 1
+        wanted -= jobs.keys()
+    return written
+
+
+def _plans_holding(spec: LoadedSpec, store: Store, wanted: set[str]) -> Iterator[Plan]:
+    """Each model's plans of ``spec`` while ``wanted`` (consumed by the caller) is not empty: an
+    adaptive policy's rounds from the outcomes stored, as its run planned them."""
+    for settings in spec.models:
+        if not wanted:
+            return
+        plan = plan_spec(spec, ModelHandle.resolve(spec, settings))
+        yield plan
+        while wanted and spec.policy.adaptive:
+            grown = plan_spec(spec, ModelHandle.resolve(spec, settings), outcomes_by_scene(plan, store))
+            if len(grown.jobs) <= len(plan.jobs):
+                break
+            plan = grown
+            yield plan
 
 
 def _missing_renders(plans: list[Plan], store: Store, executor: Executor) -> tuple[dict[int, int], list[Found]]:

@@ -17,8 +17,13 @@ def to_uint8(rgb: np.ndarray) -> np.ndarray:
 
 def encode_png(rgb: np.ndarray) -> bytes:
     """PNG bytes of a float32 (H, W, 3) image."""
+    return encode_png8(to_uint8(rgb))
+
+
+def encode_png8(pixels: np.ndarray) -> bytes:
+    """PNG bytes of a uint8 (H, W, 3) image (fast compression: blobs are written once, read rarely)."""
     buf = io.BytesIO()
-    Image.fromarray(to_uint8(rgb), "RGB").save(buf, format="PNG", compress_level=1)
+    Image.fromarray(pixels, "RGB").save(buf, format="PNG", compress_level=1)
     return buf.getvalue()
 
 

@@ -357,15 +357,25 @@ type = "grid"
 """
 
 
+#: Post-processed images written to the store (the default makes them in memory): the tests of
+#: damaged, missing and verified blobs have image blobs to damage (tests/test_image_store.py
+#: checks that both ways give the same results).
+STORE_ALL = """
+[postprocess]
+store = "all"
+"""
+
+
 @pytest.fixture(scope="session")
 def tiny_run(tmp_path_factory) -> Path:
-    """A folder holding ``spec.toml`` and its store after one real ``sweep3d run`` (8 jobs)."""
+    """A folder holding ``spec.toml`` and its store after one real ``sweep3d run`` (8 jobs; every
+    image stored)."""
     from typer.testing import CliRunner
 
     from sweep3d.cli import app
 
     folder = tmp_path_factory.mktemp("tiny_run")
-    spec = write_spec(folder, TINY_SPEC)
+    spec = write_spec(folder, TINY_SPEC + STORE_ALL)
     result = CliRunner().invoke(app, ["run", str(spec), "--no-report"])
     assert result.exit_code == 0, result.output
     return folder

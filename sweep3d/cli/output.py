@@ -43,7 +43,8 @@ INFER_SECONDS = 0.05  # per image on a 2-core CPU (render costs: stages/render/e
 def cache_status(plan: Plan, store: Store, model: ModelHandle, several: bool = False) -> list[tuple[str, int, int]]:
     """(stage, distinct keys needed, keys already stored) for render, postprocess and infer."""
     return [(getattr(stage, "title", stage.name), *plan_status(stage, plan, store))
-            for stage in (RenderStage(), PostprocessStage(), InferStage(model, several=several))]
+            for stage in (RenderStage(), PostprocessStage.for_spec(plan.spec),
+                          InferStage(model, several=several, images_stored=plan.spec.postprocess.store == "all"))]
 
 
 def print_plan(console: Console, spec: LoadedSpec, jobs: int = 0) -> Plan:

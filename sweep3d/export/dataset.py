@@ -23,6 +23,7 @@ from sweep3d.export.imagefolder import ImageFolderWriter
 from sweep3d.export.parquet import ParquetWriter
 from sweep3d.export.selection import DEFAULT_WHERE, UNEVALUABLE, Selection, check_where, select
 from sweep3d.export.target import DESIGN, MANIFEST, SCENE, ExportFolder, Staging, design_table, identity, open_folder
+from sweep3d.pipeline import write_unstored_images
 from sweep3d.progress import RunProgress
 from sweep3d.spec.loader import LoadedSpec
 
@@ -117,9 +118,11 @@ def export_dataset(spec: LoadedSpec, fmt: str, *, output: Path | None = None, wh
                           selection.skipped, already)
     if not items and not folder.fresh:
         return result  # nothing new: the folder stays as it is
+    store = Store(spec.store)
+    write_unstored_images(spec, store, [item.row["image_key"] for item in items])  # made in memory by the run
     staging = Staging(folder)
     try:
-        batch = Batch(items, Store(spec.store), selection.table, selection.columns, link)
+        batch = Batch(items, store, selection.table, selection.columns, link)
         with RunProgress(console) as progress, progress.stage("export", len(items), already) as bar:
             writer.write(batch, folder, staging, bar)
         staging.write(DESIGN, design_table(folder.items))

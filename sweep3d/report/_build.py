@@ -19,6 +19,7 @@ import duckdb
 
 from sweep3d.cache.store import Store, atomic_write
 from sweep3d.errors import UserError
+from sweep3d.pipeline import write_unstored_images
 from sweep3d.report.figures import pct
 from sweep3d.report.overlays import read_overlays
 from sweep3d.report.page import render_page
@@ -99,7 +100,9 @@ def build_context(loaded: LoadedSpec, con: duckdb.DuckDBPyConnection, store: Sto
     """
     page = gather(loaded, con, store, panels)
     summary, thumbs = page.summary, page.thumbs
-    uris = thumbs.data_uris(overlays=read_overlays(con, store, thumbs.keys()[:thumbs.limit]))
+    shown = thumbs.keys()[:thumbs.limit]
+    write_unstored_images(loaded, store, shown)  # images the run made in memory only ([postprocess] store)
+    uris = thumbs.data_uris(overlays=read_overlays(con, store, shown))
     return {
         "name": loaded.name,
         "model": model or loaded.model.label,

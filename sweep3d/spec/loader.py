@@ -40,6 +40,7 @@ from sweep3d.spec.models import (
     ExperimentSpec,
     ModelSpec,
     ObjectSpec,
+    PostprocessSpec,
     RenderSpec,
     ReportSpec,
     Spec,
@@ -112,6 +113,10 @@ class LoadedSpec:
     @property
     def render(self) -> RenderSpec:
         return self.spec.render
+
+    @property
+    def postprocess(self) -> PostprocessSpec:
+        return self.spec.postprocess
 
     @property
     def model(self) -> ModelSpec:

@@ -301,6 +301,14 @@ class ReportSpec(StrictModel):
                            "for the pass only and re-infers nothing).")
 
 
+class PostprocessSpec(StrictModel):
+    store: Literal["all", "none"] = Field(
+        "none", description="Which post-processed images are written to the store: 'none' makes each in "
+                            "memory for inference and writes it only where it is looked at (the report, "
+                            "export), made again from its render; 'all' writes every one as it is made. "
+                            "Keys and answers are the same either way.")
+
+
 class PolicySpec(Typed):
     """``type`` picks the policy; ``paired`` is the planner's; the other keys are the policy's parameters."""
 
@@ -377,6 +385,7 @@ class Spec(StrictModel):
     environments: list[EnvironmentSpec] = Field(min_length=1)
     controls: list[dict[str, Any]] = Field(default_factory=list)
     policy: PolicySpec = PolicySpec()
+    postprocess: PostprocessSpec = PostprocessSpec()
     report: ReportSpec = ReportSpec()
 
     @model_validator(mode="after")

@@ -29,7 +29,7 @@ from typing import Any, Callable, Iterable, Iterator, Mapping, Protocol, Sequenc
 import pyarrow as pa
 
 from sweep3d.cache.blobs import damaged_blobs
-from sweep3d.cache.store import DIGEST_COLUMN, KEY_COLUMN, SegmentWriter, Store
+from sweep3d.cache.store import BLOB_TABLES, DIGEST_COLUMN, KEY_COLUMN, SegmentWriter, Store
 from sweep3d.errors import UserError
 from sweep3d.progress import RunProgress, StageProgress
 from sweep3d.stages.jobs import Job, JobList, Plan
@@ -261,6 +261,7 @@ def split_to_do(stage: Stage, plan: Plan, store: Store, cached: set[str] | None 
     cached = cached_keys(stage, plan, store) if cached is None else cached
     needed = (set(unique) - cached) | stage.incomplete(plan, store, cached)
     coming = coming or {}
+    blob_inputs = getattr(stage, "blob_inputs", BLOB_TABLES)  # an input made again from its own input needs no blob
     inputs: dict[str, set[str]] = {}
     ready: list[Job] = []
     waiting: dict[tuple[str, str], list[Job]] = defaultdict(list)
@@ -276,7 +277,7 @@ def split_to_do(stage: Stage, plan: Plan, store: Store, cached: set[str] | None 
                 continue
             if table not in inputs:
                 inputs[table] = store.keys(table)
-            if upstream_key not in inputs[table] or not store.blob_path(upstream_key).exists():
+            if upstream_key not in inputs[table] or (table in blob_inputs and not store.blob_path(upstream_key).exists()):
                 continue  # skipped: its input failed or was never made
         ready.append(job)
     return ready, dict(waiting)

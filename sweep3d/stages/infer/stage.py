@@ -36,6 +36,7 @@ from sweep3d.stages.infer.labels import LabelMap
 from sweep3d.stages.infer.models import builtin_model
 from sweep3d.stages.infer.tasks import check_task, model_outputs
 from sweep3d.stages.jobs import Job, JobList, Plan
+from sweep3d.stages.postprocess import ImageHandoff, make_image, post_controls, truth_digests
 
 if TYPE_CHECKING:
     from sweep3d.stages.infer.onnx_backend import OnnxRunner
@@ -80,6 +81,8 @@ class InferStage:
         model: the run's model (resolved once, loaded on first use).
         on_ray: batches go to a Ray inference actor (a GPU when the cluster has one).
         several: the run infers several models (each progress bar names its model).
+        handoff: the post-processed images made in this process (taken before any blob is read).
+        images_stored: post-processed images are written to the store (``[postprocess] store``).
     """
 
     name = "infer"
@@ -87,9 +90,14 @@ class InferStage:
     owns_blobs = False
     side_tables: dict[str, pa.Schema] = {}
 
-    def __init__(self, model: ModelHandle, on_ray: bool = False, several: bool = False) -> None:
+    def __init__(self, model: ModelHandle, on_ray: bool = False, several: bool = False,
+                 handoff: ImageHandoff | None = None, images_stored: bool = True) -> None:
         self.model = model
         self.on_ray = on_ray
+        self.handoff = handoff
+        #: the tables whose blobs must exist before a job is inferred (see ``driver.split_to_do``):
+        #: an image that is not stored is made again from its render.
+        self.blob_inputs = ("renders", "images") if images_stored else ("renders",)
         self.title = f"infer {model.label}" if several else self.name  # its progress bar
         self.backend: str | None = None  # chosen by ``prepare``
         self._labels: LabelMap | None = None
@@ -147,7 +155,7 @@ class InferStage:
         if self._labels is None:
             self.prepare(plan, store)
         valid = {t: todo.column(t, "valid") for t in ("renders", "images")}  # live: see Feed
-        digests = {t: todo.digests(t) for t in ("renders", "images")}
+        images = ModelInputs(store, plan, todo, self.handoff)
         jobs = iter(todo)
         first = next(jobs, None)
         if first is None:
@@ -156,7 +164,7 @@ class InferStage:
         passes = self._evaluator(plan).passes
         for batch_jobs in _batches(itertools.chain([first], jobs), self.model.settings.batch_size):
             t0 = time.perf_counter()
-            batch, pixels, invalid, damaged = _load(store, batch_jobs, valid, digests)
+            batch, pixels, invalid, damaged = _load(images, batch_jobs, valid)
             arrays, lost = _load_passes(store, batch, passes)
             if lost:
                 keep = [i for i, job in enumerate(batch) if job not in lost]
@@ -164,8 +172,8 @@ class InferStage:
             rows = infer(batch, pixels, arrays) if batch else []
             per_image = (time.perf_counter() - t0) / max(len(batch) + len(invalid), 1)
             yield from self._computed(plan, batch, rows, invalid, per_image)
-            for job in damaged:
-                yield Computed(job.pred_key, damaged=(_table(job), job.image_key))
+            for job, source in damaged:
+                yield Computed(job.pred_key, damaged=source)
             for job in lost:  # its truth row goes, so the render stage renders its passes again
                 yield Computed(job.pred_key, damaged=("truths", job.truth_key))
 
@@ -270,22 +278,51 @@ def pending_predictions(plan: Plan, store: Store, stage: InferStage | None = Non
     return not store.key_set("predictions").issuperset(keys)
 
 
-def _load(store: Store, jobs: list[Job], valid: dict[str, Mapping[str, Any]],
-          digests: dict[str, Mapping[str, set[str]]]) -> tuple[list[Job], list[np.ndarray], list[Job], list[Job]]:
+def _load(images: ModelInputs, jobs: list[Job], valid: dict[str, Mapping[str, Any]]
+          ) -> tuple[list[Job], list[np.ndarray], list[Job], list[tuple[Job, tuple[str, str]]]]:
     """A batch's pixels: (jobs with a good image, their pixels, jobs whose image has NaN/inf
-    upstream and is not shown to the model, jobs whose image blob is damaged or missing)."""
+    upstream and is not shown to the model, jobs whose input blob is damaged or missing with
+    that blob's (table, key))."""
     batch, pixels, invalid, damaged = [], [], [], []
     for job in jobs:
         if valid[_table(job)].get(job.image_key) is False:
             invalid.append(job)
             continue
-        image = load_image(store, job.image_key, digests[_table(job)].get(job.image_key))
-        if image is None:  # discarded by the driver, recomputed by the run's next pass
-            damaged.append(job)
+        image = images.pixels(job)
+        if isinstance(image, tuple):  # discarded by the driver, recomputed by the run's next pass
+            damaged.append((job, image))
             continue
         batch.append(job)
         pixels.append(image)
     return batch, pixels, invalid, damaged
+
+
+class ModelInputs:
+    """Where each job's image comes from: the postprocess stage's handoff (made in this process),
+    else its stored blob, else made again from its render (an image that was not stored)."""
+
+    def __init__(self, store: Store, plan: Plan, todo: Feed, handoff: ImageHandoff | None) -> None:
+        self.store, self.plan, self.handoff = store, plan, handoff
+        self.digests = {t: todo.digests(t) for t in ("renders", "images")}  # live: see Feed
+        self.passes = truth_digests(todo)
+        self.post = post_controls(plan)
+
+    def pixels(self, job: Job) -> np.ndarray | tuple[str, str]:
+        """float32 (H, W, 3) in [0, 1], or the (table, key) of the input found damaged or missing."""
+        table = _table(job)
+        if table == "images":
+            kept = self.handoff.take(job.image_key) if self.handoff is not None else None
+            if kept is not None:
+                return kept.astype(np.float32) / np.float32(255.0)
+            recorded = self.digests["images"].get(job.image_key)
+            if not recorded:  # not stored: made again (a blob the report wrote, unrecorded, is a copy)
+                made = make_image(self.store, self.plan, job, self.post,
+                                  self.digests["renders"].get(job.render_key), self.passes)
+                if made.pixels is None:
+                    return made.damaged or ("images", job.image_key)
+                return made.pixels.astype(np.float32) / np.float32(255.0)
+        image = load_image(self.store, job.image_key, self.digests[table].get(job.image_key))
+        return (table, job.image_key) if image is None else image
 
 
 def _batches(jobs: Iterable[Job], size: int) -> Iterator[list[Job]]:

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import inspect
 import time
+from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any, Iterator, Sequence
 
@@ -27,11 +28,12 @@ from sweep3d.cache.blobs import load_image, load_pass, sha256_bytes
 from sweep3d.cache.store import DIGEST_COLUMN, TRUTH_BLOBS, Store, atomic_write, utc_now
 from sweep3d.controls import blamed
 from sweep3d.errors import PluginError
-from sweep3d.pixels import encode_png
-from sweep3d.spec.loader import ControlInstance
+from sweep3d.pixels import encode_png8, to_uint8
+from sweep3d.spec.loader import ControlInstance, LoadedSpec
 from sweep3d.stages.driver import Computed, Feed
 from sweep3d.stages.jobs import Job, JobList, Plan
 from sweep3d.stages.postprocess.frame import RenderFrame, frame_from_state
+from sweep3d.stages.postprocess.handoff import ImageHandoff
 from sweep3d.truth import BLOB_SUFFIX, TRUTH_PASSES
 
 IMAGES_SCHEMA = pa.schema([
@@ -116,12 +118,30 @@ def job_frame(plan: Plan, job: Job, arrays: dict[str, np.ndarray]) -> RenderFram
 
 
 class PostprocessStage:
-    """Applies post controls to renders (a job whose image is its render has nothing to do here)."""
+    """Applies post controls to renders (a job whose image is its render has nothing to do here).
+
+    Args:
+        store_images: write each image to the store (``[postprocess] store = "all"``); without,
+            its row records no digest and inference or the report make it again from its render.
+        handoff: where inference takes the pixels of the images made in this process.
+    """
 
     name = "postprocess"
     table = "images"
-    owns_blobs = True
     side_tables: dict[str, pa.Schema] = {}
+
+    def __init__(self, store_images: bool = True, handoff: ImageHandoff | None = None) -> None:
+        self.store_images = store_images
+        self.handoff = handoff
+
+    @classmethod
+    def for_spec(cls, spec: LoadedSpec, handoff: ImageHandoff | None = None) -> PostprocessStage:
+        """The stage as ``spec``'s ``[postprocess] store`` asks."""
+        return cls(store_images=spec.postprocess.store == "all", handoff=handoff)
+
+    @property
+    def owns_blobs(self) -> bool:  # type: ignore[override]  (a run that stores no image owns no blob)
+        return self.store_images
 
     def schema(self, plan: Plan) -> pa.Schema:
         return IMAGES_SCHEMA
@@ -140,37 +160,82 @@ class PostprocessStage:
         return set()
 
     def compute(self, todo: Feed, plan: Plan, store: Store) -> Iterator[Computed]:
-        post = [c for c in plan.spec.controls if c.control.stage == "post"]
+        post = post_controls(plan)
         render_valid = todo.column("renders", "valid")  # live: renders of this pass arrive with their jobs
         render_digests = todo.digests("renders")
-        pass_digests = {name: todo.digests("truths", TRUTH_BLOBS[BLOB_SUFFIX[name]]) for name in TRUTH_PASSES}
+        pass_digests = truth_digests(todo)
         damaged: set[str] = set()
         for job in todo:
             t0 = time.perf_counter()
-            render = None if job.render_key in damaged else \
-                load_image(store, job.render_key, render_digests.get(job.render_key))
-            if render is None:
-                damaged.add(job.render_key)
+            if job.render_key in damaged:
                 yield Computed(job.image_key, damaged=("renders", job.render_key))
                 continue
-            frame = None
-            wanted = sorted({p for inst in post for p in reads_passes(inst, job.values)})
-            if wanted and job.truth_key is None:
-                yield Computed(job.image_key, error="a post control reads render passes the plan did not ask for")
+            made = make_image(store, plan, job, post, render_digests.get(job.render_key), pass_digests)
+            if made.pixels is None:
+                if made.damaged is not None and made.damaged[0] == "renders":
+                    damaged.add(job.render_key)
+                yield Computed(job.image_key, damaged=made.damaged, error=made.error)
                 continue
-            if wanted:
-                arrays = {name: _pass(store, job, name, pass_digests[name], render.shape[:2]) for name in wanted}
-                if any(a is None for a in arrays.values()):  # its truth row goes: the passes are rendered again
-                    yield Computed(job.image_key, damaged=("truths", job.truth_key))
-                    continue
-                frame = job_frame(plan, job, arrays)
-            image = apply_post(render, post, job.values, job.image_key, frame)
-            valid = render_valid.get(job.render_key) is not False and bool(np.isfinite(image).all())
-            data = encode_png(image)
-            atomic_write(store.blob_path(job.image_key), data)
+            valid = render_valid.get(job.render_key) is not False and made.finite
+            digest = None
+            if self.store_images:
+                data = encode_png8(made.pixels)
+                atomic_write(store.blob_path(job.image_key), data)
+                digest = sha256_bytes(data)
+            if valid and self.handoff is not None:
+                self.handoff.put(job.image_key, made.pixels)
             yield Computed(job.image_key, {"image_key": job.image_key, "render_key": job.render_key, "valid": valid,
                                            "seconds": time.perf_counter() - t0, "created_at": utc_now(),
-                                           DIGEST_COLUMN: sha256_bytes(data)})
+                                           DIGEST_COLUMN: digest})
+
+
+@dataclass(frozen=True)
+class Made:
+    """One post-processed image as the store keeps it, or why it could not be made.
+
+    Attributes:
+        pixels: uint8 (H, W, 3), what a stored PNG holds (None: not made).
+        finite: the float image had no NaN or inf before it was quantised.
+        damaged: (table, key) of an input blob missing or damaged (its row goes; made again).
+        error: why the job cannot be post-processed at all.
+    """
+
+    pixels: np.ndarray | None
+    finite: bool = False
+    damaged: tuple[str, str] | None = None
+    error: str | None = None
+
+
+def post_controls(plan: Plan) -> list[ControlInstance]:
+    """The plan's post controls, in spec order."""
+    return [c for c in plan.spec.controls if c.control.stage == "post"]
+
+
+def truth_digests(source: Feed | Store) -> dict[str, Any]:
+    """Pass name → (truth key → the digests its truth rows recorded), live where ``source`` is a feed."""
+    return {name: source.digests("truths", TRUTH_BLOBS[BLOB_SUFFIX[name]]) for name in TRUTH_PASSES}
+
+
+def make_image(store: Store, plan: Plan, job: Job, post: Sequence[ControlInstance], render_digests: set[str] | None,
+               pass_digests: dict[str, Any]) -> Made:
+    """The job's post-processed image from its stored render (and passes, for the controls that
+    read them): what the stage computes, and what inference and the report make again for an
+    image that was not stored."""
+    render = load_image(store, job.render_key, render_digests)
+    if render is None:
+        return Made(None, damaged=("renders", job.render_key))
+    frame = None
+    wanted = sorted({p for inst in post for p in reads_passes(inst, job.values)})
+    if wanted and job.truth_key is None:
+        return Made(None, error="a post control reads render passes the plan did not ask for")
+    if wanted:
+        arrays = {name: _pass(store, job, name, pass_digests[name], render.shape[:2]) for name in wanted}
+        if any(a is None for a in arrays.values()):  # its truth row goes: the passes are rendered again
+            assert job.truth_key is not None
+            return Made(None, damaged=("truths", job.truth_key))
+        frame = job_frame(plan, job, arrays)
+    image = apply_post(render, post, job.values, job.image_key, frame)
+    return Made(to_uint8(image), bool(np.isfinite(image).all()))
 
 
 def _pass(store: Store, job: Job, name: str, digests: Any, shape: tuple[int, ...]) -> np.ndarray | None:
