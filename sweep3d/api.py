@@ -11,6 +11,9 @@
 
 The command line is a thin layer over this module: ``run``, ``query`` and ``report`` call the same
 functions, so both raise the same one-line :class:`~sweep3d.errors.UserError` for a user's mistake.
+What they read is the spec's own results: when the experiment last ran another version of the
+spec, the jobs are this one's, with a warning for those that have no result yet (see
+:mod:`sweep3d.stages.aggregate.own_jobs`).
 Importing it imports neither bpy nor torch.
 """
 
@@ -109,7 +112,7 @@ class Experiment:
 
     def sql(self, query: str, model: str | None = None) -> pa.Table:
         """The rows of one read-only SELECT over the views (``results``, ``control_accuracy``, …; see
-        the README), as ``sweep3d query`` answers it.
+        the README) of this spec's own jobs, as ``sweep3d query`` answers it.
 
         Args:
             model: the model whose results the views show (its id; default the spec's first).

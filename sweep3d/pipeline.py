@@ -37,7 +37,7 @@ from sweep3d.progress import RunProgress
 from sweep3d.spec.assets import blender_version
 from sweep3d.spec.columns import CLASS_NAMES_METADATA, MODELS_METADATA, PROTOCOL_METADATA
 from sweep3d.spec.loader import LoadedSpec
-from sweep3d.stages.code import PLUGINS_METADATA
+from sweep3d.stages.code import PLUGINS_METADATA, SPEC_METADATA, spec_identity
 from sweep3d.stages.code import metadata as plugins_metadata
 from sweep3d.stages.driver import (
     Found,
@@ -136,22 +136,49 @@ def write_jobs(plans: Plan | list[Plan], store: Store) -> None:
     """
     plans = [plans] if isinstance(plans, Plan) else plans
     path = store.jobs_path(plans[0].spec.name)
-    models = json.dumps([plan.model for plan in plans]).encode()
-    plugins = plugins_metadata(plans[0].spec)
+    recorded = _recorded(plans)
     prints, salt = [plan.fingerprint() for plan in plans], _jobs_format()
     digest = None if None in prints or salt is None else \
-        hashlib.sha256(b"\n".join([salt, *map(str.encode, prints), models, plugins])).hexdigest()
+        hashlib.sha256(b"\n".join([salt, *map(str.encode, prints), *recorded.values()])).hexdigest()
     if digest is not None and written_from(store, path) == digest:
         return
+    store.write_table_file(path, jobs_table(plans, recorded), keep_same=True)
+    if digest is not None:
+        remember_written(store, path, digest)
+
+
+def jobs_table(plans: list[Plan], recorded: dict[bytes, bytes] | None = None) -> pa.Table:
+    """The experiment's jobs table of ``plans`` (one per model), with the metadata the views read
+    and what the run recorded (``recorded``: :func:`_recorded` of the plans, when known)."""
     tables = [plan.table() for plan in plans]
     table = tables[0] if len(tables) == 1 else pa.concat_tables(tables, promote_options="default")
     per_model = {key: json.dumps({k: v for t in tables for k, v in json.loads(t.schema.metadata[key]).items()}).encode()
                  for key in (CLASS_NAMES_METADATA, PROTOCOL_METADATA)}  # each plan's entry under its model
-    table = table.replace_schema_metadata({**(tables[0].schema.metadata or {}), MODELS_METADATA: models,
-                                           **per_model, PLUGINS_METADATA: plugins})
-    store.write_table_file(path, table, keep_same=True)
-    if digest is not None:
-        remember_written(store, path, digest)
+    return table.replace_schema_metadata({**(tables[0].schema.metadata or {}), **per_model,
+                                          **(recorded or _recorded(plans))})
+
+
+def _recorded(plans: list[Plan]) -> dict[bytes, bytes]:
+    """What the jobs table records of the run besides its plans: the models, the user plug-ins'
+    code, and the identity of the spec (which tells a reader whether they are its jobs)."""
+    spec = plans[0].spec
+    return {MODELS_METADATA: json.dumps([plan.model for plan in plans]).encode(),
+            PLUGINS_METADATA: plugins_metadata(spec), SPEC_METADATA: spec_identity(spec).encode()}
+
+
+def plans_as_run(spec: LoadedSpec, store: Store) -> list[Plan]:
+    """The plans (one per model) a run of ``spec`` would record as its jobs, from what ``store``
+    holds: an adaptive policy's rounds are planned again from the stored outcomes, as the run
+    planned them, until a round adds no job."""
+    models = [ModelHandle.resolve(spec, settings) for settings in spec.models]
+    plans = [plan_spec(spec, model) for model in models]
+    while spec.policy.adaptive:
+        history = outcomes_by_scene(plans[0], store)
+        later = [plan_spec(spec, model, history) for model in models]
+        if len(later[0].jobs) <= len(plans[0].jobs):
+            return later
+        plans = later
+    return plans
 
 
 @lru_cache(maxsize=1)

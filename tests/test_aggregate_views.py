@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import math
+import tempfile
 from datetime import datetime
 from pathlib import Path
 from typing import Any
@@ -15,6 +16,8 @@ from typing import Any
 import duckdb
 import pyarrow as pa
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 import sweep3d.stages.aggregate.summary as summary_module
@@ -29,12 +32,14 @@ from sweep3d.stages.aggregate import (
     stored_summary,
     summarise,
     weakest_regions,
+    wilson_interval,
 )
 from sweep3d.stages.aggregate.compare import COMPARE_VIEWS
 from sweep3d.stages.aggregate.detection import DETECTION_VIEWS
 from sweep3d.stages.aggregate.summary import summary_path
 from sweep3d.stages.aggregate.tasks import TASK_VIEWS
 from sweep3d.stages.aggregate.views import BINS, NOT_APPLIED
+from tests.conftest import examples
 
 T0 = datetime(2024, 1, 1)
 
@@ -82,6 +87,49 @@ def test_wilson_macros_match_the_formula_and_published_values() -> None:
     published = con.execute("SELECT round(wilson_high(0, 10), 4), round(wilson_low(5, 10), 4)").fetchone()
     assert published == (0.2775, 0.2366)
     assert con.execute("SELECT wilson_low(0, 0), wilson_high(0, 0)").fetchone() == (None, None)
+
+
+def _assert_exact_at_the_edges(k: int, n: int, low: float, high: float, accuracy: float | None = None) -> None:
+    p = k / n if accuracy is None else accuracy
+    assert 0.0 <= low <= p <= high <= 1.0, (k, n, low, p, high)
+    assert (low == 0.0) == (k == 0) and (high == 1.0) == (k == n), (k, n, low, high)
+
+
+@settings(max_examples=examples(100), deadline=None)
+@given(st.integers(1, 10**9).flatmap(lambda n: st.tuples(st.integers(0, n), st.just(n)))
+       | st.integers(1, 10**6).flatmap(lambda n: st.sampled_from([(0, n), (n, n), (1, n), (n - 1, n)])))
+def test_wilson_interval_holds_its_accuracy_and_is_exact_at_the_edges(case: tuple[int, int]) -> None:
+    k, n = case
+    _assert_exact_at_the_edges(k, n, *wilson_interval(k, n))
+
+
+@settings(max_examples=examples(25), deadline=None)
+@given(st.lists(st.integers(1, 60).flatmap(lambda n: st.tuples(st.integers(0, n), st.just(n))
+                                          | st.sampled_from([(0, n), (n, n)])), min_size=1, max_size=6))
+def test_control_accuracy_and_failure_modes_intervals_hold_their_accuracy(levels: list[tuple[int, int]]) -> None:
+    """Through the views, as the report and the failure modes read them: 0 of 48 gave a low end of
+    6.4e-18, above its accuracy of 0."""
+    rows = [{"c_level": f"L{i}", "correct": j < k} for i, (k, n) in enumerate(levels) for j in range(n)]
+    with tempfile.TemporaryDirectory() as folder:
+        con = make_store(Path(folder), rows)
+        found = rows_of(con, "SELECT level, n, n_correct, accuracy, wilson_low, wilson_high FROM control_accuracy "
+                             "WHERE parameter = 'c_level' ORDER BY level")
+        modes = rows_of(con, "FROM failure_modes(min_count := 1)")
+    assert [(r["n_correct"], r["n"]) for r in found] == levels
+    for r in found + modes:
+        _assert_exact_at_the_edges(r["n_correct"], r["n"], r["wilson_low"], r["wilson_high"], r["accuracy"])
+
+
+def test_no_successes_in_48_is_a_low_end_of_exactly_0_in_every_view(tmp_path: Path) -> None:
+    rows = [{"c_a": "bad", "correct": False} for _ in range(48)] + [{"c_a": "good", "correct": True} for _ in range(48)]
+    con = make_store(tmp_path, rows)
+    bad = "parameter = 'c_a' AND label = 'bad'"
+    assert con.execute(f"SELECT wilson_low, accuracy FROM control_accuracy WHERE {bad}").fetchone() == (0.0, 0.0)
+    assert con.execute("SELECT wilson_high FROM control_accuracy WHERE parameter = 'c_a' AND label = 'good'"
+                       ).fetchone() == (1.0,)
+    assert con.execute("SELECT wilson_low, accuracy FROM failure_modes(min_count := 10) WHERE region = 'c_a = bad'"
+                       ).fetchone() == (0.0, 0.0)
+    assert wilson_interval(0, 48)[0] == 0.0 and wilson_interval(48, 48)[1] == 1.0
 
 
 def test_levels_keep_value_order_bin_many_numbers_and_mark_not_applied(tmp_path: Path) -> None:

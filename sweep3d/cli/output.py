@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 
+import duckdb
 from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
@@ -23,6 +24,7 @@ from sweep3d.stages.aggregate import (
     wilson_interval,
 )
 from sweep3d.stages.aggregate.boundaries import boundary_phrase, control_number, numeric_scales
+from sweep3d.stages.aggregate.own_jobs import results_store
 from sweep3d.stages.aggregate.tasks import HIDDEN
 from sweep3d.stages.code import explain
 from sweep3d.stages.driver import plan_status
@@ -412,31 +414,37 @@ def _db(psnr: float) -> str:
 def print_comparison(console: Console, spec: LoadedSpec, limit: int = 3) -> None:
     """One screen comparing the spec's models: each one's accuracy, then each later model against
     the first (McNemar, agreement) with the regions where it is significantly better or worse."""
-    con = connect(Store(spec.store), spec.name)
-    try:
-        if not has_view(con, "model_agreement"):
-            return
-        models = con.execute("SELECT model, accuracy, wilson_low, wilson_high, n FROM model_accuracy").fetchall()
-        console.print("models: " + " · ".join(
-            f"{escape(m)} {_pct(acc)} [{_pct(lo)}–{_pct(hi)}] of {n}" for m, acc, lo, hi, n in models))
-        first = models[0][0]
-        for a, b, n, diff, fixed, broken, p, same, kappa in con.execute(
-                "SELECT model_a, model_b, n, difference, fixed, broken, p_value, same_top1, kappa FROM model_agreement "
-                "WHERE model_a = ?", [first]).fetchall():
-            agreement = f"same top-1 {_pct(same)}, κ " + ("–" if kappa is None else f"{kappa:.2f}")
-            console.print(f"[bold]{escape(b)}[/] against {escape(a)}: {_points(diff)} on {n} jobs both answered; "
-                          f"{fixed} fixed, {broken} broken, McNemar p = {_p_text(p)}; {agreement}")
-            for verdict in ("better", "worse"):
-                rows = con.execute(
-                    "SELECT parameter_a, label_a, parameter_b, label_b, difference, p_holm, n FROM model_regions "
-                    "WHERE model_a = ? AND model_b = ? AND verdict = ? ORDER BY p_holm, abs(difference) DESC LIMIT ?",
-                    [a, b, verdict, limit]).fetchall()
-                regions = "; ".join(
-                    " & ".join(f"{escape(p)} = {escape(str(v))}" for p, v in ((pa, la), (pb, lb)) if p is not None)
-                    + f" ({_points(d)}, p_holm {_p_text(ph)}, {count} jobs)" for pa, la, pb, lb, d, ph, count in rows)
-                console.print(f"  significantly {verdict}: " + (regions or "nowhere, after Holm's correction"))
-    finally:
-        con.close()
+    with results_store(spec) as store:
+        con = connect(store, spec.name)
+        try:
+            _print_models(console, con, limit)
+        finally:
+            con.close()
+
+
+def _print_models(console: Console, con: duckdb.DuckDBPyConnection, limit: int) -> None:
+    """The comparison itself, from a connection over the spec's own results."""
+    if not has_view(con, "model_agreement"):
+        return
+    models = con.execute("SELECT model, accuracy, wilson_low, wilson_high, n FROM model_accuracy").fetchall()
+    console.print("models: " + " · ".join(
+        f"{escape(m)} {_pct(acc)} [{_pct(lo)}–{_pct(hi)}] of {n}" for m, acc, lo, hi, n in models))
+    first = models[0][0]
+    for a, b, n, diff, fixed, broken, p, same, kappa in con.execute(
+            "SELECT model_a, model_b, n, difference, fixed, broken, p_value, same_top1, kappa FROM model_agreement "
+            "WHERE model_a = ?", [first]).fetchall():
+        agreement = f"same top-1 {_pct(same)}, κ " + ("–" if kappa is None else f"{kappa:.2f}")
+        console.print(f"[bold]{escape(b)}[/] against {escape(a)}: {_points(diff)} on {n} jobs both answered; "
+                      f"{fixed} fixed, {broken} broken, McNemar p = {_p_text(p)}; {agreement}")
+        for verdict in ("better", "worse"):
+            rows = con.execute(
+                "SELECT parameter_a, label_a, parameter_b, label_b, difference, p_holm, n FROM model_regions "
+                "WHERE model_a = ? AND model_b = ? AND verdict = ? ORDER BY p_holm, abs(difference) DESC LIMIT ?",
+                [a, b, verdict, limit]).fetchall()
+            regions = "; ".join(
+                " & ".join(f"{escape(p)} = {escape(str(v))}" for p, v in ((pa, la), (pb, lb)) if p is not None)
+                + f" ({_points(d)}, p_holm {_p_text(ph)}, {count} jobs)" for pa, la, pb, lb, d, ph, count in rows)
+            console.print(f"  significantly {verdict}: " + (regions or "nowhere, after Holm's correction"))
 
 
 def _pct(value: float | None) -> str:

@@ -22,6 +22,7 @@ from sweep3d.cache.blobs import sha256_bytes
 from sweep3d.cache.store import Store
 from sweep3d.errors import UserError
 from sweep3d.spec.loader import LoadedSpec
+from sweep3d.stages.aggregate.own_jobs import results_store
 from sweep3d.stages.aggregate.sql import arrow, results_connection
 from sweep3d.stages.aggregate.views import stored_parameters
 
@@ -108,8 +109,7 @@ def select(spec: LoadedSpec, condition: str, model: str | None, unevaluable: str
     Raises:
         UserError: no results yet, or the condition fails to run (an unknown column, a type error).
     """
-    store = Store(spec.store)
-    with results_connection(spec, model) as con:
+    with results_store(spec) as store, results_connection(spec, model, store=store) as con:
         have = [name for name, *_ in con.execute("DESCRIBE results").fetchall()]
         views = {name for name, in con.execute("SELECT view_name FROM duckdb_views() WHERE NOT internal").fetchall()}
         gate = "evaluable IS FALSE" if "evaluable" in have else "false"
@@ -127,12 +127,12 @@ def select(spec: LoadedSpec, condition: str, model: str | None, unevaluable: str
         except duckdb.Error as exc:  # an unknown column, a type mismatch: the condition's, since ours are fixed
             raise UserError(f"--where {condition!r} failed: {str(exc).splitlines()[0]} (`sweep3d query SPEC "
                             "\"DESCRIBE results\"` lists the columns)") from None
+        parameters = stored_parameters(store.jobs_path(spec.name))
     rows_before = table.num_rows
     if unevaluable == "skip":
         table = table.filter(pc.invert(pc.fill_null(table.column("_export_unevaluable"), False)))
     skipped = rows_before - table.num_rows
     table = table.drop_columns(["_export_unevaluable"])
-    parameters = stored_parameters(store.jobs_path(spec.name))
     if parameters is None:
         parameters = [c for c in spec.parameter_columns if c in have]
     return Selection(table, table.to_pylist(), have, parameters, skipped, "truth_key" in have)

@@ -40,6 +40,7 @@ from sweep3d.stages.aggregate import (
 )
 from sweep3d.stages.aggregate.boundaries import VIEW as BOUNDARIES_VIEW
 from sweep3d.stages.aggregate.boundaries import numeric_scales, register_failure_boundaries
+from sweep3d.stages.aggregate.own_jobs import PlannedStore, results_store
 from sweep3d.stages.aggregate.results import plan_protocol
 from sweep3d.stages.infer.evaluators import measure_of
 
@@ -62,12 +63,12 @@ def write_report(loaded: LoadedSpec, output: Path | None = None, model: str | No
     Raises:
         UserError: if the store holds no results for the experiment, or the file cannot be written.
     """
-    store = Store(loaded.store)
-    con = connect(store, loaded.name, model=model)
-    try:
-        context = build_context(loaded, con, store, model=model)
-    finally:
-        con.close()
+    with results_store(loaded) as store:
+        con = connect(store, loaded.name, model=model)
+        try:
+            context = build_context(loaded, con, store, model=model)
+        finally:
+            con.close()
     path = Path(output) if output is not None else default_path(loaded, model)
     try:
         atomic_write(path, render_html(context).encode("utf-8"))
@@ -113,7 +114,7 @@ def build_context(loaded: LoadedSpec, con: duckdb.DuckDBPyConnection, store: Sto
         "accuracy": pct(summary.accuracy),
         "measure": measure_of(loaded.spec.evaluator),
         "wrong": summary.wrong,
-        "run": _latest_run(con, loaded.name),
+        "run": _latest_run(con, loaded.name, loaded.text() if isinstance(store, PlannedStore) else None),
         "panels": page.panels,
         "fixed": page.fixed,
         "thumbs": json.dumps(uris, separators=(",", ":")),
@@ -160,12 +161,12 @@ def image_keys(loaded: LoadedSpec, panels: tuple[Panel, ...] = PANELS) -> list[s
     A bounded sample, whatever the number of results; a tool that writes a synthetic store
     (``benchmarks/report_scale.py``) needs image blobs for these only.
     """
-    store = Store(loaded.store)
-    con = connect(store, loaded.name)
-    try:
-        thumbs = gather(loaded, con, store, panels).thumbs
-    finally:
-        con.close()
+    with results_store(loaded) as store:
+        con = connect(store, loaded.name)
+        try:
+            thumbs = gather(loaded, con, store, panels).thumbs
+        finally:
+            con.close()
     return thumbs.keys()[:thumbs.limit]
 
 
@@ -180,13 +181,15 @@ def min_count(summary: Summary) -> int:
     return region_min_count(summary.counted)
 
 
-def _latest_run(con: duckdb.DuckDBPyConnection, experiment: str) -> dict[str, Any] | None:
-    """Run time and cache hits of the experiment's latest run (None if none is recorded)."""
+def _latest_run(con: duckdb.DuckDBPyConnection, experiment: str, spec: str | None = None) -> dict[str, Any] | None:
+    """Run time and cache hits of the experiment's latest run (None if none is recorded); ``spec``:
+    of its latest run of that spec text (the experiment last ran another version of it)."""
     if not has_view(con, "runs"):
         return None
     found = con.execute(
         "SELECT to_json(r) FROM (SELECT * EXCLUDE (spec, started_at, created_at), epoch(started_at) AS started "
-        "FROM runs WHERE experiment = ? ORDER BY started_at DESC LIMIT 1) r", [experiment]
+        "FROM runs WHERE experiment = $experiment AND ($spec IS NULL OR spec = $spec) "
+        "ORDER BY started_at DESC LIMIT 1) r", {"experiment": experiment, "spec": spec}
     ).fetchone()
     if found is None:
         return None

@@ -95,10 +95,10 @@ class LoadedSpec:
     labels: dict[str, tuple]  # object name -> ImageNet ids (built-in models) or the labels as given
     controls: list[ControlInstance] = field(default_factory=list)
     policy: Any = None
-    source: str | None = None  # the spec's text when it came from no file (a dict or a TOML string)
+    source: str | None = None  # the spec's text as loaded (a dict's as TOML), its included files' after it
 
     def text(self) -> str:
-        """The spec as written (what the runs table records)."""
+        """The spec as written when it was loaded (what the runs table records)."""
         return self.source if self.source is not None else self.path.read_text(encoding="utf-8")
 
     @property
@@ -164,7 +164,8 @@ def load_spec(path: str | Path, catalogue: Catalogue) -> LoadedSpec:
         SpecError: for any mistake in the file, naming the key and the fix.
     """
     path = Path(path)
-    return validate_spec(_read_toml(path), catalogue, path=path, base=path.resolve().parent)
+    text = _read_text(path)  # kept: what was loaded is what text() says, whatever the file says later
+    return validate_spec(parse_toml(text, str(path)), catalogue, path=path, base=path.resolve().parent, source=text)
 
 
 def validate_spec(raw: dict[str, Any], catalogue: Catalogue, *, path: Path, base: Path,
@@ -253,16 +254,15 @@ def _naming(ref: str, problem: UserError | str) -> str:
     return message if not ref or (name and name in message) else f"{ref}: {message}"
 
 
-def _read_toml(path: Path) -> dict[str, Any]:
+def _read_text(path: Path) -> str:
     try:
-        text = path.read_text(encoding="utf-8")
+        return path.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise SpecError(str(path), "", "no such spec file; check the path") from None
     except PermissionError as exc:
         raise SpecError(str(path), "", f"cannot read the spec ({exc.strerror}); fix its permissions") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise SpecError(str(path), "", f"cannot read the spec: {exc}") from None
-    return parse_toml(text, str(path))
 
 
 def parse_toml(text: str, file: str) -> dict[str, Any]:

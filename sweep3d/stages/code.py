@@ -9,18 +9,25 @@ become the jobs' values, which the keys hold already.
 
 from __future__ import annotations
 
+import hashlib
 import json
+import uuid
 from dataclasses import asdict, dataclass
+from pathlib import Path
 
+import pyarrow as pa
 import pyarrow.parquet as pq
 
 from sweep3d.cache.store import Store
+from sweep3d.errors import UserError
 from sweep3d.registry import code_identity, is_user_plugin
 from sweep3d.spec.loader import LoadedSpec
 from sweep3d.stages.jobs import Plan
 
 #: The jobs table's schema metadata key holding :func:`user_plugins` as JSON.
 PLUGINS_METADATA = b"sweep3d.plugins"
+#: The jobs table's schema metadata key holding :func:`spec_identity` of the spec that planned it.
+SPEC_METADATA = b"sweep3d.spec"
 VERBS = {"render": "render", "postprocess": "postprocess", "infer": "infer"}
 
 
@@ -57,6 +64,38 @@ def user_plugins(spec: LoadedSpec) -> dict[str, PluginCode]:
 def metadata(spec: LoadedSpec) -> bytes:
     """:func:`user_plugins` as the jobs table records them."""
     return json.dumps({name: asdict(p) for name, p in user_plugins(spec).items()}, sort_keys=True).encode()
+
+
+def spec_identity(spec: LoadedSpec) -> str:
+    """A digest of what ``spec`` was loaded from: its text as loaded (its included files' with it)
+    and its user plug-ins' code, its policy's too. A run records it with the experiment's jobs, so
+    that a reader can tell whether they are this spec's without planning it again (see
+    :mod:`sweep3d.stages.aggregate.own_jobs`)."""
+    h = hashlib.sha256(spec.text().encode())
+    for part in (metadata(spec), _policy_code(spec).encode()):
+        h.update(b"\0" + part)
+    return h.hexdigest()
+
+
+def recorded_identity(jobs: Path) -> str | None:
+    """The :func:`spec_identity` the jobs file at ``jobs`` records (None: no readable file, or one
+    written before runs recorded it, or by hand)."""
+    try:
+        recorded = (pq.read_schema(jobs).metadata or {}).get(SPEC_METADATA)
+    except (OSError, ValueError, pa.ArrowException):
+        return None
+    return recorded.decode() if recorded is not None else None
+
+
+def _policy_code(spec: LoadedSpec) -> str:
+    """A user policy's code identity ("" for a built-in one). One whose source cannot be read gets
+    an identity of its own, so that nothing is ever taken for its results without planning it."""
+    if not is_user_plugin(spec.spec.policy.type):
+        return ""
+    try:
+        return code_identity(type(spec.policy))
+    except UserError:
+        return f"unknown:{uuid.uuid4().hex}"
 
 
 def changed_since_last_run(spec: LoadedSpec, store: Store) -> list[PluginCode]:

@@ -68,13 +68,14 @@
     return figure;
   }
 
-  /* Wilson 95 % score interval of k successes in n trials, as [low, high]. */
+  /* Wilson 95 % score interval of k successes in n trials, as [low, high]: the views' wilson_low
+     and wilson_high (sweep3d/stages/aggregate/views.py), clamped alike to [0, p] and [p, 1]. */
   function wilson(k, n) {
     if (!n) return [NaN, NaN];
     var z = 1.959963984540054, p = k / n, z2 = z * z;
     var centre = (p + z2 / (2 * n)) / (1 + z2 / n);
     var half = z * Math.sqrt(Math.max(p * (1 - p) / n + z2 / (4 * n * n), 0)) / (1 + z2 / n);
-    return [centre - half, centre + half];
+    return [Math.min(p, Math.max(0, centre - half)), Math.max(p, Math.min(1, centre + half))];
   }
 
   function percent(value, digits) {

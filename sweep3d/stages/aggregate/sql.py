@@ -3,7 +3,7 @@ API's ``sql`` share (the statement check, the locked-down connection, one-line e
 
 from __future__ import annotations
 
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from pathlib import Path
 from typing import Iterator, Sequence
 
@@ -14,6 +14,7 @@ from sweep3d.cache.store import Store, is_select
 from sweep3d.errors import UserError
 from sweep3d.spec.loader import LoadedSpec
 from sweep3d.stages.aggregate.boundaries import names_boundaries, numeric_scales, register_failure_boundaries
+from sweep3d.stages.aggregate.own_jobs import results_store
 from sweep3d.stages.aggregate.views import connect, has_view, no_results
 
 QUERY_HINT = "sweep3d query runs one SELECT over the views results, jobs, predictions, renders, images, runs"
@@ -39,12 +40,20 @@ def select_only(sql: str, refusal_hint: str = "write rows to a file with --outpu
 
 @contextmanager
 def results_connection(spec: LoadedSpec, model: str | None = None, writable: Sequence[Path] = (),
-                       statement: str = "") -> Iterator[duckdb.DuckDBPyConnection]:
-    """A read-only connection over the experiment's views (``model``'s results, default the
-    first model's); a DuckDB error inside the block becomes one line (no results yet: how to
-    make them). ``failure_boundaries`` (computed in Python, seconds at scale) is added only when
-    ``statement`` names it, so other queries cost what they did."""
-    store = Store(spec.store)
+                       statement: str = "", store: Store | None = None) -> Iterator[duckdb.DuckDBPyConnection]:
+    """A read-only connection over the views of ``spec``'s own results (``model``'s, default the
+    first model's; ``store``: a :func:`results_store` of ``spec`` the caller holds); a DuckDB error
+    inside the block becomes one line (no results yet: how to make them). ``failure_boundaries``
+    (computed in Python, seconds at scale) is added only when ``statement`` names it, so other
+    queries cost what they did."""
+    with nullcontext(store) if store is not None else results_store(spec) as own:
+        with _connection(spec, own, model, writable, statement) as con:
+            yield con
+
+
+@contextmanager
+def _connection(spec: LoadedSpec, store: Store, model: str | None, writable: Sequence[Path],
+                statement: str) -> Iterator[duckdb.DuckDBPyConnection]:
     con = connect(store, spec.name, read_only=True, writable=writable, model=model)
     try:
         if names_boundaries(statement):

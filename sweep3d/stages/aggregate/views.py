@@ -61,7 +61,9 @@ store.
 Macros:
 
 ``wilson_low(k, n)``, ``wilson_high(k, n)``
-    the 95 % Wilson score interval of a proportion k/n (NULL when n = 0).
+    the 95 % Wilson score interval of a proportion k/n (NULL when n = 0): 0 <= low <= k/n <= high
+    <= 1, low exactly 0 at k = 0 and high exactly 1 at k = n. The one definition of the interval:
+    :func:`wilson_interval` reads it from here, and the report's script mirrors it.
 ``binomial_cdf(k, n, p)``
     P(X <= k) for X ~ Binomial(n, p), exact (summed in log space).
 ``epsilon_squared(ss_effect, df_effect, ss_error, df_error, ss_total)``
@@ -255,13 +257,15 @@ def control_columns(con: duckdb.DuckDBPyConnection, parameters: list[str] | None
 # -- SQL --------------------------------------------------------------------------------------
 def _create_macros(con: duckdb.DuckDBPyConnection) -> None:
     z2 = Z95 * Z95
-    p = "(k::DOUBLE / n)"
-    for name, sign in (("wilson_low", "-"), ("wilson_high", "+")):
-        con.execute(
-            f"CREATE OR REPLACE MACRO {name}(k, n) AS CASE WHEN n > 0 THEN "
-            f"(({p} + {z2!r} / (2 * n)) {sign} {Z95!r} * sqrt(greatest({p} * (1 - {p}) / n "
-            f"+ {z2!r} / (4 * n::DOUBLE * n), 0))) / (1 + {z2!r} / n) END"
-        )
+    p = "(k::DOUBLE / n)"  # the bits of the views' accuracy, n_correct / n
+    # The score interval's ends, clamped to [0, p] and [p, 1]: in floating point its low end at
+    # k = 0 is a residue (6e-18 for 0 of 48, above the accuracy) and its high end at k = n can
+    # fall a bit short of 1; clamped, they are exactly 0 and 1, and low <= p <= high always.
+    for name, sign, clamp in (("wilson_low", "-", "least({p}, greatest(0.0, {end}))"),
+                              ("wilson_high", "+", "greatest({p}, least(1.0, {end}))")):
+        end = (f"(({p} + {z2!r} / (2 * n)) {sign} {Z95!r} * sqrt(greatest({p} * (1 - {p}) / n "
+               f"+ {z2!r} / (4 * n::DOUBLE * n), 0))) / (1 + {z2!r} / n)")
+        con.execute(f"CREATE OR REPLACE MACRO {name}(k, n) AS CASE WHEN n > 0 THEN {clamp.format(p=p, end=end)} END")
     # P(X <= k) for X ~ Binomial(n, p), summed exactly in log space (no overflow, no underflow
     # trouble: a term too small for a double is 0, as its share of the sum is).
     con.execute(
@@ -284,7 +288,7 @@ def _create_macros(con: duckdb.DuckDBPyConnection) -> None:
 
 
 def wilson_interval(k: int, n: int) -> tuple[float, float]:
-    """The 95 % Wilson interval of k successes in n, from the same SQL macros the report uses."""
+    """The 95 % Wilson interval of k successes in n (n > 0), from the same SQL macros the views use."""
     con = duckdb.connect()
     try:
         _create_macros(con)
