@@ -17,7 +17,7 @@ from typing import Annotated, Any, ClassVar, Iterator, Literal
 import numpy as np
 from pydantic import ConfigDict
 
-from sweep3d.errors import plugin_failure
+from sweep3d.errors import PLUGIN_FAILURES, plugin_failure
 from sweep3d.registry import code_identity, is_user_plugin
 from sweep3d.typed import Typed
 
@@ -96,16 +96,18 @@ class Control:
 
 
 @contextmanager
-def blamed(control: Control, doing: str) -> Iterator[None]:
-    """Run a control's code so that a user's control that raises becomes one
-    :class:`~sweep3d.errors.PluginError` naming it (``doing``: "failed in apply()"); sweep3d's own
-    controls' exceptions are bugs, raised as they are."""
+def blamed(control: Control, method: str) -> Iterator[None]:
+    """Run a control's ``method`` (e.g. "apply()") so that a user's control that raises or exits
+    becomes one :class:`~sweep3d.errors.PluginError` naming it, in the render worker too (an exit
+    there would end the worker, not name the control); sweep3d's own controls' exceptions are
+    bugs, raised as they are."""
     try:
         yield
-    except Exception as exc:
+    except PLUGIN_FAILURES as exc:
         if not is_user_plugin(control.type_name):
             raise
-        raise plugin_failure(f"control {control.type_name!r} (id {control.id!r})", exc, doing) from None
+        raise plugin_failure(f"control {control.type_name!r} (id {control.id!r})", exc, f"failed in {method}",
+                             during=f"in {method}") from None
 
 
 def wrap_periodic(value: float, period: float) -> float:

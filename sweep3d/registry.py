@@ -161,6 +161,8 @@ class Registry(Generic[T]):
                 f"cannot import {self.kind} module {module_name!r}: {exc}; put {module_name.replace('.', '/')}.py "
                 "beside the spec, or install it, or add its folder to PYTHONPATH"
             ) from None
+        except SystemExit as exc:  # sys.exit at the module's top level: named as the plug-in asked for
+            raise plugin_failure(f"{self.kind} {dotted!r}", exc, during="on import") from None
         except Exception as exc:  # noqa: BLE001  (a syntax error or a raise in the user's module)
             if isinstance(exc, SyntaxError) and exc.filename:
                 where = f" ({Path(exc.filename).name}:{exc.lineno})"

@@ -11,7 +11,7 @@ from rich.console import Console
 from rich.markup import escape
 
 from sweep3d.api import check_wait
-from sweep3d.errors import RenderError, UserError
+from sweep3d.errors import RenderError, UserError, plugin_failure
 
 __all__ = ["check_wait", "registrar"]  # check_wait: the API's, for the commands' --wait
 
@@ -27,7 +27,7 @@ def registrar(app: typer.Typer) -> Callable[[Callable], Callable]:
         @functools.wraps(func)
         def wrapper(*args, **kwargs):
             try:
-                return func(*args, **kwargs)
+                return _exits_as_errors(func, *args, **kwargs)
             except UserError as exc:
                 if DEBUG["on"] and getattr(exc, "details", ""):  # a plug-in's traceback, on request
                     err_console.print(escape(exc.details), highlight=False, soft_wrap=True)
@@ -43,3 +43,13 @@ def registrar(app: typer.Typer) -> Callable[[Callable], Callable]:
         return app.command()(wrapper)
 
     return command
+
+
+def _exits_as_errors(func: Callable, *args, **kwargs):
+    """``func``'s result, a ``SystemExit`` escaping it raised as a PluginError instead. sweep3d's
+    commands end with ``typer.Exit``, never ``SystemExit``, so one that escapes came from plug-in
+    code that no boundary caught; passing it on would exit with its code, 0 as if all went well."""
+    try:
+        return func(*args, **kwargs)
+    except SystemExit as exc:
+        raise plugin_failure("a plug-in", exc) from None

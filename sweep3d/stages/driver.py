@@ -87,6 +87,9 @@ class Feed:
         self._store, self._recorded = store, recorded
         self._jobs = list(jobs)
         self._open, self._cancelled = more, False
+        # Whether the pass began with jobs to come from stages upstream: fixed, unlike ``more``
+        # (which says how fast they went), so what a stage chooses from it is the same run to run.
+        self.upstream = more
         self._changed = threading.Condition()
 
     def put(self, job: Job) -> None:

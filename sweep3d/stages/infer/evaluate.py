@@ -14,7 +14,7 @@ from typing import Any, Sequence
 import numpy as np
 import pyarrow as pa
 
-from sweep3d.errors import PluginError, plugin_failure
+from sweep3d.errors import PLUGIN_FAILURES, PluginError, plugin_failure
 from sweep3d.stages.infer.evaluators import Evaluator, Truth
 from sweep3d.stages.infer.labels import LabelMap
 
@@ -32,8 +32,8 @@ def evaluate_checked(evaluator: Evaluator, kind: str, outputs: Any, truths: Sequ
     name = f"evaluator {kind} ({type(evaluator).where()})"
     try:
         rows = evaluator.evaluate(outputs, truths, labels)
-    except Exception as exc:  # noqa: BLE001  (a user's code: whatever it raises is its failure)
-        raise plugin_failure(f"evaluator {kind}", exc) from None
+    except PLUGIN_FAILURES as exc:  # a user's code: whatever it raises, or an exit, is its failure
+        raise plugin_failure(f"evaluator {kind}", exc, during="in evaluate()") from None
     problem = rows_problem(evaluator, rows, len(truths))
     if problem is not None:
         raise PluginError(f"{name} {problem}")

@@ -20,7 +20,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from sweep3d.cache.keys import digest, file_digest
-from sweep3d.errors import UserError, plugin_failure
+from sweep3d.errors import PLUGIN_FAILURES, UserError, plugin_failure
 from sweep3d.registry import Registry
 from sweep3d.stages.infer.labels import IMAGENET, LabelMap
 
@@ -243,7 +243,7 @@ def load_model(name: str) -> Classifier:
         made = factory()
     except UserError:
         raise
-    except Exception as exc:  # noqa: BLE001  (a user's factory failing is a user error)
+    except PLUGIN_FAILURES as exc:  # a user's factory failing (or exiting) is a user error
         raise plugin_failure(f"model factory {name!r}", exc, "raised") from None
     import torch
 

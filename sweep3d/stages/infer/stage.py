@@ -4,6 +4,12 @@ Which backend computes the predictions is :func:`choose_backend`'s choice: by de
 standing in for torch, whose answers are torch's (``onnx_backend``), so prediction keys do not
 change with it.
 
+An image's outputs are the same bits whatever batch it lands in (images are batched as they
+arrive, so which images share a batch changes run to run): torch's kernels sum in another order
+for another batch size, so batches that torch computes are padded to ``batch_size``; ONNX
+Runtime's rows on the CPU are the same bits at any batch size, position, company or thread count
+(benchmarks/RESULTS.md), so its batches are not.
+
 A prediction is valid only if its image was valid (no NaN/inf in the render or after post
 controls) and the model's outputs are finite; an invalid image is not shown to the model and
 gets a row with ``valid = false``, so it is counted as invalid and never averaged. An image blob
@@ -34,6 +40,7 @@ from sweep3d.stages.infer.handle import ModelHandle, model_key_path
 from sweep3d.stages.infer.kept_outputs import KeptOutputs
 from sweep3d.stages.infer.labels import LabelMap
 from sweep3d.stages.infer.models import builtin_model
+from sweep3d.stages.infer.outputs import Localized
 from sweep3d.stages.infer.tasks import check_task, model_outputs
 from sweep3d.stages.jobs import Job, JobList, Plan
 from sweep3d.stages.postprocess import ImageHandoff, make_image, post_controls, truth_digests
@@ -160,7 +167,7 @@ class InferStage:
         first = next(jobs, None)
         if first is None:
             return  # nothing came (its inputs failed): nothing to load
-        infer = self._inferrer(plan, store, self._threads(beside=todo.more))  # while the next images are made
+        infer = self._inferrer(plan, store, self._threads(beside=todo.upstream))  # while the next images are made
         passes = self._evaluator(plan).passes
         for batch_jobs in _batches(itertools.chain([first], jobs), self.model.settings.batch_size):
             t0 = time.perf_counter()
@@ -206,11 +213,12 @@ class InferStage:
             outputs = kept.load(images)  # kept from an earlier evaluator of the same model
             computed = outputs is None
             if computed:
-                stacked = np.stack(pixels)
+                stacked = padded(np.stack(pixels), self.model.settings.batch_size if self._pads() else 0)
                 if remote is not None:
                     outputs = remote(stacked)
                 else:
                     outputs = model_outputs(model, stacked, evaluator.task, self.model.name, self._runner)
+                outputs = first_rows(outputs, len(pixels))
             _check_classes(outputs, labels, self.model.name)
             if computed:
                 kept.save(images, outputs)
@@ -254,10 +262,16 @@ class InferStage:
             return f"{STAND_IN}:{max(getattr(self._evaluator(plan).params, 'top_k', 5), 5)}"
         return self.backend or "torch"
 
+    def _pads(self) -> bool:
+        """Whether batches are padded to ``batch_size``: where torch computes them (its answers
+        change with the batch size), not where ONNX Runtime does on the CPU (they do not)."""
+        return self._runner is None or not self._runner.batch_invariant
+
     def _threads(self, beside: bool = False) -> int:
-        """Inference threads: the model's setting, else one ``beside`` stages that still compute
-        (Blender renders on every core: one thread gave the shortest runs, benchmarks/RESULTS.md),
-        else every core."""
+        """Inference threads: the model's setting, else one ``beside`` stages that compute in the
+        pass (Blender renders on every core: one thread gave the shortest runs, benchmarks/RESULTS.md),
+        else every core. Chosen from what the pass had to do, not from how fast upstream went,
+        since torch's answers change with its thread count."""
         return self.model.settings.threads or (1 if beside else os.cpu_count() or 1)
 
     def _evaluator(self, plan: Plan) -> Evaluator:
@@ -335,6 +349,23 @@ def _batches(jobs: Iterable[Job], size: int) -> Iterator[list[Job]]:
             batch = []
     if batch:
         yield batch
+
+
+def padded(images: np.ndarray, size: int) -> np.ndarray:
+    """``images`` with copies of the last one appended up to ``size`` images: at one batch shape,
+    torch gives an image the same bits whatever its position and the other images (checked on
+    EfficientNet-Lite0), so its outputs no longer depend on the batch it landed in."""
+    if len(images) >= size:
+        return images
+    return np.concatenate([images, np.repeat(images[-1:], size - len(images), axis=0)])
+
+
+def first_rows(outputs: Any, n: int) -> Any:
+    """The first ``n`` images' outputs of a batch's (logits, a raw array, detections, score
+    maps or a :class:`Localized`): the images before :func:`padded`'s copies."""
+    if isinstance(outputs, Localized):
+        return Localized(outputs.logits[:n], outputs.boxes[:n])
+    return outputs[:n]
 
 
 def _table(job: Job) -> str:

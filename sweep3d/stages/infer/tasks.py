@@ -11,7 +11,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from sweep3d.errors import UserError
+from sweep3d.errors import PLUGIN_FAILURES, UserError, plugin_failure
 from sweep3d.stages.infer import outputs
 from sweep3d.stages.infer.cam import cam_localize, supports_cam
 from sweep3d.stages.infer.evaluators.base import TASKS
@@ -78,7 +78,7 @@ def localize(model: Classifier, images: np.ndarray, name: str) -> Localized:
         try:
             with torch.inference_mode():
                 logits, boxes = cam_localize(model.module, on_device(model.module, model.preprocess(images)))
-        except Exception as exc:  # noqa: BLE001  (a user's module failing on its input is a user error)
+        except PLUGIN_FAILURES as exc:  # a user's module failing on its input is a user error
             raise _raised(name, exc, images) from None
     else:
         out = _call(model, images, name)
@@ -117,11 +117,13 @@ def _call(model: Classifier, images: np.ndarray, name: str, runner: Callable | N
         with torch.inference_mode():
             batch = model.preprocess(images)
             return torch.from_numpy(runner(batch)) if runner is not None else model.module(on_device(model.module, batch))
-    except Exception as exc:  # noqa: BLE001  (a user's model failing on its input is a user error)
+    except PLUGIN_FAILURES as exc:  # a user's model failing on its input (or exiting) is a user error
         raise _raised(name, exc, images) from None
 
 
-def _raised(name: str, exc: Exception, images: np.ndarray) -> UserError:
+def _raised(name: str, exc: BaseException, images: np.ndarray) -> UserError:
+    if isinstance(exc, SystemExit):
+        return plugin_failure(f"model {name!r}", exc, during=f"on a batch of shape {tuple(images.shape)}")
     detail = " ".join(str(exc).split())[:300]
     return UserError(f"model {name!r} raised {type(exc).__name__} on a batch of shape {tuple(images.shape)}: "
                      f"{detail}; fix the model or its preprocessing")

@@ -12,7 +12,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from sweep3d.errors import PluginError, UserError, plugin_failure
+from sweep3d.errors import PLUGIN_FAILURES, PluginError, UserError, plugin_failure
 from sweep3d.spec.space import Point, PointError, SearchSpace, SpaceShape, contract
 from sweep3d.stages.plan.policies import Outcome, Policy
 
@@ -32,8 +32,8 @@ def policy_arrays(policy: Policy, name: str, space: SearchSpace, seed: int,
         raise PluginError(f"policy {name}: {exc}") from None
     except UserError:
         raise
-    except Exception as exc:  # noqa: BLE001  (a user's policy failing is the user's to fix)
-        raise plugin_failure(f"policy {name}", exc, "raised") from None
+    except PLUGIN_FAILURES as exc:  # a user's policy failing (or exiting) is the user's to fix
+        raise plugin_failure(f"policy {name}", exc, "raised", during="in arrays()") from None
     return _checked(made, shape, space, lambda problem: PluginError(f"policy {name}: {problem}; {contract(shape)}"))
 
 
@@ -77,6 +77,8 @@ def policy_count(policy: Policy, name: str, shape: SpaceShape) -> int | None:
         count = policy.count(shape)
     except UserError:
         raise
+    except SystemExit as exc:
+        raise plugin_failure(f"policy {name}", exc, during="in count()") from None
     except Exception as exc:  # noqa: BLE001
         raise PluginError(f"policy {name}: count(shape) raised {type(exc).__name__}: {exc}") from None
     if count is None:

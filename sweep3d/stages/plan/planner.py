@@ -14,6 +14,7 @@ from typing import Any, Callable
 import numpy as np
 
 from sweep3d.cache.keys import Template, digests, file_digest
+from sweep3d.controls import blamed
 from sweep3d.errors import SpecError, UserError
 from sweep3d.spec.assets import mesh_digest
 from sweep3d.spec.class_names import NameClash, spec_class_names
@@ -222,10 +223,12 @@ def _in_frame(rendered: list[ControlInstance], batches: dict[str, ControlBatch],
 
 
 def _in_frame_one(applying: list[ControlInstance], batches: dict[str, ControlBatch], row: int) -> bool:
-    """The in-frame test of one job through a :class:`SceneState` its controls edit."""
+    """The in-frame test of one job through a :class:`SceneState` its controls edit (a user's
+    control that raises or exits here is named, as in the render worker)."""
     state = SceneState()
     for inst in applying:
-        inst.control.apply(state, inst.control.params(batches[inst.id].raw(row)))
+        with blamed(inst.control, "apply()"):
+            inst.control.apply(state, inst.control.params(batches[inst.id].raw(row)))
     return in_frame(state)
 
 

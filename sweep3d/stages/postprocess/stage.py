@@ -87,7 +87,7 @@ def _applied(inst: ControlInstance, image: np.ndarray, params: Any, rng: np.rand
     control that raises or returns no image of ``image``'s shape is a :class:`PluginError` naming
     it (sweep3d's own controls' failures are bugs: raised)."""
     control = inst.control
-    with blamed(control, "failed in apply()"):
+    with blamed(control, "apply()"):
         if getattr(control, "passes", ()) and takes_frame(type(control)):
             out = control.apply(image, params, rng, frame)
         else:
@@ -112,7 +112,7 @@ def job_frame(plan: Plan, job: Job, arrays: dict[str, np.ndarray]) -> RenderFram
     rendered = sorted((c.control for c in plan.spec.controls if c.control.stage == "render"), key=lambda c: c.order)
     for control in rendered:
         if control.id in job.values:
-            with blamed(control, "failed in apply()"):
+            with blamed(control, "apply()"):
                 control.apply(state, control.params(job.values[control.id]))
     return frame_from_state(state, plan.framing.size, plan.framing.crop, arrays.get("depth"), arrays.get("mask"))
 

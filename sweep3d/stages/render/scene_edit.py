@@ -81,7 +81,7 @@ def render_edited(scene: BlenderScene, edits: list[tuple[RenderedControl, BaseMo
         context = SceneEdit(bpy, scene.scene, tuple(scene.meshes), scene.pose, scene.current.normaliser,
                             scene.camera, object_name, environment_name)
         for control, params in edits:
-            with blamed(control, "failed in edit()"):
+            with blamed(control, "edit()"):
                 control.edit(context, params)
         rgb = scene.render()
     finally:

@@ -133,7 +133,7 @@ def posed_state(job: RenderJob):
 
     state = SceneState()
     for control, params in job.controls:
-        with blamed(control, "failed in apply()"):
+        with blamed(control, "apply()"):
             control.apply(state, params)
     return state
 
