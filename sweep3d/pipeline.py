@@ -21,7 +21,7 @@ import uuid
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
-from typing import Iterable, Iterator
+from typing import Iterable
 
 import pyarrow as pa
 from rich.console import Console
@@ -313,7 +313,7 @@ def write_unstored_images(spec: LoadedSpec, store: Store, keys: Iterable[str]) -
     """
     wanted = {k for k in keys if k and not store.blob_path(k).exists()} & store.key_set("images")
     written = 0
-    for plan in _plans_holding(spec, store, wanted):
+    for plan in plans_as_run(spec, store) if wanted else ():
         jobs = unique_jobs(PostprocessStage(), plan.jobs)
         post, renders, passes = post_controls(plan), store.digests("renders"), truth_digests(store)
         for key in sorted(wanted & jobs.keys()):
@@ -322,23 +322,9 @@ def write_unstored_images(spec: LoadedSpec, store: Store, keys: Iterable[str]) -
                 atomic_write(store.blob_path(key), encode_png8(made.pixels), durable=False)
                 written += 1
         wanted -= jobs.keys()
-    return written
-
-
-def _plans_holding(spec: LoadedSpec, store: Store, wanted: set[str]) -> Iterator[Plan]:
-    """Each model's plans of ``spec`` while ``wanted`` (consumed by the caller) is not empty: an
-    adaptive policy's rounds from the outcomes stored, as its run planned them."""
-    for settings in spec.models:
         if not wanted:
-            return
-        plan = plan_spec(spec, ModelHandle.resolve(spec, settings))
-        yield plan
-        while wanted and spec.policy.adaptive:
-            grown = plan_spec(spec, ModelHandle.resolve(spec, settings), outcomes_by_scene(plan, store))
-            if len(grown.jobs) <= len(plan.jobs):
-                break
-            plan = grown
-            yield plan
+            break
+    return written
 
 
 def _missing_renders(plans: list[Plan], store: Store, executor: Executor) -> tuple[dict[int, int], list[Found]]:
