@@ -15,7 +15,7 @@ from sweep3d.errors import RenderError, UserError, plugin_failure
 
 __all__ = ["check_wait", "registrar"]  # check_wait: the API's, for the commands' --wait
 
-err_console = Console(stderr=True)
+err_console = Console(stderr=True, highlight=False)
 DEBUG = {"on": False}  # set by ``sweep3d --debug``: a failing plug-in's traceback is printed too
 
 

@@ -28,7 +28,7 @@ app = typer.Typer(
     no_args_is_help=True,
     help="Find where computer-vision models fail by rendering 3D scenes under systematic variation.",
 )
-console = Console()
+console = Console(highlight=False)  # values from data print as text: no colouring of what looks like numbers or paths
 
 command = registrar(app)
 

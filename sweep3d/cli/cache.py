@@ -17,7 +17,7 @@ from sweep3d.cli._commands import check_wait, registrar
 from sweep3d.errors import UserError
 
 cache_app = typer.Typer(no_args_is_help=True, rich_markup_mode=None, help="Check and tidy a spec's store: verify, gc, compact, stats.")
-console = Console()
+console = Console(highlight=False)  # values from data print as text: no colouring of what looks like numbers or paths
 
 SpecArg = typer.Argument(..., help="Path to a spec whose store to work on.", show_default=False,
                          readable=False)  # the loader says why it cannot read one, in one line

@@ -30,6 +30,7 @@ from sweep3d.stages.code import explain
 from sweep3d.stages.driver import plan_status
 from sweep3d.stages.infer import InferStage, ModelHandle
 from sweep3d.stages.infer.evaluators import measure_of
+from sweep3d.stages.jobs import JobList
 from sweep3d.stages.passes import truth_passes
 from sweep3d.stages.plan import Plan
 from sweep3d.stages.postprocess import PostprocessStage
@@ -39,7 +40,9 @@ from sweep3d.stages.render.estimate import duration, estimate_render_seconds, sl
 #: Rendered controls that may hide part of the object (its mask pass then renders twice).
 HIDING_CONTROLS = {"occlusion", "position", "camera", "scale"}
 
-INFER_SECONDS = 0.05  # per image on a 2-core CPU (render costs: stages/render/estimate.py)
+#: Seconds per image on a 2-core CPU, post-processing (a blur) and inference (EfficientNet-Lite0 on ONNX
+#: Runtime): the image path measured in benchmarks/RESULTS.md (render costs: stages/render/estimate.py).
+POST_SECONDS, INFER_SECONDS = 0.003, 0.009
 
 
 def cache_status(plan: Plan, store: Store, model: ModelHandle, several: bool = False) -> list[tuple[str, int, int]]:
@@ -57,7 +60,7 @@ def print_plan(console: Console, spec: LoadedSpec, jobs: int = 0) -> Plan:
     plans = [plan_spec(spec, model) for model in models]
     plan = plans[0]
     status = _models_status(plans, models, store)
-    scenes = len({j.scene for j in plan.jobs})
+    scenes = len(plan.jobs.scenes() if isinstance(plan.jobs, JobList) else {j.scene for j in plan.jobs})
     console.print(f"[bold]{escape(spec.name)}[/]: {len(plan.jobs) + len(plan.out_of_frame)} jobs over {scenes} scenes "
                   f"({len(spec.objects)} objects × {len(spec.environments)} environments), "
                   f"policy {spec.spec.policy.type}{_pairing(spec)}; store {escape(str(spec.store))}")
@@ -67,7 +70,7 @@ def print_plan(console: Console, spec: LoadedSpec, jobs: int = 0) -> Plan:
     hidden = any(c.control.type_name in HIDING_CONTROLS for c in spec.controls)
     for stage, needed, cached, crop in status:
         per_item = {"render": estimate_render_seconds(spec.render, crop, bool(passes), hidden),
-                    "postprocess": 0.005}.get(stage.split(" ")[0], INFER_SECONDS)
+                    "postprocess": POST_SECONDS}.get(stage.split(" ")[0], INFER_SECONDS)
         seconds = (needed - cached) * per_item
         total += seconds
         table.add_row(stage, str(needed), str(cached), str(needed - cached), duration(seconds))

@@ -289,8 +289,20 @@ def split_to_do(stage: Stage, plan: Plan, store: Store, cached: set[str] | None 
 def plan_status(stage: Stage, plan: Plan, store: Store, found: Found | None = None) -> tuple[int, int]:
     """(distinct keys ``plan`` needs at ``stage``, how many the store holds complete), from
     ``found`` where the caller already looked (:func:`rows_and_cached`)."""
+    if found is None and not store.key_set(stage.table):  # nothing stored yet: count the keys, find none
+        return _distinct_keys(stage, plan), 0
     cached = (found if found is not None else rows_and_cached(stage, plan, store))[1]
     return len(unique_jobs(stage, plan.jobs)), len(cached - stage.incomplete(plan, store, cached))
+
+
+def _distinct_keys(stage: Stage, plan: Plan) -> int:
+    """How many distinct keys ``plan`` has at ``stage``: from its columns where the stage reads
+    them there (a set of 10⁶ keys, without the first job of each that :func:`unique_jobs` finds)."""
+    keys_of = _keys_of(stage)
+    if keys_of is None or not isinstance(plan.jobs, JobList):
+        return len(unique_jobs(stage, plan.jobs))
+    distinct = set(keys_of(plan.jobs))
+    return len(distinct) - (None in distinct)
 
 
 def discard_damaged(stage: Stage, store: Store, cached: set[str]) -> set[str]:

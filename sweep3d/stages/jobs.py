@@ -357,6 +357,16 @@ class JobList(Sequence[Job]):
             return column
         return [column[i] for i in self.indices.tolist()]
 
+    def scenes(self) -> set[tuple[str, str]]:
+        """The (object, environment) scenes these jobs are of, read from the scene blocks (no job made)."""
+        indices = np.asarray(self.indices)
+        found = set()
+        for block in self.columns.blocks:
+            at = int(np.searchsorted(indices, block.start))  # the indices ascend
+            if at < len(indices) and indices[at] < block.start + block.size:
+                found.add((block.object, block.environment))
+        return found
+
     def _all(self) -> list[Job]:
         if self._jobs is None:
             self._jobs = self.columns.jobs(self.indices)

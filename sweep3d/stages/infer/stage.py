@@ -156,6 +156,8 @@ class InferStage:
                             f"the onnx backend serves classification only, not {task!r}; use backend = \"torch\"")
         if self.backend == "onnx":  # asked for: its failure is the user's to see now
             self._runner = self._onnx(plan, store, self._threads())
+        elif self.backend == STAND_IN and self._runner is None:  # exported and checked now, while
+            self._runner = self._stand_in(plan, store, self._threads(beside=True))  # Blender starts
         self._labels = labels
 
     def compute(self, todo: Feed, plan: Plan, store: Store) -> Iterator[Computed]:
