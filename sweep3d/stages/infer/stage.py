@@ -326,10 +326,10 @@ class ModelInputs:
     def pixels(self, job: Job) -> np.ndarray | tuple[str, str]:
         """float32 (H, W, 3) in [0, 1], or the (table, key) of the input found damaged or missing."""
         table = _table(job)
+        kept = self.handoff.take(job.image_key) if self.handoff is not None else None
+        if kept is not None:  # made (or decoded, for a render) by the postprocess stage in this process
+            return kept.astype(np.float32) / np.float32(255.0)
         if table == "images":
-            kept = self.handoff.take(job.image_key) if self.handoff is not None else None
-            if kept is not None:
-                return kept.astype(np.float32) / np.float32(255.0)
             recorded = self.digests["images"].get(job.image_key)
             if not recorded:  # not stored: made again (a blob the report wrote, unrecorded, is a copy)
                 made = make_image(self.store, self.plan, job, self.post,

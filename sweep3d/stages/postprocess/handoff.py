@@ -3,13 +3,16 @@
 With ``[postprocess] store = "none"`` an image is not written to the store: the stage puts its
 8-bit pixels here and the infer stage takes them. Encoding a PNG, writing it and decoding it
 again cost more per image than the model on two cores (benchmarks/RESULTS.md, the image path).
-The handoff is bounded: past :data:`LIMIT` images (inference far behind) an image is not kept,
-and inference makes it again from its render, as it does for an image of an earlier run.
+The stage also hands over the render of a job whose image is its render (no post control
+changes it), which it has decoded anyway. The handoff is bounded: past :data:`LIMIT` images the
+oldest is forgotten (inference far behind, or a render whose prediction is cached), and inference
+reads or makes it again, as it does for an image of an earlier run.
 """
 
 from __future__ import annotations
 
 import threading
+from collections import OrderedDict
 
 import numpy as np
 
@@ -21,15 +24,16 @@ class ImageHandoff:
     """Image key → uint8 (H, W, 3) pixels, each taken once; safe between the stages' threads."""
 
     def __init__(self, limit: int = LIMIT) -> None:
-        self._images: dict[str, np.ndarray] = {}
+        self._images: OrderedDict[str, np.ndarray] = OrderedDict()
         self._lock = threading.Lock()
         self.limit = limit
 
     def put(self, key: str, pixels: np.ndarray) -> None:
-        """Keep ``pixels`` for ``key`` unless the handoff is full."""
+        """Keep ``pixels`` for ``key``, forgetting the oldest image when the handoff is full."""
         with self._lock:
-            if len(self._images) < self.limit:
-                self._images[key] = pixels
+            self._images[key] = pixels
+            if len(self._images) > self.limit:
+                self._images.popitem(last=False)
 
     def take(self, key: str) -> np.ndarray | None:
         """The pixels kept for ``key``, forgotten here; None when none are kept."""

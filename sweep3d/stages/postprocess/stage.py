@@ -165,12 +165,14 @@ class PostprocessStage:
         render_digests = todo.digests("renders")
         pass_digests = truth_digests(todo)
         damaged: set[str] = set()
+        seen = _SeenRenders(plan, self.handoff)
         for job in todo:
             t0 = time.perf_counter()
             if job.render_key in damaged:
                 yield Computed(job.image_key, damaged=("renders", job.render_key))
                 continue
-            made = make_image(store, plan, job, post, render_digests.get(job.render_key), pass_digests)
+            render = seen.render(store, job.render_key, render_digests.get(job.render_key))
+            made = make_image(store, plan, job, post, render_digests.get(job.render_key), pass_digests, render)
             if made.pixels is None:
                 if made.damaged is not None and made.damaged[0] == "renders":
                     damaged.add(job.render_key)
@@ -187,6 +189,35 @@ class PostprocessStage:
             yield Computed(job.image_key, {"image_key": job.image_key, "render_key": job.render_key, "valid": valid,
                                            "seconds": time.perf_counter() - t0, "created_at": utc_now(),
                                            DIGEST_COLUMN: digest})
+
+
+class _SeenRenders:
+    """The render the stage decoded last (a render's post-processed images come one after another
+    in plan order: it is read and checked once, not once per image), handed to inference too where
+    a job's image is that render itself."""
+
+    def __init__(self, plan: Plan, handoff: ImageHandoff | None) -> None:
+        self.handoff = handoff
+        self.last: tuple[str, np.ndarray] | None = None
+        self._as_images: set[str] | None = None
+        self._plan = plan
+
+    def render(self, store: Store, key: str, digests: set[str] | None) -> np.ndarray | None:
+        if self.last is not None and self.last[0] == key:
+            return self.last[1]
+        render = load_image(store, key, digests)
+        self.last = (key, render) if render is not None else None
+        if render is not None and self.handoff is not None and key in self.as_images():
+            self.handoff.put(key, to_uint8(render))
+        return render
+
+    def as_images(self) -> set[str]:
+        """Render keys that are also some job's image key (no post control changes that job's)."""
+        if self._as_images is None:
+            jobs = self._plan.jobs
+            images = jobs.key_column("image_key") if isinstance(jobs, JobList) else [j.image_key for j in jobs]
+            self._as_images = set(images)
+        return self._as_images
 
 
 @dataclass(frozen=True)
@@ -217,11 +248,11 @@ def truth_digests(source: Feed | Store) -> dict[str, Any]:
 
 
 def make_image(store: Store, plan: Plan, job: Job, post: Sequence[ControlInstance], render_digests: set[str] | None,
-               pass_digests: dict[str, Any]) -> Made:
-    """The job's post-processed image from its stored render (and passes, for the controls that
-    read them): what the stage computes, and what inference and the report make again for an
-    image that was not stored."""
-    render = load_image(store, job.render_key, render_digests)
+               pass_digests: dict[str, Any], render: np.ndarray | None = None) -> Made:
+    """The job's post-processed image from its stored render (``render``: decoded already; and
+    passes, for the controls that read them): what the stage computes, and what inference and the
+    report make again for an image that was not stored."""
+    render = render if render is not None else load_image(store, job.render_key, render_digests)
     if render is None:
         return Made(None, damaged=("renders", job.render_key))
     frame = None
