@@ -3,7 +3,8 @@
 The package root imports neither bpy nor torch, so the CLI, the planner and the
 store start fast; the render stage imports bpy only inside its worker processes.
 ``sweep3d.load`` and ``sweep3d.Experiment`` (the Python API, :mod:`sweep3d.api`) and
-``sweep3d.plugins`` (the classes plug-ins subclass) are imported when first used.
+``sweep3d.plugins`` (the classes plug-ins subclass) are imported when first used; the errors a
+user can fix (``SpecError``, ``PluginError`` and their base ``UserError``) are here, to catch.
 """
 
 from __future__ import annotations
@@ -11,8 +12,10 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
+from sweep3d.errors import PluginError, SpecError, UserError
+
 __version__ = "0.1.0"
-__all__ = ["Experiment", "load", "plugins"]
+__all__ = ["Experiment", "PluginError", "SpecError", "UserError", "load", "plugins"]
 
 if TYPE_CHECKING:
     from sweep3d import plugins
@@ -28,3 +31,9 @@ def __getattr__(name: str) -> Any:
     if name == "plugins":
         return importlib.import_module("sweep3d.plugins")
     raise AttributeError(f"module 'sweep3d' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    """The public names, those imported on first use included (``dir(sweep3d)`` lists ``load``;
+    a notebook completes from it)."""
+    return sorted({*__all__, "__version__", *(name for name in globals() if name.startswith("__"))})

@@ -6,7 +6,7 @@
     exp.plan()                  # the jobs, cached or not; nothing is rendered
     exp.run()                   # render, postprocess and infer what the store lacks
     df = exp.dataframe()        # the results (exp.results() for a pyarrow Table)
-    exp.sql("SELECT * FROM control_accuracy")  # any read-only SELECT over the views
+    exp.sql("SELECT * FROM control_accuracy")  # any read-only SELECT over the views (pandas=True: a DataFrame)
     exp.report("mugs.html")
 
 The command line is a thin layer over this module: ``run``, ``query`` and ``report`` call the same
@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Mapping, Union
+from typing import TYPE_CHECKING, Any, Literal, Mapping, Union, overload
 
 from sweep3d.errors import UserError
 
@@ -38,6 +38,8 @@ if TYPE_CHECKING:
 #: A spec: a file's path, TOML text (a string holding a newline or starting with ``[``) or a dict.
 SpecSource = Union[str, Path, Mapping[str, Any]]
 EXECUTORS = ("local", "ray")
+#: pyarrow's integer types → pandas' nullable integer dtypes.
+NULLABLE_INTEGERS = {f"{sign}int{bits}": f"{sign.upper()}Int{bits}" for sign in ("", "u") for bits in (8, 16, 32, 64)}
 
 
 def load(spec: SpecSource, *, base: str | Path | None = None) -> Experiment:
@@ -110,31 +112,44 @@ class Experiment:
             print_run(console, result)
         return result
 
-    def sql(self, query: str, model: str | None = None) -> pa.Table:
+    @overload
+    def sql(self, query: str, model: str | None = None, *, pandas: Literal[False] = False) -> pa.Table: ...
+
+    @overload
+    def sql(self, query: str, model: str | None = None, *, pandas: Literal[True]) -> pandas.DataFrame: ...
+
+    def sql(self, query: str, model: str | None = None, *, pandas: bool = False) -> pa.Table | pandas.DataFrame:
         """The rows of one read-only SELECT over the views (``results``, ``control_accuracy``, …; see
         the README) of this spec's own jobs, as ``sweep3d query`` answers it.
 
         Args:
             model: the model whose results the views show (its id; default the spec's first).
+            pandas: return a pandas DataFrame instead of a pyarrow Table: integer columns as
+                nullable integer dtypes (``Int64``: a missing value stays ``<NA>``, not a float NaN).
         """
         from sweep3d.stages.aggregate.sql import arrow, results_connection, select_only
 
         statement = select_only(query, "read the rows and write them with pyarrow or pandas")
         with results_connection(self.spec, model, statement=statement) as con:
-            return arrow(con, statement)
+            table = arrow(con, statement)
+        return to_pandas(table) if pandas else table
 
     def results(self, model: str | None = None) -> pa.Table:
         """One row per job with its parameters, prediction and verdict, ordered by job."""
         return self.sql("SELECT * FROM results ORDER BY job", model)
 
     def dataframe(self, model: str | None = None) -> pandas.DataFrame:
-        """:meth:`results` as a pandas DataFrame."""
-        try:
-            import pandas  # noqa: F401
-        except ImportError:
-            raise UserError("results as a DataFrame need pandas: pip install pandas (or use results(), "
-                            "a pyarrow Table)") from None
-        return self.results(model).to_pandas()
+        """:meth:`results` as a pandas DataFrame, typed for analysis: ``object`` and ``environment``
+        as categoricals in spec order (plots and groupbys follow the spec, not the alphabet),
+        integers as nullable dtypes (``Int64``), and without the columns of control parameters the
+        spec never sets (their defaults, the same in every row; :meth:`results` keeps them)."""
+        frame = to_pandas(self.results(model))
+        frame = frame.drop(columns=[c for c in unset_parameters(self.spec) if c in frame and _constant(frame[c])])
+        for column, names in (("object", [o.name for o in self.spec.objects]),
+                              ("environment", [e.name for e in self.spec.environments])):
+            if column in frame:
+                frame[column] = _categorical(frame[column], names)
+        return frame
 
     def export(self, format: str, output: str | Path | None = None, *, where: str | None = None,
                model: str | None = None, unevaluable: str = "skip", append: bool = False,
@@ -157,6 +172,44 @@ class Experiment:
         fixed and broken jobs, McNemar's p-value and agreement (the ``model_agreement`` view)."""
         require_models(self.spec)
         return self.sql("SELECT * FROM model_agreement ORDER BY model_a, model_b")
+
+
+def to_pandas(table: pa.Table) -> pandas.DataFrame:
+    """``table`` as a DataFrame whose integer columns are pandas' nullable integers (pyarrow's
+    default makes a column with a missing value float64, its integers floats)."""
+    pandas = _pandas()
+    dtypes = {arrow: pandas.api.types.pandas_dtype(name) for arrow, name in NULLABLE_INTEGERS.items()}
+    return table.to_pandas(types_mapper=lambda kind: dtypes.get(str(kind)))
+
+
+def _pandas() -> Any:
+    try:
+        import pandas
+    except ImportError:
+        raise UserError("results as a DataFrame need pandas: pip install pandas (or use results(), "
+                        "a pyarrow Table)") from None
+    return pandas
+
+
+def unset_parameters(spec: LoadedSpec) -> list[str]:
+    """The columns of control parameters ``spec`` does not set: the planner records their
+    defaults, so that a job's row says everything that made its image."""
+    from sweep3d.spec.columns import parameter_column
+
+    listed = set(spec.parameter_columns)
+    return [column for inst in spec.controls for param in inst.control.Params.model_fields
+            if (column := parameter_column(inst.id, param)) not in listed]
+
+
+def _constant(column: pandas.Series) -> bool:
+    return column.nunique(dropna=False) <= 1
+
+
+def _categorical(column: pandas.Series, names: list[str]) -> pandas.Series:
+    """``column`` as a categorical whose categories are ``names`` in that order (any other value
+    the results hold after them)."""
+    extra = [v for v in dict.fromkeys(column.dropna()) if v not in names]
+    return column.astype(_pandas().CategoricalDtype([*names, *extra]))
 
 
 def require_models(spec: LoadedSpec) -> None:

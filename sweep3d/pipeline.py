@@ -75,8 +75,30 @@ class RunResult:
     def failed(self) -> int:
         return sum(o.failed for o in self.outcomes)
 
-    def outcome(self, stage: str) -> StageOutcome:
-        return next(o for o in self.outcomes if o.stage == stage)
+    def outcome(self, stage: str, model: str | None = None) -> StageOutcome:
+        """What ``stage`` did (``"render"``, ``"postprocess"``, ``"infer"``). A run of several
+        models has an infer stage per model, ``"infer <model>"``: name it, or give ``model=``.
+
+        Raises:
+            UserError: for a stage the run did not have, listing those it had.
+        """
+        titles = [stage] if model is None else [f"{stage} {model}"]
+        found = [o for o in self.outcomes if o.stage in titles]
+        if model is None and not found:  # "infer" on a run of one model named by its id
+            found = [o for o in self.outcomes if o.stage.split(" ", 1)[0] == stage]
+        if len(found) == 1:
+            return found[0]
+        names = ", ".join(repr(o.stage) for o in self.outcomes)
+        asked = repr(titles[0])
+        if found:
+            raise UserError(f"stage {asked} ran once per model: ask for one of {names} (or give model=)")
+        raise UserError(f"no stage {asked} in this run; its stages: {names}")
+
+    def __repr__(self) -> str:
+        stages = ", ".join(f"{o.stage}: {o.computed} computed, {o.cached} cached, {o.failed} failed"
+                           for o in self.outcomes)
+        return (f"RunResult({self.run_id!r}, jobs={len(self.plan.jobs)}, models={[p.model for p in self.plans]}, "
+                f"failed={self.failed}, seconds={self.seconds:.1f}, stages=[{stages}])")
 
 
 def plan_spec(spec: LoadedSpec, model: ModelHandle | None = None, history: History | None = None) -> Plan:

@@ -478,7 +478,7 @@ def test_levels_ranked_once_per_level_are_the_levels_of_ranking_every_row(tmp_pa
     ranked_once = con.execute(f"SELECT {columns} FROM control_levels ORDER BY job, position").fetchall()
     per_row = con.execute(f"SELECT {columns} FROM ({PER_ROW_LEVELS}) ORDER BY job, position").fetchall()
     assert ranked_once == per_row
-    assert {r[0] for r in con.execute("DESCRIBE control_levels").fetchall()} == {*columns.split(", "), "absent"}
+    assert {r[0] for r in con.execute("DESCRIBE control_levels").fetchall()} == {*columns.split(", "), "value", "absent"}
     assert con.execute("SELECT bool_and(absent = (label = ?)) FROM control_levels", [NOT_APPLIED]).fetchone()[0]
     labels = dict(con.execute("SELECT parameter, list(DISTINCT label ORDER BY label) FROM control_levels "
                               "WHERE parameter IN ('c_zero', 'c_str') GROUP BY parameter").fetchall())

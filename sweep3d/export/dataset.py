@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import datetime
 import decimal
+import errno
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -32,6 +33,8 @@ if TYPE_CHECKING:
 
 #: ``--format`` → the writer of that format.
 FORMATS: dict[str, type[DatasetWriter]] = {w.name: w for w in (CocoWriter, ImageFolderWriter, ParquetWriter)}
+#: The errors of a disk that has no room left (for the export, or for the user's quota).
+DISK_FULL = (errno.ENOSPC, errno.EDQUOT)
 #: Columns of ``results`` an image's attributes carry besides its scene and control values, where they exist.
 VERDICT = ("valid", "correct", "outcome", "top1_label", "evaluable", "visible_fraction")
 
@@ -54,9 +57,17 @@ class ExportResult:
     categories: int
     left_out: int
     already: int
+    where: str = DEFAULT_WHERE
+
+    @property
+    def written(self) -> bool:
+        """Whether the export wrote anything (an export that selects nothing writes no folder)."""
+        return self.added > 0
 
     def line(self) -> str:
         """One line for the command line."""
+        if self.total == 0:
+            return self._nothing()
         notes = []
         if self.left_out:
             notes.append(f"{self.left_out} not evaluable left out (--unevaluable flag keeps them)")
@@ -65,6 +76,12 @@ class ExportResult:
         extra = f"; {', '.join(notes)}" if notes else ""
         return (f"exported {self.added} images ({self.total} in all, {self.categories} categories) as {self.format} "
                 f"to {self.folder}, with its design table {DESIGN}{extra}")
+
+    def _nothing(self) -> str:
+        """What an export that selected nothing says (it writes nothing: an empty dataset is not
+        one ``datasets`` or COCO tools load)."""
+        left = f" ({self.left_out} not evaluable left out: --unevaluable flag keeps them)" if self.left_out else ""
+        return f"nothing to export: no result meets --where {self.where!r}{left}; nothing written to {self.folder}"
 
 
 def writer_for(fmt: str) -> DatasetWriter:
@@ -115,23 +132,38 @@ def export_dataset(spec: LoadedSpec, fmt: str, *, output: Path | None = None, wh
                         "add passes = [\"mask\"] to its [evaluator], run it again, then export")
     items, already = _new_items(spec, selection, folder, writer)
     result = ExportResult(folder.root, fmt, len(items), len(folder.items), len(folder.categories),
-                          selection.skipped, already)
-    if not items and not folder.fresh:
-        return result  # nothing new: the folder stays as it is
+                          selection.skipped, already, condition)
+    if not items:
+        return result  # nothing selected, or nothing new: the folder stays as it is (or is not made)
     store = Store(spec.store)
     write_unstored_images(spec, store, [item.row["image_key"] for item in items])  # made in memory by the run
+    _write(writer, Batch(items, store, selection.table, selection.columns, link), folder, already, console)
+    return result
+
+
+def _write(writer: DatasetWriter, batch: Batch, folder: ExportFolder, already: int, console: Console | None) -> None:
+    """Write ``batch`` through a staging folder, moved into place at the end; a write the disk
+    refuses (full, read-only) is one line naming the folder, and leaves it as it was."""
     staging = Staging(folder)
     try:
-        batch = Batch(items, store, selection.table, selection.columns, link)
-        with RunProgress(console) as progress, progress.stage("export", len(items), already) as bar:
+        with RunProgress(console) as progress, progress.stage("export", len(batch.items), already) as bar:
             writer.write(batch, folder, staging, bar)
         staging.write(DESIGN, design_table(folder.items))
         staging.write(MANIFEST, folder.manifest())
         staging.commit()
+    except OSError as exc:  # the writes' (the store's blobs are read behind UserErrors)
+        staging.discard()
+        fix = "free some space or choose another folder" if exc.errno in DISK_FULL else "choose another folder"
+        raise UserError(f"--output {folder.root}: cannot write the export ({_reason(exc)}); nothing was written, "
+                        f"{fix}") from None
     except BaseException:
         staging.discard()
         raise
-    return result
+
+
+def _reason(exc: OSError) -> str:
+    """An OS error as a few words: its ``strerror`` (``No space left on device``), else its first line."""
+    return exc.strerror or (str(exc).splitlines() or [type(exc).__name__])[0]
 
 
 def _new_items(spec: LoadedSpec, selection: Selection, folder: ExportFolder,

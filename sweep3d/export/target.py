@@ -87,21 +87,38 @@ def open_folder(output: Path, store: Path, fmt: str, append: bool) -> ExportFold
         raise UserError(f"--output {output}: cannot be read ({exc.strerror})") from None
     if not entries:
         return ExportFolder(output, fmt, fresh=True)
+    existing = _read_manifest(output)
     if not append:
-        raise UserError(f"--output {output}: the folder already holds files; name a new or empty folder, "
-                        "or add --append to add to an export there")
-    manifest = output / MANIFEST
+        raise UserError(f"--output {output}: the folder already holds files; {_other_folder(existing, fmt)}")
+    if existing is None:
+        raise UserError(f"--append {output}: not a sweep3d export (no readable {MANIFEST}); name a new or "
+                        "empty folder instead")
+    if existing.format != fmt:
+        raise UserError(f"--append {output}: it is a {existing.format} export, not {fmt}; use --format "
+                        f"{existing.format} or another folder")
+    return existing
+
+
+def _other_folder(existing: ExportFolder | None, fmt: str) -> str:
+    """What to do about a folder that holds files: ``--append`` only where an append would work."""
+    if existing is None:
+        return "name a new or empty folder (it is not a sweep3d export, so --append cannot add to it)"
+    if existing.format != fmt:
+        return (f"it is a {existing.format} export: name a new or empty folder, or add --append with "
+                f"--format {existing.format}")
+    return f"name a new or empty folder, or add --append to add to the {fmt} export there"
+
+
+def _read_manifest(output: Path) -> ExportFolder | None:
+    """The sweep3d export ``output`` holds, as its manifest records it (None: it is not one)."""
     try:
-        document = json.loads(manifest.read_text())
-        found = document["format"]
+        document = json.loads((output / MANIFEST).read_text())
+        found = str(document["format"])
         categories = {c["name"]: int(c["id"]) for c in document["categories"]}
         items = list(document["items"])
     except (OSError, ValueError, KeyError, TypeError):
-        raise UserError(f"--append {output}: not a sweep3d export (no readable {MANIFEST}); name a new or "
-                        "empty folder instead") from None
-    if found != fmt:
-        raise UserError(f"--append {output}: it is a {found} export, not {fmt}; use --format {found} or another folder")
-    return ExportFolder(output, fmt, fresh=False, categories=categories, items=items)
+        return None
+    return ExportFolder(output, found, fresh=False, categories=categories, items=items)
 
 
 class Staging:

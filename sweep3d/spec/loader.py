@@ -274,7 +274,7 @@ def parse_toml(text: str, file: str) -> dict[str, Any]:
 
 
 def _first_error(path: Path, exc: ValidationError) -> SpecError:
-    err = exc.errors()[0]
+    err = _cause(exc.errors())
     key = _key_path(err["loc"])
     msg = err["msg"]
     if err["type"] == "extra_forbidden":
@@ -291,6 +291,20 @@ def _first_error(path: Path, exc: ValidationError) -> SpecError:
     if more:
         msg += f" (and {more} more error{'s' if more > 1 else ''})"
     return SpecError(str(path), key, msg.removeprefix("Value error, "))
+
+
+def _cause(errors: list[Any]) -> Any:
+    """The error to report: the first, unless it is a missing key whose misspelling is an unknown
+    key of the same table (``enviroments`` for ``environments``), which names the actual mistake."""
+    first = errors[0]
+    if first["type"] != "missing":
+        return first
+    parent, name = first["loc"][:-1], str(first["loc"][-1])
+    for err in errors:
+        loc = err["loc"]
+        if err["type"] == "extra_forbidden" and loc[:-1] == parent and difflib.get_close_matches(str(loc[-1]), [name]):
+            return err
+    return first
 
 
 def _key_path(loc: tuple[Any, ...]) -> str:
@@ -542,6 +556,7 @@ def _load_policy(spec: Spec, fail, catalogue: Catalogue, controls: list[ControlI
         cls = catalogue.policies.get(spec.policy.type)
     except UserError as exc:
         raise fail("policy.type", str(exc)) from None
+    _check_policy_class(cls, spec.policy.type, fail)
     if spec.policy.paired and getattr(cls, "adaptive", False):
         key = "cross" if {"environment", "object"} & set(spec.policy.cross) else "paired"
         raise fail(f"policy.{key}", f"the {spec.policy.type} policy learns per scene, so its points cannot be "
@@ -568,6 +583,17 @@ def _load_policy(spec: Spec, fail, catalogue: Catalogue, controls: list[ControlI
         except UserError as exc:
             raise fail("policy", str(exc)) from None
     return policy
+
+
+def _check_policy_class(cls: Any, name: str, fail) -> None:
+    """Refuse a ``[policy] type`` naming something that is not a policy class (a function, another
+    class), which would otherwise fail deep in planning with an AttributeError."""
+    from sweep3d.stages.plan.policies import Policy  # that module imports this one
+
+    if not (isinstance(cls, type) and issubclass(cls, Policy)):
+        what = f"a {type(cls).__name__}" if not isinstance(cls, type) else f"class {cls.__qualname__}"
+        raise fail("policy.type", f"{name!r} is {what}, not a sweep3d Policy subclass; a policy "
+                                  "subclasses sweep3d.plugins.Policy and returns its points from points()")
 
 
 def _check_crossed(name: str, controls: list[ControlInstance], fail) -> None:

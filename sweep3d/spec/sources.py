@@ -69,9 +69,15 @@ def _plain(value: Any, key: str, plugins: dict[str, dict[str, Any]]) -> Any:
         return [_plain(item, f"{key}[{i}]", plugins) for i, item in enumerate(value)]
     if isinstance(value, Path):
         return str(value)
-    if hasattr(value, "item") and callable(value.item) and not isinstance(value, (str, bytes)):
-        return value.item()  # a numpy scalar
+    if _is_array(value):  # a notebook's np.linspace(0, 2, 3) or np.float64(0.5): plain lists and numbers
+        return _plain(value.tolist(), key, plugins)
     return value
+
+
+def _is_array(value: Any) -> bool:
+    """Whether ``value`` is an array or an array's scalar (numpy's, a pandas Series, a tensor),
+    told by its ``tolist()`` so that numpy need not be imported."""
+    return not isinstance(value, (type, str, bytes)) and callable(getattr(value, "tolist", None))
 
 
 def _plugin(obj: Any, key: str, kind: str, plugins: dict[str, dict[str, Any]]) -> str:

@@ -16,9 +16,12 @@ Views:
     parameter, position (spec order: object, environment, then controls), levels, numeric, binned.
 ``control_levels``
     one row per (result, parameter): job, object, environment, valid, counted, correct, parameter,
-    position, level (0-based, in value order), label.
+    position, level (0-based, in value order), label (text, for every kind of parameter), value
+    (the level as a number: a numeric parameter's value, a bin's centre; NULL for text and where
+    the control does not apply), absent.
 ``control_accuracy``
-    per (parameter, level): n (counted results), n_correct, accuracy, wilson_low, wilson_high.
+    per (parameter, level): label, value and absent as above, n (counted results), n_correct,
+    accuracy, wilson_low, wilson_high.
 ``pair_accuracy``
     the same per pair of levels of two parameters (both with 2 levels or more).
 ``scene_accuracy``
@@ -334,10 +337,11 @@ _FIXED_VIEWS = (
                             WHEN bin IS NOT NULL THEN level_number_label(round(lo + bin * width, digits)) || '–'
                                                       || level_number_label(round(lo + (bin + 1) * width, digits))
                             WHEN number IS NOT NULL THEN level_number_label(number)
-                            ELSE value END AS label
+                            ELSE value END AS label,
+                       CASE WHEN bin IS NOT NULL THEN lo + (bin + 0.5) * width ELSE number END AS level_value
                 FROM (SELECT DISTINCT parameter, absent, bin, value, number, lo, width, digits FROM placed))
             SELECT p.job, p.object, p.environment, p.valid, p.counted, p.correct, p.parameter, p.position, l.level,
-                   l.label, p.absent
+                   l.label, l.level_value AS value, p.absent
             FROM placed p JOIN levels l ON p.parameter = l.parameter AND p.absent = l.absent
                  AND p.bin IS NOT DISTINCT FROM l.bin AND p.value IS NOT DISTINCT FROM l.value""",
         """CREATE OR REPLACE VIEW control_parameters AS
@@ -347,7 +351,8 @@ _FIXED_VIEWS = (
             GROUP BY l.parameter, l.position ORDER BY l.position""",
         f"""CREATE OR REPLACE VIEW control_accuracy AS
             SELECT *, {_ACCURACY} FROM (
-                SELECT parameter, position, level, any_value(label) AS label, bool_or(absent) AS absent,
+                SELECT parameter, position, level, any_value(label) AS label, any_value(value) AS value,
+                       bool_or(absent) AS absent,
                        count(*) FILTER (WHERE counted) AS n, count(*) FILTER (WHERE counted AND correct) AS n_correct
                 FROM control_levels GROUP BY parameter, position, level)
             ORDER BY position, level""",

@@ -29,6 +29,7 @@ from sweep3d.cache.store import DIGEST_COLUMN, TRUTH_BLOBS, Store, atomic_write,
 from sweep3d.controls import blamed
 from sweep3d.errors import PluginError
 from sweep3d.pixels import encode_png8, to_uint8
+from sweep3d.registry import is_user_plugin
 from sweep3d.spec.loader import ControlInstance, LoadedSpec
 from sweep3d.stages.driver import Computed, Feed
 from sweep3d.stages.jobs import Job, JobList, Plan
@@ -100,7 +101,28 @@ def _applied(inst: ControlInstance, image: np.ndarray, params: Any, rng: np.rand
         what = f"an array of shape {array.shape}" if array is not None else f"a {type(out).__name__}"
         raise PluginError(f"control {control.type_name!r} (id {inst.id!r}) returned {what} from apply(); return the image as a float array of shape "
                           f"{image.shape} (H, W, 3), values in [0, 1]")
-    return array
+    return in_range(inst, array) if is_user_plugin(control.type_name) else array
+
+
+#: How far outside [0, 1] a user's post control may go (float rounding), clipped; beyond it is refused.
+RANGE_TOLERANCE = 1e-3
+
+
+def in_range(inst: ControlInstance, array: np.ndarray) -> np.ndarray:
+    """A user's control's image, its finite values in [0, 1]: a float overshoot within
+    :data:`RANGE_TOLERANCE` is clipped; further out (an 8-bit image, 1e30) is a :class:`PluginError`
+    naming the control, or the model would be tested on pixels no image has. NaN and infinity
+    are left as they are: they make the image invalid, counted apart (see :class:`Made`)."""
+    finite = np.isfinite(array)
+    low = float(np.min(array, initial=np.inf, where=finite))  # no finite pixel: inf and -inf, nothing to refuse
+    high = float(np.max(array, initial=-np.inf, where=finite))
+    if low >= 0.0 and high <= 1.0:
+        return array
+    if low < -RANGE_TOLERANCE or high > 1.0 + RANGE_TOLERANCE:
+        hint = " (divide an 8-bit image by 255)" if 1.5 < high <= 255.0 and low >= 0.0 else ""
+        raise PluginError(f"control {inst.control.type_name!r} (id {inst.id!r}) returned values from {low:g} to "
+                          f"{high:g} from apply(); return the image with values in [0, 1]{hint}")
+    return np.clip(array, 0.0, 1.0, out=array.copy(), where=finite)
 
 
 def job_frame(plan: Plan, job: Job, arrays: dict[str, np.ndarray]) -> RenderFrame:
