@@ -95,6 +95,11 @@ class Control:
         return part
 
 
+def control_label(control: Control) -> str:
+    """How messages name a control: its type as the spec gives it and its id (``control 'mod:Cut' (id 'Cut')``)."""
+    return f"control {control.type_name!r} (id {control.id!r})"
+
+
 @contextmanager
 def blamed(control: Control, method: str) -> Iterator[None]:
     """Run a control's ``method`` (e.g. "apply()") so that a user's control that raises or exits
@@ -106,8 +111,7 @@ def blamed(control: Control, method: str) -> Iterator[None]:
     except PLUGIN_FAILURES as exc:
         if not is_user_plugin(control.type_name):
             raise
-        raise plugin_failure(f"control {control.type_name!r} (id {control.id!r})", exc, f"failed in {method}",
-                             during=f"in {method}") from None
+        raise plugin_failure(control_label(control), exc, f"failed in {method}", during=f"in {method}") from None
 
 
 def wrap_periodic(value: float, period: float) -> float:

@@ -7,11 +7,14 @@ spec load with the list of valid names.
 
 from __future__ import annotations
 
+import ast
 import difflib
 import hashlib
 import importlib
+import importlib.machinery
 import inspect
 import sys
+import sysconfig
 from functools import lru_cache
 from pathlib import Path
 from typing import Any, Callable, Generic, Iterator, TypeVar
@@ -19,6 +22,7 @@ from typing import Any, Callable, Generic, Iterator, TypeVar
 from sweep3d.errors import PluginError, UserError, plugin_failure
 
 T = TypeVar("T")
+SWEEP3D = Path(__file__).resolve().parent  # sweep3d's own modules are never a plug-in's local imports
 
 
 def is_user_plugin(name: str) -> bool:
@@ -30,10 +34,12 @@ def is_user_plugin(name: str) -> bool:
 def code_identity(plugin: Any) -> str:
     """What a user's plug-in (a class or a factory function) puts into the keys of the stages it
     feeds, so that editing it re-does exactly their work: the ``version`` its author declares on
-    it (or on a base class of their own), else a digest of the source of the module defining it.
+    it (or on a base class of their own), else a digest of the source of the module defining it
+    and of the user's modules it imports (:func:`local_imports`).
 
-    A module's source is the whole file, so an edit anywhere in it counts; code it imports from
-    other modules does not: declare a ``version`` when that matters.
+    A module's source is the whole file, so an edit anywhere in it counts, and so does an edit of
+    a module beside it that it imports (``helper.py`` next to the spec); installed packages' code
+    does not: declare a ``version`` when that matters.
 
     Raises:
         UserError: the source cannot be read (a class defined in a notebook cell or ``python -c``)
@@ -49,7 +55,113 @@ def code_identity(plugin: Any) -> str:
     except (OSError, TypeError):
         raise UserError(f"cannot read the source of {_name(plugin)} to key its results; declare a version on it "
                         "(version = '1', changed whenever its output changes)") from None
-    return "source:" + hashlib.sha256(source).hexdigest()[:16]
+    digest = hashlib.sha256(source)
+    for name, data in local_imports(module):  # none: the digest of the module's source alone, as before
+        digest.update(b"\0" + name.encode() + b"\0" + hashlib.sha256(data).digest())
+    return "source:" + digest.hexdigest()[:16]
+
+
+def local_imports(module: Any) -> list[tuple[str, bytes]]:
+    """(module name, file content) of each module that ``module`` imports, directly or through one
+    another, whose file lies under the folder it was imported from (the spec's folder for a spec's
+    plug-in), sorted by name; none for a module installed with Python or a package.
+
+    Found from the import statements of the sources (those inside functions too), resolved as an
+    import would, without importing anything.
+    """
+    path = Path(getattr(module, "__file__", None) or "")
+    root = _import_root(getattr(module, "__name__", ""), path)
+    if root is None:
+        return []
+    found: dict[str, Path] = {}
+    todo = [(module.__name__, path)]
+    while todo:
+        name, file = todo.pop()
+        for imported in _imports(name, file):
+            located = _locate(imported, root)
+            if located is not None and imported not in found and located != path:
+                found[imported] = located
+                todo.append((imported, located))
+    out = []
+    for name in sorted(found):
+        try:
+            out.append((name, found[name].read_bytes()))
+        except OSError:
+            continue  # gone since it was found: the plug-in's own import fails first
+    return out
+
+
+def _import_root(name: str, path: Path) -> Path | None:
+    """The ``sys.path`` folder ``name`` was imported from (``path``: its file), or None for a
+    module without a file, sweep3d's own, or one installed with Python or a package."""
+    if not name or not path.is_file():
+        return None
+    root = path.resolve().parent
+    for _ in range(name.count(".") + (path.name == "__init__.py")):
+        root = root.parent
+    installed = {Path(sysconfig.get_paths()[k]).resolve() for k in ("stdlib", "platstdlib", "purelib", "platlib")}
+    return None if any(root == folder or folder in root.parents for folder in installed) else root
+
+
+def _imports(name: str, file: Path) -> set[str]:
+    """The absolute names of the modules the source ``file`` (module ``name``) imports, each
+    ``from a import b`` also as ``a.b`` (b may be a module)."""
+    if file.suffix != ".py":
+        return set()
+    try:
+        tree = ast.parse(file.read_bytes(), str(file))
+    except (OSError, SyntaxError, ValueError):
+        return set()
+    package = name if file.name == "__init__.py" else name.rpartition(".")[0]
+    names: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            names.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = _absolute(node.module or "", node.level, package)
+            if base is None:
+                continue
+            names.update(f"{base}.{alias.name}" if base else alias.name for alias in node.names if alias.name != "*")
+            if base:
+                names.add(base)
+    return names
+
+
+def _absolute(module: str, level: int, package: str) -> str | None:
+    """``from {'.' * level}{module} import ...`` in ``package``, as an absolute name (None: beyond the top)."""
+    if not level:
+        return module
+    parts = package.split(".") if package else []
+    if level - 1 > len(parts):
+        return None
+    base = ".".join(parts[:len(parts) - (level - 1)])
+    return f"{base}.{module}".strip(".") if module else base
+
+
+def _locate(name: str, root: Path) -> Path | None:
+    """The file of module ``name`` when it lies under ``root``: the imported module's, else where
+    an import from ``root`` would find it (without importing it); None otherwise."""
+    loaded = sys.modules.get(name)
+    file = getattr(loaded, "__file__", None) if loaded is not None else None
+    if file is None and loaded is None:
+        file = _find(name, root)
+    if not file:
+        return None
+    path = Path(file).resolve()
+    return path if root in path.parents and SWEEP3D not in path.parents and path.is_file() else None
+
+
+def _find(name: str, root: Path) -> str | None:
+    """Where module ``name`` would be found under ``root``, component by component, importing nothing."""
+    locations = [str(root)]
+    spec = None
+    parts = name.split(".")
+    for i in range(len(parts)):
+        spec = importlib.machinery.PathFinder.find_spec(".".join(parts[:i + 1]), locations)
+        if spec is None:
+            return None
+        locations = list(spec.submodule_search_locations or [])
+    return spec.origin if spec is not None and spec.has_location else None
 
 
 _imported: dict[str, tuple[int, int]] = {}  # a user module's file (mtime, size) when it was imported

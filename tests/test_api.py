@@ -58,6 +58,34 @@ def test_a_dicts_mistakes_are_one_line_spec_errors_naming_it(tmp_path: Path) -> 
         sweep3d.load(3)
 
 
+@pytest.mark.parametrize("where, tie", [
+    ("x", lambda spec: spec.__setitem__("x", spec)),
+    ("render.again", lambda spec: spec["render"].__setitem__("again", spec["render"])),
+    (r"controls\[0\]\.yaw\[2\]", lambda spec: spec["controls"][0]["yaw"].append(spec["controls"][0]["yaw"])),
+])
+def test_a_dict_that_holds_itself_is_one_line_not_a_recursion_error(tmp_path: Path, where: str, tie) -> None:
+    spec = tomllib.loads(TINY_SPEC)
+    tie(spec)
+    with pytest.raises(SpecError, match=rf"^<dict>: {where}: holds itself \(a dict or list that contains itself") as caught:
+        sweep3d.load(spec, base=tmp_path)
+    assert "\n" not in str(caught.value) and caught.value.exit_code == 2
+    shared = tomllib.loads(TINY_SPEC)  # the same list in two places is no cycle
+    write_cube(tmp_path)
+    shared["environments"].append({"name": "white again", "color": shared["environments"][0]["color"]})
+    assert len(sweep3d.load(shared, base=tmp_path).spec.environments) == 3
+
+
+def test_a_dict_nested_too_deep_is_one_line(tmp_path: Path) -> None:
+    spec = tomllib.loads(TINY_SPEC)
+    deep: dict = {}
+    spec["render"]["deep"] = deep
+    for _ in range(5000):
+        deep["d"] = {}
+        deep = deep["d"]
+    with pytest.raises(SpecError, match=r"^<dict>: render\.deep(\.d)+: nests more than 64 levels deep"):
+        sweep3d.load(spec, base=tmp_path)
+
+
 class Darken(PostControl):
     """A post control of a notebook's: runs in this process, so it may live anywhere."""
 

@@ -327,3 +327,27 @@ def test_a_non_manifold_mesh_is_not_an_error_it_renders(tmp_path: Path) -> None:
     (tmp_path / "spec.toml").write_text(_one_job(TINY_SPEC).replace('mesh = "cube.obj"', 'mesh = "bowtie.obj"'))
     result = run(load_spec(tmp_path / "spec.toml"))
     assert result.failed == 0 and result.outcome("render").computed == 1
+
+
+def test_a_full_disk_while_extracting_a_mesh_says_the_disk_is_full_and_where(tmp_path: Path, monkeypatch) -> None:
+    """A fresh store on a nearly full disk: the first write is the mesh's folder extracted from its
+    archive, whose error names no file (it said "cannot read the mesh's file ''")."""
+    import sweep3d.spec.assets as assets
+
+    (tmp_path / "kit.zip").write_bytes(_zip("parts/box.obj", CUBE_OBJ.encode()))
+    spec = tmp_path / "spec.toml"
+    spec.write_text(TINY_SPEC.replace('mesh = "cube.obj"', 'mesh = "kit.zip#parts/box.obj"'))
+
+    def full(source, out, size, name):  # as a write to a full disk fails: some bytes, then ENOSPC, no file named
+        out.write(source.read(16))
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(assets, "_copy_at_most", full)
+    result = CliRunner().invoke(app, ["plan", str(spec)], terminal_width=400)
+    assert result.exit_code == 2, result.output
+    (line,) = [line for line in result.output.splitlines() if line.strip()]
+    assets_folder = tmp_path / "store" / "assets"
+    assert line.startswith(f"error: cannot extract kit.zip#parts/box.obj into {assets_folder}/"), line
+    assert ": the disk is full (No space left on device; " in line and " free on the disk mounted at /" in line, line
+    assert line.endswith("free some disk space, or set experiment.store to a folder on another disk"), line
+    assert not any(assets_folder.iterdir())  # what was extracted is gone: no half folder, the space back

@@ -131,6 +131,27 @@ def test_a_run_says_once_that_auto_renders_on_the_cpu_and_only_when_it_renders(t
     assert device_note(RenderSpec(), "optix") is None
 
 
+@pytest.mark.parametrize("device, backend", [("cuda", "CUDA"), ("optix", "OptiX")])
+def test_plan_says_in_one_line_that_a_gpu_named_outright_is_not_here(tmp_path, gpus, device, backend) -> None:
+    """A run would find out only as its first worker starts; plan says so, and what a run would do."""
+    from typer.testing import CliRunner
+
+    from sweep3d.cli import app
+
+    spec = write_spec(tmp_path, with_render(f'device = "{device}"'))
+    result = CliRunner().invoke(app, ["plan", str(spec)], terminal_width=400)
+    assert result.exit_code == 0, result.output  # a plan for another machine is no mistake
+    (line,) = [line for line in result.output.splitlines() if "warning:" in line]
+    assert line == (f'warning: render.device = "{device}": no {backend} GPU here (Cycles finds none); sweep3d run here '
+                    'would stop with an error before its 4 renders; run it on a machine with one, or set device = '
+                    '"auto" (the best GPU back-end that works, else the CPU) or "cpu"')
+    gpus(TWO_GPUS)
+    assert "warning:" not in CliRunner().invoke(app, ["plan", str(spec)], terminal_width=400).output
+    assert device_module.missing_gpu_warning("auto", 4) is None and device_module.missing_gpu_warning("cpu", 4) is None
+    gpus(NO_GPU)
+    assert "every render is cached" in device_module.missing_gpu_warning(device, 0)
+
+
 def test_a_gpu_blender_ships_no_kernel_for_is_said_before_rendering(tmp_path, gpus) -> None:
     from sweep3d.pipeline import _note_device
 

@@ -1,6 +1,8 @@
 """A plug-in that calls ``sys.exit`` — any code, 0 and None too — fails the command: exit code 2 and
 one line naming the plug-in and the call, where it used to end ``sweep3d`` with the plug-in's code
-(0: nothing ran, and CI saw success).
+(0: nothing ran, and CI saw success). A rendered control's ``edit`` that ends the render worker
+(``os._exit``) or leaves the scene without its camera is named the same way, where each job's
+line used to say only that the worker died or that Blender had no camera.
 
 The cases met before anything renders or loads a model (a module's import, a model factory, a
 policy, a rendered control's ``apply`` in the planner's in-frame test) run in the fast lane, for
@@ -53,6 +55,37 @@ class Fade(PostControl):
 
     def apply(self, image, params, rng):
         sys.exit(0)
+'''
+EDITS = '''
+import os
+import sys
+
+from pydantic import Field
+from sweep3d.plugins import ControlParams, RenderedControl
+
+
+class Three(RenderedControl):
+    class Params(ControlParams):
+        angle: float = Field(0.0)
+
+    def edit(self, scene, params):
+        sys.exit(3)
+
+
+class Gone(RenderedControl):
+    class Params(ControlParams):
+        angle: float = Field(0.0)
+
+    def edit(self, scene, params):
+        os._exit(3)
+
+
+class NoCamera(RenderedControl):
+    class Params(ControlParams):
+        angle: float = Field(0.0)
+
+    def edit(self, scene, params):
+        scene.bpy.data.objects.remove(scene.camera, do_unlink=True)
 '''
 POLICY = '''
 import sys
@@ -162,6 +195,14 @@ def test_a_plug_in_that_exits_before_anything_runs_fails_in_one_line(tmp_path: P
 @pytest.mark.parametrize(("case", "source", "edit", "expected"), [
     pytest.param("edit-in-the-render-worker", CONTROLS, _control('type = "MOD:Cut"\nangle = [1.0]'),
                  "error: control 'MOD:Cut' (id 'Cut') (MOD.py:21) called sys.exit(0) in edit();", id="worker-edit"),
+    pytest.param("edit-exit-3", EDITS, _control('type = "MOD:Three"\nangle = [1.0]'),
+                 "error: control 'MOD:Three' (id 'Three') (MOD.py:14) called sys.exit(3) in edit();", id="worker-edit-3"),
+    pytest.param("edit-os-exit", EDITS, _control('type = "MOD:Gone"\nangle = [1.0]'),
+                 "error: control 'MOD:Gone' (id 'Gone') ended the render worker in edit() (exit code 3), twice; a "
+                 "plug-in must not end its process", id="worker-edit-os-exit"),
+    pytest.param("edit-removes-the-camera", EDITS, _control('type = "MOD:NoCamera"\nangle = [1.0]'),
+                 "error: control 'MOD:NoCamera' (id 'NoCamera') removed the scene's camera in edit(); an edit() may "
+                 "replace the camera", id="worker-edit-no-camera"),
     pytest.param("post-control-apply", CONTROLS, _control('type = "MOD:Fade"\namount = [0.5]'),
                  "error: control 'MOD:Fade' (id 'Fade') (MOD.py:29) called sys.exit(0) in apply();", id="post-apply"),
     pytest.param("evaluator-evaluate", EVALUATOR, ("[model]\n", '[evaluator]\nkind = "MOD:Bye"\n\n[model]\n'),
@@ -174,3 +215,33 @@ def test_a_plug_in_that_exits_in_a_run_fails_it_in_one_line(tmp_path: Path, case
     result = CliRunner().invoke(app, ["run", str(spec), "--no-report"], terminal_width=400)
     assert result.exit_code == 2, result.output
     assert _one_error_line(result).startswith(expected.replace("MOD", module)), result.output
+
+
+def test_a_worker_that_dies_in_a_users_edit_is_named_for_its_control() -> None:
+    """The pool's side of the os._exit case above, without Blender: the worker said whose edit()
+    it ran (an ``Editing`` message) before it died."""
+    from types import SimpleNamespace
+
+    from sweep3d.stages.render.pool import _failure, _Worker, died
+    from sweep3d.stages.render.protocol import EnvironmentRef, RenderJob
+
+    label = "control 'mod:Gone' (id 'Gone')"
+    worker = _Worker(SimpleNamespace(exitcode=3), None, 0, editing=label)
+    assert died(worker) == f"{label} ended the render worker in edit() (exit code 3)"
+    reply = _failure(RenderJob("k", "cube.obj", EnvironmentRef(color=(1.0, 1.0, 1.0))), died(worker), False, 600.0,
+                     worker.editing)
+    assert reply.kind == "plugin" and reply.error.startswith(f"{label} ended the render worker in edit() (exit code 3), "
+                                                            "twice; a plug-in must not end its process")
+    worker.editing = None
+    assert died(worker) == "render worker died (exit code 3)"
+
+
+def test_an_edit_that_leaves_no_camera_is_named() -> None:
+    from types import SimpleNamespace
+
+    from sweep3d.stages.render.scene_edit import camera_problem
+
+    camera = SimpleNamespace(name="Camera")
+    assert camera_problem(SimpleNamespace(camera=camera, objects={"Camera": camera})) is None
+    assert camera_problem(SimpleNamespace(camera=None, objects={})) == "removed the scene's camera"
+    assert camera_problem(SimpleNamespace(camera=camera, objects={})) == "unlinked the scene's camera from the scene"

@@ -2,14 +2,17 @@
 
 from __future__ import annotations
 
+import hashlib
+import importlib
 import sys
 import textwrap
 
 import pytest
 
 from sweep3d.errors import UserError
-from sweep3d.registry import Registry
-from sweep3d.stages import catalogue
+from sweep3d.registry import Registry, code_identity, local_imports
+from sweep3d.stages import catalogue, load_spec
+from tests.conftest import TINY_SPEC, plan_for, write_spec
 
 CONTROLS = catalogue().controls
 
@@ -149,3 +152,78 @@ def test_bad_user_module_is_a_user_error(user_module, source, attr, text):
 def test_empty_module_name_is_a_user_error():
     with pytest.raises(UserError):
         make_registry().get(":Flange")
+
+
+HELPED = """
+    import json
+
+    import numpy as np
+    from pydantic import Field
+    from sweep3d.plugins import ControlParams, PostControl
+    from sweep3d_test_helper import FACTOR
+
+
+    class Dim(PostControl):
+        class Params(ControlParams):
+            strength: float = Field(0.0)
+
+        def apply(self, image, params, rng):
+            from sweep3d_test_lazy import OFFSET
+            return image * (1.0 - FACTOR * params.strength) + OFFSET
+"""
+
+
+def test_a_plug_ins_identity_covers_the_modules_beside_the_spec_it_imports(user_module, tmp_path):
+    """Editing helper.py, which the post control's module imports, redoes the images (it left
+    them cached); an import inside a method counts too, installed packages do not."""
+    user_module("sweep3d_test_helper", "FACTOR = 0.5\n")
+    user_module("sweep3d_test_lazy", "OFFSET = 0.0\n")
+    name = user_module("sweep3d_test_helped", HELPED)
+    spec = write_spec(tmp_path, TINY_SPEC.replace("[policy]", f'[[controls]]\ntype = "{name}:Dim"\nstrength = [0.5]'
+                                                               "\n\n[policy]"))
+
+    def keys() -> tuple[set[str], set[str]]:
+        code_identity.cache_clear()  # as a new process would
+        plan = plan_for(load_spec(spec), "m")
+        return {j.render_key for j in plan.jobs}, {j.image_key for j in plan.jobs}
+
+    renders, images = keys()
+    assert [n for n, _ in local_imports(sys.modules[name])] == ["sweep3d_test_helper", "sweep3d_test_lazy"]
+    assert keys() == (renders, images)
+    (tmp_path / "sweep3d_test_helper.py").write_text("FACTOR = 0.25\n")
+    edited = keys()
+    assert edited[0] == renders and edited[1].isdisjoint(images)
+    (tmp_path / "sweep3d_test_lazy.py").write_text("OFFSET = 0.1\n")
+    assert keys()[1].isdisjoint(edited[1])
+
+
+def test_a_plug_in_that_imports_nothing_of_its_own_keeps_the_identity_of_its_source(user_module, tmp_path):
+    """Stores keyed before local imports counted stay valid for such plug-ins."""
+    name = user_module("sweep3d_test_plain", "import json\nimport numpy as np\n\n\nclass Plain:\n    pass\n")
+    module = importlib.import_module(name)
+    assert local_imports(module) == []
+    source = (tmp_path / f"{name}.py").read_bytes()
+    assert code_identity(module.Plain) == "source:" + hashlib.sha256(source).hexdigest()[:16]
+
+
+def test_relative_and_package_imports_are_found_without_importing_them(tmp_path, monkeypatch):
+    package = tmp_path / "sweep3d_test_kit"
+    (package / "sub").mkdir(parents=True)
+    (package / "__init__.py").write_text("")
+    (package / "sub" / "__init__.py").write_text("")
+    (package / "plugin.py").write_text("from . import tools\nfrom .sub import deep\n\n\nclass P:\n    pass\n")
+    (package / "tools.py").write_text("from .sub.deeper import X\n")
+    (package / "sub" / "deep.py").write_text("Y = 1\n")
+    (package / "sub" / "deeper.py").write_text("X = 1\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    plugin = importlib.import_module("sweep3d_test_kit.plugin")
+    try:
+        for name in ("sweep3d_test_kit.tools", "sweep3d_test_kit.sub.deeper"):
+            sys.modules.pop(name, None)  # not imported: found where an import would look
+        assert [n for n, _ in local_imports(plugin)] == [
+            "sweep3d_test_kit", "sweep3d_test_kit.sub", "sweep3d_test_kit.sub.deep", "sweep3d_test_kit.sub.deeper",
+            "sweep3d_test_kit.tools"]
+        assert "sweep3d_test_kit.tools" not in sys.modules
+    finally:
+        for name in [n for n in sys.modules if n.startswith("sweep3d_test_kit")]:
+            sys.modules.pop(name, None)

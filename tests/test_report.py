@@ -171,11 +171,12 @@ def test_optional_panels_show_only_with_data(tiny_run: Path) -> None:
 
 
 @contextmanager
-def open_page(chromium: Any, path: Path, wait_all: bool = True) -> Iterator[tuple[Any, dict[str, list]]]:
+def open_page(chromium: Any, path: Path, wait_all: bool = True,
+              width: int = 1280) -> Iterator[tuple[Any, dict[str, list]]]:
     """A page of the session's headless Chromium (the ``chromium`` fixture), in a fresh browser
-    context, showing ``path`` once it is interactive (and, with ``wait_all``, once every figure is
-    drawn and every image loaded); events collected for :func:`assert_clean`."""
-    context = chromium.new_context(viewport={"width": 1280, "height": 900})
+    context ``width`` pixels wide, showing ``path`` once it is interactive (and, with ``wait_all``,
+    once every figure is drawn and every image loaded); events collected for :func:`assert_clean`."""
+    context = chromium.new_context(viewport={"width": width, "height": 900})
     try:
         page = context.new_page()
         events: dict[str, list] = {"errors": [], "console": [], "requests": [], "dialogs": []}

@@ -22,8 +22,9 @@ import pyarrow.parquet as pq
 import pytest
 from typer.testing import CliRunner
 
+from sweep3d.cache.blobs import damaged_blobs, load_image
 from sweep3d.cache.maintenance import verify
-from sweep3d.cache.store import Store, StoreWriteError
+from sweep3d.cache.store import Store, StoreReadError, StoreWriteError
 from sweep3d.cli import app
 from tests.conftest import TINY_SPEC, write_spec
 from tests.test_reliability import add_render, render_row
@@ -385,6 +386,39 @@ def test_an_unreadable_spec_is_one_line(shared_dir: Path) -> None:
     spec.chmod(0)
     line = one_error(*as_user(lambda: cli(shared_dir, "plan", "SPEC")))
     assert line == f"error: {spec}: cannot read the spec (Permission denied); fix its permissions", line
+
+
+def test_a_blob_the_user_may_not_read_is_one_line_not_damaged_and_not_made_again() -> None:
+    """A run checks the blobs it counts as cached, and stages read their inputs: one the OS will
+    not let it read was called damaged, quarantined and made again; now it is named, with the
+    OS's reason, and left as it is (issue 35, item 15b)."""
+    folder = Path(tempfile.mkdtemp(prefix="sweep3d-audit-")) / "run"
+    root = folder / "store"
+    try:
+        add_render(Store(root), key("ab"))
+        blob = Store(root).blob_path(key("ab"))
+        hand_over(folder)
+        blob.chmod(0)
+        before = saved(root)
+
+        def read() -> list[str]:
+            lines = []
+            for call in (lambda: damaged_blobs(Store(root), "renders", {key("ab")}),
+                         lambda: load_image(Store(root), key("ab"), None)):
+                try:
+                    lines.append(f"no error: {call()}")
+                except StoreReadError as exc:
+                    lines.append(str(exc))
+            return lines
+
+        lines = as_user(read)
+        after = saved(root)
+    finally:
+        shutil.rmtree(folder.parent)
+    for line in lines:
+        assert line == (f"cannot read {blob} (Permission denied); fix its permissions (a blob that cannot be read is "
+                        "not damaged: sweep3d leaves it, and its results, as they are)"), lines
+    assert after == before  # neither quarantined nor its row dropped
 
 
 # -- 10: readers read around a damaged segment; only the lock's holder repairs -----------------

@@ -3,7 +3,9 @@
 Blobs are named by cache key, not by content, so the row that describes a blob records the
 SHA-256 of its bytes when it is written; a reader compares against it. A blob that is missing,
 does not match, or does not decode is reported as None, and the stage that needed it treats
-it as never computed.
+it as never computed. One that is there but cannot be read (permission denied, an I/O error) is
+not damaged: it is a :class:`~sweep3d.cache.store.StoreReadError` naming it with the OS's reason,
+and nothing is discarded or made again over it.
 
 A run also checks the blobs it counts as cached (:func:`damaged_blobs`), so a damaged one is
 recomputed even when nothing downstream reads it again. What it verified is remembered in
@@ -25,7 +27,15 @@ import pyarrow as pa
 import pyarrow.compute as pc
 
 from sweep3d.cache.key_join import positions, sorted_keys
-from sweep3d.cache.store import DIGEST_COLUMN, KEY_COLUMN, READ_ERRORS, Store, read_parquet
+from sweep3d.cache.store import (
+    DIGEST_COLUMN,
+    KEY_COLUMN,
+    READ_ERRORS,
+    Store,
+    StoreReadError,
+    read_parquet,
+    store_error,
+)
 
 #: Columns of a ``verified/<table>.parquet`` memo: a blob's key, its file state when it was last
 #: hashed, and the digest it had then.
@@ -55,15 +65,38 @@ def decode_image(data: bytes) -> np.ndarray | None:
         return None
 
 
+def unreadable_blob(exc: OSError) -> StoreReadError:
+    """One line for a blob the OS will not let this process read (its permissions, an I/O error):
+    unreadable, not damaged, so it is neither discarded nor made again over what cannot be read."""
+    return StoreReadError(f"{store_error(exc, 'read')} (a blob that cannot be read is not damaged: sweep3d leaves "
+                          "it, and its results, as they are)")
+
+
+def read_blob(path: Path) -> bytes | None:
+    """The bytes of the blob at ``path``; None when there is none.
+
+    Raises:
+        StoreReadError: it is there but cannot be read (permission denied, an I/O error).
+    """
+    try:
+        return path.read_bytes()
+    except FileNotFoundError:
+        return None
+    except OSError as exc:
+        raise unreadable_blob(exc) from None
+
+
 def load_image(store: Store, key: str, digests: set[str] | None) -> np.ndarray | None:
     """The blob ``key`` as float32 (H, W, 3) in [0, 1]; None if it is missing or damaged.
 
     Args:
         digests: the SHA-256 digests its rows recorded (empty or None: only check it decodes).
+
+    Raises:
+        StoreReadError: it cannot be read (see :func:`read_blob`).
     """
-    try:
-        data = store.blob_path(key).read_bytes()
-    except OSError:
+    data = read_blob(store.blob_path(key))
+    if data is None:
         return None
     if digests and sha256_bytes(data) not in digests:
         return None
@@ -74,11 +107,13 @@ def load_pass(store: Store, truth_key: str, name: str, digests: set[str] | None 
     """A truth pass's array ("mask": bool (H, W), "depth": float32 (H, W)) from its blob under
     ``truth_key``; None if it is missing, does not decode, or (``digests`` given and not empty)
     matches none of the digests its rows recorded (its row is then dropped by the caller, and the
-    pass rendered again)."""
+    pass rendered again). A blob that cannot be read raises :class:`StoreReadError`."""
     from sweep3d.truth import BLOB_SUFFIX, decode_depth, decode_mask
 
+    data = read_blob(store.blob_path(truth_key, BLOB_SUFFIX[name]))
+    if data is None:
+        return None
     try:
-        data = store.blob_path(truth_key, BLOB_SUFFIX[name]).read_bytes()
         if digests and sha256_bytes(data) not in digests:
             return None
         return decode_mask(data) if name == "mask" else decode_depth(data)
@@ -254,6 +289,10 @@ def check_blob(path: str, digests: set[str], last: Verified | None) -> Verified 
 
     ``last`` (its memo entry) spares the hashing when its file state has not changed since and
     its digest is still a recorded one.
+
+    Raises:
+        StoreReadError: it is there but cannot be read (permission denied, an I/O error): that is
+            not damage, and what cannot be read is not discarded and made again.
     """
     try:
         stat = os.stat(path)
@@ -264,8 +303,8 @@ def check_blob(path: str, digests: set[str], last: Verified | None) -> Verified 
             data = fh.read()
     except FileNotFoundError:
         return "missing"
-    except OSError:  # an I/O error reading it back: as good as damaged
-        return "damaged"
+    except OSError as exc:
+        raise unreadable_blob(exc) from None
     digest = sha256_bytes(data)
     intact = digest in digests if digests else decode_image(data) is not None
     return Verified(state, digest) if intact else "damaged"

@@ -27,6 +27,7 @@ import json
 import logging
 import os
 import re
+import shutil
 import stat
 import time
 import uuid
@@ -772,10 +773,51 @@ def _as_write_error(exc: BaseException, path: Path) -> StoreWriteError:
     reason = exc.strerror or os.strerror(code)
     if code in (errno.EISDIR, errno.ENOTDIR):
         return StoreWriteError(f"cannot write {path}: {reason}; {FIXES[code]}")
-    fix = ("free some disk space" if code in (errno.ENOSPC, errno.EDQUOT)
-           else "make the folder writable")
-    return StoreWriteError(f"cannot write {path}: {reason}; {fix}, or set experiment.store to a folder on "
-                           "another disk")
+    if code in FULL_ERRNOS:
+        return full_disk_error(OSError(code, reason), f"write {path}", path)
+    return StoreWriteError(f"cannot write {path}: {reason}; make the folder writable, or set experiment.store to a "
+                           "folder on another disk")
+
+
+#: What a full disk, or a used-up quota, raises.
+FULL_ERRNOS = (errno.ENOSPC, errno.EDQUOT)
+
+
+def is_full_disk(exc: BaseException) -> bool:
+    """Whether ``exc`` says the disk (or the user's quota) is full, however it lost its path."""
+    return isinstance(exc, OSError) and (exc.errno in FULL_ERRNOS or "No space left on device" in str(exc))
+
+
+def full_disk_error(exc: OSError, doing: str, path: Path) -> StoreWriteError:
+    """One line for a full disk met while ``doing`` (``"write <path>"``) at ``path``: that the disk
+    is full, which one (where it is mounted, what is left) and the fix."""
+    reason = exc.strerror or os.strerror(exc.errno or errno.ENOSPC)
+    what = "the disk quota is used up" if exc.errno == errno.EDQUOT else "the disk is full"
+    mount = mount_point(path)
+    try:
+        left = f"{_size(shutil.disk_usage(mount).free)} free on the disk mounted at {mount}"
+    except OSError:
+        left = f"the disk mounted at {mount}"
+    return StoreWriteError(f"cannot {doing}: {what} ({reason}; {left}); free some disk space, or set "
+                           "experiment.store to a folder on another disk")
+
+
+def mount_point(path: Path) -> Path:
+    """The mount point of the file system ``path`` (or its nearest existing folder) is on."""
+    path = Path(os.path.abspath(path))
+    while not path.exists() and path != path.parent:
+        path = path.parent
+    while not os.path.ismount(path) and path != path.parent:
+        path = path.parent
+    return path
+
+
+def _size(n: int) -> str:
+    """``n`` bytes for a person: ``0 B``, ``512 kB``, ``3.2 GB``."""
+    for unit, scale in (("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if n >= scale:
+            return f"{n / scale:.3g} {unit}"
+    return f"{n} B"
 
 
 def store_error(exc: OSError, doing: str) -> StoreReadError | StoreWriteError:

@@ -35,6 +35,7 @@ from sweep3d.stages.passes import truth_passes
 from sweep3d.stages.plan import Plan
 from sweep3d.stages.postprocess import PostprocessStage
 from sweep3d.stages.render import RenderStage
+from sweep3d.stages.render.device import missing_gpu_warning
 from sweep3d.stages.render.estimate import duration, estimate_render_seconds, slow_render_warning
 
 #: Rendered controls that may hide part of the object (its mask pass then renders twice).
@@ -95,6 +96,7 @@ def print_plan(console: Console, spec: LoadedSpec, jobs: int = 0) -> Plan:
                   f"{load_note()}")
     to_render = sum(needed - cached for stage, needed, cached, _ in status if stage.startswith("render"))
     print_warning(console, slow_render_warning(spec.render, max(p.framing.crop for p in plans), to_render))
+    print_warning(console, missing_gpu_warning(spec.render.device, to_render))
     if jobs:
         print_jobs(console, plan, store, jobs)
     return plan

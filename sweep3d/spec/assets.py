@@ -11,12 +11,14 @@ from __future__ import annotations
 import importlib.util
 import json
 import re
+import shutil
 import zipfile
 from functools import lru_cache
 from importlib import metadata
 from pathlib import Path
 
 from sweep3d.cache.keys import digest, files_digest
+from sweep3d.cache.store import full_disk_error, is_full_disk
 from sweep3d.errors import UserError
 from sweep3d.spec.sniff import check_file, damaged_member, unreadable
 
@@ -105,6 +107,9 @@ def materialise_mesh(ref: str, scratch: Path) -> Path:
             _extract(archive, member, target)
             done.write_text("ok")
         except OSError as exc:
+            if is_full_disk(exc):  # a write's error names no file: it is the store's disk, not the archive
+                shutil.rmtree(target, ignore_errors=True)  # what was extracted: the space back, none half done
+                raise full_disk_error(exc, f"extract {Path(archive).name}#{member} into {target}", target) from None
             if not str(exc.filename or "").startswith(str(scratch)):
                 raise  # reading the archive: the caller names the file
             raise UserError(f"cannot extract {member} into {str(target)!r}: {exc.strerror}; the store must be "

@@ -36,7 +36,7 @@ def spec_from_dict(raw: Mapping[str, Any], catalogue: Catalogue, base: Path) -> 
     if not isinstance(raw, Mapping):
         raise SpecError(DICT_FILE, "", f"a spec is a dict of tables, got {type(raw).__name__}")
     plugins: dict[str, dict[str, Any]] = {"control": {}, "policy": {}}
-    plain = _plain(raw, "", plugins)
+    plain = _plain(raw, "", plugins, frozenset())
     catalogue = dataclasses.replace(
         catalogue, controls=_with(catalogue.controls, plugins["control"]),
         policies=_with(catalogue.policies, plugins["policy"]))
@@ -53,9 +53,17 @@ def plugin_name(obj: Any) -> str:
     return f"{obj.__module__}:{obj.__qualname__}"
 
 
-def _plain(value: Any, key: str, plugins: dict[str, dict[str, Any]]) -> Any:
+#: How deep a dict spec may nest (a spec file's are a few levels deep): deeper is a mistake, not a
+#: spec, and would end in Python's RecursionError.
+MAX_DEPTH = 64
+
+
+def _plain(value: Any, key: str, plugins: dict[str, dict[str, Any]], within: frozenset[int]) -> Any:
     """``value`` with TOML's types only: paths as strings, tuples as lists, plug-in objects as
-    their names (controls and policies collected into ``plugins`` by kind)."""
+    their names (controls and policies collected into ``plugins`` by kind). ``within``: the ids of
+    the dicts and lists that hold it, so one that holds itself is a :class:`SpecError`."""
+    if isinstance(value, (Mapping, list, tuple)):
+        within = _enter(value, key, within)
     if isinstance(value, Mapping):
         out = {}
         for name, item in value.items():
@@ -63,14 +71,15 @@ def _plain(value: Any, key: str, plugins: dict[str, dict[str, Any]]) -> Any:
                 raise SpecError(DICT_FILE, key, f"keys are strings, got {name!r}")
             where = f"{key}.{name}" if key else name
             kind = PLUGIN_KEYS.get((key.split("[")[0], name))
-            out[name] = _plugin(item, where, kind, plugins) if kind and callable(item) else _plain(item, where, plugins)
+            out[name] = (_plugin(item, where, kind, plugins) if kind and callable(item)
+                         else _plain(item, where, plugins, within))
         return out
     if isinstance(value, (list, tuple)):
-        return [_plain(item, f"{key}[{i}]", plugins) for i, item in enumerate(value)]
+        return [_plain(item, f"{key}[{i}]", plugins, within) for i, item in enumerate(value)]
     if isinstance(value, Path):
         return str(value)
     if _is_array(value):  # a notebook's np.linspace(0, 2, 3) or np.float64(0.5): plain lists and numbers
-        return _plain(value.tolist(), key, plugins)
+        return _plain(value.tolist(), key, plugins, within)
     return value
 
 
@@ -78,6 +87,17 @@ def _is_array(value: Any) -> bool:
     """Whether ``value`` is an array or an array's scalar (numpy's, a pandas Series, a tensor),
     told by its ``tolist()`` so that numpy need not be imported."""
     return not isinstance(value, (type, str, bytes)) and callable(getattr(value, "tolist", None))
+
+
+def _enter(value: Any, key: str, within: frozenset[int]) -> frozenset[int]:
+    """``within`` and ``value``; a dict or list already among them (it contains itself) or nested
+    past :data:`MAX_DEPTH` is refused in one line, not a RecursionError."""
+    if id(value) in within:
+        raise SpecError(DICT_FILE, key, "holds itself (a dict or list that contains itself, as after d['x'] = d); "
+                                        "a spec is a tree of tables: give that key its own value")
+    if len(within) >= MAX_DEPTH:
+        raise SpecError(DICT_FILE, key, f"nests more than {MAX_DEPTH} levels deep; a spec is a few tables deep")
+    return within | {id(value)}
 
 
 def _plugin(obj: Any, key: str, kind: str, plugins: dict[str, dict[str, Any]]) -> str:

@@ -14,6 +14,7 @@ from typing import Any, Callable
 import numpy as np
 
 from sweep3d.cache.keys import Template, digests, file_digest
+from sweep3d.cache.store import StoreWriteError
 from sweep3d.controls import blamed
 from sweep3d.errors import SpecError, UserError
 from sweep3d.spec.assets import mesh_digest
@@ -245,6 +246,8 @@ def _asset_digest(spec: LoadedSpec, key: str, compute: Callable[..., str], *args
     """``compute(*args)``, with a file that cannot be read (since the spec was loaded) as one line naming ``key``."""
     try:
         return compute(*args)
+    except StoreWriteError:
+        raise  # the store's disk, not the spec's file: its line names the disk
     except UserError as exc:
         raise spec.fail(key, str(exc)) from None
     except OSError as exc:

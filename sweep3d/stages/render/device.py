@@ -100,6 +100,18 @@ def device_note(spec: RenderSpec, device: str) -> str | None:
             f'ahead, on any machine: bash scripts/cycles_kernel.sh {compiles[0].replace(".", "")}')
 
 
+def missing_gpu_warning(requested: str, to_render: int) -> str | None:
+    """What ``sweep3d plan`` says of a GPU ``[render] device`` named outright that this machine
+    lacks (a run would find out only as its first worker starts), and what a run here would do;
+    None for "cpu", "auto", or a back-end that finds a GPU."""
+    if requested not in NAMES or gpu_count(requested) > 0:
+        return None
+    run = (f"sweep3d run here would stop with an error before its {to_render} renders" if to_render
+           else "every render is cached, so sweep3d run here renders nothing, but a new one would fail")
+    return (f'render.device = "{requested}": no {NAMES[requested]} GPU here (Cycles finds none); {run}; run it on a '
+            'machine with one, or set device = "auto" (the best GPU back-end that works, else the CPU) or "cpu"')
+
+
 def use_device(bpy: Any, scene: Any, device: str, gpu: int | None = None) -> None:
     """Make ``scene`` render on ``device`` (in a worker): the CPU, or the GPUs of its back-end, all
     of them or only number ``gpu`` (modulo their count: one worker per GPU).

@@ -31,6 +31,7 @@ from sweep3d.registry import is_user_plugin
 from sweep3d.stages.render.device import KERNEL_GRACE, prepare_gpu_environment
 from sweep3d.stages.render.protocol import (
     NO_LIMITS,
+    Editing,
     Fatal,
     Idle,
     Ready,
@@ -86,6 +87,7 @@ class _Worker:
     task: list[RenderJob] | None = None
     done: set[str] = field(default_factory=set)
     current: str | None = None
+    editing: str | None = None  # the user's control whose edit() it runs (Editing), by label
     started: float = 0.0
     retired: Retired | None = None  # it reached a limit after a job and exits
     rendered: int = 0  # jobs it has answered, over all its lists
@@ -181,13 +183,16 @@ class RenderPool:
         compiles = self.settings.device != "cpu" and worker.rendered == 0
         return self.timeout + (KERNEL_GRACE if compiles else 0.0)
 
-    def _handle(self, worker: _Worker, message: Started | RenderReply | Idle | Retired) -> Iterator[RenderReply]:
+    def _handle(self, worker: _Worker, message: Started | Editing | RenderReply | Idle | Retired
+                ) -> Iterator[RenderReply]:
         if isinstance(message, Started):
-            worker.current, worker.started = message.render_key, time.monotonic()
+            worker.current, worker.started, worker.editing = message.render_key, time.monotonic(), None
+        elif isinstance(message, Editing):
+            worker.editing = message.control
         elif isinstance(message, RenderReply):
             worker.done.add(message.render_key)
             worker.rendered += 1
-            worker.current = None
+            worker.current = worker.editing = None
             yield message
         elif isinstance(message, Idle):
             worker.task = None
@@ -213,8 +218,7 @@ class RenderPool:
                  timed_out: bool) -> Iterator[RenderReply]:
         """Replace a dead or stuck worker; retry its unfinished jobs once, fail the culprit twice."""
         culprit = worker.current
-        reason = f"render took longer than {self.timeout:g} s" if timed_out else (
-            f"render worker died ({death_cause(worker.process.exitcode)})")
+        reason = f"render took longer than {self.timeout:g} s" if timed_out else died(worker)
         worker.process.kill()
         worker.process.join(5)
         leftover = [job for job in worker.task or [] if job.render_key not in worker.done]
@@ -223,7 +227,7 @@ class RenderPool:
         for job in leftover:
             key = job.render_key
             if key == culprit and key in retried:
-                yield _failure(job, reason, timed_out, self.timeout)
+                yield _failure(job, reason, timed_out, self.timeout, None if timed_out else worker.editing)
             else:
                 if key == culprit:
                     retried.add(key)
@@ -253,9 +257,22 @@ class RenderPool:
         shutil.rmtree(self.scratch, ignore_errors=True)
 
 
-def _failure(job: RenderJob, reason: str, timed_out: bool, timeout: float) -> RenderReply:
+def died(worker: _Worker) -> str:
+    """Why ``worker`` is gone, naming the user's control in whose ``edit()`` it died."""
+    cause = death_cause(worker.process.exitcode)
+    if worker.editing is not None:
+        return f"{worker.editing} ended the render worker in edit() ({cause})"
+    return f"render worker died ({cause})"
+
+
+def _failure(job: RenderJob, reason: str, timed_out: bool, timeout: float, killer: str | None = None) -> RenderReply:
     """The reply for a job that failed its worker twice: a user's control that edits the scene is
-    the likely cause of a job that never ends, so it is named (kind "plugin": the run stops)."""
+    the likely cause of a job that never ends, and the cause of a worker that died in its
+    ``edit()`` (``killer``: os._exit, a crash in Blender), so it is named (kind "plugin": the run stops)."""
+    if killer is not None:
+        return RenderReply(job.render_key, False, kind="plugin",
+                           error=f"{reason}, twice; a plug-in must not end its process (os._exit, a crash in "
+                                 "Blender): raise an exception to fail")
     editing = [c for c, _ in job.controls if is_user_plugin(c.type_name) and c.edits_scene] if timed_out else []
     if editing:
         names = ", ".join(f"{c.type_name!r} (id {c.id!r})" for c in editing)

@@ -7,8 +7,9 @@ process never loads Blender.
 
 A local worker receives a list of :class:`RenderJob` (one scene group) or None to stop, and
 answers :class:`Ready` (or :class:`Fatal`) once, then per job :class:`Started` and a
-:class:`RenderReply`, and :class:`Idle` after each list, or :class:`Retired` after a reply when
-it reached a :class:`WorkerLimits` limit (it then exits).
+:class:`RenderReply` (and :class:`Editing` around a user's control's ``edit()``), and
+:class:`Idle` after each list, or :class:`Retired` after a reply when it reached a
+:class:`WorkerLimits` limit (it then exits).
 """
 
 from __future__ import annotations
@@ -243,6 +244,14 @@ class Started:
     """A worker began a job: the pool times it from now and blames it if the worker dies."""
 
     render_key: str
+
+
+@dataclass(frozen=True)
+class Editing:
+    """A worker runs a user's control's ``edit()`` (``control``: its label), or has finished the
+    job's edits (None): a worker that dies meanwhile is that control's doing, and is named so."""
+
+    control: str | None
 
 
 @dataclass(frozen=True)

@@ -9,11 +9,13 @@ whatever the control did (:func:`render_edited`).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
-from sweep3d.controls import blamed
+from sweep3d.controls import blamed, control_label
+from sweep3d.errors import PluginError
+from sweep3d.registry import is_user_plugin
 from sweep3d.stages.render.sandbox import clean_up, snapshot
 
 if TYPE_CHECKING:
@@ -63,16 +65,32 @@ class SceneEdit:
         return obj
 
 
+#: Told the label of a user's control before its ``edit()``, and None after it.
+OnEdit = Callable[[str | None], None]
+
+
+class EditedRenderError(RuntimeError):
+    """Blender failed to render the scene a user's control's ``edit()`` left: the job's error
+    names the control (the message is the whole line)."""
+
+
 def render_edited(scene: BlenderScene, edits: list[tuple[RenderedControl, BaseModel]],
-                  object_name: str = "", environment_name: str = "") -> tuple[np.ndarray, tuple[str, ...]]:
+                  object_name: str = "", environment_name: str = "",
+                  on_edit: OnEdit | None = None) -> tuple[np.ndarray, tuple[str, ...]]:
     """Run each control's ``edit`` on the posed scene, render, and undo whatever they did.
+
+    Args:
+        on_edit: told of each user's control's ``edit()`` as it starts and ends (the render
+            worker tells its pool, which names the control if the worker dies in it).
 
     Returns:
         The render (as :meth:`BlenderScene.render`) and what the edits changed of the data the
         scene held before (empty when they only added things; else the scene was rebuilt).
 
     Raises:
-        PluginError: an ``edit`` raised; the scene is cleaned up all the same.
+        PluginError: an ``edit`` raised, or left the scene without its camera; the scene is
+            cleaned up all the same.
+        EditedRenderError: Blender failed to render what a user's ``edit`` left.
     """
     bpy = scene.bpy
     bpy.context.view_layer.update()  # derived values (world matrices) as the render will leave them
@@ -81,11 +99,51 @@ def render_edited(scene: BlenderScene, edits: list[tuple[RenderedControl, BaseMo
         context = SceneEdit(bpy, scene.scene, tuple(scene.meshes), scene.pose, scene.current.normaliser,
                             scene.camera, object_name, environment_name)
         for control, params in edits:
-            with blamed(control, "edit()"):
-                control.edit(context, params)
-        rgb = scene.render()
+            _edit(control, params, context, on_edit)
+        rgb = _render(scene, edits)
     finally:
         changed = clean_up(bpy, before).changed
         if changed:
             scene.reset()
     return rgb, changed
+
+
+def _edit(control: RenderedControl, params: BaseModel, context: SceneEdit, on_edit: OnEdit | None) -> None:
+    """One control's ``edit``, announced when it is a user's (a worker that dies in it is then
+    named for it), and a user's that leaves no camera refused (every job would fail to render)."""
+    user = is_user_plugin(control.type_name)
+    if user and on_edit is not None:
+        on_edit(control_label(control))
+    with blamed(control, "edit()"):
+        control.edit(context, params)
+    if user and on_edit is not None:
+        on_edit(None)
+    problem = camera_problem(context.scene) if user else None
+    if problem:
+        raise PluginError(f"{control_label(control)} {problem} in edit(); an edit() may replace the camera "
+                          "(set scene.scene.camera) but must leave one in the scene")
+
+
+def camera_problem(scene: Any) -> str | None:
+    """What is wrong with the scene's camera after an edit (None: it has one, in the scene)."""
+    try:
+        camera = scene.camera
+        if camera is None:
+            return "removed the scene's camera"
+        if scene.objects.get(camera.name) is None:
+            return "unlinked the scene's camera from the scene"
+    except ReferenceError:  # the camera's object was freed under the scene
+        return "removed the scene's camera"
+    return None
+
+
+def _render(scene: BlenderScene, edits: list[tuple[RenderedControl, BaseModel]]) -> np.ndarray:
+    """The edited scene's render; a failure names the users' controls that edited it."""
+    try:
+        return scene.render()
+    except Exception as exc:
+        users = [control_label(c) for c, _ in edits if is_user_plugin(c.type_name)]
+        if not users:
+            raise
+        raise EditedRenderError(f"{type(exc).__name__}: {' '.join(str(exc).split())} (rendering the scene the edit() "
+                                f"of {', '.join(users)} left)") from exc

@@ -22,12 +22,14 @@ import time
 import traceback
 from multiprocessing.connection import Connection
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from sweep3d.errors import UserError
 from sweep3d.stages.render.protocol import (
     NO_LIMITS,
+    Editing,
     Fatal,
     Idle,
     Ready,
@@ -39,6 +41,9 @@ from sweep3d.stages.render.protocol import (
     Started,
     WorkerLimits,
 )
+
+if TYPE_CHECKING:
+    from sweep3d.stages.render.scene_edit import OnEdit
 
 PR_SET_PDEATHSIG = 1  # from <linux/prctl.h>
 _parent_pid: int | None = None  # set in a spawned child: the process it renders for
@@ -103,7 +108,7 @@ def _serve(conn: Connection, settings: RenderSettings, scratch: str, limits: Wor
             return
         for job in jobs:
             conn.send(Started(job.render_key))
-            conn.send(render_job(scene, job))
+            conn.send(render_job(scene, job, on_edit=lambda control: conn.send(Editing(control))))
             rendered += 1
             reason = limits.reached(rendered, resident_mb())
             if reason is not None:
@@ -138,7 +143,7 @@ def posed_state(job: RenderJob):
     return state
 
 
-def render_job(scene, job: RenderJob, keep_pixels: bool = False) -> RenderReply:
+def render_job(scene, job: RenderJob, keep_pixels: bool = False, on_edit: OnEdit | None = None) -> RenderReply:
     """Render one job in ``scene`` (a BlenderScene); shared by process workers and Ray actors.
 
     Returns:
@@ -148,14 +153,15 @@ def render_job(scene, job: RenderJob, keep_pixels: bool = False) -> RenderReply:
         pixels are written or returned. With the UV pass on, ``info.parts`` holds what it saw;
         with truth passes on, ``info.truth`` their numbers and ``reply.truth`` their blobs.
         ``info.load_seconds`` is the part of ``info.seconds`` its scene switch took (see
-        ``BlenderScene.load_seconds``; 0 when the scene was already shown).
+        ``BlenderScene.load_seconds``; 0 when the scene was already shown). ``on_edit`` is told
+        of each user's control's ``edit()`` (see :func:`.scene_edit.render_edited`).
         A :class:`UserError` (the spec's input, a full disk) gives kind "user"; any other
         failure "internal", so one bad job does not kill the sweep.
     """
     from sweep3d.cache.store import atomic_write
     from sweep3d.errors import PluginError
     from sweep3d.pixels import encode_png, png_size
-    from sweep3d.stages.render.scene_edit import render_edited
+    from sweep3d.stages.render.scene_edit import EditedRenderError, render_edited
 
     key = job.render_key
     started = time.perf_counter()
@@ -164,7 +170,7 @@ def render_job(scene, job: RenderJob, keep_pixels: bool = False) -> RenderReply:
         scene.pose_scene(posed_state(job))
         edits = [(control, params) for control, params in job.controls if control.edits_scene]
         if edits:
-            rgb, rebuilt = render_edited(scene, edits, job.object_name, job.environment_name)
+            rgb, rebuilt = render_edited(scene, edits, job.object_name, job.environment_name, on_edit)
             finite, png = bool(np.isfinite(rgb).all()), encode_png(rgb)
         else:  # Blender's 8-bit file: finite by construction
             finite, png, rebuilt = True, scene.render_png(), ()
@@ -186,5 +192,7 @@ def render_job(scene, job: RenderJob, keep_pixels: bool = False) -> RenderReply:
         return RenderReply(key, False, error=str(exc), kind="plugin", details=exc.details)
     except UserError as exc:  # the spec's input (a mesh, an HDRI) or a full disk: exit 2
         return RenderReply(key, False, error=str(exc), kind="user")
+    except EditedRenderError as exc:  # its line names the control whose edit() left the scene
+        return RenderReply(key, False, error=f"{exc}\n{traceback.format_exc(limit=3)}")
     except Exception as exc:  # noqa: BLE001  (one bad job must not kill the sweep)
         return RenderReply(key, False, error=f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=3)}")
