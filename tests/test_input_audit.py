@@ -276,15 +276,17 @@ def test_a_segment_lacking_a_column_is_damaged_found_and_quarantined(tmp_path: P
     assert "lacks its column 'top1_label'" in caplog.text
 
 
-def test_a_segment_written_before_columns_were_listed_is_not_judged(tmp_path: Path) -> None:
+def test_a_segment_written_before_columns_were_listed_is_not_judged_by_a_list(tmp_path: Path) -> None:
+    """Such a segment is held to the columns its table's rows always had (issue 35), no more."""
     from sweep3d.cache.store import Store
 
     store = Store(tmp_path / "store")
     path = store.table_dir("predictions") / "old.parquet"
-    path.parent.mkdir(parents=True)
-    pq.write_table(pq.read_table(store.append("predictions", [{"pred_key": "k", "created_at": None}]))
-                   .replace_schema_metadata(None), path)
-    assert "k" in Store(store.root).keys("predictions")
+    listed = store.append("predictions", [{"pred_key": "k", "image_key": "i", "model": "m", "model_digest": "d",
+                                           "seconds": 0.0, "created_at": None}])
+    pq.write_table(pq.read_table(listed).replace_schema_metadata(None), path)
+    listed.unlink()
+    assert Store(store.root).keys("predictions") == {"k"}
 
 
 # -- 7a: a model whose every output is NaN --------------------------------------------------------

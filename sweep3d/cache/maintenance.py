@@ -2,7 +2,10 @@
 
 Blobs are named by cache key, not by content, so a blob's integrity is checked against the
 SHA-256 its row recorded when it was written (rows from before digests existed fall back to
-"the PNG decodes"). A segment is corrupt when it fails to read with its page checksums verified.
+"the PNG decodes"); so are a model's kept outputs (``outputs/``, their digest in the file) and the
+meshes extracted from archives (``assets/``, their digests in the folder's manifest). A segment is
+corrupt when it fails to read with its page checksums verified, or lacks a column its rows always
+have (its table's, or for predictions their evaluator's, as the plans in ``jobs/`` record it).
 Repairs and compaction change the store only through atomic renames, holding the writer lock,
 so a reader sees every row exactly once before, during and after them.
 """
@@ -20,10 +23,12 @@ from typing import Iterator
 import pyarrow as pa
 import pyarrow.compute as pc
 
+from sweep3d.cache import digested, extracted
 from sweep3d.cache.blobs import blob_is_intact
 from sweep3d.cache.store import (
     BLOB_TABLES,
     KEY_COLUMN,
+    TABLE_COLUMNS,
     TABLES,
     TRUTH_BLOBS,
     Store,
@@ -32,7 +37,9 @@ from sweep3d.cache.store import (
     blob_key,
     scan,
     segment_name,
+    with_column_list,
 )
+from sweep3d.evaluation import read_record
 
 TEMP_AGE = 3600.0  # seconds after which gc removes temp files (a live run's are younger)
 #: Folders that only the writer lock's holder writes (``reports/`` and ``cache/`` are not:
@@ -44,7 +51,8 @@ TEMP_PATTERN = ".*.tmp"  # how atomic_write names its temp files (a dot, the fil
 # -- verify ------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class Problem:
-    kind: str  # "corrupt segment", "corrupt blob", "missing blob", "corrupt jobs table"
+    kind: str  # "corrupt segment", "corrupt blob", "missing blob", "corrupt jobs table", "corrupt kept output",
+    # "corrupt extracted asset"
     table: str
     path: Path
     key: str | None = None
@@ -60,6 +68,8 @@ class Verification:
     segments: int = 0
     rows: int = 0
     blobs: int = 0
+    outputs: int = 0  # kept model outputs
+    assets: int = 0  # folders extracted from mesh archives
     problems: list[Problem] = field(default_factory=list)
 
     @property
@@ -68,8 +78,8 @@ class Verification:
 
 
 def verify(root: Path) -> Verification:
-    """Re-read every segment (checking its columns are its table's) and re-hash every blob that a
-    row references; change nothing."""
+    """Re-read every segment (checking its columns are its table's), re-hash every blob that a
+    row references, every kept model output and every extracted mesh; change nothing."""
     store = Store(root, quarantine=False, warn=False)
     report = Verification()
     for table in TABLES:
@@ -81,6 +91,8 @@ def verify(root: Path) -> Verification:
                     report.problems.append(Problem("corrupt segment", table, path, detail=store.unreadable.get(str(path), "")))
                 continue
             report.rows += data.num_rows
+    for path in evaluated_columns_lacking(store):
+        report.problems.append(Problem("corrupt segment", "predictions", path, detail=store.unreadable.get(str(path), "")))
     for path in jobs_files(root):
         if store.read_segment(path) is None and path.exists():
             report.problems.append(Problem("corrupt jobs table", "jobs", path, detail=store.unreadable.get(str(path), "")))
@@ -102,7 +114,50 @@ def verify(root: Path) -> Verification:
                 detail = "content does not match its recorded SHA-256" if digests else "does not decode"
                 report.problems.append(Problem("corrupt blob", table, path, key, detail))
     _verify_truth_blobs(store, report)
+    _verify_kept_outputs(root, report)
+    _verify_assets(root, report)
     return report
+
+
+def evaluated_columns_lacking(store: Store) -> list[Path]:
+    """Predictions segments lacking a column of their rows' evaluator, as each experiment's plan
+    (its jobs file) records it; found damaged in ``store`` (see :meth:`Store.require_columns`).
+    Only segments that list no columns of their own are judged, so a store without such a
+    segment reads no jobs file here."""
+    if not store.unlisted_segments("predictions"):
+        return []
+    found: list[Path] = []
+    for path in jobs_files(store.root):
+        record = read_record(path)
+        jobs = store.read_segment(path, ["pred_key"]) if record is not None else None
+        if record is None or jobs is None:
+            continue
+        keys = set(jobs.column(0).to_pylist())
+        columns = (*TABLE_COLUMNS["predictions"], *record.columns)
+        found += store.require_columns("predictions", columns, keys, f"every row of the {record.kind} evaluator has")
+    return found
+
+
+def _verify_kept_outputs(root: Path, report: Verification) -> None:
+    """Check every kept model output (``outputs/``) against the digest it was written with."""
+    for entry in store_files(root / digested.FOLDER):
+        if not entry.name.endswith(digested.SUFFIX) or entry.name.startswith("."):
+            continue
+        report.outputs += 1
+        why = digested.check_file(Path(entry.path))
+        if why:
+            report.problems.append(Problem("corrupt kept output", "outputs", Path(entry.path), detail=why))
+
+
+def _verify_assets(root: Path, report: Verification) -> None:
+    """Hash every file extracted from a mesh archive (``assets/``) against its manifest."""
+    for entry in scan(root / extracted.FOLDER):
+        if not entry.is_dir(follow_symlinks=False):
+            continue
+        folder = Path(entry.path)
+        report.assets += 1
+        for rel, why in extracted.check_folder(folder):
+            report.problems.append(Problem("corrupt extracted asset", "assets", folder / rel, entry.name, why))
 
 
 def _verify_truth_blobs(store: Store, report: Verification) -> None:
@@ -154,6 +209,11 @@ def repair(root: Path, report: Verification) -> int:
                 if blob.exists():
                     store.quarantine(blob)
             fixed += len(keys)
+    for problem in report.problems:  # caches: the next run runs the model, or extracts the mesh, again
+        if problem.kind == "corrupt kept output" and store.quarantine(problem.path) is not None:
+            fixed += 1
+    for name in {p.key for p in report.problems if p.kind == "corrupt extracted asset" and p.key is not None}:
+        fixed += store.quarantine(root / extracted.FOLDER / name) is not None
     truths = {p.key for p in report.problems if p.table == "truths" and p.key is not None}
     if truths:  # the next run that needs them renders the passes again
         store.drop_rows("truths", truths)
@@ -355,6 +415,8 @@ def compact_table(store: Store, table: str) -> Compacted | None:
     merged one: never a gap. Returns None when there is nothing to merge.
     """
     store.sweep_superseded(table)
+    if table == "predictions":  # merged, a segment lacking its evaluator's columns would read as NULLs
+        evaluated_columns_lacking(store)
     paths = store.readable_segments(table)
     parts = [(p, store.read_segment(p)) for p in paths]
     parts = [(p, t) for p, t in parts if t is not None]
@@ -371,7 +433,7 @@ def compact_table(store: Store, table: str) -> Compacted | None:
         return None
     merged = merged.take(pa.array(first, type=pa.int64()))
     name = segment_name()
-    store.write_table_file(store.table_dir(table) / name, merged)
+    store.write_table_file(store.table_dir(table) / name, with_column_list(merged))
     record = {"merged": name, "replaces": [p.name for p, _ in parts], "at": time.time()}
     atomic_write(store.table_dir(table) / f".compacted-{Path(name).stem}.json", json.dumps(record).encode())
     return Compacted(table, len(parts), rows_before, merged.num_rows)

@@ -11,7 +11,8 @@ Layout under the store root::
 Every write is a temp file plus an atomic rename, so a killed run leaves either a whole file
 or none: rerunning recomputes only what no complete row records. Segments carry Parquet page
 checksums; a segment that fails to read (corrupted on disk, or whose columns are not its
-table's) is skipped with one warning, and moved to ``quarantine/`` when the process reading it
+table's: lacking one it lists, or, listing none, one its table's rows always have) is skipped with
+one warning, and moved to ``quarantine/`` when the process reading it
 holds the writer lock (its rows are then recomputed), so a damaged store never crashes a run and
 readers never change it. A full disk or a read-only folder is a :class:`StoreWriteError`, a
 folder that cannot be read a :class:`StoreReadError` (one-line user errors); a failed write
@@ -34,7 +35,7 @@ import uuid
 from contextlib import contextmanager
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any, Iterable, Iterator, NamedTuple
+from typing import Any, Collection, Iterable, Iterator, NamedTuple
 
 import duckdb
 import pyarrow as pa
@@ -76,6 +77,22 @@ COLUMNS_METADATA = b"sweep3d.columns"
 
 #: Columns a file of each table must have (its key), and a jobs file (what results join on).
 REQUIRED_COLUMNS = {**{table: (key,) for table, key in KEY_COLUMN.items()}, "jobs": ("pred_key",)}
+#: Columns every segment of each table has had since sweep3d first wrote it: its stage's schema less
+#: the columns added since (a blob's ``sha256``, a truth's ``framed_pixels``: older segments rightly
+#: lack them). A segment that lists no columns of its own (written before segments did, or rewritten
+#: by a tool that dropped the list) is judged by these instead: lacking one, it was rewritten without
+#: it, and is damaged, not rows of NULLs. A prediction's evaluator columns depend on its evaluator:
+#: see :meth:`Store.require_columns`.
+TABLE_COLUMNS = {
+    "renders": ("render_key", "width", "height", "valid", "seconds", "created_at"),
+    "images": ("image_key", "render_key", "valid", "seconds", "created_at"),
+    "predictions": ("pred_key", "image_key", "model", "model_digest", "seconds", "created_at"),
+    "runs": ("run_id", "experiment", "spec_path", "spec", "jobs", "started_at", "created_at", "seconds"),
+    "parts": ("parts_key", "render_key", "layout", "parts", "pixels", "object_pixels", "created_at"),
+    "truths": ("truth_key", "render_key", "passes", "gt_x0", "gt_y0", "gt_x1", "gt_y1", "visible_pixels",
+               "silhouette_pixels", "visible_fraction", "silhouette", "truth_seconds", "mask_sha256", "depth_sha256",
+               "created_at"),
+}
 
 log = logging.getLogger("sweep3d.store")
 MAX_FILENAME_BYTES = 120  # of an experiment's name in file names: with suffixes, well under 255
@@ -116,6 +133,8 @@ class Store:
         self.quarantine_bad = quarantine
         self.warn = warn
         self._checked: dict[tuple[str, int, int], list[str]] = {}  # (path, size, mtime) read whole once -> columns
+        self._unlisted: set[tuple[str, int, int]] = set()  # ... of those, the segments listing no columns
+        self._condemned: set[tuple[str, int, int]] = set()  # segments require_columns found damaged
         self._bad: dict[str, str] = {}  # unreadable files already reported -> why
         self._keys: dict[str, tuple[tuple, frozenset[str]]] = {}  # table -> (segment state, its keys)
         self._listed: dict[str, tuple[tuple[int, ...], BlobListing]] = {}  # blob folder -> (its state, listing)
@@ -346,9 +365,10 @@ class Store:
         """One segment (only the ``columns`` it has, when given), or None when it cannot be read.
 
         A segment is read whole, with its page checksums verified and its columns checked
-        (:data:`REQUIRED_COLUMNS`), the first time this store object sees it (by path, size and
-        mtime); one that fails, or a folder in its place, is reported once (and quarantined by the
-        lock's holder). A segment that vanished meanwhile (compacted away by another process) is
+        (:data:`REQUIRED_COLUMNS`; those it lists, else :data:`TABLE_COLUMNS`), the first time this
+        store object sees it (by path, size and mtime); one that fails, or a folder in its place, is
+        reported once (and quarantined by the lock's holder), as is one :meth:`require_columns`
+        found lacking. A segment that vanished meanwhile (compacted away by another process) is
         None, silently.
         """
         try:
@@ -358,15 +378,19 @@ class Store:
                 self._report_bad(path, what, move=self.quarantine_bad)
                 return None
             ident = (str(path), st.st_size, st.st_mtime_ns)
+            if ident in self._condemned:
+                return None
             names = self._checked.get(ident)
             if names is None:
                 whole = read_parquet(path, verify=True)
-                check_column_list(whole)
-                mismatch = self._columns_mismatch(path, whole.schema)
+                listed = check_column_list(whole)
+                mismatch = self._columns_mismatch(path, whole.schema, listed)
                 if mismatch:
                     self._report_bad(path, mismatch, move=self.quarantine_bad)
                     return None
                 self._checked[ident] = whole.column_names
+                if not listed:
+                    self._unlisted.add(ident)
                 return whole.select([c for c in columns if c in whole.column_names]) if columns else whole
             return read_parquet(path, [c for c in columns if c in names] if columns else None)
         except FileNotFoundError:
@@ -378,9 +402,10 @@ class Store:
             self._report_bad(path, _first_line(exc), move=self.quarantine_bad)
             return None
 
-    def _columns_mismatch(self, path: Path, schema: pa.Schema) -> str:
+    def _columns_mismatch(self, path: Path, schema: pa.Schema, listed: bool = True) -> str:
         """Why the file at ``path`` cannot hold its table's rows ("" when it can): it lacks a
-        column the table needs, or its key is not text (a file of another table, a query's export)."""
+        column the table needs, or its key is not text (a file of another table, a query's export),
+        or, listing no columns of its own (``listed``), it lacks one of :data:`TABLE_COLUMNS`."""
         folder = path.parent
         kind = folder.name if folder.parent == self.root / "tables" or folder == self.root / "jobs" else None
         for column in REQUIRED_COLUMNS.get(kind or "", ()):
@@ -388,7 +413,54 @@ class Store:
                 return f"its columns are not the {kind} table's: it has no {column} column"
             if not pa.types.is_string(schema.field(column).type):
                 return f"its columns are not the {kind} table's: its {column} is {schema.field(column).type}, not text"
-        return ""
+        if kind == "jobs" or listed:
+            return ""
+        return lacking_columns(schema.names, TABLE_COLUMNS.get(kind or "", ()), f"every {kind} row has")
+
+    def require_columns(self, table: str, columns: Iterable[str], keys: Collection[str], whose: str) -> list[Path]:
+        """Segments of ``table`` that hold a row of one of ``keys`` but lack one of ``columns``:
+        what every row of those keys has (a prediction, its evaluator's columns, which
+        :data:`TABLE_COLUMNS` cannot know). Each is reported as damaged (``whose`` columns it
+        lacks, for the warning), quarantined by the lock's holder, and read as unreadable by this
+        store object from now on, so the rows of its keys are recomputed.
+
+        Only segments that list no columns of their own are judged: one that lists them was
+        written with those and is held to them (:func:`check_column_list`).
+        """
+        wanted = list(columns)
+        found: list[Path] = []
+        for path, ident in self._unlisted_segments(table):
+            why = lacking_columns(self._checked[ident], wanted, whose)
+            if why and self._holds_any(path, table, keys):
+                self._condemned.add(ident)
+                self._keys.pop(table, None)
+                self._report_bad(path, why, move=self.quarantine_bad)
+                found.append(path)
+        return found
+
+    def unlisted_segments(self, table: str) -> list[Path]:
+        """The readable segments of ``table`` that list no columns of their own (see :meth:`require_columns`)."""
+        return [path for path, _ in self._unlisted_segments(table)]
+
+    def _unlisted_segments(self, table: str) -> list[tuple[Path, tuple[str, int, int]]]:
+        """(segment, its identity) for each readable segment of ``table`` that lists no columns."""
+        out = []
+        for path in self.segments(table):
+            try:
+                st = path.stat()
+            except OSError:
+                continue
+            ident = (str(path), st.st_size, st.st_mtime_ns)
+            if ident not in self._checked:
+                self.read_segment(path, [KEY_COLUMN[table]])  # checks it whole, once per store object
+            if ident in self._unlisted and ident in self._checked and ident not in self._condemned:
+                out.append((path, ident))
+        return out
+
+    def _holds_any(self, path: Path, table: str, keys: Collection[str]) -> bool:
+        """Whether the segment at ``path`` holds a row of one of ``keys``."""
+        data = self.read_segment(path, [KEY_COLUMN[table]])
+        return data is not None and any(key in keys for key in data.column(0).to_pylist())
 
     def _read_all(self, table: str, columns: list[str] | None) -> list[tuple[Path, pa.Table]]:
         """(segment, rows) for every readable segment of ``table``; unreadable ones are quarantined.
@@ -680,18 +752,31 @@ def with_column_list(table: pa.Table) -> pa.Table:
     return table.replace_schema_metadata(metadata)
 
 
-def check_column_list(table: pa.Table) -> None:
+def check_column_list(table: pa.Table) -> bool:
     """Raise ValueError (a read error: the segment is damaged) when ``table`` lacks a column its
-    metadata lists; a segment written before the list was kept is not judged."""
+    metadata lists. Returns whether it lists its columns: one that does not (written before the
+    list was kept, or stripped of it) is judged by its table's columns instead (:data:`TABLE_COLUMNS`)."""
     listed = (table.schema.metadata or {}).get(COLUMNS_METADATA)
     if listed is None:
-        return
+        return False
     try:
         missing = [c for c in json.loads(listed) if c not in table.column_names]
     except (ValueError, TypeError):
         raise ValueError("its list of columns is not readable") from None
     if missing:
         raise ValueError(f"it lacks its column{'s' * (len(missing) > 1)} {', '.join(map(repr, missing))}")
+    return True
+
+
+def lacking_columns(names: Iterable[str], required: Iterable[str], whose: str) -> str:
+    """Why a segment with columns ``names`` is damaged ("" when it is not): it lacks one of the
+    ``required`` columns, which ``whose`` rows have (and lists no columns of its own to say so)."""
+    have = set(names)
+    missing = [c for c in required if c not in have]
+    if not missing:
+        return ""
+    return (f"it lacks the column{'s' * (len(missing) > 1)} {', '.join(map(repr, missing))} that {whose}, and lists "
+            "no columns of its own: rewritten without them")
 
 
 def lock_down(con: duckdb.DuckDBPyConnection, readable: Iterable[Path], writable: Iterable[Path] = ()) -> None:

@@ -44,7 +44,8 @@ def verify(
                                 "so the next run recomputes them."),
     wait: float = WaitOption,
 ) -> None:
-    """Re-read every segment and re-hash every blob; report corrupt or missing ones (exit 1 if any)."""
+    """Re-read every segment and re-hash every blob, kept model output and extracted mesh; report
+    corrupt or missing ones (exit 1 if any)."""
     from sweep3d.cache.maintenance import repair as repair_store
     from sweep3d.cache.maintenance import verify as verify_store
     from sweep3d.cache.store import Store
@@ -52,8 +53,8 @@ def verify(
     check_wait(wait)
     root = _store_root(spec)
     report = verify_store(root)
-    console.print(f"checked {report.segments} segments ({report.rows} rows) and {report.blobs} blobs in "
-                  f"{escape(str(root))}")
+    console.print(f"checked {report.segments} segments ({report.rows} rows), {report.blobs} blobs, "
+                  f"{report.outputs} kept model outputs and {report.assets} extracted meshes in {escape(str(root))}")
     for problem in report.problems[:MAX_LISTED]:
         console.print(f"[red]{escape(problem.line(root))}[/]", highlight=False)
     if len(report.problems) > MAX_LISTED:

@@ -11,7 +11,7 @@ from rich.table import Table
 
 from sweep3d.cache.store import Store
 from sweep3d.errors import UserError
-from sweep3d.pipeline import plan_spec
+from sweep3d.pipeline import RunResult, plan_spec
 from sweep3d.spec.loader import LoadedSpec
 from sweep3d.stages.aggregate import (
     Region,
@@ -191,7 +191,37 @@ def print_run(console: Console, result) -> None:
     console.print(f"{len(result.plan.jobs) + skipped} jobs in {result.seconds:.1f} s (run {result.run_id})"
                   + (f"; {skipped} out of frame, not rendered" if skipped else ""))
     print_protocol(console, result.plans or [result.plan])
-    print_findings(console, result.plan, result.store)
+    missing = unpredicted_jobs(result)
+    print_findings(console, result.plan, result.store, missing)
+    if result.failed:
+        console.print(f"[red]{escape(failed_line(result, missing))}[/]")
+
+
+def unpredicted_jobs(result: RunResult) -> int:
+    """The jobs of the run's (first) plan left without a prediction: a stage failed for them, or
+    for what they waited on. 0 when nothing failed (then every job has one)."""
+    if not result.failed:
+        return 0
+    have = (result.store or Store(result.plan.spec.store)).key_set("predictions")
+    return sum(1 for key in result.plan.jobs.key_column("pred_key") if key not in have)
+
+
+def failed_line(result: RunResult, missing: int) -> str:
+    """One line closing a run in which something failed: how many jobs are left out of the
+    findings, and what failed at which stage (the first cause of each), never a clean summary."""
+    stages = "; ".join(f"{o.stage}: {o.failed} failed ({_cause(o.errors[0]) if o.errors else 'no error given'})"
+                       for o in result.outcomes if o.failed)
+    jobs = len(result.plan.jobs)
+    left = (f"{missing} of {jobs} jobs failed and are missing from the findings and the report" if missing
+            else "every job has a prediction, but some of their keys failed to compute again")
+    return f"error: {left}; {stages}"
+
+
+def _cause(error: str) -> str:
+    """An outcome's error without its ``<stage> <key>:`` prefix, first line only."""
+    first = error.splitlines()[0] if error else ""
+    head, sep, rest = first.partition(": ")
+    return rest if sep and len(head.split()) == 2 else first
 
 
 def print_protocol(console: Console, plans: list[Plan]) -> None:
@@ -204,23 +234,28 @@ def print_protocol(console: Console, plans: list[Plan]) -> None:
             console.print(f"{escape(model)}: {escape(line)}", highlight=False, soft_wrap=True)
 
 
-def print_findings(console: Console, plan: Plan, store: Store | None = None) -> None:
+def print_findings(console: Console, plan: Plan, store: Store | None = None, failed: int = 0) -> None:
     """The task's accuracy and where the model fails most: the control values significantly below the
     rest of their parameter, as the report's failure modes test them (never a value that merely
     looks low), or, when none is, the largest gap with its interval.
 
     Args:
         store: the run's store object (it has read the segments already), else a new one.
+        failed: jobs the run failed to predict: said beside the accuracy, which leaves them out.
     """
     store = store if store is not None else Store(plan.spec.store)
     summary = stored_summary(store, plan.spec.name, plan.columns, scales=numeric_scales(plan.spec.controls))
     which = f"{escape(plan.model)}: " if len(plan.spec.models) > 1 else ""
+    not_run = f"{failed} job{'s' * (failed != 1)} failed in the run and {'is' if failed == 1 else 'are'} not counted"
     if summary.accuracy is None:
         if summary.invalid:
             console.print(f"{which}no accuracy: {all_invalid_line(summary)}")
+        elif failed:
+            console.print(f"{which}no accuracy: {not_run}")
         return
     measure, rule = measure_of(plan.spec.evaluator)
     console.print(f"{which}{measure} {summary.accuracy:.1%} ({summary.correct} of {summary.counted}"
+                  + (f"; {not_run}" if failed else "")
                   + (f"; {rule}" if measure != "top-1 accuracy" else "") + "); "
                   f"{summary.wrong} failures"
                   + (f", {summary.invalid} invalid predictions (NaN/inf outputs) excluded" if summary.invalid else "")

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import logging
 import re
 import shutil
 import zipfile
@@ -17,6 +18,7 @@ from functools import lru_cache
 from importlib import metadata
 from pathlib import Path
 
+from sweep3d.cache import extracted
 from sweep3d.cache.keys import digest, files_digest
 from sweep3d.cache.store import full_disk_error, is_full_disk
 from sweep3d.errors import UserError
@@ -24,6 +26,8 @@ from sweep3d.spec.sniff import check_file, damaged_member, unreadable
 
 MESH_SUFFIXES = {".obj", ".gltf", ".glb", ".ply", ".stl"}
 HDRI_SUFFIXES = {".exr", ".hdr", ".png", ".jpg", ".jpeg", ".tif", ".tiff"}
+
+log = logging.getLogger("sweep3d.store")
 
 
 @lru_cache(maxsize=1)
@@ -96,25 +100,44 @@ def check_named(ref: str, what: str, example: str) -> None:
 
 
 def materialise_mesh(ref: str, scratch: Path) -> Path:
-    """A local file path for a mesh reference, extracting zip members' folders under ``scratch``."""
+    """A local file path for a mesh reference, extracting zip members' folders under ``scratch``.
+
+    The extracted copy is checked against what was extracted before each use (see
+    :mod:`sweep3d.cache.extracted`): a copy edited since, or one of an archive that changed, is
+    extracted again (the first with a warning), so that what renders, and what its keys hash, is
+    the archive's."""
     archive, sep, member = ref.partition("#")
     if not sep:
         return Path(archive)
-    target = scratch / "assets" / digest([archive, member])[:16]
-    done = target / ".complete"
-    if not done.exists():
-        try:
-            _extract(archive, member, target)
-            done.write_text("ok")
-        except OSError as exc:
-            if is_full_disk(exc):  # a write's error names no file: it is the store's disk, not the archive
-                shutil.rmtree(target, ignore_errors=True)  # what was extracted: the space back, none half done
-                raise full_disk_error(exc, f"extract {Path(archive).name}#{member} into {target}", target) from None
-            if not str(exc.filename or "").startswith(str(scratch)):
-                raise  # reading the archive: the caller names the file
-            raise UserError(f"cannot extract {member} into {str(target)!r}: {exc.strerror}; the store must be "
-                            "writable") from None
+    target = scratch / extracted.FOLDER / digest([archive, member])[:16]
+    try:
+        why = extracted.stale(target, extracted.read_manifest(target), archive, lambda: _members(archive, member))
+        if why is not None:
+            if why:
+                log.warning(f"warning: the copy of {Path(archive).name}#{member} extracted under the store's "
+                            f"{_relative(target, scratch)} was changed since ({why}); extracting it again")
+            (target / extracted.MANIFEST).unlink(missing_ok=True)
+            files = _extract(archive, member, target)
+            extracted.record(target, files, archive, _members(archive, member))
+    except OSError as exc:
+        if is_full_disk(exc):  # a write's error names no file: it is the store's disk, not the archive
+            shutil.rmtree(target, ignore_errors=True)  # what was extracted: the space back, none half done
+            raise full_disk_error(exc, f"extract {Path(archive).name}#{member} into {target}", target) from None
+        if not str(exc.filename or "").startswith(str(scratch)):
+            raise  # reading the archive: the caller names the file
+        raise UserError(f"cannot extract {member} into {str(target)!r}: {exc.strerror}; the store must be "
+                        "writable") from None
     return target / member
+
+
+def _members(archive: str, member: str) -> dict[str, list[int]]:
+    """The archive's files that :func:`materialise_mesh` extracts for ``member``, with their CRCs and sizes."""
+    with zipfile.ZipFile(archive) as zf:
+        return extracted.members(zf, extracted_members(zf, member))
+
+
+def _relative(path: Path, root: Path) -> str:
+    return str(path.relative_to(root)) if path.is_relative_to(root) else str(path)
 
 
 def extracted_members(zf: zipfile.ZipFile, member: str) -> list[zipfile.ZipInfo]:
@@ -142,9 +165,11 @@ def check_archive(ref: str, limit_mb: float) -> None:
                                 f"{limit_mb:g}; raise max_archive_mb if the archive is trusted")
 
 
-def _extract(archive: str, member: str, target: Path) -> None:
+def _extract(archive: str, member: str, target: Path) -> list[str]:
     """Extract ``member``'s folder (its materials and textures) from ``archive`` into ``target``,
-    each file no longer than it declares (the spec's check read those sizes, not the bytes)."""
+    each file no longer than it declares (the spec's check read those sizes, not the bytes), over
+    whatever is there. Returns the files written, relative to ``target``."""
+    written = []
     with zipfile.ZipFile(archive) as zf:
         for info in extracted_members(zf, member):
             path = target.joinpath(*(part for part in info.filename.split("/") if part not in ("", ".", "..")))
@@ -155,6 +180,8 @@ def _extract(archive: str, member: str, target: Path) -> None:
                     _copy_at_most(source, out, info.file_size, name)
             except zipfile.BadZipFile as exc:
                 raise damaged_member(name, exc) from None
+            written.append(path.relative_to(target).as_posix())
+    return written
 
 
 def _copy_at_most(source, out, size: int, name: str) -> None:

@@ -194,7 +194,10 @@ class Stage(Protocol):
         """(table, key) of the stored blob the job reads, or None when it reads none."""
 
     def incomplete(self, plan: Plan, store: Store, cached: set[str]) -> set[str]:
-        """Cached keys to compute again for something of theirs the store lacks (e.g. a pass)."""
+        """Cached keys to compute again for something of theirs the store lacks (e.g. a pass).
+
+        A stage whose rows' columns depend on the plan (the infer stage's, on its evaluator) may
+        also define ``required_columns(plan) -> (columns, whose)``: see :func:`rows_and_cached`."""
 
     def compute(self, todo: Feed, plan: Plan, store: Store) -> Iterator[Computed]:
         """Compute ``todo`` (one job per key, coming as their inputs land), yielding one
@@ -236,9 +239,16 @@ def cached_keys(stage: Stage, plan: Plan, store: Store) -> set[str]:
 
 def rows_and_cached(stage: Stage, plan: Plan, store: Store) -> Found:
     """(keys of ``plan`` at ``stage`` that have a row, those of them that are cached: with their
-    blob, where rows own one)."""
+    blob, where rows own one). A stored segment of the plan's keys lacking a column the stage's
+    rows always have (``required_columns``, where a stage declares them) is damaged: its rows
+    are not counted, and so computed again."""
+    unique = unique_jobs(stage, plan.jobs)
+    required = getattr(stage, "required_columns", None)
+    if required is not None:
+        columns, whose = required(plan)
+        store.require_columns(stage.table, columns, unique, whose)
     rows = store.key_set(stage.table)
-    have = set(rows.intersection(unique_jobs(stage, plan.jobs)))  # in C: 10⁶ keys in a fraction of a second
+    have = set(rows.intersection(unique))  # in C: 10⁶ keys in a fraction of a second
     return have, (store.existing_blobs(have) if stage.owns_blobs else have)
 
 

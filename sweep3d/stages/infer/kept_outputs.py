@@ -9,23 +9,30 @@ instead of running the model when all of them are there. Boxes, detections and s
 not kept: their tasks run the model again. The files are a cache: a missing or unreadable one
 means the model runs; ``sweep3d cache gc`` leaves them alone, and deleting the folder loses nothing
 but time.
+
+Each file ends with the SHA-256 of its array's ``.npy`` bytes, recorded when it was written
+(:mod:`sweep3d.cache.digested`; ``np.load`` reads the array and ignores it). A file whose bytes no
+longer match (edited in place, its mtime restored or not) is never used: the model runs for its
+batch again, with a warning, and the file is written anew; ``sweep3d cache verify`` reports it.
 """
 
 from __future__ import annotations
 
 import io
+import logging
 from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
 
+from sweep3d.cache.digested import FOLDER, SUFFIX, pack, unpack
 from sweep3d.cache.keys import digest
 from sweep3d.cache.store import Store, atomic_write
 
 #: The tasks whose outputs are one array per image, kept when small.
 KEPT_TASKS = ("classification", "raw")
 MAX_BYTES = 64 * 1024  # per image: 1 000 float32 logits are 4 kB; a depth map is not kept
-FOLDER = "outputs"
+log = logging.getLogger("sweep3d.store")
 
 
 def outputs_key(model_digest: str, answers: str, task: str, image_key: str) -> str:
@@ -44,19 +51,25 @@ class KeptOutputs:
 
     def _path(self, image_key: str) -> Path:
         key = outputs_key(self.model_digest, self.answers, self.task, image_key)
-        return self.root / key[:2] / f"{key}.npy"
+        return self.root / key[:2] / f"{key}{SUFFIX}"
 
     def load(self, image_keys: Sequence[str]) -> np.ndarray | None:
-        """The batch's outputs stacked (N, ...) when every image's is kept and readable, else None."""
+        """The batch's outputs stacked (N, ...) when every image's is kept, readable and matches
+        its digest, else None (the model runs; a file that does not match is said, once per batch)."""
         if self.task not in KEPT_TASKS or not image_keys:
             return None
-        arrays = []
+        arrays: list[np.ndarray] = []
+        mismatched: list[Path] = []
         for key in image_keys:
-            try:
-                arrays.append(np.load(self._path(key), allow_pickle=False))
-            except (OSError, ValueError):
-                return None
-        if len({(a.shape, a.dtype) for a in arrays}) != 1:
+            path = self._path(key)
+            array = _read(path)
+            if isinstance(array, np.ndarray):
+                arrays.append(array)
+            elif array == "mismatch":
+                mismatched.append(path)
+        if mismatched:
+            _warn(mismatched, self.root.parent)
+        if len(arrays) != len(image_keys) or len({(a.shape, a.dtype) for a in arrays}) != 1:
             return None
         return np.stack(arrays)
 
@@ -67,6 +80,29 @@ class KeptOutputs:
         if outputs[0].nbytes > MAX_BYTES:
             return
         for key, array in zip(image_keys, outputs):
-            buffer = io.BytesIO()
-            np.save(buffer, np.ascontiguousarray(array), allow_pickle=False)
-            atomic_write(self._path(key), buffer.getvalue(), durable=False)  # a torn file reads as a miss
+            atomic_write(self._path(key), pack(array), durable=False)  # a torn file reads as a mismatch
+
+
+def _read(path: Path) -> np.ndarray | str:
+    """The array kept at ``path``; "missing" when there is none to read, "mismatch" when its bytes
+    do not match the digest it was written with (or it has none)."""
+    try:
+        data = path.read_bytes()
+    except OSError:
+        return "missing"
+    body = unpack(data)
+    if body is None:
+        return "mismatch"
+    try:
+        return np.load(io.BytesIO(body), allow_pickle=False)
+    except (OSError, ValueError):
+        return "mismatch"
+
+
+def _warn(paths: list[Path], root: Path) -> None:
+    """One line for a batch's kept outputs that do not match their digests."""
+    sample = ", ".join(str(p.relative_to(root)) if p.is_relative_to(root) else p.name for p in paths[:2])
+    log.warning(f"warning: {len(paths)} kept model output{'s' * (len(paths) > 1)} ({sample}"
+                f"{', …' if len(paths) > 2 else ''}) {'do' if len(paths) > 1 else 'does'} not match the digest "
+                "recorded when written (changed since, or kept before digests were); running the model again for "
+                "their batch, and keeping its outputs anew")

@@ -114,6 +114,12 @@ class InferStage:
     def schema(self, plan: Plan) -> pa.Schema:
         return predictions_schema(self._evaluator(plan))
 
+    def required_columns(self, plan: Plan) -> tuple[list[str], str]:
+        """The columns every prediction of the run's evaluator has, and whose they are: a stored
+        segment of its keys without one was rewritten without it (see ``Store.require_columns``),
+        and its rows would read as NULLs."""
+        return self.schema(plan).names, f"every row of the {plan.spec.evaluator.kind} evaluator has"
+
     def key(self, job: Job) -> str:
         return job.pred_key
 

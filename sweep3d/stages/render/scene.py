@@ -144,11 +144,18 @@ class BlenderScene:
         self.parts: dict[str, Any] | None = None  # what the UV pass saw in the latest render
         truth = tuple(p for p in settings.passes if p in TRUTH_PASSES)
         self.truth_pass = TruthPass(bpy, scene, scratch, truth) if truth else None
+        self.stale = False  # a control's edit changed data this scene held: rebuild before the next job
 
     def reset(self) -> None:
         """Start again from an empty Blender scene (everything loaded is loaded again when next
         needed): for after a control's ``edit`` changed data this scene held (see ``scene_edit``)."""
         self.__init__(self.settings, self.scratch, self.log, self.gpu)
+
+    def rebuild_if_stale(self) -> None:
+        """:meth:`reset` when a control's ``edit`` left the scene :attr:`stale`. Called once the
+        job's reply is made: a rebuild makes new pass readers, which hold nothing of the render."""
+        if self.stale:
+            self.reset()
 
     @staticmethod
     def _configure(scene, s: RenderSettings) -> None:

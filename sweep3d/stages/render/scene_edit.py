@@ -3,7 +3,9 @@
 ``edit(scene, params)`` receives a :class:`SceneEdit`: the live Blender scene of one job, posed
 by the built-in state, with handles on the object, the camera and the empties that carry the
 object. The worker takes a :func:`~.sandbox.snapshot` first and cleans up after the render
-whatever the control did (:func:`render_edited`).
+whatever the control did (:func:`render_edited`). Where the edit changed data the scene held, the
+scene is rebuilt only once the job's reply has been made (:meth:`BlenderScene.rebuild_if_stale`):
+rebuilding replaces the truth and UV passes' readers, and with them what they read of this render.
 """
 
 from __future__ import annotations
@@ -85,7 +87,9 @@ def render_edited(scene: BlenderScene, edits: list[tuple[RenderedControl, BaseMo
 
     Returns:
         The render (as :meth:`BlenderScene.render`) and what the edits changed of the data the
-        scene held before (empty when they only added things; else the scene was rebuilt).
+        scene held before (empty when they only added things; else the scene is marked stale, and
+        the caller rebuilds it with :meth:`BlenderScene.rebuild_if_stale` once it has read the
+        render's passes).
 
     Raises:
         PluginError: an ``edit`` raised, or left the scene without its camera; the scene is
@@ -104,7 +108,7 @@ def render_edited(scene: BlenderScene, edits: list[tuple[RenderedControl, BaseMo
     finally:
         changed = clean_up(bpy, before).changed
         if changed:
-            scene.reset()
+            scene.stale = True  # not rebuilt yet: the passes of this render are still to be read
     return rgb, changed
 
 

@@ -214,7 +214,7 @@ class RenderStage:
             if job.truth_key is not None:
                 truth = _truth_row(store, job, reply)
                 if truth is None:
-                    yield Computed(job.render_key, error="the worker rendered no truth passes")
+                    yield Computed(job.render_key, error=no_truth_error(plan, reply))
                     continue
                 side["truths"] = truth
             yield Computed(job.render_key, row, side)
@@ -282,6 +282,19 @@ def _groups(plan: Plan, store: Store, todo: list[Job], stored: set[str]) -> list
         jobs = by_scene[scene]
         groups += [jobs[i : i + GROUP_SIZE] for i in range(0, len(jobs), GROUP_SIZE)]
     return groups
+
+
+def no_truth_error(plan: Plan, reply: RenderReply) -> str:
+    """Why a job that needs its truth passes has none: the controls whose ``edit`` changed what
+    the scene held, when one did (the scene was rebuilt around the job), else the worker's settings."""
+    changed = reply.info.rebuilt if reply.info is not None else ()
+    if changed:
+        names = ", ".join(repr(c.control.type_name) for c in plan.spec.controls
+                          if c.control.stage == "render" and c.control.edits_scene)
+        return (f"the worker rendered no truth passes: the edit() of control {names} changed what the scene held "
+                f"({', '.join(changed[:3])}{', …' if len(changed) > 3 else ''}) and the scene was rebuilt before "
+                "the passes were read")
+    return "the worker rendered no truth passes though the run asked for them (a bug: please report it)"
 
 
 def rebuilt_warning(plan: Plan, changed: tuple[str, ...]) -> str:

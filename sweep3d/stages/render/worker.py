@@ -196,3 +196,5 @@ def render_job(scene, job: RenderJob, keep_pixels: bool = False, on_edit: OnEdit
         return RenderReply(key, False, error=f"{exc}\n{traceback.format_exc(limit=3)}")
     except Exception as exc:  # noqa: BLE001  (one bad job must not kill the sweep)
         return RenderReply(key, False, error=f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=3)}")
+    finally:
+        scene.rebuild_if_stale()  # after the reply took this render's passes and timings
