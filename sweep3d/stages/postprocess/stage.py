@@ -225,13 +225,13 @@ class _SeenRenders:
         self._plan = plan
 
     def render(self, store: Store, key: str, digests: set[str] | None) -> np.ndarray | None:
-        if self.last is not None and self.last[0] == key:
-            return self.last[1]
-        render = load_image(store, key, digests)
-        self.last = (key, render) if render is not None else None
-        if render is not None and self.handoff is not None and key in self.as_images():
-            self.handoff.put(key, to_uint8(render))
-        return render
+        """The render ``key``, decoded (a copy: a control may change its input in place)."""
+        if self.last is None or self.last[0] != key:
+            render = load_image(store, key, digests)
+            self.last = (key, render) if render is not None else None
+            if render is not None and self.handoff is not None and key in self.as_images():
+                self.handoff.put(key, to_uint8(render))
+        return self.last[1].copy() if self.last is not None else None
 
     def as_images(self) -> set[str]:
         """Render keys that are also some job's image key (no post control changes that job's)."""
