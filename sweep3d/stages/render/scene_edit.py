@@ -9,7 +9,7 @@ whatever the control did (:func:`render_edited`).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
@@ -64,8 +64,12 @@ class SceneEdit:
 
 
 def render_edited(scene: BlenderScene, edits: list[tuple[RenderedControl, BaseModel]],
-                  object_name: str = "", environment_name: str = "") -> tuple[np.ndarray, tuple[str, ...]]:
+                  object_name: str = "", environment_name: str = "",
+                  on_edit: Callable[[str | None], None] | None = None) -> tuple[np.ndarray, tuple[str, ...]]:
     """Run each control's ``edit`` on the posed scene, render, and undo whatever they did.
+
+    ``on_edit`` hears each control's id as its ``edit`` is called, and None once they all have
+    returned: a worker tells its pool, which times an edit apart from the render.
 
     Returns:
         The render (as :meth:`BlenderScene.render`) and what the edits changed of the data the
@@ -81,8 +85,12 @@ def render_edited(scene: BlenderScene, edits: list[tuple[RenderedControl, BaseMo
         context = SceneEdit(bpy, scene.scene, tuple(scene.meshes), scene.pose, scene.current.normaliser,
                             scene.camera, object_name, environment_name)
         for control, params in edits:
+            if on_edit is not None:
+                on_edit(control.id)
             with blamed(control, "edit()"):
                 control.edit(context, params)
+        if on_edit is not None:
+            on_edit(None)
         rgb = scene.render()
     finally:
         changed = clean_up(bpy, before).changed
