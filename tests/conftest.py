@@ -136,11 +136,12 @@ def _refuse_workers(guard: _LaneGuard) -> None:
         return start
 
     multiprocessing.context.SpawnProcess.start = refuse("spawned process")
-    for module, cls in (("sweep3d.stages.render.pool", "RenderPool"), ("sweep3d.stages.render.ray_pool", "RayRenderPool")):
+    for module, cls in (("sweep3d.stages.render.child", "Child"), ("sweep3d.stages.render.pool", "RenderPool"),
+                        ("sweep3d.stages.render.ray_pool", "RayRenderPool")):
         try:
             target = getattr(__import__(module, fromlist=[cls]), cls)
         except (ImportError, AttributeError):
-            continue  # moved: the spawn guard above still covers local workers
+            continue  # moved: the guards left still cover local workers
         target.__init__ = refuse(cls)
 
 

@@ -82,6 +82,19 @@ def test_worker_recycling_settings_are_not_in_render_keys(tmp_path, gpus) -> Non
     assert render_keys(plan_with(tmp_path, "worker_memory = 0")) == base
 
 
+def test_timeouts_are_not_in_render_keys_and_must_be_finite_seconds(tmp_path, gpus) -> None:
+    import pydantic
+
+    from sweep3d.spec.models import RenderSpec
+
+    base = render_keys(plan_with(tmp_path))
+    assert render_keys(plan_with(tmp_path, "timeout = 5\nedit_timeout = 1")) == base
+    assert (RenderSpec().timeout, RenderSpec().edit_timeout) == (600, 60)
+    for bad in (0, -1, float("inf")):
+        with pytest.raises(pydantic.ValidationError):
+            RenderSpec(edit_timeout=bad)
+
+
 def test_a_gpu_run_has_one_worker_per_gpu_unless_workers_is_set(gpus) -> None:
     gpus({"optix": 3, "cuda": 3})
     assert worker_count(RenderSpec(device="optix"), "optix") == 3

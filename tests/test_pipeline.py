@@ -84,10 +84,9 @@ def test_adding_an_object_renders_only_its_scenes(tiny_copy: Path) -> None:
 
 
 def test_blender_starts_while_the_model_is_checked_and_a_broken_model_leaves_no_worker(tiny_copy, monkeypatch) -> None:
-    import multiprocessing
-
     from sweep3d.errors import UserError
     from sweep3d.stages.infer import InferStage
+    from sweep3d.stages.render.child import live_children
     from sweep3d.stages.render.pool import RenderPool
 
     edit_spec(tiny_copy, "yaw = [0, 45]", "yaw = [10, 55]")  # renders to make
@@ -103,7 +102,7 @@ def test_blender_starts_while_the_model_is_checked_and_a_broken_model_leaves_no_
     monkeypatch.setattr(InferStage, "prepare", broken)
     with pytest.raises(UserError, match="broken"):
         run(load_spec(tiny_copy / "spec.toml"))
-    assert multiprocessing.active_children() == [], "the worker started ahead is stopped"
+    assert live_children() == [], "the worker started ahead is stopped"
     monkeypatch.setattr(InferStage, "prepare", check)
     starts.clear()
     assert computed(tiny_copy) == {"render": 4, "postprocess": 4, "infer": 8}

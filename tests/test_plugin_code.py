@@ -276,14 +276,120 @@ class Stuck(RenderedControl):
 '''
 
 
-def test_a_scene_edit_that_hangs_is_named_after_the_render_timeout(tmp_path: Path) -> None:
-    (tmp_path / "stuck.py").write_text(textwrap.dedent(HANGING_EDIT))
-    spec = write_spec(tmp_path, SPEC.replace('kind = "myeval:Strict"', 'kind = "classification"').replace(
+def stuck_spec(folder: Path, render: str = "") -> Path:
+    """A spec whose only control is ``stuck:Stuck`` at 100000 s (every job's edit hangs), with
+    ``render`` added to its ``[render]`` table."""
+    (folder / "stuck.py").write_text(textwrap.dedent(HANGING_EDIT))
+    return write_spec(folder, SPEC.replace('kind = "myeval:Strict"', 'kind = "classification"').replace(
         'type = "myscene:Slab"\nsize = [0.0, 0.6]', 'type = "stuck:Stuck"\nseconds = [100000.0]').replace(
         '[[controls]]\ntype = "mypost:Dim"\nstrength = [0.0, 0.5]\n', "").replace(
-        "denoise = false\n", "denoise = false\ntimeout = 1\n"))
+        "denoise = false\n", f"denoise = false\n{render}"))
+
+
+def test_a_scene_edit_that_hangs_is_named_after_the_render_timeout(tmp_path: Path) -> None:
+    spec = stuck_spec(tmp_path, "timeout = 1\n")
     result = CliRunner().invoke(app, ["run", str(spec), "--no-report"])
     assert result.exit_code == 2, result.output
     line = " ".join(result.output[result.output.index("error:"):].split())
     assert line.startswith("error: control 'stuck:Stuck' (id 'Stuck') did not finish its job within render.timeout "
                            "= 1 s, twice: its edit() may hang"), line
+
+
+def test_a_hung_edit_with_no_timeout_set_stops_the_run_after_the_default_edit_timeout(tmp_path: Path) -> None:
+    """Issue 35, item 6: with no timeout in the spec a hung edit() ran on silently for
+    render.timeout (600 s) twice. The default render.edit_timeout (60 s) ends it: exit 2, one
+    line naming the control, where its edit() is and the job's values; not retried."""
+    import time
+
+    from sweep3d.spec.models import RenderSpec
+    from tests.conftest import REPO
+
+    spec = stuck_spec(tmp_path)
+    assert "timeout" not in spec.read_text() and RenderSpec().edit_timeout == 60
+    started = time.monotonic()
+    done = subprocess.run([sys.executable, "-m", "sweep3d", "run", str(spec), "--no-report"], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=300, env={**os.environ, "PYTHONPATH": str(REPO)})
+    elapsed = time.monotonic() - started
+    assert done.returncode == 2, done.stdout + done.stderr
+    lines = [line for line in done.stderr.splitlines() if line.strip()]
+    edit_line = 1 + textwrap.dedent(HANGING_EDIT).splitlines().index("    def edit(self, scene, params):")
+    assert lines == [f"error: control 'stuck:Stuck' (id 'Stuck', stuck.py:{edit_line}): its edit() did not return "
+                     "within render.edit_timeout = 60 s (seconds=100000.0); fix it if it hangs, or raise "
+                     "render.edit_timeout if it is only slow"], done.stderr
+    assert 60 < elapsed < 115, f"{elapsed:.0f} s: one edit_timeout and Blender's start, no retry (2 x 60 s)"
+    assert "Traceback" not in done.stdout + done.stderr
+
+
+FORKING_EDIT = '''
+import multiprocessing
+import os
+import subprocess
+import sys
+import time
+
+from pydantic import Field
+from sweep3d.plugins import ControlParams, RenderedControl
+
+
+class Forker(RenderedControl):
+    """Leaves children running, every way an edit can: a subprocess, a bare fork, and multiprocessing
+    (fork, and spawn, which starts the worker's resource tracker). All of them hold its stderr."""
+
+    class Params(ControlParams):
+        children: int = Field(0, ge=0)
+
+    def edit(self, scene, params):
+        pids = []
+        for _ in range(params.children):
+            pids.append(subprocess.Popen([sys.executable, "-c", "import time; time.sleep(600)"]).pid)
+            pid = os.fork()
+            if pid == 0:
+                time.sleep(600)
+                os._exit(0)
+            pids.append(pid)
+            for method in ("fork", "spawn"):
+                child = multiprocessing.get_context(method).Process(target=time.sleep, args=(600,))
+                child.start()
+                pids.append(child.pid)
+            pids.append(multiprocessing.resource_tracker._resource_tracker._pid)
+        with open(os.environ["FORKED"], "a") as out:
+            out.write("".join(f"{pid}\\n" for pid in pids))
+'''
+
+
+def _session(sid: int) -> list[str]:
+    """The live processes of session ``sid`` ("pid state command"), zombies left out."""
+    out = subprocess.run(["ps", "-s", str(sid), "-o", "pid=,stat=,args="], capture_output=True, text=True).stdout
+    return [line.strip() for line in out.splitlines() if line.strip() and line.split()[1][0] != "Z"]
+
+
+def test_an_edit_that_forks_leaves_no_process_behind_and_the_run_s_pipe_closes(tmp_path: Path) -> None:
+    """Issue 35, item 13: an edit's children (and a resource tracker) outlived the run and held its
+    output pipe, so a caller reading it hung. Each worker leads its own process group, which goes
+    with it: the run (in a session of its own) exits 0, its pipe closes, and no process of its
+    session is left."""
+    import signal
+
+    from tests.conftest import REPO
+
+    (tmp_path / "forker.py").write_text(FORKING_EDIT)
+    spec = write_spec(tmp_path, SPEC.replace('kind = "myeval:Strict"', 'kind = "classification"').replace(
+        'type = "myscene:Slab"\nsize = [0.0, 0.6]', 'type = "forker:Forker"\nchildren = [0, 1]').replace(
+        '[[controls]]\ntype = "mypost:Dim"\nstrength = [0.0, 0.5]\n', ""))
+    process = subprocess.Popen([sys.executable, "-m", "sweep3d", "run", str(spec), "--no-report"], cwd=tmp_path,
+                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True,
+                               env={**os.environ, "PYTHONPATH": str(REPO), "FORKED": str(tmp_path / "forked")})
+    try:
+        output, _ = process.communicate(timeout=240)  # EOF: nothing holds the pipe any more
+        assert process.returncode == 0, output
+        assert not _session(process.pid), f"left running after the run: {_session(process.pid)}"
+    finally:
+        for line in _session(process.pid):  # a failing test leaves no orphan either
+            try:
+                os.kill(int(line.split()[0]), signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+        process.kill()
+    forked = (tmp_path / "forked").read_text().split()
+    assert len(forked) == 5 and all(pid.isdigit() for pid in forked), forked  # four children and a tracker
+    assert len(Store(tmp_path / "store").keys("renders")) == 2

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import re
 from pathlib import Path
 
@@ -155,6 +156,32 @@ def test_the_python_api_example_runs(tmp_path: Path, monkeypatch) -> None:
     assert len(frame) == 4 and set(frame["blur_sigma"]) == {0.0, 2.0} and frame["valid"].all()
     assert scope["page"] == Path("notebook.html") and scope["page"].stat().st_size > 10_000
     assert scope["exp"].sql("SELECT count(*) AS n FROM results").to_pylist() == [{"n": 4}]
+
+
+@pytest.mark.slow
+@pytest.mark.blender
+@pytest.mark.torch
+@pytest.mark.parametrize("how", ["file", "stdin"])
+def test_the_python_api_example_runs_as_a_plain_script(tmp_path: Path, how: str) -> None:
+    """``python example.py`` and ``python - < example.py``, no ``if __name__ == "__main__":``: the
+    render workers never run the user's script (issue 35, item 4: they ran it again, which found
+    the store locked by its parent, or could not find ``<stdin>``)."""
+    import subprocess
+    import sys
+
+    script = tmp_path / "example.py"
+    script.write_text(api_example(tmp_path))
+    command, stdin = ([sys.executable, str(script)], None) if how == "file" else ([sys.executable, "-"], script.open())
+    try:
+        done = subprocess.run(command, stdin=stdin, cwd=tmp_path, capture_output=True, text=True, timeout=600,
+                              env={**os.environ, "PYTHONPATH": str(REPO)})
+    finally:
+        if stdin is not None:
+            stdin.close()
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.count("4 jobs") == 1, done.stdout  # the script's body ran once, in its own process
+    assert "Traceback" not in done.stderr, done.stderr
+    assert (tmp_path / "notebook.html").stat().st_size > 10_000
 
 
 @pytest.mark.blender

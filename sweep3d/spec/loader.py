@@ -235,7 +235,7 @@ def _validated(raw: dict[str, Any], catalogue: Catalogue, *, path: Path, base: P
 def plugin_folder(folder: Path) -> None:
     """Make the modules in a spec's folder importable (first on ``sys.path``), so ``module:Name``
     finds a plug-in file beside the spec whatever the working directory; render workers started
-    afterwards inherit the path (spawned processes copy the parent's ``sys.path``)."""
+    afterwards inherit the path (each is sent the parent's ``sys.path``: ``stages.render.child``)."""
     entry = str(folder)
     if entry not in sys.path:
         sys.path.insert(0, entry)
@@ -423,8 +423,8 @@ def _load_controls(spec: Spec, fail, base: Path, catalogue: Catalogue) -> list[C
 def importable_by_name(cls: type) -> bool:
     """Whether another process can import ``cls`` by its module and name, as pickle does.
 
-    A class defined in ``__main__`` (a notebook cell, the script being run) is not: a spawned
-    render worker would run the script's whole body again to find it, or fail in a notebook.
+    A class defined in ``__main__`` (a notebook cell, the script being run) is not: a render
+    worker never runs the user's script (see ``stages.render.child``), so it could not find it.
     """
     if cls.__module__ in ("__main__", "__mp_main__") or "<locals>" in cls.__qualname__:
         return False

@@ -56,7 +56,9 @@ class RenderSpec(StrictModel):
     seed: int = Field(0, ge=0, le=2**31 - 1, description="Cycles sampling seed.")
     threads: int = Field(0, ge=0, le=1024, description="Cycles threads per worker; 0 = all cores.")
     workers: int = Field(1, ge=1, le=256, description="Render worker processes.")
-    timeout: float = Field(600.0, gt=0, description="Seconds one render may take before it fails.")
+    timeout: float = Field(600.0, gt=0, description="Seconds one render may take before it fails (tried twice).")
+    edit_timeout: float = Field(60.0, gt=0, description="Seconds a rendered control's edit() may take in one job; "
+                                                        "past it the run stops with a line naming the control.")
     device: Literal["auto", "cpu", "cuda", "optix"] = Field(
         "auto", description="Cycles' device: auto (OptiX, else CUDA, else the CPU), cpu, or an NVIDIA GPU through "
                             "cuda or optix. A GPU's renders are keyed apart (GPU Cycles does not give CPU's pixels).")
@@ -74,7 +76,7 @@ class RenderSpec(StrictModel):
         raise ValueError(f"must be a square image side of 8..4096 pixels or \"model\" (the model's input "
                          f"size, which it then does not resample); got {value!r}")
 
-    @field_validator("timeout")
+    @field_validator("timeout", "edit_timeout")
     @classmethod
     def _finite(cls, value: float) -> float:
         if not math.isfinite(value):
@@ -92,8 +94,8 @@ class RenderSpec(StrictModel):
                 hashed: see ``stages.render.device``); only a GPU is in the key, so CPU renders
                 keep the keys they had before the setting existed.
         """
-        part = self.model_dump(exclude={"threads", "workers", "timeout", "resolution", "adaptive_threshold", "seed",
-                                        "device", "worker_memory", "worker_jobs"})
+        part = self.model_dump(exclude={"threads", "workers", "timeout", "edit_timeout", "resolution",
+                                        "adaptive_threshold", "seed", "device", "worker_memory", "worker_jobs"})
         part.update(pixels)
         if device != "cpu":
             part["device"] = device

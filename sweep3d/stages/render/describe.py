@@ -4,19 +4,18 @@ What an importer makes of a file is not what the file says: Blender 4.5's OBJ im
 MTL's ``d`` into the Principled BSDF's Alpha, the mean of ``Tf`` into Transmission Weight, ``Pc``
 into a quarter of it as Coat Weight, and ``illum`` 3 to 7 into Metallic 1. The only faithful
 account is Blender's own, so this imports each object (with its parts and overrides, as a render
-worker does) in a spawned process: the caller's process never imports bpy.
+worker does) in a child process (:mod:`.child`): the caller's process never imports bpy.
 """
 
 from __future__ import annotations
 
-import multiprocessing as mp
 import os
 import tempfile
 from pathlib import Path
 from typing import Any
 
+from sweep3d.stages.render.child import call_in_child
 from sweep3d.stages.render.protocol import Look
-from sweep3d.stages.render.worker import die_with_parent
 
 #: What a row holds per material, beside ``part``, ``material`` and ``overridden``.
 COLUMNS = ("base_color", "opacity", "roughness", "metallic", "transmission", "ior", "coat")
@@ -27,8 +26,7 @@ def describe_materials(items: list[tuple[str, Look | None]]) -> list[list[dict[s
     ``looks.effective_materials``), or the user error its import gave, as text."""
     if not items:
         return []
-    with mp.get_context("spawn").Pool(1, initializer=die_with_parent) as pool:
-        return pool.apply(_describe_in_this_process, (items,))
+    return call_in_child(_describe_in_this_process, items)
 
 
 def _describe_in_this_process(items: list[tuple[str, Look | None]]) -> list[list[dict[str, Any]] | str]:

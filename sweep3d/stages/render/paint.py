@@ -5,12 +5,11 @@ Figure 8): each part of the surface (see :mod:`sweep3d.parts`) takes the colour 
 of the images that show it. The paint is an image texture of one texel per part on the parts UV
 map, sampled without interpolation, lit by a plain white world so the colours read true.
 
-:func:`paint_objects` runs Blender in a spawned process (the report's process never imports bpy).
+:func:`paint_objects` runs Blender in a child process (:mod:`.child`; the report's process never imports bpy).
 """
 
 from __future__ import annotations
 
-import multiprocessing as mp
 import os
 import tempfile
 from pathlib import Path
@@ -18,8 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from sweep3d.parts import AZIMUTH_PARTS, ELEVATION_PARTS, PARTS, UV_MAP
+from sweep3d.stages.render.child import call_in_child
 from sweep3d.stages.render.protocol import Look
-from sweep3d.stages.render.worker import die_with_parent
 
 #: (label, camera azimuth, camera elevation): the sides shown, as the camera control names them.
 SIDES = (("front", 0.0, 15.0), ("right", 90.0, 15.0), ("back", 180.0, 15.0), ("left", 270.0, 15.0),
@@ -31,7 +30,7 @@ def paint_objects(items: list[tuple[str, np.ndarray]], resolution: int = 160, sa
                   looks: list[Look | None] | None = None) -> list[list[bytes]]:
     """PNG renders of each ``(mesh, colours)`` (colours: PARTS × 3, sRGB in [0, 1]), one per side.
 
-    Runs Blender once, in a fresh spawned process, for all the items. ``looks`` (one per item)
+    Runs Blender once, in a fresh child process, for all the items. ``looks`` (one per item)
     paint only an object's ``parts``, as it was rendered.
     """
     looks = looks or [None] * len(items)
@@ -39,8 +38,7 @@ def paint_objects(items: list[tuple[str, np.ndarray]], resolution: int = 160, sa
              for (mesh, colours), look in zip(items, looks)]
     if not items:
         return []
-    with mp.get_context("spawn").Pool(1, initializer=die_with_parent) as pool:  # no orphan if the report is killed
-        return pool.apply(_paint_in_this_process, (items, resolution, samples))
+    return call_in_child(_paint_in_this_process, items, resolution, samples)  # no orphan if the report is killed
 
 
 def _paint_in_this_process(items: list[tuple[str, np.ndarray, Look | None]], resolution: int,

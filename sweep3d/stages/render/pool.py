@@ -3,18 +3,19 @@
 Jobs arrive grouped by scene, ordered world by world; a group goes to one worker so the scene is
 loaded once, and each worker takes its groups from its own contiguous share of that order
 (:class:`Shares`), so it changes world as rarely as the order allows. A worker that dies or
-exceeds the per-job timeout is replaced and its unfinished jobs are retried once; a worker that
+exceeds the per-job timeout is replaced and its unfinished jobs are retried once, but a job whose
+control's ``edit`` outlives ``edit_timeout`` fails at once, naming the control; a worker that
 retires between jobs (it reached ``[render] worker_memory`` or ``worker_jobs``: see
 :class:`WorkerLimits`) is replaced too, and a fresh one renders the rest of its list: no job is
 lost or rendered twice. With a GPU device and several workers, each renders on its own GPU
 (its slot's number, modulo the GPUs there are). Scratch files
 are removed when the pool closes, also on Ctrl-C, and a killed run's by the next run
-(:func:`remove_stale_scratch`). Workers die with their parent.
+(:func:`remove_stale_scratch`). Workers are :class:`~.child.Child` processes: they never run the
+user's ``__main__``, die with their parent, and nothing they start outlives them.
 """
 
 from __future__ import annotations
 
-import multiprocessing as mp
 import os
 import shutil
 import signal
@@ -24,10 +25,12 @@ from collections import Counter, deque
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, wait
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Iterator, Literal
 
+from sweep3d.controls import control_label
 from sweep3d.errors import RenderError, UserError
 from sweep3d.registry import is_user_plugin
+from sweep3d.stages.render.child import Child
 from sweep3d.stages.render.device import KERNEL_GRACE, prepare_gpu_environment
 from sweep3d.stages.render.protocol import (
     NO_LIMITS,
@@ -46,6 +49,8 @@ from sweep3d.stages.render.worker import worker_main
 
 SCRATCH_PREFIX = "sweep3d-"  # + the parent's pid: a later run can tell a killed run's folder
 START_TIMEOUT = 120.0  # seconds a worker may take to import bpy and build its scene
+#: What ends a busy worker: a control's edit() past edit_timeout, its job past the timeout, its death.
+Trouble = Literal["edit", "timeout", "died"]
 
 
 class Shares:
@@ -81,15 +86,16 @@ class Shares:
 
 @dataclass
 class _Worker:
-    process: Any
+    process: Child
     conn: Connection
     slot: int
     task: list[RenderJob] | None = None
     done: set[str] = field(default_factory=set)
     current: str | None = None
-    editing: str | None = None  # the user's control whose edit() it runs (Editing), by label
     started: float = 0.0
     retired: Retired | None = None  # it reached a limit after a job and exits
+    editing: str | None = None  # the id of the control whose edit() it runs now
+    edit_started: float = 0.0
     rendered: int = 0  # jobs it has answered, over all its lists
 
 
@@ -98,19 +104,19 @@ class RenderPool:
     :meth:`run`."""
 
     def __init__(self, settings: RenderSettings, workers: int = 1, timeout: float = 600.0,
-                 limits: WorkerLimits = NO_LIMITS) -> None:
+                 limits: WorkerLimits = NO_LIMITS, edit_timeout: float = 60.0) -> None:
         self.settings = settings
         self.n_workers = workers
         self.timeout = timeout
         self.limits = limits
+        self.edit_timeout = edit_timeout
         prepare_gpu_environment(settings.device)
         self.recycled: Counter[str] = Counter()  # workers retired between jobs, by the limit reached
-        self.ctx = mp.get_context("spawn")
         root = scratch_root()
         remove_stale_scratch(root)
         self.scratch = Path(tempfile.mkdtemp(prefix=f"{SCRATCH_PREFIX}{os.getpid()}-", dir=root))
         self.workers: list[_Worker] = []
-        self._started: tuple[Any, Connection] | None = None  # slot 0's process, started ahead (prestart)
+        self._started: tuple[Child, Connection] | None = None  # slot 0's process, started ahead (prestart)
 
     def __enter__(self) -> "RenderPool":
         return self
@@ -124,16 +130,11 @@ class RenderPool:
         if not self.workers and self._started is None:
             self._started = self._start(0)
 
-    def _start(self, slot: int) -> tuple[Any, Connection]:
-        parent, child = self.ctx.Pipe()
+    def _start(self, slot: int) -> tuple[Child, Connection]:
+        """A fresh worker process (in its own process group: see :mod:`.child`) and its pipe."""
         gpu = slot if self.settings.device != "cpu" and self.n_workers > 1 else None  # one GPU per worker
-        process = self.ctx.Process(
-            target=worker_main, args=(child, self.settings, str(self.scratch), self.limits, gpu), daemon=True,
-            name="sweep3d-render"
-        )
-        process.start()
-        child.close()
-        return process, parent
+        process = Child(worker_main, (self.settings, str(self.scratch), self.limits, gpu), "sweep3d-render")
+        return process, process.conn
 
     def _spawn(self, slot: int) -> _Worker:
         if slot == 0 and self._started is not None:  # started ahead by prestart
@@ -173,9 +174,19 @@ class RenderPool:
                 if worker.retired is not None:
                     self._recycle(worker, queue)
                     continue
-                timed_out = worker.current is not None and time.monotonic() - worker.started > self.allowed(worker)
-                if worker.task is not None and (not worker.process.is_alive() or timed_out):
-                    yield from self._replace(worker, queue, retried, timed_out)
+                trouble = self._trouble(worker) if worker.task is not None else None
+                if trouble is not None:
+                    yield from self._replace(worker, queue, retried, trouble)
+
+    def _trouble(self, worker: _Worker) -> Trouble | None:
+        """What is wrong with a busy worker, if anything: a control's ``edit`` running past
+        ``edit_timeout``, its job past :meth:`allowed`, or its death."""
+        now = time.monotonic()
+        if worker.editing is not None and now - worker.edit_started > self.edit_timeout:
+            return "edit"
+        if worker.current is not None and now - worker.started > self.allowed(worker):
+            return "timeout"
+        return None if worker.process.is_alive() else "died"
 
     def allowed(self, worker: _Worker) -> float:
         """Seconds ``worker``'s current job may take: ``timeout``, and on a GPU worker's first job
@@ -188,7 +199,7 @@ class RenderPool:
         if isinstance(message, Started):
             worker.current, worker.started, worker.editing = message.render_key, time.monotonic(), None
         elif isinstance(message, Editing):
-            worker.editing = message.control
+            worker.editing, worker.edit_started = message.control, time.monotonic()
         elif isinstance(message, RenderReply):
             worker.done.add(message.render_key)
             worker.rendered += 1
@@ -202,10 +213,7 @@ class RenderPool:
     def _recycle(self, worker: _Worker, queue: Shares) -> None:
         """Replace a worker that retired between jobs: the rest of its list goes first to the fresh
         worker in its slot (not a retry: none of those jobs had started)."""
-        worker.process.join(5)  # it exits by itself after saying so
-        if worker.process.is_alive():
-            worker.process.kill()
-            worker.process.join(5)
+        worker.process.end(5)  # it exits by itself after saying so
         self.recycled[worker.retired.reason] += 1
         self.workers.remove(worker)
         leftover = [job for job in worker.task or [] if job.render_key not in worker.done]
@@ -214,11 +222,12 @@ class RenderPool:
         if queue:
             self.workers.append(self._spawn(worker.slot))
 
-    def _replace(self, worker: _Worker, queue: Shares, retried: set[str],
-                 timed_out: bool) -> Iterator[RenderReply]:
-        """Replace a dead or stuck worker; retry its unfinished jobs once, fail the culprit twice."""
-        culprit = worker.current
-        reason = f"render took longer than {self.timeout:g} s" if timed_out else died(worker)
+    def _replace(self, worker: _Worker, queue: Shares, retried: set[str], trouble: Trouble) -> Iterator[RenderReply]:
+        """Replace a dead or stuck worker (with all it started); retry its unfinished jobs once,
+        fail the culprit twice, or at once where a control's edit hung (it is named)."""
+        culprit, editing, killer = worker.current, worker.editing, _user_editing(worker)
+        timed_out = trouble == "timeout"
+        reason = f"render took longer than {self.timeout:g} s" if timed_out else died(worker, killer)
         worker.process.kill()
         worker.process.join(5)
         leftover = [job for job in worker.task or [] if job.render_key not in worker.done]
@@ -226,8 +235,10 @@ class RenderPool:
         retry = []
         for job in leftover:
             key = job.render_key
-            if key == culprit and key in retried:
-                yield _failure(job, reason, timed_out, self.timeout, None if timed_out else worker.editing)
+            if key == culprit and trouble == "edit":
+                yield _hung_edit(job, editing, self.edit_timeout)
+            elif key == culprit and key in retried:
+                yield _failure(job, reason, timed_out, self.timeout, None if timed_out else killer)
             else:
                 if key == culprit:
                     retried.add(key)
@@ -250,19 +261,25 @@ class RenderPool:
             except (OSError, ValueError):
                 pass
         for worker in self.workers:
-            worker.process.join(timeout=5)
-            if worker.process.is_alive():
-                worker.process.kill()
+            worker.process.end(5)  # with whatever it started: nothing outlives the run
         self.workers = []
         shutil.rmtree(self.scratch, ignore_errors=True)
 
 
-def died(worker: _Worker) -> str:
-    """Why ``worker`` is gone, naming the user's control in whose ``edit()`` it died."""
+def died(worker: _Worker, killer: str | None) -> str:
+    """Why ``worker`` is gone, naming the user's control (``killer``) in whose ``edit()`` it died."""
     cause = death_cause(worker.process.exitcode)
-    if worker.editing is not None:
-        return f"{worker.editing} ended the render worker in edit() ({cause})"
+    if killer is not None:
+        return f"{killer} ended the render worker in edit() ({cause})"
     return f"render worker died ({cause})"
+
+
+def _user_editing(worker: _Worker) -> str | None:
+    """The label of the user's control whose ``edit()`` the worker is in (None: none, or a
+    built-in's, whose failure is sweep3d's own)."""
+    job = next((j for j in worker.task or [] if j.render_key == worker.current), None)
+    control = next((c for c, _ in job.controls if c.id == worker.editing), None) if job is not None else None
+    return control_label(control) if control is not None and is_user_plugin(control.type_name) else None
 
 
 def _failure(job: RenderJob, reason: str, timed_out: bool, timeout: float, killer: str | None = None) -> RenderReply:
@@ -282,7 +299,25 @@ def _failure(job: RenderJob, reason: str, timed_out: bool, timeout: float, kille
     return RenderReply(job.render_key, False, error=reason)
 
 
-def _first_message(conn: Connection, process: Any) -> Ready | Fatal:
+def _hung_edit(job: RenderJob, control_id: str | None, limit: float) -> RenderReply:
+    """The reply for a job whose control's ``edit`` did not return within ``limit`` seconds: one
+    line naming the control, where its ``edit`` is and the job's values (kind "plugin": the run
+    stops, exit 2). Not retried: the same values would hang again."""
+    found = next(((c, p) for c, p in job.controls if c.id == control_id), None)
+    if found is None:  # not one of the job's: the worker's word cannot be placed
+        return RenderReply(job.render_key, False, kind="plugin", error=f"a control's edit() did not return within "
+                                                                       f"render.edit_timeout = {limit:g} s")
+    control, params = found
+    code = getattr(getattr(type(control), "edit", None), "__code__", None)
+    where = f", {Path(code.co_filename).name}:{code.co_firstlineno}" if code is not None else ""
+    values = ", ".join(f"{k}={v!r}" for k, v in params.model_dump().items())
+    return RenderReply(job.render_key, False, kind="plugin",
+                       error=f"control {control.type_name!r} (id {control.id!r}{where}): its edit() did not return "
+                             f"within render.edit_timeout = {limit:g} s ({values}); fix it if it hangs, or raise "
+                             "render.edit_timeout if it is only slow")
+
+
+def _first_message(conn: Connection, process: Child) -> Ready | Fatal:
     """The worker's first message, or a :class:`Fatal` saying why none came: it died while
     starting (the OOM killer during ``import bpy``, say) or took longer than ``START_TIMEOUT``."""
     if not wait([conn, process.sentinel], timeout=START_TIMEOUT):

@@ -6,10 +6,10 @@ control instances and pydantic params included) and imports neither bpy nor torc
 process never loads Blender.
 
 A local worker receives a list of :class:`RenderJob` (one scene group) or None to stop, and
-answers :class:`Ready` (or :class:`Fatal`) once, then per job :class:`Started` and a
-:class:`RenderReply` (and :class:`Editing` around a user's control's ``edit()``), and
-:class:`Idle` after each list, or :class:`Retired` after a reply when it reached a
-:class:`WorkerLimits` limit (it then exits).
+answers :class:`Ready` (or :class:`Fatal`) once, then per job :class:`Started` (and
+:class:`Editing` around its controls' ``edit``) and a :class:`RenderReply`, and :class:`Idle`
+after each list, or :class:`Retired` after a reply when it reached a :class:`WorkerLimits` limit
+(it then exits).
 """
 
 from __future__ import annotations
@@ -248,9 +248,12 @@ class Started:
 
 @dataclass(frozen=True)
 class Editing:
-    """A worker runs a user's control's ``edit()`` (``control``: its label), or has finished the
-    job's edits (None): a worker that dies meanwhile is that control's doing, and is named so."""
+    """A worker calls the ``edit`` of the job's control ``control`` (its id), or has returned from
+    the job's last one (None): the pool times each edit on its own (``[render] edit_timeout``), and
+    names a user's control whose ``edit`` the worker died in.
+    """
 
+    render_key: str
     control: str | None
 
 

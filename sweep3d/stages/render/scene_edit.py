@@ -67,7 +67,7 @@ class SceneEdit:
         return obj
 
 
-#: Told the label of a user's control before its ``edit()``, and None after it.
+#: Told the id of each control before its ``edit()``, and None after the job's last one.
 OnEdit = Callable[[str | None], None]
 
 
@@ -82,8 +82,9 @@ def render_edited(scene: BlenderScene, edits: list[tuple[RenderedControl, BaseMo
     """Run each control's ``edit`` on the posed scene, render, and undo whatever they did.
 
     Args:
-        on_edit: told of each user's control's ``edit()`` as it starts and ends (the render
-            worker tells its pool, which names the control if the worker dies in it).
+        on_edit: hears each control's id as its ``edit`` is called, and None once they all have
+            returned: a worker tells its pool, which times an edit apart from the render and
+            names a user's control if the worker dies in its ``edit``.
 
     Returns:
         The render (as :meth:`BlenderScene.render`) and what the edits changed of the data the
@@ -104,6 +105,8 @@ def render_edited(scene: BlenderScene, edits: list[tuple[RenderedControl, BaseMo
                             scene.camera, object_name, environment_name)
         for control, params in edits:
             _edit(control, params, context, on_edit)
+        if on_edit is not None:
+            on_edit(None)
         rgb = _render(scene, edits)
     finally:
         changed = clean_up(bpy, before).changed
@@ -113,15 +116,14 @@ def render_edited(scene: BlenderScene, edits: list[tuple[RenderedControl, BaseMo
 
 
 def _edit(control: RenderedControl, params: BaseModel, context: SceneEdit, on_edit: OnEdit | None) -> None:
-    """One control's ``edit``, announced when it is a user's (a worker that dies in it is then
-    named for it), and a user's that leaves no camera refused (every job would fail to render)."""
+    """One control's ``edit``, announced (the pool times it, and names a user's control whose
+    ``edit`` its worker dies in), and a user's that leaves no camera refused (every job would
+    fail to render)."""
     user = is_user_plugin(control.type_name)
-    if user and on_edit is not None:
-        on_edit(control_label(control))
+    if on_edit is not None:
+        on_edit(control.id)
     with blamed(control, "edit()"):
         control.edit(context, params)
-    if user and on_edit is not None:
-        on_edit(None)
     problem = camera_problem(context.scene) if user else None
     if problem:
         raise PluginError(f"{control_label(control)} {problem} in edit(); an edit() may replace the camera "

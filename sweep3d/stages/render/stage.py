@@ -43,7 +43,6 @@ from sweep3d.stages.passes import needed_passes, truth_passes
 from sweep3d.stages.render.device import worker_count
 from sweep3d.stages.render.pool import RenderPool
 from sweep3d.stages.render.protocol import (
-    NO_LIMITS,
     EnvironmentRef,
     Look,
     RenderExecutor,
@@ -85,14 +84,14 @@ class Executor:
     kind: str = "local"
     address: str | None = None
 
-    def pool(self, settings: RenderSettings, workers: int, timeout: float,
-             limits: WorkerLimits = NO_LIMITS) -> RenderExecutor:
-        """A fresh executor of this kind (``timeout`` and ``limits`` apply to local workers only)."""
+    def pool(self, settings: RenderSettings, workers: int, spec: RenderSpec) -> RenderExecutor:
+        """A fresh executor of this kind (``spec``'s timeouts and worker limits apply to local
+        workers only)."""
         if self.kind == "ray":
             from sweep3d.stages.render.ray_pool import RayRenderPool
 
             return RayRenderPool(settings, workers, self.address)
-        return RenderPool(settings, workers, timeout, limits)
+        return RenderPool(settings, workers, spec.timeout, WorkerLimits.from_spec(spec), spec.edit_timeout)
 
 
 LOCAL = Executor()
@@ -130,7 +129,7 @@ class RenderStage:
         if self.executor.kind != "local" or self._warm is not None:
             return
         settings, spec = render_settings(plan), plan.spec.render
-        pool = self.executor.pool(settings, worker_count(spec, plan.device), spec.timeout, WorkerLimits.from_spec(spec))
+        pool = self.executor.pool(settings, worker_count(spec, plan.device), spec)
         pool.prestart()
         self._warm = settings, pool
 
@@ -180,7 +179,7 @@ class RenderStage:
             if warm is not None:  # planned again with other settings: not this worker
                 warm[1].close()
             workers = min(worker_count(spec, plan.device), len(groups))
-            pool = self.executor.pool(settings, workers, spec.timeout, WorkerLimits.from_spec(spec))
+            pool = self.executor.pool(settings, workers, spec)
         with pool:
             yield from self._replies(pool.run(groups), plan, store, jobs, stored)
             if pool.recycled:

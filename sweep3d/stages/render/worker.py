@@ -7,17 +7,15 @@ after each list. After a job's reply, a worker that reached one of its :class:`W
 (its resident memory, its number of jobs) sends :class:`Retired` and exits: the pool gives the
 rest of its list to a fresh worker.
 
-A worker dies with its run: it asks the kernel for SIGKILL when its parent dies, and it never
-writes a blob once its parent has gone (a new run may hold the store's lock by then).
+A worker dies with its run: it is a :class:`~.child.Child`, which asks the kernel for SIGKILL
+when its parent dies, and it never writes a blob once its parent has gone (a new run may hold the
+store's lock by then).
 """
 
 from __future__ import annotations
 
-import ctypes
-import multiprocessing as mp
 import os
 import signal
-import sys
 import time
 import traceback
 from multiprocessing.connection import Connection
@@ -27,6 +25,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from sweep3d.errors import UserError
+from sweep3d.stages.render.child import orphaned
 from sweep3d.stages.render.protocol import (
     NO_LIMITS,
     Editing,
@@ -45,38 +44,11 @@ from sweep3d.stages.render.protocol import (
 if TYPE_CHECKING:
     from sweep3d.stages.render.scene_edit import OnEdit
 
-PR_SET_PDEATHSIG = 1  # from <linux/prctl.h>
-_parent_pid: int | None = None  # set in a spawned child: the process it renders for
-
-
-def die_with_parent() -> None:
-    """Make this spawned child die when its parent does, and exit now if the parent has already gone.
-
-    An orphan would render on for minutes and write blobs into a store whose lock it does not
-    hold. Linux sends the signal when the parent's *thread* that spawned the child exits: pools
-    are started from the main thread. Elsewhere, :func:`orphaned` before each write is the guard.
-    """
-    global _parent_pid
-    parent = mp.parent_process()
-    if parent is None:  # not a multiprocessing child (a test calling render_job in-process)
-        return
-    _parent_pid = parent.pid
-    if sys.platform.startswith("linux"):
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
-    if orphaned():  # the parent died before the request: no signal will come
-        os._exit(1)
-
-
-def orphaned() -> bool:
-    """Whether this worker's parent has died (it was re-parented to init or a subreaper)."""
-    return _parent_pid is not None and os.getppid() != _parent_pid
-
 
 def worker_main(conn: Connection, settings: RenderSettings, scratch: str, limits: WorkerLimits = NO_LIMITS,
                 gpu: int | None = None) -> None:
-    """Entry point of a spawned worker process (``gpu``: the one GPU it renders on; None: all)."""
-    die_with_parent()
+    """Entry point of a worker process (a :class:`~.child.Child`: it dies with its parent; ``gpu``:
+    the one GPU it renders on; None: all)."""
     try:
         _serve(conn, settings, scratch, limits, gpu)
     except (BrokenPipeError, ConnectionResetError, EOFError):
@@ -108,13 +80,18 @@ def _serve(conn: Connection, settings: RenderSettings, scratch: str, limits: Wor
             return
         for job in jobs:
             conn.send(Started(job.render_key))
-            conn.send(render_job(scene, job, on_edit=lambda control: conn.send(Editing(control))))
+            conn.send(render_job(scene, job, on_edit=_telling(conn, job.render_key)))
             rendered += 1
             reason = limits.reached(rendered, resident_mb())
             if reason is not None:
                 conn.send(Retired(reason))
                 return
         conn.send(Idle())
+
+
+def _telling(conn: Connection, render_key: str) -> OnEdit:
+    """What hears a job's edits: it tells the pool, which times each ``edit`` (see :class:`Editing`)."""
+    return lambda control: conn.send(Editing(render_key, control))
 
 
 def resident_mb(pid: int | str = "self") -> float | None:
@@ -144,7 +121,8 @@ def posed_state(job: RenderJob):
 
 
 def render_job(scene, job: RenderJob, keep_pixels: bool = False, on_edit: OnEdit | None = None) -> RenderReply:
-    """Render one job in ``scene`` (a BlenderScene); shared by process workers and Ray actors.
+    """Render one job in ``scene`` (a BlenderScene); shared by process workers and Ray actors
+    (``on_edit``: see :func:`~.scene_edit.render_edited`).
 
     Returns:
         The reply for the parent. With ``keep_pixels`` it carries the PNG bytes instead of
