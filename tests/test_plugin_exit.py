@@ -219,21 +219,27 @@ def test_a_plug_in_that_exits_in_a_run_fails_it_in_one_line(tmp_path: Path, case
 
 def test_a_worker_that_dies_in_a_users_edit_is_named_for_its_control() -> None:
     """The pool's side of the os._exit case above, without Blender: the worker said whose edit()
-    it ran (an ``Editing`` message) before it died."""
+    it ran (an ``Editing`` message with the control's id) before it died; a built-in's edit is
+    sweep3d's own failure, not named as the user's."""
     from types import SimpleNamespace
 
-    from sweep3d.stages.render.pool import _failure, _Worker, died
+    from sweep3d.stages.render.pool import _failure, _user_editing, _Worker, died
     from sweep3d.stages.render.protocol import EnvironmentRef, RenderJob
 
+    gone, builtin = SimpleNamespace(type_name="mod:Gone", id="Gone"), SimpleNamespace(type_name="material", id="paint")
+    job = RenderJob("k", "cube.obj", EnvironmentRef(color=(1.0, 1.0, 1.0)), controls=((builtin, None), (gone, None)))
+    worker = _Worker(SimpleNamespace(exitcode=3), None, 0, task=[job], current="k", editing="Gone")
     label = "control 'mod:Gone' (id 'Gone')"
-    worker = _Worker(SimpleNamespace(exitcode=3), None, 0, editing=label)
-    assert died(worker) == f"{label} ended the render worker in edit() (exit code 3)"
-    reply = _failure(RenderJob("k", "cube.obj", EnvironmentRef(color=(1.0, 1.0, 1.0))), died(worker), False, 600.0,
-                     worker.editing)
+    killer = _user_editing(worker)
+    assert killer == label
+    assert died(worker, killer) == f"{label} ended the render worker in edit() (exit code 3)"
+    reply = _failure(job, died(worker, killer), False, 600.0, killer)
     assert reply.kind == "plugin" and reply.error.startswith(f"{label} ended the render worker in edit() (exit code 3), "
                                                             "twice; a plug-in must not end its process")
+    worker.editing = "paint"
+    assert _user_editing(worker) is None
     worker.editing = None
-    assert died(worker) == "render worker died (exit code 3)"
+    assert _user_editing(worker) is None and died(worker, None) == "render worker died (exit code 3)"
 
 
 def test_an_edit_that_leaves_no_camera_is_named() -> None:
