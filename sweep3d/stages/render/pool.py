@@ -277,6 +277,8 @@ def died(worker: _Worker, killer: str | None) -> str:
 def _user_editing(worker: _Worker) -> str | None:
     """The label of the user's control whose ``edit()`` the worker is in (None: none, or a
     built-in's, whose failure is sweep3d's own)."""
+    if worker.editing is None:
+        return None
     job = next((j for j in worker.task or [] if j.render_key == worker.current), None)
     control = next((c for c, _ in job.controls if c.id == worker.editing), None) if job is not None else None
     return control_label(control) if control is not None and is_user_plugin(control.type_name) else None
