@@ -15,6 +15,11 @@ def to_uint8(rgb: np.ndarray) -> np.ndarray:
     return (np.clip(clean, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
 
 
+def from_uint8(pixels: np.ndarray) -> np.ndarray:
+    """8-bit pixels as float32 in [0, 1]: exactly what :func:`decode_png` gives for their PNG."""
+    return pixels.astype(np.float32) / np.float32(255.0)
+
+
 def encode_png(rgb: np.ndarray) -> bytes:
     """PNG bytes of a float32 (H, W, 3) image."""
     return encode_png8(to_uint8(rgb))

@@ -48,9 +48,9 @@ POST_SECONDS, INFER_SECONDS = 0.003, 0.009
 
 def cache_status(plan: Plan, store: Store, model: ModelHandle, several: bool = False) -> list[tuple[str, int, int]]:
     """(stage, distinct keys needed, keys already stored) for render, postprocess and infer."""
+    post = PostprocessStage.for_spec(plan.spec)
     return [(getattr(stage, "title", stage.name), *plan_status(stage, plan, store))
-            for stage in (RenderStage(), PostprocessStage.for_spec(plan.spec),
-                          InferStage(model, several=several, images_stored=plan.spec.postprocess.store == "all"))]
+            for stage in (RenderStage(), post, InferStage(model, several=several, images_stored=post.store_images))]
 
 
 def print_plan(console: Console, spec: LoadedSpec, jobs: int = 0) -> Plan:

@@ -30,6 +30,7 @@ import pyarrow as pa
 from sweep3d.cache.blobs import load_image, load_pass
 from sweep3d.cache.store import Store, utc_now
 from sweep3d.errors import SpecError, UserError
+from sweep3d.pixels import from_uint8
 from sweep3d.spec.columns import PREDICTION_COLUMNS
 from sweep3d.spec.loader import LoadedSpec
 from sweep3d.spec.models import ModelSpec
@@ -334,7 +335,7 @@ class ModelInputs:
         table = _table(job)
         kept = self.handoff.take(job.image_key) if self.handoff is not None else None
         if kept is not None:  # made (or decoded, for a render) by the postprocess stage in this process
-            return kept.astype(np.float32) / np.float32(255.0)
+            return from_uint8(kept)
         if table == "images":
             recorded = self.digests["images"].get(job.image_key)
             if not recorded:  # not stored: made again (a blob the report wrote, unrecorded, is a copy)
@@ -342,7 +343,7 @@ class ModelInputs:
                                   self.digests["renders"].get(job.render_key), self.passes)
                 if made.pixels is None:
                     return made.damaged or ("images", job.image_key)
-                return made.pixels.astype(np.float32) / np.float32(255.0)
+                return from_uint8(made.pixels)
         image = load_image(self.store, job.image_key, self.digests[table].get(job.image_key))
         return (table, job.image_key) if image is None else image
 
