@@ -1,0 +1,1 @@
+"""Physical realism: does a failure found in simulation hold in a photograph of the same scene?"""
