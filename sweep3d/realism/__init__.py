@@ -1,0 +1,8 @@
+"""Is a failure real? Agreement of the renders' verdicts with photographs of the same scenes, or
+with another renderer's images (``sweep3d realism pick`` / ``score``; the ``agreement`` view)."""
+
+from sweep3d.realism.photos import photo_like
+from sweep3d.realism.pick import margin, near_tie, pick
+from sweep3d.realism.score import score_engine, score_photos
+
+__all__ = ["margin", "near_tie", "photo_like", "pick", "score_engine", "score_photos"]
