@@ -32,11 +32,9 @@ from sweep3d.errors import UserError
 from sweep3d.realism.photos import PREPROCESS, Photo, PhotoProblems, framed, match_photos, upright
 from sweep3d.realism.pick import DESIGN, RENDERS, default_kit, read_kit
 from sweep3d.spec.loader import LoadedSpec
-from sweep3d.stages.aggregate.agreement import VERDICT_SCHEMA, VERDICTS
+from sweep3d.stages.aggregate.agreement import VERDICT_SCHEMA, VERDICTS, photo_path
 
 PHOTO = "photo"
-#: Where the framed photographs the model saw are kept (for the report's render | photo pairs).
-PHOTOS_FOLDER = ("realism", "photos")
 THUMB_SIDE = 256
 
 
@@ -54,11 +52,6 @@ class Scored:
         for model, (same, n) in self.agree.items():
             out.append(f"{model}: the {self.source} verdict agrees with the render's on {same} of {n} jobs")
         return out
-
-
-def photo_thumb_path(store: Store, sha256: str) -> Path:
-    """Where the framed photograph with the SHA-256 ``sha256`` (of its file's bytes) is kept."""
-    return store.root.joinpath(*PHOTOS_FOLDER, f"{sha256}.jpg")
 
 
 def find_kit(spec: LoadedSpec, photos: Path | None, kit: Path | None) -> Path:
@@ -196,7 +189,7 @@ def _keep_thumb(store: Store, sha256: str, pixels: np.ndarray) -> None:
     image.thumbnail((THUMB_SIDE, THUMB_SIDE))
     buffer = io.BytesIO()
     image.save(buffer, format="JPEG", quality=85)
-    path = photo_thumb_path(store, sha256)
+    path = photo_path(store, sha256)
     path.parent.mkdir(parents=True, exist_ok=True)
     atomic_write(path, buffer.getvalue(), durable=False)
 
@@ -301,5 +294,5 @@ def _configurations(con: Any, jobs: Sequence[int] | None, parameters: Sequence[s
     return out
 
 
-__all__ = ["PHOTO", "Photo", "Scored", "classify", "engine_spec", "find_kit", "photo_thumb_path", "score_engine",
+__all__ = ["PHOTO", "Photo", "Scored", "classify", "engine_spec", "find_kit", "score_engine",
            "score_photos"]

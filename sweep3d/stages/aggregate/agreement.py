@@ -55,6 +55,16 @@ VERDICT_SCHEMA = pa.schema([
 ])
 
 
+#: Where ``realism score`` keeps each photograph as the model saw it (framed as its render, as a
+#: small JPEG named by the SHA-256 of the photograph's file), for the report's render | photo pairs.
+PHOTOS_FOLDER = ("realism", "photos")
+
+
+def photo_path(store: Store, sha256: str) -> Path:
+    """The kept copy of the photograph whose file has the SHA-256 ``sha256``."""
+    return store.root.joinpath(*PHOTOS_FOLDER, f"{sha256}.jpg")
+
+
 def verdict_files(store: Store) -> list[Path]:
     """The readable segments of the store's ``verdicts`` table (unreadable ones are reported once)."""
     return [path for path in store.segments(VERDICTS) if store.read_segment(path, ["source"]) is not None]
