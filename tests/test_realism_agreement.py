@@ -126,3 +126,16 @@ def test_kappa_and_ratios_are_finite_or_null_for_any_small_table(pairs: list[tup
         assert (got is None) == (want[key] is None), key
         if got is not None:
             assert math.isfinite(got) and got == pytest.approx(want[key], abs=1e-12)
+
+
+def test_sweep3d_query_reads_the_agreement_view(tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from sweep3d.cli import app
+
+    spec = make_run(tmp_path)
+    Store(tmp_path / "store").append(VERDICTS, [verdict(0, True), verdict(1, False)], VERDICT_SCHEMA)
+    result = CliRunner().invoke(app, ["query", str(spec), "SELECT source, n FROM agreement WHERE overall",
+                                      "--format", "csv"])
+    assert result.exit_code == 0, result.output
+    assert result.output.strip().splitlines() == ["source,n", "photo,2"]  # the locked-down connection reads verdicts

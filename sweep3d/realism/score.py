@@ -9,7 +9,7 @@ Two sources, one path to the verdicts:
   its task's call (``model_outputs``) and the spec's evaluator (``evaluate_checked``), batches
   padded as the infer stage pads them. Nothing about classification is done here.
 - ``engine:<name>``: the picked configurations rendered by another renderer. The kit's
-  ``design.csv`` is replayed by a spec written beside it (``engine-<name>.toml``: the spec
+  ``design.csv`` is replayed by a spec written in it (``engines/<name>.toml``: the spec
   included, ``[policy] type = "table"``, ``[render] engine = "<name>"``, its own experiment
   name), run through the whole pipeline, and its results are matched back to the picked jobs
   by their configuration. Nothing here knows an engine: whatever ``[render] engine`` accepts
@@ -35,6 +35,8 @@ from sweep3d.spec.loader import LoadedSpec
 from sweep3d.stages.aggregate.agreement import VERDICT_SCHEMA, VERDICTS, photo_path
 
 PHOTO = "photo"
+#: The kit's subfolder holding the specs that replay its design with another engine.
+ENGINES = "engines"
 THUMB_SIDE = 256
 
 
@@ -227,7 +229,8 @@ def engine_spec(spec: LoadedSpec, kit: Path, engine: str) -> Path:
     """Write the spec that replays the kit's ``design.csv`` with ``[render] engine = engine``."""
     import json
 
-    path = kit / f"engine-{engine}.toml"
+    path = kit / ENGINES / f"{engine}.toml"
+    path.parent.mkdir(exist_ok=True)
     text = ENGINE_SPEC.format(engine=engine, name=spec.name, spec=json.dumps(str(spec.path.resolve())),
                               experiment=json.dumps(f"{spec.name}.engine-{engine}"),
                               design=json.dumps(str((kit / DESIGN).resolve())), engine_value=json.dumps(engine))
@@ -263,22 +266,24 @@ def score_engine(spec: LoadedSpec, engine: str, kit: Path | None = None, console
             wanted = _configurations(con, jobs, parameters)
         with results_connection(other.spec, settings.label if several else None) as con:
             theirs = _configurations(con, None, parameters, verdicts=True)
-        for config, job in wanted.items():
-            verdict = theirs.get(config)
-            if verdict is None:
-                raise UserError(f"job {job}: {engine} made no result for its configuration; run `sweep3d realism "
-                                f"score --engine {engine}` again")
-            rows.append(_row(source, spec.name, job, settings.label, verdict, image_key=verdict["image_key"],
-                             preprocess=f"rendered by {engine}; the model's own preprocessing, as for the render"))
+        for config, same in wanted.items():  # jobs of one configuration pair up in job order
+            made = theirs.get(config, [])
+            if len(made) < len(same):
+                raise UserError(f"job {same[0]}: {engine} made no result for its configuration; run `sweep3d "
+                                f"realism score --engine {engine}` again")
+            for job, verdict in zip(same, made):
+                rows.append(_row(source, spec.name, job, settings.label, verdict, image_key=verdict["image_key"],
+                                 preprocess=f"rendered by {engine}; the model's own preprocessing, as for the render"))
+    rows.sort(key=lambda r: (r["model"], r["job"]))
     with store.lock(wait):
         store.append(VERDICTS, rows, VERDICT_SCHEMA)
     return _scored(source, spec, store, rows)
 
 
 def _configurations(con: Any, jobs: Sequence[int] | None, parameters: Sequence[str],
-                    verdicts: bool = False) -> dict[tuple, Any]:
-    """Results by configuration (object, environment, each parameter's value): their job, or
-    (``verdicts``) the row's verdict columns; ``jobs``: only those."""
+                    verdicts: bool = False) -> dict[tuple, list[Any]]:
+    """Results by configuration (object, environment, each parameter's value), in job order:
+    their jobs, or (``verdicts``) the rows' verdict columns; ``jobs``: only those."""
     from sweep3d.stages.aggregate.quoting import identifier
 
     columns = {name for name, *_ in con.execute("DESCRIBE results").fetchall()}
@@ -287,10 +292,10 @@ def _configurations(con: Any, jobs: Sequence[int] | None, parameters: Sequence[s
     where = " WHERE job IN (SELECT unnest(?))" if jobs is not None else ""
     cursor = con.execute(f"SELECT job, {', '.join(map(identifier, named + extra))} FROM results{where} ORDER BY job",
                          [list(jobs)] if jobs is not None else [])
-    out: dict[tuple, Any] = {}
+    out: dict[tuple, list[Any]] = {}
     for job, *values in cursor.fetchall():
         config = tuple(values[:len(named)])
-        out.setdefault(config, dict(zip(extra, values[len(named):])) if verdicts else job)
+        out.setdefault(config, []).append(dict(zip(extra, values[len(named):])) if verdicts else job)
     return out
 
 
