@@ -47,8 +47,8 @@ def hand(pairs: list[tuple[bool, bool]]) -> dict[str, Any]:
             "kappa": None if expected == 1 else (agree / n - expected) / (1 - expected)}
 
 
-def agreement_rows(folder: Path) -> list[dict[str, Any]]:
-    con = connect(Store(folder / "store"), "realism")
+def agreement_rows(folder: Path, experiment: str = "realism") -> list[dict[str, Any]]:
+    con = connect(Store(folder / "store"), experiment)
     cursor = con.execute("SELECT * FROM agreement")
     names = [d[0] for d in cursor.description]
     return [dict(zip(names, r)) for r in cursor.fetchall()]

@@ -138,3 +138,19 @@ def test_each_bad_input_is_one_line_and_stores_nothing(tmp_path: Path, monkeypat
             assert sum(line in p for p in printed) == 1, (photos.name, line, result.output)
     assert not Store(tmp_path / "store").segments(VERDICTS)
     assert not (tmp_path / "store" / "realism").exists()
+
+
+def test_a_real_run_s_renders_as_photographs_agree_with_it(tiny_copy: Path, monkeypatch) -> None:
+    """End to end on the tiny real run (Blender renders, the built-in model, ONNX Runtime standing
+    in for torch in the run): its own images, scored through torch, give its verdicts back."""
+    stub_kit_tools(monkeypatch)
+    spec = tiny_copy / "spec.toml"
+    result = CliRunner().invoke(app, ["realism", "pick", str(spec), "--per-object", "4", "--near-ties", "mark"])
+    assert result.exit_code == 0, result.output
+    kit_dir = tiny_copy / "realism" / "tiny"
+    jobs = json.loads((kit_dir / "kit.json").read_text())["jobs"]
+    assert jobs and len(jobs) <= 4
+    result = CliRunner().invoke(app, ["realism", "score", str(spec), str(kit_dir / "renders")])
+    assert result.exit_code == 0, result.output  # the kit found by default beside the spec
+    overall = next(r for r in agreement_rows(tiny_copy, "tiny") if r["overall"])
+    assert (overall["n"], overall["agreement"]) == (len(jobs), 1.0)
