@@ -100,7 +100,7 @@ from sweep3d.cache.store import Store, lock_down
 from sweep3d.errors import UserError
 from sweep3d.evaluation import Roles
 from sweep3d.spec.columns import JOB_COLUMNS, MODELS_METADATA, PARAMETERS_METADATA
-from sweep3d.stages.aggregate.agreement import AGREEMENT_VIEWS, register_agreement_views, verdict_files
+from sweep3d.stages.aggregate.agreement import register_agreement_views, verdict_files
 from sweep3d.stages.aggregate.compare import COMPARE_MACROS, COMPARE_VIEWS, register_compare_views
 from sweep3d.stages.aggregate.detection import DETECTION_VIEWS, detection_views
 from sweep3d.stages.aggregate.failure_modes import create_failure_modes
@@ -129,7 +129,7 @@ _ACCURACY = ("n_correct / nullif(n, 0) AS accuracy, wilson_low(n_correct, n) AS 
 
 VIEWS = ("control_values", "control_stats", "control_levels", "control_parameters", "control_accuracy",
          "pair_accuracy", "scene_accuracy", "variance_explained", "object_sensitivity", "object_confusions",
-         "part_visibility", *TASK_VIEWS, *DETECTION_VIEWS, *PAIRED_VIEWS, *COMPARE_VIEWS, *AGREEMENT_VIEWS)
+         "part_visibility", *TASK_VIEWS, *DETECTION_VIEWS, *PAIRED_VIEWS, *COMPARE_VIEWS)
 MACROS = ("wilson_low", "wilson_high", "binomial_cdf", "hypergeometric_cdf", "difference_low",
           "difference_high", "epsilon_squared", "failure_modes", "object_sensitivity",
           *COMPARE_MACROS)
