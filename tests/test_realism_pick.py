@@ -253,6 +253,11 @@ def test_pick_writes_a_deterministic_kit_half_right_half_wrong(tmp_path: Path, m
     again = pick(spec, tmp_path / "again", "--per-object", "4")
     assert again.exit_code == 0, again.output
     assert kit_files(tmp_path / "kit") == kit_files(tmp_path / "again")  # same seed: the same bytes
+    photo = tmp_path / "kit" / f"{kit['jobs'][0]}.jpg"
+    photo.write_bytes(b"a photograph")
+    before = kit_files(tmp_path / "kit")
+    assert pick(spec, tmp_path / "kit", "--per-object", "4").exit_code == 0  # picked again into the kit
+    assert kit_files(tmp_path / "kit") == before and photo.read_bytes() == b"a photograph"
     other = pick(spec, tmp_path / "other", "--per-object", "4", "--seed", "11")
     assert other.exit_code == 0, other.output
     assert json.loads((tmp_path / "other" / "kit.json").read_text())["jobs"] != kit["jobs"]

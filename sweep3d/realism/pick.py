@@ -276,10 +276,11 @@ def _write_kit(folder: Path, spec: LoadedSpec, seed: int, per_object: int, thres
 def _put_in_place(staging: Path, folder: Path) -> None:
     """Move the staged kit's files into ``folder``, replacing an earlier kit's (photographs kept)."""
     folder.mkdir(parents=True, exist_ok=True)
-    for name in (RENDERS, EDGES):
-        shutil.rmtree(folder / name, ignore_errors=True)
     for entry in staging.iterdir():
-        os.replace(entry, folder / entry.name)
+        target = folder / entry.name
+        if entry.is_dir() and target.is_dir():
+            shutil.rmtree(target)
+        os.replace(entry, target)
 
 
 def _kit_document(spec: LoadedSpec, seed: int, per_object: int, threshold: float, near_ties: str,
