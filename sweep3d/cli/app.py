@@ -436,6 +436,9 @@ def _register_subcommands() -> None:
     from sweep3d.cli.cache import cache_app
 
     app.add_typer(cache_app, name="cache")
+    from sweep3d.cli.realism import realism_app
+
+    app.add_typer(realism_app, name="realism")
 
 
 _register_subcommands()

@@ -14,7 +14,9 @@ tasks whose results have an ``outcome`` or ``iou``), the model comparison (only 
 tests several models), the paired comparisons (only when the spec is paired: ``[policy]
 paired``), the failure boundaries (only where a numeric parameter has enough results to fit) and
 the part-visibility panel (accuracy conditioned on which parts of the object's
-surface are visible, from a UV render pass) returns None when the spec did not ask for the pass.
+surface are visible, from a UV render pass) returns None when the spec did not ask for the pass;
+the realism panel (agreement with photographs or another renderer) only once ``sweep3d realism
+score`` has stored another source's verdicts.
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ from sweep3d.report.panels import (
     overall,
     paired,
     part_visibility,
+    realism,
 )
 
 CORE_PANELS: tuple[Panel, ...] = (
@@ -56,6 +59,7 @@ OPTIONAL_PANELS: tuple[Panel, ...] = (
     Panel("compare", "Model comparison", "panels/compare.html.j2", compare.build),
     Panel("paired", "Paired comparisons", "panels/paired.html.j2", paired.build),
     Panel("part-visibility", "Part visibility", "panels/part_visibility.html.j2", part_visibility.build),
+    Panel("realism", "Realism", "panels/realism.html.j2", realism.build),
 )
 
 #: Page order: what was left out of the accuracy right after it, failure boundaries after the

@@ -60,6 +60,10 @@ store.
     two values of one parameter on the same configurations (environment A against B on the
     same poses): the pairs, and per pair of values McNemar's exact test on the discordant ones
     (see :mod:`sweep3d.stages.aggregate.paired`).
+``source_verdicts``, ``agreement``
+    only when ``sweep3d realism score`` stored another source's verdicts (photographs, another
+    renderer): the renders' verdicts beside the source's, and their agreement, PPV, NPV and
+    Cohen's κ per source, model and object (see :mod:`sweep3d.stages.aggregate.agreement`).
 
 Macros:
 
@@ -96,6 +100,7 @@ from sweep3d.cache.store import Store, lock_down
 from sweep3d.errors import UserError
 from sweep3d.evaluation import Roles
 from sweep3d.spec.columns import JOB_COLUMNS, MODELS_METADATA, PARAMETERS_METADATA
+from sweep3d.stages.aggregate.agreement import register_agreement_views, verdict_files
 from sweep3d.stages.aggregate.compare import COMPARE_MACROS, COMPARE_VIEWS, register_compare_views
 from sweep3d.stages.aggregate.detection import DETECTION_VIEWS, detection_views
 from sweep3d.stages.aggregate.failure_modes import create_failure_modes
@@ -164,8 +169,10 @@ def connect(store: Store, experiment: str | None = None, read_only: bool = False
         raise UserError(f"--model {model}: the experiment has no results yet")
     if register_views(con, parameters, model=shown, min_visible=min_visible) and has_view(con, "results_all"):
         register_compare_views(con, models, results_roles(con).has("prediction"))
+    verdicts = verdict_files(store)  # other sources' verdicts (photographs, another renderer)
+    register_agreement_views(con, verdicts, experiment)
     if read_only:
-        lock_down(con, [path for paths in files.values() for path in paths], writable)
+        lock_down(con, [path for paths in files.values() for path in paths] + verdicts, writable)
     return con
 
 

@@ -1,0 +1,77 @@
+"""``sweep3d realism``: is a failure real? Pick jobs to photograph, then score the photographs
+(or another renderer's images) against the renders' verdicts."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+from rich.console import Console
+from rich.markup import escape
+
+from sweep3d.cli._commands import check_wait, registrar
+
+realism_app = typer.Typer(no_args_is_help=True, rich_markup_mode=None,
+                          help="Agreement with photographs or another renderer: pick jobs, then score them.")
+console = Console(highlight=False)
+command = registrar(realism_app)
+
+SpecArg = typer.Argument(..., help="Path to the experiment's TOML spec.", show_default=False, readable=False)
+KitOption = typer.Option(None, "--kit", help="The kit's folder (default: PHOTOS when it holds kit.json, else "
+                                              "realism/<experiment> beside the spec).")
+WaitOption = typer.Option(0.0, help="Seconds to wait for a run holding the store's lock.")
+
+
+@command
+def pick(
+    spec: Path = SpecArg,
+    per_object: int = typer.Option(10, "--per-object", help="Results per object and model: half right, half wrong."),
+    seed: Optional[int] = typer.Option(None, "--seed", help="Seed of the draw (default: the spec's seed)."),
+    output: Optional[Path] = typer.Option(None, "--output", "-o", help="The kit's folder: new, empty or an earlier "
+                                          "kit (default: realism/<experiment> beside the spec)."),
+    near_ties: str = typer.Option("leave", "--near-ties", help="Results whose true and best other class are within "
+                                  "0.05 probability: leave them out, or mark them (kept, flagged in kit.json)."),
+) -> None:
+    """Choose results worth photographing and write the kit: design.csv, renders, edges, align.html."""
+    from sweep3d.realism.pick import pick as pick_kit
+    from sweep3d.stages import load_spec
+
+    kit = pick_kit(load_spec(spec), output, per_object, seed, near_ties)
+    for line in kit.short:
+        console.print(f"[yellow]note:[/] {escape(line)}", soft_wrap=True)
+    console.print(escape(kit.line()), soft_wrap=True)
+
+
+@command
+def score(
+    spec: Path = SpecArg,
+    photos: Optional[Path] = typer.Argument(None, help="The folder of photographs, each named <job>.jpg (or "
+                                            "listed in --match). Not with --engine.", show_default=False),
+    match: Optional[Path] = typer.Option(None, "--match", help="A CSV with columns photo,job (photo paths relative "
+                                         "to PHOTOS) instead of matching by file name."),
+    engine: Optional[str] = typer.Option(None, "--engine", help="Score another renderer instead of photographs: "
+                                         "render the kit's design with [render] engine = NAME."),
+    kit: Optional[Path] = KitOption,
+    wait: float = WaitOption,
+) -> None:
+    """Run the spec's models on the photographs (or another renderer's images) of the picked jobs and
+    store their verdicts; the agreement view and the report's Realism panel read them."""
+    from sweep3d.errors import UserError
+    from sweep3d.realism.score import score_engine, score_photos
+    from sweep3d.stages import load_spec
+
+    check_wait(wait)
+    loaded = load_spec(spec)
+    if engine is not None:
+        if photos is not None or match is not None:
+            raise UserError("--engine scores renders, not photographs: leave PHOTOS and --match out")
+        scored = score_engine(loaded, engine, kit, console, wait)
+    else:
+        if photos is None:
+            raise UserError("give the folder of photographs (PHOTOS), or --engine NAME to score another renderer")
+        console.print("photographs are read upright (EXIF orientation), resized and centre-cropped to their "
+                      "render's size, then given the model's own preprocessing, as the renders were", soft_wrap=True)
+        scored = score_photos(loaded, photos, match, kit, wait)
+    for line in scored.lines():
+        console.print(escape(line), soft_wrap=True)

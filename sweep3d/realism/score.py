@@ -1,0 +1,303 @@
+"""``sweep3d realism score``: the spec's models on another source of images of the picked jobs,
+stored as verdicts beside the renders' (the store's ``verdicts`` table, read by the ``agreement``
+view: :mod:`sweep3d.stages.aggregate.agreement`).
+
+Two sources, one path to the verdicts:
+
+- ``photo``: photographs of the picked scenes (:mod:`sweep3d.realism.photos` matches and frames
+  them), classified here by the run's own model code: the model handle the infer stage resolves,
+  its task's call (``model_outputs``) and the spec's evaluator (``evaluate_checked``), batches
+  padded as the infer stage pads them. Nothing about classification is done here.
+- ``engine:<name>``: the picked configurations rendered by another renderer. The kit's
+  ``design.csv`` is replayed by a spec written in it (``engines/<name>.toml``: the spec
+  included, ``[policy] type = "table"``, ``[render] engine = "<name>"``, its own experiment
+  name), run through the whole pipeline, and its results are matched back to the picked jobs
+  by their configuration. Nothing here knows an engine: whatever ``[render] engine`` accepts
+  is a source.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import types
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from sweep3d.cache.store import Store, atomic_write, utc_now
+from sweep3d.errors import UserError
+from sweep3d.realism.photos import PREPROCESS, Photo, PhotoProblems, framed, match_photos, upright
+from sweep3d.realism.pick import DESIGN, RENDERS, default_kit, read_kit
+from sweep3d.spec.loader import LoadedSpec
+from sweep3d.stages.aggregate.agreement import VERDICT_SCHEMA, VERDICTS, photo_path
+
+PHOTO = "photo"
+#: The kit's subfolder holding the specs that replay its design with another engine.
+ENGINES = "engines"
+THUMB_SIDE = 256
+
+
+@dataclass(frozen=True)
+class Scored:
+    """What ``score`` stored: the source, its verdicts per model and how they agree with the runs'."""
+
+    source: str
+    verdicts: int
+    models: list[str]
+    agree: dict[str, tuple[int, int]]  # model → (jobs agreeing, jobs)
+
+    def lines(self) -> list[str]:
+        out = [f"stored {self.verdicts} verdicts of source {self.source!r} ({', '.join(self.models)})"]
+        for model, (same, n) in self.agree.items():
+            out.append(f"{model}: the {self.source} verdict agrees with the render's on {same} of {n} jobs")
+        return out
+
+
+def find_kit(spec: LoadedSpec, photos: Path | None, kit: Path | None) -> Path:
+    """The kit's folder: ``kit`` when given, else ``photos`` when it holds one, else the default."""
+    if kit is not None:
+        return kit
+    if photos is not None and (photos / "kit.json").is_file():
+        return photos
+    return default_kit(spec)
+
+
+def score_photos(spec: LoadedSpec, photos: Path, match: Path | None = None, kit: Path | None = None,
+                 wait: float = 0.0) -> Scored:
+    """Classify the photographs in ``photos`` with each of ``spec``'s models and store them as source ``photo``.
+
+    Raises:
+        PhotoProblems: a photograph matches no job, a job has none, a file is not a readable image
+            (every such line at once; nothing is stored).
+        UserError: no kit, no results of the run.
+    """
+    folder = find_kit(spec, photos, kit)
+    document = read_kit(folder)
+    if document.get("experiment") != spec.name:
+        raise UserError(f"{folder / 'kit.json'}: is the kit of experiment {document.get('experiment')!r}, not "
+                        f"{spec.name!r}; give this spec's kit with --kit")
+    jobs = [int(j) for j in document["jobs"]]
+    matched = match_photos(photos, jobs, match)
+    sizes = _render_sizes(folder, jobs)
+    frames = {p.job: framed(upright(p.path), *sizes[p.job]) for p in matched}
+    digests = {p.job: hashlib.sha256(p.path.read_bytes()).hexdigest() for p in matched}
+    store = Store(spec.store)
+    rows: list[dict[str, Any]] = []
+    for settings in spec.models:
+        verdicts = classify(spec, settings, [frames[j] for j in jobs], _truth_rows(spec, store, jobs, settings.label))
+        for job, verdict in zip(jobs, verdicts):
+            h, w = sizes[job]
+            photo = next(p for p in matched if p.job == job)
+            rows.append(_row(PHOTO, spec.name, job, settings.label, verdict, photo=photo.path.name,
+                             photo_sha256=digests[job], preprocess=PREPROCESS.format(width=w, height=h)))
+    with store.lock(wait):
+        for job, pixels in frames.items():
+            _keep_thumb(store, digests[job], pixels)
+        store.append(VERDICTS, rows, VERDICT_SCHEMA)
+    return _scored(PHOTO, spec, store, rows)
+
+
+def classify(spec: LoadedSpec, settings: Any, images: Sequence[np.ndarray], truths: Sequence[dict[str, Any]]
+             ) -> list[dict[str, Any]]:
+    """The spec's evaluator's rows for 8-bit ``images`` (each the size of its job's render), by
+    the model ``settings`` names, through the infer stage's own code (its handle, task call,
+    evaluator and batch padding). ``truths``: per image its ``object`` and ``truth_key``."""
+    from sweep3d.cache.blobs import load_pass
+    from sweep3d.pixels import from_uint8
+    from sweep3d.stages.infer import EVALUATORS, ModelHandle
+    from sweep3d.stages.infer.evaluate import evaluate_checked
+    from sweep3d.stages.infer.evaluators.base import Truth
+    from sweep3d.stages.infer.stage import _truths, first_rows, padded
+    from sweep3d.stages.infer.tasks import check_task, model_outputs
+
+    handle = ModelHandle.resolve(spec, settings)
+    model = handle.classifier()
+    labels = model.label_map()
+    evaluator = EVALUATORS.get(spec.evaluator.kind).from_settings(spec.evaluator)
+    check_task(model, evaluator.task, handle.name)
+    ids = _truths(types.SimpleNamespace(spec=spec), labels, handle.name)
+    store = Store(spec.store)
+    size = settings.batch_size
+    out: list[dict[str, Any] | None] = [None] * len(images)
+    by_shape: dict[tuple[int, ...], list[int]] = {}
+    for i, image in enumerate(images):  # images of one size share a batch, as renders of a run do
+        by_shape.setdefault(image.shape, []).append(i)
+    for indices in by_shape.values():
+        for start in range(0, len(indices), size):
+            chosen = indices[start:start + size]
+            stacked = padded(np.stack([from_uint8(images[i]) for i in chosen]), size)
+            outputs = first_rows(model_outputs(model, stacked, evaluator.task, handle.name), len(chosen))
+            truth = []
+            for i in chosen:
+                t = truths[i]
+                arrays = {name: load_pass(store, t["truth_key"], name) if t.get("truth_key") else None
+                          for name in evaluator.passes}
+                truth.append(Truth(ids[t["object"]], **arrays))
+            for i, row in zip(chosen, evaluate_checked(evaluator, spec.evaluator.kind, outputs, truth, labels)):
+                out[i] = row
+    return [row for row in out if row is not None]
+
+
+def _render_sizes(folder: Path, jobs: Sequence[int]) -> dict[int, tuple[int, int]]:
+    """(height, width) of each job's render in the kit (what its photograph is framed to)."""
+    from PIL import Image
+
+    sizes, problems = {}, []
+    for job in jobs:
+        path = folder / RENDERS / f"{job}.png"
+        try:
+            with Image.open(path) as im:
+                sizes[job] = (im.height, im.width)
+        except OSError:
+            problems.append(f"{path}: the kit's render of job {job} is missing or unreadable; run "
+                            "`sweep3d realism pick` again")
+    if problems:
+        raise PhotoProblems(problems)
+    return sizes
+
+
+def _truth_rows(spec: LoadedSpec, store: Store, jobs: Sequence[int], model: str) -> list[dict[str, Any]]:
+    """Per job (in ``jobs``' order) its object and truth key, from the run's results."""
+    from sweep3d.stages.aggregate.sql import results_connection
+
+    several = len(spec.models) > 1
+    with results_connection(spec, model if several else None) as con:
+        columns = {name for name, *_ in con.execute("DESCRIBE results").fetchall()}
+        truth = "truth_key" if "truth_key" in columns else "NULL AS truth_key"
+        found = {row[0]: {"object": row[1], "truth_key": row[2]} for row in con.execute(
+            f"SELECT job, object, {truth} FROM results WHERE job IN (SELECT unnest(?))", [list(jobs)]).fetchall()}
+    missing = [j for j in jobs if j not in found]
+    if missing:
+        raise UserError(f"jobs {', '.join(map(str, missing[:8]))} of the kit have no result of model {model} in "
+                        f"{spec.name}: run `sweep3d run {spec.path}`, then `sweep3d realism pick` again")
+    return [found[j] for j in jobs]
+
+
+def _row(source: str, experiment: str, job: int, model: str, verdict: dict[str, Any], **extra: Any) -> dict[str, Any]:
+    row = {name: None for name in VERDICT_SCHEMA.names}
+    row.update(source=source, experiment=experiment, job=job, model=model, valid=bool(verdict.get("valid")),
+               correct=verdict.get("correct"), top1_label=verdict.get("top1_label"),
+               label_prob=verdict.get("label_prob"), created_at=utc_now(), **extra)
+    return row
+
+
+def _keep_thumb(store: Store, sha256: str, pixels: np.ndarray) -> None:
+    from PIL import Image
+
+    image = Image.fromarray(pixels)
+    image.thumbnail((THUMB_SIDE, THUMB_SIDE))
+    buffer = io.BytesIO()
+    image.save(buffer, format="JPEG", quality=85)
+    path = photo_path(store, sha256)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write(path, buffer.getvalue(), durable=False)
+
+
+def _scored(source: str, spec: LoadedSpec, store: Store, rows: list[dict[str, Any]]) -> Scored:
+    """What was stored, with each model's agreement read back through the ``agreement`` view."""
+    from sweep3d.stages.aggregate.sql import results_connection
+
+    agree = {}
+    with results_connection(spec, store=store) as con:
+        for model, same, n in con.execute(
+                "SELECT model, n_agree, n FROM agreement WHERE source = ? AND overall ORDER BY model", [source]).fetchall():
+            agree[model] = (same, n)
+    return Scored(source, len(rows), [m.label for m in spec.models], agree)
+
+
+# -- another renderer as a source ------------------------------------------------------------
+ENGINE_SPEC = """\
+# Written by `sweep3d realism score --engine {engine}`: the picked jobs of {name!r}, rendered by {engine}.
+include = [{spec}]
+
+[experiment]
+name = {experiment}
+
+[policy]
+type = "table"
+file = {design}
+
+[render]
+engine = {engine_value}
+"""
+
+
+def engine_spec(spec: LoadedSpec, kit: Path, engine: str) -> Path:
+    """Write the spec that replays the kit's ``design.csv`` with ``[render] engine = engine``."""
+    import json
+
+    path = kit / ENGINES / f"{engine}.toml"
+    path.parent.mkdir(exist_ok=True)
+    text = ENGINE_SPEC.format(engine=engine, name=spec.name, spec=json.dumps(str(spec.path.resolve())),
+                              experiment=json.dumps(f"{spec.name}.engine-{engine}"),
+                              design=json.dumps(str((kit / DESIGN).resolve())), engine_value=json.dumps(engine))
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def score_engine(spec: LoadedSpec, engine: str, kit: Path | None = None, console: Any = None,
+                 wait: float = 0.0) -> Scored:
+    """Render the kit's picked configurations with ``engine`` (through the whole pipeline, cached
+    like any run) and store the verdicts as source ``engine:<engine>``.
+
+    Raises:
+        UserError: no kit; the spec loader refusing the engine or a control it cannot express.
+    """
+    from sweep3d.api import Experiment
+    from sweep3d.stages.aggregate.sql import results_connection
+    from sweep3d.stages.aggregate.views import stored_parameters
+
+    if not engine or not engine.replace("-", "").replace("_", "").isalnum():
+        raise UserError(f"--engine {engine!r}: name a render engine, e.g. mitsuba")
+    folder = find_kit(spec, None, kit)
+    document = read_kit(folder)
+    jobs = [int(j) for j in document["jobs"]]
+    other = Experiment(engine_spec(spec, folder, engine))
+    other.run(wait=wait, console=console)
+    store = Store(spec.store)
+    parameters = stored_parameters(store.jobs_path(spec.name)) or list(spec.parameter_columns)
+    source, rows = f"engine:{engine}", []
+    for settings in spec.models:
+        several = len(spec.models) > 1
+        with results_connection(spec, settings.label if several else None) as con:
+            wanted = _configurations(con, jobs, parameters)
+        with results_connection(other.spec, settings.label if several else None) as con:
+            theirs = _configurations(con, None, parameters, verdicts=True)
+        for config, same in wanted.items():  # jobs of one configuration pair up in job order
+            made = theirs.get(config, [])
+            if len(made) < len(same):
+                raise UserError(f"job {same[0]}: {engine} made no result for its configuration; run `sweep3d "
+                                f"realism score --engine {engine}` again")
+            for job, verdict in zip(same, made):
+                rows.append(_row(source, spec.name, job, settings.label, verdict, image_key=verdict["image_key"],
+                                 preprocess=f"rendered by {engine}; the model's own preprocessing, as for the render"))
+    rows.sort(key=lambda r: (r["model"], r["job"]))
+    with store.lock(wait):
+        store.append(VERDICTS, rows, VERDICT_SCHEMA)
+    return _scored(source, spec, store, rows)
+
+
+def _configurations(con: Any, jobs: Sequence[int] | None, parameters: Sequence[str],
+                    verdicts: bool = False) -> dict[tuple, list[Any]]:
+    """Results by configuration (object, environment, each parameter's value), in job order:
+    their jobs, or (``verdicts``) the rows' verdict columns; ``jobs``: only those."""
+    from sweep3d.stages.aggregate.quoting import identifier
+
+    columns = {name for name, *_ in con.execute("DESCRIBE results").fetchall()}
+    named = [c for c in ("object", "environment", *parameters) if c in columns]
+    extra = [c for c in ("valid", "correct", "top1_label", "label_prob", "image_key") if c in columns]
+    where = " WHERE job IN (SELECT unnest(?))" if jobs is not None else ""
+    cursor = con.execute(f"SELECT job, {', '.join(map(identifier, named + extra))} FROM results{where} ORDER BY job",
+                         [list(jobs)] if jobs is not None else [])
+    out: dict[tuple, list[Any]] = {}
+    for job, *values in cursor.fetchall():
+        config = tuple(values[:len(named)])
+        out.setdefault(config, []).append(dict(zip(extra, values[len(named):])) if verdicts else job)
+    return out
+
+
+__all__ = ["PHOTO", "Photo", "Scored", "classify", "engine_spec", "find_kit", "score_engine",
+           "score_photos"]

@@ -1,0 +1,97 @@
+"""Realism: do the verdicts on the renders hold for photographs of the same scenes (or for another
+renderer's images of them)?
+
+Shown only when the store holds verdicts of another source for the experiment (``sweep3d realism
+score``). Per source, model and object (and over all objects): the share of jobs on which the
+source's verdict is the render's, with its 95 % Wilson interval; PPV (of the jobs the model got
+right in simulation, the share it got right in the source too), NPV (of those it got wrong, the
+share it got wrong there too) and Cohen's κ (agreement beyond what the two verdicts' rates give by
+chance). Then render | photo pairs with both verdicts, the disagreements first.
+"""
+
+from __future__ import annotations
+
+import base64
+import io
+from typing import Any
+
+from sweep3d.report.figures import interval, pct
+from sweep3d.report.panel import PanelInputs
+from sweep3d.stages.aggregate import has_view
+from sweep3d.stages.aggregate.agreement import photo_path
+
+PAIRS = 24  # render | photo pairs shown per source
+JPEG_QUALITY = 80
+
+
+def build(inputs: PanelInputs) -> dict[str, Any] | None:
+    """The agreement table and the pairs; None without another source's verdicts."""
+    if not has_view(inputs.con, "agreement"):
+        return None
+    rows = inputs.rows("SELECT * FROM agreement")
+    if not rows:
+        return None
+    sources = list(dict.fromkeys(r["source"] for r in rows))
+    return {"rows": [_row(r) for r in rows], "sources": [_pairs(inputs, s) for s in sources],
+            "several_models": len({r["model"] for r in rows}) > 1}
+
+
+def _row(r: dict[str, Any]) -> dict[str, Any]:
+    return {"source": r["source"], "model": r["model"], "object": "all objects" if r["overall"] else r["object"],
+            "overall": r["overall"], "n": r["n"], "n_agree": r["n_agree"], "agreement": pct(r["agreement"], 0),
+            "interval": interval(r["wilson_low"], r["wilson_high"]),
+            "ppv": _ratio(r["ppv"], r["n_sim_right"]), "npv": _ratio(r["npv"], r["n_sim_wrong"]),
+            "kappa": "–" if r["kappa"] is None else f"{r['kappa']:.2f}"}
+
+
+def _ratio(value: float | None, n: int) -> str:
+    return "–" if value is None else f"{value:.2f} (of {n})"
+
+
+def _pairs(inputs: PanelInputs, source: str) -> dict[str, Any]:
+    """Up to :data:`PAIRS` jobs of ``source`` (first model's verdicts), disagreements first."""
+    rows = inputs.rows(
+        "SELECT * FROM source_verdicts WHERE source = ? AND model = (SELECT min(model) FROM source_verdicts "
+        "WHERE source = ?) ORDER BY sim_correct = source_correct, job LIMIT ?", [source, source, PAIRS])
+    pairs = []
+    for r in rows:
+        agree = r["sim_correct"] == r["source_correct"]
+        render = {"thumb": inputs.thumbs.want(r["image_key"]), "outcome": _outcome(r["sim_correct"]),
+                  "caption": f"render: {r['sim_top1']}",
+                  "title": f"job {r['job']}: {r['object']} in {r['environment']}; render: {r['sim_top1']} "
+                           f"({_outcome(r['sim_correct'])})"}
+        other = {"outcome": _outcome(r["source_correct"]), "caption": f"{_short(source)}: {r['source_top1']}",
+                 "title": f"job {r['job']}: {_short(source)} {r['photo'] or ''}: {r['source_top1']} "
+                          f"({_outcome(r['source_correct'])})"}
+        if r["source_image_key"]:
+            other["thumb"] = inputs.thumbs.want(r["source_image_key"])
+        else:
+            other["uri"] = _photo_uri(inputs, r["photo_sha256"])
+        pairs.append({"job": r["job"], "agree": agree, "render": render, "other": other})
+    return {"source": source, "model": rows[0]["model"] if rows else "", "pairs": pairs,
+            "preprocess": rows[0]["preprocess"] if rows else ""}
+
+
+def _outcome(correct: bool) -> str:
+    return "correct" if correct else "wrong"
+
+
+def _short(source: str) -> str:
+    return source.removeprefix("engine:")
+
+
+def _photo_uri(inputs: PanelInputs, sha256: str | None) -> str | None:
+    """The kept photograph as a data URI at the report's thumbnail size (None when it is gone)."""
+    from PIL import Image
+
+    if not sha256:
+        return None
+    try:
+        with Image.open(photo_path(inputs.store, sha256)) as im:
+            image = im.convert("RGB")
+    except OSError:
+        return None
+    image.thumbnail((inputs.thumbs.size, inputs.thumbs.size))
+    buffer = io.BytesIO()
+    image.save(buffer, format="JPEG", quality=JPEG_QUALITY)
+    return "data:image/jpeg;base64," + base64.b64encode(buffer.getvalue()).decode()
