@@ -341,17 +341,17 @@ def _model_of(annotation: Any) -> tuple[Any, bool]:
 
 
 def cli(found: Sources) -> str:
-    import click
-
     out = ["# Command line", "",
            "Every command and option of `sweep3d`, generated from its click command tree. "
            "`sweep3d COMMAND --help` prints the same.", ""]
     root = found.cli
-    out += _command(root, "sweep3d", click, level=2, top=True)
+    out += _command(root, "sweep3d", level=2, top=True)
     return "\n".join(out)
 
 
-def _command(command: Any, path: str, click: Any, level: int, top: bool = False) -> list[str]:
+def _command(command: Any, path: str, level: int, top: bool = False) -> list[str]:
+    """A command's help and parameters, then its subcommands'. Duck-typed: typer carries its own
+    copy of click's classes, so ``isinstance`` against ``click``'s would find nothing."""
     out = []
     if not top:
         out += [f"{'#' * level} `{path}`", ""]
@@ -362,19 +362,35 @@ def _command(command: Any, path: str, click: Any, level: int, top: bool = False)
         out += ["| argument or option | type | default | description |", "|---|---|---|---|"]
         for param in params:
             names = ", ".join(f"`{o}`" for o in [*param.opts, *param.secondary_opts])
-            if isinstance(param, click.Argument):
-                names = f"`{param.human_readable_name}`" + (" (required)" if param.required else "")
-            kind = "flag" if getattr(param, "is_flag", False) else cell(param.type.name)
+            if param.param_type_name == "argument":
+                names = f"`{(param.metavar or param.name).upper()}`" + (" (required)" if param.required else "")
+            kind = "flag" if getattr(param, "is_flag", False) else _param_type(param)
             value = param.default
             shown = "" if value is None or callable(value) or value == () else f"`{value}`"
             out.append(f"| {names} | {kind} | {shown} | {cell(getattr(param, 'help', None) or '')} |")
         out.append("")
-    if isinstance(command, click.Group):
-        for name in command.list_commands(click.Context(command)):
-            sub = command.get_command(click.Context(command), name)
+    if hasattr(command, "list_commands"):
+        context = command.context_class(command)
+        for name in command.list_commands(context):
+            sub = command.get_command(context, name)
             if sub is not None and not sub.hidden:
-                out += _command(sub, f"{path} {name}", click, level if top else level + 1)
+                out += _command(sub, f"{path} {name}", level if top else level + 1)
     return out
+
+
+def _param_type(param: Any) -> str:
+    """A CLI parameter's type, with its range (typer's own parameters describe their annotation;
+    click's name their type)."""
+    annotation = getattr(getattr(param, "type_descriptor", None), "annotation", None)
+    if annotation is not None:
+        kind = type_name(annotation).replace("PosixPath", "path").replace("Path", "path")
+    else:
+        kind = cell(getattr(getattr(param, "type", None), "name", "") or "text")
+    low, high = getattr(param, "min", None), getattr(param, "max", None)
+    if low is not None or high is not None:
+        kind += " (" + " ".join(filter(None, [f"{low} ≤" if low is not None else "", "x",
+                                              f"≤ {high}" if high is not None else ""])) + ")"
+    return kind
 
 
 def generate() -> dict[str, str]:
