@@ -228,3 +228,13 @@ def test_classifier_factory_from_the_docs_loads_a_scripted_model_and_keys_its_co
     model = load_model("mymodels:resnet_like")
     assert isinstance(model, Classifier) and model.preprocess.crop == 224
     assert code_identity(MODELS.get("mymodels:resnet_like")).startswith("source:")
+
+
+def test_the_readme_fits_a_screen_and_its_links_lead_into_the_docs() -> None:
+    """The README stays short (issue 36: under 200 lines) and every relative link it gives exists,
+    so the links work on GitHub as in a checkout."""
+    text = (REPO / "README.md").read_text()
+    assert len(text.splitlines()) < 200
+    links = re.findall(r"\]\(((?!https?:)[^)#]+)(?:#[^)]*)?\)", text)
+    assert len(links) > 30 and any(link.startswith("docs/tutorials/") for link in links)
+    assert [link for link in links if not (REPO / link).exists()] == []
