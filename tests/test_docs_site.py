@@ -90,7 +90,7 @@ def test_the_reference_lists_every_registered_plugin(site) -> None:
     cli = visible(page(folder, "reference/cli"))
     assert all(f"sweep3d {command}" in cli for command in ("plan", "run", "query", "export", "cache verify"))
     api = page(folder, "reference/python-api")
-    assert 'id="sweep3d.Experiment.dataframe"' in api and 'id="sweep3d.load"' in api
+    assert all(f'id="sweep3d.{name}"' in api for name in ("load", "Experiment.dataframe", "plugins.RenderedControl"))
 
 
 @pytest.mark.slow
