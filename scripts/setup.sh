@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Set up sweep3d on a fresh Debian 12 machine: system libraries, meshes, a virtualenv.
 #   bash scripts/setup.sh          # what `sweep3d run` needs
-#   bash scripts/setup.sh --test   # plus the test extras and Chromium for the report's browser tests
+#   bash scripts/setup.sh --test   # plus the test and docs extras and Chromium for the report's browser tests
 # Safe to rerun: it installs only what is missing.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -27,7 +27,7 @@ command -v "$python" >/dev/null 2>&1 || python=python3
 # The CPU build of torch first (an unpinned torch would pull a multi-GB CUDA build).
 .venv/bin/python -m pip install -q "torch==2.13.0"
 if [ "$with_test" = 1 ]; then
-  .venv/bin/python -m pip install -q -e ".[test]"
+  .venv/bin/python -m pip install -q -e ".[test,docs]"  # docs: tests/test_docs_site.py builds the site
 else
   .venv/bin/python -m pip install -q -e .
 fi

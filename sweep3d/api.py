@@ -120,7 +120,7 @@ class Experiment:
 
     def sql(self, query: str, model: str | None = None, *, pandas: bool = False) -> pa.Table | pandas.DataFrame:
         """The rows of one read-only SELECT over the views (``results``, ``control_accuracy``, …; see
-        the README) of this spec's own jobs, as ``sweep3d query`` answers it.
+        the docs, how-to/query.md) of this spec's own jobs, as ``sweep3d query`` answers it.
 
         Args:
             model: the model whose results the views show (its id; default the spec's first).

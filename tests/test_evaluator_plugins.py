@@ -276,14 +276,14 @@ def test_rows_that_keep_the_contract_pass_unchanged() -> None:
     assert evaluate_checked(evaluator, "mymod:Returns", None, TRUTHS, LABELS) == evaluator.rows
 
 
-def test_the_readme_s_evaluator_loads_and_its_rows_pass_the_checks(tmp_path: Path, monkeypatch) -> None:
-    """The README's depth evaluator, without a render: its settings, roles and rows, and the
+def test_the_docs_evaluator_loads_and_its_rows_pass_the_checks(tmp_path: Path, monkeypatch) -> None:
+    """The depth evaluator of the docs (how-to/own-evaluator.md), without a render: its settings, roles and rows, and the
     line its failure message names."""
     import numpy as np
 
-    from tests.test_readme import readme_block
+    from tests.doc_blocks import block, page_text
 
-    (tmp_path / "mydepth.py").write_text(readme_block("### Your own evaluator"))
+    (tmp_path / "mydepth.py").write_text(block("how-to/own-evaluator.md", "# Your own evaluator"))
     monkeypatch.syspath_prepend(str(tmp_path))
     loaded = load_spec(spec_with(tmp_path, 'kind = "mydepth:DepthError"\ntolerance = 0.05'))
     evaluator = EVALUATORS.get("mydepth:DepthError").from_settings(loaded.evaluator)
@@ -295,5 +295,4 @@ def test_the_readme_s_evaluator_loads_and_its_rows_pass_the_checks(tmp_path: Pat
     rows = evaluate_checked(evaluator, "mydepth:DepthError", np.full((2, 1, 4, 4), 2.05), truths, LABELS)
     assert rows[0] == {"valid": True, "correct": True, "abs_rel": pytest.approx(0.025)}
     assert rows[1]["valid"] is False
-    readme = (Path(__file__).parents[1] / "README.md").read_text()
-    assert f"(mydepth.py:{type(evaluator).where().split(':')[1]}) failed" in readme
+    assert f"(mydepth.py:{type(evaluator).where().split(':')[1]}) failed" in page_text("how-to/own-evaluator.md")

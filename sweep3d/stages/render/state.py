@@ -17,7 +17,7 @@ if TYPE_CHECKING:
     from sweep3d.stages.render.lights import AreaLight, SunLight
 
 SENSOR_WIDTH_MM = 36.0
-FRAME_FILL = 0.8  # distance = 1 / (zoom · FRAME_FILL · sin(half fov)): the sphere spans ~78 % at 50 mm (README)
+FRAME_FILL = 0.8  # distance = 1 / (zoom · FRAME_FILL · sin(half fov)): the sphere spans ~78 % at 50 mm (docs/how-to/camera.md)
 #: The :class:`SceneState` fields :func:`in_frame` reads.
 FRAME_FIELDS = ("scale", "azimuth", "elevation", "zoom", "fill", "focal_length", "frame_x", "frame_y")
 EDGE_TOLERANCE = 1e-9  # relative: states this close to the frame's edge are tested one by one
@@ -28,7 +28,7 @@ def zoom_for_fill(fill: Any, focal_length: Any) -> Any:
     focal length (mm): the inverse of :func:`fill_of_zoom`, exact for any lens.
 
     With h the half field of view (tan h = 18 / f), the sphere's outline spans tan a / tan h of
-    the frame where sin a = 0.8 · zoom · sin h (README, "Camera framing"); solved for zoom,
+    the frame where sin a = 0.8 · zoom · sin h (docs/how-to/camera.md); solved for zoom,
     zoom = fill · √(f² + 18²) / (0.8 · √(f² + (18 · fill)²)). Only +, ×, ÷ and √ (all correctly
     rounded), so floats and numpy arrays give the same bits: keys and the in-frame test agree.
     """
@@ -126,7 +126,7 @@ class SceneState:
     def camera_distance(self) -> float:
         """Distance from which a unit sphere (scale 1) is seen under an angle whose sine is ``FRAME_FILL``
         times the half field of view's (its outline spans tan(asin(0.8 sin h)) / tan h of the
-        frame: 78 % at zoom 1 and 50 mm; README, "Camera framing")."""
+        frame: 78 % at zoom 1 and 50 mm; docs/how-to/camera.md)."""
         return 1.0 / (self.framing_zoom() * FRAME_FILL * math.sin(self.half_fov()))
 
     def camera_basis(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

@@ -1,4 +1,5 @@
-"""The README's examples work as written."""
+"""The documentation's examples work as written and do what the pages say; the README keeps CI's
+test command (every tutorial block also runs as written: tests/test_tutorials.py)."""
 
 from __future__ import annotations
 
@@ -12,12 +13,7 @@ import pytest
 from sweep3d.stages import load_spec
 from sweep3d.stages.postprocess import apply_post
 from tests.conftest import REPO, TINY_SPEC, plan_for, write_cube, write_spec
-
-
-def readme_block(after: str) -> str:
-    text = (REPO / "README.md").read_text()
-    start = text.index(after)
-    return re.search(r"```python\n(.*?)```", text[start:], re.S).group(1)
+from tests.doc_blocks import block
 
 
 def test_ci_runs_the_readmes_test_command() -> None:
@@ -25,8 +21,8 @@ def test_ci_runs_the_readmes_test_command() -> None:
     assert f"\n    {command}\n" in (REPO / "README.md").read_text()
 
 
-def test_custom_control_from_the_readme(tmp_path: Path, monkeypatch) -> None:
-    code = readme_block("### Your own control")
+def test_custom_control_from_the_docs(tmp_path: Path, monkeypatch) -> None:
+    code = block("tutorials/own-control.md", "# Your own control")
     assert len(code.strip().splitlines()) < 30
     (tmp_path / "mycontrols.py").write_text(code)
     monkeypatch.syspath_prepend(str(tmp_path))
@@ -64,7 +60,7 @@ def constant():
 @pytest.mark.slow
 @pytest.mark.blender
 @pytest.mark.torch
-def test_depth_evaluator_from_the_readme_reads_the_depth_pass(tmp_path: Path, monkeypatch) -> None:
+def test_depth_evaluator_from_the_docs_reads_the_depth_pass(tmp_path: Path, monkeypatch) -> None:
     from typer.testing import CliRunner
 
     from sweep3d.cache.blobs import load_pass
@@ -72,7 +68,7 @@ def test_depth_evaluator_from_the_readme_reads_the_depth_pass(tmp_path: Path, mo
     from sweep3d.cli import app
     from sweep3d.stages.aggregate import connect
 
-    (tmp_path / "mydepth.py").write_text(readme_block("### Your own evaluator"))
+    (tmp_path / "mydepth.py").write_text(block("how-to/own-evaluator.md", "# Your own evaluator"))
     (tmp_path / "depthmodel.py").write_text(DEPTH_MODEL)
     monkeypatch.syspath_prepend(str(tmp_path))
     spec = write_spec(tmp_path, TINY_SPEC.replace("[model]\n", '[model]\nname = "depthmodel:constant"\n').replace(
@@ -89,7 +85,7 @@ def test_depth_evaluator_from_the_readme_reads_the_depth_pass(tmp_path: Path, mo
 
 
 @pytest.mark.torch
-def test_detector_factory_from_the_readme_loads_a_scripted_detector(tmp_path: Path, monkeypatch) -> None:
+def test_detector_factory_from_the_docs_loads_a_scripted_detector(tmp_path: Path, monkeypatch) -> None:
     from typing import Dict, List
 
     import torch
@@ -103,7 +99,7 @@ def test_detector_factory_from_the_readme_loads_a_scripted_detector(tmp_path: Pa
                      "scores": torch.tensor([0.8])} for _ in images]
 
     torch.jit.save(torch.jit.script(Fixed()), str(tmp_path / "detector.pt"))
-    (tmp_path / "mydetectors.py").write_text(readme_block("A detector or segmenter is a factory"))
+    (tmp_path / "mydetectors.py").write_text(block("how-to/tasks.md", "A detector or segmenter is a factory"))
     monkeypatch.syspath_prepend(str(tmp_path))
     monkeypatch.chdir(tmp_path)
     from sweep3d.stages.infer import load_model
@@ -115,10 +111,10 @@ def test_detector_factory_from_the_readme_loads_a_scripted_detector(tmp_path: Pa
     assert len(found) == 2 and found[0].boxes.tolist() == [[1.0, 2.0, 10.0, 12.0]] and found[1].labels.tolist() == [3]
 
 
-def test_custom_policy_from_the_readme(tmp_path: Path, monkeypatch) -> None:
+def test_custom_policy_from_the_docs(tmp_path: Path, monkeypatch) -> None:
     from sweep3d.stages.plan import count_jobs
 
-    (tmp_path / "mypolicies.py").write_text(readme_block("A policy turns a scene's search space"))
+    (tmp_path / "mypolicies.py").write_text(block("how-to/own-policy.md", "A policy turns a scene's search space"))
     monkeypatch.syspath_prepend(str(tmp_path))
     body = TINY_SPEC.replace("yaw = [0, 45]", "yaw = { range = [0, 90] }").replace(
         'type = "grid"', 'type = "mypolicies:Extremes"\nmiddle = true')
@@ -129,8 +125,8 @@ def test_custom_policy_from_the_readme(tmp_path: Path, monkeypatch) -> None:
 
 
 def api_example(folder: Path) -> str:
-    """The README's notebook example, its mesh a cube where Sweet Home 3D's furniture is missing."""
-    code = readme_block("## Python API")
+    """The notebook tutorial's example, its mesh a cube where Sweet Home 3D's furniture is missing."""
+    code = block("tutorials/notebooks.md", "# Notebooks and the Python API")
     mesh = re.search(r'"(/usr/share/sweethome3d/[^"]+)"', code).group(1)
     if not Path(mesh.partition("#")[0]).exists():
         code = code.replace(mesh, str(write_cube(folder)))
@@ -185,7 +181,7 @@ def test_the_python_api_example_runs_as_a_plain_script(tmp_path: Path, how: str)
 
 
 @pytest.mark.blender
-def test_scene_edit_control_from_the_readme_adds_its_disc_for_one_job(blender_scene, tmp_path: Path,
+def test_scene_edit_control_from_the_docs_adds_its_disc_for_one_job(blender_scene, tmp_path: Path,
                                                                       monkeypatch) -> None:
     from io import BytesIO
 
@@ -194,7 +190,7 @@ def test_scene_edit_control_from_the_readme_adds_its_disc_for_one_job(blender_sc
     from sweep3d.stages.render.protocol import EnvironmentRef, RenderJob
     from sweep3d.stages.render.worker import render_job
 
-    (tmp_path / "mydisc.py").write_text(readme_block("A rendered control has two hooks"))
+    (tmp_path / "mydisc.py").write_text(block("tutorials/own-control.md", "A rendered control has two hooks"))
     monkeypatch.syspath_prepend(str(tmp_path))
     spec = write_spec(tmp_path, TINY_SPEC.replace(
         "[policy]", '[[controls]]\ntype = "mydisc:Disc"\nradius = [0, 1]\nred = 1.0\n\n[policy]'))
@@ -214,7 +210,7 @@ def test_scene_edit_control_from_the_readme_adds_its_disc_for_one_job(blender_sc
 
 
 @pytest.mark.torch
-def test_classifier_factory_from_the_readme_loads_a_scripted_model_and_keys_its_code(tmp_path: Path,
+def test_classifier_factory_from_the_docs_loads_a_scripted_model_and_keys_its_code(tmp_path: Path,
                                                                                       monkeypatch) -> None:
     import torch
 
@@ -226,9 +222,19 @@ def test_classifier_factory_from_the_readme_loads_a_scripted_model_and_keys_its_
             return x.mean(dim=(2, 3)) @ torch.ones(3, 1000)
 
     torch.jit.save(torch.jit.script(Linear()), str(tmp_path / "my_model.pt"))
-    (tmp_path / "mymodels.py").write_text(readme_block("### Your own model"))
+    (tmp_path / "mymodels.py").write_text(block("how-to/own-model.md", "# Your own model"))
     monkeypatch.syspath_prepend(str(tmp_path))
     monkeypatch.chdir(tmp_path)
     model = load_model("mymodels:resnet_like")
     assert isinstance(model, Classifier) and model.preprocess.crop == 224
     assert code_identity(MODELS.get("mymodels:resnet_like")).startswith("source:")
+
+
+def test_the_readme_fits_a_screen_and_its_links_lead_into_the_docs() -> None:
+    """The README stays short (issue 36: under 200 lines) and every relative link it gives exists,
+    so the links work on GitHub as in a checkout."""
+    text = (REPO / "README.md").read_text()
+    assert len(text.splitlines()) < 200
+    links = re.findall(r"\]\(((?!https?:)[^)#]+)(?:#[^)]*)?\)", text)
+    assert len(links) > 30 and any(link.startswith("docs/tutorials/") for link in links)
+    assert [link for link in links if not (REPO / link).exists()] == []
