@@ -30,6 +30,7 @@ if TYPE_CHECKING:
     import pyarrow as pa
     from rich.console import Console
 
+    from sweep3d.explain.driver import ExplainResult
     from sweep3d.export import ExportResult
     from sweep3d.pipeline import RunResult
     from sweep3d.spec.loader import LoadedSpec
@@ -111,6 +112,26 @@ class Experiment:
 
             print_run(console, result)
         return result
+
+    def explain(self, budget: int | None = None, *, seed: int | None = None, progress: bool = True,
+                wait: float = 0.0, console: Console | None = None) -> ExplainResult:
+        """For each failure of the finished run (a seeded sample within ``budget`` new renders), the
+        nearest configuration where the model is right; like ``sweep3d explain``: resumable, its
+        renders cached, the results in the ``counterfactuals`` view (:meth:`counterfactuals`)."""
+        from rich.console import Console
+
+        from sweep3d.explain.driver import explain_spec, print_explained
+
+        check_wait(wait)
+        console = console or (Console() if progress else None)
+        result = explain_spec(self.spec, budget=budget, seed=seed, console=console, wait=wait)
+        if console is not None:
+            print_explained(console, result)
+        return result
+
+    def counterfactuals(self) -> pa.Table:
+        """What :meth:`explain` found: one row per failure searched (the ``counterfactuals`` view)."""
+        return self.sql("SELECT * FROM counterfactuals ORDER BY failure_job")
 
     @overload
     def sql(self, query: str, model: str | None = None, *, pandas: Literal[False] = False) -> pa.Table: ...

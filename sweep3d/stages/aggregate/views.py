@@ -97,6 +97,7 @@ from sweep3d.errors import UserError
 from sweep3d.evaluation import Roles
 from sweep3d.spec.columns import JOB_COLUMNS, MODELS_METADATA, PARAMETERS_METADATA
 from sweep3d.stages.aggregate.compare import COMPARE_MACROS, COMPARE_VIEWS, register_compare_views
+from sweep3d.stages.aggregate.counterfactuals import register_counterfactual_views
 from sweep3d.stages.aggregate.detection import DETECTION_VIEWS, detection_views
 from sweep3d.stages.aggregate.failure_modes import create_failure_modes
 from sweep3d.stages.aggregate.paired import PAIRED_VIEWS, register_paired_views
@@ -164,8 +165,9 @@ def connect(store: Store, experiment: str | None = None, read_only: bool = False
         raise UserError(f"--model {model}: the experiment has no results yet")
     if register_views(con, parameters, model=shown, min_visible=min_visible) and has_view(con, "results_all"):
         register_compare_views(con, models, results_roles(con).has("prediction"))
+    explained = register_counterfactual_views(con, store, experiment)  # once `sweep3d explain` ran
     if read_only:
-        lock_down(con, [path for paths in files.values() for path in paths], writable)
+        lock_down(con, [path for paths in files.values() for path in paths] + explained, writable)
     return con
 
 
