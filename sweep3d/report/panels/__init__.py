@@ -14,7 +14,8 @@ tasks whose results have an ``outcome`` or ``iou``), the model comparison (only 
 tests several models), the paired comparisons (only when the spec is paired: ``[policy]
 paired``), the failure boundaries (only where a numeric parameter has enough results to fit) and
 the part-visibility panel (accuracy conditioned on which parts of the object's
-surface are visible, from a UV render pass) returns None when the spec did not ask for the pass.
+surface are visible, from a UV render pass) returns None when the spec did not ask for the pass;
+the nearest fixes (failure beside fix) only once ``sweep3d explain`` has run.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from sweep3d.report.panels import (
     explorer,
     failure_modes,
     failures,
+    nearest_fixes,
     not_evaluable,
     objects,
     outcomes,
@@ -56,6 +58,7 @@ OPTIONAL_PANELS: tuple[Panel, ...] = (
     Panel("compare", "Model comparison", "panels/compare.html.j2", compare.build),
     Panel("paired", "Paired comparisons", "panels/paired.html.j2", paired.build),
     Panel("part-visibility", "Part visibility", "panels/part_visibility.html.j2", part_visibility.build),
+    Panel("nearest-fixes", "Nearest fixes", "panels/nearest_fixes.html.j2", nearest_fixes.build),  # after explain
 )
 
 #: Page order: what was left out of the accuracy right after it, failure boundaries after the
