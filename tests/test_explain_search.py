@@ -140,3 +140,23 @@ def test_the_oracle_is_asked_each_configuration_once() -> None:
     fixes = explain(same, lambda scene: AXES, counting)
     assert len(asked) == len(set(asked))
     assert fixes[0].fix == fixes[1].fix == fixes[2].fix
+
+
+def test_a_change_across_a_whole_turn_is_written_the_short_way_round(tmp_path) -> None:
+    """Yaw over −180..180 wraps: from 172.8° to −172.8° is +14.4°, 4 % of the range, not −345.6°."""
+    from sweep3d.explain.driver import _changes, _written, scene_axes
+    from sweep3d.explain.search import Fix, Move
+    from sweep3d.stages import load_spec
+    from tests.conftest import TINY_SPEC, write_spec
+
+    body = TINY_SPEC.replace("yaw = [0, 45]", "yaw = { range = [-180, 180] }")
+    spec = load_spec(write_spec(tmp_path, body))
+    space, axes = scene_axes(spec, ("box", "white"))
+    assert [(a.name, a.kind, a.wraps) for a in axes] == [("orientation_yaw", "range", True), ("blur_sigma", "list", False)]
+    failure = Config(("box", "white"), Point((0.98,), (1,)))
+    fix = Fix(failure, Config(failure.scene, Point((0.02,), (0,))), (Move("blur_sigma", -1.0), Move("orientation_yaw", 0.04)),
+              math.hypot(1.0, 0.04), 3, True)
+    changes = {c[0]: c for c in _changes(space, fix)}
+    assert changes["orientation_yaw"][3] == pytest.approx(14.4)
+    assert changes["blur_sigma"][1:4] == ("1.5", "0", -1.5)
+    assert _written(changes["orientation_yaw"]) == "orientation_yaw +14.4 (4.0% of its range)"
