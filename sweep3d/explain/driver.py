@@ -17,7 +17,7 @@ import dataclasses
 import math
 import time
 from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 import pyarrow as pa
@@ -233,7 +233,7 @@ def explain_spec(spec: LoadedSpec, *, budget: int | None = None, seed: int | Non
             try:
                 fixes = explain(list(by_config), axes.__getitem__, stages.verdicts, budget=budget, seed=seed,
                                 free=own.__contains__, resolution=resolution, concurrent=_together(budget, axes),
-                                on_round=_reporter(console, budget, started, state))
+                                on_round=_reporter(console, budget, started, state, lambda: stages.rendered))
             finally:
                 stages.close()
             rows = _rows(spec, plan, stages, fixes, by_config, seed, budget)
@@ -253,8 +253,10 @@ def _together(budget: int | None, axes: dict[tuple[str, str], list[Axis]]) -> in
     return max(1, min(CONCURRENT, budget // max(cost, 1)))
 
 
-def _reporter(console: Console | None, budget: int | None, started: float, state: Progress):
-    """A line per round: failures searched and fixed, probes (charged to the budget) and rate."""
+def _reporter(console: Console | None, budget: int | None, started: float, state: Progress,
+              rendered: Callable[[], int]):
+    """A line per round: failures searched and fixed, probes (how many rendered, the rest found in
+    the store), configurations charged to the budget, and the rate."""
     def report(now: Progress) -> None:
         state.__dict__.update(now.__dict__)  # the counts, for the result
         if console is None:
@@ -262,7 +264,8 @@ def _reporter(console: Console | None, budget: int | None, started: float, state
         seconds = max(time.perf_counter() - started, 1e-9)
         of = f" of {budget}" if budget is not None else ""
         console.print(f"[bold]explain[/] round {now.rounds}: {now.finished}/{now.failures} failures done "
-                      f"({now.found} fixed, {now.started - now.finished} searching), {now.probes} probes, "
+                      f"({now.found} fixed, {now.started - now.finished} searching), {now.probes} probes "
+                      f"({rendered()} rendered, the rest cached), "
                       f"{now.charged}{of} new configurations, {now.probes / seconds:.2f} probes/s",
                       highlight=False, soft_wrap=True)
     return report

@@ -65,8 +65,9 @@ def register_counterfactual_views(con: duckdb.DuckDBPyConnection, store: Store, 
             return []
     except (OSError, ValueError, pa.ArrowException):  # none yet, or unreadable: no views
         return []
+    own = "WHERE failure_pred_key IN (SELECT pred_key FROM jobs) " if _has(con, "jobs") else ""
     con.execute(f"CREATE OR REPLACE VIEW counterfactuals AS SELECT * FROM read_parquet('{_quoted(path)}') "
-                "ORDER BY failure_job")
+                f"{own}ORDER BY failure_job")  # a failure the spec no longer plans is not shown
     con.execute("""CREATE OR REPLACE VIEW counterfactual_parameters AS
         WITH moves AS (
             SELECT failure_job, n_changed, unnest(parameters) AS parameter, unnest(shares) AS share
@@ -76,6 +77,10 @@ def register_counterfactual_views(con: duckdb.DuckDBPyConnection, store: Store, 
                count(*) / (SELECT n FROM fixes) AS share, median(abs(share)) AS median_share
         FROM moves GROUP BY parameter ORDER BY cheapest DESC, parameter""")
     return [path]
+
+
+def _has(con: duckdb.DuckDBPyConnection, view: str) -> bool:
+    return bool(con.execute("SELECT count(*) FROM duckdb_views() WHERE view_name = ?", [view]).fetchone()[0])
 
 
 def _quoted(path: Path) -> str:
