@@ -113,8 +113,9 @@ def run(
 @command
 def explain(
     spec: Path = SpecArg,
-    budget: Optional[int] = typer.Option(None, help="Most new renders the search may make (default: no limit); "
-                                                    "the failures are then a seeded sample."),
+    budget: Optional[int] = typer.Option(None, help="Most configurations beyond the run's own that the search may "
+                                                    "probe, each at most one render (default: no limit); the "
+                                                    "failures are then a seeded sample."),
     seed: Optional[int] = typer.Option(None, help="Seed of the order the failures are taken in (default: the spec's)."),
     wait: float = typer.Option(0.0, help="Seconds to wait for another run holding the store's lock."),
     report: bool = typer.Option(True, help="Write the HTML report (with its Nearest fixes panel) when it ends."),
