@@ -8,6 +8,7 @@
     df = exp.dataframe()        # the results (exp.results() for a pyarrow Table)
     exp.sql("SELECT * FROM control_accuracy")  # any read-only SELECT over the views (pandas=True: a DataFrame)
     exp.report("mugs.html")
+    exp.explain(budget=200)     # the nearest fix of each failure (a seeded sample within the budget)
 
 The command line is a thin layer over this module: ``run``, ``query`` and ``report`` call the same
 functions, so both raise the same one-line :class:`~sweep3d.errors.UserError` for a user's mistake.
