@@ -286,6 +286,7 @@ def explain(failures: Sequence[Config], axes: Callable[[Scene], list[Axis]], ora
             break
         asked: list[tuple[_Search, _Ray, float, Config]] = []
         finished: list[tuple[_Search, bool]] = []
+        before = len(results)
         for search in active:
             wanted = search.requests()
             if not wanted:
@@ -315,6 +316,8 @@ def explain(failures: Sequence[Config], axes: Callable[[Scene], list[Axis]], ora
         for search, ray, t, config in asked:
             search.probes += 1
             search.answer(ray, t, config, known[config])
+        if not asked and len(results) == before:
+            continue  # only failures the budget no longer reaches were looked at: nothing to tell
         state.charged = len(charged)
         state.rounds += 1
         if on_round is not None:
