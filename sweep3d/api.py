@@ -8,6 +8,7 @@
     df = exp.dataframe()        # the results (exp.results() for a pyarrow Table)
     exp.sql("SELECT * FROM control_accuracy")  # any read-only SELECT over the views (pandas=True: a DataFrame)
     exp.report("mugs.html")
+    exp.explain(budget=200)     # the nearest fix of each failure (a seeded sample within the budget)
 
 The command line is a thin layer over this module: ``run``, ``query`` and ``report`` call the same
 functions, so both raise the same one-line :class:`~sweep3d.errors.UserError` for a user's mistake.
@@ -30,6 +31,7 @@ if TYPE_CHECKING:
     import pyarrow as pa
     from rich.console import Console
 
+    from sweep3d.explain.driver import ExplainResult
     from sweep3d.export import ExportResult
     from sweep3d.pipeline import RunResult
     from sweep3d.spec.loader import LoadedSpec
@@ -111,6 +113,26 @@ class Experiment:
 
             print_run(console, result)
         return result
+
+    def explain(self, budget: int | None = None, *, seed: int | None = None, progress: bool = True,
+                wait: float = 0.0, console: Console | None = None) -> ExplainResult:
+        """For each failure of the finished run (a seeded sample within ``budget`` new renders), the
+        nearest configuration where the model is right; like ``sweep3d explain``: resumable, its
+        renders cached, the results in the ``counterfactuals`` view (:meth:`counterfactuals`)."""
+        from rich.console import Console
+
+        from sweep3d.explain.driver import explain_spec, print_explained
+
+        check_wait(wait)
+        console = console or (Console() if progress else None)
+        result = explain_spec(self.spec, budget=budget, seed=seed, console=console, wait=wait)
+        if console is not None:
+            print_explained(console, result)
+        return result
+
+    def counterfactuals(self) -> pa.Table:
+        """What :meth:`explain` found: one row per failure searched (the ``counterfactuals`` view)."""
+        return self.sql("SELECT * FROM counterfactuals ORDER BY failure_job")
 
     @overload
     def sql(self, query: str, model: str | None = None, *, pandas: Literal[False] = False) -> pa.Table: ...

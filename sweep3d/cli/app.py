@@ -111,6 +111,27 @@ def run(
 
 
 @command
+def explain(
+    spec: Path = SpecArg,
+    budget: Optional[int] = typer.Option(None, help="Most configurations beyond the run's own that the search may "
+                                                    "probe, each at most one render (default: no limit); the "
+                                                    "failures are then a seeded sample."),
+    seed: Optional[int] = typer.Option(None, help="Seed of the order the failures are taken in (default: the spec's)."),
+    wait: float = typer.Option(0.0, help="Seconds to wait for another run holding the store's lock."),
+    report: bool = typer.Option(True, help="Write the HTML report (with its Nearest fixes panel) when it ends."),
+) -> None:
+    """For each failure of a finished run, find the nearest configuration where the model is right."""
+    from sweep3d.api import Experiment
+
+    check_wait(wait)
+    experiment = Experiment(spec)
+    signal.signal(signal.SIGTERM, _interrupt)  # clean up workers and scratch files as on Ctrl-C
+    experiment.explain(budget=budget, seed=seed, wait=wait, console=console)
+    if report:
+        _write_report(experiment, None)
+
+
+@command
 def report(
     spec: Path = SpecArg,
     output: Optional[Path] = typer.Option(None, "--output", "-o", help="HTML file to write."),

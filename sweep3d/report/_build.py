@@ -40,6 +40,7 @@ from sweep3d.stages.aggregate import (
 )
 from sweep3d.stages.aggregate.boundaries import VIEW as BOUNDARIES_VIEW
 from sweep3d.stages.aggregate.boundaries import numeric_scales, register_failure_boundaries
+from sweep3d.stages.aggregate.counterfactuals import COUNTERFACTUAL_VIEWS
 from sweep3d.stages.aggregate.own_jobs import PlannedStore, results_store
 from sweep3d.stages.aggregate.results import plan_protocol
 from sweep3d.stages.infer.evaluators import measure_of
@@ -122,7 +123,7 @@ def build_context(loaded: LoadedSpec, con: duckdb.DuckDBPyConnection, store: Sto
         "thumb_size": thumbs.size,
         "images": {"shown": len(uris) - thumbs.missing - thumbs.damaged - thumbs.left_out, "of": page.images,
                    "missing": thumbs.missing, "damaged": thumbs.damaged, "left_out": thumbs.left_out},
-        "views": [v for v in (*VIEWS, BOUNDARIES_VIEW) if has_view(con, v)],
+        "views": [v for v in (*VIEWS, BOUNDARIES_VIEW, *COUNTERFACTUAL_VIEWS) if has_view(con, v)],
         "macros": MACROS,
     }
 

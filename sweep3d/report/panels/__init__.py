@@ -16,7 +16,8 @@ paired``), the failure boundaries (only where a numeric parameter has enough res
 the part-visibility panel (accuracy conditioned on which parts of the object's
 surface are visible, from a UV render pass) returns None when the spec did not ask for the pass;
 the realism panel (agreement with photographs or another renderer) only once ``sweep3d realism
-score`` has stored another source's verdicts.
+score`` has stored another source's verdicts; the nearest fixes (failure beside fix) only once
+``sweep3d explain`` has run.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from sweep3d.report.panels import (
     explorer,
     failure_modes,
     failures,
+    nearest_fixes,
     not_evaluable,
     objects,
     outcomes,
@@ -60,6 +62,7 @@ OPTIONAL_PANELS: tuple[Panel, ...] = (
     Panel("paired", "Paired comparisons", "panels/paired.html.j2", paired.build),
     Panel("part-visibility", "Part visibility", "panels/part_visibility.html.j2", part_visibility.build),
     Panel("realism", "Realism", "panels/realism.html.j2", realism.build),
+    Panel("nearest-fixes", "Nearest fixes", "panels/nearest_fixes.html.j2", nearest_fixes.build),  # after explain
 )
 
 #: Page order: what was left out of the accuracy right after it, failure boundaries after the

@@ -102,6 +102,7 @@ from sweep3d.evaluation import Roles
 from sweep3d.spec.columns import JOB_COLUMNS, MODELS_METADATA, PARAMETERS_METADATA
 from sweep3d.stages.aggregate.agreement import register_agreement_views, verdict_files
 from sweep3d.stages.aggregate.compare import COMPARE_MACROS, COMPARE_VIEWS, register_compare_views
+from sweep3d.stages.aggregate.counterfactuals import register_counterfactual_views
 from sweep3d.stages.aggregate.detection import DETECTION_VIEWS, detection_views
 from sweep3d.stages.aggregate.failure_modes import create_failure_modes
 from sweep3d.stages.aggregate.paired import PAIRED_VIEWS, register_paired_views
@@ -171,8 +172,9 @@ def connect(store: Store, experiment: str | None = None, read_only: bool = False
         register_compare_views(con, models, results_roles(con).has("prediction"))
     verdicts = verdict_files(store)  # other sources' verdicts (photographs, another renderer)
     register_agreement_views(con, verdicts, experiment)
+    explained = register_counterfactual_views(con, store, experiment)  # once `sweep3d explain` ran
     if read_only:
-        lock_down(con, [path for paths in files.values() for path in paths] + verdicts, writable)
+        lock_down(con, [path for paths in files.values() for path in paths] + verdicts + explained, writable)
     return con
 
 

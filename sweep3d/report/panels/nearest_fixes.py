@@ -1,0 +1,62 @@
+"""Nearest fixes: each failure beside the nearest configuration where the model is right, as
+``sweep3d explain`` found it, with the change written out ("orientation_yaw +14 makes it a
+toaster"), and per parameter how often it is part of the cheapest fix. Shown only once
+``explain`` has run (its ``counterfactuals`` views; see
+:mod:`sweep3d.stages.aggregate.counterfactuals`)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from sweep3d.report.figures import pct
+from sweep3d.report.panel import PanelInputs
+from sweep3d.stages.aggregate.views import has_view
+
+CARDS = 12  # failure | fix pairs shown, nearest first
+
+
+def build(inputs: PanelInputs) -> dict[str, Any] | None:
+    """The pairs (nearest first), the per-parameter counts and what was searched; None before ``explain``."""
+    if not has_view(inputs.con, "counterfactuals"):
+        return None
+    model = inputs.loaded.model.label
+    totals = inputs.rows("SELECT count(*) AS searched, count(*) FILTER (WHERE found) AS found, "
+                         "count(*) FILTER (WHERE NOT complete) AS cut, any_value(budget) AS budget "
+                         "FROM counterfactuals")[0]
+    if not totals["searched"]:
+        return None
+    pairs = inputs.rows("SELECT * FROM counterfactuals WHERE found ORDER BY distance, failure_job LIMIT ?", [CARDS])
+    cards = [_card(inputs, row) for row in pairs]
+    parameters = [{"parameter": p["parameter"], "cheapest": p["cheapest"], "alone": p["alone"],
+                   "share": pct(p["share"], 0), "width": round(100 * (p["share"] or 0)),
+                   "median": pct(p["median_share"], 1)}
+                  for p in inputs.rows("SELECT * FROM counterfactual_parameters")]
+    return {"cards": cards, "parameters": parameters, "model": model, **totals}
+
+
+def _card(inputs: PanelInputs, row: dict[str, Any]) -> dict[str, Any]:
+    moves = [_move(p, a, b, d) for p, a, b, d in zip(row["parameters"], row["from_values"], row["to_values"],
+                                                        row["deltas"])]
+    fixed_as = row["fix_label"] or row["true_labels"]
+    return {
+        "job": row["failure_job"], "object": row["object"], "environment": row["environment"],
+        "failure_thumb": inputs.thumbs.want(row["failure_image_key"]),
+        "fix_thumb": inputs.thumbs.want(row["fix_image_key"]),
+        "said": row["failure_label"] or "no prediction", "fix_label": fixed_as,
+        "sentence": f"{' and '.join(moves)} makes it a {fixed_as}",
+        "failure_probability": _pct(row["failure_probability"]), "fix_probability": _pct(row["fix_probability"]),
+        "distance": f"{row['distance']:.3f}",
+        "moved": "; ".join(f"{p} {a} → {b}" for p, a, b in zip(row["parameters"], row["from_values"],
+                                                              row["to_values"])),
+    }
+
+
+def _move(parameter: str, before: str, after: str, delta: float | None) -> str:
+    """``+14 orientation_yaw`` for a number, ``camera_lens wide → tele`` for an option."""
+    if delta is None:
+        return f"{parameter} {before} → {after}"
+    return f"{delta:+.3g} {parameter}"
+
+
+def _pct(value: float | None) -> str | None:
+    return pct(value) if value is not None else None

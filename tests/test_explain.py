@@ -1,0 +1,173 @@
+"""``sweep3d explain`` end to end on a tiny real spec: a user model that calls an image a carton
+only when it is sharp fails on the blurred jobs, deterministically; the search renders and infers
+its probes through the stages, the ``counterfactuals`` view says what fixes each failure, every
+fixing job's stored prediction is right, a rerun renders nothing, and the report shows the pairs
+side by side (in Chromium)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from sweep3d.api import Experiment
+from sweep3d.cache.store import Store
+from sweep3d.cli import app
+from sweep3d.report import write_report
+from tests.conftest import write_spec
+from tests.test_report import ARTIFACTS, assert_clean, open_page
+
+SHARP_MODEL = '''
+import torch
+from sweep3d.stages.infer import Classifier, Preprocess
+
+
+class Sharp(torch.nn.Module):
+    """A carton when the image is sharp (mean absolute gradient above a threshold), else blurred."""
+
+    def __init__(self, threshold):
+        super().__init__()
+        self.threshold = torch.nn.Parameter(torch.tensor(float(threshold)))
+
+    def forward(self, x):
+        g = (x[..., 1:, :] - x[..., :-1, :]).abs().mean(dim=(1, 2, 3)) + (x[..., 1:] - x[..., :-1]).abs().mean(dim=(1, 2, 3))
+        s = (g - self.threshold) * 50
+        return torch.stack([s, -s], dim=1)
+
+
+def sharp():
+    return Classifier(Sharp(0.09), Preprocess(resize=32, crop=32), labels=["carton", "blurred"])
+'''
+
+SPEC = """\
+[experiment]
+name = "explain-tiny"
+seed = 3
+store = "store"
+
+[render]
+resolution = 32
+samples = 1
+denoise = false
+
+[model]
+name = "explain_sharp_model:sharp"
+batch_size = 8
+
+[[objects]]
+name = "box"
+mesh = "cube.obj"
+labels = ["carton"]
+
+[[environments]]
+name = "white"
+color = [1.0, 1.0, 1.0]
+
+[[controls]]
+type = "orientation"
+yaw = { range = [0, 90] }
+
+[[controls]]
+type = "blur"
+sigma = { range = [0.0, 3.0] }
+
+[policy]
+type = "grid"
+samples_per_dim = 3
+"""
+
+pytestmark = [pytest.mark.blender, pytest.mark.torch, pytest.mark.slow]
+
+
+@pytest.fixture(scope="module")
+def explained(tmp_path_factory) -> Path:
+    """A run of the tiny spec, then ``sweep3d explain`` on it (no budget: every failure)."""
+    folder = tmp_path_factory.mktemp("explain")
+    (folder / "explain_sharp_model.py").write_text(SHARP_MODEL)
+    spec = write_spec(folder, SPEC)
+    runner = CliRunner()
+    result = runner.invoke(app, ["run", str(spec), "--no-report"])
+    assert result.exit_code == 0, result.output
+    result = runner.invoke(app, ["explain", str(spec), "--no-report"])
+    assert result.exit_code == 0, result.output
+    assert "explain round 1:" in result.output and "have a nearest fix" in result.output  # progress, then the end
+    return folder
+
+
+def test_every_failure_gets_a_fix_whose_stored_prediction_is_right(explained: Path) -> None:
+    experiment = Experiment(explained / "spec.toml")
+    failures = experiment.sql("SELECT job FROM results WHERE counted AND NOT correct").column("job").to_pylist()
+    assert 2 <= len(failures) <= 4
+    rows = experiment.counterfactuals().to_pylist()
+    assert sorted(r["failure_job"] for r in rows) == sorted(failures)
+    store = Store(experiment.store)
+    con = store.connect()
+    for row in rows:
+        assert row["found"] and row["complete"], row
+        assert row["failure_label"] == "blurred" and row["failure_correct"] is False
+        valid, correct, label = con.execute("SELECT valid, correct, top1_label FROM predictions WHERE pred_key = ?",
+                                            [row["fix_pred_key"]]).fetchone()
+        assert valid and correct and label == "carton" == row["fix_label"]
+        assert row["fix_correct"] and row["fix_margin"] > 0 > row["failure_margin"]
+        assert 1 <= row["n_changed"] <= 2 and len(row["deltas"]) == len(row["shares"]) == row["n_changed"]
+        assert row["distance"] == pytest.approx(sum(s * s for s in row["shares"]) ** 0.5)
+        for parameter, delta, share in zip(row["parameters"], row["deltas"], row["shares"]):
+            span = 90.0 if parameter == "orientation_yaw" else 3.0
+            assert delta == pytest.approx(share * span, abs=1e-9), row  # own units against share of range
+        assert store.blob_path(row["fix_image_key"]).exists()  # the report shows it
+    cheapest = experiment.sql("SELECT parameter, cheapest FROM counterfactual_parameters").to_pylist()
+    assert sum(p["cheapest"] for p in cheapest) == sum(r["n_changed"] for r in rows)
+    query = CliRunner().invoke(app, ["query", str(explained / "spec.toml"),
+                                     "SELECT count(*) AS n FROM counterfactuals WHERE found"])
+    assert query.exit_code == 0 and str(len(rows)) in query.output
+
+
+def test_a_rerun_renders_nothing_and_writes_the_same_counterfactuals(explained: Path) -> None:
+    experiment = Experiment(explained / "spec.toml")
+    path = explained / "store" / "explain" / "explain-tiny.parquet"
+    before = path.read_bytes()
+    again = experiment.explain(progress=False)
+    assert again.rendered == 0 and again.found == len(again.fixes) >= 2
+    assert path.read_bytes() == before
+
+
+def test_a_budget_and_a_missing_run_are_one_line_each(explained: Path, tmp_path: Path) -> None:
+    runner = CliRunner()
+    bad = runner.invoke(app, ["explain", str(explained / "spec.toml"), "--budget", "-1"])
+    assert bad.exit_code == 2 and "--budget -1" in bad.output and "Traceback" not in bad.output
+    (tmp_path / "explain_sharp_model.py").write_text(SHARP_MODEL)
+    fresh = write_spec(tmp_path, SPEC)
+    sys.modules.pop("explain_sharp_model", None)
+    early = runner.invoke(app, ["explain", str(fresh)])
+    assert early.exit_code == 2 and "sweep3d run" in early.output, early.output
+
+
+@pytest.mark.browser
+def test_the_nearest_fixes_panel_shows_each_failure_beside_its_fix(explained: Path, chromium) -> None:
+    experiment = Experiment(explained / "spec.toml")
+    n = len(experiment.counterfactuals())
+    report = write_report(experiment.spec)
+    with open_page(chromium, report) as (page, events):
+        pairs = page.evaluate("""Array.from(document.querySelectorAll('#nearest-fixes .fix-pair')).map(p => {
+            const [a, b] = Array.from(p.querySelectorAll('img')).map(i => i.getBoundingClientRect());
+            const loaded = Array.from(p.querySelectorAll('img')).every(i => i.naturalWidth > 0);
+            return {left: a.left, right: a.right, fixLeft: b.left, top: a.top, fixTop: b.top, loaded,
+                    sentence: p.querySelector('.sentence').textContent,
+                    moved: p.querySelector('.controls').textContent};
+        })""")
+        assert len(pairs) == n
+        for pair in pairs:
+            assert pair["loaded"], pair
+            assert pair["top"] == pair["fixTop"] and pair["right"] <= pair["fixLeft"], pair  # side by side
+            assert pair["sentence"].endswith("makes it a carton"), pair
+            assert "orientation_yaw" in pair["moved"] or "blur_sigma" in pair["moved"], pair
+            assert "→" in pair["moved"] and "distance" in pair["moved"], pair
+        rows = page.evaluate("Array.from(document.querySelectorAll('#nearest-fixes table.cheapest tbody tr'))"
+                             ".map(r => r.textContent)")
+        assert rows and all("%" in r for r in rows)
+        assert page.evaluate("document.documentElement.scrollWidth") <= 1280
+        ARTIFACTS.mkdir(exist_ok=True)
+        page.locator("#nearest-fixes").screenshot(path=str(ARTIFACTS / "nearest-fixes.png"))
+        assert_clean(report, events)
