@@ -20,8 +20,8 @@ from sweep3d.stability.changes import changed, level_noise, margins, toggled_dit
 from sweep3d.stability.check import SCHEMA, stability_key, stratified_sample
 from sweep3d.stages.aggregate import connect, summarise
 from sweep3d.stages.aggregate.fragile import MARGIN_EDGES, create_margin_macro
-from sweep3d.stages.infer.evaluators.classification import ranked_rows
 from sweep3d.stages.infer.evaluators.base import Truth
+from sweep3d.stages.infer.evaluators.classification import ranked_rows
 from sweep3d.stages.infer.labels import LabelMap
 from tests.conftest import examples
 

@@ -260,7 +260,9 @@ def print_findings(console: Console, plan: Plan, store: Store | None = None, fai
                   f"{summary.wrong} failures"
                   + (f", {summary.invalid} invalid predictions (NaN/inf outputs) excluded" if summary.invalid else "")
                   + (f"; {not_evaluable_line(summary)}" if summary.not_evaluable else ""))
-    line = fragile_line(summary)
+    from sweep3d.stages.aggregate.fragile import fragile_sentence
+
+    line = fragile_sentence(summary)
     if line:
         console.print(line, highlight=False, soft_wrap=True)
     regions = weakest_regions(summary)
@@ -283,19 +285,6 @@ def print_findings(console: Console, plan: Plan, store: Store | None = None, fai
     if summary.no_boundaries:
         console.print("no significant boundary (q ≥ 0.05): "
                       + "; ".join(describe_flat(rows) for rows in by_parameter(summary.no_boundaries)))
-
-
-def fragile_line(summary) -> str:
-    """How many failures are fragile (near-ties the stability check saw flip); "" before any check."""
-    if summary.fragile_failures is None or summary.fragile_threshold is None:
-        return ""
-    failures = summary.wrong + (summary.fragile_dropped and summary.fragile_failures)
-    rule = (f"|margin| < {summary.fragile_threshold:.3g} or flipped in the check" if summary.fragile_threshold
-            else "flipped in the check (no checked image flipped)")
-    dropped = (f"; {summary.fragile_dropped} fragile results left out of the counts above ([aggregate] drop_fragile)"
-               if summary.fragile_dropped else "")
-    return (f"fragile: {summary.fragile_failures} of {failures} failures ({rule}; stability check of "
-            f"{summary.fragile_checked} images){dropped}")
 
 
 def describe_region(region: Region) -> str:

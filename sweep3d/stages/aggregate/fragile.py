@@ -18,6 +18,7 @@ null (unknown), never false.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import duckdb
 import pyarrow as pa
@@ -148,3 +149,16 @@ def plan_drops_fragile(jobs: Path) -> bool:
         return (pq.read_schema(jobs).metadata or {}).get(DROP_FRAGILE_METADATA) == b"true"
     except (OSError, ValueError, pa.ArrowException):
         return False
+
+
+def fragile_sentence(summary: Any) -> str:
+    """How many failures are fragile, for ``run``'s findings and the report; "" before any check."""
+    if summary.fragile_failures is None or summary.fragile_threshold is None:
+        return ""
+    failures = summary.wrong + (summary.fragile_failures if summary.fragile_dropped else 0)
+    rule = (f"|margin| < {summary.fragile_threshold:.3g} or flipped in the check" if summary.fragile_threshold
+            else "flipped in the check; no checked image flipped")
+    dropped = (f"; {summary.fragile_dropped} fragile results left out of the counts ([aggregate] drop_fragile)"
+               if summary.fragile_dropped else "")
+    return (f"fragile: {summary.fragile_failures} of {failures} failures ({rule}; stability check of "
+            f"{summary.fragile_checked} images){dropped}")
