@@ -24,7 +24,8 @@ def run_stability(console: Console, spec_path: Path, sample: int, seed: int) -> 
         for row in found.bins:
             if not row["n"]:
                 continue
-            table.add_row(f"[{row['lower']:g}, {row['upper']:g})", str(row["n"]), str(row["flips"]),
+            close = "]" if row["upper"] >= 1.0 else ")"  # the last bin holds 1
+            table.add_row(f"[{row['lower']:g}, {row['upper']:g}{close}", str(row["n"]), str(row["flips"]),
                           f"{row['flip_rate']:.0%}", f"{row['wilson_low']:.0%}–{row['wilson_high']:.0%}")
         console.print(table)
         by_change: dict[str, tuple[int, int]] = {}
