@@ -264,7 +264,7 @@ def print_findings(console: Console, plan: Plan, store: Store | None = None, fai
 
     line = fragile_sentence(summary)
     if line:
-        console.print(line, highlight=False, soft_wrap=True)
+        console.print(escape(line), highlight=False, soft_wrap=True)
     regions = weakest_regions(summary)
     if regions:
         console.print("fails most at: " + "; ".join(map(describe_region, regions))

@@ -108,7 +108,8 @@ def check(spec: LoadedSpec, sample: int = DEFAULT_SAMPLE, seed: int = 0, console
         wanted = {(key, change): stability_key(key, change, seed) for key in keys for change in todo_changes}
         have = store.key_set("stability")
         todo = sorted({key for (key, _), skey in wanted.items() if skey not in have}, key=keys.index)
-        computed = _compute(store, spec, plan, handle, [jobs[k] for k in todo], todo_changes, seed, wanted, console)
+        computed = _compute(store, spec, plan, handle, [jobs[k] for k in todo], todo_changes, seed, wanted, console,
+                            cached=len(keys) - len(todo))
         skipped = [f"{c}: {why}" for c, why in _inapplicable(handle, plan).items()]
         out.append(_found(spec, settings.label, len(keys), computed, len(keys) - len(todo), skipped))
     return out
@@ -156,7 +157,7 @@ def _applicable(handle: Any, plan: Any) -> list[str]:
 
 
 def _compute(store: Store, spec: LoadedSpec, plan: Any, handle: Any, jobs: list, changes: list[str], seed: int,
-             wanted: dict[tuple[str, str], str], console: Any) -> int:
+             wanted: dict[tuple[str, str], str], console: Any, cached: int = 0) -> int:
     """Infer the baseline and each change of ``jobs``' images and append their rows; returns how many images."""
     if not jobs:
         return 0
@@ -176,7 +177,7 @@ def _compute(store: Store, spec: LoadedSpec, plan: Any, handle: Any, jobs: list,
     post = post_controls(plan)
     batch = max(1, spec.spec.all_models[0].batch_size // (1 + len(changes)))
     rows: list[dict[str, Any]] = []
-    with RunProgress(console) as progress, progress.stage("stability", len(jobs), 0) as bar:
+    with RunProgress(console) as progress, progress.stage("stability", len(jobs), cached) as bar:
         for start in range(0, len(jobs), batch):
             part = jobs[start: start + batch]
             pixels = []

@@ -158,7 +158,7 @@ def fragile_sentence(summary: Any) -> str:
     failures = summary.wrong + (summary.fragile_failures if summary.fragile_dropped else 0)
     rule = (f"|margin| < {summary.fragile_threshold:.3g} or flipped in the check" if summary.fragile_threshold
             else "flipped in the check; no checked image flipped")
-    dropped = (f"; {summary.fragile_dropped} fragile results left out of the counts ([aggregate] drop_fragile)"
-               if summary.fragile_dropped else "")
+    dropped = (f"; [aggregate] drop_fragile: the {summary.fragile_dropped} fragile results, right or wrong, are left "
+               "out of every count, accuracy, failure mode and boundary" if summary.fragile_dropped else "")
     return (f"fragile: {summary.fragile_failures} of {failures} failures ({rule}; stability check of "
             f"{summary.fragile_checked} images){dropped}")
