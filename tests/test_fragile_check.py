@@ -41,6 +41,10 @@ def test_the_check_stores_a_row_per_image_and_change_and_recomputes_nothing(tiny
     run = CliRunner().invoke(app, ["run", spec, "--no-report"])
     assert run.exit_code == 0, run.output
     assert "fragile: " in run.output and f"stability check of {images} images" in run.output
+    report = CliRunner().invoke(app, ["report", spec])
+    assert report.exit_code == 0, report.output
+    page = next((tiny_copy / "store" / "reports").glob("*.html")).read_text()
+    assert f"stability check of {images} images" in page and "Fragile: " in page  # the failures panel says it
 
 
 def test_a_check_before_any_result_or_of_another_task_is_one_line(tmp_path: Path) -> None:
