@@ -46,9 +46,9 @@ from sweep3d.cache import snapshot
 from sweep3d.cache.snapshot import StateSnapshot
 from sweep3d.errors import StoreBusyError, UserError
 
-TABLES = ("renders", "images", "predictions", "runs", "parts", "truths")
+TABLES = ("renders", "images", "predictions", "runs", "parts", "truths", "stability")
 KEY_COLUMN = {"renders": "render_key", "images": "image_key", "predictions": "pred_key", "runs": "run_id",
-              "parts": "parts_key", "truths": "truth_key"}
+              "parts": "parts_key", "truths": "truth_key", "stability": "stability_key"}
 #: Blobs a ``truths`` row owns beside its key (``blobs/ab/<truth_key>.<suffix>``) and the column
 #: recording each one's SHA-256 (null: the pass was not rendered).
 TRUTH_BLOBS = {"mask.png": "mask_sha256", "depth.npz": "depth_sha256"}
@@ -92,6 +92,8 @@ TABLE_COLUMNS = {
     "truths": ("truth_key", "render_key", "passes", "gt_x0", "gt_y0", "gt_x1", "gt_y1", "visible_pixels",
                "silhouette_pixels", "visible_fraction", "silhouette", "truth_seconds", "mask_sha256", "depth_sha256",
                "created_at"),
+    "stability": ("stability_key", "pred_key", "image_key", "change", "base_correct", "base_margin", "correct",
+                  "margin", "flipped", "created_at"),
 }
 
 log = logging.getLogger("sweep3d.store")

@@ -155,6 +155,20 @@ def compare(spec: Path = SpecArg) -> None:
 
 
 @command
+def stability(
+    spec: Path = SpecArg,
+    sample: int = typer.Option(64, "--sample", min=1, help="Images to re-infer (per model), spread over margin bins, "
+                                                             "near-ties first."),
+    seed: int = typer.Option(0, "--seed", min=0, help="Seeds the sample's order and the random changes."),
+) -> None:
+    """Re-infer a sample of the run's images under changes no eye sees (±1 level of noise, dither, 8-bit
+    resizing): the flip rate per margin bin, and which results are fragile."""
+    from sweep3d.cli.stability import run_stability
+
+    run_stability(console, spec, sample, seed)
+
+
+@command
 def bench(
     spec: Path = SpecArg,
     jobs: Optional[int] = typer.Option(None, min=1, show_default=False,

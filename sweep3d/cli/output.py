@@ -260,6 +260,11 @@ def print_findings(console: Console, plan: Plan, store: Store | None = None, fai
                   f"{summary.wrong} failures"
                   + (f", {summary.invalid} invalid predictions (NaN/inf outputs) excluded" if summary.invalid else "")
                   + (f"; {not_evaluable_line(summary)}" if summary.not_evaluable else ""))
+    from sweep3d.stages.aggregate.fragile import fragile_sentence
+
+    line = fragile_sentence(summary)
+    if line:
+        console.print(escape(line), highlight=False, soft_wrap=True)
     regions = weakest_regions(summary)
     if regions:
         console.print("fails most at: " + "; ".join(map(describe_region, regions))

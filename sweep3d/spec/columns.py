@@ -21,6 +21,8 @@ PARAMETERS_METADATA = b"sweep3d.parameters"
 MODELS_METADATA = b"sweep3d.models"
 #: Parquet metadata key of a jobs file planned with truth passes: ``[evaluator] min_visible``.
 MIN_VISIBLE_METADATA = b"sweep3d.min_visible"
+#: Parquet metadata key of a jobs file whose spec sets ``[aggregate] drop_fragile`` (b"true"; absent otherwise).
+DROP_FRAGILE_METADATA = b"sweep3d.drop_fragile"
 #: Its value when no gate applies (the truth passes were asked for by a control, not the evaluation).
 MIN_VISIBLE_OFF = b"off"
 #: Parquet metadata key of a jobs file holding, per model, the classes the spec names otherwise than

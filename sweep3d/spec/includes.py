@@ -22,7 +22,7 @@ from typing import Any
 from sweep3d.errors import SpecError
 
 LISTS = ("objects", "environments", "controls", "models")
-TABLES = ("experiment", "render", "model", "evaluator", "policy", "postprocess", "report")
+TABLES = ("experiment", "render", "model", "evaluator", "policy", "postprocess", "report", "aggregate")
 #: A control entry's folder when it came from an included file (its file parameters resolve there).
 BASE_KEY = "__folder__"
 

@@ -66,6 +66,15 @@ class RenderSpec(StrictModel):
                                "after a job before it is replaced by a fresh one (between jobs); 0 = no limit.")
     worker_jobs: int = Field(0, ge=0, description="Replace a render worker by a fresh one after this many jobs; "
                                                   "0 = never.")
+    dither: float = Field(1.0, ge=0.0, le=10.0, allow_inf_nan=False,
+                          description="Blender's scene.render.dither_intensity: noise added before the 8-bit "
+                                      "quantisation (Blender's default 1.0; 0 = none). Keyed only when not 1.0.")
+    world_sampling: Literal["automatic", "manual", "none"] = Field(
+        "automatic", description="How Cycles importance-samples the world (an HDRI): Blender's world "
+                                 "sampling_method. 'manual' uses world_map_resolution. Keyed only when not automatic.")
+    world_map_resolution: int = Field(1024, ge=4, le=16384,
+                                      description="The world's importance map side with world_sampling = 'manual' "
+                                                  "(Blender's sample_map_resolution).")
 
     @field_validator("resolution", mode="before")
     @classmethod
@@ -95,11 +104,18 @@ class RenderSpec(StrictModel):
                 keep the keys they had before the setting existed.
         """
         part = self.model_dump(exclude={"threads", "workers", "timeout", "edit_timeout", "resolution",
-                                        "adaptive_threshold", "seed", "device", "worker_memory", "worker_jobs"})
+                                        "adaptive_threshold", "seed", "device", "worker_memory", "worker_jobs",
+                                        "dither", "world_sampling", "world_map_resolution"})
         part.update(pixels)
         if device != "cpu":
             part["device"] = device
         part.update({k: v for k in ("adaptive_threshold", "seed") if (v := getattr(self, k))})
+        if self.dither != 1.0:  # Blender's default: keys of specs that do not set it stay as they were
+            part["dither"] = self.dither
+        if self.world_sampling != "automatic":
+            part["world_sampling"] = self.world_sampling
+            if self.world_sampling == "manual":
+                part["world_map_resolution"] = self.world_map_resolution
         return part
 
 
@@ -110,6 +126,10 @@ class ModelSpec(StrictModel):
     backend: Literal["torch", "onnx"] = Field("torch", description="onnx: ONNX Runtime, checked against torch.")
     batch_size: int = Field(32, ge=1, le=4096)
     threads: int = Field(0, ge=0, le=1024, description="torch threads; 0 = all cores.")
+    resize_arithmetic: Literal["float", "uint8"] = Field(
+        "float", description="How the model's bilinear resize computes: 'float' (on the float image, sweep3d's "
+                             "default) or 'uint8' (on 8-bit pixels, rounded back to 8 bits, as PIL and torchvision "
+                             "on PIL images do). In the prediction key only when not 'float'.")
 
     @property
     def label(self) -> str:
@@ -303,6 +323,13 @@ class ReportSpec(StrictModel):
                            "for the pass only and re-infers nothing).")
 
 
+class AggregateSpec(StrictModel):
+    drop_fragile: bool = Field(
+        False, description="Leave fragile results (near-ties that the stability check saw flip under changes no "
+                           "eye sees; `sweep3d stability`) out of what is counted: failure modes, boundaries and "
+                           "accuracies. Without a check, nothing is left out.")
+
+
 class PostprocessSpec(StrictModel):
     store: Literal["all", "none"] = Field(
         "none", description="Which post-processed images are written to the store: 'none' makes each in "
@@ -389,6 +416,7 @@ class Spec(StrictModel):
     policy: PolicySpec = PolicySpec()
     postprocess: PostprocessSpec = PostprocessSpec()
     report: ReportSpec = ReportSpec()
+    aggregate: AggregateSpec = AggregateSpec()
 
     @model_validator(mode="after")
     def _model_or_models(self) -> Spec:

@@ -26,6 +26,7 @@ import pyarrow as pa
 from sweep3d.evaluation import EVALUATOR_METADATA, EvaluatorRecord
 from sweep3d.spec.columns import (
     CLASS_NAMES_METADATA,
+    DROP_FRAGILE_METADATA,
     MIN_VISIBLE_METADATA,
     MIN_VISIBLE_OFF,
     PARAMETERS_METADATA,
@@ -499,6 +500,8 @@ class Plan:
             gated = visibility_gated(self.spec)
             metadata[MIN_VISIBLE_METADATA] = repr(float(self.spec.evaluator.min_visible)).encode() if gated \
                 else MIN_VISIBLE_OFF
+        if self.spec.spec.aggregate.drop_fragile:  # only then: other plans' files stay as they were
+            metadata[DROP_FRAGILE_METADATA] = b"true"
         metadata[EVALUATOR_METADATA] = self.evaluator_record().to_json()
         model = self.model or self.spec.model.label
         metadata[CLASS_NAMES_METADATA] = json.dumps({model: [list(c) for c in self.class_names]}).encode()

@@ -9,6 +9,7 @@ from typing import Any
 from sweep3d.evaluation import Roles
 from sweep3d.report.figures import pct
 from sweep3d.report.panel import PanelInputs
+from sweep3d.stages.aggregate.fragile import fragile_sentence
 from sweep3d.stages.aggregate.results import results_roles
 
 
@@ -43,7 +44,7 @@ def build(inputs: PanelInputs) -> dict[str, Any]:
             "outcome": _outcome(outcome, iou),
         })
     return {"cards": cards, "wrong": inputs.summary.wrong, "order": _order(roles),
-            "truth_note": _truth_note(cards, roles)}
+            "truth_note": _truth_note(cards, roles), "fragile": fragile_sentence(inputs.summary)}
 
 
 def _order(roles: Roles) -> str:

@@ -44,6 +44,7 @@ from sweep3d.spec.columns import (
     PROTOCOL_METADATA,
 )
 from sweep3d.stages.aggregate.class_names import named_columns, read_class_names
+from sweep3d.stages.aggregate.fragile import create_margin_macro, margin_sql
 from sweep3d.stages.aggregate.quoting import identifier, literal
 
 DEFAULT_MIN_VISIBLE = 0.1
@@ -87,6 +88,10 @@ def register_results(con: duckdb.DuckDBPyConnection, jobs: Path, truths: bool) -
                for usual, column in record.roles.aliases().items() if usual != column and column in have]
     picked += [f"{named[c]} AS {identifier(c)}" for c in MODEL_NAME_COLUMNS.values()
                if c in named and c not in record.columns]
+    margin = margin_sql(set(have) & set(record.columns)) if "margin" not in record.columns else None
+    if margin is not None:  # the best true class's probability less the best other's (aggregate.fragile)
+        create_margin_macro(con)
+        picked.append(f"{margin} AS margin")
     valid = record.roles.valid
     counted = (COUNTED_SQL.format(valid=identifier(valid)) if truth is not None else f"p.{identifier(valid)}") \
         if valid in have else None

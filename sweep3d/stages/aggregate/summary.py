@@ -32,7 +32,7 @@ REGION_LIMIT = 3  # control values a summary names where the model fails, most c
 BOUNDARY_LIMIT = 3  # boundaries of single objects or environments a summary names, most certain first
 #: Bump when :func:`summarise` gives other numbers for the same rows without a change to this
 #: module or to the views' module (both are part of a remembered summary's key).
-SUMMARY_FORMAT = 5
+SUMMARY_FORMAT = 6
 
 
 @dataclass
@@ -83,6 +83,12 @@ class Summary:
     no_boundaries: list[dict[str, Any]] = field(default_factory=list)
     #: significant boundaries of single objects or environments beyond the ones named
     boundaries_left_out: int = 0
+    #: failures whose verdict the stability check says changes no eye sees could flip (None: no check
+    #: yet, or an evaluator without a margin); see ``aggregate.fragile``
+    fragile_failures: int | None = None
+    fragile_threshold: float | None = None  # |margin| below which a result is fragile
+    fragile_checked: int = 0  # images the stability check re-inferred
+    fragile_dropped: int = 0  # fragile results left out of what is counted ([aggregate] drop_fragile)
 
     @property
     def wrong(self) -> int:
@@ -157,7 +163,24 @@ def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit:
     boundaries, no_boundaries, left_out = boundary_findings(con, scales)
     return Summary(jobs, evaluated, invalid, correct, accuracy, objects, environments, scene_accuracy,
                    scene_count, effects, failures, per_object, counted, sum(reasons.values()), reasons, min_visible,
-                   regions, gap, boundaries, no_boundaries, left_out)
+                   regions, gap, boundaries, no_boundaries, left_out, *fragile_findings(con, have))
+
+
+def fragile_findings(con: duckdb.DuckDBPyConnection, have: set[str]) -> tuple[int | None, float | None, int, int]:
+    """(fragile failures, threshold, images checked, fragile results not counted) of the model
+    ``results`` shows; (None, None, 0, 0) before any stability check (or without a margin)."""
+    if "fragile" not in have or not has_view(con, "fragile_threshold"):
+        return None, None, 0, 0
+    model = con.execute("SELECT any_value(model) FROM results").fetchone()[0] if "model" in have else None
+    found = con.execute("SELECT threshold, checked FROM fragile_threshold WHERE model IS NOT DISTINCT FROM ?",
+                        [model]).fetchone()
+    if found is None:
+        return None, None, 0, 0
+    before = "counted_with_fragile" if "counted_with_fragile" in have else "counted"
+    fragile, dropped = con.execute(
+        f"SELECT count(*) FILTER (WHERE {before} AND NOT correct AND fragile), "
+        f"count(*) FILTER (WHERE {before} AND NOT counted) FROM results").fetchone()
+    return int(fragile), float(found[0]), int(found[1]), int(dropped)
 
 
 #: What the findings keep of a boundary (``failure_boundaries`` columns).
@@ -322,7 +345,8 @@ def summary_path(store: Store, experiment: str) -> Path:
 def summary_key(store: Store, experiment: str, columns: list[str], failure_limit: int = FAILURE_LIMIT,
                 scales: dict[str, Scale] | None = None) -> str:
     """What a summary of ``experiment`` is computed from, as a hex digest (see :func:`stored_summary`)."""
-    files = [store.jobs_path(experiment), *store.segments("predictions"), *store.segments("truths")]
+    files = [store.jobs_path(experiment), *store.segments("predictions"), *store.segments("truths"),
+             *store.segments("stability")]  # the stability check's rows say which results are fragile
     states = []
     for path in files:
         try:

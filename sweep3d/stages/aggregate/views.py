@@ -105,6 +105,7 @@ from sweep3d.stages.aggregate.compare import COMPARE_MACROS, COMPARE_VIEWS, regi
 from sweep3d.stages.aggregate.counterfactuals import register_counterfactual_views
 from sweep3d.stages.aggregate.detection import DETECTION_VIEWS, detection_views
 from sweep3d.stages.aggregate.failure_modes import create_failure_modes
+from sweep3d.stages.aggregate.fragile import plan_drops_fragile, register_fragile
 from sweep3d.stages.aggregate.paired import PAIRED_VIEWS, register_paired_views
 from sweep3d.stages.aggregate.parts import register_part_views
 from sweep3d.stages.aggregate.quoting import identifier, literal
@@ -165,6 +166,8 @@ def connect(store: Store, experiment: str | None = None, read_only: bool = False
         min_visible = plan_min_visible(store.jobs_path(experiment))
     shown = None
     if has_view(con, "results"):
+        _create_macros(con)  # the stability views' Wilson intervals
+        register_fragile(con, drop=experiment is not None and plan_drops_fragile(store.jobs_path(experiment)))
         shown = _select_model(con, models, model)
     elif model is not None:
         raise UserError(f"--model {model}: the experiment has no results yet")

@@ -75,6 +75,12 @@ class ModelHandle:
             raise
         except UserError as exc:
             raise SpecError(str(spec.path), key, str(exc)) from None
+        try:
+            preprocess = with_arithmetic(preprocess, settings.resize_arithmetic, name)
+            if loaded is not None:
+                loaded = dataclasses.replace(loaded, preprocess=preprocess)
+        except UserError as exc:
+            raise SpecError(str(spec.path), key.replace(".name", ".resize_arithmetic"), str(exc)) from None
         own = preprocess
         framing = Framing.full(spec.render.resolution) if spec.render.resolution != "model" else None
         if framing is None:
@@ -108,6 +114,8 @@ class ModelHandle:
         """The model ready for inference (loaded on first use), preprocessing for this framing."""
         if self._classifier is None:
             model = load_model(self.name)
+            model = dataclasses.replace(model, preprocess=with_arithmetic(model.preprocess,
+                                                                          self.settings.resize_arithmetic, self.name))
             if self.framing.model:  # the image is the model's input already: no resize or crop again
                 model = dataclasses.replace(model, preprocess=for_model_framing(model.preprocess, self.name))
             self._classifier = model
@@ -120,3 +128,17 @@ def model_key_path(spec: LoadedSpec, settings: ModelSpec) -> str:
         if model is settings:
             return f"models[{i}].name"
     return "model.name"
+
+
+def with_arithmetic(preprocess: Any, arithmetic: str, name: str) -> Any:
+    """``preprocess`` resizing with ``[model] resize_arithmetic`` (itself for the default).
+
+    Raises:
+        UserError: a non-default arithmetic for a model whose preprocessing is not sweep3d's.
+    """
+    if arithmetic == "float" or getattr(preprocess, "arithmetic", None) == arithmetic:
+        return preprocess
+    if not isinstance(preprocess, Preprocess):
+        raise UserError(f"model {name!r} preprocesses with a {type(preprocess).__name__}, not sweep3d's Preprocess, "
+                        f"so resize_arithmetic = {arithmetic!r} cannot apply; remove it or resize in your own preprocessing")
+    return dataclasses.replace(preprocess, arithmetic=arithmetic)

@@ -30,12 +30,17 @@ IMAGENET_STD = (0.229, 0.224, 0.225)
 
 @dataclass(frozen=True)
 class Preprocess:
-    """Resize the short side, centre-crop, normalise: the usual ImageNet evaluation transform."""
+    """Resize the short side, centre-crop, normalise: the usual ImageNet evaluation transform.
+
+    ``arithmetic``: how the (antialiased) bilinear resize computes: ``"float"`` on the float image
+    (torch), or ``"uint8"`` on 8-bit pixels rounded back to 8 bits (PIL's, which torchvision applies to
+    PIL images): another tool's answers on near-ties can depend on it."""
 
     resize: int = 256
     crop: int = 224
     mean: tuple[float, float, float] = IMAGENET_MEAN
     std: tuple[float, float, float] = IMAGENET_STD
+    arithmetic: str = "float"
 
     def __call__(self, images: np.ndarray):
         """Args: images, float32 (N, H, W, 3) in [0, 1]. Returns: torch float32 (N, 3, crop, crop)."""
@@ -47,7 +52,10 @@ class Preprocess:
         scale = self.resize / min(h, w)
         size = (max(self.crop, round(h * scale)), max(self.crop, round(w * scale)))
         if size != (h, w):
-            x = F.interpolate(x, size=size, mode="bilinear", antialias=True, align_corners=False)
+            if self.arithmetic == "uint8":
+                x = torch.from_numpy(resize_uint8(images, size)).permute(0, 3, 1, 2)
+            else:
+                x = F.interpolate(x, size=size, mode="bilinear", antialias=True, align_corners=False)
         top, left = (size[0] - self.crop) // 2, (size[1] - self.crop) // 2
         x = x[:, :, top : top + self.crop, left : left + self.crop]
         mean = torch.tensor(self.mean).view(1, 3, 1, 1)
@@ -55,7 +63,10 @@ class Preprocess:
         return (x - mean) / std
 
     def key_part(self) -> dict[str, Any]:
-        return {"resize": self.resize, "crop": self.crop, "mean": list(self.mean), "std": list(self.std)}
+        part = {"resize": self.resize, "crop": self.crop, "mean": list(self.mean), "std": list(self.std)}
+        if self.arithmetic != "float":  # the default keeps the keys it always had
+            part["arithmetic"] = self.arithmetic
+        return part
 
     def to_image(self, boxes: np.ndarray, height: int, width: int) -> np.ndarray:
         """Boxes (N, 4) in the model's input pixels (the crop) as pixels of the (height, width)
@@ -67,6 +78,17 @@ class Preprocess:
         out[:, [0, 2]] = (out[:, [0, 2]] + left) * (width / cols)
         out[:, [1, 3]] = (out[:, [1, 3]] + top) * (height / rows)
         return out
+
+
+def resize_uint8(images: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """``images`` (float32 (N, H, W, 3) in [0, 1]) quantised to 8 bits, resized to ``size`` (rows,
+    columns) by PIL's antialiased bilinear filter on the 8-bit pixels, as float32 in [0, 1] again."""
+    from PIL import Image
+
+    pixels = (np.clip(np.nan_to_num(images), 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
+    out = [np.asarray(Image.fromarray(image).resize((size[1], size[0]), Image.Resampling.BILINEAR))
+           for image in pixels]
+    return np.stack(out).astype(np.float32) / np.float32(255.0)
 
 
 @dataclass(frozen=True)

@@ -55,6 +55,9 @@ class RenderSettings:
     threads: int = _SPEC.threads
     passes: tuple[str, ...] = ()
     device: str = "cpu"
+    dither: float = _SPEC.dither
+    world_sampling: Literal["automatic", "manual", "none"] = _SPEC.world_sampling
+    world_map_resolution: int = _SPEC.world_map_resolution
 
     @classmethod
     def from_spec(cls, spec: RenderSpec, framing: Framing, passes: Iterable[str] = (),

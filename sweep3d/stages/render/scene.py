@@ -177,6 +177,7 @@ class BlenderScene:
         scene.render.use_persistent_data = True  # keeps the BVH and the importance map while they stay
         scene.render.threads_mode = "FIXED"
         scene.render.threads = s.threads or os.cpu_count() or 1
+        scene.render.dither_intensity = s.dither
         scene.view_settings.view_transform = "Standard"
         scene.view_settings.look = "None"
         scene.render.image_settings.file_format = "PNG"
@@ -214,6 +215,8 @@ class BlenderScene:
         if nodes is None:
             world = self.bpy.data.worlds.new("sweep3d_world")
             world.use_fake_user = True  # out of use while another is current: not an orphan to purge
+            world.cycles.sampling_method = self.settings.world_sampling.upper()  # the HDRI's importance map
+            world.cycles.sample_map_resolution = self.settings.world_map_resolution
             nodes = WorldNodes(self.bpy, world)
             self.worlds.add(environment, nodes)
         return nodes

@@ -1,0 +1,272 @@
+"""The stability check: re-infer a seeded sample of a run's images under changes no eye sees
+(:mod:`sweep3d.stability.changes`) and record, per image and change, whether the verdict flipped.
+
+The sample is stratified by ``|margin|`` (the bins of ``aggregate.fragile.MARGIN_EDGES``): bins take
+turns, lowest first, each giving its next image in a seeded order, so the near-ties that decide
+the fragile threshold are all checked when there are few of them, and every bin gets a share.
+
+Each (image, model, change) is one row of the store's ``stability`` table under its
+``stability_key`` (the prediction key, the change, the check's version, and the seed for a random
+change), so a second check recomputes nothing and a larger sample adds only what is new. The
+baseline is inferred again beside the changed images, by torch with the model's own
+preprocessing, so a flip compares two answers of one computation.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+
+from sweep3d.cache.keys import digest
+from sweep3d.cache.store import Store, utc_now
+from sweep3d.errors import UserError
+from sweep3d.spec.loader import LoadedSpec
+from sweep3d.stability.changes import CHANGES, RANDOM_CHANGES, changed, margins
+
+#: Bumped when the check gives other rows for the same inputs.
+STABILITY_VERSION = 1
+DEFAULT_SAMPLE = 64
+SCHEMA = pa.schema([("stability_key", pa.string()), ("pred_key", pa.string()), ("image_key", pa.string()),
+                    ("change", pa.string()), ("seed", pa.int64()),
+                    ("base_correct", pa.bool_()), ("base_margin", pa.float64()), ("correct", pa.bool_()),
+                    ("margin", pa.float64()), ("flipped", pa.bool_()), ("created_at", pa.timestamp("us", tz="UTC"))])
+
+
+@dataclass
+class Checked:
+    """What one model's check did and found."""
+
+    model: str
+    sampled: int
+    computed: int
+    cached: int
+    skipped: list[str]  # changes that do not apply (and why)
+    bins: list[dict[str, Any]]  # stability_bins rows of the model
+    changes: list[dict[str, Any]]  # stability_changes rows with n > 0
+    threshold: float
+    failures: int
+    fragile_failures: int
+
+
+def stability_key(pred_key: str, change: str, seed: int) -> str:
+    """The key of one change's row for one prediction; a deterministic change is the same under any seed."""
+    value: dict[str, Any] = {"stage": "stability", "v": STABILITY_VERSION, "pred": pred_key, "change": change}
+    if change in RANDOM_CHANGES:
+        value["seed"] = seed
+    return digest(value)
+
+
+def stratified_sample(rows: list[tuple[str, float]], n: int, seed: int) -> list[str]:
+    """``n`` prediction keys of ``rows`` ((pred_key, margin), distinct keys): bins of ``|margin|``
+    take turns, lowest first, each giving its next key in an order seeded by ``seed``."""
+    from sweep3d.stages.aggregate.fragile import MARGIN_EDGES
+
+    bins: list[list[str]] = [[] for _ in MARGIN_EDGES]
+    for key, margin in rows:
+        index = next((i for i, edge in enumerate(MARGIN_EDGES[:-1]) if abs(margin) < edge), len(MARGIN_EDGES) - 1)
+        bins[index].append(key)
+    for keys in bins:
+        keys.sort(key=lambda k: hashlib.sha256(f"{seed}\0{k}".encode()).digest())
+    out: list[str] = []
+    depth = 0
+    while len(out) < n and any(depth < len(keys) for keys in bins):
+        for keys in bins:
+            if depth < len(keys) and len(out) < n:
+                out.append(keys[depth])
+        depth += 1
+    return out
+
+
+def check(spec: LoadedSpec, sample: int = DEFAULT_SAMPLE, seed: int = 0, console: Any = None) -> list[Checked]:
+    """Run the stability check of ``spec``'s results (every model of it); returns what each found.
+
+    Raises:
+        UserError: no results yet, or an evaluator that does not rank classes.
+    """
+    from sweep3d.pipeline import plan_spec
+    from sweep3d.stages.aggregate.own_jobs import results_store
+    from sweep3d.stages.infer.handle import ModelHandle
+
+    if spec.evaluator.kind != "classification":
+        raise UserError(f"stability: [evaluator] kind = {spec.evaluator.kind!r}; the check reads the margin of "
+                        "a classification verdict (kind = \"classification\")")
+    out = []
+    store = Store(spec.store)
+    for settings in spec.spec.all_models:
+        handle = ModelHandle.resolve(spec, settings)
+        with results_store(spec) as reading:
+            rows = _sampled_results(reading, spec, settings.label if len(spec.spec.all_models) > 1 else None)
+        keys = stratified_sample(rows, sample, seed)
+        plan = plan_spec(spec, handle)
+        jobs = {job.pred_key: job for job in plan.jobs if job.pred_key in set(keys)}
+        todo_changes = _applicable(handle, plan)
+        wanted = {(key, change): stability_key(key, change, seed) for key in keys for change in todo_changes}
+        have = store.key_set("stability")
+        todo = sorted({key for (key, _), skey in wanted.items() if skey not in have}, key=keys.index)
+        computed = _compute(store, spec, plan, handle, [jobs[k] for k in todo], todo_changes, seed, wanted, console,
+                            cached=len(keys) - len(todo))
+        skipped = [f"{c}: {why}" for c, why in _inapplicable(handle, plan).items()]
+        out.append(_found(spec, settings.label, len(keys), computed, len(keys) - len(todo), skipped))
+    return out
+
+
+def _sampled_results(store: Store, spec: LoadedSpec, model: str | None) -> list[tuple[str, float]]:
+    """(pred_key, margin) of the counted results with a margin, one per prediction key."""
+    from sweep3d.stages.aggregate import connect
+    from sweep3d.stages.aggregate.views import no_results
+
+    con = connect(store, spec.name, model=model)
+    try:
+        have = {row[0] for row in con.execute("DESCRIBE results").fetchall()} \
+            if con.execute("SELECT count(*) FROM duckdb_views() WHERE view_name = 'results'").fetchone()[0] else set()
+        if "margin" not in have:
+            raise no_results(store, spec.name, spec.path)
+        counted = "coalesce(counted_with_fragile, counted)" if "counted_with_fragile" in have else "counted"
+        rows = con.execute(f"SELECT pred_key, any_value(margin) FROM results WHERE {counted} AND margin IS NOT NULL "
+                           "GROUP BY pred_key ORDER BY pred_key").fetchall()
+    finally:
+        con.close()
+    if not rows:
+        raise no_results(store, spec.name, spec.path)
+    return [(key, float(margin)) for key, margin in rows]
+
+
+def _inapplicable(handle: Any, plan: Any) -> dict[str, str]:
+    """Changes that cannot change this model's answers, and why."""
+    from sweep3d.stages.infer.models import Preprocess
+
+    view = handle.view
+    if view is None:
+        return {"resize": "the model's preprocessing is not sweep3d's Preprocess"}
+    side = handle.framing.crop or handle.framing.size
+    scale = view.resize / side
+    if handle.framing.model or max(view.crop, round(side * scale)) == side:
+        return {"resize": "the model does not resize these images (they are its input)"}
+    assert isinstance(view, Preprocess)
+    return {}
+
+
+def _applicable(handle: Any, plan: Any) -> list[str]:
+    skip = _inapplicable(handle, plan)
+    return [c for c in CHANGES if c not in skip]
+
+
+def _compute(store: Store, spec: LoadedSpec, plan: Any, handle: Any, jobs: list, changes: list[str], seed: int,
+             wanted: dict[tuple[str, str], str], console: Any, cached: int = 0) -> int:
+    """Infer the baseline and each change of ``jobs``' images and append their rows; returns how many images."""
+    if not jobs:
+        return 0
+    from sweep3d.cache.blobs import load_image
+    from sweep3d.pixels import from_uint8, to_uint8
+    from sweep3d.progress import RunProgress
+    from sweep3d.stages.infer.stage import _truths
+    from sweep3d.stages.infer.tasks import predict
+    from sweep3d.stages.postprocess.stage import make_image, post_controls, truth_digests
+
+    model = handle.classifier()
+    other = _other_arithmetic(model)
+    truths = _truths(plan, model.label_map(), handle.name)
+    digests = {t: store.digests(t) for t in ("renders", "images")}
+    passes = truth_digests(store)
+    have = store.key_set("stability")
+    post = post_controls(plan)
+    batch = max(1, spec.spec.all_models[0].batch_size // (1 + len(changes)))
+    rows: list[dict[str, Any]] = []
+    with RunProgress(console) as progress, progress.stage("stability", len(jobs), cached) as bar:
+        for start in range(0, len(jobs), batch):
+            part = jobs[start: start + batch]
+            pixels = []
+            for job in part:
+                image = load_image(store, job.image_key, digests["images"].get(job.image_key)) \
+                    if digests["images"].get(job.image_key) else None
+                if image is None:
+                    made = make_image(store, plan, job, post, digests["renders"].get(job.render_key), passes)
+                    if made.pixels is None:
+                        raise UserError(f"stability: the image of job {job.index} is missing from the store "
+                                        f"(render key {job.render_key}); run `sweep3d run {spec.path}` first")
+                    pixels.append(made.pixels)
+                else:
+                    pixels.append(to_uint8(image))
+            ids = [truths[job.object] for job in part]
+            base = predict(model, from_uint8(np.stack(pixels)), handle.name)
+            answers = {}
+            for change in [c for c in changes if any(wanted[(job.pred_key, c)] not in have for job in part)]:
+                if change == "resize":
+                    answers[change] = predict(other, from_uint8(np.stack(pixels)), handle.name)
+                else:
+                    moved = [changed(p, change, seed, job.image_key) for p, job in zip(pixels, part)]
+                    answers[change] = predict(model, from_uint8(np.stack(moved)), handle.name)
+            rows += [row for row in _rows(part, ids, base, answers, seed, wanted) if row["stability_key"] not in have]
+            bar.advance(len(part))
+    with store.lock():
+        store.append("stability", rows, SCHEMA)
+    return len(jobs)
+
+
+def _other_arithmetic(model: Any) -> Any:
+    """The model with its resize computed in the other arithmetic (8-bit against float)."""
+    preprocess = model.preprocess
+    if not hasattr(preprocess, "arithmetic"):
+        return model
+    flipped = "float" if preprocess.arithmetic == "uint8" else "uint8"
+    return dataclasses.replace(model, preprocess=dataclasses.replace(preprocess, arithmetic=flipped))
+
+
+def _rows(jobs: list, ids: list, base: np.ndarray, answers: dict[str, np.ndarray], seed: int,
+          wanted: dict[tuple[str, str], str]) -> list[dict[str, Any]]:
+    """The table rows of one batch: per job and change, the baseline's and the change's verdicts;
+    an image whose logits are not finite (either side) gives no row (it is not counted anyway)."""
+    base_margin = margins(base, ids)
+    base_correct = base.argmax(axis=1)
+    now = utc_now()
+    out = []
+    for change, logits in answers.items():
+        margin = margins(logits, ids)
+        top = logits.argmax(axis=1)
+        for i, job in enumerate(jobs):
+            if not (np.isfinite(base_margin[i]) and np.isfinite(margin[i])):
+                continue
+            right, was = bool(int(top[i]) in ids[i]), bool(int(base_correct[i]) in ids[i])
+            out.append({"stability_key": wanted[(job.pred_key, change)], "pred_key": job.pred_key,
+                        "image_key": job.image_key, "change": change,
+                        "seed": seed if change in RANDOM_CHANGES else None, "base_correct": was,
+                        "base_margin": float(base_margin[i]), "correct": right, "margin": float(margin[i]),
+                        "flipped": right != was, "created_at": now})
+    return out
+
+
+def _found(spec: LoadedSpec, model: str, sampled: int, computed: int, cached: int, skipped: list[str]) -> Checked:
+    """What the views say of ``model`` once its rows are stored."""
+    from sweep3d.stages.aggregate.own_jobs import results_store
+
+    several = len(spec.spec.all_models) > 1
+    with results_store(spec) as reading:
+        from sweep3d.stages.aggregate import connect
+        from sweep3d.stages.aggregate.quoting import literal
+
+        con = connect(reading, spec.name, model=model if several else None)
+        try:
+            have = {row[0] for row in con.execute("DESCRIBE results").fetchall()}
+            shown = con.execute("SELECT any_value(model) FROM results").fetchone()[0] if "model" in have else None
+            where = f"model IS NOT DISTINCT FROM {'NULL' if shown is None else literal(shown)}"
+            bins = _dicts(con, f"SELECT * FROM stability_bins WHERE {where} ORDER BY bin")
+            changes = _dicts(con, f"SELECT * FROM stability_changes WHERE {where} AND n > 0 ORDER BY change, bin")
+            threshold = con.execute(f"SELECT threshold FROM fragile_threshold WHERE {where}").fetchone()
+            counted = "coalesce(counted_with_fragile, counted)" if "counted_with_fragile" in have else "counted"
+            failures, fragile = con.execute(f"SELECT count(*) FILTER (WHERE {counted} AND NOT correct), count(*) "
+                                            f"FILTER (WHERE {counted} AND NOT correct AND fragile) FROM results").fetchone()
+        finally:
+            con.close()
+    return Checked(model, sampled, computed, cached, skipped, bins, changes,
+                   float(threshold[0]) if threshold else 0.0, int(failures), int(fragile or 0))
+
+
+def _dicts(con: Any, sql: str) -> list[dict[str, Any]]:
+    cursor = con.execute(sql)
+    names = [d[0] for d in cursor.description]
+    return [dict(zip(names, row)) for row in cursor.fetchall()]
