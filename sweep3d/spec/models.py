@@ -66,6 +66,9 @@ class RenderSpec(StrictModel):
                                "after a job before it is replaced by a fresh one (between jobs); 0 = no limit.")
     worker_jobs: int = Field(0, ge=0, description="Replace a render worker by a fresh one after this many jobs; "
                                                   "0 = never.")
+    engine: Literal["cycles", "mitsuba"] = Field(
+        "cycles", description="The renderer: Blender's Cycles, or Mitsuba 3 (a second renderer, to tell a model's "
+                              "failure from a simulator artifact; docs/how-to/second-renderer.md). Keyed apart.")
 
     @field_validator("resolution", mode="before")
     @classmethod
@@ -95,7 +98,8 @@ class RenderSpec(StrictModel):
                 keep the keys they had before the setting existed.
         """
         part = self.model_dump(exclude={"threads", "workers", "timeout", "edit_timeout", "resolution",
-                                        "adaptive_threshold", "seed", "device", "worker_memory", "worker_jobs"})
+                                        "adaptive_threshold", "seed", "device", "worker_memory", "worker_jobs",
+                                        "engine"})  # the engine keys apart: render/keys.py
         part.update(pixels)
         if device != "cpu":
             part["device"] = device
