@@ -92,8 +92,8 @@ def read_obj(path: Path) -> ObjMesh:
         elif tag == "f":
             corners = [_corner(c, len(positions), len(texcoords), len(normals)) for c in parts[1:]]
             bucket = faces.setdefault(obj, {}).setdefault((material, smooth), [])
-            for i in range(1, len(corners) - 1):
-                bucket += (corners[0], corners[i], corners[i + 1])
+            for tri in triangulate([positions[c[0]] for c in corners]):
+                bucket += (corners[tri[0]], corners[tri[1]], corners[tri[2]])
         elif tag == "o" and len(parts) > 1:
             obj = " ".join(parts[1:])
         elif tag == "usemtl":
@@ -120,11 +120,63 @@ def read_obj(path: Path) -> ObjMesh:
                 n = vn[index[:, 2]]
             else:
                 n = smooth_normals[index[:, 0]]
-            n = _unit(n, np.repeat(face_n, 3, axis=0))
+            flat = np.repeat(face_n, 3, axis=0)
+            n = _unit(n, flat)
+            n = np.where(((n * flat).sum(axis=1) < 0.0)[:, None], flat, n)  # a smooth normal facing away
             uvs = vt[np.maximum(index[:, 1], 0)] if len(vt) and (index[:, 1] >= 0).all() else None
             known = mat if mat in mesh.materials else DEFAULT_MATERIAL
             mesh.pieces.append(Piece(name, known, p, n.astype(np.float32), uvs))
     return mesh
+
+
+def triangulate(polygon: list[tuple[float, float, float]]) -> list[tuple[int, int, int]]:
+    """A face's triangles as corner indices: a fan for a convex face (as Blender splits a quad),
+    ear clipping in the face's plane for a concave one (an n-gon around a hole's bridge, which a
+    fan would cover), so no triangle lies outside the face."""
+    n = len(polygon)
+    fan = [(0, i, i + 1) for i in range(1, n - 1)]
+    if n <= 3:
+        return fan
+    p = np.asarray(polygon, dtype=np.float64)
+    normal = np.cross(p - p.mean(axis=0), np.roll(p, -1, axis=0) - p.mean(axis=0)).sum(axis=0)  # Newell
+    if not np.linalg.norm(normal) > 0:
+        return fan
+    axis = int(np.argmax(np.abs(normal)))
+    xy = np.delete(p, axis, axis=1)  # seen from +axis; (x, z) is seen from -y
+    if (normal[axis] > 0) == (axis == 1):
+        xy[:, 0] = -xy[:, 0]  # mirrored, so the face turns counter-clockwise
+    turn = [_cross2(xy[i - 1], xy[i], xy[(i + 1) % n]) for i in range(n)]
+    if min(turn) >= 0:  # convex (counter-clockwise in the plane)
+        return fan
+    return _ear_clip(xy) or fan
+
+
+def _cross2(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> float:
+    return float((b[0] - a[0]) * (c[1] - b[1]) - (b[1] - a[1]) * (c[0] - b[0]))
+
+
+def _ear_clip(xy: np.ndarray) -> list[tuple[int, int, int]]:
+    """Ear clipping of a counter-clockwise simple polygon (empty when it finds no ear: not simple)."""
+    left = list(range(len(xy)))
+    out: list[tuple[int, int, int]] = []
+    while len(left) > 3:
+        for k in range(len(left)):
+            a, b, c = left[k - 1], left[k], left[(k + 1) % len(left)]
+            if _cross2(xy[a], xy[b], xy[c]) <= 0:
+                continue  # reflex
+            inside = any(_in_triangle(xy[q], xy[a], xy[b], xy[c]) for q in left if q not in (a, b, c))
+            if not inside:
+                out.append((a, b, c))
+                left.pop(k)
+                break
+        else:
+            return []
+    out.append((left[0], left[1], left[2]))
+    return out
+
+
+def _in_triangle(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> bool:
+    return _cross2(a, b, p) >= 0 and _cross2(b, c, p) >= 0 and _cross2(c, a, p) >= 0
 
 
 def _corner(token: str, nv: int, nt: int, nn: int) -> tuple[int, int, int]:

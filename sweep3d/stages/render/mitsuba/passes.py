@@ -98,10 +98,17 @@ def surfaces(scene: MitsubaScene, size: int, widen: float, window: tuple[int, in
     sensor["film"] = {**sensor["film"], "rfilter": {"type": "box"}, "crop_offset_x": x, "crop_offset_y": y,
                       "crop_width": w, "crop_height": h}
     sensor["sampler"] = {"type": "stratified", "sample_count": 1, "jitter": False}  # the pixel's centre, as Cycles
-    loaded = scene.load(scene.describe(SURFACES, sensor, scenery=scenery, lit=False))
+    mi = scene.mi
+    if scenery and scene.loaded is not None:  # the job's own scene, seen by this sensor
+        loaded = scene.loaded
+        image = mi.render(loaded, sensor=mi.load_dict(scene.converted(sensor)), integrator=mi.load_dict(SURFACES),
+                          spp=1, seed=scene.settings.seed)
+    else:
+        loaded = scene.load(scene.describe(SURFACES, sensor, scenery=scenery, lit=False))
+        image = mi.render(loaded, spp=1, seed=scene.settings.seed)
+    image = np.asarray(image, dtype=np.float64)
     ids = [shape.id() for shape in loaded.shapes()]
     is_object = np.array([False] + [i.startswith("object_") for i in ids])
-    image = np.asarray(scene.mi.render(loaded, spp=1, seed=scene.settings.seed), dtype=np.float64)
     index = np.rint(image[..., 4]).astype(np.int64)
     hit = (image[..., 0] > 0) & (index > 0) & (index < len(is_object))
     obj = hit & is_object[np.where(hit, index, 0)]

@@ -25,9 +25,10 @@ import numpy as np
 from sweep3d.errors import UserError
 from sweep3d.pixels import encode_png
 from sweep3d.spec.looks import unknown_name
-from sweep3d.stages.render.engines import MITSUBA_VARIANT
+from sweep3d.stages.render import engines
 from sweep3d.stages.render.lights import WHITE, SunLight
 from sweep3d.stages.render.mitsuba import translate
+from sweep3d.stages.render.mitsuba.hdri import load_bitmap
 from sweep3d.stages.render.mitsuba.objfile import MtlMaterial, ObjMesh, read_obj
 from sweep3d.stages.render.protocol import EnvironmentRef, Look, RenderSettings
 from sweep3d.stages.render.state import SceneState
@@ -38,13 +39,14 @@ FILTER_STDDEV = 0.3
 LLVM_LIBRARIES = ("/usr/lib/x86_64-linux-gnu/libLLVM-19.so", "/usr/lib/llvm-19/lib/libLLVM.so")
 
 
-def load_mitsuba(variant: str = MITSUBA_VARIANT) -> Any:
-    """``mitsuba`` with ``variant`` set (Debian's libLLVM for an llvm variant when
+def load_mitsuba(variant: str | None = None) -> Any:
+    """``mitsuba`` with ``variant`` (default: ``engines.MITSUBA_VARIANT``) set (Debian's libLLVM for an llvm variant when
     ``DRJIT_LIBLLVM_PATH`` is unset), errors only in the log.
 
     Raises:
         UserError: mitsuba is not installed, or the variant cannot run here.
     """
+    variant = variant or engines.MITSUBA_VARIANT
     if variant.startswith("llvm") and "DRJIT_LIBLLVM_PATH" not in os.environ:
         found = next((p for p in LLVM_LIBRARIES if Path(p).exists()), None)
         if found:
@@ -99,6 +101,8 @@ class MitsubaScene:
         self.environment = EnvironmentRef()
         self.state = SceneState()
         self.textures: dict[str, Any] = {}  # texture path → loaded bitmap, shared by jobs
+        self.hdris: dict[str, Any] = {}  # HDRI path → its bitmap as Blender reads it (hdri.py)
+        self.loaded: Any = None  # the latest job's loaded Mitsuba scene
         self.stale = False
         truth = tuple(p for p in settings.passes if p in TRUTH_PASSES)
         from sweep3d.stages.render.mitsuba.passes import MitsubaTruth
@@ -141,7 +145,8 @@ class MitsubaScene:
         integrator = ({"type": "aov", "aovs": "albedo:albedo,normal:sh_normal", "integrator": path}
                       if denoise else path)
         scene = self.describe(integrator, translate.camera(state, s.resolution, s.crop, FILTER_STDDEV))
-        image = np.asarray(mi.render(self.load(scene), spp=s.samples, seed=s.seed), dtype=np.float32)
+        self.loaded = self.load(scene)  # the truth passes look at the same scene
+        image = np.asarray(mi.render(self.loaded, spp=s.samples, seed=s.seed), dtype=np.float32)
         rgb, alpha = np.maximum(image[..., :3], 0.0), np.clip(image[..., 3:4], 0.0, 1.0)
         if denoise:
             import pyoidn
@@ -149,7 +154,8 @@ class MitsubaScene:
             albedo = np.clip(image[..., 4:7], 0.0, 1.0)
             normal = np.clip(image[..., 7:10], -1.0, 1.0)
             rgb = np.maximum(pyoidn.denoise(np.ascontiguousarray(rgb), np.ascontiguousarray(albedo),
-                                            np.ascontiguousarray(normal), hdr=True), 0.0)
+                                            np.ascontiguousarray(normal), hdr=True,
+                                            clean_aux=s.denoise_prefilter != "accurate"), 0.0)  # as Cycles
         if background is None:
             return srgb(rgb)
         straight = srgb(rgb / np.maximum(alpha, 1e-6))  # Blender's transparent film: straight alpha
@@ -166,7 +172,7 @@ class MitsubaScene:
         with the world and the lights, which a pass that only finds surfaces does without)."""
         state, env, loaded = self.state, self.environment, self.current
         assert loaded is not None, "prepare() first"
-        sensor = {"sampler": {"type": "independent"}, **sensor}
+        sensor = {"sampler": {"type": "multijitter"}, **sensor}  # stratified: less noise than independent at 4 spp
         scene: dict[str, Any] = {"type": "scene", "integrator": integrator, "sensor": sensor}
         if lit:
             scene["world"] = self._world(env, state)
@@ -183,11 +189,12 @@ class MitsubaScene:
 
     def load(self, scene: dict[str, Any]) -> Any:
         """``mitsuba.load_dict`` of a description whose matrices are numpy arrays."""
-        return self.mi.load_dict(self._converted(scene))
+        return self.mi.load_dict(self.converted(scene))
 
-    def _converted(self, value: Any) -> Any:
+    def converted(self, value: Any) -> Any:
+        """A description with its numpy 4×4 matrices as Mitsuba transforms."""
         if isinstance(value, dict):
-            return {k: self._converted(v) for k, v in value.items()}
+            return {k: self.converted(v) for k, v in value.items()}
         if isinstance(value, np.ndarray) and value.shape == (4, 4):
             return self.mi.ScalarTransform4f(value.tolist())
         return value
@@ -197,7 +204,10 @@ class MitsubaScene:
         to the key light's fill), both times the environment's and the job's strength."""
         strength = env.strength * state.world_strength
         if env.hdri:
-            return {"type": "envmap", "filename": env.hdri, "scale": strength,
+            bitmap = self.hdris.get(env.hdri)
+            if bitmap is None:
+                bitmap = self.hdris[env.hdri] = load_bitmap(self.mi, env.hdri)
+            return {"type": "envmap", "bitmap": bitmap, "scale": strength,
                     "to_world": translate.envmap_to_world(state.world_rotation)}
         if env.key_light is not None:
             strength *= env.key_light.fill
