@@ -6,7 +6,8 @@ heights; its blur left out: one image per render) at the model's framing (224² 
 ``"mitsuba"``, each in a fresh store, and prints per environment and per object: how often the
 model's verdict (correct or not) agrees between the engines, Cohen's κ, how often its top-1 class
 agrees, the PSNR of the Mitsuba image against the Cycles one, and the median seconds per render
-(the renders table's, a worker's whole job). The machine may be shared: say so next to figures.
+(the renders table's, a worker's whole job); then each image whose verdict differs, with the
+margin of each (the true class's probability minus the best other's, from the top 5). The machine may be shared: say so next to figures.
 
     .venv/bin/python benchmarks/engines.py [--samples-per-dim 6] [--keep DIR]
 """
@@ -60,6 +61,13 @@ def kappa(pairs: list[tuple[bool, bool]]) -> float:
     return float("nan") if chance == 1 else (observed - chance) / (1 - chance)
 
 
+def margin(row: dict) -> float:
+    """The true class's probability minus the best other class's among the top k (negative: wrong)."""
+    labels = set(row["label_ids"] or [])
+    others = [p for c, p in zip(row["topk"], row["topk_probs"]) if c not in labels]
+    return float(row["label_prob"]) - (max(others) if others else 0.0)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--samples-per-dim", type=int, default=6, help="yaws per turn (the quickstart's 6)")
@@ -104,6 +112,13 @@ def main() -> None:
         k = kappa([(a, b) for a, b, _, _ in entries])
         print(f"{group:24s} {n:4d} {agree:15.1%} {k:6.2f} {top1:13.1%} {sum(a for a, *_ in entries) / n:10.1%} "
               f"{sum(b for _, b, *_ in entries) / n:11.1%} {statistics.median(p for *_, p in entries):17.1f}")
+    flips = [(key, rows["cycles"][key], rows["mitsuba"][key]) for key in shared
+             if rows["cycles"][key]["correct"] != rows["mitsuba"][key]["correct"]]
+    near = sum(abs(margin(c)) < 0.1 for _, c, _ in flips)
+    print(f"{len(flips)} verdicts differ; {near} of them within 0.1 of a tie under Cycles (|margin| < 0.1):")
+    for key, c, m in flips:
+        print(f"  {key[0]:14s} {key[1]:7s} yaw {key[2]:6.0f} elevation {key[3]:3.0f}: Cycles {c['top1_label']!r} "
+              f"(margin {margin(c):+.2f}), Mitsuba {m['top1_label']!r} (margin {margin(m):+.2f})")
     for engine in ENGINES:
         print(f"{engine:8s} {statistics.median(seconds[engine]):.3f} s per render (median of {len(seconds[engine])}; "
               f"mean {statistics.mean(seconds[engine]):.3f}); whole run {wall[engine]:.0f} s")

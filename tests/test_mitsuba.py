@@ -94,6 +94,40 @@ class Edits(RenderedControl):
         pass
 
 
+def test_an_obj_reads_as_blender_imports_it(tmp_path: Path) -> None:
+    """Blender's axes (OBJ's -Z forward, Y up), a concave face cut into triangles inside it, and
+    the MTL's values as the importer's Principled BSDF (roughness from Ns, specular from Ks)."""
+    from sweep3d.stages.render.mitsuba.objfile import read_obj
+
+    (tmp_path / "l.mtl").write_text("newmtl red\nKd 0.5 0.1 0.1\nNs 250\nKs 0.2 0.2 0.2\nNi 1.45\nd 0.5\n")
+    # an L in the OBJ's x-y plane (concave at its 4th corner: a fan from the 1st would cover the notch)
+    (tmp_path / "l.obj").write_text("mtllib l.mtl\no L\nv 0 0 0\nv 2 0 0\nv 2 1 0\nv 1 1 0\nv 1 2 0\nv 0 2 0\n"
+                                    "usemtl red\nf 1 2 3 4 5 6\n")
+    mesh = read_obj(tmp_path / "l.obj")
+    (piece,) = mesh.pieces
+    assert piece.object_name == "L" and piece.material == "red" and len(piece.positions) == 12
+    assert np.allclose(piece.positions[:, 1], 0.0) and piece.positions[:, 2].max() == 2.0  # OBJ y is Blender z
+    tris = piece.positions.reshape(-1, 3, 3)[:, :, [0, 2]]
+    centroids = tris.mean(axis=1)
+    assert not ((centroids[:, 0] > 1) & (centroids[:, 1] > 1)).any()  # nothing in the notch
+    area = np.abs(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])).sum() / 2
+    assert area == pytest.approx(3.0)
+    red = mesh.materials["red"]
+    assert red.roughness == pytest.approx(1 - math.sqrt(0.25)) and red.specular == pytest.approx(0.2)
+    assert red.ior == 1.45 and red.opacity == 0.5 and red.base_color == (0.5, 0.1, 0.1)
+
+
+def test_an_exr_s_chromaticities_are_undone_as_blender_ignores_them() -> None:
+    from sweep3d.stages.render.mitsuba.hdri import REC709, rgb_to_xyz, undo_conversion
+
+    assert undo_conversion(REC709) is None
+    wide = (0.6484, 0.3309, 0.3212, 0.5979, 0.1559, 0.0661, 0.3457, 0.3585)  # the bpy wheel's city.exr
+    converted = np.linalg.solve(rgb_to_xyz(REC709), rgb_to_xyz(wide))  # what Mitsuba's reader applies
+    pixel = np.array([0.3, 0.5, 0.2])
+    assert np.allclose(undo_conversion(wide) @ (converted @ pixel), pixel)
+    assert np.allclose(rgb_to_xyz(REC709)[1].sum(), 1.0)  # white has Y = 1
+
+
 # -- renders of both engines ---------------------------------------------------------------------
 
 def _render(engine: str, jobs: list[RenderJob], size: int, samples: int, passes=()) -> dict:
