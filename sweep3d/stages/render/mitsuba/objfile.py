@@ -6,7 +6,8 @@ importer (defaults: forward -Z, up Y; one object per ``o``): Blender's (x, y, z)
 vertex normals averaged over the object's smooth faces (weighted by each corner's angle, as
 Blender does); an MTL becomes the Principled BSDF values the importer sets (``base_color`` from
 ``Kd`` or ``map_Kd``, ``roughness`` = 1 − √(Ns / 1000), ``specular`` = the mean of ``Ks``, ``ior``
-= ``Ni``, ``opacity`` = ``d``, ``metallic`` = ``Pm``). Faces are triangulated as fans and every
+= ``Ni``, ``opacity`` = ``d``, ``metallic`` = ``Pm`` (else 1 for illum 3–7), ``transmission`` =
+the mean of ``Tf``, ``coat`` = ``Pc`` / 4; ``sweep3d plan --materials`` shows Blender's own). Faces are triangulated as fans and every
 corner gets its own vertex, so the arrays are ready for a triangle mesh.
 """
 
@@ -35,6 +36,8 @@ class MtlMaterial:
     specular: float = 0.5  # Blender's Specular IOR Level
     ior: float = 1.5
     opacity: float = 1.0
+    transmission: float = 0.0  # the mean of Tf
+    coat: float = 0.0  # a quarter of Pc
 
 
 @dataclass
@@ -283,7 +286,12 @@ def _material(name: str, values: dict[str, str], folder: Path) -> MtlMaterial:
     roughness = number("Pr", -1.0)
     if roughness < 0:
         roughness = 1.0 - math.sqrt(min(max(ns, 0.0), 1000.0) / 1000.0) if ns >= 0 else 0.5
-    return MtlMaterial(name=name, base_color=kd, texture=texture, roughness=roughness,
-                       metallic=max(number("Pm", 0.0), 0.0),
+    metallic = number("Pm", -1.0)
+    if metallic < 0:  # Blender: reflection on (illum 3-7) is a metal
+        metallic = 1.0 if 3 <= number("illum", -1.0) <= 7 else 0.0
+    tf = colour("Tf")
+    return MtlMaterial(name=name, base_color=kd, texture=texture, roughness=roughness, metallic=metallic,
                        specular=sum(ks) / 3.0 if ks is not None else 0.5, ior=number("Ni", 1.5),
-                       opacity=min(max(number("d", 1.0), 0.0), 1.0))
+                       opacity=min(max(number("d", 1.0), 0.0), 1.0),
+                       transmission=min(max(sum(tf) / 3.0, 0.0), 1.0) if tf is not None else 0.0,
+                       coat=max(number("Pc", 0.0), 0.0) / 4.0)

@@ -301,7 +301,8 @@ class MitsubaScene:
         for name in sorted(used):
             own = mesh.materials.get(name, MtlMaterial(name))
             v: dict[str, Any] = {"base_color": own.base_color, "roughness": own.roughness, "metallic": own.metallic,
-                                 "specular": own.specular, "ior": own.ior, "opacity": own.opacity}
+                                 "specular": own.specular, "ior": own.ior, "opacity": own.opacity,
+                                 "transmission": own.transmission, "coat": own.coat}
             if look is not None:
                 v.update(dict(look.material))
                 v.update(dict(named.get(name, ())))
