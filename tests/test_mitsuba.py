@@ -244,3 +244,31 @@ def test_a_cached_mitsuba_render_is_not_rendered_again(tmp_path: Path) -> None:
     assert {k: store.blob_path(k).stat().st_mtime_ns for k in blobs} == blobs
     cycles = CliRunner().invoke(app, ["plan", str(spec_with(tmp_path / "cycles", ""))])
     assert cycles.exit_code == 0
+
+
+@pytest.mark.blender
+def test_material_edits_and_parts_reach_mitsuba_s_pixels(tmp_path: Path) -> None:
+    """The material control's base colour edit turns the object's pixels; a target the file lacks,
+    or a part it lacks, is the user's error in Cycles' words (in-process: no Blender involved)."""
+    from sweep3d.errors import UserError
+    from sweep3d.stages.render.mitsuba.scene import MitsubaScene
+    from sweep3d.stages.render.protocol import Look
+    from sweep3d.stages.render.state import SceneState
+
+    (tmp_path / "two.mtl").write_text("newmtl grey\nKd 0.5 0.5 0.5\n")
+    cube = write_cube(tmp_path).read_text()
+    (tmp_path / "two.obj").write_text("mtllib two.mtl\no Box\nusemtl grey\n" + cube)
+    scene = MitsubaScene(RenderSettings(resolution=32, samples=2, denoise=False, engine="mitsuba"), tmp_path)
+    black = EnvironmentRef(color=(0.0, 0.0, 0.0))  # lit by a uniform white world, shown on black
+    scene.prepare(str(tmp_path / "two.obj"), black)
+    colours = {}
+    for name, rgb in (("red", (0.8, 0.0, 0.0)), ("blue", (0.0, 0.0, 0.8))):
+        scene.pose_scene(SceneState(yaw=30.0, material_edits=(("grey", (("base_color", rgb),)),)))
+        image = scene.render()
+        colours[name] = image[12:20, 12:20].reshape(-1, 3).mean(axis=0)
+    assert colours["red"][0] > 3 * colours["red"][2] and colours["blue"][2] > 3 * colours["blue"][0]
+    scene.pose_scene(SceneState(material_edits=(("gray", (("roughness", 0.1),)),)))
+    with pytest.raises(UserError, match="'gray' is no material of two.obj"):
+        scene.render()
+    with pytest.raises(UserError, match="no object 'Bx'.*did you mean 'Box'"):
+        scene.prepare(str(tmp_path / "two.obj"), black, Look(parts=("Bx",)))
