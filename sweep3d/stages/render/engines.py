@@ -18,8 +18,8 @@ from sweep3d.errors import SpecError
 from sweep3d.spec.loader import LoadedSpec
 
 ENGINES = ("cycles", "mitsuba")
-#: Mitsuba's variant: ``scalar_rgb`` needs no system library and was faster per 224² render here
-#: than ``llvm_ad_rgb`` once a scene is rebuilt per job (see docs/how-to/second-renderer.md).
+#: Mitsuba's variant: ``scalar_rgb`` needs no system library, compiles no kernels, and took about
+#: the time ``llvm_ad_rgb`` took per 224² render here (benchmarks/mitsuba_variant.py; RESULTS.md).
 MITSUBA_VARIANT = "scalar_rgb"
 #: Mesh files the Mitsuba engine reads (its own OBJ/MTL reader: ``mitsuba/objfile.py``).
 MITSUBA_MESHES = (".obj",)

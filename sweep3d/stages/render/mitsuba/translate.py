@@ -27,8 +27,9 @@ from sweep3d.stages.render.lights import AreaLight, SunLight, direction, facing
 from sweep3d.stages.render.props import OCCLUDER_DEPTH
 from sweep3d.stages.render.state import SENSOR_WIDTH_MM, PointLight, SceneState
 
-#: Blender's default Principled BSDF values for what an MTL leaves out.
-MIN_SPECULAR = 1e-3  # Mitsuba's principled needs an index of refraction above 1
+#: The least ``specular`` given to Mitsuba's principled BSDF (Blender's IOR 1 reflects nothing; Mitsuba's
+#: needs an index of refraction above 1).
+MIN_SPECULAR = 1e-3
 
 
 def rotation_z(degrees: float) -> np.ndarray:
