@@ -36,6 +36,8 @@ from sweep3d.truth import TRUTH_PASSES
 
 #: The pixel filter's standard deviation in pixels: close to Cycles' 1.5 px Blackman-Harris.
 FILTER_STDDEV = 0.3
+#: Objects (mesh, look) a worker keeps read, least recently used first out (as Cycles' workers keep 16).
+MAX_KEPT_OBJECTS = 16
 LLVM_LIBRARIES = ("/usr/lib/x86_64-linux-gnu/libLLVM-19.so", "/usr/lib/llvm-19/lib/libLLVM.so")
 
 
@@ -103,6 +105,7 @@ class MitsubaScene:
         self.textures: dict[str, Any] = {}  # texture path → loaded bitmap, shared by jobs
         self.hdris: dict[str, Any] = {}  # HDRI path → its bitmap as Blender reads it (hdri.py)
         self.loaded: Any = None  # the latest job's loaded Mitsuba scene
+        self.serial = 0  # names each read object's PLY files
         self.stale = False
         truth = tuple(p for p in settings.passes if p in TRUTH_PASSES)
         from sweep3d.stages.render.mitsuba.passes import MitsubaTruth
@@ -118,6 +121,11 @@ class MitsubaScene:
         self.loading = self.current is None or environment != self.environment or self.objects.get(ref) is not self.current
         if ref not in self.objects:
             self.objects[ref] = self._load(mesh_path, look)
+        self.objects[ref] = self.objects.pop(ref)  # most recently used last
+        while len(self.objects) > MAX_KEPT_OBJECTS:  # the least recently used goes, with its files
+            old = self.objects.pop(next(iter(self.objects)))
+            for ply, _ in old.files:
+                Path(ply).unlink(missing_ok=True)
         self.current, self.environment = self.objects[ref], environment
         self.load_seconds = time.perf_counter() - started if self.loading else 0.0
 
@@ -277,7 +285,8 @@ class MitsubaScene:
         if not radius > 0:
             raise UserError(f"{mesh_path!r} has zero size (all vertices coincide)")
         materials, textures = self._materials(mesh, {p.material for p in pieces}, look, where)
-        stem = f"{len(self.objects):03d}"
+        self.serial += 1
+        stem = f"{self.serial:05d}"
         files = []
         for i, piece in enumerate(pieces):
             ply = self.folder / f"{stem}-{i:04d}.ply"
