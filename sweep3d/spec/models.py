@@ -75,6 +75,9 @@ class RenderSpec(StrictModel):
     world_map_resolution: int = Field(1024, ge=4, le=16384,
                                       description="The world's importance map side with world_sampling = 'manual' "
                                                   "(Blender's sample_map_resolution).")
+    engine: Literal["cycles", "mitsuba"] = Field(
+        "cycles", description="The renderer: Blender's Cycles, or Mitsuba 3 (a second renderer, to tell a model's "
+                              "failure from a simulator artifact; docs/how-to/second-renderer.md). Keyed apart.")
 
     @field_validator("resolution", mode="before")
     @classmethod
@@ -105,7 +108,8 @@ class RenderSpec(StrictModel):
         """
         part = self.model_dump(exclude={"threads", "workers", "timeout", "edit_timeout", "resolution",
                                         "adaptive_threshold", "seed", "device", "worker_memory", "worker_jobs",
-                                        "dither", "world_sampling", "world_map_resolution"})
+                                        "dither", "world_sampling", "world_map_resolution",
+                                        "engine"})  # the engine keys apart: render/keys.py
         part.update(pixels)
         if device != "cpu":
             part["device"] = device

@@ -38,6 +38,7 @@ from sweep3d.stages.plan.policies import Outcome
 from sweep3d.stages.postprocess.keys import image_template
 from sweep3d.stages.render.controls.base import frame_fields
 from sweep3d.stages.render.device import resolve_device
+from sweep3d.stages.render.engines import check_engine, engine_key, plan_device
 from sweep3d.stages.render.keys import parts_keys, render_template, scene_key, truth_keys
 from sweep3d.stages.render.state import SceneState, in_frame, in_frame_many
 
@@ -85,7 +86,9 @@ def make_plan(spec: LoadedSpec, *, framing: Framing, model_digest: str, blender:
     """
     model = model or spec.model
     renamed = _renamed_classes(spec, classes if classes is not None else builtin_labels(model.name))
-    device = device or resolve_device(spec.render.device)
+    check_engine(spec)
+    device = plan_device(spec.render.engine, device or resolve_device(spec.render.device))
+    engine = engine_key(spec.render.engine)
     check_size(spec)
     rendered = sorted((c for c in spec.controls if c.control.stage == "render"),
                       key=lambda c: (c.control.order, spec.controls.index(c)))
@@ -100,7 +103,8 @@ def make_plan(spec: LoadedSpec, *, framing: Framing, model_digest: str, blender:
         object_digest = _asset_digest(spec, f"objects[{i}].mesh", mesh_digest, spec.meshes[obj.name], spec.store)
         truth = list(spec.labels[obj.name])
         for env in spec.environments:
-            scene = scene_key(blender, settings, object_digest, env.key_part(hdri_digests[env.name]), obj.look_key())
+            scene = scene_key(blender, settings, object_digest, env.key_part(hdri_digests[env.name]), obj.look_key(),
+                              engine)
             scene_controls = [c for c in spec.controls if c.applies_to(obj.name, env.name)]
             space = SearchSpace(scene_controls)
             listing = getattr(spec.policy, "listed", None)  # a user's policy may not subclass Policy

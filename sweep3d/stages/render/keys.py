@@ -21,16 +21,21 @@ RENDER_STAGE_VERSION = 1
 
 
 def scene_key(blender: str, settings: dict[str, Any], object_digest: str, environment: dict[str, Any],
-              look: dict[str, Any] | None = None) -> str:
+              look: dict[str, Any] | None = None, engine: dict[str, Any] | None = None) -> str:
     """Everything of a render key that is fixed for one (object, environment) scene, hashed once.
 
     Args:
         look: the object's ``parts``, material overrides and ``auto_smooth``
             (``ObjectSpec.look_key``); None leaves the key as it was before they existed.
+        engine: a renderer other than Cycles (``engines.engine_key``: its name, version and
+            variant), which then stands in for Blender's version; None: Cycles, keyed as before.
     """
     value = {"stage": "render", "v": RENDER_STAGE_VERSION, "blender": blender, "settings": settings,
              "passes": [],  # the RGB image's; extra passes leave it alone and are keyed apart
              "object": object_digest, "environment": environment}
+    if engine:
+        del value["blender"]
+        value["engine"] = engine
     if look:
         value["look"] = look
     return digest(value)

@@ -42,6 +42,8 @@ class RenderSettings:
         threads: Cycles threads per worker; 0 = all cores.
         device: what renders: "cpu", "cuda" or "optix" (``[render] device`` resolved: never
             "auto", see ``stages.render.device``).
+        engine: the renderer (``[render] engine``): the worker builds a ``BlenderScene`` or a
+            ``MitsubaScene`` (``stages.render.mitsuba``), which render the same jobs.
     """
 
     resolution: int
@@ -58,6 +60,7 @@ class RenderSettings:
     dither: float = _SPEC.dither
     world_sampling: Literal["automatic", "manual", "none"] = _SPEC.world_sampling
     world_map_resolution: int = _SPEC.world_map_resolution
+    engine: str = _SPEC.engine  # "cycles" or "mitsuba": which scene the worker builds
 
     @classmethod
     def from_spec(cls, spec: RenderSpec, framing: Framing, passes: Iterable[str] = (),

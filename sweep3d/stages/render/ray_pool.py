@@ -56,11 +56,11 @@ class RenderActor:
         import tempfile
 
         from sweep3d.stages.render.render_log import RenderLog
-        from sweep3d.stages.render.scene import BlenderScene
+        from sweep3d.stages.render.worker import make_scene
 
         self.scratch = Path(tempfile.mkdtemp(prefix="sweep3d-ray-"))
         log = RenderLog(self.scratch / "blender.log")  # Blender prints progress straight to fd 1
-        self.scene = BlenderScene(settings, self.scratch, log)
+        self.scene = make_scene(settings, self.scratch, log)
         self.unpacked: dict[str, str] = {}
 
     def pid(self) -> int:

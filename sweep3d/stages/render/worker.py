@@ -60,12 +60,11 @@ def _serve(conn: Connection, settings: RenderSettings, scratch: str, limits: Wor
     until a limit is reached after a job."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides when workers stop
     from sweep3d.stages.render.render_log import RenderLog
-    from sweep3d.stages.render.scene import BlenderScene
 
     try:
         # Blender prints progress straight to fd 1: into scratch, where a scene load's set-up is read
         log = RenderLog(Path(scratch) / f"blender-{os.getpid()}.log")
-        scene = BlenderScene(settings, Path(scratch), log, gpu)
+        scene = make_scene(settings, Path(scratch), log, gpu)
     except UserError as exc:  # a device it cannot use, bpy missing: the user's to fix (exit 2)
         conn.send(Fatal(str(exc), user=True))
         return
@@ -87,6 +86,18 @@ def _serve(conn: Connection, settings: RenderSettings, scratch: str, limits: Wor
                 conn.send(Retired(reason))
                 return
         conn.send(Idle())
+
+
+def make_scene(settings: RenderSettings, scratch: Path, log=None, gpu: int | None = None):
+    """The worker's scene for ``settings.engine``: a ``BlenderScene`` (Cycles), or a ``MitsubaScene``
+    (imported only then: Cycles' workers never load Mitsuba, nor Mitsuba's Blender)."""
+    if settings.engine == "mitsuba":
+        from sweep3d.stages.render.mitsuba.scene import MitsubaScene
+
+        return MitsubaScene(settings, scratch, log, gpu)
+    from sweep3d.stages.render.scene import BlenderScene
+
+    return BlenderScene(settings, scratch, log, gpu)
 
 
 def _telling(conn: Connection, render_key: str) -> OnEdit:

@@ -1,0 +1,106 @@
+"""Which renderer makes a spec's images (``[render] engine``), what it adds to the render key, and
+what a second renderer cannot express (refused at ``plan``, before anything renders).
+
+Cycles is the default and adds nothing to the key, so its keys are those from before the choice
+existed. Mitsuba 3 (``sweep3d.stages.render.mitsuba``) renders the same plain-Python scene
+(:class:`~.state.SceneState`); its key names the engine, Mitsuba's version and the variant in
+place of Blender's version, which then changes none of its pixels. Nothing here imports
+Mitsuba: the version comes from the package's metadata.
+"""
+
+from __future__ import annotations
+
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+from sweep3d.errors import SpecError
+from sweep3d.spec.loader import LoadedSpec
+
+ENGINES = ("cycles", "mitsuba")
+#: Mitsuba's variant: ``scalar_rgb`` needs no system library, compiles no kernels, and took about
+#: the time ``llvm_ad_rgb`` took per 224² render here (benchmarks/mitsuba_variant.py; RESULTS.md).
+MITSUBA_VARIANT = "scalar_rgb"
+#: Mesh files the Mitsuba engine reads (its own OBJ/MTL reader: ``mitsuba/objfile.py``).
+MITSUBA_MESHES = (".obj",)
+
+
+def mitsuba_version() -> str:
+    """The installed Mitsuba's version (a :class:`SpecError`-free empty string when it is missing:
+    :func:`check_engine` refuses such a spec first)."""
+    try:
+        return metadata.version("mitsuba")
+    except metadata.PackageNotFoundError:
+        return ""
+
+
+def engine_key(engine: str) -> dict[str, Any] | None:
+    """The engine's part of every render key: None for Cycles (its keys stay as they were)."""
+    if engine == "cycles":
+        return None
+    return {"name": engine, "version": mitsuba_version(), "variant": MITSUBA_VARIANT}
+
+
+def plan_device(engine: str, device: str) -> str:
+    """The device renders are keyed and made on: Mitsuba renders on the CPU whatever ``auto``
+    finds (an explicit GPU is refused by :func:`check_engine`)."""
+    return "cpu" if engine == "mitsuba" else device
+
+
+def check_engine(spec: LoadedSpec) -> None:
+    """Refuse, in one line naming the key and the engine, what the spec's engine cannot render.
+
+    Raises:
+        SpecError: Mitsuba is not installed, or the spec asks it for a GPU device, a mesh format
+            it does not read, smoothing, part visibility, or a control it cannot express.
+    """
+    engine = spec.render.engine
+    if engine == "cycles":
+        return
+    path = str(spec.path)
+    if not mitsuba_version():
+        raise SpecError(path, "render.engine", "engine \"mitsuba\" needs the mitsuba package: pip install mitsuba")
+    if spec.render.device in ("cuda", "optix"):
+        raise SpecError(path, "render.device", f"device {spec.render.device!r} is Cycles'; the mitsuba engine "
+                                               "renders on the CPU (use \"auto\" or \"cpu\")")
+    if spec.report.part_visibility:
+        raise SpecError(path, "report.part_visibility", "part visibility needs Cycles' UV pass; the mitsuba "
+                                                        "engine cannot render it (set it false)")
+    for i, obj in enumerate(spec.objects):
+        mesh = spec.meshes[obj.name]
+        suffix = Path(str(mesh).partition("#")[2] or str(mesh)).suffix.lower()
+        if suffix not in MITSUBA_MESHES:
+            raise SpecError(path, f"objects[{i}].mesh", f"the mitsuba engine reads only .obj meshes (with their "
+                                                        f"MTL), not {suffix or 'this file'}")
+        if obj.auto_smooth is not None:
+            raise SpecError(path, f"objects[{i}].auto_smooth", "the mitsuba engine cannot smooth by angle; "
+                                                               "remove auto_smooth")
+    for index, inst in enumerate(spec.controls):
+        if inst.control.stage != "render":
+            continue
+        problem = refused(inst.control, inst.spaces)
+        if problem:
+            raise SpecError(path, f"controls[{index}]", f"control {inst.control.type_name!r} (id "
+                                                        f"{inst.control.id!r}): {problem} with engine \"mitsuba\"")
+
+
+def refused(control: Any, spaces: dict[str, Any]) -> str | None:
+    """Why the Mitsuba engine cannot render a rendered control with these parameter spaces (None: it can)."""
+    name = control.type_name
+
+    def can_be(param: str, test) -> bool:
+        space = spaces.get(param)
+        return space is not None and any(test(v) for v in space.values())
+
+    if control.edits_scene:
+        return "its edit() changes Blender's scene, which Mitsuba does not have"
+    if name == "sky" and can_be("enabled", bool):
+        return "Blender's procedural sky cannot be rendered"
+    if name == "pin_to_ground" and can_be("enabled", bool):
+        return "the ground is a Cycles shadow catcher, which cannot be rendered"
+    if name == "material":
+        if can_be("skin", lambda v: v != "original"):
+            return "skins are Blender shader nodes and cannot be rendered"
+        if can_be("emission", lambda v: v not in (None, 0, 0.0)):
+            return "emission cannot be rendered"
+    return None

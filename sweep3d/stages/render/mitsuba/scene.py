@@ -1,0 +1,350 @@
+"""Mitsuba's copy of a job: what a render worker keeps and renders when the engine is Mitsuba.
+
+:class:`MitsubaScene` has the interface :func:`~sweep3d.stages.render.worker.render_job` uses of
+a ``BlenderScene`` (``prepare``, ``pose_scene``, ``render_png``, ``truth_pass``, ``parts``,
+``load_seconds``, ``rebuild_if_stale``), so the stage, the pool, the blobs and the rows are the
+same for both engines. An object is read once per (mesh, look) into triangle meshes per material
+(PLY files in the worker's scratch folder); each job then describes the whole scene to
+``mitsuba.load_dict`` (a few milliseconds) and renders it.
+
+Pixels follow Cycles' output: linear radiance, OpenImageDenoise with albedo and normals when
+the settings (or the ``denoiser`` control) ask, Blender's "Standard" view transform (the sRGB
+curve, clipped), 8 bits, and a plain background composited behind the object's coverage.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sweep3d.errors import UserError
+from sweep3d.pixels import encode_png
+from sweep3d.spec.looks import unknown_name
+from sweep3d.stages.render import engines
+from sweep3d.stages.render.lights import WHITE, SunLight
+from sweep3d.stages.render.mitsuba import translate
+from sweep3d.stages.render.mitsuba.hdri import load_bitmap
+from sweep3d.stages.render.mitsuba.objfile import MtlMaterial, ObjMesh, read_obj
+from sweep3d.stages.render.protocol import EnvironmentRef, Look, RenderSettings
+from sweep3d.stages.render.state import SceneState
+from sweep3d.truth import TRUTH_PASSES
+
+#: The pixel filter's standard deviation in pixels: close to Cycles' 1.5 px Blackman-Harris.
+FILTER_STDDEV = 0.3
+#: Objects (mesh, look) a worker keeps read, least recently used first out (as Cycles' workers keep 16).
+MAX_KEPT_OBJECTS = 16
+LLVM_LIBRARIES = ("/usr/lib/x86_64-linux-gnu/libLLVM-19.so", "/usr/lib/llvm-19/lib/libLLVM.so")
+
+
+def load_mitsuba(variant: str | None = None) -> Any:
+    """``mitsuba`` with ``variant`` (default: ``engines.MITSUBA_VARIANT``) set (Debian's libLLVM for an llvm variant when
+    ``DRJIT_LIBLLVM_PATH`` is unset), errors only in the log.
+
+    Raises:
+        UserError: mitsuba is not installed, or the variant cannot run here.
+    """
+    variant = variant or engines.MITSUBA_VARIANT
+    if variant.startswith("llvm") and "DRJIT_LIBLLVM_PATH" not in os.environ:
+        found = next((p for p in LLVM_LIBRARIES if Path(p).exists()), None)
+        if found:
+            os.environ["DRJIT_LIBLLVM_PATH"] = found
+    try:
+        import mitsuba as mi
+    except ImportError:
+        raise UserError("engine \"mitsuba\" needs the mitsuba package: pip install mitsuba") from None
+    try:
+        mi.set_variant(variant)
+    except (ImportError, AttributeError, RuntimeError) as exc:
+        raise UserError(f"Mitsuba's variant {variant!r} cannot run here: {exc}") from None
+    mi.set_log_level(mi.LogLevel.Error)
+    return mi
+
+
+@dataclass
+class LoadedMesh:
+    """One (mesh, look) read for Mitsuba: a PLY file and a material per piece, and its normalisation."""
+
+    files: list[tuple[str, str]]  # (PLY path, material name)
+    materials: dict[str, dict[str, Any]]  # material name → Principled values (the look applied)
+    textures: dict[str, str]  # material name → its base colour texture (absent when overridden)
+    centre: np.ndarray
+    radius: float
+    points: np.ndarray  # a subsample of the vertices (Blender axes), for the silhouette's bounds
+    where: str
+
+
+class MitsubaScene:
+    """A render worker's Mitsuba scene (the ``BlenderScene`` interface; module docstring).
+
+    Args:
+        log, gpu: as ``BlenderScene``'s; unused (Mitsuba prints nothing and renders on the CPU).
+    """
+
+    def __init__(self, settings: RenderSettings, scratch: Path, log: Any = None, gpu: int | None = None) -> None:
+        self.mi = load_mitsuba()
+        self.settings = settings
+        self.scratch = scratch
+        self.folder = scratch / f"mitsuba-{os.getpid()}"
+        self.folder.mkdir(parents=True, exist_ok=True)
+        if settings.threads:
+            import drjit as dr
+
+            dr.set_thread_count(settings.threads)
+        self.loading = False
+        self.load_seconds = 0.0
+        self.parts: dict[str, Any] | None = None  # no UV pass (refused at plan)
+        self.objects: dict[tuple[str, Look | None], LoadedMesh] = {}
+        self.current: LoadedMesh | None = None
+        self.environment = EnvironmentRef()
+        self.state = SceneState()
+        self.textures: dict[str, Any] = {}  # texture path → loaded bitmap, shared by jobs
+        self.hdris: dict[str, Any] = {}  # HDRI path → its bitmap as Blender reads it (hdri.py)
+        self.loaded: Any = None  # the latest job's loaded Mitsuba scene
+        self.serial = 0  # names each read object's PLY files
+        self.stale = False
+        truth = tuple(p for p in settings.passes if p in TRUTH_PASSES)
+        from sweep3d.stages.render.mitsuba.passes import MitsubaTruth
+
+        self.truth_pass = MitsubaTruth(self, truth) if truth else None
+
+    # -- the BlenderScene interface ------------------------------------------------------------
+    def prepare(self, mesh_path: str, environment: EnvironmentRef, look: Look | None = None) -> None:
+        """Make ``mesh_path`` (as ``look`` shows it) and ``environment`` the job's, reading the mesh
+        the first time (that job's :attr:`load_seconds`)."""
+        started = time.perf_counter()
+        ref = (mesh_path, look)
+        self.loading = self.current is None or environment != self.environment or self.objects.get(ref) is not self.current
+        if ref not in self.objects:
+            self.objects[ref] = self._load(mesh_path, look)
+        self.objects[ref] = self.objects.pop(ref)  # most recently used last
+        while len(self.objects) > MAX_KEPT_OBJECTS:  # the least recently used goes, with its files
+            old = self.objects.pop(next(iter(self.objects)))
+            for ply, _ in old.files:
+                Path(ply).unlink(missing_ok=True)
+        self.current, self.environment = self.objects[ref], environment
+        self.load_seconds = time.perf_counter() - started if self.loading else 0.0
+
+    def pose_scene(self, state: SceneState) -> None:
+        """Keep the job's state: the scene is described whole when it renders."""
+        self.state = state
+
+    def render_png(self) -> bytes:
+        """Render the job as the blob's PNG (RGB, 8 bits), and its truth passes when asked."""
+        png = encode_png(self.render())
+        if self.truth_pass is not None:
+            self.truth_pass.read(self)
+        return png
+
+    def rebuild_if_stale(self) -> None:
+        """Nothing to rebuild: no control edits a Mitsuba scene (``edit`` is refused at plan)."""
+
+    # -- rendering -----------------------------------------------------------------------------
+    def render(self) -> np.ndarray:
+        """The job's image: float32 (H, W, 3), sRGB values in [0, 1], as ``BlenderScene.render``."""
+        mi, s, state = self.mi, self.settings, self.state
+        denoise = s.denoise if state.denoise is None else state.denoise
+        background = self.background()
+        path = {"type": "path", "max_depth": s.max_bounces + 1, "hide_emitters": background is not None}
+        integrator = ({"type": "aov", "aovs": "albedo:albedo,normal:sh_normal", "integrator": path}
+                      if denoise else path)
+        scene = self.describe(integrator, translate.camera(state, s.resolution, s.crop, FILTER_STDDEV))
+        self.loaded = self.load(scene)  # the truth passes look at the same scene
+        image = np.asarray(mi.render(self.loaded, spp=s.samples, seed=s.seed), dtype=np.float32)
+        rgb, alpha = np.maximum(image[..., :3], 0.0), np.clip(image[..., 3:4], 0.0, 1.0)
+        if denoise:
+            import pyoidn
+
+            albedo = np.clip(image[..., 4:7], 0.0, 1.0)
+            normal = np.clip(image[..., 7:10], -1.0, 1.0)
+            rgb = np.maximum(pyoidn.denoise(np.ascontiguousarray(rgb), np.ascontiguousarray(albedo),
+                                            np.ascontiguousarray(normal), hdr=True,
+                                            clean_aux=s.denoise_prefilter != "accurate"), 0.0)  # as Cycles
+        if background is None:
+            return srgb(rgb)
+        straight = srgb(rgb / np.maximum(alpha, 1e-6))  # Blender's transparent film: straight alpha
+        return straight * alpha + np.asarray(background, dtype=np.float32) * (1.0 - alpha)
+
+    def background(self) -> tuple[float, float, float] | None:
+        """The plain colour composited behind the object (None: the world is seen)."""
+        env, state = self.environment, self.state
+        return state.background or (tuple(env.color) if env.color else None)
+
+    def describe(self, integrator: dict[str, Any], sensor: dict[str, Any], scenery: bool = True,
+                 lit: bool = True) -> dict[str, Any]:
+        """The job's scene for Mitsuba's ``load_dict`` (``scenery``: with the occluder; ``lit``:
+        with the world and the lights, which a pass that only finds surfaces does without)."""
+        state, env, loaded = self.state, self.environment, self.current
+        assert loaded is not None, "prepare() first"
+        sensor = {"sampler": {"type": "multijitter"}, **sensor}  # stratified: less noise than independent at 4 spp
+        scene: dict[str, Any] = {"type": "scene", "integrator": integrator, "sensor": sensor}
+        if lit:
+            scene["world"] = self._world(env, state)
+            scene.update(translate.lights(state.lights + self._key_light(env, state), state))
+        matrix = translate.object_matrix(state, loaded.centre, loaded.radius)
+        edits = self._edited(loaded, state)
+        for i, (ply, material) in enumerate(loaded.files):
+            scene[f"object_{i:04d}"] = {"type": "ply", "filename": ply, "to_world": matrix,
+                                        "bsdf": self._bsdf(loaded, material, edits.get(material, {}))}
+        plate = translate.occluder(state) if scenery else None
+        if plate is not None:
+            scene["scenery_occluder"] = plate
+        return scene
+
+    def load(self, scene: dict[str, Any]) -> Any:
+        """``mitsuba.load_dict`` of a description whose matrices are numpy arrays."""
+        return self.mi.load_dict(self.converted(scene))
+
+    def converted(self, value: Any) -> Any:
+        """A description with its numpy 4×4 matrices as Mitsuba transforms."""
+        if isinstance(value, dict):
+            return {k: self.converted(v) for k, v in value.items()}
+        if isinstance(value, np.ndarray) and value.shape == (4, 4):
+            return self.mi.ScalarTransform4f(value.tolist())
+        return value
+
+    def _world(self, env: EnvironmentRef, state: SceneState) -> dict[str, Any]:
+        """An HDRI as Blender's world shows it, or a plain colour's uniform white light (dimmed
+        to the key light's fill), both times the environment's and the job's strength."""
+        strength = env.strength * state.world_strength
+        if env.hdri:
+            bitmap = self.hdris.get(env.hdri)
+            if bitmap is None:
+                bitmap = self.hdris[env.hdri] = load_bitmap(self.mi, env.hdri)
+            return {"type": "envmap", "bitmap": bitmap, "scale": strength,
+                    "to_world": translate.envmap_to_world(state.world_rotation)}
+        if env.key_light is not None:
+            strength *= env.key_light.fill
+        return {"type": "constant", "radiance": {"type": "rgb", "value": [strength] * 3}}
+
+    @staticmethod
+    def _key_light(env: EnvironmentRef, state: SceneState) -> list[SunLight]:
+        """A plain colour's key light, as ``BlenderScene._key_light`` makes it."""
+        key = env.key_light
+        if key is None:
+            return []
+        strength = key.strength * env.strength * state.world_strength
+        return [SunLight(WHITE, strength, key.angle, key.azimuth, key.elevation, key.relative_to)]
+
+    def _edited(self, loaded: LoadedMesh, state: SceneState) -> dict[str, dict[str, Any]]:
+        """The job's material edits (the ``material`` control) per material name.
+
+        Raises:
+            UserError: an edit's target names no material of the object (Cycles' wording)."""
+        out: dict[str, dict[str, Any]] = {}
+        names = sorted(loaded.materials)
+        for target, pairs in state.material_edits:
+            if target and target not in loaded.materials:
+                raise UserError(f"the material control's target {target!r} is no material of {loaded.where} "
+                                f"(its materials: {', '.join(names) or 'none'})")
+            for name in names:
+                if target in ("", name):
+                    out.setdefault(name, {}).update(pairs)
+        return out
+
+    def _bsdf(self, loaded: LoadedMesh, material: str, edits: dict[str, Any]) -> dict[str, Any]:
+        values = {**loaded.materials[material], **edits}
+        texture_path = loaded.textures.get(material) if "base_color" not in edits else None
+        texture = None
+        if texture_path is not None:
+            texture = self.textures.get(texture_path)
+            if texture is None:
+                texture = self.textures[texture_path] = self.mi.load_dict({"type": "bitmap", "filename": texture_path})
+        return translate.principled(values, texture)
+
+    # -- loading -------------------------------------------------------------------------------
+    def _load(self, mesh_path: str, look: Look | None) -> LoadedMesh:
+        """Read a mesh file as its look shows it into PLY files (one per object and material).
+
+        Raises:
+            UserError: a part or material the file lacks, or nothing to render.
+        """
+        path = Path(mesh_path)
+        where = path.name
+        if path.suffix.lower() != ".obj":
+            raise UserError(f"the mitsuba engine reads only .obj meshes, not {where!r}")
+        mesh = read_obj(path)
+        pieces = mesh.pieces
+        if look is not None and look.parts:
+            objects = mesh.objects()
+            for part in look.parts:
+                if part not in objects:
+                    raise UserError(unknown_name("object", part, objects, where) + "; give one of its objects")
+            pieces = [p for p in pieces if p.object_name in look.parts]
+        if not pieces:
+            raise UserError(f"{mesh_path!r} contains no faces to render")
+        points = np.concatenate([p.positions for p in pieces])
+        if not np.isfinite(points).all():
+            raise UserError(f"{mesh_path!r} has no finite vertices to render")
+        centre = (points.min(axis=0) + points.max(axis=0)) / 2.0
+        radius = float(np.sqrt(((points - centre) ** 2).sum(axis=1).max()))
+        if not radius > 0:
+            raise UserError(f"{mesh_path!r} has zero size (all vertices coincide)")
+        materials, textures = self._materials(mesh, {p.material for p in pieces}, look, where)
+        self.serial += 1
+        stem = f"{self.serial:05d}"
+        files = []
+        for i, piece in enumerate(pieces):
+            ply = self.folder / f"{stem}-{i:04d}.ply"
+            write_ply(ply, piece.positions, piece.normals, piece.uvs)
+            files.append((str(ply), piece.material))
+        step = max(1, len(points) // 20000)
+        return LoadedMesh(files, materials, textures, centre, radius, points[::step], where)
+
+    @staticmethod
+    def _materials(mesh: ObjMesh, used: set[str], look: Look | None,
+                   where: str) -> tuple[dict[str, dict[str, Any]], dict[str, str]]:
+        """The used materials' Principled values with the look's overrides (all, then per name),
+        and the textures an override of the base colour does not replace."""
+        values: dict[str, dict[str, Any]] = {}
+        textures: dict[str, str] = {}
+        named = dict(look.materials) if look is not None else {}
+        for name in named:
+            if name not in used:
+                raise UserError(unknown_name("material", name, sorted(used - {""}), f"the rendered parts of {where}")
+                                + "; give one of its materials")
+        for name in sorted(used):
+            own = mesh.materials.get(name, MtlMaterial(name))
+            v: dict[str, Any] = {"base_color": own.base_color, "roughness": own.roughness, "metallic": own.metallic,
+                                 "specular": own.specular, "ior": own.ior, "opacity": own.opacity,
+                                 "transmission": own.transmission, "coat": own.coat}
+            if look is not None:
+                v.update(dict(look.material))
+                v.update(dict(named.get(name, ())))
+            values[name] = v
+            if own.texture and "base_color" not in dict(look.material if look else ()) | dict(named.get(name, ())):
+                textures[name] = own.texture
+        return values, textures
+
+
+def srgb(linear: np.ndarray) -> np.ndarray:
+    """Blender's "Standard" view transform: the sRGB curve of linear values, clipped to [0, 1]."""
+    x = np.clip(linear, 0.0, 1.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055).astype(np.float32)
+
+
+def write_ply(path: Path, positions: np.ndarray, normals: np.ndarray, uvs: np.ndarray | None) -> None:
+    """A binary PLY of unshared triangles (three vertices per face) Mitsuba's ``ply`` reads.
+
+    Texture ``v`` is flipped: OBJ counts it up from the image's bottom, Mitsuba's bitmaps from its top."""
+    n = len(positions)
+    columns = [positions.astype(np.float32), normals.astype(np.float32)]
+    names = ["x", "y", "z", "nx", "ny", "nz"]
+    if uvs is not None:
+        columns.append(np.stack([uvs[:, 0], 1.0 - uvs[:, 1]], axis=1).astype(np.float32))
+        names += ["u", "v"]
+    vertices = np.ascontiguousarray(np.concatenate(columns, axis=1), dtype="<f4")
+    faces = np.empty(n // 3, dtype=[("count", "u1"), ("index", "<i4", (3,))])
+    faces["count"] = 3
+    faces["index"] = np.arange(n, dtype=np.int32).reshape(-1, 3)
+    header = ["ply", "format binary_little_endian 1.0", f"element vertex {n}",
+              *(f"property float {name}" for name in names), f"element face {n // 3}",
+              "property list uchar int vertex_indices", "end_header"]
+    with open(path, "wb") as out:
+        out.write(("\n".join(header) + "\n").encode())
+        out.write(vertices.tobytes())
+        out.write(faces.tobytes())
