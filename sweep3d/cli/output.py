@@ -261,8 +261,10 @@ def print_findings(console: Console, plan: Plan, store: Store | None = None, fai
                   + (f", {summary.invalid} invalid predictions (NaN/inf outputs) excluded" if summary.invalid else "")
                   + (f"; {not_evaluable_line(summary)}" if summary.not_evaluable else ""))
     regions = weakest_regions(summary)
+    marks = confirmation_marks(store, plan.spec.name, regions, summary.boundaries)
+    unconfirmed = UNCONFIRMED_MARK in marks
     if regions:
-        console.print("fails most at: " + "; ".join(map(describe_region, regions))
+        console.print("fails most at: " + "; ".join(describe_region(r) + marks.pop(0) for r in regions)
                       + " (each against the rest of its parameter; false discovery rate 5%)")
     elif summary.wrong and summary.effects:
         gap = nearest_miss_region(summary)
@@ -274,12 +276,30 @@ def print_findings(console: Console, plan: Plan, store: Store | None = None, fai
                           "does not rule out chance")
     if summary.boundaries:
         more = summary.boundaries_left_out
-        console.print("fails beyond a boundary: " + "; ".join(map(describe_boundary, summary.boundaries))
+        console.print("fails beyond a boundary: " + "; ".join(describe_boundary(b) + marks.pop(0)
+                                                              for b in summary.boundaries)
                       + (f"; {more} more of single objects or environments in the report" if more else "")
                       + " (step fits with 95% profile-likelihood intervals; false discovery rate 5%)")
     if summary.no_boundaries:
         console.print("no significant boundary (q ≥ 0.05): "
                       + "; ".join(describe_flat(rows) for rows in by_parameter(summary.no_boundaries)))
+    if unconfirmed:
+        console.print(f"unconfirmed: not yet tested on fresh renders (sweep3d confirm {escape(str(plan.spec.path))})",
+                      soft_wrap=True)
+
+
+UNCONFIRMED_MARK = " [unconfirmed]"
+
+
+def confirmation_marks(store: Store, experiment: str, regions: list[Region], boundaries: list[dict]) -> list[str]:
+    """What follows each finding (regions, then boundaries): its verdict on fresh renders, as
+    ``sweep3d confirm`` recorded it (see :mod:`sweep3d.confirm.record`), or `` [unconfirmed]``."""
+    from sweep3d.confirm.claims import boundary_key, region_key
+    from sweep3d.confirm.record import mark, read_verdicts
+
+    verdicts = read_verdicts(store, experiment)
+    keys = [region_key(r.column, r.label) for r in regions] + [boundary_key(b) for b in boundaries]
+    return [mark(verdicts, key) if key in verdicts else UNCONFIRMED_MARK for key in keys]
 
 
 def describe_region(region: Region) -> str:

@@ -53,9 +53,10 @@ class ConfirmResult:
 
 
 def confirm(loaded: LoadedSpec, renders: int = DEFAULT_RENDERS, seed: int | None = None,
-            console: Console | None = None) -> ConfirmResult:
+            console: Console | None = None, claims: list[Claim] | None = None) -> ConfirmResult:
     """Confirm every significant finding of ``loaded``'s last run on ``renders`` fresh renders each
-    (``renders // 2`` twin pairs), drawn with ``seed`` (default: the spec's)."""
+    (``renders // 2`` twin pairs), drawn with ``seed`` (default: the spec's); ``claims``: these
+    instead of the run's findings."""
     from sweep3d.pipeline import plans_as_run, run
 
     if renders < 2:
@@ -68,7 +69,8 @@ def confirm(loaded: LoadedSpec, renders: int = DEFAULT_RENDERS, seed: int | None
     if summary.accuracy is None:
         raise UserError(f"{loaded.path}: no results to confirm yet; run: sweep3d run {loaded.path}")
     space = space_of(loaded)
-    claims = findings_claims(loaded, store, summary, space)
+    if claims is None:
+        claims = findings_claims(loaded, store, summary, space)
     wanted = max(1, renders // 2)
     candidates = {c.key: draw_pairs(space, c, OVERDRAW * wanted, seed) for c in claims}
     rows = [row for c in claims for pair in candidates[c.key] for row in pair]
