@@ -188,3 +188,32 @@ def test_a_chance_region_significant_in_a_small_discovery_set_is_not_replicated_
         confirmed += verdict.status == CONFIRMED
     # exact McNemar is conservative: about 2-3 % expected; ALPHA + 2.5 standard errors of 300 draws
     assert confirmed / len(planted) <= ALPHA + 2.5 * (ALPHA * (1 - ALPHA) / len(planted)) ** 0.5
+
+
+# -- the record, as run's findings and the report read it -------------------------------------------
+
+def test_the_report_panel_marks_each_finding_by_its_recorded_verdict(tmp_path) -> None:
+    from types import SimpleNamespace
+
+    from sweep3d.cache.store import Store
+    from sweep3d.cli.output import UNCONFIRMED_MARK, confirmation_marks
+    from sweep3d.confirm.claims import boundary_key, region_key
+    from sweep3d.confirm.record import write_verdicts
+    from sweep3d.report.panels import confirmations
+    from sweep3d.stages.aggregate.summary import Region
+
+    store = Store(tmp_path / "store")
+    region = {"column": "occluder_coverage", "label": "half"}
+    boundary = boundary_row("camera_elevation", "above", 40.0)
+    inputs = SimpleNamespace(store=store, loaded=SimpleNamespace(name="e"),
+                             summary=SimpleNamespace(regions=[region], boundaries=[boundary]))
+    assert confirmations.build(inputs) is None  # nothing confirmed yet: no panel
+    (verdict,) = judge([Pairs(both_right=10, inside_wrong=12, inside_right=1, both_wrong=3)])
+    write_verdicts(store, "e", {region_key("occluder_coverage", "half"): {"text": "", "verdict": verdict.as_dict()}})
+    rows = confirmations.build(inputs)["rows"]
+    assert [r["status"] for r in rows] == [CONFIRMED, UNCONFIRMED]
+    assert rows[0]["pairs"] == 26 and rows[0]["difference"].startswith("-42 pts")
+    assert boundary_key(boundary) == "boundary camera_elevation fails above 40"
+    marks = confirmation_marks(store, "e", [Region("occluder_coverage", "half", 0.2, 5, 0.8, 5, -0.6, -0.9, -0.2,
+                                                   0.01)], [boundary])
+    assert marks[0].startswith(" [confirmed on 26 fresh pairs: -42 pts") and marks[1] == UNCONFIRMED_MARK
