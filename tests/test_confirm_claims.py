@@ -15,7 +15,7 @@ from sweep3d.confirm.run import findings_claims
 from sweep3d.stages import load_spec
 from sweep3d.stages.aggregate.boundaries import numeric_scales
 from sweep3d.stages.aggregate.confirmation import CONFIRMED, judge, tally
-from sweep3d.stages.aggregate.summary import summarise
+from sweep3d.stages.aggregate.summary import named_rules, summarise
 from tests.conftest import write_spec
 from tests.test_aggregate_views import make_store
 
@@ -82,7 +82,7 @@ def test_the_findings_become_claims_that_a_true_oracle_confirms(tmp_path: Path) 
             (a, b), = c.inside.intervals
             assert c.key.endswith(f"{a:.0f}–{b:.0f}") and a >= 40 - 8
     assert any(c.key.startswith("value camera_elevation") for c in claims)
-    assert len(claims) == len(summary.regions) + len(summary.boundaries)
+    assert len(claims) == len(summary.regions) + len(summary.boundaries) + len(named_rules(summary))
     pairs = [draw_pairs(space, c, 32, seed=1) for c in claims]
     verdicts = judge([tally((truth(a), truth(b)) for a, b in drawn) for drawn in pairs])
     assert [v.status for v in verdicts] == [CONFIRMED] * len(claims)

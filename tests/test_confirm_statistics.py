@@ -206,7 +206,7 @@ def test_the_report_panel_marks_each_finding_by_its_recorded_verdict(tmp_path) -
     region = {"column": "occluder_coverage", "label": "half"}
     boundary = boundary_row("camera_elevation", "above", 40.0)
     inputs = SimpleNamespace(store=store, loaded=SimpleNamespace(name="e"),
-                             summary=SimpleNamespace(regions=[region], boundaries=[boundary]))
+                             summary=SimpleNamespace(regions=[region], boundaries=[boundary], rules=[]))
     assert confirmations.build(inputs) is None  # nothing confirmed yet: no panel
     (verdict,) = judge([Pairs(both_right=10, inside_wrong=12, inside_right=1, both_wrong=3)])
     write_verdicts(store, "e", {region_key("occluder_coverage", "half"): {"text": "", "verdict": verdict.as_dict()}})

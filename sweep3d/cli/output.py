@@ -25,6 +25,7 @@ from sweep3d.stages.aggregate import (
 )
 from sweep3d.stages.aggregate.boundaries import boundary_phrase, control_number, numeric_scales
 from sweep3d.stages.aggregate.own_jobs import results_store
+from sweep3d.stages.aggregate.summary import named_rules
 from sweep3d.stages.aggregate.tasks import HIDDEN
 from sweep3d.stages.code import explain
 from sweep3d.stages.driver import plan_status
@@ -261,7 +262,8 @@ def print_findings(console: Console, plan: Plan, store: Store | None = None, fai
                   + (f", {summary.invalid} invalid predictions (NaN/inf outputs) excluded" if summary.invalid else "")
                   + (f"; {not_evaluable_line(summary)}" if summary.not_evaluable else ""))
     regions = weakest_regions(summary)
-    marks = confirmation_marks(store, plan.spec.name, regions, summary.boundaries)
+    rules = named_rules(summary)
+    marks = confirmation_marks(store, plan.spec.name, regions, summary.boundaries, rules)
     unconfirmed = UNCONFIRMED_MARK in marks
     if regions:
         console.print("fails most at: " + "; ".join(describe_region(r) + marks.pop(0) for r in regions)
@@ -283,6 +285,10 @@ def print_findings(console: Console, plan: Plan, store: Store | None = None, fai
     if summary.no_boundaries:
         console.print("no significant boundary (q ≥ 0.05): "
                       + "; ".join(describe_flat(rows) for rows in by_parameter(summary.no_boundaries)))
+    if rules:
+        console.print("fails more in a box: " + "; ".join(escape(r["text"]) + marks.pop(0) for r in rules)
+                      + " (subgroup discovery over intervals; best of many boxes, so optimistic until confirmed)",
+                      soft_wrap=True)
     if unconfirmed:
         console.print(f"unconfirmed: not yet tested on fresh renders (sweep3d confirm {escape(str(plan.spec.path))})",
                       soft_wrap=True)
@@ -291,14 +297,16 @@ def print_findings(console: Console, plan: Plan, store: Store | None = None, fai
 UNCONFIRMED_MARK = " [unconfirmed]"
 
 
-def confirmation_marks(store: Store, experiment: str, regions: list[Region], boundaries: list[dict]) -> list[str]:
-    """What follows each finding (regions, then boundaries): its verdict on fresh renders, as
+def confirmation_marks(store: Store, experiment: str, regions: list[Region], boundaries: list[dict],
+                       rules: list[dict] = ()) -> list[str]:
+    """What follows each finding (regions, boundaries, then rules): its verdict on fresh renders, as
     ``sweep3d confirm`` recorded it (see :mod:`sweep3d.confirm.record`), or `` [unconfirmed]``."""
-    from sweep3d.confirm.claims import boundary_key, region_key
+    from sweep3d.confirm.claims import boundary_key, region_key, rule_key
     from sweep3d.confirm.record import mark, read_verdicts
 
     verdicts = read_verdicts(store, experiment)
-    keys = [region_key(r.column, r.label) for r in regions] + [boundary_key(b) for b in boundaries]
+    keys = ([region_key(r.column, r.label) for r in regions] + [boundary_key(b) for b in boundaries]
+            + [rule_key(r["key"]) for r in rules])
     return [mark(verdicts, key) if key in verdicts else UNCONFIRMED_MARK for key in keys]
 
 

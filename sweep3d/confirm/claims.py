@@ -37,7 +37,10 @@ class Claim:
     parameter: str  # a results column: object, environment or <control id>_<param>
     inside: Side
     outside: Side
-    scope: tuple[str, str] | None = None  # ("object", "mug"): the twins are drawn in that object only
+    scope: tuple[tuple[str, str], ...] = ()  # (("object", "mug"),): the twins are drawn in that object only
+    #: a rule's box: (column, its interval or value) per control parameter; ``parameter``, ``inside``
+    #: and ``outside`` are then unused: inside is the box, outside the rest of the box's parameters' space
+    box: tuple[tuple[str, Side], ...] = ()
 
 
 def region_key(column: str, label: str) -> str:
@@ -102,8 +105,50 @@ def boundary_claim(row: Mapping[str, Any], text: str, space: Choice | Range) -> 
         claim_sides = (Side(lower), Side(upper)) if below else (Side(upper), Side(lower))
     if not claim_sides[0] or not claim_sides[1]:
         return None
-    scope = None if row["scope"] == "all" else (row["scope"], row[row["scope"]])
+    scope = () if row["scope"] == "all" else ((row["scope"], row[row["scope"]]),)
     return Claim(boundary_key(row), text, row["parameter"], *claim_sides, scope=scope)
+
+
+def rule_key(key: str) -> str:
+    """The key of a rule (its conditions as ``rules`` writes them)."""
+    return f"rule {key}"
+
+
+def rule_claim(rule: Mapping[str, Any], spaces: Mapping[str, Choice | Range]) -> Claim | None:
+    """The claim of a rule (``rules.rule_dict``): its conditions on control parameters form the box,
+    its conditions on the object or environment the scope (confirmed within them). None when no
+    condition is on a control parameter the spec varies (a rule of scenes alone is a failure mode)."""
+    box, scope = [], []
+    for c in rule["conditions"]:
+        column = c["column"]
+        if column in ("object", "environment"):
+            scope.append((column, c["value"]))
+            continue
+        space = spaces.get(column)
+        if space is None:
+            return None
+        if c["value"] is not None:
+            options = tuple(o for o in getattr(space, "options", ()) if _same(o, str(c["value"]), _float(c["value"])))
+            if isinstance(space, Range):
+                options = (c["value"],)
+            if not options:
+                return None
+            box.append((column, Side(options)))
+        else:
+            assert isinstance(space, Range)
+            low = space.low if c["low"] is None else c["low"]
+            high = space.high if c["high"] is None else c["high"]
+            box.append((column, Side(intervals=((low, high),))))
+    if not box:
+        return None
+    return Claim(rule_key(rule["key"]), rule["text"], box[0][0], box[0][1], Side(), tuple(scope), tuple(box))
+
+
+def _float(value: Any) -> float | None:
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return None
 
 
 def _same(option: Any, label: str, number: float | None) -> bool:

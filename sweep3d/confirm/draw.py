@@ -89,6 +89,10 @@ def draw_pairs(space: Space, claim: Claim, count: int, seed: int) -> list[tuple[
             pairs.append((_row(space, inside_scene, base), _row(space, outside_scene, base)))
             continue
         scene = scenes[int(rng.integers(len(scenes)))]
+        if claim.box:
+            pairs.append((_row(space, scene, {**base, **_box_inside(rng, space, claim)}),
+                          _row(space, scene, {**base, **_box_outside(rng, space, claim)})))
+            continue
         inside = _row(space, scene, {**base, claim.parameter: _side_value(rng, target.space, claim.inside, None)})
         outside = _row(space, scene, {**base, claim.parameter: _side_value(rng, target.space, claim.outside,
                                                                              claim.inside)})
@@ -100,16 +104,31 @@ def _scenes(space: Space, claim: Claim) -> list[tuple[str, str]]:
     """The scenes a pair may be drawn in: for an object (environment) claim, the environments
     (objects) it is drawn in, as (object, environment) with the varied one left as given; else the
     scenes where the claim's parameter applies, within its scope."""
-    scope = dict([claim.scope]) if claim.scope else {}
+    scope = dict(claim.scope)
     if claim.parameter in ("object", "environment"):
         return [(o, e) for o in space.objects[:1] for e in space.environments
                 if e == scope.get("environment", e)] if claim.parameter == "object" else \
                [(o, space.environments[0]) for o in space.objects if o == scope.get("object", o)]
-    target = space.parameter(claim.parameter)
-    if target is None:
+    targets = [space.parameter(column) for column in ([c for c, _ in claim.box] or [claim.parameter])]
+    if None in targets:
         return []
-    return [(o, e) for o in space.objects for e in space.environments if (o, e) in target.scenes
+    return [(o, e) for o in space.objects for e in space.environments if all((o, e) in t.scenes for t in targets)
             and o == scope.get("object", o) and e == scope.get("environment", e)]
+
+
+def _box_inside(rng: np.random.Generator, space: Space, claim: Claim) -> Row:
+    """Every box parameter drawn within its side."""
+    return {column: _side_value(rng, space.parameter(column).space, side, None) for column, side in claim.box}
+
+
+def _box_outside(rng: np.random.Generator, space: Space, claim: Claim) -> Row:
+    """The box parameters drawn from their whole spaces until they fall outside the box (uniformly
+    over the rest of their joint space)."""
+    for _ in range(10_000):
+        values = {column: _value(rng, space.parameter(column).space) for column, _ in claim.box}
+        if not all(_within(values[column], side) for column, side in claim.box):
+            return values
+    raise ValueError(f"no configuration outside the box of {claim.text!r}")
 
 
 def _row(space: Space, scene: tuple[str, str], values: Row) -> Row:

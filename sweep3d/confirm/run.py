@@ -18,7 +18,7 @@ from typing import Any
 from rich.console import Console
 
 from sweep3d.cache.store import Store
-from sweep3d.confirm.claims import Claim, boundary_claim, value_claim
+from sweep3d.confirm.claims import Claim, boundary_claim, rule_claim, value_claim
 from sweep3d.confirm.draw import Row, Space, draw_pairs, scene_order, space_of
 from sweep3d.confirm.record import write_verdicts
 from sweep3d.errors import UserError
@@ -26,7 +26,7 @@ from sweep3d.spec.loader import LoadedSpec
 from sweep3d.spec.models import PolicySpec
 from sweep3d.stages.aggregate.boundaries import boundary_phrase, numeric_scales
 from sweep3d.stages.aggregate.confirmation import DEFAULT_RENDERS, Verdict, judge, tally
-from sweep3d.stages.aggregate.summary import Summary, stored_summary
+from sweep3d.stages.aggregate.summary import Summary, named_rules, stored_summary
 from sweep3d.stages.aggregate.views import connect, has_view
 
 #: Candidate pairs drawn per pair wanted: room for those dropped (out of frame, a discovery image).
@@ -111,7 +111,7 @@ def confirm(loaded: LoadedSpec, renders: int = DEFAULT_RENDERS, seed: int | None
 
 def findings_claims(loaded: LoadedSpec, store: Store, summary: Summary, space: Space) -> list[Claim]:
     """The claims of the findings ``run`` prints: each significant failure mode (single values,
-    at most three) and each significant boundary it names."""
+    at most three), each significant boundary and each rule over several parameters it names."""
     claims: list[Claim] = []
     names = {"object": [o.name for o in loaded.objects], "environment": [e.name for e in loaded.environments]}
     levels = _levels(store, loaded.name) if summary.regions else {}
@@ -130,6 +130,11 @@ def findings_claims(loaded: LoadedSpec, store: Store, summary: Summary, space: S
             continue
         who = "" if row["scope"] == "all" else f"{row[row['scope']]}: "
         claim = boundary_claim(row, f"{who}{row['parameter']} {boundary_phrase(row)}", parameter.space)
+        if claim is not None:
+            claims.append(claim)
+    spaces = {p.column: p.space for p in space.parameters}
+    for rule in named_rules(summary):
+        claim = rule_claim(rule, spaces)
         if claim is not None:
             claims.append(claim)
     return claims

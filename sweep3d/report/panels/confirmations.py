@@ -10,12 +10,13 @@ from __future__ import annotations
 
 from typing import Any
 
-from sweep3d.confirm.claims import boundary_key, region_key
+from sweep3d.confirm.claims import boundary_key, region_key, rule_key
 from sweep3d.confirm.record import read_verdicts
 from sweep3d.report.figures import p_text, pct
 from sweep3d.report.panel import PanelInputs
 from sweep3d.stages.aggregate.boundaries import boundary_phrase
 from sweep3d.stages.aggregate.confirmation import UNCONFIRMED
+from sweep3d.stages.aggregate.summary import named_rules
 
 
 def build(inputs: PanelInputs) -> dict[str, Any] | None:
@@ -27,6 +28,7 @@ def build(inputs: PanelInputs) -> dict[str, Any] | None:
     for b in summary.boundaries:
         who = "" if b["scope"] == "all" else f"{b[b['scope']]}: "
         findings.append((boundary_key(b), f"{who}{b['parameter']} {boundary_phrase(b)}"))
+    findings += [(rule_key(r["key"]), r["text"]) for r in named_rules(summary)]
     if not findings:
         return None
     rows = []
