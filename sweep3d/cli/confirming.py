@@ -28,7 +28,8 @@ def print_confirmation(console: Console, result: ConfirmResult) -> None:
             f"inside, {v.inside_right} only outside; p = {v.p_value:.2g}, Holm p = {v.p_holm:.2g}", soft_wrap=True)
     n = len(result.confirmations)
     console.print(
-        f"fresh renders: {result.rendered} made, {result.cached} cached (experiment {escape(result.experiment)}); "
+        f"fresh jobs: {result.jobs}, renders {result.rendered} made and {result.cached} cached (experiment "
+        f"{escape(result.experiment)}); "
         "twins matched on every other parameter, none an image of the run; test: McNemar's exact, one-sided, on the "
         f"fresh pairs only, Holm-adjusted over the {n} finding{'s' * (n != 1)}: at most a {ALPHA:.0%} chance that "
         "any finding without a real effect is called confirmed", soft_wrap=True)

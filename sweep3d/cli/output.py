@@ -266,7 +266,7 @@ def print_findings(console: Console, plan: Plan, store: Store | None = None, fai
     marks = confirmation_marks(store, plan.spec.name, regions, summary.boundaries, rules)
     unconfirmed = UNCONFIRMED_MARK in marks
     if regions:
-        console.print("fails most at: " + "; ".join(describe_region(r) + marks.pop(0) for r in regions)
+        console.print("fails most at: " + "; ".join(describe_region(r) + escape(marks.pop(0)) for r in regions)
                       + " (each against the rest of its parameter; false discovery rate 5%)")
     elif summary.wrong and summary.effects:
         gap = nearest_miss_region(summary)
@@ -278,7 +278,7 @@ def print_findings(console: Console, plan: Plan, store: Store | None = None, fai
                           "does not rule out chance")
     if summary.boundaries:
         more = summary.boundaries_left_out
-        console.print("fails beyond a boundary: " + "; ".join(describe_boundary(b) + marks.pop(0)
+        console.print("fails beyond a boundary: " + "; ".join(describe_boundary(b) + escape(marks.pop(0))
                                                               for b in summary.boundaries)
                       + (f"; {more} more of single objects or environments in the report" if more else "")
                       + " (step fits with 95% profile-likelihood intervals; false discovery rate 5%)")
@@ -286,7 +286,7 @@ def print_findings(console: Console, plan: Plan, store: Store | None = None, fai
         console.print("no significant boundary (q ≥ 0.05): "
                       + "; ".join(describe_flat(rows) for rows in by_parameter(summary.no_boundaries)))
     if rules:
-        console.print("fails more in a box: " + "; ".join(escape(r["text"]) + marks.pop(0) for r in rules)
+        console.print("fails more in a box: " + "; ".join(escape(r["text"] + marks.pop(0)) for r in rules)
                       + " (subgroup discovery over intervals; best of many boxes, so optimistic until confirmed)",
                       soft_wrap=True)
     if unconfirmed:

@@ -47,6 +47,7 @@ class Confirmation:
 class ConfirmResult:
     experiment: str  # the fresh jobs' experiment
     confirmations: list[Confirmation]
+    jobs: int  # fresh jobs (two per pair; twins that differ only in a post control share a render)
     rendered: int  # renders this call made
     cached: int  # renders it found in the store
     failed: int
@@ -106,7 +107,7 @@ def confirm(loaded: LoadedSpec, renders: int = DEFAULT_RENDERS, seed: int | None
     write_verdicts(store, loaded.name, {
         x.claim.key: {"text": x.claim.text, "verdict": x.verdict.as_dict(), "renders": renders, "seed": seed,
                       "drawn": x.drawn, "experiment": loaded.name + SUFFIX} for x in confirmations})
-    return ConfirmResult(loaded.name + SUFFIX, confirmations, rendered, cached, failed)
+    return ConfirmResult(loaded.name + SUFFIX, confirmations, len(fresh), rendered, cached, failed)
 
 
 def findings_claims(loaded: LoadedSpec, store: Store, summary: Summary, space: Space) -> list[Claim]:
