@@ -91,3 +91,43 @@ def test_confirm_before_any_run_is_one_line(tmp_path: Path) -> None:
     result = CliRunner().invoke(app, ["confirm", str(spec)])
     assert result.exit_code == 2
     assert "sweep3d run" in result.output and "Traceback" not in result.output
+
+
+BRIGHT_MODEL = '''\
+import torch
+from sweep3d.stages.infer.models import Classifier, Normalize
+
+
+class Bright(torch.nn.Module):
+    """Says "carton" for a bright image, "dark" otherwise: fails exactly below a brightness."""
+
+    def forward(self, x):
+        m = x.mean(dim=(1, 2, 3))
+        return torch.stack([(m - 0.45) * 50, (0.45 - m) * 50], dim=1)
+
+
+def make():
+    return Classifier(Bright(), Normalize(), labels=["carton", "dark"])
+'''
+
+
+def test_a_real_boundary_is_confirmed_and_run_marks_it(tmp_path: Path) -> None:
+    """A model that fails on dark images: the run finds the brightness boundary, confirm replicates
+    it on fresh twins, a second confirm renders nothing, and run's findings say confirmed."""
+    (tmp_path / "brightmodel.py").write_text(BRIGHT_MODEL)
+    text = (SPEC.replace("[model]\nbatch_size = 8", '[model]\nname = "brightmodel:make"')
+            .replace("pitch = { range = [-20, 20] }", "\n[[controls]]\ntype = \"brightness_contrast\"\n"
+                     "brightness = { range = [-0.8, 0.2] }").replace("samples = 4", "samples = 30"))
+    spec = write_spec(tmp_path, text)
+    runner = CliRunner()
+    first = runner.invoke(app, ["run", str(spec), "--no-report"])
+    assert first.exit_code == 0, first.output
+    assert "brightness_contrast_brightness fails below" in first.output and "[unconfirmed]" in first.output
+    confirmed = runner.invoke(app, ["confirm", str(spec), "--renders", "24"])
+    assert confirmed.exit_code == 0, confirmed.output
+    assert "confirmed: brightness_contrast_brightness fails below" in confirmed.output
+    assert "fresh jobs: 24, renders 12 made" in confirmed.output  # twins differ in a post control: one render
+    again = runner.invoke(app, ["confirm", str(spec), "--renders", "24"])
+    assert "renders 0 made and 12 cached" in again.output
+    marked = runner.invoke(app, ["run", str(spec), "--no-report"])
+    assert "[confirmed on 12 fresh pairs" in " ".join(marked.output.split())
