@@ -46,6 +46,7 @@ import numpy as np
 import pyarrow as pa
 
 from sweep3d.stages.aggregate.confirmation import wilson
+from sweep3d.stages.aggregate.measures import NOT_A_MEASURE
 from sweep3d.stages.aggregate.quoting import identifier
 from sweep3d.stages.aggregate.views import has_view
 
@@ -277,8 +278,8 @@ def rules_of(con: duckdb.DuckDBPyConnection, parameters: Sequence[str] | None = 
     if parameters is None:
         if not has_view(con, "control_parameters"):
             return []
-        parameters = [r[0] for r in con.execute("SELECT parameter FROM control_parameters WHERE levels > 1 "
-                                                "ORDER BY position").fetchall()]
+        parameters = [r[0] for r in con.execute(f"SELECT parameter FROM control_parameters WHERE levels > 1 "
+                                                f"AND {NOT_A_MEASURE} ORDER BY position").fetchall()]
     if not parameters:
         return []
     kinds = {name: kind for name, kind, *_ in con.execute("DESCRIBE results").fetchall()}
