@@ -21,7 +21,12 @@ Views:
     the control does not apply), absent.
 ``control_accuracy``
     per (parameter, level): label, value and absent as above, n (counted results), n_correct,
-    accuracy, wilson_low, wilson_high.
+    accuracy, wilson_low, wilson_high. Besides the parameters, the results' *measures*
+    (``measures.MEASURES``: ``visible_fraction``, ``margin``, ``iou``, those the results have) are
+    levelled and binned the same way, after them, in ``control_values``, ``control_levels``,
+    ``control_parameters`` and here; they are outcomes, not causes, so the views that compare
+    values (``pair_accuracy``, ``variance_explained``, ``object_sensitivity``, ``failure_modes``,
+    ``outcomes_by_value``, the model comparison) leave them out.
 ``pair_accuracy``
     the same per pair of levels of two parameters (both with 2 levels or more).
 ``scene_accuracy``
@@ -234,7 +239,7 @@ def register_views(con: duckdb.DuckDBPyConnection, parameters: list[str] | None 
         result_columns = _columns(con, "results")
     columns = control_columns(con, parameters)
     roles = results_roles(con)
-    for sql in _view_statements(columns, roles, result_measures(set(result_columns), roles)):
+    for sql in _view_statements(columns, roles, result_measures(result_columns, roles)):
         con.execute(sql)
     register_part_views(con, set(result_columns))
     register_task_views(con, roles, set(result_columns), model, min_visible)
@@ -447,16 +452,18 @@ _CONFUSIONS_VIEW = """CREATE OR REPLACE VIEW object_confusions AS
                 ORDER BY object, rank"""
 
 
-def result_measures(result_columns: set[str], roles: Roles) -> list[tuple[str, str]]:
-    """(name, SQL over ``results``) of each measure of ``measures.MEASURES`` the results have: the
-    object's visible fraction (truth passes), the top-1 probability's margin over the second
-    (a classifier's ``topk_probs``) and the IoU (an evaluator with the ``iou`` role)."""
+def result_measures(result_columns: dict[str, str], roles: Roles) -> list[tuple[str, str]]:
+    """(name, SQL over ``results``) of each measure of ``measures.MEASURES`` the results have (as
+    numbers; ``result_columns``: name → DuckDB type): the object's visible fraction (truth passes),
+    the top-1 probability's margin over the second (a classifier's ``topk_probs``) and the IoU (an
+    evaluator with the ``iou`` role)."""
     out = []
-    if "visible_fraction" in result_columns:
+    if _is_numeric(result_columns.get("visible_fraction", "")):
         out.append(("visible_fraction", "visible_fraction"))
-    if "topk_probs" in result_columns:
+    probs = result_columns.get("topk_probs", "")
+    if probs.endswith("[]") and _is_numeric(probs[:-2]):
         out.append(("margin", "CASE WHEN len(topk_probs) >= 2 THEN topk_probs[1] - topk_probs[2] END"))
-    if roles.has("iou") and roles.iou in result_columns:
+    if roles.has("iou") and _is_numeric(result_columns.get(roles.iou, "")):
         out.append(("iou", identifier(roles.iou)))
     return out
 
