@@ -186,7 +186,7 @@ def test_a_chance_region_significant_in_a_small_discovery_set_is_not_replicated_
         verdict = verdict_of(claim, null, 1000 + seed)
         assert verdict.status in (CONFIRMED, NOT_REPLICATED)
         confirmed += verdict.status == CONFIRMED
-    # exact McNemar is conservative: about 2-3 % expected; ALPHA + 2.5 standard errors of 300 draws
+    # exact McNemar is conservative: about 3 % expected; ALPHA + 2.5 standard errors of 300 draws
     assert confirmed / len(planted) <= ALPHA + 2.5 * (ALPHA * (1 - ALPHA) / len(planted)) ** 0.5
 
 
