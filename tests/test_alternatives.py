@@ -8,6 +8,7 @@ from pathlib import Path
 
 from sweep3d.spec.framing import Framing
 from sweep3d.stages import load_spec
+from sweep3d.stages.aggregate.rules import rules_of
 from sweep3d.stages.plan import make_plan
 from tests.conftest import write_spec
 from tests.test_aggregate_views import make_store, rows_of
@@ -107,5 +108,6 @@ def test_accuracy_per_treatment_is_paired_and_never_pools_a_controls_absent_jobs
     pairs = {(r["environment_a"], r["environment_b"]): r for r in rows_of(con, "FROM paired_environments")}
     assert set(pairs) == {("none", "plate"), ("none", "plant"), ("plate", "plant")}
     assert all(r["n"] == 2 * 6 for r in pairs.values())  # every base scene paired across treatments
+    assert rules_of(con)[0].key() == "environment = plate"  # rules read a control's absent jobs as no value
     truth = sum(r["correct"] for r in rows if r["environment"] == "plate") / 12
     assert pairs[("none", "plate")]["accuracy_b"] == truth and pairs[("none", "plate")]["accuracy_a"] == 1.0

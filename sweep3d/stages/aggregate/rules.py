@@ -284,17 +284,20 @@ def rules_of(con: duckdb.DuckDBPyConnection, parameters: Sequence[str] | None = 
         return []
     kinds = {name: kind for name, kind, *_ in con.execute("DESCRIBE results").fetchall()}
     selected = [p for p in parameters if p in kinds]
-    picked = ", ".join(f"CAST({identifier(p)} AS DOUBLE)" if _numeric(kinds[p]) else f"CAST({identifier(p)} AS VARCHAR)"
-                       for p in selected)
-    got = con.execute(f"SELECT correct, {picked} FROM results WHERE counted ORDER BY job").fetchall()
-    if not got:
+    picked = ", ".join(f"CAST({identifier(p)} AS DOUBLE) AS c{i}" if _numeric(kinds[p])
+                       else f"CAST({identifier(p)} AS VARCHAR) AS c{i}" for i, p in enumerate(selected))
+    got = con.execute(f"SELECT correct, {picked} FROM results WHERE counted ORDER BY job").fetchnumpy()
+    if not len(got["correct"]):
         return []
-    correct = np.array([bool(r[0]) for r in got])
+    correct = np.asarray(got["correct"], bool)
     columns = {}
-    for i, p in enumerate(selected, start=1):
-        raw = [r[i] for r in got]
-        columns[p] = (np.array([np.nan if v is None else v for v in raw], np.float64) if _numeric(kinds[p])
-                      else np.array(raw, dtype=object))
+    for i, p in enumerate(selected):
+        values = got[f"c{i}"]
+        if _numeric(kinds[p]):  # a masked array where the control does not apply: NaN there
+            columns[p] = np.ma.filled(np.ma.asarray(values, np.float64), np.nan)
+        else:
+            columns[p] = np.array([None if v is None or v is np.ma.masked else str(v) for v in values.tolist()],
+                                  dtype=object)
     return find_rules(columns, correct)
 
 
