@@ -217,3 +217,12 @@ def test_the_report_panel_marks_each_finding_by_its_recorded_verdict(tmp_path) -
     marks = confirmation_marks(store, "e", [Region("occluder_coverage", "half", 0.2, 5, 0.8, 5, -0.6, -0.9, -0.2,
                                                    0.01)], [boundary])
     assert marks[0].startswith(" [confirmed on 26 fresh pairs: -42 pts") and marks[1] == UNCONFIRMED_MARK
+
+
+def test_a_value_of_an_integer_range_is_drawn_as_the_integer_the_plan_holds() -> None:
+    claim = value_claim("scale_steps", "3", "", Range(1.0, 9.0, integer=True), level_value=3.0)
+    space = Space(("mug",), ("white",), (Parameter("scale_steps", "scale", "steps", Range(1.0, 9.0, integer=True),
+                                                   frozenset({("mug", "white")})),))
+    for inside, outside in draw_pairs(space, claim, 20, seed=1):
+        assert inside["scale_steps"] == 3 and type(inside["scale_steps"]) is int
+        assert outside["scale_steps"] != 3 and type(outside["scale_steps"]) is int

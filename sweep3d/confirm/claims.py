@@ -81,7 +81,8 @@ def value_claim(column: str, label: str, text: str, space: Choice | Range | None
         inside = Side(intervals=((lo, hi),))
         outside = Side(intervals=tuple((a, b) for a, b in ((space.low, lo), (hi, space.high)) if b > a))
     elif level_value is not None:
-        inside, outside = Side((level_value,)), Side(intervals=((space.low, space.high),))
+        value = int(round(level_value)) if space.integer else level_value  # as the plan holds it: the same key
+        inside, outside = Side((value,)), Side(intervals=((space.low, space.high),))
     else:
         return None
     if not inside or not outside:
@@ -130,7 +131,7 @@ def rule_claim(rule: Mapping[str, Any], spaces: Mapping[str, Choice | Range]) ->
         if c["value"] is not None:
             options = tuple(o for o in getattr(space, "options", ()) if _same(o, str(c["value"]), _float(c["value"])))
             if isinstance(space, Range):
-                options = (c["value"],)
+                options = (int(round(c["value"])) if space.integer else c["value"],)
             if not options:
                 return None
             box.append((column, Side(options)))
