@@ -129,5 +129,7 @@ def test_a_real_boundary_is_confirmed_and_run_marks_it(tmp_path: Path) -> None:
     assert "fresh jobs: 24, renders 12 made" in confirmed.output  # twins differ in a post control: one render
     again = runner.invoke(app, ["confirm", str(spec), "--renders", "24"])
     assert "renders 0 made and 12 cached" in again.output
-    marked = runner.invoke(app, ["run", str(spec), "--no-report"])
+    marked = runner.invoke(app, ["run", str(spec)])
     assert "[confirmed on 12 fresh pairs" in " ".join(marked.output.split())
+    html = (tmp_path / "store" / "reports" / "fresh.html").read_text(encoding="utf-8")
+    assert "Confirmed on fresh renders" in html and "<td><b>confirmed</b></td>" in html
