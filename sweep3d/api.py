@@ -32,6 +32,7 @@ if TYPE_CHECKING:
     from rich.console import Console
 
     from sweep3d.explain.driver import ExplainResult
+    from sweep3d.confirm.run import ConfirmResult
     from sweep3d.export import ExportResult
     from sweep3d.pipeline import RunResult
     from sweep3d.spec.loader import LoadedSpec
@@ -182,6 +183,17 @@ class Experiment:
 
         return export_dataset(self.spec, format, output=Path(output) if output is not None else None, where=where,
                               model=model, unevaluable=unevaluable, append=append, link=link)
+
+    def confirm(self, renders: int | None = None, seed: int | None = None, progress: bool = True) -> ConfirmResult:
+        """Test each significant finding of the last run on fresh renders, like ``sweep3d confirm``
+        (``renders`` per finding, default 64; ``seed`` default the spec's); the verdicts are kept for
+        the findings and the report."""
+        from rich.console import Console
+
+        from sweep3d.confirm.run import confirm
+        from sweep3d.stages.aggregate.confirmation import DEFAULT_RENDERS
+
+        return confirm(self.spec, renders or DEFAULT_RENDERS, seed, Console() if progress else None)
 
     def report(self, path: str | Path | None = None, model: str | None = None) -> Path:
         """Write the HTML report (default ``<store>/reports/<experiment>.html``) and return its path."""

@@ -26,6 +26,7 @@ from sweep3d.report.panels import PANELS, explorer
 from sweep3d.report.results import WRONG, Results, materialise_views
 from sweep3d.stages import load_spec
 from sweep3d.stages.aggregate import connect
+from sweep3d.stages.aggregate.measures import MEASURES
 from tests.test_report import ARTIFACTS, assert_clean, cell_centre, open_page
 
 
@@ -74,7 +75,10 @@ def test_the_joint_table_sums_to_every_slice_sql_gives(synthetic: Path) -> None:
         "SELECT a.parameter, a.level, b.parameter, b.level, count(*) FILTER (WHERE a.valid), "
         "count(*) FILTER (WHERE a.valid AND a.correct), count(*) FROM control_levels a JOIN control_levels b "
         "ON a.job = b.job AND a.position < b.position GROUP BY ALL").fetchall()
-    assert len(pairs) == sum(levels[a] * levels[b] for a, b in itertools.combinations(range(len(names)), 2))
+    assert "margin" in names  # a measure is an axis too (its levels are not crossed with the others')
+    crossed = [i for i, name in enumerate(names) if name not in MEASURES]
+    assert len([p for p in pairs if p[0] not in MEASURES and p[2] not in MEASURES]) == sum(
+        levels[a] * levels[b] for a, b in itertools.combinations(crossed, 2))
     for a, la, b, lb, *expected in pairs:
         assert summed(table, {names.index(a): la, names.index(b): lb}) == tuple(expected)
     yaw, elevation, blur, obj = (names.index(n) for n in ("orientation_yaw", "camera_elevation", "blur_sigma",
@@ -111,9 +115,15 @@ def test_a_joint_table_over_budget_becomes_pair_tables(synthetic: Path) -> None:
     assert [t["params"] for t in data["tables"]] == [list(p) for p in itertools.combinations(range(len(names)), 2)]
     for table in data["tables"]:
         a, b = table["params"]
-        rows = con.execute("SELECT level_a, level_b, n, n_correct FROM pair_accuracy WHERE parameter_a = ? "
-                           "AND parameter_b = ?", [names[a], names[b]]).fetchall()
-        assert {(la, lb): (n, k) for la, lb, n, k in rows} == {
+        rows = con.execute(  # pair_accuracy's counts, for measures too (which it leaves out)
+            "SELECT a.level, b.level, count(*) FILTER (WHERE a.counted), count(*) FILTER (WHERE a.counted AND "
+            "a.correct) FROM control_levels a JOIN control_levels b ON a.job = b.job "
+            "WHERE a.parameter = ? AND b.parameter = ? GROUP BY ALL", [names[a], names[b]]).fetchall()
+        if names[a] not in MEASURES and names[b] not in MEASURES:
+            assert sorted(rows) == sorted(con.execute(
+                "SELECT level_a, level_b, n, n_correct FROM pair_accuracy WHERE parameter_a = ? AND parameter_b = ?",
+                [names[a], names[b]]).fetchall())
+        assert {(la, lb): (n, k) for la, lb, n, k in rows if n} == {
             (la, lb): (n, k) for la, lb, n, k in zip(*table["level"], table["n"], table["k"]) if n}
     assert "Sliders are off" in render_html(context)
 
@@ -240,7 +250,8 @@ def test_heat_map_matches_sql_and_shows_right_and_wrong(tmp_path: Path, chromium
             page.focus(f"input[aria-label='value of {name}']")
             for _ in range(steps):
                 page.keyboard.press("ArrowRight")
-        page.wait_for_function("() => window.sweep3d.explorer.state.slider.join() === '2,0,0,0,1'")
+        # the parameters' sliders (the measures, margin here, come after them)
+        page.wait_for_function("() => window.sweep3d.explorer.state.slider.slice(0, 5).join() === '2,0,0,0,1'")
         sliced = heatmap(page)
         assert sliced["x"] == ["0", "30", "60"] and len(sliced["y"]) == 10
         for y, x in itertools.product(range(10), range(3)):

@@ -253,6 +253,30 @@ def bench(
 
 
 @command
+def confirm(
+    spec: Path = SpecArg,
+    renders: Optional[int] = typer.Option(None, "--renders", min=2, show_default=False,
+                                          help="Fresh renders per finding, half inside its region and half outside "
+                                               "(default 64)."),
+    seed: Optional[int] = typer.Option(None, "--seed", min=0, show_default=False,
+                                       help="Seed of the fresh draws (default: the spec's)."),
+) -> None:
+    """Test each significant finding of the last run on fresh renders: twins inside and outside its
+    region, matched on every other parameter, never an image of the run; confirmed or not replicated."""
+    from sweep3d.api import Experiment
+    from sweep3d.cli.confirming import print_confirmation
+    from sweep3d.confirm.run import confirm as confirm_findings
+    from sweep3d.stages.aggregate.confirmation import DEFAULT_RENDERS
+
+    experiment = Experiment(spec)
+    signal.signal(signal.SIGTERM, _interrupt)
+    result = confirm_findings(experiment.spec, renders or DEFAULT_RENDERS, seed, console)
+    print_confirmation(console, result)
+    if result.failed:
+        raise typer.Exit(1)
+
+
+@command
 def sheet(
     spec: Path = SpecArg,
     output: Optional[Path] = typer.Option(None, "--output", "-o", help="PNG file to write."),

@@ -25,6 +25,7 @@ from sweep3d.stages.aggregate import (
 )
 from sweep3d.stages.aggregate.boundaries import boundary_phrase, control_number, numeric_scales
 from sweep3d.stages.aggregate.own_jobs import results_store
+from sweep3d.stages.aggregate.summary import named_rules
 from sweep3d.stages.aggregate.tasks import HIDDEN
 from sweep3d.stages.code import explain
 from sweep3d.stages.driver import plan_status
@@ -266,8 +267,11 @@ def print_findings(console: Console, plan: Plan, store: Store | None = None, fai
     if line:
         console.print(escape(line), highlight=False, soft_wrap=True)
     regions = weakest_regions(summary)
+    rules = named_rules(summary)
+    marks = confirmation_marks(store, plan.spec.name, regions, summary.boundaries, rules)
+    unconfirmed = UNCONFIRMED_MARK in marks
     if regions:
-        console.print("fails most at: " + "; ".join(map(describe_region, regions))
+        console.print("fails most at: " + "; ".join(describe_region(r) + escape(marks.pop(0)) for r in regions)
                       + " (each against the rest of its parameter; false discovery rate 5%)")
     elif summary.wrong and summary.effects:
         gap = nearest_miss_region(summary)
@@ -279,12 +283,36 @@ def print_findings(console: Console, plan: Plan, store: Store | None = None, fai
                           "does not rule out chance")
     if summary.boundaries:
         more = summary.boundaries_left_out
-        console.print("fails beyond a boundary: " + "; ".join(map(describe_boundary, summary.boundaries))
+        console.print("fails beyond a boundary: " + "; ".join(describe_boundary(b) + escape(marks.pop(0))
+                                                              for b in summary.boundaries)
                       + (f"; {more} more of single objects or environments in the report" if more else "")
                       + " (step fits with 95% profile-likelihood intervals; false discovery rate 5%)")
     if summary.no_boundaries:
         console.print("no significant boundary (q ≥ 0.05): "
                       + "; ".join(describe_flat(rows) for rows in by_parameter(summary.no_boundaries)))
+    if rules:
+        console.print("fails more in a box: " + "; ".join(escape(r["text"] + marks.pop(0)) for r in rules)
+                      + " (subgroup discovery over intervals; best of many boxes, so optimistic until confirmed)",
+                      soft_wrap=True)
+    if unconfirmed:
+        console.print(f"unconfirmed: not yet tested on fresh renders (sweep3d confirm {escape(str(plan.spec.path))})",
+                      soft_wrap=True)
+
+
+UNCONFIRMED_MARK = " [unconfirmed]"
+
+
+def confirmation_marks(store: Store, experiment: str, regions: list[Region], boundaries: list[dict],
+                       rules: list[dict] = ()) -> list[str]:
+    """What follows each finding (regions, boundaries, then rules): its verdict on fresh renders, as
+    ``sweep3d confirm`` recorded it (see :mod:`sweep3d.confirm.record`), or `` [unconfirmed]``."""
+    from sweep3d.confirm.claims import boundary_key, region_key, rule_key
+    from sweep3d.confirm.record import mark, read_verdicts
+
+    verdicts = read_verdicts(store, experiment)
+    keys = ([region_key(r.column, r.label) for r in regions] + [boundary_key(b) for b in boundaries]
+            + [rule_key(r["key"]) for r in rules])
+    return [mark(verdicts, key) if key in verdicts else UNCONFIRMED_MARK for key in keys]
 
 
 def describe_region(region: Region) -> str:

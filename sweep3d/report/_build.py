@@ -41,6 +41,7 @@ from sweep3d.stages.aggregate import (
 from sweep3d.stages.aggregate.boundaries import VIEW as BOUNDARIES_VIEW
 from sweep3d.stages.aggregate.boundaries import numeric_scales, register_failure_boundaries
 from sweep3d.stages.aggregate.counterfactuals import COUNTERFACTUAL_VIEWS
+from sweep3d.stages.aggregate.measures import MEASURES
 from sweep3d.stages.aggregate.own_jobs import PlannedStore, results_store
 from sweep3d.stages.aggregate.results import plan_protocol
 from sweep3d.stages.infer.evaluators import measure_of
@@ -149,7 +150,7 @@ def gather(loaded: LoadedSpec, con: duckdb.DuckDBPyConnection, store: Store,
     scales = numeric_scales(loaded.controls)
     register_failure_boundaries(con, scales)  # once: the summary's findings and the panel read it
     summary = summarise(con, columns, scales=scales)
-    results = Results(con, ["object", "environment", *columns])
+    results = Results(con, ["object", "environment", *columns], MEASURES)
     images = con.execute("SELECT count(DISTINCT image_key) FROM results").fetchone()[0]
     thumbs = Thumbnails(store, images)
     inputs = PanelInputs(loaded, con, summary, results, thumbs, min_count(summary), store)

@@ -80,12 +80,15 @@ class Results:
             spec's control columns (names with no levels are skipped).
     """
 
-    def __init__(self, con: duckdb.DuckDBPyConnection, names: Sequence[str]) -> None:
+    def __init__(self, con: duckdb.DuckDBPyConnection, names: Sequence[str], measures: Sequence[str] = ()) -> None:
         self.con = con
         self.parameters = read_parameters(con, names)
+        #: the measures of ``measures`` the results have (visible fraction, margin, IoU): axes of the
+        #: explorer only; their levels follow the parameters' (index ``len(parameters) + i``)
+        self.measures = read_parameters(con, measures)
         columns = {row[0] for row in con.execute("DESCRIBE results").fetchall()}
         roles = results_roles(con)
-        con.execute(_table_sql(columns, roles, [p.name for p in self.parameters]))
+        con.execute(_table_sql(columns, roles, [p.name for p in self.parameters + self.measures]))
         #: ORDER BY putting rows of ``results`` in example order (for SQL shown to the user).
         badness = badness_sql(roles)
         self.example_order_sql = ("ORDER BY NOT counted, correct" + (f", {badness} DESC" if badness != "NULL" else "")
@@ -168,7 +171,7 @@ class Results:
         return [(p.name, p.labels[0]) for p in self.parameters if not p.varies]
 
     def _rows(self, where: str, values: list[Any], limit: int | None) -> list[ResultRow]:
-        levels = "".join(f", {_level(p)}" for p in range(len(self.parameters)))
+        levels = "".join(f", {_level(p)}" for p in range(len(self.parameters) + len(self.measures)))
         found = self.con.execute(
             f"SELECT job, outcome, prediction, image_key, why{levels} FROM {TABLE} WHERE {where} "
             f"ORDER BY {EXAMPLE_ORDER}" + (f" LIMIT {int(limit)}" if limit is not None else ""), values

@@ -27,6 +27,7 @@ from sweep3d.report.panels import (
     aggregate,
     boundaries,
     compare,
+    confirmations,
     explorer,
     failure_modes,
     failures,
@@ -52,12 +53,15 @@ CORE_PANELS: tuple[Panel, ...] = (
 NOT_EVALUABLE = Panel("not-evaluable", "Not evaluable", "panels/not_evaluable.html.j2", not_evaluable.build)
 OUTCOMES = Panel("outcomes", "Boxes and masks", "panels/outcomes.html.j2", outcomes.build)
 BOUNDARIES = Panel("boundaries", "Failure boundaries", "panels/boundaries.html.j2", boundaries.build)
+CONFIRMATIONS = Panel("confirmations", "Confirmed on fresh renders", "panels/confirmations.html.j2",
+                      confirmations.build)
 
 #: Panels shown only when their data exists (their ``build`` returns None otherwise).
 OPTIONAL_PANELS: tuple[Panel, ...] = (
     NOT_EVALUABLE,
     BOUNDARIES,
     OUTCOMES,
+    CONFIRMATIONS,
     Panel("compare", "Model comparison", "panels/compare.html.j2", compare.build),
     Panel("paired", "Paired comparisons", "panels/paired.html.j2", paired.build),
     Panel("part-visibility", "Part visibility", "panels/part_visibility.html.j2", part_visibility.build),
@@ -67,7 +71,7 @@ OPTIONAL_PANELS: tuple[Panel, ...] = (
 
 #: Page order: what was left out of the accuracy right after it, failure boundaries after the
 #: failure modes, box and mask outcomes after the aggregate plots.
-PANELS: tuple[Panel, ...] = (CORE_PANELS[0], NOT_EVALUABLE, *CORE_PANELS[1:3], BOUNDARIES, *CORE_PANELS[3:],
-                             *OPTIONAL_PANELS[2:])
+PANELS: tuple[Panel, ...] = (CORE_PANELS[0], NOT_EVALUABLE, *CORE_PANELS[1:3], BOUNDARIES, CONFIRMATIONS,
+                             *CORE_PANELS[3:], *(p for p in OPTIONAL_PANELS[2:] if p is not CONFIRMATIONS))
 
 __all__ = ["CORE_PANELS", "OPTIONAL_PANELS", "PANELS"]

@@ -1,5 +1,10 @@
 """Explorer (after 3DB's dashboard): any two parameters as heat-map axes, others as sliders or pooled.
 
+Besides the spec's parameters, the results' measures are axes too, binned as ``control_accuracy``
+bins them: the object's visible fraction (truth passes), the classifier's margin and the IoU
+(:mod:`sweep3d.stages.aggregate.measures`): accuracy against how much of the object shows is one
+choice of axis.
+
 The page carries counts, not rows: the non-empty cells of the contingency table over every
 parameter shown (per combination of levels: valid results, correct ones, all results; levels as
 in ``control_levels``). ``static/explorer.js`` sums them into any heat map (two parameters as
@@ -55,14 +60,17 @@ def payload(inputs: PanelInputs, max_cells: int = MAX_CELLS) -> dict[str, Any]:
     (some jobs are not evaluable: the counts leave them out, and the page says "counted").
     """
     results = inputs.results
-    shown = [i for i, p in enumerate(results.parameters) if p.varies or p.name in SCENE_COLUMNS]
-    params = [results.parameters[i] for i in shown]
+    axes = results.parameters + getattr(results, "measures", [])  # measures (visible fraction, margin, IoU) last
+    shown = [i for i, p in enumerate(axes) if p.varies or p.name in SCENE_COLUMNS]
+    params = [axes[i] for i in shown]
     defaults = default_axes(params)
     cells = results.cells(shown)
     groups = [list(range(len(shown)))] if cells <= max_cells else pairs(len(shown))
     first = [shown[defaults[axis]] for axis in ("x", "y") if defaults[axis] >= 0]
-    jobs = results.sample([[shown[p] for p in group] for group in groups], first, FIRST_VIEW_IMAGES,
-                          inputs.thumbs.remaining)
+    # images are sampled per cell of the parameters (a measure's bins would thin every cell's share)
+    measures = len(results.parameters)
+    sampled = [[shown[p] for p in group if shown[p] < measures] for group in groups]
+    jobs = results.sample([g for g in sampled if g], first, FIRST_VIEW_IMAGES, inputs.thumbs.remaining)
     return {
         "params": [{"name": p.name, "labels": p.labels, "binned": p.binned} for p in params],
         "mode": "joint" if cells <= max_cells else "pairs",

@@ -38,6 +38,7 @@ import pyarrow as pa
 from sweep3d.spec.loader import ControlInstance
 from sweep3d.spec.params import Choice, Range
 from sweep3d.stages.aggregate.compare import ALPHA
+from sweep3d.stages.aggregate.measures import NOT_A_MEASURE
 from sweep3d.stages.aggregate.quoting import identifier
 from sweep3d.stages.aggregate.step_fit import fit_step
 from sweep3d.stages.aggregate.views import has_view
@@ -186,8 +187,9 @@ def _fitted_parameters(con: duckdb.DuckDBPyConnection, scales: Mapping[str, Scal
     """(column, scale) of each parameter to fit, in spec order."""
     if not has_view(con, "control_parameters"):
         return []
-    listed = [r[0] for r in con.execute("SELECT parameter FROM control_parameters WHERE numeric AND "
-                                        "parameter NOT IN ('object', 'environment') ORDER BY position").fetchall()]
+    listed = [r[0] for r in con.execute("SELECT parameter FROM control_parameters WHERE numeric AND parameter "
+                                        f"NOT IN ('object', 'environment') AND {NOT_A_MEASURE} "
+                                        "ORDER BY position").fetchall()]
     if scales is None:
         binned = {r[0] for r in con.execute("SELECT parameter FROM control_parameters WHERE binned").fetchall()}
         return [(column, Scale()) for column in listed if column in binned]

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import duckdb
 
+from sweep3d.stages.aggregate.measures import NOT_A_MEASURE
 from sweep3d.stages.aggregate.quoting import literal
 
 #: Below this many paired jobs a region is not ranked (as ``failure_modes``'s default).
@@ -99,12 +100,13 @@ def register_compare_views(con: duckdb.DuckDBPyConnection, models: list[str], ha
                    fixed, broken, {differ}
             FROM (SELECT p.model_a, p.model_b, any_value(p.rank_a) AS rank_a, any_value(p.rank_b) AS rank_b,
                          l.parameter, l.position, l.level, any_value(l.label) AS label, {counts}
-                  FROM model_pairs p JOIN control_levels l USING (job)
+                  FROM model_pairs p JOIN control_levels l USING (job) WHERE l.{NOT_A_MEASURE}
                   GROUP BY p.model_a, p.model_b, l.parameter, l.position, l.level)
             ORDER BY rank_a, rank_b, position, level""",
         f"""CREATE OR REPLACE VIEW model_regions AS
             WITH varied AS (SELECT l.* FROM control_levels l
-                            SEMI JOIN control_parameters c ON c.parameter = l.parameter AND c.levels > 1),
+                            SEMI JOIN control_parameters c ON c.parameter = l.parameter AND c.levels > 1
+                            WHERE l.{NOT_A_MEASURE}),
             singles AS (
                 SELECT p.model_a, p.model_b, l.parameter AS parameter_a, l.label AS label_a,
                        NULL::VARCHAR AS parameter_b, NULL::VARCHAR AS label_b, {counts}

@@ -35,6 +35,7 @@ from __future__ import annotations
 import duckdb
 
 from sweep3d.evaluation import Roles
+from sweep3d.stages.aggregate.measures import NOT_A_MEASURE
 
 DETECTION_VIEWS = ("average_precision", "average_precision_by_value")
 THRESHOLDS = 10  # t = 0.50, 0.55, …, 0.95
@@ -51,7 +52,7 @@ def detection_views(con: duckdb.DuckDBPyConnection, roles: Roles, result_columns
     con.execute("CREATE OR REPLACE VIEW average_precision AS "
                 + ap_sql(f"(SELECT r.object, r.job, r.det_scores, r.det_ious FROM results r WHERE {evaluable})", ()))
     by_value = ("(SELECT l.parameter, l.position, l.level, l.label, r.object, r.job, r.det_scores, r.det_ious "
-                f"FROM control_levels l JOIN results r USING (job) WHERE {evaluable})")
+                f"FROM control_levels l JOIN results r USING (job) WHERE {evaluable} AND l.{NOT_A_MEASURE})")
     con.execute("CREATE OR REPLACE VIEW average_precision_by_value AS " + ap_sql(by_value, _LEVEL_KEYS))
     return True
 

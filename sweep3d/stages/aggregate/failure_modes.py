@@ -38,6 +38,7 @@ from __future__ import annotations
 import duckdb
 
 from sweep3d.stages.aggregate.compare import ALPHA
+from sweep3d.stages.aggregate.measures import NOT_A_MEASURE
 from sweep3d.stages.aggregate.quoting import identifier, literal
 
 
@@ -116,7 +117,7 @@ def _failure_modes_sql(min_count: int, twins_sql: str) -> str:
     # is neither tested nor part of any rest, which would mix scenes into the comparison.
     return f"""CREATE OR REPLACE MACRO failure_modes(min_count := {min_count}) AS TABLE
         WITH overall AS (SELECT avg(correct::DOUBLE) AS p FROM results WHERE counted),
-        applied AS MATERIALIZED (FROM control_accuracy WHERE NOT absent),
+        applied AS MATERIALIZED (FROM control_accuracy WHERE NOT absent AND {NOT_A_MEASURE}),
         totals AS MATERIALIZED (
             SELECT parameter, count(*) AS levels, min(level) AS first_level, sum(n)::BIGINT AS n,
                    sum(n_correct)::BIGINT AS n_correct

@@ -15,6 +15,7 @@ from sweep3d.errors import UserError
 from sweep3d.spec.loader import LoadedSpec
 from sweep3d.stages.aggregate.boundaries import names_boundaries, numeric_scales, register_failure_boundaries
 from sweep3d.stages.aggregate.own_jobs import results_store
+from sweep3d.stages.aggregate.rules import names_rules, register_rules
 from sweep3d.stages.aggregate.views import connect, has_view, no_results
 
 QUERY_HINT = "sweep3d query runs one SELECT over the views results, jobs, predictions, renders, images, runs"
@@ -44,8 +45,8 @@ def results_connection(spec: LoadedSpec, model: str | None = None, writable: Seq
     """A read-only connection over the views of ``spec``'s own results (``model``'s, default the
     first model's; ``store``: a :func:`results_store` of ``spec`` the caller holds); a DuckDB error
     inside the block becomes one line (no results yet: how to make them). ``failure_boundaries``
-    (computed in Python, seconds at scale) is added only when ``statement`` names it, so other
-    queries cost what they did."""
+    and ``rules`` (computed in Python, seconds at scale) are added only when ``statement`` names
+    them, so other queries cost what they did."""
     with nullcontext(store) if store is not None else results_store(spec) as own:
         with _connection(spec, own, model, writable, statement) as con:
             yield con
@@ -58,6 +59,8 @@ def _connection(spec: LoadedSpec, store: Store, model: str | None, writable: Seq
     try:
         if names_boundaries(statement):
             register_failure_boundaries(con, numeric_scales(spec.controls))
+        if names_rules(statement):
+            register_rules(con)
         yield con
     except duckdb.Error as exc:
         if isinstance(exc, duckdb.CatalogException) and not has_view(con, "results"):

@@ -25,6 +25,8 @@ from sweep3d.cache.store import Store, atomic_write, safe_filename
 from sweep3d.errors import UserError
 from sweep3d.stages.aggregate.boundaries import Scale, boundary_rows
 from sweep3d.stages.aggregate.results import results_roles
+from sweep3d.stages.aggregate.rules import SUMMARY_LIMIT as RULES_LIMIT
+from sweep3d.stages.aggregate.rules import rule_dict, rules_of
 from sweep3d.stages.aggregate.views import connect, has_view, materialise, register_views
 
 FAILURE_LIMIT = 48  # failures a summary lists, worst first
@@ -89,6 +91,9 @@ class Summary:
     fragile_threshold: float | None = None  # |margin| below which a result is fragile
     fragile_checked: int = 0  # images the stability check re-inferred
     fragile_dropped: int = 0  # fragile results left out of what is counted ([aggregate] drop_fragile)
+    #: boxes over several parameters where the model fails more (``rules.rule_dict``; best first;
+    #: none beyond ``rules.SUMMARY_LIMIT`` counted results)
+    rules: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def wrong(self) -> int:
@@ -161,9 +166,10 @@ def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit:
     min_count = region_min_count(counted)
     regions, gap = value_findings(con, columns, min_count)
     boundaries, no_boundaries, left_out = boundary_findings(con, scales)
+    rules = [rule_dict(rule) for rule in rules_of(con)] if counted <= RULES_LIMIT else []
     return Summary(jobs, evaluated, invalid, correct, accuracy, objects, environments, scene_accuracy,
                    scene_count, effects, failures, per_object, counted, sum(reasons.values()), reasons, min_visible,
-                   regions, gap, boundaries, no_boundaries, left_out, *fragile_findings(con, have))
+                   regions, gap, boundaries, no_boundaries, left_out, *fragile_findings(con, have), rules)
 
 
 def fragile_findings(con: duckdb.DuckDBPyConnection, have: set[str]) -> tuple[int | None, float | None, int, int]:
@@ -203,6 +209,17 @@ def boundary_findings(con: duckdb.DuckDBPyConnection, scales: dict[str, Scale] |
     flat = [row for row in fits if not row["significant"]]
     return ([{k: row[k] for k in _BOUNDARY_FIELDS} for row in overall + groups[:limit]],
             [{k: row[k] for k in _BOUNDARY_FIELDS} for row in flat], max(0, len(groups) - limit))
+
+
+RULE_LIMIT = 2  # rules over several parameters a summary names
+
+
+def named_rules(summary: Summary, limit: int = RULE_LIMIT) -> list[dict[str, Any]]:
+    """The rules ``run`` names: boxes of two conditions or more whose discovery p-value, adjusted
+    for every box the search scored (Bonferroni), is below 0.05; best first, at most ``limit``."""
+    from sweep3d.stages.aggregate.compare import ALPHA
+
+    return [r for r in summary.rules if len(r["conditions"]) >= 2 and r["p_adjusted"] < ALPHA][:limit]
 
 
 def region_min_count(counted: int) -> int:

@@ -30,6 +30,7 @@ from __future__ import annotations
 import duckdb
 
 from sweep3d.evaluation import OUTCOMES, Roles  # what a box or mask task says (``results.outcome``)
+from sweep3d.stages.aggregate.measures import NOT_A_MEASURE
 from sweep3d.stages.aggregate.quoting import literal
 
 TASK_VIEWS = ("not_evaluable", "outcomes_by_value", "iou_by_object")
@@ -104,7 +105,7 @@ def _outcomes_sql() -> str:
         SELECT parameter, position, level, label, n, {", ".join(f"n_{o}" for o in OUTCOMES)}, {shares} FROM (
             SELECT l.parameter, l.position, l.level, any_value(l.label) AS label,
                    count(*) FILTER (WHERE l.counted AND r.outcome IS NOT NULL) AS n, {counts}
-            FROM control_levels l JOIN results r USING (job)
+            FROM control_levels l JOIN results r USING (job) WHERE l.{NOT_A_MEASURE}
             GROUP BY l.parameter, l.position, l.level)
         ORDER BY position, level"""
 

@@ -21,7 +21,12 @@ Views:
     the control does not apply), absent.
 ``control_accuracy``
     per (parameter, level): label, value and absent as above, n (counted results), n_correct,
-    accuracy, wilson_low, wilson_high.
+    accuracy, wilson_low, wilson_high. Besides the parameters, the results' *measures*
+    (``measures.MEASURES``: ``visible_fraction``, ``margin``, ``iou``, those the results have) are
+    levelled and binned the same way, after them, in ``control_values``, ``control_levels``,
+    ``control_parameters`` and here; they are outcomes, not causes, so the views that compare
+    values (``pair_accuracy``, ``variance_explained``, ``object_sensitivity``, ``failure_modes``,
+    ``outcomes_by_value``, the model comparison) leave them out.
 ``pair_accuracy``
     the same per pair of levels of two parameters (both with 2 levels or more).
 ``scene_accuracy``
@@ -106,6 +111,7 @@ from sweep3d.stages.aggregate.counterfactuals import register_counterfactual_vie
 from sweep3d.stages.aggregate.detection import DETECTION_VIEWS, detection_views
 from sweep3d.stages.aggregate.failure_modes import create_failure_modes
 from sweep3d.stages.aggregate.fragile import plan_drops_fragile, register_fragile
+from sweep3d.stages.aggregate.measures import NOT_A_MEASURE
 from sweep3d.stages.aggregate.paired import PAIRED_VIEWS, register_paired_views
 from sweep3d.stages.aggregate.parts import register_part_views
 from sweep3d.stages.aggregate.quoting import identifier, literal
@@ -113,6 +119,7 @@ from sweep3d.stages.aggregate.results import plan_min_visible, register_results,
 from sweep3d.stages.aggregate.tasks import TASK_VIEWS, register_task_views
 
 MAX_LEVELS = 12  # a numeric parameter with more distinct values is binned
+
 #: Default fewest counted results a failure mode's region, or a level in ``object_sensitivity``, needs.
 MIN_COUNT = 10
 BINS = 10
@@ -244,7 +251,7 @@ def register_views(con: duckdb.DuckDBPyConnection, parameters: list[str] | None 
         result_columns = _columns(con, "results")
     columns = control_columns(con, parameters)
     roles = results_roles(con)
-    for sql in _view_statements(columns, roles):
+    for sql in _view_statements(columns, roles, result_measures(result_columns, roles)):
         con.execute(sql)
     register_part_views(con, set(result_columns))
     register_task_views(con, roles, set(result_columns), model, min_visible)
@@ -370,7 +377,8 @@ _FIXED_VIEWS = (
             ORDER BY position, level""",
         f"""CREATE OR REPLACE VIEW pair_accuracy AS
             WITH varied AS (SELECT l.* FROM control_levels l
-                            SEMI JOIN control_parameters p ON p.parameter = l.parameter AND p.levels > 1)
+                            SEMI JOIN control_parameters p ON p.parameter = l.parameter AND p.levels > 1
+                            WHERE l.{NOT_A_MEASURE})
             SELECT *, {_ACCURACY} FROM (
                 SELECT a.parameter AS parameter_a, a.position AS position_a, a.level AS level_a,
                        any_value(a.label) AS label_a,
@@ -387,14 +395,14 @@ _FIXED_VIEWS = (
                        count(*) FILTER (WHERE counted AND correct) AS n_correct
                 FROM results GROUP BY object, environment)
             ORDER BY object, environment""",
-        """CREATE OR REPLACE VIEW variance_explained AS
+        f"""CREATE OR REPLACE VIEW variance_explained AS
             WITH overall AS (SELECT count(*) AS n, avg(correct::DOUBLE) AS p FROM results WHERE counted),
             total AS (SELECT n, n * p * (1 - p) AS ss FROM overall),
             main AS (
                 SELECT c.parameter, c.position, sum(c.n * (c.accuracy - o.p) ^ 2) AS ss, count(*) - 1 AS df
                 FROM control_accuracy c SEMI JOIN control_parameters v ON v.parameter = c.parameter AND v.levels > 1,
                      overall o
-                WHERE c.n > 0 GROUP BY c.parameter, c.position),
+                WHERE c.n > 0 AND c.{NOT_A_MEASURE} GROUP BY c.parameter, c.position),
             cells AS (
                 SELECT parameter_a, position_a, parameter_b, position_b, sum(c.n * (c.accuracy - o.p) ^ 2) AS ss,
                        count(*) - 1 AS df
@@ -425,7 +433,7 @@ _FIXED_VIEWS = (
             WITH per_level AS (
                 SELECT object, parameter, position, level, any_value(label) AS label,
                        count(*) FILTER (WHERE counted) AS n, count(*) FILTER (WHERE counted AND correct) AS n_correct
-                FROM control_levels WHERE parameter <> 'object'
+                FROM control_levels WHERE parameter <> 'object' AND {NOT_A_MEASURE}
                 GROUP BY object, parameter, position, level),
             kept AS (SELECT *, n_correct / n AS accuracy FROM per_level WHERE n >= greatest(min_count, 1)),
             pooled AS (SELECT object, parameter, sum(n) AS n, sum(n_correct) / sum(n) AS p
@@ -456,17 +464,34 @@ _CONFUSIONS_VIEW = """CREATE OR REPLACE VIEW object_confusions AS
                 ORDER BY object, rank"""
 
 
-def _view_statements(parameters: list[tuple[str, bool]], roles: Roles) -> list[str]:
+def result_measures(result_columns: dict[str, str], roles: Roles) -> list[tuple[str, str]]:
+    """(name, SQL over ``results``) of each measure of ``measures.MEASURES`` the results have (as
+    numbers; ``result_columns``: name → DuckDB type): the object's visible fraction (truth passes),
+    a classifier's ``margin`` (the best true class's probability less the best other's, from
+    ``aggregate.fragile``: one meaning of margin everywhere) and the IoU (an evaluator with the
+    ``iou`` role)."""
+    out = []
+    if _is_numeric(result_columns.get("visible_fraction", "")):
+        out.append(("visible_fraction", "visible_fraction"))
+    if _is_numeric(result_columns.get("margin", "")):
+        out.append(("margin", "margin"))
+    if roles.has("iou") and _is_numeric(result_columns.get(roles.iou, "")):
+        out.append(("iou", identifier(roles.iou)))
+    return out
+
+
+def _view_statements(parameters: list[tuple[str, bool]], roles: Roles,
+                     measures: Sequence[tuple[str, str]] = ()) -> list[str]:
     """The CREATE statements, in dependency order (``object_confusions`` for an evaluator that
     names its predicted class)."""
-    statements = ["CREATE OR REPLACE VIEW control_values AS " + _values_sql(parameters), *_FIXED_VIEWS]
+    statements = ["CREATE OR REPLACE VIEW control_values AS " + _values_sql(parameters, measures), *_FIXED_VIEWS]
     if roles.has("prediction"):
         wrong_class = f" AND {identifier(roles.outcome)} = 'wrong_class'" if roles.has("outcome") else ""
         statements.append(_CONFUSIONS_VIEW.format(wrong_class=wrong_class))
     return statements
 
 
-def _values_sql(parameters: list[tuple[str, bool]]) -> str:
+def _values_sql(parameters: list[tuple[str, bool]], measures: Sequence[tuple[str, str]] = ()) -> str:
     """``control_values``: results in long form, one row per (result, parameter), raw values.
 
     ``results`` (a join of the jobs with the deduplicated predictions) is computed once, into
@@ -487,7 +512,17 @@ def _values_sql(parameters: list[tuple[str, bool]]) -> str:
             f"SELECT job, object, environment, valid, counted, correct, {literal(name)} AS parameter, "
             f"{position} AS position, CAST({column} AS VARCHAR) AS raw, {number} AS number FROM read_once"
         )
-    return (f"WITH read_once AS MATERIALIZED (SELECT {', '.join(map(identifier, columns))} FROM results)\n"
+    # a measure's rows, after the parameters' (NaN/inf as no value), only when some result has it
+    for position, (name, _) in enumerate(measures, start=len(parameters)):
+        column = identifier(name)
+        parts.append(
+            f"SELECT job, object, environment, valid, counted, correct, {literal(name)} AS parameter, "
+            f"{position} AS position, CAST({column} AS VARCHAR) AS raw, {column} AS number FROM read_once "
+            f"WHERE (SELECT count({column}) FROM read_once) > 0"
+        )
+    picked = [*map(identifier, columns), *(f"CASE WHEN isfinite(CAST({expr} AS DOUBLE)) THEN CAST({expr} AS DOUBLE) "
+                                           f"END AS {identifier(name)}" for name, expr in measures)]
+    return (f"WITH read_once AS MATERIALIZED (SELECT {', '.join(picked)} FROM results)\n"
             + "\nUNION ALL ".join(parts))
 
 
