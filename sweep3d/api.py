@@ -31,8 +31,8 @@ if TYPE_CHECKING:
     import pyarrow as pa
     from rich.console import Console
 
-    from sweep3d.explain.driver import ExplainResult
     from sweep3d.confirm.run import ConfirmResult
+    from sweep3d.explain.driver import ExplainResult
     from sweep3d.export import ExportResult
     from sweep3d.pipeline import RunResult
     from sweep3d.spec.loader import LoadedSpec
