@@ -35,8 +35,8 @@ def store_with_margins(folder: Path, n: int = 300):
         right = bool(first - second > 0.3) if second == second else True
         predictions.append({"pred_key": key, "image_key": key, "created_at": T0, "valid": True, "correct": right,
                             "top1_label": "mug", "topk": [0, 1], "topk_labels": ["mug", "cup"],
-                            "topk_probs": [first, second], "label_ids": [0],
-                            "label_prob": first, "loss": 1.0})
+                            "topk_probs": [first, second], "label_ids": [0] if i % 7 else [],
+                            "label_prob": first if i % 7 else None, "loss": 1.0})  # no true class: no margin
     store.write_table_file(store.jobs_path("e"), pa.Table.from_pylist(jobs))
     store.append("predictions", predictions)
     return connect(store, "e")
