@@ -161,11 +161,12 @@ def main() -> None:
     parser.add_argument("--samples", type=int, default=32)
     parser.add_argument("--image", type=Path, default=None, help="write a side-by-side PNG (post | physical) here")
     args = parser.parse_args()
+    import sweep3d
     from sweep3d.spec.assets import materialise_mesh
-    from sweep3d.stages import catalogue, load_spec
+    from sweep3d.stages import builtin_catalogue as catalogue
 
     folder = Path(tempfile.mkdtemp(prefix="depth-bench-"))
-    spec = load_spec(REPO / "specs" / "quickstart.toml")
+    spec = sweep3d.load(REPO / "specs" / "quickstart.toml").spec
     meshes = {obj: str(materialise_mesh(spec.meshes[obj], folder)) for obj, *_ in SCENES}
     print(f"{len(SCENES)} scenes at {args.size}², {args.samples} samples + OpenImageDenoise, 2 threads; "
           f"load average {' '.join(f'{v:.2f}' for v in os.getloadavg())}")

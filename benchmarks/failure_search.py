@@ -17,9 +17,9 @@ from pathlib import Path
 from rich.console import Console
 from rich.table import Table
 
+import sweep3d
 from sweep3d.cache.store import Store
 from sweep3d.pipeline import run
-from sweep3d.stages import load_spec
 from sweep3d.stages.aggregate import connect
 from sweep3d.stages.plan.policies import POLICIES
 
@@ -28,7 +28,7 @@ SPEC = Path(__file__).resolve().parents[1] / "specs" / "failure_search.toml"
 
 def measure(policy_name: str, seed: int, console: Console) -> tuple[int, int, int]:
     """(renders, distinct failing images, images) of one run of the spec under ``policy_name``."""
-    loaded = load_spec(SPEC)
+    loaded = sweep3d.load(SPEC).spec
     budget = loaded.policy.params.samples
     policy_cls = POLICIES.get(policy_name)
     params = loaded.policy.params if policy_name == "adaptive" else policy_cls.Params(samples=budget)

@@ -127,9 +127,9 @@ def cut_objects(text: str, keep: int) -> str:
 
 def quickstart(folder: Path, config: str, objects: int) -> dict:
     """One cold-store run of the quickstart (cut to its first ``objects`` objects) under ``config``."""
+    import sweep3d
     from sweep3d.cache.store import Store
     from sweep3d.pipeline import run
-    from sweep3d.stages import load_spec
     from sweep3d.stages.aggregate import connect
     from sweep3d.stages.infer import onnx_backend
 
@@ -150,7 +150,7 @@ def quickstart(folder: Path, config: str, objects: int) -> dict:
     onnx_backend.OnnxRunner = Counted
     try:
         started = time.perf_counter()
-        result = run(load_spec(folder / "quickstart.toml"), overlap=overlap)
+        result = run(sweep3d.load(folder / "quickstart.toml").spec, overlap=overlap)
         wall = time.perf_counter() - started
     finally:
         onnx_backend.OnnxRunner = runner_class

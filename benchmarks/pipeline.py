@@ -174,9 +174,9 @@ def pipeline(n: int, folder: Path) -> dict:
     """Run the spec through sweep3d in this process: stage times, store I/O time, memory."""
     import resource
 
+    import sweep3d
     from sweep3d.cache import store as store_module
     from sweep3d.pipeline import run
-    from sweep3d.stages import load_spec
 
     io = {"seconds": 0.0}
 
@@ -196,7 +196,7 @@ def pipeline(n: int, folder: Path) -> dict:
     watch = MemoryWatch()
     watch.start()
     started = time.perf_counter()
-    result = run(load_spec(folder / "spec.toml"))
+    result = run(sweep3d.load(folder / "spec.toml").spec)
     wall = time.perf_counter() - started
     watch.stop.set()
     assert result.failed == 0 and result.outcome("render").computed == n, result.outcomes
@@ -208,10 +208,10 @@ def pipeline(n: int, folder: Path) -> dict:
 
 def noop_rerun(n: int, folder: Path) -> dict:
     """Seconds for `sweep3d run` when all ``n`` jobs are cached (rows synthesised, blobs tiny)."""
+    import sweep3d
     from sweep3d.cache.store import Store, atomic_write, utc_now
     from sweep3d.pipeline import plan_spec
     from sweep3d.pixels import encode_png
-    from sweep3d.stages import load_spec
     from sweep3d.stages.infer import ClassificationEvaluator
     from sweep3d.stages.infer.stage import predictions_schema
 
@@ -219,7 +219,7 @@ def noop_rerun(n: int, folder: Path) -> dict:
     spec = SPEC.replace(MESH, "cube.obj").replace('samples_per_dim = {n}', "").replace(
         'type = "grid"', f'type = "random"\nsamples = {n}').replace('yaw = {', 'pitch = { range = [-90, 90] }\nyaw = {')
     (folder / "spec.toml").write_text(spec)
-    plan = plan_spec(load_spec(folder / "spec.toml"))
+    plan = plan_spec(sweep3d.load(folder / "spec.toml").spec)
     store = Store(folder / "store")
     png = encode_png(np.zeros((8, 8, 3), np.float32))
     now = utc_now()
@@ -257,12 +257,12 @@ def quickstart_spec(folder: Path) -> Path:
 
 def bare_jobs(folder: Path) -> tuple[Path, int]:
     """The quickstart's distinct renders as the bare loop's input (world, object, pose order)."""
+    import sweep3d
     from sweep3d.pipeline import plan_spec
     from sweep3d.spec.assets import materialise_mesh
-    from sweep3d.stages import load_spec
     from sweep3d.stages.render import render_settings
 
-    plan = plan_spec(load_spec(quickstart_spec(folder)))
+    plan = plan_spec(sweep3d.load(quickstart_spec(folder)).spec)
     spec = plan.spec
     rendered = {c.control.id for c in spec.controls if c.control.stage == "render"}
     assert rendered == {"orientation", "camera"}, f"the bare loop poses only these controls, not {rendered}"
@@ -320,14 +320,14 @@ def bare_multi(folder: Path) -> dict:
 
 def stage_multi(folder: Path) -> dict:
     """Seconds of sweep3d's render stage over the quickstart on a fresh store, and worker memory."""
+    import sweep3d
     from sweep3d.cache.store import Store
     from sweep3d.pipeline import plan_spec
     from sweep3d.progress import RunProgress
-    from sweep3d.stages import load_spec
     from sweep3d.stages.driver import run_stage
     from sweep3d.stages.render import RenderStage
 
-    plan = plan_spec(load_spec(quickstart_spec(folder)))
+    plan = plan_spec(sweep3d.load(quickstart_spec(folder)).spec)
     store = Store(folder / "store")
     watch = MemoryWatch()
     watch.start()
@@ -352,14 +352,14 @@ def cli_multi(folder: Path) -> dict:
 def infer_alone(stage: dict, folder: Path) -> float:
     """Seconds of the postprocess and inference stages alone over the stage's renders (the model
     loaded first, as a run's is before its renders end): sweep3d's image path."""
+    import sweep3d
     from sweep3d.pipeline import plan_spec
     from sweep3d.progress import RunProgress
-    from sweep3d.stages import load_spec
     from sweep3d.stages.driver import run_stages
     from sweep3d.stages.infer import InferStage, ModelHandle
     from sweep3d.stages.postprocess import ImageHandoff, PostprocessStage
 
-    spec = load_spec(quickstart_spec(folder))
+    spec = sweep3d.load(quickstart_spec(folder)).spec
     model = ModelHandle.resolve(spec)
     plan = plan_spec(spec, model)
     post = PostprocessStage.for_spec(spec, ImageHandoff())  # as a run wires them

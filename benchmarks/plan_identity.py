@@ -23,11 +23,11 @@ import json, sys
 from pathlib import Path
 import sweep3d
 from sweep3d.pipeline import plan_spec
-from sweep3d.stages import load_spec
+import sweep3d
 root = Path(sys.argv[1]).resolve()
 assert Path(sweep3d.__file__).resolve().is_relative_to(root), sweep3d.__file__
 for spec in sorted(Path(sys.argv[2]).glob("*.toml")):
-    plan = plan_spec(load_spec(spec))
+    plan = plan_spec(sweep3d.load(spec).spec)
     print(f"# {spec.name} {len(plan.jobs)} in frame, {len(plan.out_of_frame)} out")
     for row in plan.rows():
         print(json.dumps(row, ensure_ascii=False))

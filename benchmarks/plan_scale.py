@@ -94,8 +94,8 @@ print("MAXRSS", usage.ru_maxrss, code, usage.ru_utime + usage.ru_stime, file=sys
 IN_PROCESS = """
 import json, resource, sys, time
 from sweep3d.pipeline import plan_spec
-from sweep3d.stages import load_spec
-spec = load_spec(sys.argv[1])
+import sweep3d
+spec = sweep3d.load(sys.argv[1]).spec
 t, c = time.perf_counter(), time.process_time()
 plan = plan_spec(spec)
 planned, planned_cpu = time.perf_counter() - t, time.process_time() - c
@@ -154,18 +154,18 @@ def synthesise_store(folder: Path, jobs: int) -> None:
     import numpy as np
     import pyarrow as pa
 
+    import sweep3d
     from sweep3d.cache.blobs import sha256_bytes
     from sweep3d.cache.store import DIGEST_COLUMN, Store, utc_now
     from sweep3d.pipeline import plan_spec
     from sweep3d.pixels import encode_png
-    from sweep3d.stages import load_spec
     from sweep3d.stages.infer import ClassificationEvaluator
     from sweep3d.stages.infer.stage import predictions_schema
     from sweep3d.stages.render.stage import RENDERS_SCHEMA
 
     (folder / "cube.obj").write_text(CUBE)
     (folder / "spec.toml").write_text(noop_spec(jobs))
-    plan = plan_spec(load_spec(folder / "spec.toml"))
+    plan = plan_spec(sweep3d.load(folder / "spec.toml").spec)
     store = Store(folder / "store")
     png = encode_png(np.zeros((8, 8, 3), np.float32))
     renders = [j.render_key for j in plan.jobs]
@@ -194,9 +194,9 @@ GROUP_BY = ("SELECT orientation_yaw > 0 AS right_side, count(*) AS jobs, avg(cor
 QUERY = """
 import json, sys, time
 from sweep3d.cache.store import Store
-from sweep3d.stages import load_spec
+import sweep3d
 from sweep3d.stages.aggregate import connect
-spec = load_spec("spec.toml")
+spec = sweep3d.load("spec.toml").spec
 t = time.perf_counter()
 con = connect(Store(spec.store), spec.name, read_only=True)
 opened = time.perf_counter() - t

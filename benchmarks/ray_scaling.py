@@ -54,12 +54,12 @@ samples_per_dim = {per_scene}
 
 
 def render_rate(folder: Path, renders: int, executor, workers: int) -> float:
+    import sweep3d
     from sweep3d.pipeline import run
-    from sweep3d.stages import load_spec
 
     folder.mkdir(parents=True)
     (folder / "spec.toml").write_text(SPEC.replace("{per_scene}", str(renders // 2)))
-    loaded = load_spec(folder / "spec.toml")
+    loaded = sweep3d.load(folder / "spec.toml").spec
     threads = max(1, (os.cpu_count() or 1) // workers)
     render = loaded.spec.render.model_copy(update={"workers": workers, "threads": threads})
     loaded = dataclasses.replace(loaded, spec=loaded.spec.model_copy(update={"render": render}))

@@ -74,10 +74,10 @@ def main() -> None:
 
         mesh = str(write_cube(folder))
     else:
+        import sweep3d
         from sweep3d.spec.assets import materialise_mesh
-        from sweep3d.stages import load_spec
 
-        spec = load_spec(REPO / "specs" / "quickstart.toml")
+        spec = sweep3d.load(REPO / "specs" / "quickstart.toml").spec
         name = spec.objects[0].name
         mesh = str(materialise_mesh(spec.meshes[name], folder))
     print(f"mesh {Path(mesh).name}, {args.jobs} renders per configuration and round, {args.rounds} rounds, "

@@ -3,7 +3,7 @@
     import sweep3d
 
     exp = sweep3d.load({"experiment": {"name": "mugs"}, ...}, base="assets")  # or a path, or TOML text
-    exp.plan()                  # the jobs, cached or not; nothing is rendered
+    exp.plan()                  # the jobs, what is cached and to compute, an estimate; nothing is rendered
     exp.run()                   # render, postprocess and infer what the store lacks
     df = exp.dataframe()        # the results (exp.results() for a pyarrow Table)
     exp.sql("SELECT * FROM control_accuracy")  # any read-only SELECT over the views (pandas=True: a DataFrame)
@@ -35,8 +35,8 @@ if TYPE_CHECKING:
     from sweep3d.explain.driver import ExplainResult
     from sweep3d.export import ExportResult
     from sweep3d.pipeline import RunResult
+    from sweep3d.plan_status import PlanStatus
     from sweep3d.spec.loader import LoadedSpec
-    from sweep3d.stages.plan import Plan
 
 #: A spec: a file's path, TOML text (a string holding a newline or starting with ``[``) or a dict.
 SpecSource = Union[str, Path, Mapping[str, Any]]
@@ -82,18 +82,21 @@ class Experiment:
         """The store folder the experiment's renders and results are kept in."""
         return self.spec.store
 
-    def plan(self) -> Plan:
-        """The jobs of the spec's first model (``plan.table()`` for them as a pyarrow Table)."""
-        from sweep3d.pipeline import plan_spec
+    def plan(self) -> PlanStatus:
+        """The plans of the spec's models and, per stage, the keys needed, cached and to compute with
+        an estimate of the time (what ``sweep3d plan`` prints); ``.jobs`` and ``.table()`` are the
+        first model's jobs (``.plans`` has every model's). Nothing is rendered."""
+        from sweep3d.plan_status import plan_status
 
-        return plan_spec(self.spec)
+        return plan_status(self.spec)
 
     def run(self, progress: bool = True, *, wait: float = 0.0, executor: str = "local",
             address: str | None = None, console: Console | None = None) -> RunResult:
         """Render, postprocess and infer what the store lacks; resumable, like ``sweep3d run``.
 
         Args:
-            progress: show progress bars, then the stages' table and the findings.
+            progress: show progress bars (the returned :class:`~sweep3d.pipeline.RunResult` holds the
+                stages' outcomes; ``sweep3d run`` prints them).
             wait: seconds to wait for another run holding the store's lock.
             executor: where renders run, ``local`` worker processes or ``ray``.
             address: with ``ray``, the cluster's address (default: start a local one).
@@ -108,12 +111,7 @@ class Experiment:
         if executor not in EXECUTORS:
             raise UserError(f"executor {executor!r}: use local or ray")
         console = console or (Console() if progress else None)
-        result = run_pipeline(self.spec, console, wait=wait, executor=Executor(executor, address))
-        if console is not None:
-            from sweep3d.cli.output import print_run
-
-            print_run(console, result)
-        return result
+        return run_pipeline(self.spec, console, wait=wait, executor=Executor(executor, address))
 
     def explain(self, budget: int | None = None, *, seed: int | None = None, progress: bool = True,
                 wait: float = 0.0, console: Console | None = None) -> ExplainResult:
@@ -262,16 +260,7 @@ def check_wait(seconds: float) -> float:
 
 def _load_spec(spec: SpecSource, base: str | Path | None) -> LoadedSpec:
     """Load ``spec`` from wherever it comes, against the built-in plug-ins."""
-    from sweep3d.spec.sources import spec_from_dict, spec_from_toml
-    from sweep3d.stages import catalogue, load_spec
+    from sweep3d.spec import read_spec
+    from sweep3d.stages import builtin_catalogue
 
-    folder = Path(base) if base is not None else Path.cwd()
-    if isinstance(spec, Mapping):
-        return spec_from_dict(spec, catalogue(), folder)
-    if isinstance(spec, str) and ("\n" in spec or spec.lstrip().startswith("[")):
-        return spec_from_toml(spec, catalogue(), folder)
-    if not isinstance(spec, (str, Path)):
-        raise UserError(f"a spec is a path, TOML text or a dict, got {type(spec).__name__}")
-    if base is not None:
-        raise UserError(f"{spec}: base= is for a dict or TOML text; a spec file's paths are relative to its folder")
-    return load_spec(spec)
+    return read_spec(spec, builtin_catalogue(), base)

@@ -43,9 +43,9 @@ from sweep3d.stages.driver import (
     Found,
     add_outcomes,
     merge_outcomes,
-    plan_status,
     rows_and_cached,
     run_stages,
+    stage_counts,
     unique_jobs,
 )
 from sweep3d.stages.infer import InferStage, ModelHandle, pending_predictions
@@ -356,7 +356,7 @@ def _missing_renders(plans: list[Plan], store: Store, executor: Executor) -> tup
     stage = RenderStage(executor)
     for plan in plans:
         found.append(rows_and_cached(stage, plan, store))
-        needed, cached = plan_status(stage, plan, store, found[-1])
+        needed, cached = stage_counts(stage, plan, store, found[-1])
         missing[plan.framing.crop] = needed - cached
     return missing, found
 

@@ -24,14 +24,13 @@ import os
 import re
 import shutil
 import sys
-import textwrap
 import traceback
 from pathlib import Path
 
 import pytest
 from hypothesis import settings as hypothesis_settings
 
-REPO = Path(__file__).resolve().parents[1]
+from tests.helpers import REPO, STORE_ALL, TINY_SPEC, write_cube, write_spec
 
 if os.environ.get("PYTEST_XDIST_WORKER"):
     # xdist's workers start with COLUMNS=80 and LINES=24 set, which would fix the width of the CLI's
@@ -62,11 +61,6 @@ LANE_SHARE = 0.2  # fast profile's max_examples / the default's 100
 
 #: True while the session selects the fast lane (set in pytest_configure, before test modules import).
 LANE = False
-
-
-def examples(n: int) -> int:
-    """``max_examples`` for a property test that sets its own: ``n``, or a fifth of it in the fast lane."""
-    return max(5, round(n * LANE_SHARE)) if LANE else n
 
 
 def _selects_lane(markexpr: str) -> bool:
@@ -284,87 +278,14 @@ def chromium():
         playwright.stop()
 
 
-CUBE_OBJ = """\
-# unit cube
-v -1 -1 -1
-v 1 -1 -1
-v 1 1 -1
-v -1 1 -1
-v -1 -1 1
-v 1 -1 1
-v 1 1 1
-v -1 1 1
-f 1 2 3 4
-f 5 8 7 6
-f 1 5 6 2
-f 2 6 7 3
-f 3 7 8 4
-f 5 1 4 8
-"""
 
 
-def write_cube(folder: Path, name: str = "cube.obj") -> Path:
-    path = folder / name
-    path.write_text(CUBE_OBJ)
-    return path
 
 
-def write_spec(folder: Path, body: str, *, cube: bool = True, name: str = "spec.toml") -> Path:
-    """Write a spec into ``folder`` (with a cube mesh beside it unless ``cube`` is False)."""
-    if cube:
-        write_cube(folder)
-    path = folder / name
-    path.write_text(textwrap.dedent(body))
-    return path
 
 
-TINY_SPEC = """\
-[experiment]
-name = "tiny"
-seed = 7
-store = "store"
-
-[render]
-resolution = 32
-samples = 1
-denoise = false
-
-[model]
-batch_size = 8
-
-[[objects]]
-name = "box"
-mesh = "cube.obj"
-labels = ["carton"]
-
-[[environments]]
-name = "white"
-color = [1.0, 1.0, 1.0]
-
-[[environments]]
-name = "studio"
-hdri = "builtin:studio"
-
-[[controls]]
-type = "orientation"
-yaw = [0, 45]
-
-[[controls]]
-type = "blur"
-sigma = [0.0, 1.5]
-
-[policy]
-type = "grid"
-"""
 
 
-#: Post-processed images written to the store (the default makes them in memory): the tests of
-#: damaged, missing and verified blobs have image blobs to damage (tests/test_image_store.py
-#: checks that both ways give the same results).
-STORE_ALL = """
-[postprocess]
-store = "all"
-"""
 
 
 @pytest.fixture(scope="session")
@@ -403,15 +324,3 @@ def blender_scene(tmp_path_factory):
     return scene
 
 
-def plan_for(loaded, model_digest: str | None = None):
-    """Plan ``loaded`` as a run would; a ``model_digest`` stands in for the model's (none is loaded)."""
-    from sweep3d.pipeline import plan_spec
-    from sweep3d.spec.assets import blender_version
-    from sweep3d.spec.framing import Framing
-    from sweep3d.stages.plan import make_plan
-
-    if model_digest is None:
-        return plan_spec(loaded)
-    resolution = loaded.render.resolution
-    assert resolution != "model", "a stand-in digest needs a pixel resolution"
-    return make_plan(loaded, framing=Framing.full(resolution), model_digest=model_digest, blender=blender_version())

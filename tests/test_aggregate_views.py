@@ -39,35 +39,7 @@ from sweep3d.stages.aggregate.detection import DETECTION_VIEWS
 from sweep3d.stages.aggregate.summary import summary_path
 from sweep3d.stages.aggregate.tasks import TASK_VIEWS
 from sweep3d.stages.aggregate.views import BINS, NOT_APPLIED
-from tests.conftest import examples
-
-T0 = datetime(2024, 1, 1)
-
-
-def make_store(folder: Path, rows: list[dict[str, Any]], experiment: str = "e") -> duckdb.DuckDBPyConnection:
-    """A store whose jobs are ``rows`` (scene, control columns, ``correct``; ``valid`` default True)."""
-    store = Store(folder / "store")
-    jobs, predictions = [], []
-    for i, row in enumerate(rows):
-        row = dict(row)
-        correct, valid = row.pop("correct"), row.pop("valid", True)
-        key = f"k{i}"
-        jobs.append({"experiment": experiment, "job": i, "object": row.pop("object", "obj"),
-                     "environment": row.pop("environment", "env"), **row,
-                     "render_key": key, "image_key": key, "pred_key": key})
-        predictions.append({"pred_key": key, "image_key": key, "created_at": T0, "valid": valid,
-                            "correct": correct if valid else None, "top1_label": row.get("prediction", "thing"),
-                            "topk": [0], "topk_labels": [row.get("prediction", "thing")], "topk_probs": [0.9],
-                            "loss": 1.0})
-    store.write_table_file(store.jobs_path(experiment), pa.Table.from_pylist(jobs))
-    store.append("predictions", predictions)
-    return connect(store, experiment)
-
-
-def rows_of(con: duckdb.DuckDBPyConnection, sql: str) -> list[dict[str, Any]]:
-    cursor = con.execute(sql)
-    names = [d[0] for d in cursor.description]
-    return [dict(zip(names, r)) for r in cursor.fetchall()]
+from tests.helpers import examples, make_store, rows_of
 
 
 def wilson(k: int, n: int, z: float = 1.959963984540054) -> tuple[float, float]:

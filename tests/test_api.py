@@ -16,7 +16,7 @@ from pydantic import Field
 import sweep3d
 from sweep3d.errors import SpecError, UserError
 from sweep3d.plugins import ControlParams, Point, Policy, PostControl, RenderedControl
-from tests.conftest import REPO, TINY_SPEC, plan_for, write_cube
+from tests.helpers import REPO, TINY_SPEC, plan_for, write_cube, write_spec
 
 RESULTS = 40
 
@@ -149,10 +149,10 @@ def test_a_rendered_control_from_main_is_refused_by_name_too(tmp_path: Path) -> 
     """``type = "__main__:Name"`` in a file: the same refusal (the name imports here, not in a worker)."""
     script = tmp_path / "script.py"
     script.write_text(
-        "import sys\nfrom sweep3d.plugins import RenderedControl\nfrom sweep3d.stages import load_spec\n"
+        "import sys\nfrom sweep3d.plugins import RenderedControl\nimport sweep3d\n"
         "from sweep3d.errors import SpecError\n"
         "class Lift(RenderedControl):\n    def apply(self, state, params):\n        pass\n"
-        "try:\n    load_spec(sys.argv[1])\nexcept SpecError as exc:\n    print(exc)\n")
+        "try:\n    sweep3d.load(sys.argv[1])\nexcept SpecError as exc:\n    print(exc)\n")
     spec = tmp_path / "spec.toml"
     write_cube(tmp_path)
     spec.write_text(TINY_SPEC.replace("[policy]", '[[controls]]\ntype = "__main__:Lift"\n\n[policy]'))
@@ -164,7 +164,7 @@ def test_a_rendered_control_from_main_is_refused_by_name_too(tmp_path: Path) -> 
 @pytest.fixture(scope="module")
 def synthetic(tmp_path_factory) -> Path:
     """A spec and its store holding synthetic results (no Blender, no model)."""
-    from benchmarks.report_scale import build_store
+    from tests.helpers import build_store
 
     return build_store(tmp_path_factory.mktemp("api"), RESULTS)
 
@@ -195,3 +195,20 @@ def test_no_results_yet_says_to_run_first(tmp_path: Path) -> None:
 def test_the_report_is_the_commands(synthetic: Path, tmp_path: Path) -> None:
     path = sweep3d.load(synthetic).report(tmp_path / "page.html")
     assert path == tmp_path / "page.html" and "<html" in path.read_text()[:200].lower()
+
+
+def test_plan_returns_the_status_the_plan_command_prints(tmp_path: Path) -> None:
+    """The numbers of ``sweep3d plan`` are the engine's: ``Experiment.plan()`` returns them."""
+    from typer.testing import CliRunner
+
+    from sweep3d.cli import app
+
+    spec = write_spec(tmp_path, TINY_SPEC)
+    status = sweep3d.load(spec).plan()
+    assert [(s.stage, s.needed, s.cached, s.to_compute) for s in status.stages] == [
+        ("render", 4, 0, 4), ("postprocess", 8, 0, 8), ("infer", 8, 0, 8)]  # blur does not change a render
+    assert status.seconds == sum(s.seconds for s in status.stages) > 0
+    assert len(status.jobs) == 8 and status.to_render == 4
+    printed = CliRunner().invoke(app, ["plan", str(spec)])
+    assert printed.exit_code == 0, printed.output
+    assert all(f"{s.stage} " in printed.output for s in status.stages)

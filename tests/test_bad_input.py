@@ -29,7 +29,7 @@ from typer.testing import CliRunner
 
 from sweep3d.cli import app
 from tests import files
-from tests.conftest import CUBE_OBJ, TINY_SPEC, write_cube
+from tests.helpers import CUBE_OBJ, TINY_SPEC, write_cube
 
 RNG = np.random.default_rng(0)
 GARBAGE = RNG.integers(0, 256, 4096, dtype=np.uint8).tobytes()
@@ -254,7 +254,7 @@ def test_the_table_has_at_least_thirty_cases() -> None:
 @pytest.fixture(scope="module")
 def synthetic_run(tmp_path_factory) -> Path:
     """A folder whose store holds a finished run's tables (synthetic results: no Blender, no model)."""
-    from benchmarks.report_scale import build_store
+    from tests.helpers import build_store
 
     folder = build_store(tmp_path_factory.mktemp("synthetic_run"), 64).parent
     write_cube(folder)  # the cube TINY_SPEC names
@@ -321,7 +321,7 @@ def test_a_non_manifold_mesh_is_not_an_error_it_renders(tmp_path: Path) -> None:
     """Two triangles touching at one vertex (non-manifold, open): legal, and most real meshes are
     open somewhere, so sweep3d renders it rather than refusing it."""
     from sweep3d.pipeline import run
-    from sweep3d.stages import load_spec
+    from tests.helpers import load_spec
 
     (tmp_path / "bowtie.obj").write_bytes(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv -1 0 0\nv 0 -1 0\nf 1 2 3\nf 1 4 5\n")
     (tmp_path / "spec.toml").write_text(_one_job(TINY_SPEC).replace('mesh = "cube.obj"', 'mesh = "bowtie.obj"'))

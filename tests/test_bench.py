@@ -17,10 +17,9 @@ from sweep3d.bench.budget import bench_seconds, budget_chooser, choose_jobs
 from sweep3d.bench.measure import ROUNDS, Setting, default_settings, reference_settings, split_times
 from sweep3d.cli import app
 from sweep3d.errors import UserError
-from sweep3d.stages import load_spec
 from sweep3d.stages.render.protocol import RenderInfo
 from sweep3d.stages.render.render_log import parse_setup_seconds
-from tests.conftest import TINY_SPEC, plan_for, write_spec
+from tests.helpers import TINY_SPEC, load_spec, plan_for, write_spec
 
 runner = CliRunner()
 
@@ -115,7 +114,7 @@ def test_a_worker_reports_scene_loads_apart_from_steady_renders(tmp_path: Path) 
     from sweep3d.stages.render.controls import Orientation
     from sweep3d.stages.render.pool import RenderPool
     from sweep3d.stages.render.protocol import EnvironmentRef, RenderJob, RenderSettings
-    from tests.conftest import write_cube
+    from tests.helpers import write_cube
 
     cube = str(write_cube(tmp_path))
     white, studio = EnvironmentRef(color=(1.0, 1.0, 1.0)), EnvironmentRef(hdri=str(builtin_hdris()["studio"]))

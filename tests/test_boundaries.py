@@ -16,17 +16,15 @@ import pyarrow.parquet as pq
 import pytest
 from typer.testing import CliRunner
 
-from benchmarks.report_scale import build_store
 from sweep3d.cache.store import Store
 from sweep3d.cli import app
 from sweep3d.cli.output import by_parameter, describe_boundary, describe_flat
 from sweep3d.report import build_context, render_html, write_report
-from sweep3d.stages import load_spec
 from sweep3d.stages.aggregate import connect, summarise
 from sweep3d.stages.aggregate.boundaries import Scale, adjust, failure_boundaries, fit_parameter, numeric_scales
 from sweep3d.stages.aggregate.step_fit import CRITICAL, fit_step
 from sweep3d.stages.aggregate.summary import boundary_findings
-from tests.test_aggregate_views import make_store
+from tests.helpers import build_store, load_spec, make_store
 
 THRESHOLD = 12.0
 LOW, HIGH = 0.0, 60.0
@@ -299,7 +297,7 @@ def test_the_report_draws_the_boundary_with_its_band(elevation_spec: Path) -> No
 
 @pytest.mark.browser
 def test_the_boundary_panel_draws_in_chromium(elevation_spec: Path, chromium) -> None:
-    from tests.test_report import ARTIFACTS, assert_clean, open_page
+    from tests.helpers import ARTIFACTS, assert_clean, open_page
 
     path = write_report(load_spec(elevation_spec))
     with open_page(chromium, path) as (page, events):
@@ -399,7 +397,7 @@ def test_the_boundary_policy_explores_where_it_sees_no_step() -> None:
     ('type = "boundary"\nmargin = -1', "policy.margin", "greater than or equal to 0"),
 ])
 def test_the_boundary_policy_refuses_pairing_in_one_line(tmp_path: Path, policy: str, key: str, says: str) -> None:
-    from tests.conftest import TINY_SPEC, write_spec
+    from tests.helpers import TINY_SPEC, write_spec
 
     spec = write_spec(tmp_path, TINY_SPEC.replace('[policy]\ntype = "grid"', f"[policy]\n{policy}"))
     result = CliRunner().invoke(app, ["plan", str(spec)])

@@ -12,12 +12,10 @@ import pytest
 
 from sweep3d.errors import SpecError
 from sweep3d.spec.framing import Framing
-from sweep3d.stages import load_spec
 from sweep3d.stages.plan import make_plan
 from sweep3d.stages.render.protocol import EnvironmentRef
 from sweep3d.stages.render.state import SceneState, fill_of_zoom, in_frame, zoom_for_fill
-from tests.conftest import write_spec
-from tests.test_lights import render, sphere_obj
+from tests.helpers import load_spec, render, sphere_obj, write_spec
 
 SPEC = """\
 [experiment]

@@ -20,7 +20,6 @@ from sweep3d.pipeline import write_jobs
 from sweep3d.report import write_report
 from sweep3d.spec.assets import blender_version
 from sweep3d.spec.framing import Framing
-from sweep3d.stages import load_spec
 from sweep3d.stages.aggregate import connect
 from sweep3d.stages.aggregate.class_names import named_columns
 from sweep3d.stages.infer.evaluators import ClassificationEvaluator
@@ -29,7 +28,7 @@ from sweep3d.stages.infer.evaluators.classification import ranked_rows
 from sweep3d.stages.infer.labels import IMAGENET, LabelMap
 from sweep3d.stages.infer.stage import predictions_schema
 from sweep3d.stages.plan import make_plan
-from tests.conftest import write_spec
+from tests.helpers import load_spec, write_spec
 
 SNEAKER, CURTAIN, TEA_CUP = 770, 854, 968  # ImageNet's sneaker / running shoe, front / theater curtain, tea cup / cup
 

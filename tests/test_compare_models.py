@@ -25,7 +25,7 @@ from sweep3d.cli import app
 from sweep3d.spec.columns import MODELS_METADATA, PARAMETERS_METADATA
 from sweep3d.stages.aggregate import connect
 from sweep3d.stages.aggregate.compare import create_mcnemar
-from tests.conftest import TINY_SPEC, examples, write_spec
+from tests.helpers import TINY_SPEC, examples, write_spec
 
 T0 = datetime(2024, 1, 1)
 TWO_MODELS = """\
@@ -196,7 +196,7 @@ def test_models_framed_apart_get_renders_of_their_own(tmp_path: Path) -> None:
 
 def test_adding_a_model_renders_nothing_and_infers_only_it(tiny_copy: Path) -> None:
     from sweep3d.pipeline import run
-    from sweep3d.stages import load_spec
+    from tests.helpers import load_spec
 
     spec = tiny_copy / "spec.toml"
     spec.write_text(spec.read_text().replace("[model]\nbatch_size = 8\n", TWO_MODELS))
@@ -223,8 +223,7 @@ def test_adding_a_model_renders_nothing_and_infers_only_it(tiny_copy: Path) -> N
 @pytest.mark.browser
 def test_comparison_panel_draws_in_chromium(tiny_copy: Path, chromium) -> None:
     from sweep3d.report import write_report
-    from sweep3d.stages import load_spec
-    from tests.test_report import assert_clean, open_page
+    from tests.helpers import assert_clean, load_spec, open_page
 
     spec = tiny_copy / "spec.toml"
     spec.write_text(spec.read_text().replace("[model]\nbatch_size = 8\n", TWO_MODELS))

@@ -15,12 +15,12 @@ from hypothesis import strategies as st
 from sweep3d.controls import ControlParams
 from sweep3d.errors import SpecError
 from sweep3d.pixels import linear_to_srgb, srgb_to_linear
-from sweep3d.stages import catalogue, load_spec
+from sweep3d.stages import builtin_catalogue as catalogue
 from sweep3d.stages.postprocess import PostControl, apply_post
 from sweep3d.stages.postprocess.depth_effects import disk_kernel, signed_coc
 from sweep3d.stages.postprocess.frame import RenderFrame, frame_from_state
 from sweep3d.stages.postprocess.stage import takes_frame
-from tests.conftest import TINY_SPEC, examples, plan_for, write_spec
+from tests.helpers import TINY_SPEC, examples, load_spec, plan_for, write_spec
 
 CONTROLS = catalogue().controls
 FOG = CONTROLS.get("fog")("fog", "fog")

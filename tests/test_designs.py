@@ -13,12 +13,10 @@ from typer.testing import CliRunner
 from sweep3d.cli import app
 from sweep3d.errors import SpecError
 from sweep3d.spec.framing import Framing
-from sweep3d.stages import load_spec
 from sweep3d.stages.plan import count_jobs, make_plan
 from sweep3d.stages.plan.design import write_design
-from tests.conftest import write_cube, write_spec
-from tests.test_aggregate_views import make_store, rows_of
-from tests.test_paired import SPEC, every_job, scene_values
+from tests.helpers import PAIRED_SPEC as SPEC
+from tests.helpers import every_job, load_spec, make_store, rows_of, scene_values, write_cube, write_spec
 
 #: Two objects on white, plus two backgrounds; skins on white only. What a published protocol asks:
 #: the same poses everywhere, and every skin on the first few of them.

@@ -15,9 +15,8 @@ from typer.testing import CliRunner
 from sweep3d.cache.blobs import load_image, load_pass
 from sweep3d.cache.store import Store
 from sweep3d.cli import app
-from sweep3d.stages import load_spec
 from sweep3d.truth import box
-from tests.conftest import plan_for, write_spec
+from tests.helpers import load_spec, plan_for, write_spec
 
 pytestmark = [pytest.mark.slow, pytest.mark.blender, pytest.mark.torch]
 

@@ -18,13 +18,12 @@ from rich.console import Console
 from sweep3d.errors import UserError
 from sweep3d.pixels import decode_png
 from sweep3d.spec.models import RenderSpec
-from sweep3d.stages import load_spec
 from sweep3d.stages.render import device as device_module
 from sweep3d.stages.render.device import device_note, resolve_device, worker_count
 from sweep3d.stages.render.protocol import EnvironmentRef, RenderJob, RenderSettings, WorkerLimits
 from sweep3d.stages.render.stage import recycled_note
 from sweep3d.stages.render.worker import resident_mb
-from tests.conftest import TINY_SPEC, plan_for, write_spec
+from tests.helpers import TINY_SPEC, load_spec, plan_for, write_spec
 
 NO_GPU: dict[str, int] = {}
 TWO_GPUS = {"optix": 2, "cuda": 2}
@@ -261,7 +260,7 @@ def test_a_gpu_blender_cannot_find_is_one_user_error_naming_render_device(blende
 @pytest.mark.blender
 def test_workers_recycled_between_jobs_render_every_job_once_and_the_same_pixels(tmp_path: Path) -> None:
     from sweep3d.stages.render.pool import RenderPool
-    from tests.conftest import write_cube
+    from tests.helpers import write_cube
 
     cube = str(write_cube(tmp_path))
     colours = [(1.0, 1.0, 1.0), (0.5, 0.5, 0.5), (0.2, 0.4, 0.8), (0.9, 0.3, 0.1)]

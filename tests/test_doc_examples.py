@@ -10,10 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sweep3d.stages import load_spec
 from sweep3d.stages.postprocess import apply_post
-from tests.conftest import REPO, TINY_SPEC, plan_for, write_cube, write_spec
 from tests.doc_blocks import block
+from tests.helpers import REPO, TINY_SPEC, load_spec, plan_for, write_cube, write_spec
 
 
 def test_ci_runs_the_readmes_test_command() -> None:

@@ -19,12 +19,11 @@ from sweep3d.cache.keys import digest
 from sweep3d.cache.store import Store
 from sweep3d.pipeline import write_jobs
 from sweep3d.progress import RunProgress
-from sweep3d.stages import load_spec
 from sweep3d.stages.aggregate import connect as connect_results
 from sweep3d.stages.driver import run_stage
 from sweep3d.stages.render import RenderStage
 from sweep3d.stages.render.keys import truth_keys
-from tests.conftest import plan_for, write_spec
+from tests.helpers import load_spec, plan_for, write_spec
 
 WALL = '''\
 from pydantic import Field

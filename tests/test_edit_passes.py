@@ -21,12 +21,11 @@ from sweep3d.cache.store import Store, utc_now
 from sweep3d.cli import app
 from sweep3d.cli.output import print_run
 from sweep3d.pipeline import RunResult, write_jobs
-from sweep3d.stages import load_spec
 from sweep3d.stages.aggregate import connect as connect_results
 from sweep3d.stages.outcome import StageOutcome
 from sweep3d.stages.render.protocol import RenderInfo, RenderReply
 from sweep3d.stages.render.stage import no_truth_error
-from tests.conftest import CUBE_OBJ, TINY_SPEC, plan_for, write_spec
+from tests.helpers import CUBE_OBJ, TINY_SPEC, load_spec, plan_for, write_spec
 
 PAINT = '''
 from pydantic import Field

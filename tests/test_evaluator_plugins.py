@@ -21,13 +21,12 @@ from sweep3d.evaluation import EVALUATOR_METADATA, Roles, declaration_problem
 from sweep3d.report import build_context, render_html
 from sweep3d.report.panels import CORE_PANELS, PANELS
 from sweep3d.spec.columns import MIN_VISIBLE_METADATA, PARAMETERS_METADATA
-from sweep3d.stages import load_spec
 from sweep3d.stages.aggregate import connect, summarise
 from sweep3d.stages.infer.evaluate import evaluate_checked
 from sweep3d.stages.infer.evaluators import EVALUATORS, Evaluator, Truth
 from sweep3d.stages.infer.keys import evaluator_key
 from sweep3d.stages.infer.labels import LabelMap
-from tests.conftest import TINY_SPEC, write_spec
+from tests.helpers import TINY_SPEC, load_spec, write_spec
 from tests.test_tasks_report import MIN_VISIBLE, PARAMETERS, SPEC, T0, TRUE_BOX, prediction, synthetic_jobs
 
 pytestmark = pytest.mark.fast

@@ -8,8 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sweep3d.stages import load_spec
-from tests.conftest import REPO, plan_for
+from tests.helpers import REPO, load_spec, plan_for
 
 MUG = REPO / "examples" / "mug_liquid" / "mug_liquid.toml"
 needs_mug = pytest.mark.skipif(not Path("/usr/share/sweethome3d/furniture/KatorLegaz.sh3f").exists(),

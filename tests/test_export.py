@@ -35,7 +35,7 @@ from sweep3d.export.target import ExportFolder, Staging, class_folder, design_ta
 from sweep3d.progress import StageProgress
 from sweep3d.stages.aggregate import connect
 from sweep3d.stages.aggregate.views import stored_parameters
-from tests.conftest import TINY_SPEC, write_spec
+from tests.helpers import TINY_SPEC, write_spec
 
 SPEC = """\
 [experiment]
@@ -361,7 +361,7 @@ def test_the_design_table_replays_as_the_same_jobs_under_the_table_policy(export
     """The loop closes: a spec whose ``table`` policy reads an export's ``design.csv`` plans the
     exported jobs again, in order, with the same keys (for a retrained model, say)."""
     from sweep3d.pipeline import plan_spec
-    from sweep3d.stages import load_spec
+    from tests.helpers import load_spec
 
     out = exported(export_run, tmp_path / "failures", "--format", "imagefolder", "--unevaluable", "flag")
     replay = export_run / "replay.toml"

@@ -8,11 +8,11 @@ from pathlib import Path
 import numpy as np
 
 from sweep3d.cache.store import Store
-from sweep3d.stages.driver import plan_status, unique_jobs
+from sweep3d.stages.driver import stage_counts, unique_jobs
 from sweep3d.stages.infer import InferStage, ModelHandle
 from sweep3d.stages.postprocess import ImageHandoff, PostprocessStage
 from sweep3d.stages.render import RenderStage
-from tests.conftest import TINY_SPEC, plan_for, write_spec
+from tests.helpers import TINY_SPEC, plan_for, write_spec
 
 
 def test_each_image_is_taken_once_and_the_oldest_goes_when_full() -> None:
@@ -27,7 +27,7 @@ def test_each_image_is_taken_once_and_the_oldest_goes_when_full() -> None:
 
 
 def test_the_store_setting_decides_whether_the_stage_owns_blobs(tmp_path: Path) -> None:
-    from sweep3d.stages import load_spec
+    from tests.helpers import load_spec
 
     for store, owns in (("all", True), ("none", False)):
         folder = tmp_path / store
@@ -38,13 +38,13 @@ def test_the_store_setting_decides_whether_the_stage_owns_blobs(tmp_path: Path) 
 
 
 def test_a_fresh_store_counts_each_stage_s_distinct_keys(tmp_path: Path) -> None:
-    from sweep3d.stages import load_spec
+    from tests.helpers import load_spec
 
     spec = load_spec(write_spec(tmp_path, TINY_SPEC))
     plan = plan_for(spec, "0" * 40)
     store = Store(tmp_path / "store")
     model = ModelHandle.resolve(spec)
     for stage in (RenderStage(), PostprocessStage.for_spec(spec), InferStage(model)):
-        needed, cached = plan_status(stage, plan, store)
+        needed, cached = stage_counts(stage, plan, store)
         assert (needed, cached) == (len(unique_jobs(stage, plan.jobs)), 0)
     assert plan.jobs.scenes() == {j.scene for j in plan.jobs} == {("box", "white"), ("box", "studio")}

@@ -13,7 +13,7 @@ from typer.testing import CliRunner
 
 from sweep3d.cache.store import Store
 from sweep3d.cli import app
-from tests.conftest import TINY_SPEC, write_spec
+from tests.helpers import TINY_SPEC, write_spec
 
 pytestmark = [pytest.mark.blender, pytest.mark.torch, pytest.mark.slow]
 

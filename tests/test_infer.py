@@ -11,7 +11,7 @@ from sweep3d.errors import UserError
 from sweep3d.stages.infer import IMAGENET, ClassificationEvaluator, load_model, predict
 from sweep3d.stages.infer.evaluators import Truth, log_softmax
 from sweep3d.stages.infer.stage import STAND_IN
-from tests.conftest import TINY_SPEC, examples, write_spec
+from tests.helpers import TINY_SPEC, examples, write_spec
 
 
 @pytest.fixture(scope="module")
@@ -158,8 +158,8 @@ def test_rows_without_near_ties_rank_alike_under_any_error_within_the_tolerance(
 ])
 def test_the_backend_is_the_spec_s_or_onnx_standing_in_for_the_built_in_model(tmp_path, model, on_ray,
                                                                                 backend) -> None:
-    from sweep3d.stages import load_spec
     from sweep3d.stages.infer.stage import choose_backend
+    from tests.helpers import load_spec
 
     (tmp_path / "my_models.py").write_text("def make():\n    raise NotImplementedError\n")
     write_spec(tmp_path, TINY_SPEC.replace("[model]\n", "[model]\n" + model))
@@ -183,10 +183,10 @@ def _infer_in_batches(folder, orders: list[list[int]], images: np.ndarray, model
     from sweep3d.cache.store import Store
     from sweep3d.pipeline import plan_spec
     from sweep3d.pixels import encode_png
-    from sweep3d.stages import load_spec
     from sweep3d.stages.driver import Feed
     from sweep3d.stages.infer import InferStage, ModelHandle
     from sweep3d.stages.jobs import Job
+    from tests.helpers import load_spec
 
     loaded = load_spec(write_spec(folder, TINY_SPEC.replace("batch_size = 8\n", f"batch_size = 4\nthreads = 1\n{model}")))
     handle = ModelHandle.resolve(loaded)

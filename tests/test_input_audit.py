@@ -17,7 +17,7 @@ from typer.testing import CliRunner
 
 from sweep3d.cli import app
 from tests import files
-from tests.conftest import CUBE_OBJ, TINY_SPEC, write_spec
+from tests.helpers import CUBE_OBJ, TINY_SPEC, write_spec
 
 
 def _tree(root: Path) -> dict[str, bytes]:
@@ -109,9 +109,8 @@ def test_a_control_named_render_plans_as_any_other_id(tmp_path: Path) -> None:
     a control's hole is named apart from the render key's, so its keys are the per-job ones."""
     from sweep3d.spec.assets import blender_version
     from sweep3d.spec.framing import Framing
-    from sweep3d.stages import load_spec
     from sweep3d.stages.plan import make_plan
-    from tests.test_plan_columns import reference_jobs
+    from tests.helpers import load_spec, reference_jobs
 
     colour_only = ('[[environments]]\nname = "studio"\nhdri = "builtin:studio"\n', "")  # the reference's scenes
     spec = load_spec(_spec(tmp_path, ('type = "blur"', 'type = "blur"\nid = "render"'), colour_only))

@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sweep3d.cache.key_join import ABSENT, positions, sorted_keys
-from tests.conftest import examples
+from tests.helpers import examples
 
 HEX = st.text(alphabet="0123456789abcdef", min_size=4, max_size=4)  # one width: the sorted path
 ANY = st.text(alphabet="ab\x00é", max_size=3)  # mixed widths, NUL bytes, non-ASCII: the fallback

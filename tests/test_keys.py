@@ -13,9 +13,8 @@ from hypothesis import strategies as st
 
 from sweep3d.cache.keys import canonical, digest, file_digest, files_digest
 from sweep3d.controls import wrap_periodic
-from sweep3d.stages import load_spec
 from sweep3d.stages.render.controls import Camera, Orientation
-from tests.conftest import examples, plan_for, write_spec
+from tests.helpers import examples, load_spec, plan_for, write_spec
 
 FAST = settings(max_examples=examples(150), deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
@@ -423,8 +422,7 @@ def test_random_policy_draws_differ_per_scene(tmp_path):
 
 
 def test_out_of_frame_jobs_are_flagged_and_not_planned_for_rendering(tmp_path) -> None:
-    from sweep3d.stages import load_spec
-    from tests.conftest import TINY_SPEC, plan_for, write_spec
+    from tests.helpers import TINY_SPEC, load_spec, plan_for, write_spec
 
     body = TINY_SPEC.replace("[policy]", '[[controls]]\ntype = "position"\nx = [0.0, 0.5, 3.0]\n\n[policy]')
     plan = plan_for(load_spec(write_spec(tmp_path, body)), "m")

@@ -15,7 +15,7 @@ import pyarrow as pa
 from sweep3d.cache.store import Store
 from sweep3d.spec.columns import PARAMETERS_METADATA
 from sweep3d.stages.aggregate import connect
-from tests.conftest import REPO, TINY_SPEC, write_spec
+from tests.helpers import REPO, TINY_SPEC, write_spec
 
 
 def _modules_after(code: str) -> set[str]:
@@ -35,7 +35,7 @@ def test_loading_and_planning_import_neither_blender_nor_torch(tmp_path: Path) -
     spec = write_spec(tmp_path, TINY_SPEC)
     loaded = _modules_after(f"""
         from sweep3d.pipeline import plan_spec
-        from sweep3d.stages import load_spec
+        from tests.helpers import load_spec
         plan = plan_spec(load_spec({str(spec)!r}))
         assert len(plan.jobs) == 8
     """)

@@ -3,7 +3,6 @@ the keys, the geometry (fast) and real renders (Blender, 32-48 px, few samples).
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 from pathlib import Path
 
@@ -14,13 +13,11 @@ from typer.testing import CliRunner
 from sweep3d.cli import app
 from sweep3d.errors import SpecError
 from sweep3d.spec.models import KeyLightSpec
-from sweep3d.stages import catalogue, load_spec
 from sweep3d.stages.render.lights import direction, facing, kelvin_to_rgb, light_colour
 from sweep3d.stages.render.protocol import EnvironmentRef
 from sweep3d.stages.render.state import SceneState
-from tests.conftest import TINY_SPEC, plan_for, write_spec
+from tests.helpers import TINY_SPEC, load_spec, plan_for, render, sphere_obj, write_spec
 
-CONTROLS = catalogue().controls
 SUN = '[[controls]]\ntype = "sun_light"\n'
 AREA = '[[controls]]\ntype = "area_light"\n'
 
@@ -159,15 +156,6 @@ def test_temperature_zero_is_white_and_6500_kelvin_is_not() -> None:
 
 # -- renders ----------------------------------------------------------------------------------
 
-def sphere_obj(path: Path, n: int = 16) -> str:
-    """A UV sphere: smooth shading shows which side a light is on."""
-    rings = [(math.sin(math.pi * i / n), math.cos(math.pi * i / n)) for i in range(n + 1)]
-    verts = [(s * math.cos(math.pi * j / n), s * math.sin(math.pi * j / n), c) for s, c in rings for j in range(2 * n)]
-    faces = [(i * 2 * n + j, i * 2 * n + (j + 1) % (2 * n), (i + 1) * 2 * n + (j + 1) % (2 * n), (i + 1) * 2 * n + j)
-             for i in range(n) for j in range(2 * n)]
-    path.write_text("".join(f"v {x:.6f} {y:.6f} {z:.6f}\n" for x, y, z in verts)
-                    + "".join("f " + " ".join(str(k + 1) for k in face) + "\n" for face in faces))
-    return str(path)
 
 
 @pytest.fixture(scope="module")
@@ -175,14 +163,6 @@ def sphere(tmp_path_factory) -> str:
     return sphere_obj(tmp_path_factory.mktemp("sphere") / "sphere.obj")
 
 
-def render(scene, mesh: str, env: EnvironmentRef, controls: list[tuple[str, dict]], **camera) -> np.ndarray:
-    state = SceneState(**camera)
-    for name, values in controls:
-        control = CONTROLS.get(name)(name, name)
-        control.apply(state, control.params(values))
-    scene.prepare(mesh, env)
-    scene.pose_scene(state)
-    return scene.render()
 
 
 def object_pixels(scene, mesh: str, env: EnvironmentRef, controls, **camera) -> tuple[np.ndarray, np.ndarray]:

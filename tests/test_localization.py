@@ -14,13 +14,12 @@ from typer.testing import CliRunner
 
 from sweep3d.cli import app
 from sweep3d.errors import SpecError
-from sweep3d.stages import load_spec
 from sweep3d.stages.infer import Preprocess
 from sweep3d.stages.infer.cam import map_box
 from sweep3d.stages.infer.evaluators import EVALUATORS, Truth, box_iou
 from sweep3d.stages.infer.labels import LabelMap
 from sweep3d.stages.infer.outputs import Localized
-from tests.conftest import TINY_SPEC, plan_for, write_spec
+from tests.helpers import TINY_SPEC, load_spec, plan_for, write_spec
 
 NAMES = LabelMap([["cat"], ["dog"], ["cup"]])
 

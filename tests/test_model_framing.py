@@ -20,11 +20,10 @@ from sweep3d.pixels import decode_png
 from sweep3d.progress import RunProgress
 from sweep3d.spec.framing import Framing
 from sweep3d.spec.models import RenderSpec
-from sweep3d.stages import load_spec
 from sweep3d.stages.aggregate import connect as connect_results
 from sweep3d.stages.driver import run_stage
 from sweep3d.stages.render import RenderStage, render_settings
-from tests.conftest import TINY_SPEC, plan_for, write_spec
+from tests.helpers import TINY_SPEC, load_spec, plan_for, write_spec
 
 
 def _spec(folder: Path, resolution: str, *, one_job: bool = False) -> Path:

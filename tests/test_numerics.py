@@ -20,11 +20,10 @@ from hypothesis import strategies as st
 from sweep3d.cache.store import Store
 from sweep3d.pipeline import run
 from sweep3d.spec.params import Range
-from sweep3d.stages import load_spec
 from sweep3d.stages.aggregate import connect, summarise
 from sweep3d.stages.infer import ClassificationEvaluator, LabelMap
 from sweep3d.stages.infer.evaluators import Truth, log_softmax
-from tests.conftest import CUBE_OBJ, examples, write_spec
+from tests.helpers import CUBE_OBJ, examples, load_spec, write_spec
 
 
 def write_exr(path: Path, rgb: np.ndarray) -> None:
@@ -200,7 +199,7 @@ def test_cycles_turns_nan_and_inf_sky_pixels_into_finite_light(tmp_path: Path) -
     (In a child process: importing bpy here would change sys.path for later render workers.)"""
     import subprocess
 
-    from tests.conftest import REPO, write_cube
+    from tests.helpers import REPO, write_cube
 
     hdri = poisoned_hdri(tmp_path / "poisoned.exr")
     done = subprocess.run([sys.executable, "-c", FLOAT_RENDER, str(tmp_path), str(hdri), str(write_cube(tmp_path))],
@@ -456,7 +455,7 @@ def test_planned_values_stay_inside_declared_ranges_and_follow_the_seed(tmp_path
                                                                         policy, seed) -> None:
     if len({*zoom}) < 2 or len({*el}) < 2 or len({*scale}) < 2:
         return
-    from tests.conftest import plan_for
+    from tests.helpers import plan_for
 
     folder = tmp_path_factory.mktemp("sampling")
     (zl, zh), (el_lo, el_hi), (sl, sh) = sorted(zoom), sorted(el), sorted(scale)

@@ -25,7 +25,7 @@ from sweep3d.errors import UserError
 from sweep3d.pipeline import outcomes_by_scene, plan_spec, plans_as_run, write_jobs
 from sweep3d.stages.code import SPEC_METADATA
 from sweep3d.stages.plan import Plan
-from tests.conftest import TINY_SPEC, write_cube
+from tests.helpers import TINY_SPEC, write_cube
 
 BLUR = "sigma = [0.0, 1.5]"
 #: The same experiment ("tiny", 8 jobs) with blur 0 and 3, and with blur 0 and 2: half their jobs are shared.

@@ -20,68 +20,27 @@ from typer.testing import CliRunner
 from sweep3d.cli import app
 from sweep3d.spec.framing import Framing
 from sweep3d.spec.space import SpaceShape
-from sweep3d.stages import load_spec
 from sweep3d.stages.plan import make_plan
 from sweep3d.stages.plan.policies import RandomPolicy, balanced
-from tests.conftest import TINY_SPEC, examples, write_spec
-from tests.test_aggregate_views import make_store, rows_of
+from tests.helpers import (
+    PAIRED_SPEC,
+    TINY_SPEC,
+    every_job,
+    examples,
+    load_spec,
+    make_store,
+    rows_of,
+    scene_values,
+    write_spec,
+)
 
 FAST = settings(max_examples=examples(150), deadline=None)
 
-#: Two objects × two environments; the camera applies to "grey" only, so its scenes have an extra control.
-SPEC = """\
-[experiment]
-name = "freeze"
-seed = {seed}
-store = "store"
-
-[render]
-resolution = 32
-samples = 1
-denoise = false
-
-[[objects]]
-name = "box"
-mesh = "cube.obj"
-labels = ["carton"]
-
-[[objects]]
-name = "crate"
-mesh = "cube.obj"
-labels = ["crate"]
-
-[[environments]]
-name = "white"
-color = [1.0, 1.0, 1.0]
-key_light = false  # lit as before plain backgrounds had a key light: the keys of the frozen plans
-
-[[environments]]
-name = "grey"
-color = [0.5, 0.5, 0.5]
-key_light = false
-
-[[controls]]
-type = "orientation"
-yaw = {{ range = [-180, 180] }}
-pitch = [0, 15, 30]
-
-[[controls]]
-type = "camera"
-zoom = {{ range = [0.8, 2.0], log = true }}
-environments = ["grey"]
-
-[[controls]]
-type = "blur"
-sigma = [0, 1, 2]
-
-[policy]
-{policy}
-"""
 RANDOM = 'type = "random"\nsamples = 7'
 SOBOL = 'type = "sobol"\nsamples = 8'
 GRID = 'type = "grid"\nsamples_per_dim = 3'
 #: Digests of every job (scene, values, render and image keys; prediction keys are the infer
-#: stage's) of SPEC at seed 3, computed with the planner of commit 4c31124, before paired designs
+#: stage's) of PAIRED_SPEC at seed 3, computed with the planner of commit 4c31124, before paired designs
 #: existed: an unpaired plan must not move.
 BEFORE = {RANDOM: (28, "40178db6e481b99e"), SOBOL: (32, "315cddc08e619c3e"), GRID: (216, "01f038408e976e36")}
 
@@ -89,12 +48,10 @@ BEFORE = {RANDOM: (28, "40178db6e481b99e"), SOBOL: (32, "315cddc08e619c3e"), GRI
 def plan(folder: Path, policy: str, seed: int = 3):
     sub = folder / f"spec{len(list(folder.iterdir()))}"
     sub.mkdir()
-    loaded = load_spec(write_spec(sub, SPEC.format(seed=seed, policy=policy)))
+    loaded = load_spec(write_spec(sub, PAIRED_SPEC.format(seed=seed, policy=policy)))
     return make_plan(loaded, framing=Framing.full(32), model_digest="m", blender="4.5.0")
 
 
-def every_job(p) -> list:
-    return list(p.jobs) + list(p.out_of_frame)
 
 
 def fingerprint(p) -> tuple[int, str]:
@@ -104,12 +61,6 @@ def fingerprint(p) -> tuple[int, str]:
     return len(jobs), hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-def scene_values(p, control: str) -> dict[tuple[str, str], list[dict[str, Any]]]:
-    """(object, environment) → the values of ``control`` of its jobs, in job order."""
-    out: dict[tuple[str, str], list] = {}
-    for job in sorted(every_job(p), key=lambda j: j.index):
-        out.setdefault((job.object, job.environment), []).append(job.values[control])
-    return out
 
 
 # -- keys of unpaired plans do not move -------------------------------------------------------------
@@ -155,7 +106,7 @@ def test_paired_all_shares_across_objects_and_follows_the_seed(tmp_path: Path) -
 
 def test_paired_sobol_pairs_scenes_with_the_same_controls(tmp_path: Path) -> None:
     """Sobol points are joint over every dimension: scenes pair when their controls are the same."""
-    body = SPEC.format(seed=3, policy=SOBOL + "\npaired = true").replace('environments = ["grey"]', "")
+    body = PAIRED_SPEC.format(seed=3, policy=SOBOL + "\npaired = true").replace('environments = ["grey"]', "")
     folder = tmp_path / "same"
     folder.mkdir()
     loaded = load_spec(write_spec(folder, body))
@@ -322,7 +273,7 @@ def test_the_panel_shows_paired_numbers_only_for_a_paired_spec(tmp_path: Path, p
 def test_a_post_control_added_to_a_paired_random_spec_renders_nothing_new(tmp_path: Path) -> None:
     """Each control draws from its own stream: the orientation's draws, and so every render, stay."""
     before = plan(tmp_path, RANDOM + "\npaired = true")
-    body = SPEC.format(seed=3, policy=RANDOM + "\npaired = true").replace(
+    body = PAIRED_SPEC.format(seed=3, policy=RANDOM + "\npaired = true").replace(
         "[policy]", '[[controls]]\ntype = "noise"\nstd = { range = [0, 0.1] }\n\n[policy]')
     folder = tmp_path / "more"
     folder.mkdir()

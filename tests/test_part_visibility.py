@@ -17,13 +17,19 @@ from sweep3d.cli import app
 from sweep3d.parts import AZIMUTH_PARTS, PARTS, part_of, sphere_turns
 from sweep3d.pixels import decode_png
 from sweep3d.report import write_report
-from sweep3d.stages import load_spec
 from sweep3d.stages.aggregate import connect
 from sweep3d.stages.aggregate import connect as connect_results
 from sweep3d.stages.aggregate.parts import VISIBLE_SHARE
-from tests.conftest import TINY_SPEC, write_spec
-from tests.test_parts import direction
-from tests.test_report import ARTIFACTS, assert_clean, open_page, screenshot_panels
+from tests.helpers import (
+    ARTIFACTS,
+    TINY_SPEC,
+    assert_clean,
+    direction,
+    load_spec,
+    open_page,
+    screenshot_panels,
+    write_spec,
+)
 
 YAWS = (0, 90, 180, 270)
 PARTS_SPEC = (TINY_SPEC.replace("resolution = 32", "resolution = 48").replace("yaw = [0, 45]", f"yaw = {list(YAWS)}")
@@ -117,7 +123,7 @@ def test_switching_the_panel_on_renders_the_pass_only(parts_run: Path, tmp_path:
 @pytest.mark.blender
 def test_painted_object_takes_the_colour_of_each_side(tmp_path: Path) -> None:
     from sweep3d.stages.render.paint import SIDES, paint_objects
-    from tests.conftest import write_cube
+    from tests.helpers import write_cube
 
     colours = np.tile([[0.9, 0.1, 0.1]], (PARTS, 1))  # red all round ...
     for part in range(PARTS):
@@ -138,7 +144,7 @@ def test_one_worker_switching_objects_sees_each_objects_own_parts(tmp_path: Path
     """A worker keeps both objects loaded: the UV pass of each is its own, also after a switch."""
     from sweep3d.stages.render.pool import RenderPool
     from sweep3d.stages.render.protocol import EnvironmentRef, RenderJob, RenderSettings
-    from tests.conftest import write_cube
+    from tests.helpers import write_cube
 
     cube = str(write_cube(tmp_path))
     slab = tmp_path / "slab.obj"  # a flat box: far fewer of the cube's parts face the camera

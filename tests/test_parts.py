@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
@@ -18,12 +16,7 @@ from sweep3d.parts import (
     part_of,
     sphere_turns,
 )
-
-
-def direction(azimuth: float, elevation: float) -> np.ndarray:
-    """A unit vector at ``azimuth`` degrees from the front (-Y) towards the right (+X)."""
-    az, el = math.radians(azimuth), math.radians(elevation)
-    return np.array([[math.cos(el) * math.sin(az), -math.cos(el) * math.cos(az), math.sin(el)]])
+from tests.helpers import direction
 
 
 def stored_uv(azimuth: float, elevation: float) -> tuple[np.ndarray, np.ndarray]:

@@ -14,9 +14,8 @@ from typer.testing import CliRunner
 from sweep3d.cache.store import Store
 from sweep3d.cli import app
 from sweep3d.pipeline import run
-from sweep3d.stages import load_spec
 from sweep3d.stages.aggregate import connect as connect_results
-from tests.conftest import REPO, TINY_SPEC, write_cube, write_spec
+from tests.helpers import REPO, TINY_SPEC, load_spec, write_cube, write_spec
 
 pytestmark = pytest.mark.slow
 
@@ -175,7 +174,7 @@ def test_adaptive_policy_runs_rounds_and_resumes_from_the_cache(tmp_path: Path) 
 
 
 def test_the_all_controls_spec_renders_every_control_without_error(tmp_path: Path) -> None:
-    from sweep3d.stages import catalogue
+    from sweep3d.stages import builtin_catalogue as catalogue
 
     CONTROLS = catalogue().controls
 

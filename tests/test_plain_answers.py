@@ -27,7 +27,7 @@ from sweep3d.spec.loader import ControlInstance
 from sweep3d.stages.outcome import StageOutcome
 from sweep3d.stages.plan.policies import GridPolicy
 from sweep3d.stages.postprocess import PostControl, apply_post
-from tests.conftest import TINY_SPEC, write_cube
+from tests.helpers import TINY_SPEC, write_cube
 from tests.test_own_jobs import SPEC_02, fake_run
 
 
@@ -196,7 +196,7 @@ def test_control_accuracy_gives_each_level_as_a_number(ran: Path) -> None:
 
 
 def test_a_binned_levels_value_is_the_bins_centre(tmp_path: Path) -> None:
-    from tests.test_aggregate_views import make_store
+    from tests.helpers import make_store
 
     con = make_store(tmp_path, [{"c_x": float(x), "correct": x < 10} for x in range(20)])  # 20 values: 10 bins
     rows = con.execute("SELECT label, value FROM control_accuracy WHERE parameter = 'c_x' ORDER BY level").fetchall()

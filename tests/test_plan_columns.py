@@ -21,21 +21,16 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from pydantic import Field, field_validator
 
-from sweep3d.cache.keys import Hole, Template, canonical, digest, float_texts
+from sweep3d.cache.keys import Hole, Template, canonical, float_texts
 from sweep3d.controls import ControlParams, wrap_periodic, wrap_periodic_many
 from sweep3d.spec.assets import blender_version
 from sweep3d.spec.framing import Framing
 from sweep3d.spec.params import Range
-from sweep3d.spec.space import SearchSpace
-from sweep3d.stages import load_spec
-from sweep3d.stages.infer.keys import infer_base, pred_key
 from sweep3d.stages.plan import make_plan
 from sweep3d.stages.postprocess.controls.base import PostControl
-from sweep3d.stages.postprocess.keys import image_key
 from sweep3d.stages.render.controls.base import RenderedControl
-from sweep3d.stages.render.keys import parts_key, render_key, scene_key
 from sweep3d.stages.render.state import SceneState, in_frame, in_frame_many
-from tests.conftest import examples, write_spec
+from tests.helpers import examples, finite, load_spec, reference_jobs, values, write_spec
 
 # -- users' controls: each takes a slow path of the planner ------------------------------------
 
@@ -85,45 +80,8 @@ class Rounded(PostControl):
 HERE = "tests.test_plan_columns"
 
 
-def reference_jobs(spec, *, framing: Framing, model_digest: str, blender: str) -> list[tuple]:
-    """The jobs of ``spec`` as the planner made them job by job: (index, object, environment,
-    values, render, image, pred, point, parts, in frame)."""
-    from sweep3d.spec.assets import mesh_digest
-
-    rendered = sorted((c for c in spec.controls if c.control.stage == "render"),
-                      key=lambda c: (c.control.order, spec.controls.index(c)))
-    post = [c for c in spec.controls if c.control.stage == "post"]
-    settings_part = spec.render.key_part(framing.key_part())
-    base = infer_base(model_digest, {"kind": spec.evaluator.kind, "top_k": spec.evaluator.params.get("top_k", 5)}, spec.model.backend)
-    out = []
-    for obj in spec.objects:
-        object_digest = mesh_digest(spec.meshes[obj.name], spec.store)
-        truth = list(spec.labels[obj.name])
-        for env in spec.environments:
-            scene = scene_key(blender, settings_part, object_digest, env.key_part(None))
-            scene_controls = [c for c in spec.controls if c.applies_to(obj.name, env.name)]
-            space = SearchSpace(scene_controls)
-            seed = int(digest([spec.experiment.seed, obj.name, env.name])[:15], 16)
-            for point in spec.policy.points(space.shape, seed, {}):
-                values = space.values(point)
-                models = {c.id: c.control.params(values[c.id]) for c in scene_controls}
-                params = {key: model.model_dump() for key, model in models.items()}
-                render = render_key(scene, _parts(rendered, params))
-                effective = [c for c in post if c.id in params and not c.control.is_identity(params[c.id])]
-                seeded = any(getattr(c.control, "stochastic", False) for c in effective)
-                image = image_key(render, _parts(post, params), spec.experiment.seed if seeded else None)
-                state = SceneState()
-                for inst in rendered:
-                    if inst.id in models:
-                        inst.control.apply(state, models[inst.id])
-                out.append((len(out), obj.name, env.name, params, render, image, pred_key(base, image, truth),
-                            point, parts_key(render) if spec.report.part_visibility else None, in_frame(state)))
-    return out
 
 
-def _parts(controls, params: dict[str, dict[str, Any]]) -> list[dict[str, Any]]:
-    return [c.control.key_part(params[c.id]) for c in controls
-            if c.id in params and not c.control.is_identity(params[c.id])]
 
 
 # -- random specs ------------------------------------------------------------------------------
@@ -253,7 +211,6 @@ def _check_distinct_keys_from_columns(plan) -> None:
 
 # -- the vectorised pieces against their scalar forms ------------------------------------------
 
-finite = st.floats(allow_nan=False, allow_infinity=False)
 
 
 @settings(max_examples=examples(200), deadline=None)
@@ -283,9 +240,6 @@ def test_a_range_maps_many_points_as_it_maps_each(bounds, log, integer, units) -
     assert [repr(v) for v in many] == [repr(space.at(u)) for u in units]
 
 
-values = st.recursive(st.none() | st.booleans() | st.integers() | finite | st.text(max_size=5),
-                      lambda inner: st.lists(inner, max_size=3) | st.dictionaries(st.text(max_size=4), inner, max_size=3),
-                      max_leaves=8)
 
 
 @settings(max_examples=examples(200), deadline=None)

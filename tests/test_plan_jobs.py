@@ -7,7 +7,7 @@ from pathlib import Path
 from typer.testing import CliRunner
 
 from sweep3d.cli import app
-from tests.conftest import TINY_SPEC, write_spec
+from tests.helpers import TINY_SPEC, write_spec
 
 
 def test_plan_lists_the_first_jobs_with_their_values_and_cache_state(tmp_path: Path) -> None:

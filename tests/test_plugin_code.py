@@ -15,33 +15,10 @@ from typer.testing import CliRunner
 from sweep3d.cache.store import Store
 from sweep3d.cli import app
 from sweep3d.stages.infer.tasks import model_outputs
-from tests.conftest import write_spec
+from tests.helpers import SCENE_CONTROL, write_spec
 
 pytestmark = pytest.mark.slow
 
-SCENE_CONTROL = '''
-from pydantic import Field
-from sweep3d.controls import ControlParams
-from sweep3d.stages.render import RenderedControl
-
-RED = (1.0, 0.0, 0.0, 1.0)
-
-
-class Slab(RenderedControl):
-    class Params(ControlParams):
-        size: float = Field(0.0, ge=0.0)
-
-    def edit(self, scene, params):
-        bpy = scene.bpy
-        s = params.size
-        mesh = bpy.data.meshes.new("slab")
-        mesh.from_pydata([(-s, -1.5, -s), (s, -1.5, -s), (s, -1.5, s), (-s, -1.5, s)], [], [(0, 1, 2, 3)])
-        material = bpy.data.materials.new("slab")
-        material.use_nodes = True
-        material.node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = RED
-        mesh.materials.append(material)
-        scene.add(bpy.data.objects.new("slab", mesh))
-'''
 POST_CONTROL = '''
 from pydantic import Field
 from sweep3d.controls import ControlParams
@@ -302,7 +279,7 @@ def test_a_hung_edit_with_no_timeout_set_stops_the_run_after_the_default_edit_ti
     import time
 
     from sweep3d.spec.models import RenderSpec
-    from tests.conftest import REPO
+    from tests.helpers import REPO
 
     spec = stuck_spec(tmp_path)
     assert "timeout" not in spec.read_text() and RenderSpec().edit_timeout == 60
@@ -370,7 +347,7 @@ def test_an_edit_that_forks_leaves_no_process_behind_and_the_run_s_pipe_closes(t
     session is left."""
     import signal
 
-    from tests.conftest import REPO
+    from tests.helpers import REPO
 
     (tmp_path / "forker.py").write_text(FORKING_EDIT)
     spec = write_spec(tmp_path, SPEC.replace('kind = "myeval:Strict"', 'kind = "classification"').replace(

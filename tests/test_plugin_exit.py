@@ -20,7 +20,7 @@ import pytest
 from typer.testing import CliRunner
 
 from sweep3d.cli import app
-from tests.conftest import TINY_SPEC, write_spec
+from tests.helpers import TINY_SPEC, write_spec
 
 #: One job (a yaw, a blur, one environment), so a run renders once.
 ONE_JOB = TINY_SPEC.replace("yaw = [0, 45]", "yaw = [0]").replace("sigma = [0.0, 1.5]", "sigma = [0.0]").replace(

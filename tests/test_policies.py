@@ -14,7 +14,7 @@ from sweep3d.spec import Choice, ControlInstance, Fixed, Range
 from sweep3d.spec.space import Point, SearchSpace, SpaceShape
 from sweep3d.stages.plan.policies import POLICIES, GridPolicy, RandomPolicy
 from sweep3d.stages.render.controls import Camera, Orientation
-from tests.conftest import TINY_SPEC, examples
+from tests.helpers import TINY_SPEC, examples
 
 FAST = settings(max_examples=examples(120), deadline=None)
 
@@ -205,8 +205,7 @@ def test_grid_over_a_space_reaches_every_declared_value():
 
 def test_grid_over_a_full_turn_does_not_repeat_its_end(tmp_path) -> None:
     """yaw over [-180, 180]: six distinct poses, not five plus -180 and 180 twice."""
-    from sweep3d.stages import load_spec
-    from tests.conftest import plan_for, write_spec
+    from tests.helpers import load_spec, plan_for, write_spec
 
     body = TINY_FULL_TURN
     plan = plan_for(load_spec(write_spec(tmp_path, body)), "m")
@@ -330,9 +329,8 @@ FILTERED = TINY_SPEC.replace("yaw = [0, 45]", 'yaw = { range = [0, 90] }\nenviro
 
 
 def test_the_job_count_matches_the_plan_with_controls_limited_to_some_scenes(tmp_path) -> None:
-    from sweep3d.stages import load_spec
     from sweep3d.stages.plan import count_jobs
-    from tests.conftest import plan_for, write_spec
+    from tests.helpers import load_spec, plan_for, write_spec
 
     loaded = load_spec(write_spec(tmp_path, FILTERED))
     plan = plan_for(loaded, "m")
@@ -349,8 +347,7 @@ def test_a_billion_job_grid_is_refused_in_one_line_before_anything_is_made(tmp_p
     import time
 
     from sweep3d.errors import SpecError
-    from sweep3d.stages import load_spec
-    from tests.conftest import plan_for, write_spec
+    from tests.helpers import load_spec, plan_for, write_spec
 
     loaded = load_spec(write_spec(tmp_path, HUGE_GRID))
     memory = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
@@ -368,8 +365,7 @@ def test_a_billion_job_grid_is_refused_in_one_line_before_anything_is_made(tmp_p
 
 def test_max_jobs_raises_or_lowers_the_limit(tmp_path) -> None:
     from sweep3d.errors import SpecError
-    from sweep3d.stages import load_spec
-    from tests.conftest import plan_for, write_spec
+    from tests.helpers import load_spec, plan_for, write_spec
 
     body = FILTERED.replace('seed = 7', 'seed = 7\nmax_jobs = 23')
     with pytest.raises(SpecError, match=r"expands to 24 jobs, over the limit of 23"):
@@ -391,8 +387,7 @@ def test_a_policy_that_cannot_count_is_stopped_as_its_points_come(tmp_path) -> N
     import dataclasses
 
     from sweep3d.errors import SpecError
-    from sweep3d.stages import load_spec
-    from tests.conftest import plan_for, write_spec
+    from tests.helpers import load_spec, plan_for, write_spec
 
     loaded = load_spec(write_spec(tmp_path, FILTERED.replace('seed = 7', 'seed = 7\nmax_jobs = 20')))
     loaded = dataclasses.replace(loaded, policy=Uncounted(loaded.policy.params))

@@ -11,7 +11,7 @@ import pytest
 from typer.testing import CliRunner
 
 from sweep3d.cli import app
-from tests.conftest import TINY_SPEC, write_spec
+from tests.helpers import TINY_SPEC, write_spec
 
 POLICIES = textwrap.dedent('''
     import math

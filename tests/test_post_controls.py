@@ -9,10 +9,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sweep3d.controls import ControlParams
-from sweep3d.stages import catalogue
+from sweep3d.stages import builtin_catalogue as catalogue
 from sweep3d.stages.postprocess import PostControl, apply_post
 from sweep3d.stages.postprocess.controls import CORRUPTIONS
-from tests.conftest import examples
+from tests.helpers import examples
 
 CONTROLS = catalogue().controls
 

@@ -13,9 +13,8 @@ from sweep3d.cache.store import Store
 from sweep3d.cli import app
 from sweep3d.pipeline import plan_spec, write_jobs
 from sweep3d.spec.framing import Framing
-from sweep3d.stages import load_spec
 from sweep3d.stages.aggregate.results import plan_protocol
-from tests.conftest import TINY_SPEC, write_spec
+from tests.helpers import TINY_SPEC, load_spec, write_spec
 
 MODEL_VIEW = 'resolution = "model": renders are the model\'s input, the centre 224² of a 256² view, never resampled'
 FIXED_224 = "resolution = 224: 224² renders, which the model resizes to 256² (upsampled 1.14×) and centre-crops to 224²"

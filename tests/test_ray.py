@@ -9,10 +9,9 @@ import pytest
 
 from sweep3d.cache.store import Store
 from sweep3d.pipeline import run
-from sweep3d.stages import load_spec
 from sweep3d.stages.aggregate import connect as connect_results
 from sweep3d.stages.render.stage import Executor
-from tests.conftest import TINY_SPEC, write_spec
+from tests.helpers import TINY_SPEC, load_spec, write_spec
 
 ray = pytest.importorskip("ray")
 pytestmark = pytest.mark.slow
@@ -78,7 +77,7 @@ def test_a_killed_actor_loses_no_job_and_duplicates_none(local_cluster, tmp_path
     from sweep3d.stages.render.protocol import RenderSettings
     from sweep3d.stages.render.ray_pool import RayRenderPool
     from sweep3d.stages.render.stage import _groups
-    from tests.conftest import plan_for
+    from tests.helpers import plan_for
 
     spec = write_spec(tmp_path, TINY_SPEC.replace("yaw = [0, 45]", "yaw = [0, 30, 60, 90, 120, 150]"))
     loaded = load_spec(spec)
@@ -103,7 +102,7 @@ def test_a_control_module_beside_the_spec_runs_on_ray_actors(local_cluster, tmp_
     """The actors get the control's code from the driver: no shared folder, no PYTHONPATH."""
     import textwrap
 
-    from tests.test_plugin_code import SCENE_CONTROL
+    from tests.helpers import SCENE_CONTROL
 
     folder = tmp_path / "study"
     folder.mkdir()

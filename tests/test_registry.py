@@ -11,8 +11,8 @@ import pytest
 
 from sweep3d.errors import UserError
 from sweep3d.registry import Registry, code_identity, local_imports
-from sweep3d.stages import catalogue, load_spec
-from tests.conftest import TINY_SPEC, plan_for, write_spec
+from sweep3d.stages import builtin_catalogue as catalogue
+from tests.helpers import TINY_SPEC, load_spec, plan_for, write_spec
 
 CONTROLS = catalogue().controls
 

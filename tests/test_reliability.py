@@ -12,7 +12,6 @@ import subprocess
 import sys
 import threading
 import time
-from datetime import datetime, timedelta
 from pathlib import Path
 
 import pyarrow as pa
@@ -29,31 +28,12 @@ from sweep3d.cache.maintenance import (
     store_stats,
     verify,
 )
-from sweep3d.cache.store import DIGEST_COLUMN, Store, StoreWriteError, atomic_write
+from sweep3d.cache.store import Store, StoreWriteError, atomic_write
 from sweep3d.cli import app
 from sweep3d.errors import UserError
 from sweep3d.pipeline import run
-from sweep3d.pixels import encode_png
-from sweep3d.stages import load_spec
 from sweep3d.stages.aggregate import connect as connect_results
-from tests.conftest import REPO, TINY_SPEC, write_spec
-
-T0 = datetime(2024, 1, 1)
-
-
-def render_row(key: str, minutes: int = 0, digest: str | None = None, seconds: float = 1.0) -> dict:
-    return {"render_key": key, "width": 4, "height": 4, "valid": True, "seconds": seconds,
-            "created_at": T0 + timedelta(minutes=minutes), DIGEST_COLUMN: digest}
-
-
-def add_render(store: Store, key: str, minutes: int = 0) -> bytes:
-    """A blob and its row, as the render stage writes them."""
-    import numpy as np
-
-    data = encode_png(np.full((4, 4, 3), (minutes % 10) / 10, np.float32))
-    atomic_write(store.blob_path(key), data)
-    store.append("renders", [render_row(key, minutes, sha256_bytes(data))])
-    return data
+from tests.helpers import REPO, T0, TINY_SPEC, HashCounter, add_render, load_spec, render_row, write_spec
 
 
 def flip_bytes(path: Path, at: float = 0.5, n: int = 4) -> None:
@@ -159,19 +139,6 @@ def test_a_full_disk_while_writing_a_blob_leaves_no_temp_file(tmp_path, monkeypa
 # -- blobs a run counts as cached ------------------------------------------------------------
 
 
-class HashCounter:
-    """Counts the blobs :func:`damaged_blobs` hashes (stands in for ``sha256_bytes``)."""
-
-    def __init__(self, monkeypatch) -> None:
-        import sweep3d.cache.blobs as blobs
-
-        self.calls = 0
-        self.real = blobs.sha256_bytes
-        monkeypatch.setattr(blobs, "sha256_bytes", self)
-
-    def __call__(self, data: bytes) -> str:
-        self.calls += 1
-        return self.real(data)
 
 
 def test_a_run_hashes_a_blob_again_only_when_its_file_changed(tmp_path, monkeypatch):

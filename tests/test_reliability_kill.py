@@ -32,9 +32,8 @@ import pytest
 from sweep3d.cache.maintenance import collect_garbage, verify
 from sweep3d.cache.store import KEY_COLUMN, Store
 from sweep3d.pipeline import run
-from sweep3d.stages import load_spec
 from sweep3d.stages.aggregate import connect as connect_results
-from tests.conftest import REPO, TINY_SPEC, write_spec
+from tests.helpers import REPO, TINY_SPEC, load_spec, write_spec
 
 pytestmark = pytest.mark.slow
 

@@ -273,7 +273,7 @@ def test_a_worker_dying_on_the_last_job_of_its_share_leaves_no_group_unrendered(
     """The culprit fails after its retry; the groups still queued get a new worker (none waits forever)."""
     from sweep3d.stages.render.pool import RenderPool
     from sweep3d.stages.render.protocol import RenderJob, RenderSettings
-    from tests.conftest import write_cube
+    from tests.helpers import write_cube
 
     cube = str(write_cube(tmp_path))
     fine = [RenderJob(key, cube, WHITE) for key in ("a", "b")]

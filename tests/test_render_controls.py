@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from sweep3d.spec.assets import builtin_hdris
-from sweep3d.stages import catalogue
+from sweep3d.stages import builtin_catalogue as catalogue
 from sweep3d.stages.render.controls import RenderedControl
 from sweep3d.stages.render.protocol import EnvironmentRef
 from sweep3d.stages.render.state import SceneState

@@ -10,12 +10,11 @@ from __future__ import annotations
 from pathlib import Path
 
 from sweep3d.cache.store import Store
-from sweep3d.stages import load_spec
 from sweep3d.stages.render.kept import Kept
 from sweep3d.stages.render.pool import Shares
 from sweep3d.stages.render.protocol import EnvironmentRef, RenderJob
 from sweep3d.stages.render.stage import _groups
-from tests.conftest import TINY_SPEC, plan_for, write_cube, write_spec
+from tests.helpers import TINY_SPEC, load_spec, plan_for, write_cube, write_spec
 
 TWO_OBJECTS = TINY_SPEC.replace("[[environments]]", """[[objects]]
 name = "crate"

@@ -14,9 +14,7 @@ import hashlib
 import io
 import json
 import re
-from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Iterator
 
 import pytest
 from PIL import Image
@@ -27,18 +25,25 @@ from sweep3d.cli import app
 from sweep3d.report import build_context, render_html, write_report
 from sweep3d.report.page import SCRIPTS, plotly_js, script_json
 from sweep3d.report.panel import Panel
-from sweep3d.report.panels import CORE_PANELS, PANELS, overall
+from sweep3d.report.panels import PANELS, overall
 from sweep3d.report.thumbs import SIZES, Thumbnails, thumbnail_size
-from sweep3d.stages import load_spec
 from sweep3d.stages.aggregate import connect
-from tests.conftest import REPO, TINY_SPEC, write_spec
+from tests.helpers import (
+    PANEL_IDS,
+    TINY_SPEC,
+    assert_clean,
+    cell_centre,
+    load_spec,
+    open_page,
+    page_thumbnails,
+    screenshot_panels,
+    write_spec,
+)
 
-ARTIFACTS = REPO / "test-artifacts"
 SCRIPT = re.compile(r"<script\b[^>]*>.*?</script>", re.S | re.I)
 INLINE_SCRIPT = re.compile(r"<script>(.*?)</script>", re.S)
 DATA_URI = re.compile(r"data:image/(png|jpeg);base64,([A-Za-z0-9+/=]+)")
 EXTERNAL = re.compile(r"""(?:src|href)\s*=\s*["']?\s*(?:https?:)?//|url\(\s*["']?\s*(?:https?:)?//|@import""", re.I)
-PANEL_IDS = [p.id for p in CORE_PANELS]  # every report has these; optional ones are tested where shown
 
 EVIL_OBJECT = "box<script>alert(1)</script>"
 EVIL_ENV = "</script><img src=x onerror=alert(2)> & <b>bold</b>"
@@ -51,10 +56,6 @@ def results_count(folder: Path, where: str = "true") -> int:
     return con.execute(f"SELECT count(*) FROM results WHERE {where}").fetchone()[0]
 
 
-def page_thumbnails(html: str) -> list[str | None]:
-    found = re.search(r'<script type="application/json" id="thumbs">(.*?)</script>', html, re.S)
-    assert found, "the page has no thumbnail block"
-    return json.loads(found.group(1))
 
 
 def test_report_is_self_contained(tiny_run: Path, tmp_path: Path) -> None:
@@ -170,44 +171,10 @@ def test_optional_panels_show_only_with_data(tiny_run: Path) -> None:
     assert '<section id="extra">' in html and '<a href="#extra">Extra panel</a>' in html
 
 
-@contextmanager
-def open_page(chromium: Any, path: Path, wait_all: bool = True,
-              width: int = 1280) -> Iterator[tuple[Any, dict[str, list]]]:
-    """A page of the session's headless Chromium (the ``chromium`` fixture), in a fresh browser
-    context ``width`` pixels wide, showing ``path`` once it is interactive (and, with ``wait_all``,
-    once every figure is drawn and every image loaded); events collected for :func:`assert_clean`."""
-    context = chromium.new_context(viewport={"width": width, "height": 900})
-    try:
-        page = context.new_page()
-        events: dict[str, list] = {"errors": [], "console": [], "requests": [], "dialogs": []}
-        page.on("pageerror", lambda exc: events["errors"].append(str(exc)))
-        page.on("console", lambda msg: events["console"].append(msg.text) if msg.type == "error" else None)
-        page.on("request", lambda req: events["requests"].append(req.url))
-        page.on("dialog", lambda dialog: (events["dialogs"].append(dialog.message), dialog.dismiss()))
-        page.goto(path.as_uri())
-        page.wait_for_function("() => document.documentElement.dataset.ready === '1'", timeout=60_000)
-        if wait_all:
-            page.wait_for_function("() => document.documentElement.dataset.drawn === '1'", timeout=60_000)
-            page.wait_for_function("() => Array.from(document.images).every(i => i.complete)", timeout=10_000)
-        yield page, events
-    finally:
-        context.close()
 
 
-def assert_clean(path: Path, events: dict[str, list]) -> None:
-    """No script error, no console error, no dialog, and no request but the file itself (and the
-    in-page ``blob:`` URLs a PNG export makes)."""
-    assert events["errors"] == []
-    assert events["console"] == []
-    assert events["dialogs"] == []
-    assert {url for url in events["requests"] if not url.startswith("blob:")} == {path.as_uri()}
 
 
-def screenshot_panels(page: Any, prefix: str) -> None:
-    ARTIFACTS.mkdir(exist_ok=True)
-    page.screenshot(path=str(ARTIFACTS / f"{prefix}.png"), full_page=True)
-    for panel in PANEL_IDS:
-        page.locator(f"#{panel}").screenshot(path=str(ARTIFACTS / f"{prefix}-{panel}.png"))
 
 
 @pytest.mark.browser
@@ -295,16 +262,6 @@ def test_names_are_escaped(tiny_copy: Path, chromium) -> None:
         assert_clean(path, events)
 
 
-def cell_centre(page: Any, x: int, y: int) -> tuple[float, float]:
-    """Page coordinates of the centre of the explorer heat map's cell (x, y), scrolled into view
-    first (a click outside the viewport reaches nothing)."""
-    page.locator("#explorer-plot").scroll_into_view_if_needed()
-    return tuple(page.evaluate(
-        """([x, y]) => {
-             const gd = document.getElementById('explorer-plot'), box = gd.getBoundingClientRect();
-             const xa = gd._fullLayout.xaxis, ya = gd._fullLayout.yaxis;
-             return [box.left + xa._offset + xa.l2p(x), box.top + ya._offset + ya.l2p(y)];
-           }""", [x, y]))
 
 
 def test_report_on_an_empty_store_says_how_to_fix(tmp_path: Path) -> None:

@@ -19,15 +19,13 @@ from typing import Any
 import duckdb
 import pytest
 
-from benchmarks.report_scale import build_store
 from sweep3d.cache.store import Store
 from sweep3d.report import build_context, render_html, write_report
 from sweep3d.report.panels import PANELS, explorer
 from sweep3d.report.results import WRONG, Results, materialise_views
-from sweep3d.stages import load_spec
 from sweep3d.stages.aggregate import connect
 from sweep3d.stages.aggregate.measures import MEASURES
-from tests.test_report import ARTIFACTS, assert_clean, cell_centre, open_page
+from tests.helpers import ARTIFACTS, assert_clean, build_store, cell_centre, load_spec, open_page
 
 
 @pytest.fixture(scope="module")

@@ -12,11 +12,9 @@ from pathlib import Path
 
 import pytest
 
-from benchmarks.report_scale import build_store
 from sweep3d.report import write_report
 from sweep3d.report.panels.failure_modes import EXAMPLES
-from sweep3d.stages import load_spec
-from tests.test_report import ARTIFACTS, assert_clean, open_page
+from tests.helpers import ARTIFACTS, assert_clean, build_store, load_spec, open_page
 
 RESULTS = 2_000
 ROW_HEIGHT = 140  # px: a row of numbers beside four thumbnails

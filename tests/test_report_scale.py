@@ -15,14 +15,12 @@ from pathlib import Path
 
 import pytest
 
-from benchmarks.report_scale import build_store
 from sweep3d.cache.store import Store
 from sweep3d.report import write_report
 from sweep3d.report.panels.explorer import GALLERY_LIMIT
 from sweep3d.report.thumbs import MAX_IMAGES
-from sweep3d.stages import load_spec
 from sweep3d.stages.aggregate import connect
-from tests.test_report import ARTIFACTS, assert_clean, cell_centre, open_page, page_thumbnails
+from tests.helpers import ARTIFACTS, assert_clean, build_store, cell_centre, load_spec, open_page, page_thumbnails
 
 RESULTS = 10_000
 MAX_BYTES = 25_000_000

@@ -15,11 +15,10 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from benchmarks.report_scale import build_store
 from sweep3d.cache.store import Store
 from sweep3d.report import build_context, render_html
-from sweep3d.stages import load_spec
 from sweep3d.stages.aggregate import connect
+from tests.helpers import build_store, load_spec
 
 FIXED = "camera_elevation"
 

@@ -212,7 +212,7 @@ def test_a_material_target_no_object_has_is_one_line_naming_the_key(tmp_path) ->
     from typer.testing import CliRunner
 
     from sweep3d.cli import app
-    from tests.conftest import TINY_SPEC, write_spec
+    from tests.helpers import TINY_SPEC, write_spec
 
     (tmp_path / "two.obj").write_text(TWO_MATERIALS_OBJ)
     (tmp_path / "two.mtl").write_text(TWO_MATERIALS_MTL)

@@ -33,11 +33,9 @@ from sweep3d.evaluation import EVALUATOR_METADATA, EvaluatorRecord, Roles
 from sweep3d.pipeline import run
 from sweep3d.pixels import encode_png
 from sweep3d.spec.assets import materialise_mesh
-from sweep3d.stages import load_spec
 from sweep3d.stages.aggregate import connect as connect_results
 from sweep3d.stages.infer.kept_outputs import KeptOutputs
-from tests.conftest import CUBE_OBJ, TINY_SPEC, plan_for, write_spec
-from tests.test_reliability import T0, render_row
+from tests.helpers import CUBE_OBJ, T0, TINY_SPEC, load_spec, plan_for, render_row, write_spec
 
 
 def edit_in_place(path: Path, change: Callable[[bytes], bytes]) -> None:

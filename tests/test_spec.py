@@ -23,9 +23,8 @@ from sweep3d.cli import app
 from sweep3d.errors import SpecError
 from sweep3d.spec import Choice, Fixed, Range
 from sweep3d.spec.space import Point, SearchSpace
-from sweep3d.stages import load_spec
 from tests import files
-from tests.conftest import CUBE_OBJ, TINY_SPEC, write_cube, write_spec
+from tests.helpers import CUBE_OBJ, TINY_SPEC, load_spec, write_cube, write_spec
 
 BASE = TINY_SPEC.replace('name = "tiny"\nseed = 7\nstore = "store"', 'name = "mistakes"\nseed = 3')
 
@@ -582,7 +581,7 @@ def test_run_warns_before_hours_of_rendering_but_not_before_minutes(tmp_path):
     from sweep3d.cache.store import Store
     from sweep3d.pipeline import _warn_if_slow
     from sweep3d.stages.render import LOCAL
-    from tests.conftest import plan_for
+    from tests.helpers import plan_for
 
     console = Console(record=True, width=400)
     big = BASE.replace("resolution = 32", "resolution = 4096").replace("samples = 1", "samples = 4")

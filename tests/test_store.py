@@ -20,6 +20,7 @@ from sweep3d.cache.store import Store, atomic_write
 from sweep3d.cli import app
 from sweep3d.errors import StoreBusyError, UserError
 from sweep3d.stages.aggregate import connect as connect_results
+from tests.helpers import one_line, store_tree
 
 T0 = datetime(2024, 1, 1, tzinfo=timezone.utc)
 
@@ -254,7 +255,7 @@ def test_real_run_tables_open_with_plain_duckdb(tiny_run):
 
 
 def _results_count(folder: Path) -> int:
-    from sweep3d.stages import load_spec
+    from tests.helpers import load_spec
 
     loaded = load_spec(folder / "spec.toml")
     return connect_results(Store(loaded.store), loaded.name).execute("select count(*) from results").fetchone()[0]
@@ -338,20 +339,13 @@ RESULTS = 40  # synthetic results in the store of the query tests (no Blender, n
 @pytest.fixture(scope="module")
 def synthetic(tmp_path_factory) -> Path:
     """A spec and its store holding synthetic results (see benchmarks/report_scale.py)."""
-    from benchmarks.report_scale import build_store
+    from tests.helpers import build_store
 
     return build_store(tmp_path_factory.mktemp("query"), RESULTS)
 
 
-def store_tree(root: Path) -> dict[str, tuple[int, int]]:
-    """Every file under ``root`` with its size and mtime: what a query must leave as it was."""
-    return {str(p.relative_to(root)): (p.stat().st_size, p.stat().st_mtime_ns) for p in root.rglob("*") if p.is_file()}
 
 
-def one_line(output: str) -> str:
-    lines = [line for line in output.splitlines() if line.strip()]
-    assert len(lines) == 1, output
-    return lines[0]
 
 
 @pytest.mark.parametrize("sql, text", [
@@ -438,7 +432,7 @@ def test_a_failed_export_leaves_no_file(synthetic: Path, tmp_path: Path) -> None
 
 def first_seconds_of_a_run(folder: Path) -> Path:
     """A spec whose store holds what a first run writes in its first seconds: renders, no results."""
-    from tests.conftest import TINY_SPEC, write_spec
+    from tests.helpers import TINY_SPEC, write_spec
 
     spec = write_spec(folder, TINY_SPEC)
     store = Store(folder / "store")
@@ -452,7 +446,7 @@ def first_seconds_of_a_run(folder: Path) -> Path:
 @pytest.mark.parametrize("started", [False, True], ids=["never-run", "first-seconds"])
 def test_query_and_report_before_any_result_say_so_in_one_line(tmp_path: Path, command: list[str],
                                                                started: bool) -> None:
-    from tests.conftest import TINY_SPEC, write_spec
+    from tests.helpers import TINY_SPEC, write_spec
 
     spec = first_seconds_of_a_run(tmp_path) if started else write_spec(tmp_path, TINY_SPEC)
     result = CliRunner().invoke(app, [command[0], str(spec), *command[1:]])

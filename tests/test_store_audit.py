@@ -26,9 +26,7 @@ from sweep3d.cache.blobs import damaged_blobs, load_image
 from sweep3d.cache.maintenance import verify
 from sweep3d.cache.store import Store, StoreReadError, StoreWriteError
 from sweep3d.cli import app
-from tests.conftest import TINY_SPEC, write_spec
-from tests.test_reliability import add_render, render_row
-from tests.test_store import one_line, store_tree
+from tests.helpers import TINY_SPEC, add_render, one_line, render_row, store_tree, write_spec
 
 RESULTS = 24  # synthetic results in the stores these tests copy
 T = TypeVar("T")
@@ -42,7 +40,7 @@ def key(prefix: str) -> str:
 @pytest.fixture(scope="module")
 def synthetic(tmp_path_factory) -> Path:
     """A folder holding a spec and its store of synthetic results (see benchmarks/report_scale.py)."""
-    from benchmarks.report_scale import build_store
+    from tests.helpers import build_store
 
     return build_store(tmp_path_factory.mktemp("audit") / "run", RESULTS, images=False).parent
 

@@ -16,8 +16,7 @@ import sweep3d.cache.store as store_module
 from sweep3d.cache.blobs import damaged_blobs, sha256_bytes
 from sweep3d.cache.store import Store, atomic_write
 from sweep3d.pixels import encode_png
-from tests.conftest import examples
-from tests.test_reliability import HashCounter, add_render, render_row
+from tests.helpers import HashCounter, add_render, examples, render_row
 
 
 def test_a_listing_finds_the_blobs_a_check_per_key_finds(tmp_path: Path, monkeypatch) -> None:

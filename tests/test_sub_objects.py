@@ -14,8 +14,7 @@ from typer.testing import CliRunner
 
 from sweep3d.cli import app
 from sweep3d.spec.names import file_names
-from sweep3d.stages import load_spec
-from tests.conftest import plan_for, write_spec
+from tests.helpers import load_spec, plan_for, write_spec
 
 DIGEST = "0" * 64  # a stand-in model digest: the plan needs no model
 

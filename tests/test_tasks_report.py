@@ -22,7 +22,6 @@ import pyarrow as pa
 import pytest
 from PIL import Image
 
-from benchmarks.report_scale import build_store
 from sweep3d.cache.store import Store
 from sweep3d.cli.output import not_evaluable_line
 from sweep3d.report import build_context, render_html, write_report
@@ -31,13 +30,11 @@ from sweep3d.report.panels import CORE_PANELS, PANELS
 from sweep3d.report.results import CORRECT, NOT_EVALUABLE, WRONG, Results, materialise_views
 from sweep3d.report.thumbs import encode_thumbnail
 from sweep3d.spec.columns import MIN_VISIBLE_METADATA, MODELS_METADATA, PARAMETERS_METADATA
-from sweep3d.stages import load_spec
 from sweep3d.stages.aggregate import connect, stored_summary, summarise
 from sweep3d.stages.aggregate.measures import MEASURES
 from sweep3d.stages.aggregate.tasks import OUTCOMES, TASK_VIEWS
 from sweep3d.truth import encode_mask
-from tests.conftest import write_spec
-from tests.test_report import assert_clean, open_page
+from tests.helpers import assert_clean, build_store, load_spec, open_page, write_spec
 
 T0 = datetime(2024, 1, 1)
 W, H = 64, 48  # stored images

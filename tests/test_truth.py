@@ -15,11 +15,10 @@ from typer.testing import CliRunner
 from sweep3d.cache.store import Store
 from sweep3d.cli import app
 from sweep3d.errors import SpecError
-from sweep3d.stages import load_spec
 from sweep3d.stages.aggregate import connect as connect_results
 from sweep3d.stages.passes import needed_passes, truth_passes
 from sweep3d.truth import box, decode_depth, decode_mask, encode_depth, encode_mask, ground_truth
-from tests.conftest import plan_for, write_spec
+from tests.helpers import load_spec, plan_for, write_spec
 
 SIDE = 48
 TRUTH_SPEC = f"""\
@@ -239,7 +238,7 @@ def test_a_killed_run_resumes_its_truth_passes(tmp_path: Path) -> None:
     import time
 
     from sweep3d.cache.maintenance import verify
-    from tests.conftest import REPO
+    from tests.helpers import REPO
 
     body = TRUTH_SPEC.replace("x = [0.0, 0.5, 1.6, 2.5]", "x = { range = [-0.6, 0.6] }").replace(
         '[policy]\ntype = "grid"', '[policy]\ntype = "grid"\nsamples_per_dim = 12').replace(

@@ -58,19 +58,22 @@ def plan(
                                           "replays (type = \"table\", file = \"...\")."),
 ) -> None:
     """Count the jobs a spec expands to, what is already cached, and an estimated time."""
+    import sweep3d
     from sweep3d.cli.output import print_plan
-    from sweep3d.stages import load_spec
+    from sweep3d.plan_status import plan_status
 
     if design is not None:
         from sweep3d.stages.plan.design import check_output
 
         check_output(design)
-    loaded = load_spec(spec)
+    loaded = sweep3d.load(spec).spec
     if materials:  # first: a part or material only Blender can check fails before anything prints
         from sweep3d.cli.materials import effective_materials, print_materials
 
         described = effective_materials(loaded)
-    made = print_plan(console, loaded, jobs)
+    status = plan_status(loaded)
+    print_plan(console, status, jobs)
+    made = status.plan
     if design is not None:
         from sweep3d.stages.plan.design import write_design
 
@@ -97,6 +100,9 @@ def run(
     experiment = Experiment(spec)
     signal.signal(signal.SIGTERM, _interrupt)  # clean up workers and scratch files as on Ctrl-C
     result = experiment.run(wait=wait, executor=executor, address=address, console=console)
+    from sweep3d.cli.output import print_run
+
+    print_run(console, result)
     if len(experiment.spec.models) > 1:
         from sweep3d.cli.output import print_comparison
 
@@ -200,6 +206,7 @@ def bench(
     """
     import time
 
+    import sweep3d
     from sweep3d.bench import (
         Setting,
         apply_setting,
@@ -213,7 +220,6 @@ def bench(
     from sweep3d.cache.store import Store
     from sweep3d.cli.output import print_bench
     from sweep3d.progress import RunProgress
-    from sweep3d.stages import load_spec
     from sweep3d.stages.infer import ModelHandle
     from sweep3d.stages.render.estimate import duration
 
@@ -224,7 +230,7 @@ def bench(
                             "--budget: as many as are estimated to fit in the minutes)")
     if reference_denoise not in ("off", "accurate", "fast", "none"):
         raise UserError(f"--reference-denoise {reference_denoise!r}: use off, accurate, fast or none")
-    loaded = load_spec(spec)
+    loaded = sweep3d.load(spec).spec
     r = loaded.render
     view = ModelHandle.resolve(loaded).view  # None: a user's own preprocessing, compared at the spec's size
     model_view, full_frame = view is not None, view.crop if view is not None else None
@@ -290,12 +296,12 @@ def sheet(
 
     A range is shown at the spec's own grid when its policy is a grid, else at five points.
     """
+    import sweep3d
     from sweep3d.cache.store import Store
     from sweep3d.progress import RunProgress
     from sweep3d.report.sheet import contact_sheet
-    from sweep3d.stages import load_spec
 
-    loaded = load_spec(spec)
+    loaded = sweep3d.load(spec).spec
     target = output or Store(loaded.store).report_path(loaded.name, "-controls.png")
     with RunProgress(console) as progress:
         sheet = contact_sheet(loaded, target, progress, object_name, environment, tiles)

@@ -29,9 +29,9 @@ command = registrar(cache_app)
 
 
 def _store_root(spec: Path) -> Path:
-    from sweep3d.stages import load_spec
+    import sweep3d
 
-    loaded = load_spec(spec)
+    loaded = sweep3d.load(spec).spec
     if not loaded.store.is_dir():
         raise UserError(f"store {loaded.store} does not exist yet; run: sweep3d run {spec}")
     return loaded.store

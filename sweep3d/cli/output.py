@@ -11,7 +11,8 @@ from rich.table import Table
 
 from sweep3d.cache.store import Store
 from sweep3d.errors import UserError
-from sweep3d.pipeline import RunResult, plan_spec
+from sweep3d.pipeline import RunResult
+from sweep3d.plan_status import PlanStatus
 from sweep3d.spec.loader import LoadedSpec
 from sweep3d.stages.aggregate import (
     Region,
@@ -27,80 +28,50 @@ from sweep3d.stages.aggregate.boundaries import boundary_phrase, control_number,
 from sweep3d.stages.aggregate.own_jobs import results_store
 from sweep3d.stages.aggregate.summary import named_rules
 from sweep3d.stages.aggregate.tasks import HIDDEN
-from sweep3d.stages.code import explain
-from sweep3d.stages.driver import plan_status
-from sweep3d.stages.infer import InferStage, ModelHandle
+from sweep3d.stages.infer import ModelHandle
 from sweep3d.stages.infer.evaluators import measure_of
 from sweep3d.stages.jobs import JobList
-from sweep3d.stages.passes import truth_passes
 from sweep3d.stages.plan import Plan
-from sweep3d.stages.postprocess import PostprocessStage
-from sweep3d.stages.render import RenderStage
 from sweep3d.stages.render.device import missing_gpu_warning
-from sweep3d.stages.render.estimate import duration, estimate_render_seconds, slow_render_warning
-
-#: Rendered controls that may hide part of the object (its mask pass then renders twice).
-HIDING_CONTROLS = {"occlusion", "position", "camera", "scale"}
-
-#: Seconds per image on a 2-core CPU, post-processing (a blur) and inference (EfficientNet-Lite0 on ONNX
-#: Runtime): the image path measured in benchmarks/RESULTS.md (render costs: stages/render/estimate.py).
-POST_SECONDS, INFER_SECONDS = 0.003, 0.009
+from sweep3d.stages.render.estimate import duration, slow_render_warning
 
 
-def cache_status(plan: Plan, store: Store, model: ModelHandle, several: bool = False) -> list[tuple[str, int, int]]:
-    """(stage, distinct keys needed, keys already stored) for render, postprocess and infer."""
-    post = PostprocessStage.for_spec(plan.spec)
-    return [(getattr(stage, "title", stage.name), *plan_status(stage, plan, store))
-            for stage in (RenderStage(), post, InferStage(model, several=several, images_stored=post.store_images))]
-
-
-def print_plan(console: Console, spec: LoadedSpec, jobs: int = 0) -> Plan:
-    """What ``sweep3d plan`` prints: the counts per stage, cached and to compute, the estimate, and
-    with ``jobs`` the first that many jobs of the first model's plan (which it returns)."""
+def print_plan(console: Console, status: PlanStatus, jobs: int = 0) -> None:
+    """What ``sweep3d plan`` prints of ``status`` (the engine's :func:`~sweep3d.plan_status.plan_status`):
+    the counts per stage, cached and to compute, the estimate, and with ``jobs`` the first that many
+    jobs of the first model's plan."""
+    spec, plans, plan = status.spec, status.plans, status.plan
     store = Store(spec.store)
-    models = [ModelHandle.resolve(spec, settings) for settings in spec.models]
-    plans = [plan_spec(spec, model) for model in models]
-    plan = plans[0]
-    status = _models_status(plans, models, store)
     scenes = len(plan.jobs.scenes() if isinstance(plan.jobs, JobList) else {j.scene for j in plan.jobs})
     console.print(f"[bold]{escape(spec.name)}[/]: {len(plan.jobs) + len(plan.out_of_frame)} jobs over {scenes} scenes "
                   f"({len(spec.objects)} objects × {len(spec.environments)} environments), "
                   f"policy {spec.spec.policy.type}{_pairing(spec)}; store {escape(str(spec.store))}")
     table = Table("stage", "needed", "cached", "to compute", "estimate")
-    total = 0.0
-    passes = truth_passes(spec)
-    hidden = any(c.control.type_name in HIDING_CONTROLS for c in spec.controls)
-    for stage, needed, cached, crop in status:
-        per_item = {"render": estimate_render_seconds(spec.render, crop, bool(passes), hidden),
-                    "postprocess": POST_SECONDS}.get(stage.split(" ")[0], INFER_SECONDS)
-        seconds = (needed - cached) * per_item
-        total += seconds
-        table.add_row(stage, str(needed), str(cached), str(needed - cached), duration(seconds))
+    for row in status.stages:
+        table.add_row(row.stage, str(row.needed), str(row.cached), str(row.to_compute), duration(row.seconds))
     console.print(table)
-    for line in explain(plan, store):
+    for line in status.changed:
         console.print(escape(line), highlight=False)
     print_protocol(console, plans)
-    if len(models) > 1:
-        console.print(_sharing(models))
+    if len(status.models) > 1:
+        console.print(_sharing(status.models))
     if plan.out_of_frame:
         console.print(f"{len(plan.out_of_frame)} jobs put the object wholly out of frame: flagged, not rendered")
     if spec.report.part_visibility:
         console.print("renders carry a UV pass (the report's part-visibility panel); a render cached "
                       "without it is rendered again for the pass only")
-    if passes:
-        console.print(f"renders carry the {' and '.join(passes)} passes (ground truth for the evaluator); a render "
-                      "cached without them is rendered again for the passes only")
+    if status.passes:
+        console.print(f"renders carry the {' and '.join(status.passes)} passes (ground truth for the evaluator); "
+                      "a render cached without them is rendered again for the passes only")
     if spec.policy.adaptive:
         console.print(f"adaptive policy: this is its first round; it proposes up to "
                       f"{spec.policy.params.samples} jobs per scene as results come in")
-    console.print(f"estimated time: {duration(total)} (plus ~5 s start-up when anything needs rendering); "
+    console.print(f"estimated time: {duration(status.seconds)} (plus ~5 s start-up when anything needs rendering); "
                   f"{load_note()}")
-    to_render = sum(needed - cached for stage, needed, cached, _ in status if stage.startswith("render"))
-    print_warning(console, slow_render_warning(spec.render, max(p.framing.crop for p in plans), to_render))
-    print_warning(console, missing_gpu_warning(spec.render.device, to_render))
+    print_warning(console, slow_render_warning(spec.render, status.crop, status.to_render))
+    print_warning(console, missing_gpu_warning(spec.render.device, status.to_render))
     if jobs:
         print_jobs(console, plan, store, jobs)
-    return plan
 
 
 def load_note(cores: int | None = None, load: float | None = None) -> str:
@@ -149,21 +120,6 @@ def _pairing(spec: LoadedSpec) -> str:
     parts += [f"{name} crossed with {'every draw' if k is None else f'the first {k} draws'}"
               for name, k in spec.spec.policy.crossed.items()]
     return f" ({'; '.join(parts)})" if parts else ""
-
-
-def _models_status(plans: list[Plan], models: list[ModelHandle], store: Store) -> list[tuple[str, int, int, int]]:
-    """(stage, needed, cached, frame side): render and postprocess once per distinct framing (models
-    framed alike share them), then infer once per model."""
-    several = len(models) > 1
-    framed: dict[object, list[tuple[str, int, int, int]]] = {}
-    infers = []
-    for plan, model in zip(plans, models):
-        rows = [(*row, plan.framing.crop) for row in cache_status(plan, store, model, several)]
-        framed.setdefault(plan.framing, rows[:2])
-        infers.append(rows[2])
-    if len(framed) > 1:  # say whose frame each render row is
-        framed = {f: [(f"{stage} ({f.crop}²)", *rest) for stage, *rest in rows] for f, rows in framed.items()}
-    return [row for rows in framed.values() for row in rows] + infers
 
 
 def _sharing(models: list[ModelHandle]) -> str:

@@ -4,10 +4,26 @@
 Usage::
 
     from sweep3d.export import export_dataset
-    from sweep3d.stages import load_spec
-    export_dataset(load_spec("spec.toml"), "coco", output="failures")  # failures/annotations.json, images/
+    import sweep3d
+    export_dataset(sweep3d.load("spec.toml").spec, "coco", output="failures")  # failures/annotations.json, images/
 """
 
-from sweep3d.export.dataset import FORMATS, ExportResult, default_output, export_dataset
+from __future__ import annotations
 
 __all__ = ["FORMATS", "ExportResult", "default_output", "export_dataset"]
+
+# Lazy exports (PEP 562): a name's module is imported when first used, so importing this package
+# stays light and free of cycles.
+from typing import TYPE_CHECKING as _TYPE_CHECKING  # noqa: E402
+
+from sweep3d.lazy import exports as _exports  # noqa: E402
+
+if _TYPE_CHECKING:
+    from sweep3d.export.dataset import FORMATS, ExportResult, default_output, export_dataset
+
+__getattr__, __dir__ = _exports(__name__, {
+    'ExportResult': ('sweep3d.export.dataset', 'ExportResult'),
+    'FORMATS': ('sweep3d.export.dataset', 'FORMATS'),
+    'default_output': ('sweep3d.export.dataset', 'default_output'),
+    'export_dataset': ('sweep3d.export.dataset', 'export_dataset'),
+})

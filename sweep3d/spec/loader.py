@@ -153,12 +153,12 @@ class LoadedSpec:
         return SpecError(str(self.path), key, problem)
 
 
-def load_spec(path: str | Path, catalogue: Catalogue) -> LoadedSpec:
-    """Read, validate and resolve a spec file.
+def spec_from_file(path: str | Path, catalogue: Catalogue) -> LoadedSpec:
+    """Read, validate and resolve a spec file (``sweep3d.load`` is the public way in).
 
     Args:
         catalogue: the controls, policies, models and evaluators its names may refer to
-            (``sweep3d.stages.catalogue()`` for the built-in ones).
+            (``sweep3d.stages.builtin_catalogue()`` for the built-in ones).
 
     Raises:
         SpecError: for any mistake in the file, naming the key and the fix.

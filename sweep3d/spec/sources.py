@@ -15,13 +15,34 @@ import json
 from pathlib import Path
 from typing import Any, Mapping
 
-from sweep3d.errors import SpecError
+from sweep3d.errors import SpecError, UserError
 from sweep3d.registry import Registry
 from sweep3d.spec.catalogue import Catalogue
-from sweep3d.spec.loader import LoadedSpec, parse_toml, validate_spec
+from sweep3d.spec.loader import LoadedSpec, parse_toml, spec_from_file, validate_spec
 
 DICT_FILE = "<dict>"
 STRING_FILE = "<string>"
+
+
+def read_spec(spec: str | Path | Mapping[str, Any], catalogue: Catalogue, base: str | Path | None = None) -> LoadedSpec:
+    """The spec ``spec`` describes: a file's path, TOML text (a string holding a newline or
+    starting with ``[``) or a dict, validated against ``catalogue``. The layer-clean step behind
+    ``sweep3d.load`` (the one public loader), for a front end that hands its own catalogue.
+
+    Args:
+        base: the folder a dict's or a string's relative paths resolve against (default the
+            working directory); a file's resolve against its own folder.
+    """
+    folder = Path(base) if base is not None else Path.cwd()
+    if isinstance(spec, Mapping):
+        return spec_from_dict(spec, catalogue, folder)
+    if isinstance(spec, str) and ("\n" in spec or spec.lstrip().startswith("[")):
+        return spec_from_toml(spec, catalogue, folder)
+    if not isinstance(spec, (str, Path)):
+        raise UserError(f"a spec is a path, TOML text or a dict, got {type(spec).__name__}")
+    if base is not None:
+        raise UserError(f"{spec}: base= is for a dict or TOML text; a spec file's paths are relative to its folder")
+    return spec_from_file(spec, catalogue)
 
 
 def spec_from_toml(text: str, catalogue: Catalogue, base: Path) -> LoadedSpec:

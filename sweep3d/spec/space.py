@@ -8,12 +8,14 @@ turns such a point into physical control values, so policies are testable on the
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Iterable, Sequence
+from typing import TYPE_CHECKING, Any, Iterable, Sequence
 
 import numpy as np
 
-from sweep3d.spec.loader import ControlInstance
 from sweep3d.spec.params import Choice, Fixed, Range
+
+if TYPE_CHECKING:
+    from sweep3d.spec.loader import ControlInstance
 
 
 @dataclass(frozen=True)

@@ -6,11 +6,9 @@ The spec layer imports no stage; this module, one layer up, hands it the stages'
 from __future__ import annotations
 
 from functools import lru_cache
-from pathlib import Path
 
 from sweep3d.registry import Registry
-from sweep3d.spec import Catalogue, LoadedSpec
-from sweep3d.spec import load_spec as load_with
+from sweep3d.spec import Catalogue
 from sweep3d.stages.infer import EVALUATORS, MODELS, builtin_labels
 from sweep3d.stages.plan import POLICIES
 from sweep3d.stages.postprocess import POST_CONTROLS
@@ -18,16 +16,8 @@ from sweep3d.stages.render.controls import RENDERED_CONTROLS
 
 
 @lru_cache(maxsize=1)
-def catalogue() -> Catalogue:
+def builtin_catalogue() -> Catalogue:
     """The built-in controls, policies, models and evaluators (users' own come by ``module:Name``)."""
     controls = Registry.union("control", RENDERED_CONTROLS, POST_CONTROLS)
     return Catalogue(controls, POLICIES, MODELS, EVALUATORS, builtin_labels)
 
-
-def load_spec(path: str | Path, plugins: Catalogue | None = None) -> LoadedSpec:
-    """Load a spec file against the built-in catalogue (or ``plugins``).
-
-    Raises:
-        SpecError: for any mistake in the file, naming the key and the fix.
-    """
-    return load_with(path, plugins or catalogue())

@@ -296,7 +296,7 @@ def split_to_do(stage: Stage, plan: Plan, store: Store, cached: set[str] | None 
     return ready, dict(waiting)
 
 
-def plan_status(stage: Stage, plan: Plan, store: Store, found: Found | None = None) -> tuple[int, int]:
+def stage_counts(stage: Stage, plan: Plan, store: Store, found: Found | None = None) -> tuple[int, int]:
     """(distinct keys ``plan`` needs at ``stage``, how many the store holds complete), from
     ``found`` where the caller already looked (:func:`rows_and_cached`)."""
     if found is None and not store.key_set(stage.table):  # nothing stored yet: count the keys, find none

@@ -5,16 +5,18 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import ClassVar, Mapping, Sequence
+from typing import TYPE_CHECKING, ClassVar, Mapping, Sequence
 
 import numpy as np
 from pydantic import ConfigDict, Field, StrictBool
 
 from sweep3d.registry import Registry
-from sweep3d.spec.loader import ControlInstance
 from sweep3d.spec.params import Range
 from sweep3d.spec.space import Point, SearchSpace, SpaceShape, as_arrays, as_points
 from sweep3d.typed import Typed
+
+if TYPE_CHECKING:
+    from sweep3d.spec.loader import ControlInstance
 
 
 class PolicyParams(Typed):

@@ -1,0 +1,708 @@
+"""The one module tests share besides conftest's fixtures: a spec builder (tiny specs and a cube
+mesh written into a folder), the spec loader tests use, synthetic stores and the small pieces
+several test files need. Tests import from here, never from another test file or from
+``benchmarks/``."""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import math
+import re
+import textwrap
+from contextlib import contextmanager
+from datetime import datetime, timedelta
+from functools import lru_cache
+from pathlib import Path
+from typing import Any, Iterator
+
+import duckdb
+import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
+from hypothesis import strategies as st
+from PIL import Image
+
+from sweep3d.cache.blobs import sha256_bytes
+from sweep3d.cache.keys import digest
+from sweep3d.cache.store import DIGEST_COLUMN, Store, atomic_write, segment_name, utc_now
+from sweep3d.pixels import encode_png
+from sweep3d.report import image_keys
+from sweep3d.report.panels import CORE_PANELS
+from sweep3d.spec.assets import blender_version
+from sweep3d.spec.columns import PARAMETERS_METADATA
+from sweep3d.spec.framing import Framing
+from sweep3d.spec.space import SearchSpace
+from sweep3d.stages import builtin_catalogue
+from sweep3d.stages.aggregate import (
+    connect,
+)
+from sweep3d.stages.infer.keys import infer_base, pred_key
+from sweep3d.stages.plan import make_plan
+from sweep3d.stages.postprocess.keys import image_key
+from sweep3d.stages.render.keys import parts_key, render_key, scene_key
+from sweep3d.stages.render.protocol import EnvironmentRef
+from sweep3d.stages.render.state import SceneState, in_frame
+
+# --- definitions ---
+
+
+def load_spec(source, plugins=None):
+    """The :class:`~sweep3d.spec.LoadedSpec` of ``source`` (a path, TOML text or a dict) against
+    the built-in plug-ins (or the catalogue ``plugins``): what ``sweep3d.load(source).spec`` is."""
+    from sweep3d.spec import read_spec
+    from sweep3d.stages import builtin_catalogue
+
+    return read_spec(source, plugins or builtin_catalogue())
+
+
+def examples(n: int) -> int:
+    """``max_examples`` for a property test that sets its own: ``n``, or a fifth of it in the fast lane."""
+    from tests import conftest
+
+    return max(5, round(n * conftest.LANE_SHARE)) if conftest.LANE else n
+
+
+# from conftest.py
+REPO = Path(__file__).resolve().parents[1]
+
+
+CUBE_OBJ = """\
+# unit cube
+v -1 -1 -1
+v 1 -1 -1
+v 1 1 -1
+v -1 1 -1
+v -1 -1 1
+v 1 -1 1
+v 1 1 1
+v -1 1 1
+f 1 2 3 4
+f 5 8 7 6
+f 1 5 6 2
+f 2 6 7 3
+f 3 7 8 4
+f 5 1 4 8
+"""
+
+
+def write_cube(folder: Path, name: str = "cube.obj") -> Path:
+    path = folder / name
+    path.write_text(CUBE_OBJ)
+    return path
+
+
+def write_spec(folder: Path, body: str, *, cube: bool = True, name: str = "spec.toml") -> Path:
+    """Write a spec into ``folder`` (with a cube mesh beside it unless ``cube`` is False)."""
+    if cube:
+        write_cube(folder)
+    path = folder / name
+    path.write_text(textwrap.dedent(body))
+    return path
+
+
+TINY_SPEC = """\
+[experiment]
+name = "tiny"
+seed = 7
+store = "store"
+
+[render]
+resolution = 32
+samples = 1
+denoise = false
+
+[model]
+batch_size = 8
+
+[[objects]]
+name = "box"
+mesh = "cube.obj"
+labels = ["carton"]
+
+[[environments]]
+name = "white"
+color = [1.0, 1.0, 1.0]
+
+[[environments]]
+name = "studio"
+hdri = "builtin:studio"
+
+[[controls]]
+type = "orientation"
+yaw = [0, 45]
+
+[[controls]]
+type = "blur"
+sigma = [0.0, 1.5]
+
+[policy]
+type = "grid"
+"""
+
+
+#: Post-processed images written to the store (the default makes them in memory): the tests of
+#: damaged, missing and verified blobs have image blobs to damage (tests/test_image_store.py
+#: checks that both ways give the same results).
+STORE_ALL = """
+[postprocess]
+store = "all"
+"""
+
+
+def plan_for(loaded, model_digest: str | None = None):
+    """Plan ``loaded`` as a run would; a ``model_digest`` stands in for the model's (none is loaded)."""
+    from sweep3d.pipeline import plan_spec
+    from sweep3d.spec.framing import Framing
+
+    if model_digest is None:
+        return plan_spec(loaded)
+    resolution = loaded.render.resolution
+    assert resolution != "model", "a stand-in digest needs a pixel resolution"
+    return make_plan(loaded, framing=Framing.full(resolution), model_digest=model_digest, blender=blender_version())
+
+
+
+
+# from test_aggregate_views.py
+T0 = datetime(2024, 1, 1)
+
+
+def make_store(folder: Path, rows: list[dict[str, Any]], experiment: str = "e") -> duckdb.DuckDBPyConnection:
+    """A store whose jobs are ``rows`` (scene, control columns, ``correct``; ``valid`` default True)."""
+    store = Store(folder / "store")
+    jobs, predictions = [], []
+    for i, row in enumerate(rows):
+        row = dict(row)
+        correct, valid = row.pop("correct"), row.pop("valid", True)
+        key = f"k{i}"
+        jobs.append({"experiment": experiment, "job": i, "object": row.pop("object", "obj"),
+                     "environment": row.pop("environment", "env"), **row,
+                     "render_key": key, "image_key": key, "pred_key": key})
+        predictions.append({"pred_key": key, "image_key": key, "created_at": T0, "valid": valid,
+                            "correct": correct if valid else None, "top1_label": row.get("prediction", "thing"),
+                            "topk": [0], "topk_labels": [row.get("prediction", "thing")], "topk_probs": [0.9],
+                            "loss": 1.0})
+    store.write_table_file(store.jobs_path(experiment), pa.Table.from_pylist(jobs))
+    store.append("predictions", predictions)
+    return connect(store, experiment)
+
+
+def rows_of(con: duckdb.DuckDBPyConnection, sql: str) -> list[dict[str, Any]]:
+    cursor = con.execute(sql)
+    names = [d[0] for d in cursor.description]
+    return [dict(zip(names, r)) for r in cursor.fetchall()]
+
+
+
+
+# from test_paired.py
+#: Two objects × two environments; the camera applies to "grey" only, so its scenes have an extra control.
+PAIRED_SPEC = """\
+[experiment]
+name = "freeze"
+seed = {seed}
+store = "store"
+
+[render]
+resolution = 32
+samples = 1
+denoise = false
+
+[[objects]]
+name = "box"
+mesh = "cube.obj"
+labels = ["carton"]
+
+[[objects]]
+name = "crate"
+mesh = "cube.obj"
+labels = ["crate"]
+
+[[environments]]
+name = "white"
+color = [1.0, 1.0, 1.0]
+key_light = false  # lit as before plain backgrounds had a key light: the keys of the frozen plans
+
+[[environments]]
+name = "grey"
+color = [0.5, 0.5, 0.5]
+key_light = false
+
+[[controls]]
+type = "orientation"
+yaw = {{ range = [-180, 180] }}
+pitch = [0, 15, 30]
+
+[[controls]]
+type = "camera"
+zoom = {{ range = [0.8, 2.0], log = true }}
+environments = ["grey"]
+
+[[controls]]
+type = "blur"
+sigma = [0, 1, 2]
+
+[policy]
+{policy}
+"""
+
+
+def every_job(p) -> list:
+    return list(p.jobs) + list(p.out_of_frame)
+
+
+def scene_values(p, control: str) -> dict[tuple[str, str], list[dict[str, Any]]]:
+    """(object, environment) → the values of ``control`` of its jobs, in job order."""
+    out: dict[tuple[str, str], list] = {}
+    for job in sorted(every_job(p), key=lambda j: j.index):
+        out.setdefault((job.object, job.environment), []).append(job.values[control])
+    return out
+
+
+
+
+# from test_reliability.py
+
+
+def render_row(key: str, minutes: int = 0, digest: str | None = None, seconds: float = 1.0) -> dict:
+    return {"render_key": key, "width": 4, "height": 4, "valid": True, "seconds": seconds,
+            "created_at": T0 + timedelta(minutes=minutes), DIGEST_COLUMN: digest}
+
+
+def add_render(store: Store, key: str, minutes: int = 0) -> bytes:
+    """A blob and its row, as the render stage writes them."""
+    import numpy as np
+
+    data = encode_png(np.full((4, 4, 3), (minutes % 10) / 10, np.float32))
+    atomic_write(store.blob_path(key), data)
+    store.append("renders", [render_row(key, minutes, sha256_bytes(data))])
+    return data
+
+
+class HashCounter:
+    """Counts the blobs :func:`damaged_blobs` hashes (stands in for ``sha256_bytes``)."""
+
+    def __init__(self, monkeypatch) -> None:
+        import sweep3d.cache.blobs as blobs
+
+        self.calls = 0
+        self.real = blobs.sha256_bytes
+        monkeypatch.setattr(blobs, "sha256_bytes", self)
+
+    def __call__(self, data: bytes) -> str:
+        self.calls += 1
+        return self.real(data)
+
+
+
+
+# from test_store.py
+def store_tree(root: Path) -> dict[str, tuple[int, int]]:
+    """Every file under ``root`` with its size and mtime: what a query must leave as it was."""
+    return {str(p.relative_to(root)): (p.stat().st_size, p.stat().st_mtime_ns) for p in root.rglob("*") if p.is_file()}
+
+
+def one_line(output: str) -> str:
+    lines = [line for line in output.splitlines() if line.strip()]
+    assert len(lines) == 1, output
+    return lines[0]
+
+
+
+
+# from test_lights.py
+CONTROLS = builtin_catalogue().controls
+
+
+def sphere_obj(path: Path, n: int = 16) -> str:
+    """A UV sphere: smooth shading shows which side a light is on."""
+    rings = [(math.sin(math.pi * i / n), math.cos(math.pi * i / n)) for i in range(n + 1)]
+    verts = [(s * math.cos(math.pi * j / n), s * math.sin(math.pi * j / n), c) for s, c in rings for j in range(2 * n)]
+    faces = [(i * 2 * n + j, i * 2 * n + (j + 1) % (2 * n), (i + 1) * 2 * n + (j + 1) % (2 * n), (i + 1) * 2 * n + j)
+             for i in range(n) for j in range(2 * n)]
+    path.write_text("".join(f"v {x:.6f} {y:.6f} {z:.6f}\n" for x, y, z in verts)
+                    + "".join("f " + " ".join(str(k + 1) for k in face) + "\n" for face in faces))
+    return str(path)
+
+
+def render(scene, mesh: str, env: EnvironmentRef, controls: list[tuple[str, dict]], **camera) -> np.ndarray:
+    state = SceneState(**camera)
+    for name, values in controls:
+        control = CONTROLS.get(name)(name, name)
+        control.apply(state, control.params(values))
+    scene.prepare(mesh, env)
+    scene.pose_scene(state)
+    return scene.render()
+
+
+
+
+# from test_plugin_code.py
+SCENE_CONTROL = '''
+from pydantic import Field
+from sweep3d.controls import ControlParams
+from sweep3d.stages.render import RenderedControl
+
+RED = (1.0, 0.0, 0.0, 1.0)
+
+
+class Slab(RenderedControl):
+    class Params(ControlParams):
+        size: float = Field(0.0, ge=0.0)
+
+    def edit(self, scene, params):
+        bpy = scene.bpy
+        s = params.size
+        mesh = bpy.data.meshes.new("slab")
+        mesh.from_pydata([(-s, -1.5, -s), (s, -1.5, -s), (s, -1.5, s), (-s, -1.5, s)], [], [(0, 1, 2, 3)])
+        material = bpy.data.materials.new("slab")
+        material.use_nodes = True
+        material.node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = RED
+        mesh.materials.append(material)
+        scene.add(bpy.data.objects.new("slab", mesh))
+'''
+
+
+
+
+# from test_report.py
+ARTIFACTS = REPO / "test-artifacts"
+
+
+@contextmanager
+def open_page(chromium: Any, path: Path, wait_all: bool = True,
+              width: int = 1280) -> Iterator[tuple[Any, dict[str, list]]]:
+    """A page of the session's headless Chromium (the ``chromium`` fixture), in a fresh browser
+    context ``width`` pixels wide, showing ``path`` once it is interactive (and, with ``wait_all``,
+    once every figure is drawn and every image loaded); events collected for :func:`assert_clean`."""
+    context = chromium.new_context(viewport={"width": width, "height": 900})
+    try:
+        page = context.new_page()
+        events: dict[str, list] = {"errors": [], "console": [], "requests": [], "dialogs": []}
+        page.on("pageerror", lambda exc: events["errors"].append(str(exc)))
+        page.on("console", lambda msg: events["console"].append(msg.text) if msg.type == "error" else None)
+        page.on("request", lambda req: events["requests"].append(req.url))
+        page.on("dialog", lambda dialog: (events["dialogs"].append(dialog.message), dialog.dismiss()))
+        page.goto(path.as_uri())
+        page.wait_for_function("() => document.documentElement.dataset.ready === '1'", timeout=60_000)
+        if wait_all:
+            page.wait_for_function("() => document.documentElement.dataset.drawn === '1'", timeout=60_000)
+            page.wait_for_function("() => Array.from(document.images).every(i => i.complete)", timeout=10_000)
+        yield page, events
+    finally:
+        context.close()
+
+
+def assert_clean(path: Path, events: dict[str, list]) -> None:
+    """No script error, no console error, no dialog, and no request but the file itself (and the
+    in-page ``blob:`` URLs a PNG export makes)."""
+    assert events["errors"] == []
+    assert events["console"] == []
+    assert events["dialogs"] == []
+    assert {url for url in events["requests"] if not url.startswith("blob:")} == {path.as_uri()}
+
+
+def cell_centre(page: Any, x: int, y: int) -> tuple[float, float]:
+    """Page coordinates of the centre of the explorer heat map's cell (x, y), scrolled into view
+    first (a click outside the viewport reaches nothing)."""
+    page.locator("#explorer-plot").scroll_into_view_if_needed()
+    return tuple(page.evaluate(
+        """([x, y]) => {
+             const gd = document.getElementById('explorer-plot'), box = gd.getBoundingClientRect();
+             const xa = gd._fullLayout.xaxis, ya = gd._fullLayout.yaxis;
+             return [box.left + xa._offset + xa.l2p(x), box.top + ya._offset + ya.l2p(y)];
+           }""", [x, y]))
+
+
+
+
+# from report_scale.py
+OBJECTS = {  # name -> (ImageNet label, base accuracy, what it is taken for)
+    "soccer": ("soccer ball", 0.95, ["volleyball", "rugby ball"]),
+    "basketball": ("basketball", 0.85, ["volleyball", "soccer ball"]),
+    "camera": ("reflex camera", 0.75, ["binoculars", "Polaroid camera"]),
+    "toaster": ("toaster", 0.55, ["electrical switch", "radiator", "space heater"]),
+    "orange": ("orange", 0.35, ["ping-pong ball", "lemon"]),
+}
+
+
+ENVIRONMENTS = {"studio": (0.85, 0.85, 0.85), "forest": (0.25, 0.45, 0.2), "city": (0.55, 0.55, 0.6),
+                "night": (0.05, 0.05, 0.12)}
+
+
+IMAGE_SIZE = 96
+
+
+TOP_K = 3  # the truth and two confusions
+
+
+SCALE_SPEC = """\
+[experiment]
+name = "scale"
+seed = 0
+store = "store"
+
+[model]
+name = "efficientnet-lite0"
+
+{objects}
+{environments}
+[[controls]]
+type = "orientation"
+yaw = {{ range = [-180, 180] }}
+
+[[controls]]
+type = "camera"
+elevation = [0, 30, 60]
+
+[[controls]]
+type = "blur"
+sigma = [0.0, 1.0, 2.0]
+
+[policy]
+type = "random"
+samples = {samples}
+"""
+
+
+def build_store(folder: Path, results: int, seed: int = 0, images: bool = True) -> Path:
+    """Write a spec and a store holding ``results`` synthetic results; returns the spec's path.
+
+    Rows are written in bulk (one jobs file, one predictions segment, as a compacted store holds
+    them); image blobs only for the images the report embeds (:func:`sweep3d.report.image_keys`),
+    since writing a PNG per result would dominate at 10^6. Accuracy depends on the object, the
+    yaw (side views are hard), the blur, the elevation, and on one interaction (the orange at
+    night), so every panel of the report has something to show; one result in 500 is invalid.
+    ``images=False`` writes no blob (for tests of numbers only).
+    """
+    import sweep3d
+
+    spec = write_scale_spec(folder, results)
+    loaded = sweep3d.load(spec).spec
+    assert loaded.parameter_columns == ["orientation_yaw", "camera_elevation", "blur_sigma"], loaded.parameter_columns
+    store = Store(loaded.store)
+    jobs, predictions = synthetic_tables(loaded.name, results, seed)
+    store.write_table_file(store.jobs_path(loaded.name), jobs.replace_schema_metadata(
+        {PARAMETERS_METADATA: json.dumps(loaded.parameter_columns).encode()}))
+    store.write_table_file(store.table_dir("predictions") / segment_name(), predictions)
+    now = utc_now()
+    store.append("runs", [{
+        "run_id": f"synthetic{seed}", "experiment": loaded.name, "spec_path": str(spec), "spec": spec.read_text(),
+        "jobs": results, "started_at": now, "created_at": now, "seconds": 0.0,
+        **{f"{stage}_{k}": v for stage in ("render", "postprocess", "infer")
+           for k, v in (("total", results), ("cached", 0), ("computed", results), ("failed", 0))},
+    }])
+    if images:
+        write_images(store, jobs, image_keys(loaded))
+    return spec
+
+
+def write_scale_spec(folder: Path, results: int) -> Path:
+    """The benchmark's spec (5 objects × 4 environments, random yaw, 3 elevations, 3 blurs)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "cube.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    scenes = len(OBJECTS) * len(ENVIRONMENTS)
+    objects = "\n".join(f'[[objects]]\nname = "{n}"\nmesh = "cube.obj"\nlabels = ["{label}"]\n'
+                        for n, (label, _, _) in OBJECTS.items())
+    environments = "\n".join(f'[[environments]]\nname = "{n}"\ncolor = [{", ".join(map(str, c))}]\n'
+                             for n, c in ENVIRONMENTS.items())
+    spec = folder / "spec.toml"
+    spec.write_text(SCALE_SPEC.format(objects=objects, environments=environments, samples=math.ceil(results / scenes)))
+    return spec
+
+
+def synthetic_tables(experiment: str, results: int, seed: int) -> tuple[pa.Table, pa.Table]:
+    """The jobs table and the predictions table of ``results`` synthetic results, built column-wise."""
+    from sweep3d.stages.infer.evaluators import ClassificationEvaluator
+    from sweep3d.stages.infer.stage import predictions_schema
+
+    rng = np.random.default_rng(seed)
+    index = np.arange(results)
+    obj, env = index % len(OBJECTS), (index // len(OBJECTS)) % len(ENVIRONMENTS)
+    yaw = rng.uniform(-180, 180, results)
+    elevation = rng.choice([0.0, 30.0, 60.0], results)
+    sigma = rng.choice([0.0, 1.0, 2.0], results)
+    base = np.array([accuracy for _, accuracy, _ in OBJECTS.values()])[obj]
+    p = base * (1 - 0.35 * np.abs(np.sin(np.radians(yaw)))) * (1 - 0.15 * sigma) * (1 - elevation / 400)
+    p = np.where((obj == list(OBJECTS).index("orange")) & (env == list(ENVIRONMENTS).index("night")), p * 0.3, p)
+    correct = rng.random(results) < p
+    valid = rng.random(results) >= 1 / 500
+    keys = pa.array([hashlib.sha256(f"{seed}-{i}".encode()).hexdigest() for i in range(results)])
+    jobs = pa.table({
+        "experiment": pa.array([experiment] * results), "job": pa.array(index, pa.int64()),
+        "object": pa.array(np.array(list(OBJECTS))[obj]), "environment": pa.array(np.array(list(ENVIRONMENTS))[env]),
+        "orientation_yaw": yaw, "camera_elevation": elevation, "blur_sigma": sigma,
+        "render_key": keys, "image_key": keys, "pred_key": keys,
+    })
+    topk, probs = _topk(obj, correct, rng)
+    truth = np.where(correct, topk[:, 0], topk[:, 1])  # the truth is first when correct, else second
+    names = np.array(_label_names(), dtype=object)
+    loss = -np.log(np.maximum(np.where(correct, probs[:, 0], probs[:, 1]), 1e-9))
+    columns = {
+        "pred_key": keys, "image_key": keys, "model": pa.array(["efficientnet-lite0"] * results),
+        "model_digest": pa.array(["synthetic"] * results), "seconds": np.full(results, 0.01),
+        "created_at": pa.array([utc_now().replace(tzinfo=None)] * results, pa.timestamp("us")),
+        "valid": valid, "correct": pa.array(correct, mask=~valid), "top1": pa.array(topk[:, 0], mask=~valid),
+        "top1_label": pa.array(names[topk[:, 0]], mask=~valid),
+        "topk": _lists(topk, valid, pa.int32()), "topk_labels": _lists(names[topk], valid, pa.string()),
+        "topk_probs": _lists(probs, valid, pa.float32()),
+        "label_prob": pa.array(np.exp(-loss), mask=~valid), "loss": pa.array(loss, mask=~valid),
+        "correct_top5": pa.array(correct | (topk[:, 1] == truth), mask=~valid),
+        "label_ids": _lists(truth[:, None], valid, pa.int32()),
+    }
+    schema = predictions_schema(ClassificationEvaluator())
+    return jobs, pa.table({name: columns[name] for name in schema.names}, schema=schema)
+
+
+def _topk(obj: np.ndarray, correct: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Top-3 ImageNet ids and probabilities per result: the truth first when correct, else one of
+    the object's confusions first and the truth second."""
+    from sweep3d.stages.infer.labels import IMAGENET
+
+    topk, probs = np.zeros((len(obj), TOP_K), np.int32), np.zeros((len(obj), TOP_K))
+    for o, (label, _, confusions) in enumerate(OBJECTS.values()):
+        rows = np.flatnonzero(obj == o)
+        orders = [[label, *confusions]] + [[c, label, *[d for d in confusions if d != c]] for c in confusions]
+        table = np.array([[IMAGENET.index(name) for name in order[:TOP_K]] for order in orders], np.int32)
+        choice = np.where(correct[rows], 0, 1 + rng.integers(len(confusions), size=len(rows)))
+        topk[rows] = table[choice]
+        probs[rows] = -np.sort(-rng.dirichlet(np.ones(TOP_K + 1), size=len(rows))[:, :TOP_K], axis=1)
+    return topk, probs
+
+
+def _lists(values: np.ndarray, valid: np.ndarray, kind: pa.DataType) -> pa.Array:
+    """Rows of ``values`` as a list column (null where not valid)."""
+    width = values.shape[1]
+    offsets = pa.array(np.arange(len(values) + 1, dtype=np.int32) * width, mask=np.append(~valid, False))
+    return pa.ListArray.from_arrays(offsets, pa.array(values.reshape(-1), type=kind))
+
+
+def _label_names() -> list[str]:
+    """Class id → name, for the classes the synthetic model predicts (the names the spec uses)."""
+    from sweep3d.stages.infer.labels import IMAGENET
+
+    names = [""] * len(IMAGENET)
+    for label, _, confusions in OBJECTS.values():
+        for name in (label, *confusions):
+            names[IMAGENET.index(name)] = name
+    return names
+
+
+def write_images(store: Store, jobs: pa.Table, keys: list[str]) -> None:
+    """A small PNG blob for each of ``keys`` (drawn from its job's object, environment, yaw, blur)."""
+    columns = jobs.select(["image_key", "object", "environment", "orientation_yaw", "blur_sigma"])
+    for row in columns.filter(pc.is_in(jobs["image_key"], pa.array(keys, pa.string()))).to_pylist():
+        rng = np.random.default_rng(int(row["image_key"][:8], 16))
+        path = store.blob_path(row["image_key"])
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(_image(row["object"], row["environment"], row["orientation_yaw"], row["blur_sigma"], rng))
+
+
+def _image(obj: str, env: str, yaw: float, sigma: float, rng: np.random.Generator) -> bytes:
+    """A small PNG: the environment's colour, a lit disc in the object's colour, some noise."""
+    y, x, backgrounds, noise = _canvas()
+    hue = list(OBJECTS).index(obj) / len(OBJECTS)
+    colour = np.array([0.5 + 0.5 * math.cos(2 * math.pi * (hue + k / 3)) for k in range(3)], dtype=np.float32)
+    cx, r = 0.5 + 0.2 * math.sin(math.radians(yaw)), 0.28
+    disc = ((x - cx) ** 2 + (y - 0.5) ** 2) < r * r
+    shade = np.clip(1.1 - 1.5 * np.hypot(x - cx + 0.1, y - 0.4), 0.2, 1.0)[..., None]
+    image = np.where(disc[..., None], colour * shade, backgrounds[env])
+    image += noise[int(rng.integers(len(noise)))] * (1 + sigma / 2)
+    buf = io.BytesIO()
+    Image.fromarray((np.clip(image, 0, 1) * 255).astype(np.uint8), "RGB").save(buf, format="PNG", compress_level=1)
+    return buf.getvalue()
+
+
+@lru_cache(maxsize=1)
+def _canvas() -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray], list[np.ndarray]]:
+    """Pixel coordinates, each environment's background and a few noise fields, computed once."""
+    y, x = (np.mgrid[0:IMAGE_SIZE, 0:IMAGE_SIZE] / IMAGE_SIZE).astype(np.float32)
+    backgrounds = {name: (np.asarray(c, dtype=np.float32)[None, None, :] * (0.7 + 0.3 * y[..., None]))
+                   for name, c in ENVIRONMENTS.items()}
+    rng = np.random.default_rng(12345)
+    noise = [rng.normal(0, 0.02, (IMAGE_SIZE, IMAGE_SIZE, 3)).astype(np.float32) for _ in range(16)]
+    return y, x, backgrounds, noise
+
+
+
+
+# from test_parts.py
+def direction(azimuth: float, elevation: float) -> np.ndarray:
+    """A unit vector at ``azimuth`` degrees from the front (-Y) towards the right (+X)."""
+    az, el = math.radians(azimuth), math.radians(elevation)
+    return np.array([[math.cos(el) * math.sin(az), -math.cos(el) * math.cos(az), math.sin(el)]])
+
+
+
+
+# from test_report.py
+PANEL_IDS = [p.id for p in CORE_PANELS]  # every report has these; optional ones are tested where shown
+
+
+def page_thumbnails(html: str) -> list[str | None]:
+    found = re.search(r'<script type="application/json" id="thumbs">(.*?)</script>', html, re.S)
+    assert found, "the page has no thumbnail block"
+    return json.loads(found.group(1))
+
+
+def screenshot_panels(page: Any, prefix: str) -> None:
+    ARTIFACTS.mkdir(exist_ok=True)
+    page.screenshot(path=str(ARTIFACTS / f"{prefix}.png"), full_page=True)
+    for panel in PANEL_IDS:
+        page.locator(f"#{panel}").screenshot(path=str(ARTIFACTS / f"{prefix}-{panel}.png"))
+
+
+
+
+# from test_plan_columns.py
+def reference_jobs(spec, *, framing: Framing, model_digest: str, blender: str) -> list[tuple]:
+    """The jobs of ``spec`` as the planner made them job by job: (index, object, environment,
+    values, render, image, pred, point, parts, in frame)."""
+    from sweep3d.spec.assets import mesh_digest
+
+    rendered = sorted((c for c in spec.controls if c.control.stage == "render"),
+                      key=lambda c: (c.control.order, spec.controls.index(c)))
+    post = [c for c in spec.controls if c.control.stage == "post"]
+    settings_part = spec.render.key_part(framing.key_part())
+    base = infer_base(model_digest, {"kind": spec.evaluator.kind, "top_k": spec.evaluator.params.get("top_k", 5)}, spec.model.backend)
+    out = []
+    for obj in spec.objects:
+        object_digest = mesh_digest(spec.meshes[obj.name], spec.store)
+        truth = list(spec.labels[obj.name])
+        for env in spec.environments:
+            scene = scene_key(blender, settings_part, object_digest, env.key_part(None))
+            scene_controls = [c for c in spec.controls if c.applies_to(obj.name, env.name)]
+            space = SearchSpace(scene_controls)
+            seed = int(digest([spec.experiment.seed, obj.name, env.name])[:15], 16)
+            for point in spec.policy.points(space.shape, seed, {}):
+                values = space.values(point)
+                models = {c.id: c.control.params(values[c.id]) for c in scene_controls}
+                params = {key: model.model_dump() for key, model in models.items()}
+                render = render_key(scene, _parts(rendered, params))
+                effective = [c for c in post if c.id in params and not c.control.is_identity(params[c.id])]
+                seeded = any(getattr(c.control, "stochastic", False) for c in effective)
+                image = image_key(render, _parts(post, params), spec.experiment.seed if seeded else None)
+                state = SceneState()
+                for inst in rendered:
+                    if inst.id in models:
+                        inst.control.apply(state, models[inst.id])
+                out.append((len(out), obj.name, env.name, params, render, image, pred_key(base, image, truth),
+                            point, parts_key(render) if spec.report.part_visibility else None, in_frame(state)))
+    return out
+
+
+def _parts(controls, params: dict[str, dict[str, Any]]) -> list[dict[str, Any]]:
+    return [c.control.key_part(params[c.id]) for c in controls
+            if c.id in params and not c.control.is_identity(params[c.id])]
+
+
+finite = st.floats(allow_nan=False, allow_infinity=False)
+
+
+values = st.recursive(st.none() | st.booleans() | st.integers() | finite | st.text(max_size=5),
+                      lambda inner: st.lists(inner, max_size=3) | st.dictionaries(st.text(max_size=4), inner, max_size=3),
+                      max_leaves=8)
+
+
