@@ -206,7 +206,7 @@ def test_plan_returns_the_status_the_plan_command_prints(tmp_path: Path) -> None
     spec = write_spec(tmp_path, TINY_SPEC)
     status = sweep3d.load(spec).plan()
     assert [(s.stage, s.needed, s.cached, s.to_compute) for s in status.stages] == [
-        ("render", 4, 0, 4), ("postprocess", 8, 0, 8), ("infer", 8, 0, 8)]  # blur does not change a render
+        ("render", 4, 0, 4), ("postprocess", 4, 0, 4), ("infer", 8, 0, 8)]  # blur: no render; sigma 0: no image
     assert status.seconds == sum(s.seconds for s in status.stages) > 0
     assert len(status.jobs) == 8 and status.to_render == 4
     printed = CliRunner().invoke(app, ["plan", str(spec)])
