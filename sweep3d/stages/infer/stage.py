@@ -34,7 +34,7 @@ from sweep3d.pixels import from_uint8
 from sweep3d.spec.columns import PREDICTION_COLUMNS
 from sweep3d.spec.loader import LoadedSpec
 from sweep3d.spec.models import ModelSpec
-from sweep3d.stages.driver import Computed, Feed, unique_jobs
+from sweep3d.stages.driver import unique_jobs
 from sweep3d.stages.infer.evaluate import evaluate_checked
 from sweep3d.stages.infer.evaluators import EVALUATORS, Evaluator, Truth
 from sweep3d.stages.infer.handle import ModelHandle, model_key_path
@@ -45,6 +45,7 @@ from sweep3d.stages.infer.outputs import Localized
 from sweep3d.stages.infer.tasks import check_task, model_outputs
 from sweep3d.stages.jobs import Job, JobList, Plan
 from sweep3d.stages.postprocess import ImageHandoff, make_image, post_controls, truth_digests
+from sweep3d.stages.stage_protocol import Computed, Feed
 
 if TYPE_CHECKING:
     from sweep3d.stages.infer.onnx_backend import OnnxRunner

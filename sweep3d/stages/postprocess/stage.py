@@ -31,10 +31,10 @@ from sweep3d.errors import PluginError
 from sweep3d.pixels import encode_png8, to_uint8
 from sweep3d.registry import is_user_plugin
 from sweep3d.spec.loader import ControlInstance, LoadedSpec
-from sweep3d.stages.driver import Computed, Feed
 from sweep3d.stages.jobs import Job, JobList, Plan
 from sweep3d.stages.postprocess.frame import RenderFrame, frame_from_state
 from sweep3d.stages.postprocess.handoff import ImageHandoff
+from sweep3d.stages.stage_protocol import Computed, Feed
 from sweep3d.truth import BLOB_SUFFIX, TRUTH_PASSES
 
 IMAGES_SCHEMA = pa.schema([

@@ -37,7 +37,6 @@ from sweep3d.parts import PARTS_LAYOUT
 from sweep3d.spec.assets import materialise_mesh
 from sweep3d.spec.loader import LoadedSpec
 from sweep3d.spec.models import RenderSpec
-from sweep3d.stages.driver import Computed, Feed
 from sweep3d.stages.jobs import Job, JobList, Plan
 from sweep3d.stages.passes import needed_passes, truth_passes
 from sweep3d.stages.render.device import worker_count
@@ -52,6 +51,7 @@ from sweep3d.stages.render.protocol import (
     RenderSettings,
     WorkerLimits,
 )
+from sweep3d.stages.stage_protocol import Computed, Feed
 from sweep3d.truth import BLOB_SUFFIX
 
 log = logging.getLogger("sweep3d.render")
