@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import sys
 import time
 import uuid
 from dataclasses import dataclass, field
@@ -27,8 +26,8 @@ import pyarrow as pa
 from rich.console import Console
 from rich.markup import escape
 
-from sweep3d.cache import snapshot
 from sweep3d.cache.maintenance import compact_table, remove_killed_writers_temp_files
+from sweep3d.cache.snapshot import MIN_JOBS as SNAPSHOT_MIN_JOBS
 from sweep3d.cache.store import TABLES, Store, atomic_write, utc_now
 from sweep3d.cache.written import remember_written, written_from
 from sweep3d.errors import RenderError, SpecError, UserError
@@ -208,15 +207,13 @@ def _jobs_format() -> bytes | None:
     """What makes the jobs file's bytes besides the plan: the code that builds its table, its
     metadata and the store's writer, and pyarrow's version (a change to any of them writes the
     file again); None where the code cannot be read (installed in a zip: the file is compared)."""
-    from sweep3d.cache import store as store_module
-    from sweep3d.spec import columns as columns_module
-    from sweep3d.stages import code as code_module
-    from sweep3d.stages import jobs as jobs_module
+    import importlib.util
 
+    modules = ("sweep3d.stages.jobs", "sweep3d.cache.store", "sweep3d.spec.columns", "sweep3d.stages.code", __name__)
     try:
-        code = b"".join(Path(m.__file__).read_bytes()  # type: ignore[arg-type]
-                        for m in (jobs_module, store_module, columns_module, code_module, sys.modules[__name__]))
-    except (OSError, TypeError):
+        code = b"".join(Path(importlib.util.find_spec(m).origin).read_bytes()  # type: ignore[union-attr, arg-type]
+                        for m in modules)
+    except (OSError, TypeError, AttributeError):
         return None
     return f"jobs file 1, pyarrow {pa.__version__}, code {hashlib.sha256(code).hexdigest()}".encode()
 
@@ -260,7 +257,7 @@ def _run_locked(spec: LoadedSpec, store: Store, console: Console | None, wait: f
         store.snapshot_states()  # every blob's listing and state, taken on the other core while this one plans
         models = [ModelHandle.resolve(spec, settings) for settings in spec.models]
         plans = [plan_spec(spec, model) for model in models]
-        if max(len(plan.jobs) for plan in plans) < snapshot.MIN_JOBS:
+        if max(len(plan.jobs) for plan in plans) < SNAPSHOT_MIN_JOBS:
             store.forget_states()  # few blobs to check: waiting for the child's look at every blob costs more
         remove_leftovers(store)  # before anything is written (planning reads no blob folder)
         result = RunResult(uuid.uuid4().hex[:12], plans[0], plans=plans, store=store)

@@ -18,7 +18,11 @@ from functools import lru_cache
 from importlib import metadata
 from pathlib import Path
 
-from sweep3d.cache import extracted
+from sweep3d.cache.extracted import FOLDER as EXTRACTED_FOLDER
+from sweep3d.cache.extracted import MANIFEST as EXTRACTED_MANIFEST
+from sweep3d.cache.extracted import members as extracted_files
+from sweep3d.cache.extracted import read_manifest, stale
+from sweep3d.cache.extracted import record as record_extracted
 from sweep3d.cache.keys import digest, files_digest
 from sweep3d.cache.store import full_disk_error, is_full_disk
 from sweep3d.errors import UserError
@@ -109,16 +113,16 @@ def materialise_mesh(ref: str, scratch: Path) -> Path:
     archive, sep, member = ref.partition("#")
     if not sep:
         return Path(archive)
-    target = scratch / extracted.FOLDER / digest([archive, member])[:16]
+    target = scratch / EXTRACTED_FOLDER / digest([archive, member])[:16]
     try:
-        why = extracted.stale(target, extracted.read_manifest(target), archive, lambda: _members(archive, member))
+        why = stale(target, read_manifest(target), archive, lambda: _members(archive, member))
         if why is not None:
             if why:
                 log.warning(f"warning: the copy of {Path(archive).name}#{member} extracted under the store's "
                             f"{_relative(target, scratch)} was changed since ({why}); extracting it again")
-            (target / extracted.MANIFEST).unlink(missing_ok=True)
+            (target / EXTRACTED_MANIFEST).unlink(missing_ok=True)
             files = _extract(archive, member, target)
-            extracted.record(target, files, archive, _members(archive, member))
+            record_extracted(target, files, archive, _members(archive, member))
     except OSError as exc:
         if is_full_disk(exc):  # a write's error names no file: it is the store's disk, not the archive
             shutil.rmtree(target, ignore_errors=True)  # what was extracted: the space back, none half done
@@ -133,7 +137,7 @@ def materialise_mesh(ref: str, scratch: Path) -> Path:
 def _members(archive: str, member: str) -> dict[str, list[int]]:
     """The archive's files that :func:`materialise_mesh` extracts for ``member``, with their CRCs and sizes."""
     with zipfile.ZipFile(archive) as zf:
-        return extracted.members(zf, extracted_members(zf, member))
+        return extracted_files(zf, extracted_members(zf, member))
 
 
 def _relative(path: Path, root: Path) -> str:
