@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-FOLDER = "outputs"  # under the store's root
+OUTPUTS_FOLDER = "outputs"  # under the store's root
 SUFFIX = ".npy"
 #: What follows the array's bytes in a kept file: this tag, then the hex SHA-256 of those bytes.
 DIGEST_TAG = b"\nsweep3d.sha256:"

@@ -21,7 +21,7 @@ from typing import Any, Callable
 
 from sweep3d.cache.store import StoreWriteError, atomic_write
 
-FOLDER = "assets"
+ASSETS_FOLDER = "assets"
 MANIFEST = ".complete"  # written last: a folder without it was never completely extracted
 VERSION = 1
 

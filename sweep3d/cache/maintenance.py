@@ -140,7 +140,7 @@ def evaluated_columns_lacking(store: Store) -> list[Path]:
 
 def _verify_kept_outputs(root: Path, report: Verification) -> None:
     """Check every kept model output (``outputs/``) against the digest it was written with."""
-    for entry in store_files(root / digested.FOLDER):
+    for entry in store_files(root / digested.OUTPUTS_FOLDER):
         if not entry.name.endswith(digested.SUFFIX) or entry.name.startswith("."):
             continue
         report.outputs += 1
@@ -151,7 +151,7 @@ def _verify_kept_outputs(root: Path, report: Verification) -> None:
 
 def _verify_assets(root: Path, report: Verification) -> None:
     """Hash every file extracted from a mesh archive (``assets/``) against its manifest."""
-    for entry in scan(root / extracted.FOLDER):
+    for entry in scan(root / extracted.ASSETS_FOLDER):
         if not entry.is_dir(follow_symlinks=False):
             continue
         folder = Path(entry.path)
@@ -213,7 +213,7 @@ def repair(root: Path, report: Verification) -> int:
         if problem.kind == "corrupt kept output" and store.quarantine(problem.path) is not None:
             fixed += 1
     for name in {p.key for p in report.problems if p.kind == "corrupt extracted asset" and p.key is not None}:
-        fixed += store.quarantine(root / extracted.FOLDER / name) is not None
+        fixed += store.quarantine(root / extracted.ASSETS_FOLDER / name) is not None
     truths = {p.key for p in report.problems if p.table == "truths" and p.key is not None}
     if truths:  # the next run that needs them renders the passes again
         store.drop_rows("truths", truths)

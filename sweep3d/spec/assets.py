@@ -18,7 +18,7 @@ from functools import lru_cache
 from importlib import metadata
 from pathlib import Path
 
-from sweep3d.cache.extracted import FOLDER as EXTRACTED_FOLDER
+from sweep3d.cache.extracted import ASSETS_FOLDER as EXTRACTED_FOLDER
 from sweep3d.cache.extracted import MANIFEST as EXTRACTED_MANIFEST
 from sweep3d.cache.extracted import members as extracted_files
 from sweep3d.cache.extracted import read_manifest, stale

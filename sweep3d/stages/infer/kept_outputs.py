@@ -25,7 +25,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from sweep3d.cache.digested import FOLDER, SUFFIX, pack, unpack
+from sweep3d.cache.digested import OUTPUTS_FOLDER, SUFFIX, pack, unpack
 from sweep3d.cache.keys import digest
 from sweep3d.cache.store import Store, atomic_write
 
@@ -46,7 +46,7 @@ class KeptOutputs:
     """The kept outputs of one model, backend and task in one store."""
 
     def __init__(self, store: Store, model_digest: str, answers: str, task: str) -> None:
-        self.root = store.root / FOLDER
+        self.root = store.root / OUTPUTS_FOLDER
         self.model_digest, self.answers, self.task = model_digest, answers, task
 
     def _path(self, image_key: str) -> Path:
