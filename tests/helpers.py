@@ -12,6 +12,7 @@ import math
 import re
 import textwrap
 from contextlib import contextmanager
+from dataclasses import dataclass, field
 from datetime import datetime, timedelta
 from functools import lru_cache
 from pathlib import Path
@@ -24,9 +25,11 @@ import pyarrow.compute as pc
 from hypothesis import strategies as st
 from PIL import Image
 
+import sweep3d
 from sweep3d.cache.blobs import sha256_bytes
 from sweep3d.cache.keys import digest
 from sweep3d.cache.store import DIGEST_COLUMN, Store, atomic_write, segment_name, utc_now
+from sweep3d.pipeline import plan_spec, plans_as_run, write_jobs
 from sweep3d.pixels import encode_png
 from sweep3d.report import image_keys
 from sweep3d.report.panels import CORE_PANELS
@@ -38,12 +41,14 @@ from sweep3d.stages import builtin_catalogue
 from sweep3d.stages.aggregate import (
     connect,
 )
+from sweep3d.stages.aggregate.tasks import OUTCOMES
 from sweep3d.stages.infer.keys import infer_base, pred_key
-from sweep3d.stages.plan import make_plan
+from sweep3d.stages.plan import Plan, make_plan
 from sweep3d.stages.postprocess.keys import image_key
 from sweep3d.stages.render.keys import parts_key, render_key, scene_key
 from sweep3d.stages.render.protocol import EnvironmentRef
 from sweep3d.stages.render.state import SceneState, in_frame
+from sweep3d.truth import encode_mask
 
 # --- definitions ---
 
@@ -55,6 +60,46 @@ def load_spec(source, plugins=None):
     from sweep3d.stages import builtin_catalogue
 
     return read_spec(source, plugins or builtin_catalogue())
+
+
+#: The spec builder's parts: meshes the tests write (``write_spec`` writes cube.obj), the
+#: environments they light them with, and the smallest render.
+SPEC_OBJECTS = {"box": ("cube.obj", ["carton"]), "crate": ("cube.obj", ["crate"])}
+SPEC_ENVIRONMENTS = {"white": {"color": [1.0, 1.0, 1.0]}, "grey": {"color": [0.5, 0.5, 0.5]},
+                "studio": {"hdri": "builtin:studio"}}
+TINY_RENDER = {"resolution": 32, "samples": 1, "denoise": False}
+
+
+def toml_value(value) -> str:
+    """``value`` as TOML (what the tests' specs use: text, numbers, booleans, lists)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return json.dumps(value)
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(toml_value(v) for v in value) + "]"
+    return repr(value)
+
+
+def toml_table(header: str, values: dict) -> str:
+    return f"{header}\n" + "".join(f"{k} = {toml_value(v)}\n" for k, v in values.items()) + "\n"
+
+
+def spec_toml(name: str, *, seed: int | None = None, store: str | None = "store", render: dict | None = None,
+              objects=("box",), environments=("white",), body: str = "") -> str:
+    """A spec's text: ``[experiment]``, ``[render]`` (default :data:`TINY_RENDER`), one
+    ``[[objects]]`` per name or (name, mesh, labels), one ``[[environments]]`` per name or (name,
+    table), then ``body`` (controls, policy, model, ... as TOML text). Tests write the tables they
+    are about and take the rest from here, rather than pasting a whole spec."""
+    experiment = {"name": name, **({"seed": seed} if seed is not None else {}), **({"store": store} if store else {})}
+    text = toml_table("[experiment]", experiment) + toml_table("[render]", TINY_RENDER if render is None else render)
+    for obj in objects:
+        obj_name, mesh, labels = (obj, *SPEC_OBJECTS[obj]) if isinstance(obj, str) else obj
+        text += toml_table("[[objects]]", {"name": obj_name, "mesh": mesh, "labels": labels})
+    for env in environments:
+        env_name, table = (env, SPEC_ENVIRONMENTS[env]) if isinstance(env, str) else env
+        text += toml_table("[[environments]]", {"name": env_name, **table})
+    return text + textwrap.dedent(body)
 
 
 def examples(n: int) -> int:
@@ -153,7 +198,6 @@ store = "all"
 
 def plan_for(loaded, model_digest: str | None = None):
     """Plan ``loaded`` as a run would; a ``model_digest`` stands in for the model's (none is loaded)."""
-    from sweep3d.pipeline import plan_spec
     from sweep3d.spec.framing import Framing
 
     if model_digest is None:
@@ -704,5 +748,187 @@ finite = st.floats(allow_nan=False, allow_infinity=False)
 values = st.recursive(st.none() | st.booleans() | st.integers() | finite | st.text(max_size=5),
                       lambda inner: st.lists(inner, max_size=3) | st.dictionaries(st.text(max_size=4), inner, max_size=3),
                       max_leaves=8)
+
+
+
+
+# from test_tasks_report.py
+W, H = 64, 48  # stored images
+
+
+MIN_VISIBLE = 0.2
+
+
+PARAMETERS = ["orientation_yaw", "blur_sigma"]
+
+
+TASKS_SPEC = spec_toml("tasks",
+        render={},
+        objects=(("mug", "cube.obj", ["coffee mug"]), ("ball", "cube.obj", ["soccer ball"])),
+        body="""\
+[model]
+name = "efficientnet-lite0"
+
+[evaluator]
+passes = ["mask"]
+min_visible = 0.2
+
+[[controls]]
+type = "orientation"
+yaw = [0, 90, 180]
+
+[[controls]]
+type = "blur"
+sigma = [0.0, 1.0]
+
+[policy]
+type = "grid"
+""")
+
+
+@dataclass
+class Job:
+    """One synthetic job and what is true of it."""
+
+    job: int
+    object: str
+    yaw: float
+    sigma: float
+    in_frame: bool = True
+    visible: int = 600  # visible pixels of the object
+    fraction: float | None = 0.8
+    framed: int = 750  # pixels of its unoccluded silhouette in the image
+    truth: bool = True  # a truth row exists (else evaluable is unknown: counted)
+    valid: bool = True
+    outcome: str = "correct"
+    iou: float | None = 0.8
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def evaluable(self) -> bool | None:
+        if not self.in_frame:
+            return False
+        if not self.truth:
+            return None
+        return self.fraction is not None and self.fraction >= MIN_VISIBLE
+
+    @property
+    def counted(self) -> bool:
+        return self.valid and self.evaluable is not False
+
+    @property
+    def reason(self) -> str:
+        if not self.in_frame or self.fraction is None or self.framed == 0:
+            return "out of frame"
+        return "fully occluded" if self.visible == 0 else "hidden"
+
+
+def synthetic_jobs() -> list[Job]:
+    """72 jobs over 2 objects × 3 yaws × 2 blurs: some out of frame, hidden, without a truth row,
+    invalid; outcomes and IoUs that depend on the yaw and the object."""
+    rng = np.random.default_rng(5)
+    jobs = []
+    for i in range(72):
+        job = Job(i, ["mug", "ball"][i % 2], [0.0, 90.0, 180.0][(i // 2) % 3], [0.0, 1.0][(i // 6) % 2])
+        weights = {0.0: [0.7, 0.1, 0.1, 0.1], 90.0: [0.3, 0.2, 0.3, 0.2], 180.0: [0.5, 0.3, 0.1, 0.1]}[job.yaw]
+        job.outcome = str(rng.choice(OUTCOMES, p=weights))
+        job.iou = {"correct": rng.uniform(0.55, 0.95), "wrong_class": rng.uniform(0.5, 0.9),
+                   "wrong_box": rng.uniform(0.05, 0.45), "missed": None}[job.outcome]
+        if job.object == "ball" and job.iou is not None:
+            job.iou *= 0.9
+        if i % 16 == 15:
+            job.in_frame, job.visible, job.fraction = False, 0, None
+        elif i % 10 == 3:  # hidden: some of it shows, less than min_visible; wrong on purpose
+            job.visible, job.fraction, job.outcome, job.iou = 40, 0.05, "wrong_class", 0.7
+        elif i == 4:  # in frame by the plan's geometry, but no pixel would reach the image even unoccluded
+            job.visible, job.fraction, job.framed, job.outcome, job.iou = 0, 0.0, 0, "missed", None
+        elif i == 10:  # in the image, but wholly behind an occluder
+            job.visible, job.fraction, job.outcome, job.iou = 0, 0.0, "missed", None
+        elif i == 8:
+            job.truth = False
+        elif i % 13 == 5:
+            job.valid, job.outcome, job.iou = False, None, None
+        jobs.append(job)
+    return jobs
+
+
+TRUE_BOX = (10, 8, 40, 30)
+
+
+def pred_box(job: Job) -> tuple[float, float, float, float] | None:
+    """Shifted right for a wrong box; none when missed."""
+    if job.outcome in (None, "missed"):
+        return None
+    shift = 18.0 if job.outcome == "wrong_box" else 2.0
+    x0, y0, x1, y1 = TRUE_BOX
+    return (x0 + shift, y0 + 1.0, x1 + shift, y1 + 1.0)
+
+
+def prediction(key: str, image: str, job: Job, kind: str, model: str) -> dict[str, Any]:
+    label = "coffee mug" if job.object == "mug" else "soccer ball"
+    if job.outcome == "wrong_class":
+        label = "hidden thing" if job.fraction is not None and job.fraction < MIN_VISIBLE else "teapot"
+    row = {"pred_key": key, "image_key": image, "model": model, "created_at": T0, "valid": job.valid,
+           "correct": job.outcome == "correct" if job.valid else None, "top1_label": label if job.valid else None}
+    if kind in ("classification", "localization"):  # detection and segmentation rank no classes
+        row.update(topk=[0], topk_labels=[label], topk_probs=[0.9], loss=1.0 + job.job / 100)
+    if kind in ("localization", "detection", "segmentation"):
+        row.update(outcome=job.outcome, class_correct=job.outcome in ("correct", "wrong_box") if job.valid else None,
+                   iou=job.iou)
+    if kind in ("localization", "detection"):
+        box = pred_box(job) or (None,) * 4
+        row.update(dict(zip(("pred_x0", "pred_y0", "pred_x1", "pred_y1"), box)))
+    if kind == "segmentation":
+        mask = np.zeros((H, W), bool)
+        if pred_box(job):
+            x0, y0, x1, y1 = (int(v) for v in pred_box(job))
+            mask[y0:y1, x0:x1] = True
+        row.update(pred_pixels=int(mask.sum()), true_pixels=job.visible, pred_mask=encode_mask(mask))
+    return row
+
+
+
+
+# from test_own_jobs.py
+BLUR = "sigma = [0.0, 1.5]"
+
+
+#: The same experiment ("tiny", 8 jobs) with blur 0 and 3, and with blur 0 and 2: half their jobs are shared.
+SPEC_03, SPEC_02 = TINY_SPEC.replace(BLUR, "sigma = [0.0, 3.0]"), TINY_SPEC.replace(BLUR, "sigma = [0.0, 2.0]")
+
+
+def fake_run(spec: sweep3d.Experiment, run_id: str = "run") -> None:
+    """What a run of ``spec`` leaves in its store: its jobs file, a prediction and an image for
+    each job (a job is correct when its blur is 0), and its row in ``runs`` (the latest)."""
+    store = Store(spec.store)
+    started = datetime(2024, 1, 1 + len(store.segments("runs")))
+    store.append("runs", [{"run_id": run_id, "experiment": spec.name, "spec_path": str(spec.spec.path),
+                           "spec": spec.spec.text(), "jobs": 8, "started_at": started, "created_at": started,
+                           "seconds": 1.0}])
+    plans = plans_as_run(spec.spec, store)
+    predict(plans[0], store)
+    write_jobs(plans, store)
+
+
+def predict(plan: Plan, store: Store) -> None:
+    """A prediction and an image for each job of ``plan`` the store lacks: correct when its blur is 0."""
+    have = store.keys("predictions") if store.segments("predictions") else set()
+    rows = []
+    for job in plan.jobs:
+        if job.pred_key in have:
+            continue
+        blur = next(v["sigma"] for i, v in job.values.items() if i.startswith("blur"))
+        rows.append({"pred_key": job.pred_key, "image_key": job.image_key, "created_at": datetime(2024, 1, 1),
+                     "valid": True, "correct": blur == 0, "top1_label": "carton", "loss": 1.0 + blur})
+        path = store.blob_path(job.image_key)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(_png())
+    store.append("predictions", rows)
+
+
+def _png() -> bytes:
+    buffer = io.BytesIO()
+    Image.fromarray(np.zeros((4, 4, 3), np.uint8)).save(buffer, format="PNG")
+    return buffer.getvalue()
 
 

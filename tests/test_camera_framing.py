@@ -15,31 +15,16 @@ from sweep3d.spec.framing import Framing
 from sweep3d.stages.plan import make_plan
 from sweep3d.stages.render.protocol import EnvironmentRef
 from sweep3d.stages.render.state import SceneState, fill_of_zoom, in_frame, zoom_for_fill
-from tests.helpers import load_spec, render, sphere_obj, write_spec
+from tests.helpers import load_spec, render, spec_toml, sphere_obj, write_spec
 
-SPEC = """\
-[experiment]
-name = "framing"
-
-[render]
-resolution = 32
-
-[[objects]]
-name = "box"
-mesh = "cube.obj"
-labels = ["carton"]
-
-[[environments]]
-name = "white"
-color = [1.0, 1.0, 1.0]
-
+SPEC = spec_toml("framing", store=None, render={"resolution": 32}, body="""\
 [[controls]]
 type = "camera"
 {camera}
 
 [policy]
 {policy}
-"""
+""")
 GRID = 'type = "grid"\nsamples_per_dim = 3'
 
 

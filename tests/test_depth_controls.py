@@ -20,7 +20,7 @@ from sweep3d.stages.postprocess import PostControl, apply_post
 from sweep3d.stages.postprocess.depth_effects import disk_kernel, signed_coc
 from sweep3d.stages.postprocess.frame import RenderFrame, frame_from_state
 from sweep3d.stages.postprocess.stage import takes_frame
-from tests.helpers import TINY_SPEC, examples, load_spec, plan_for, write_spec
+from tests.helpers import TINY_SPEC, examples, load_spec, plan_for, spec_toml, write_spec
 
 CONTROLS = catalogue().controls
 FOG = CONTROLS.get("fog")("fog", "fog")
@@ -346,26 +346,7 @@ def test_the_stage_hands_the_depth_pass_over_and_renders_a_damaged_one_again(tmp
 
 
 # -- real renders ---------------------------------------------------------------------------------
-REAL_SPEC = """\
-[experiment]
-name = "depth"
-seed = 1
-store = "store"
-
-[render]
-resolution = 48
-samples = 1
-denoise = false
-
-[[objects]]
-name = "box"
-mesh = "cube.obj"
-labels = ["carton"]
-
-[[environments]]
-name = "white"
-color = [1.0, 1.0, 1.0]
-
+REAL_SPEC = spec_toml("depth", seed=1, render={"resolution": 48, "samples": 1, "denoise": False}, body="""\
 [[controls]]
 type = "camera"
 azimuth = 35
@@ -382,7 +363,7 @@ fstop = [0.0, 1000.0]
 
 [policy]
 type = "grid"
-"""
+""")
 
 
 @pytest.mark.blender

@@ -8,6 +8,8 @@ replaced); what needs Blender renders a handful of 32-pixel jobs.
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 from collections import Counter
 from pathlib import Path
 
@@ -23,7 +25,7 @@ from sweep3d.stages.render.device import device_note, resolve_device, worker_cou
 from sweep3d.stages.render.protocol import EnvironmentRef, RenderJob, RenderSettings, WorkerLimits
 from sweep3d.stages.render.stage import recycled_note
 from sweep3d.stages.render.worker import resident_mb
-from tests.helpers import TINY_SPEC, load_spec, plan_for, write_spec
+from tests.helpers import REPO, TINY_SPEC, load_spec, plan_for, write_spec
 
 NO_GPU: dict[str, int] = {}
 TWO_GPUS = {"optix": 2, "cuda": 2}
@@ -308,11 +310,9 @@ def test_auto_reuses_a_cpu_runs_renders_and_an_absent_gpu_is_one_line_exit_2_ren
     assert Store(tiny_copy / "store").keys("renders") == renders  # nothing rendered
 
 
-def test_the_gpu_benchmark_table_rates_renders_after_the_first_and_compares_pixels_with_the_cpu(
-        tmp_path, capsys) -> None:
+def test_the_gpu_benchmark_table_rates_renders_after_the_first_and_compares_pixels_with_the_cpu(tmp_path) -> None:
+    """The benchmark's report step, run as its users run it (``python benchmarks/gpu.py report``)."""
     from PIL import Image
-
-    from benchmarks import gpu
 
     for run, level in (("cpu-1", 100), ("cuda-1", 103)):
         (tmp_path / run).mkdir()
@@ -321,7 +321,8 @@ def test_the_gpu_benchmark_table_rates_renders_after_the_first_and_compares_pixe
         device = run.split("-")[0]
         (tmp_path / f"{run}.json").write_text(
             f'Blender 4.5 says hello\n{{"setup": 2.0, "first": 1.0, "loop": 11.0, "n": 21, "device": "{device}"}}\n')
-    gpu.report(tmp_path)
-    rows = [line for line in capsys.readouterr().out.splitlines() if line.startswith("| c")]
+    out = subprocess.run([sys.executable, str(REPO / "benchmarks" / "gpu.py"), "report", str(tmp_path)],
+                         capture_output=True, text=True, check=True, cwd=REPO).stdout
+    rows = [line for line in out.splitlines() if line.startswith("| c")]
     assert rows == ["| cpu-1 | 2.0 | 1.00 | 2.0 | 11.0 | – |",
                     "| cuda-1 | 2.0 | 1.00 | 2.0 | 11.0 | 3.00 (max 3.00, 2 frames) |"]

@@ -23,7 +23,7 @@ from sweep3d.stages.aggregate import connect as connect_results
 from sweep3d.stages.driver import run_stage
 from sweep3d.stages.render import RenderStage
 from sweep3d.stages.render.keys import truth_keys
-from tests.helpers import load_spec, plan_for, write_spec
+from tests.helpers import load_spec, plan_for, spec_toml, write_spec
 
 WALL = '''\
 from pydantic import Field
@@ -54,26 +54,7 @@ class Wall(RenderedControl):
         scene.add(bpy.data.objects.new("wall", mesh), parent=scene.camera)  # in the camera's frame
 '''
 
-SPEC = """\
-[experiment]
-name = "wall"
-seed = 1
-store = "store"
-
-[render]
-resolution = 48
-samples = 1
-denoise = false
-
-[[objects]]
-name = "box"
-mesh = "cube.obj"
-labels = ["carton"]
-
-[[environments]]
-name = "white"
-color = [1.0, 1.0, 1.0]
-
+SPEC = spec_toml("wall", seed=1, render={"resolution": 48, "samples": 1, "denoise": False}, body="""\
 [[controls]]
 type = "walls:Wall"
 cover = [0.0, 0.3, 0.8, 1.0]
@@ -92,7 +73,7 @@ file = "design.csv"
 
 [evaluator]
 passes = ["mask"]
-"""
+""")
 #: (wall cover, plate coverage, x): the object centred, then at the frame's right edge (a sliver
 #: at 1.5; at 1.7 its bounding sphere is in frame, no pixel of the cube is).
 JOBS = [(0.0, 0.0, 0.0), (0.0, 0.5, 0.0), (0.3, 0.0, 0.0), (0.3, 0.5, 0.0), (0.8, 0.0, 0.0), (0.8, 0.5, 0.0),

@@ -26,8 +26,18 @@ from sweep3d.stages.infer.evaluate import evaluate_checked
 from sweep3d.stages.infer.evaluators import EVALUATORS, Evaluator, Truth
 from sweep3d.stages.infer.keys import evaluator_key
 from sweep3d.stages.infer.labels import LabelMap
-from tests.helpers import TINY_SPEC, load_spec, write_spec
-from tests.test_tasks_report import MIN_VISIBLE, PARAMETERS, SPEC, T0, TRUE_BOX, prediction, synthetic_jobs
+from tests.helpers import (
+    MIN_VISIBLE,
+    PARAMETERS,
+    T0,
+    TINY_SPEC,
+    TRUE_BOX,
+    load_spec,
+    prediction,
+    synthetic_jobs,
+    write_spec,
+)
+from tests.helpers import TASKS_SPEC as SPEC
 
 pytestmark = pytest.mark.fast
 

@@ -35,39 +35,19 @@ from sweep3d.export.target import ExportFolder, Staging, class_folder, design_ta
 from sweep3d.progress import StageProgress
 from sweep3d.stages.aggregate import connect
 from sweep3d.stages.aggregate.views import stored_parameters
-from tests.helpers import TINY_SPEC, write_spec
+from tests.helpers import TINY_SPEC, spec_toml, write_spec
 
-SPEC = """\
-[experiment]
-name = "export"
-seed = 2
-store = "store"
-
-[render]
-resolution = 40
-samples = 1
-denoise = false
-
+SPEC = spec_toml("export",
+        seed=2,
+        render={"resolution": 40, "samples": 1, "denoise": False},
+        objects=("box", "crate"),
+        body="""\
 [model]
 name = "export_detector:centre"
 
 [evaluator]
 kind = "detection"
 passes = ["mask"]
-
-[[objects]]
-name = "box"
-mesh = "cube.obj"
-labels = ["carton"]
-
-[[objects]]
-name = "crate"
-mesh = "cube.obj"
-labels = ["crate"]
-
-[[environments]]
-name = "white"
-color = [1.0, 1.0, 1.0]
 
 [[controls]]
 type = "orientation"
@@ -84,7 +64,7 @@ objects = ["crate"]            # no scale_factor for the box: an empty cell in d
 
 [policy]
 type = "grid"
-"""
+""")
 
 #: Always one box in the image's centre, labelled carton: right on a centred box, wrong on the crate.
 DETECTOR = '''

@@ -23,7 +23,7 @@ from sweep3d.spec.params import Range
 from sweep3d.stages.aggregate import connect, summarise
 from sweep3d.stages.infer import ClassificationEvaluator, LabelMap
 from sweep3d.stages.infer.evaluators import Truth, log_softmax
-from tests.helpers import CUBE_OBJ, examples, load_spec, write_spec
+from tests.helpers import CUBE_OBJ, examples, load_spec, spec_toml, write_spec
 
 
 def write_exr(path: Path, rgb: np.ndarray) -> None:
@@ -83,36 +83,11 @@ def cube(scale: float) -> str:
 
 # -- extreme but legal values through the whole pipeline --------------------------------------
 
-EXTREME_SPEC = """\
-[experiment]
-name = "extremes"
-seed = 1
-store = "store"
-
-[render]
-resolution = 32
-samples = 1
-denoise = false
-
-[[objects]]
-name = "speck"
-mesh = "speck.obj"
-labels = ["carton"]
-
-[[objects]]
-name = "giant"
-mesh = "giant.obj"
-labels = ["carton"]
-
-[[environments]]
-name = "poisoned"
-hdri = "poisoned.exr"
-strength = 1000000.0
-
-[[environments]]
-name = "white"
-color = [1.0, 1.0, 1.0]
-
+EXTREME_SPEC = spec_toml("extremes",
+        seed=1,
+        objects=(("speck", "speck.obj", ["carton"]), ("giant", "giant.obj", ["carton"])),
+        environments=(("poisoned", {"hdri": "poisoned.exr", "strength": 1000000.0}), "white"),
+        body="""\
 [[controls]]
 type = "camera"
 zoom = [0.001, 1000.0]
@@ -129,7 +104,7 @@ strength = 1000000.0
 
 [policy]
 type = "grid"
-"""
+""")
 
 
 @pytest.mark.slow

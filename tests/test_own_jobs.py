@@ -6,15 +6,11 @@ prediction and image for each job."""
 
 from __future__ import annotations
 
-import io
 import logging
-from datetime import datetime
 from pathlib import Path
 
-import numpy as np
 import pyarrow.parquet as pq
 import pytest
-from PIL import Image
 from typer.testing import CliRunner
 
 import sweep3d
@@ -22,14 +18,10 @@ import sweep3d.stages.aggregate.own_jobs as own_jobs
 from sweep3d.cache.store import Store
 from sweep3d.cli import app
 from sweep3d.errors import UserError
-from sweep3d.pipeline import outcomes_by_scene, plan_spec, plans_as_run, write_jobs
+from sweep3d.pipeline import outcomes_by_scene, plan_spec, write_jobs
 from sweep3d.stages.code import SPEC_METADATA
-from sweep3d.stages.plan import Plan
-from tests.helpers import TINY_SPEC, write_cube
+from tests.helpers import SPEC_02, SPEC_03, fake_run, predict, write_cube
 
-BLUR = "sigma = [0.0, 1.5]"
-#: The same experiment ("tiny", 8 jobs) with blur 0 and 3, and with blur 0 and 2: half their jobs are shared.
-SPEC_03, SPEC_02 = TINY_SPEC.replace(BLUR, "sigma = [0.0, 3.0]"), TINY_SPEC.replace(BLUR, "sigma = [0.0, 2.0]")
 #: Another version sharing no job with those (other yaws).
 SPEC_OTHER = SPEC_02.replace("yaw = [0, 45]", "yaw = [10, 20]")
 
@@ -39,39 +31,10 @@ ADAPTIVE = SPEC_02.replace("yaw = [0, 45]", "yaw = { range = [0, 90] }").replace
     'type = "grid"', 'type = "adaptive"\nsamples = 6\ninitial = 2\nbatch = 2')
 
 
-def fake_run(spec: sweep3d.Experiment, run_id: str = "run") -> None:
-    """What a run of ``spec`` leaves in its store: its jobs file, a prediction and an image for
-    each job (a job is correct when its blur is 0), and its row in ``runs`` (the latest)."""
-    store = Store(spec.store)
-    started = datetime(2024, 1, 1 + len(store.segments("runs")))
-    store.append("runs", [{"run_id": run_id, "experiment": spec.name, "spec_path": str(spec.spec.path),
-                           "spec": spec.spec.text(), "jobs": 8, "started_at": started, "created_at": started,
-                           "seconds": 1.0}])
-    plans = plans_as_run(spec.spec, store)
-    predict(plans[0], store)
-    write_jobs(plans, store)
 
 
-def predict(plan: Plan, store: Store) -> None:
-    """A prediction and an image for each job of ``plan`` the store lacks: correct when its blur is 0."""
-    have = store.keys("predictions") if store.segments("predictions") else set()
-    rows = []
-    for job in plan.jobs:
-        if job.pred_key in have:
-            continue
-        blur = next(v["sigma"] for i, v in job.values.items() if i.startswith("blur"))
-        rows.append({"pred_key": job.pred_key, "image_key": job.image_key, "created_at": datetime(2024, 1, 1),
-                     "valid": True, "correct": blur == 0, "top1_label": "carton", "loss": 1.0 + blur})
-        path = store.blob_path(job.image_key)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_bytes(_png())
-    store.append("predictions", rows)
 
 
-def _png() -> bytes:
-    buffer = io.BytesIO()
-    Image.fromarray(np.zeros((4, 4, 3), np.uint8)).save(buffer, format="PNG")
-    return buffer.getvalue()
 
 
 def load(folder: Path, text: str) -> sweep3d.Experiment:

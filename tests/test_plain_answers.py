@@ -27,8 +27,7 @@ from sweep3d.spec.loader import ControlInstance
 from sweep3d.stages.outcome import StageOutcome
 from sweep3d.stages.plan.policies import GridPolicy
 from sweep3d.stages.postprocess import PostControl, apply_post
-from tests.helpers import TINY_SPEC, write_cube
-from tests.test_own_jobs import SPEC_02, fake_run
+from tests.helpers import SPEC_02, TINY_SPEC, fake_run, write_cube
 
 
 @pytest.fixture

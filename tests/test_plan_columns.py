@@ -30,7 +30,7 @@ from sweep3d.stages.plan import make_plan
 from sweep3d.stages.postprocess.controls.base import PostControl
 from sweep3d.stages.render.controls.base import RenderedControl
 from sweep3d.stages.render.state import SceneState, in_frame, in_frame_many
-from tests.helpers import examples, finite, load_spec, reference_jobs, values, write_spec
+from tests.helpers import examples, finite, load_spec, reference_jobs, spec_toml, values, write_spec
 
 # -- users' controls: each takes a slow path of the planner ------------------------------------
 
@@ -297,29 +297,14 @@ def test_planned_jobs_read_their_values_from_columns_and_compare_as_jobs(tmp_pat
 
 
 def specs_example(policy: str) -> str:
-    return f"""\
-[experiment]
-name = "columns"
-
-[render]
-resolution = 32
-
-[[objects]]
-name = "box"
-mesh = "cube.obj"
-labels = ["carton"]
-
-[[environments]]
-name = "white"
-color = [1.0, 1.0, 1.0]
-
+    return spec_toml("columns", store=None, render={"resolution": 32}, body=f"""\
 [[controls]]
 type = "orientation"
 yaw = {{ range = [-180, 180] }}
 
 [policy]
 {policy}
-"""
+""")
 
 
 def test_an_unchanged_plan_is_not_written_again_and_a_changed_one_is(tmp_path: Path, monkeypatch) -> None:

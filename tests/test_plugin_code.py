@@ -15,7 +15,7 @@ from typer.testing import CliRunner
 from sweep3d.cache.store import Store
 from sweep3d.cli import app
 from sweep3d.stages.infer.tasks import model_outputs
-from tests.helpers import SCENE_CONTROL, write_spec
+from tests.helpers import SCENE_CONTROL, spec_toml, write_spec
 
 pytestmark = pytest.mark.slow
 
@@ -43,27 +43,9 @@ NOTE = "first"
 class Strict(ClassificationEvaluator):
     """Classification as usual (its code is what the test edits)."""
 '''
-SPEC = """\
-[experiment]
-name = "plugins"
-store = "store"
-
-[render]
-resolution = 32
-samples = 1
-denoise = false
-
+SPEC = spec_toml("plugins", body="""\
 [evaluator]
 kind = "myeval:Strict"
-
-[[objects]]
-name = "box"
-mesh = "cube.obj"
-labels = ["carton"]
-
-[[environments]]
-name = "white"
-color = [1.0, 1.0, 1.0]
 
 [[controls]]
 type = "myscene:Slab"
@@ -75,7 +57,7 @@ strength = [0.0, 0.5]
 
 [policy]
 type = "grid"
-"""
+""")
 
 
 def counts(folder: Path) -> dict[str, int]:

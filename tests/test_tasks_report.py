@@ -12,8 +12,6 @@ import base64
 import io
 import json
 import re
-from dataclasses import dataclass, field
-from datetime import datetime
 from pathlib import Path
 from typing import Any
 
@@ -34,127 +32,24 @@ from sweep3d.stages.aggregate import connect, stored_summary, summarise
 from sweep3d.stages.aggregate.measures import MEASURES
 from sweep3d.stages.aggregate.tasks import OUTCOMES, TASK_VIEWS
 from sweep3d.truth import encode_mask
-from tests.helpers import assert_clean, build_store, load_spec, open_page, write_spec
-
-T0 = datetime(2024, 1, 1)
-W, H = 64, 48  # stored images
-MIN_VISIBLE = 0.2
-PARAMETERS = ["orientation_yaw", "blur_sigma"]
-SPEC = """\
-[experiment]
-name = "tasks"
-store = "store"
-
-[model]
-name = "efficientnet-lite0"
-
-[evaluator]
-passes = ["mask"]
-min_visible = 0.2
-
-[[objects]]
-name = "mug"
-mesh = "cube.obj"
-labels = ["coffee mug"]
-
-[[objects]]
-name = "ball"
-mesh = "cube.obj"
-labels = ["soccer ball"]
-
-[[environments]]
-name = "white"
-color = [1.0, 1.0, 1.0]
-
-[[controls]]
-type = "orientation"
-yaw = [0, 90, 180]
-
-[[controls]]
-type = "blur"
-sigma = [0.0, 1.0]
-
-[policy]
-type = "grid"
-"""
-
-
-@dataclass
-class Job:
-    """One synthetic job and what is true of it."""
-
-    job: int
-    object: str
-    yaw: float
-    sigma: float
-    in_frame: bool = True
-    visible: int = 600  # visible pixels of the object
-    fraction: float | None = 0.8
-    framed: int = 750  # pixels of its unoccluded silhouette in the image
-    truth: bool = True  # a truth row exists (else evaluable is unknown: counted)
-    valid: bool = True
-    outcome: str = "correct"
-    iou: float | None = 0.8
-    extra: dict[str, Any] = field(default_factory=dict)
-
-    @property
-    def evaluable(self) -> bool | None:
-        if not self.in_frame:
-            return False
-        if not self.truth:
-            return None
-        return self.fraction is not None and self.fraction >= MIN_VISIBLE
-
-    @property
-    def counted(self) -> bool:
-        return self.valid and self.evaluable is not False
-
-    @property
-    def reason(self) -> str:
-        if not self.in_frame or self.fraction is None or self.framed == 0:
-            return "out of frame"
-        return "fully occluded" if self.visible == 0 else "hidden"
-
-
-def synthetic_jobs() -> list[Job]:
-    """72 jobs over 2 objects × 3 yaws × 2 blurs: some out of frame, hidden, without a truth row,
-    invalid; outcomes and IoUs that depend on the yaw and the object."""
-    rng = np.random.default_rng(5)
-    jobs = []
-    for i in range(72):
-        job = Job(i, ["mug", "ball"][i % 2], [0.0, 90.0, 180.0][(i // 2) % 3], [0.0, 1.0][(i // 6) % 2])
-        weights = {0.0: [0.7, 0.1, 0.1, 0.1], 90.0: [0.3, 0.2, 0.3, 0.2], 180.0: [0.5, 0.3, 0.1, 0.1]}[job.yaw]
-        job.outcome = str(rng.choice(OUTCOMES, p=weights))
-        job.iou = {"correct": rng.uniform(0.55, 0.95), "wrong_class": rng.uniform(0.5, 0.9),
-                   "wrong_box": rng.uniform(0.05, 0.45), "missed": None}[job.outcome]
-        if job.object == "ball" and job.iou is not None:
-            job.iou *= 0.9
-        if i % 16 == 15:
-            job.in_frame, job.visible, job.fraction = False, 0, None
-        elif i % 10 == 3:  # hidden: some of it shows, less than min_visible; wrong on purpose
-            job.visible, job.fraction, job.outcome, job.iou = 40, 0.05, "wrong_class", 0.7
-        elif i == 4:  # in frame by the plan's geometry, but no pixel would reach the image even unoccluded
-            job.visible, job.fraction, job.framed, job.outcome, job.iou = 0, 0.0, 0, "missed", None
-        elif i == 10:  # in the image, but wholly behind an occluder
-            job.visible, job.fraction, job.outcome, job.iou = 0, 0.0, "missed", None
-        elif i == 8:
-            job.truth = False
-        elif i % 13 == 5:
-            job.valid, job.outcome, job.iou = False, None, None
-        jobs.append(job)
-    return jobs
-
-
-TRUE_BOX = (10, 8, 40, 30)
-
-
-def pred_box(job: Job) -> tuple[float, float, float, float] | None:
-    """Shifted right for a wrong box; none when missed."""
-    if job.outcome in (None, "missed"):
-        return None
-    shift = 18.0 if job.outcome == "wrong_box" else 2.0
-    x0, y0, x1, y1 = TRUE_BOX
-    return (x0 + shift, y0 + 1.0, x1 + shift, y1 + 1.0)
+from tests.helpers import (
+    MIN_VISIBLE,
+    PARAMETERS,
+    T0,
+    TASKS_SPEC,
+    TRUE_BOX,
+    H,
+    Job,
+    W,
+    assert_clean,
+    build_store,
+    load_spec,
+    open_page,
+    pred_box,
+    prediction,
+    synthetic_jobs,
+    write_spec,
+)
 
 
 def make_store(folder: Path, jobs: list[Job], kind: str = "localization", models: tuple[str, ...] = ("m",),
@@ -163,7 +58,7 @@ def make_store(folder: Path, jobs: list[Job], kind: str = "localization", models
     ``detection`` (its box columns only), ``segmentation``, or ``classification``: none of the box or
     mask columns); returns the spec. Without ``framed``, the truth rows are from before ``framed_pixels``."""
     folder.mkdir(parents=True, exist_ok=True)
-    spec = write_spec(folder, SPEC)
+    spec = write_spec(folder, TASKS_SPEC)
     store = Store(folder / "store")
     rows, truths, predictions = [], [], []
     for model in models:
@@ -193,27 +88,6 @@ def make_store(folder: Path, jobs: list[Job], kind: str = "localization", models
     return spec
 
 
-def prediction(key: str, image: str, job: Job, kind: str, model: str) -> dict[str, Any]:
-    label = "coffee mug" if job.object == "mug" else "soccer ball"
-    if job.outcome == "wrong_class":
-        label = "hidden thing" if job.fraction is not None and job.fraction < MIN_VISIBLE else "teapot"
-    row = {"pred_key": key, "image_key": image, "model": model, "created_at": T0, "valid": job.valid,
-           "correct": job.outcome == "correct" if job.valid else None, "top1_label": label if job.valid else None}
-    if kind in ("classification", "localization"):  # detection and segmentation rank no classes
-        row.update(topk=[0], topk_labels=[label], topk_probs=[0.9], loss=1.0 + job.job / 100)
-    if kind in ("localization", "detection", "segmentation"):
-        row.update(outcome=job.outcome, class_correct=job.outcome in ("correct", "wrong_box") if job.valid else None,
-                   iou=job.iou)
-    if kind in ("localization", "detection"):
-        box = pred_box(job) or (None,) * 4
-        row.update(dict(zip(("pred_x0", "pred_y0", "pred_x1", "pred_y1"), box)))
-    if kind == "segmentation":
-        mask = np.zeros((H, W), bool)
-        if pred_box(job):
-            x0, y0, x1, y1 = (int(v) for v in pred_box(job))
-            mask[y0:y1, x0:x1] = True
-        row.update(pred_pixels=int(mask.sum()), true_pixels=job.visible, pred_mask=encode_mask(mask))
-    return row
 
 
 def write_blobs(store: Store, jobs: list[Job]) -> None:

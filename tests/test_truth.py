@@ -18,29 +18,10 @@ from sweep3d.errors import SpecError
 from sweep3d.stages.aggregate import connect as connect_results
 from sweep3d.stages.passes import needed_passes, truth_passes
 from sweep3d.truth import box, decode_depth, decode_mask, encode_depth, encode_mask, ground_truth
-from tests.helpers import load_spec, plan_for, write_spec
+from tests.helpers import load_spec, plan_for, spec_toml, write_spec
 
 SIDE = 48
-TRUTH_SPEC = f"""\
-[experiment]
-name = "truth"
-seed = 3
-store = "store"
-
-[render]
-resolution = {SIDE}
-samples = 1
-denoise = false
-
-[[objects]]
-name = "box"
-mesh = "cube.obj"
-labels = ["carton"]
-
-[[environments]]
-name = "white"
-color = [1.0, 1.0, 1.0]
-
+TRUTH_SPEC = spec_toml("truth", seed=3, render={"resolution": SIDE, "samples": 1, "denoise": False}, body="""\
 [[controls]]
 type = "position"
 x = [0.0, 0.5, 1.6, 2.5]
@@ -54,7 +35,7 @@ type = "grid"
 
 [evaluator]
 passes = ["mask", "depth"]
-"""
+""")
 PLAIN_SPEC = TRUTH_SPEC.replace('passes = ["mask", "depth"]\n', "")
 
 
