@@ -22,17 +22,17 @@ VARIANTS = ("scalar_rgb", "llvm_ad_rgb")
 
 
 def _measure(variant: str, jobs: int, passes: tuple[str, ...], out) -> None:
+    import sweep3d
     import sweep3d.stages.render.engines as engines
     from sweep3d.spec.assets import builtin_hdris, materialise_mesh
     from sweep3d.spec.models import KeyLightSpec
-    from sweep3d.stages import load_spec
     from sweep3d.stages.render.controls import RENDERED_CONTROLS
     from sweep3d.stages.render.mitsuba.scene import MitsubaScene
     from sweep3d.stages.render.protocol import EnvironmentRef, RenderJob, RenderSettings
     from sweep3d.stages.render.worker import render_job
 
     engines.MITSUBA_VARIANT = variant
-    spec = load_spec(REPO / "specs" / "quickstart.toml")
+    spec = sweep3d.load(REPO / "specs" / "quickstart.toml").spec
     scratch = Path(tempfile.mkdtemp(prefix="mitsuba-variant-"))
     scene = MitsubaScene(RenderSettings(resolution=256, crop=224, samples=4, denoise=True, passes=passes,
                                         engine="mitsuba"), scratch)

@@ -61,10 +61,10 @@ def sources() -> Sources:
     from sweep3d.cli import app
     from sweep3d.plugins import Evaluator, Policy, PostControl, RenderedControl
     from sweep3d.spec import Spec
-    from sweep3d.stages import catalogue
+    from sweep3d.stages import builtin_catalogue
     from sweep3d.stages.infer import builtin_model
 
-    plugins = catalogue()
+    plugins = builtin_catalogue()
     found = Sources(
         rendered={n: plugins.controls.get(n) for n in plugins.controls.names()
                   if plugins.controls.get(n).stage == "render"},

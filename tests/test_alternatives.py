@@ -7,10 +7,10 @@ from __future__ import annotations
 from pathlib import Path
 
 from sweep3d.spec.framing import Framing
-from sweep3d.stages import load_spec
 from sweep3d.stages.aggregate.rules import rules_of
 from sweep3d.stages.plan import make_plan
 from tests.conftest import write_spec
+from tests.helpers import load_spec
 from tests.test_aggregate_views import make_store, rows_of
 from tests.test_paired import every_job
 

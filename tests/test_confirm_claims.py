@@ -12,11 +12,11 @@ from sweep3d.cache.store import Store
 from sweep3d.confirm.claims import Side
 from sweep3d.confirm.draw import draw_pairs, space_of
 from sweep3d.confirm.run import findings_claims
-from sweep3d.stages import load_spec
 from sweep3d.stages.aggregate.boundaries import numeric_scales
 from sweep3d.stages.aggregate.confirmation import CONFIRMED, judge, tally
 from sweep3d.stages.aggregate.summary import named_rules, summarise
 from tests.conftest import write_spec
+from tests.helpers import load_spec
 from tests.test_aggregate_views import make_store
 
 SPEC = """\

@@ -15,9 +15,9 @@ from sweep3d.confirm.claims import boundary_claim
 from sweep3d.confirm.record import read_verdicts
 from sweep3d.confirm.run import SUFFIX, confirm
 from sweep3d.spec.params import Range
-from sweep3d.stages import load_spec
 from sweep3d.stages.aggregate.confirmation import CONFIRMED, NOT_REPLICATED
 from tests.conftest import write_spec
+from tests.helpers import load_spec
 
 pytestmark = [pytest.mark.slow, pytest.mark.blender, pytest.mark.torch]
 

@@ -13,11 +13,11 @@ from sweep3d.cli import app
 from sweep3d.errors import UserError
 from sweep3d.spec.columns import DROP_FRAGILE_METADATA
 from sweep3d.spec.models import RenderSpec
-from sweep3d.stages import load_spec
 from sweep3d.stages.infer.handle import with_arithmetic
 from sweep3d.stages.infer.models import LITE0_PREPROCESS, Preprocess, model_key, resize_uint8
 from sweep3d.stages.render.protocol import RenderSettings
 from tests.conftest import TINY_SPEC, plan_for, write_spec
+from tests.helpers import load_spec
 
 PIXELS = {"resolution": 32}
 

@@ -16,15 +16,16 @@ from typer.testing import CliRunner
 from sweep3d.cli import app
 from sweep3d.controls import ControlParams
 from sweep3d.spec.models import KeyLightSpec
-from sweep3d.stages import catalogue, load_spec
+from sweep3d.stages import builtin_catalogue
 from sweep3d.stages.render.controls.base import RenderedControl
 from sweep3d.stages.render.engines import engine_key, mitsuba_version
 from sweep3d.stages.render.keys import scene_key
 from sweep3d.stages.render.protocol import EnvironmentRef, RenderJob, RenderSettings
 from sweep3d.truth import decode_mask
 from tests.conftest import TINY_SPEC, plan_for, write_cube, write_spec
+from tests.helpers import load_spec
 
-CONTROLS = catalogue().controls
+CONTROLS = builtin_catalogue().controls
 
 
 def spec_with(folder: Path, render: str = "", extra: str = "") -> Path:

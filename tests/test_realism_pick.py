@@ -264,8 +264,8 @@ def test_pick_writes_a_deterministic_kit_half_right_half_wrong(tmp_path: Path, m
 
 
 def test_the_design_replays_with_the_table_policy(tmp_path: Path, monkeypatch) -> None:
-    from sweep3d.stages import load_spec
     from sweep3d.stages.plan.design import read_design
+    from tests.helpers import load_spec
 
     spec = make_run(tmp_path)
     stub_kit_tools(monkeypatch)

@@ -34,10 +34,10 @@ def pick(
                                   "0.05 probability: leave them out, or mark them (kept, flagged in kit.json)."),
 ) -> None:
     """Choose results worth photographing and write the kit: design.csv, renders, edges, align.html."""
+    import sweep3d
     from sweep3d.realism.pick import pick as pick_kit
-    from sweep3d.stages import load_spec
 
-    kit = pick_kit(load_spec(spec), output, per_object, seed, near_ties)
+    kit = pick_kit(sweep3d.load(spec).spec, output, per_object, seed, near_ties)
     for line in kit.short:
         console.print(f"[yellow]note:[/] {escape(line)}", soft_wrap=True)
     console.print(escape(kit.line()), soft_wrap=True)
@@ -57,12 +57,12 @@ def score(
 ) -> None:
     """Run the spec's models on the photographs (or another renderer's images) of the picked jobs and
     store their verdicts; the agreement view and the report's Realism panel read them."""
+    import sweep3d
     from sweep3d.errors import UserError
     from sweep3d.realism.score import score_engine, score_photos
-    from sweep3d.stages import load_spec
 
     check_wait(wait)
-    loaded = load_spec(spec)
+    loaded = sweep3d.load(spec).spec
     if engine is not None:
         if photos is not None or match is not None:
             raise UserError("--engine scores renders, not photographs: leave PHOTOS and --match out")
