@@ -27,7 +27,6 @@ from tests.test_realism_pick import LABELS, T0, image_of, job_colours, make_run,
 
 
 def test_another_engine_is_a_source_matched_by_configuration(tmp_path: Path, monkeypatch) -> None:
-    import sweep3d.api
     import sweep3d.realism.score as score
 
     colours = job_colours(repeat=1)  # one job per configuration, as a run has
@@ -40,11 +39,11 @@ def test_another_engine_is_a_source_matched_by_configuration(tmp_path: Path, mon
     flipped = set(picked[::3])  # the other engine disagrees on these
     written = {}
 
-    def run(self, **kwargs):
+    def run(spec, console, wait):
         """The replaying spec's run: one result per design row, numbered backwards."""
-        written["spec"] = self.spec.path.read_text()
-        assert self.spec.name == "realism.engine-other" and self.spec.spec.policy.type == "table"
-        store = Store(self.spec.store)
+        written["spec"] = spec.path.read_text()
+        assert spec.name == "realism.engine-other" and spec.spec.policy.type == "table"
+        store = Store(spec.store)
         jobs, predictions = [], []
         for new, old in enumerate(reversed(picked)):
             c = colours[old]
@@ -52,7 +51,7 @@ def test_another_engine_is_a_source_matched_by_configuration(tmp_path: Path, mon
             if old in flipped:
                 row = {**row, "correct": not row["correct"], "top1_label": "other"}
             key = f"e{new:03x}" + "cd" * 30
-            jobs.append({"experiment": self.spec.name, "job": new, "object": c["object"],
+            jobs.append({"experiment": spec.name, "job": new, "object": c["object"],
                          "environment": c["environment"], "orientation_yaw": float(c["orientation_yaw"]),
                          "render_key": key, "image_key": key, "pred_key": f"p{key}", "model": "realism_model:redblue"})
             predictions.append({"pred_key": f"p{key}", "image_key": key, "model": "realism_model:redblue",
@@ -60,10 +59,10 @@ def test_another_engine_is_a_source_matched_by_configuration(tmp_path: Path, mon
         table = pa.Table.from_pylist(jobs).replace_schema_metadata(
             {PARAMETERS_METADATA: json.dumps(["orientation_yaw"]).encode(),
              MODELS_METADATA: json.dumps(["realism_model:redblue"]).encode()})
-        store.write_table_file(store.jobs_path(self.spec.name), table)
+        store.write_table_file(store.jobs_path(spec.name), table)
         store.append("predictions", predictions)
 
-    monkeypatch.setattr(sweep3d.api.Experiment, "run", run)
+    monkeypatch.setattr(score, "_run", run)
     monkeypatch.setattr(score, "ENGINE_SPEC", score.ENGINE_SPEC.replace("engine = {engine_value}", ""))
     result = CliRunner().invoke(app, ["realism", "score", str(spec), "--engine", "other", "--kit",
                                       str(tmp_path / "kit")])

@@ -238,6 +238,13 @@ def engine_spec(spec: LoadedSpec, kit: Path, engine: str) -> Path:
     return path
 
 
+def _run(spec: LoadedSpec, console: Any, wait: float) -> None:
+    """Run ``spec`` like ``sweep3d run`` (what renders the other engine's images)."""
+    from sweep3d.pipeline import run
+
+    run(spec, console, wait=wait)
+
+
 def score_engine(spec: LoadedSpec, engine: str, kit: Path | None = None, console: Any = None,
                  wait: float = 0.0) -> Scored:
     """Render the kit's picked configurations with ``engine`` (through the whole pipeline, cached
@@ -246,7 +253,8 @@ def score_engine(spec: LoadedSpec, engine: str, kit: Path | None = None, console
     Raises:
         UserError: no kit; the spec loader refusing the engine or a control it cannot express.
     """
-    from sweep3d.api import Experiment
+    from sweep3d.spec import read_spec
+    from sweep3d.stages import builtin_catalogue
     from sweep3d.stages.aggregate.sql import results_connection
     from sweep3d.stages.aggregate.views import stored_parameters
 
@@ -255,8 +263,8 @@ def score_engine(spec: LoadedSpec, engine: str, kit: Path | None = None, console
     folder = find_kit(spec, None, kit)
     document = read_kit(folder)
     jobs = [int(j) for j in document["jobs"]]
-    other = Experiment(engine_spec(spec, folder, engine))
-    other.run(wait=wait, console=console)
+    other = read_spec(engine_spec(spec, folder, engine), builtin_catalogue(), None)
+    _run(other, console, wait)
     store = Store(spec.store)
     parameters = stored_parameters(store.jobs_path(spec.name)) or list(spec.parameter_columns)
     source, rows = f"engine:{engine}", []
@@ -264,7 +272,7 @@ def score_engine(spec: LoadedSpec, engine: str, kit: Path | None = None, console
         several = len(spec.models) > 1
         with results_connection(spec, settings.label if several else None) as con:
             wanted = _configurations(con, jobs, parameters)
-        with results_connection(other.spec, settings.label if several else None) as con:
+        with results_connection(other, settings.label if several else None) as con:
             theirs = _configurations(con, None, parameters, verdicts=True)
         for config, same in wanted.items():  # jobs of one configuration pair up in job order
             made = theirs.get(config, [])
