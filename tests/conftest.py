@@ -30,7 +30,7 @@ from pathlib import Path
 import pytest
 from hypothesis import settings as hypothesis_settings
 
-from tests.helpers import REPO, STORE_ALL, TINY_SPEC, write_cube, write_spec
+from tests.helpers import CHROMIUM, CHROMIUM_ARGS, REPO, STORE_ALL, TINY_SPEC, write_cube, write_spec
 
 if os.environ.get("PYTEST_XDIST_WORKER"):
     # xdist's workers start with COLUMNS=80 and LINES=24 set, which would fix the width of the CLI's
@@ -252,11 +252,6 @@ def _one_onnx_export_per_model(tmp_path_factory):
         yield
     finally:
         OnnxRunner._export = export
-
-
-CHROMIUM = Path("/usr/bin/chromium")
-CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
-                 "--disable-component-update", "--no-first-run", "--disable-sync"]
 
 
 @pytest.fixture(scope="session")

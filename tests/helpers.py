@@ -932,3 +932,7 @@ def _png() -> bytes:
     return buffer.getvalue()
 
 
+#: The headless Chromium the browser tests drive (``apt-get install chromium``), and its flags.
+CHROMIUM = Path("/usr/bin/chromium")
+CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
+                 "--disable-component-update", "--no-first-run", "--disable-sync"]

@@ -9,10 +9,7 @@ from pathlib import Path
 from sweep3d.spec.framing import Framing
 from sweep3d.stages.aggregate.rules import rules_of
 from sweep3d.stages.plan import make_plan
-from tests.conftest import write_spec
-from tests.helpers import load_spec
-from tests.test_aggregate_views import make_store, rows_of
-from tests.test_paired import every_job
+from tests.helpers import every_job, load_spec, make_store, rows_of, write_spec
 
 SPEC = """\
 [experiment]

@@ -15,9 +15,7 @@ from sweep3d.confirm.run import findings_claims
 from sweep3d.stages.aggregate.boundaries import numeric_scales
 from sweep3d.stages.aggregate.confirmation import CONFIRMED, judge, tally
 from sweep3d.stages.aggregate.summary import named_rules, summarise
-from tests.conftest import write_spec
-from tests.helpers import load_spec
-from tests.test_aggregate_views import make_store
+from tests.helpers import load_spec, make_store, write_spec
 
 SPEC = """\
 [experiment]

@@ -16,8 +16,7 @@ from sweep3d.confirm.record import read_verdicts
 from sweep3d.confirm.run import SUFFIX, confirm
 from sweep3d.spec.params import Range
 from sweep3d.stages.aggregate.confirmation import CONFIRMED, NOT_REPLICATED
-from tests.conftest import write_spec
-from tests.helpers import load_spec
+from tests.helpers import load_spec, write_spec
 
 pytestmark = [pytest.mark.slow, pytest.mark.blender, pytest.mark.torch]
 

@@ -16,8 +16,7 @@ from sweep3d.api import Experiment
 from sweep3d.cache.store import Store
 from sweep3d.cli import app
 from sweep3d.report import write_report
-from tests.conftest import write_spec
-from tests.test_report import ARTIFACTS, assert_clean, open_page
+from tests.helpers import ARTIFACTS, assert_clean, open_page, write_spec
 
 SHARP_MODEL = '''
 import torch

@@ -146,8 +146,7 @@ def test_a_change_across_a_whole_turn_is_written_the_short_way_round(tmp_path) -
     """Yaw over −180..180 wraps: from 172.8° to −172.8° is +14.4°, 4 % of the range, not −345.6°."""
     from sweep3d.explain.driver import _changes, _written, scene_axes
     from sweep3d.explain.search import Fix, Move
-    from tests.conftest import TINY_SPEC, write_spec
-    from tests.helpers import load_spec
+    from tests.helpers import TINY_SPEC, load_spec, write_spec
 
     body = TINY_SPEC.replace("yaw = [0, 45]", "yaw = { range = [-180, 180] }")
     spec = load_spec(write_spec(tmp_path, body))

@@ -23,7 +23,7 @@ from sweep3d.stages.aggregate.fragile import MARGIN_EDGES, create_margin_macro
 from sweep3d.stages.infer.evaluators.base import Truth
 from sweep3d.stages.infer.evaluators.classification import ranked_rows
 from sweep3d.stages.infer.labels import LabelMap
-from tests.conftest import examples
+from tests.helpers import examples
 
 T0 = datetime(2024, 1, 1, tzinfo=timezone.utc)
 

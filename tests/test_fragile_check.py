@@ -9,7 +9,7 @@ from typer.testing import CliRunner
 
 from sweep3d.cache.store import Store
 from sweep3d.cli import app
-from tests.conftest import TINY_SPEC, write_spec
+from tests.helpers import TINY_SPEC, write_spec
 
 
 def test_the_check_stores_a_row_per_image_and_change_and_recomputes_nothing(tiny_copy: Path) -> None:

@@ -16,8 +16,7 @@ from sweep3d.spec.models import RenderSpec
 from sweep3d.stages.infer.handle import with_arithmetic
 from sweep3d.stages.infer.models import LITE0_PREPROCESS, Preprocess, model_key, resize_uint8
 from sweep3d.stages.render.protocol import RenderSettings
-from tests.conftest import TINY_SPEC, plan_for, write_spec
-from tests.helpers import load_spec
+from tests.helpers import TINY_SPEC, load_spec, plan_for, write_spec
 
 PIXELS = {"resolution": 32}
 

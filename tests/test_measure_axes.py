@@ -15,7 +15,7 @@ from sweep3d.report.results import Results, materialise_views
 from sweep3d.stages.aggregate import connect
 from sweep3d.stages.aggregate.measures import MEASURES
 from sweep3d.stages.aggregate.rules import rules_of
-from tests.test_aggregate_views import rows_of
+from tests.helpers import rows_of
 
 T0 = datetime(2026, 1, 1, tzinfo=timezone.utc)
 

@@ -22,8 +22,7 @@ from sweep3d.stages.render.engines import engine_key, mitsuba_version
 from sweep3d.stages.render.keys import scene_key
 from sweep3d.stages.render.protocol import EnvironmentRef, RenderJob, RenderSettings
 from sweep3d.truth import decode_mask
-from tests.conftest import TINY_SPEC, plan_for, write_cube, write_spec
-from tests.helpers import load_spec
+from tests.helpers import TINY_SPEC, load_spec, plan_for, write_cube, write_spec
 
 CONTROLS = builtin_catalogue().controls
 

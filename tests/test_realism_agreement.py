@@ -6,9 +6,8 @@ from __future__ import annotations
 
 import math
 import tempfile
-from datetime import datetime, timedelta, timezone
+from datetime import timedelta
 from pathlib import Path
-from typing import Any
 
 import pytest
 from hypothesis import given, settings
@@ -18,45 +17,10 @@ from sweep3d.cache.store import Store
 from sweep3d.stages.aggregate import connect, wilson_interval
 from sweep3d.stages.aggregate.agreement import VERDICT_SCHEMA, VERDICTS
 from sweep3d.stages.aggregate.quoting import literal
-from tests.conftest import examples
-from tests.test_realism_pick import LABELS, image_of, job_colours, make_run, redblue_row
+from tests.helpers import examples
+from tests.realism_run import LABELS, T1, agreement_rows, hand, job_colours, make_run, sim_verdicts, verdict
 
-T1 = datetime(2024, 2, 1, tzinfo=timezone.utc)
 MODEL = "realism_model:redblue"
-
-
-def verdict(job: int, correct: bool, source: str = "photo", at: datetime = T1, valid: bool = True) -> dict[str, Any]:
-    row = {name: None for name in VERDICT_SCHEMA.names}
-    row.update(source=source, experiment="realism", job=job, model=MODEL, valid=valid, correct=correct,
-               top1_label="red" if correct else "blue", created_at=at)
-    return row
-
-
-def hand(pairs: list[tuple[bool, bool]]) -> dict[str, Any]:
-    """Agreement, PPV, NPV and κ of (simulation, source) verdicts, by the textbook formulas."""
-    n = len(pairs)
-    agree = sum(a == b for a, b in pairs)
-    sim_right = [b for a, b in pairs if a]
-    sim_wrong = [b for a, b in pairs if not a]
-    p_sim = sum(a for a, _ in pairs) / n
-    p_src = sum(b for _, b in pairs) / n
-    expected = p_sim * p_src + (1 - p_sim) * (1 - p_src)
-    return {"n": n, "n_agree": agree, "agreement": agree / n,
-            "ppv": sum(sim_right) / len(sim_right) if sim_right else None,
-            "npv": sum(not b for b in sim_wrong) / len(sim_wrong) if sim_wrong else None,
-            "kappa": None if expected == 1 else (agree / n - expected) / (1 - expected)}
-
-
-def agreement_rows(folder: Path, experiment: str = "realism") -> list[dict[str, Any]]:
-    con = connect(Store(folder / "store"), experiment)
-    cursor = con.execute("SELECT * FROM agreement")
-    names = [d[0] for d in cursor.description]
-    return [dict(zip(names, r)) for r in cursor.fetchall()]
-
-
-def sim_verdicts() -> list[bool]:
-    return [redblue_row(image_of(j["rgb"]), LABELS[j["object"]])["correct"] for j in job_colours()]
-
 
 def test_agreement_ppv_npv_kappa_equal_a_hand_computation(tmp_path: Path) -> None:
     make_run(tmp_path)

@@ -24,7 +24,7 @@ from PIL import Image
 
 from sweep3d.realism.align import PAGE, AlignShot, write_align_page
 from sweep3d.realism.edges import EDGE_RGB, edge_image
-from tests.conftest import CHROMIUM, CHROMIUM_ARGS, REPO
+from tests.helpers import CHROMIUM, CHROMIUM_ARGS, REPO
 
 ARTIFACTS = REPO / "test-artifacts"
 CAMERA_SIZE = (320, 240)  # the fake camera's frame, width × height (4:3, as a phone's)

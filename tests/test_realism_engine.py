@@ -22,8 +22,7 @@ from sweep3d.cache.store import Store
 from sweep3d.cli import app
 from sweep3d.spec.columns import MODELS_METADATA, PARAMETERS_METADATA
 from sweep3d.stages.aggregate.agreement import VERDICTS
-from tests.test_realism_agreement import agreement_rows
-from tests.test_realism_pick import LABELS, T0, image_of, job_colours, make_run, redblue_row, stub_kit_tools
+from tests.realism_run import LABELS, T0, agreement_rows, image_of, job_colours, make_run, redblue_row, stub_kit_tools
 
 
 def test_another_engine_is_a_source_matched_by_configuration(tmp_path: Path, monkeypatch) -> None:

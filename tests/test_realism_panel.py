@@ -16,10 +16,8 @@ from sweep3d.cache.store import Store
 from sweep3d.realism.photos import photo_like
 from sweep3d.report import write_report
 from sweep3d.stages.aggregate.agreement import VERDICT_SCHEMA, VERDICTS, photo_path
-from tests.helpers import load_spec
-from tests.test_realism_agreement import sim_verdicts, verdict
-from tests.test_realism_pick import image_of, job_colours, make_run
-from tests.test_report import ARTIFACTS, assert_clean, open_page
+from tests.helpers import ARTIFACTS, assert_clean, load_spec, open_page
+from tests.realism_run import image_of, job_colours, make_run, sim_verdicts, verdict
 
 T2 = datetime(2024, 3, 1, tzinfo=timezone.utc)
 

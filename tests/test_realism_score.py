@@ -23,8 +23,7 @@ from sweep3d.cache.store import Store
 from sweep3d.cli import app
 from sweep3d.realism.photos import framed, photo_like, upright
 from sweep3d.stages.aggregate.agreement import VERDICTS
-from tests.test_realism_agreement import agreement_rows, hand
-from tests.test_realism_pick import LABELS, image_of, job_colours, make_run, redblue_row, stub_kit_tools
+from tests.realism_run import LABELS, agreement_rows, hand, image_of, job_colours, make_run, redblue_row, stub_kit_tools
 
 PER_OBJECT = 6
 

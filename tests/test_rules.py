@@ -13,7 +13,7 @@ from sweep3d.spec.params import Choice, Range
 from sweep3d.stages.aggregate.confirmation import CONFIRMED, judge, tally
 from sweep3d.stages.aggregate.rules import find_rules, rule_dict, rules_of
 from sweep3d.stages.aggregate.summary import named_rules, summarise
-from tests.test_aggregate_views import make_store
+from tests.helpers import make_store
 
 
 def planted(seed: int, n: int = 600, effect: bool = True) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from tests.conftest import write_cube
 from tests.doc_blocks import FURNITURE, Block, blocks, markers, tutorials
+from tests.helpers import write_cube
 
 #: Blocks that show something and run nothing: a command's output, a file's layout.
 SHOWN = {"text", "console", "csv", ""}

@@ -1,0 +1,239 @@
+"""A synthetic run for the realism tests: red and blue objects a tiny user model classifies by
+colour, its store with real PNG blobs, stand-ins for the kit's page tools, and the agreement
+expected by the textbook formulas. Tests import from here, never from one another."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import sys
+import types
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+import pytest
+from typer.testing import CliRunner
+
+from sweep3d.cache.blobs import sha256_bytes
+from sweep3d.cache.store import Store
+from sweep3d.cli import app
+from sweep3d.pixels import encode_png8
+from sweep3d.spec.columns import MODELS_METADATA, PARAMETERS_METADATA
+from sweep3d.stages.aggregate import connect
+from sweep3d.stages.aggregate.agreement import VERDICT_SCHEMA
+from tests.helpers import write_spec
+
+T0 = datetime(2024, 1, 1, tzinfo=timezone.utc)
+SIDE = 32
+SPEC = """\
+[experiment]
+name = "realism"
+seed = 5
+store = "store"
+
+[render]
+resolution = 32
+samples = 1
+denoise = false
+
+[model]
+name = "realism_model:redblue"
+batch_size = 4
+
+[[objects]]
+name = "apple"
+mesh = "cube.obj"
+labels = ["red"]
+
+[[objects]]
+name = "plum"
+mesh = "cube.obj"
+labels = ["blue"]
+
+[[environments]]
+name = "white"
+color = [1.0, 1.0, 1.0]
+
+[[environments]]
+name = "grey"
+color = [0.5, 0.5, 0.5]
+
+[[controls]]
+type = "orientation"
+yaw = [0, 90, 180]
+
+[policy]
+type = "grid"
+"""
+
+#: Red if the image's mean red exceeds its mean blue, else blue: logits ±20·(r − b) on pixels in [0, 1].
+MODEL = '''
+import torch
+from sweep3d.stages.infer import Classifier, Preprocess
+
+
+class RedBlue(torch.nn.Module):
+    def forward(self, x):
+        d = x[:, 0].mean(dim=(1, 2)) - x[:, 2].mean(dim=(1, 2))
+        return torch.stack([20 * d, -20 * d], dim=1)
+
+
+def redblue():
+    return Classifier(RedBlue().eval(), Preprocess(resize=32, crop=32, mean=(0.0, 0.0, 0.0), std=(1.0, 1.0, 1.0)),
+                      labels=["red", "blue"])
+'''
+LABELS = {"apple": "red", "plum": "blue"}
+YAWS = (0, 90, 180)
+ENVIRONMENTS = ("white", "grey")
+
+
+def job_colours(seed: int = 0, repeat: int = 3) -> list[dict[str, Any]]:
+    """Jobs (object × environment × yaw × ``repeat``) with a flat colour each: red and blue means a
+    few levels to tens of levels apart, either way round."""
+    rng = np.random.default_rng(seed)
+    jobs = []
+    for obj in LABELS:
+        for env in ENVIRONMENTS:
+            for yaw in YAWS:
+                for _ in range(repeat):
+                    r = int(rng.integers(60, 200))
+                    b = int(np.clip(r + rng.choice([-1, 1]) * rng.integers(2, 40), 0, 255))
+                    jobs.append({"object": obj, "environment": env, "orientation_yaw": yaw,
+                                 "rgb": (r, int(rng.integers(0, 255)), b)})
+    return jobs
+
+
+def image_of(rgb: tuple[int, int, int]) -> np.ndarray:
+    return np.broadcast_to(np.array(rgb, dtype=np.uint8), (SIDE, SIDE, 3)).copy()
+
+
+def redblue_row(pixels: np.ndarray, label: str) -> dict[str, Any]:
+    """What the test model's classification row says about ``pixels`` (8-bit), by numpy."""
+    x = pixels.astype(np.float32) / np.float32(255.0)
+    d = float(x[..., 0].mean() - x[..., 2].mean())
+    logits = np.array([20 * d, -20 * d])
+    p = np.exp(logits - logits.max())
+    p /= p.sum()
+    order = [0, 1] if logits[0] >= logits[1] else [1, 0]
+    names = ["red", "blue"]
+    truth = names.index(label)
+    return {"valid": True, "correct": order[0] == truth, "top1": order[0], "top1_label": names[order[0]],
+            "topk": order, "topk_labels": [names[i] for i in order], "topk_probs": [float(p[i]) for i in order],
+            "label_prob": float(p[truth]), "loss": float(-math.log(p[truth])), "correct_top5": True,
+            "label_ids": [truth]}
+
+
+def make_run(folder: Path, jobs: list[dict[str, Any]] | None = None,
+             rows: list[dict[str, Any]] | None = None) -> Path:
+    """A spec, its model module and a store as a finished run leaves them: a jobs file, image rows
+    with their PNG blobs, and predictions (``rows``: each job's prediction row; default the test
+    model's answer on its image). Returns the spec's path."""
+    (folder / "realism_model.py").write_text(MODEL)
+    spec = write_spec(folder, SPEC)
+    jobs = job_colours() if jobs is None else jobs
+    store = Store(folder / "store")
+    plan, images, predictions = [], [], []
+    for i, job in enumerate(jobs):
+        pixels = image_of(job["rgb"])
+        data = encode_png8(pixels)
+        key = f"{i:04x}" + "ab" * 30
+        store.blob_path(key).parent.mkdir(parents=True, exist_ok=True)
+        store.blob_path(key).write_bytes(data)
+        plan.append({"experiment": "realism", "job": i, "object": job["object"], "environment": job["environment"],
+                     "orientation_yaw": float(job["orientation_yaw"]), "render_key": key, "image_key": key,
+                     "pred_key": f"p{key}", "model": "realism_model:redblue"})
+        images.append({"image_key": key, "render_key": key, "valid": True, "seconds": 0.0, "created_at": T0,
+                       "sha256": sha256_bytes(data)})
+        row = redblue_row(pixels, LABELS[job["object"]]) if rows is None else rows[i]
+        predictions.append({"pred_key": f"p{key}", "image_key": key, "model": "realism_model:redblue",
+                            "model_digest": "d", "seconds": 0.0, "created_at": T0, **row})
+    table = pa.Table.from_pylist(plan).replace_schema_metadata(
+        {PARAMETERS_METADATA: json.dumps(["orientation_yaw"]).encode(),
+         MODELS_METADATA: json.dumps(["realism_model:redblue"]).encode()})
+    store.write_table_file(store.jobs_path("realism"), table)
+    store.append("images", images)
+    store.append("predictions", predictions)
+    return spec
+
+
+@dataclasses.dataclass(frozen=True)
+class StubShot:
+    job_id: str
+    render: str
+    edges: str
+    caption: str
+
+
+def stub_kit_tools(monkeypatch: pytest.MonkeyPatch) -> list[list[StubShot]]:
+    """Stand-ins for ``sweep3d.realism.edges`` and ``.align`` (built elsewhere); returns the
+    shots each ``write_align_page`` call got."""
+    calls: list[list[StubShot]] = []
+
+    def edge_image(rgb: np.ndarray) -> np.ndarray:
+        grey = rgb.astype(np.float32).mean(axis=2)
+        edge = np.abs(np.diff(grey, axis=1, prepend=grey[:, :1])) > 8
+        out = np.zeros((*rgb.shape[:2], 4), np.uint8)
+        out[edge] = (255, 0, 255, 255)
+        return out
+
+    def write_align_page(kit_dir: Path, shots) -> Path:
+        calls.append(list(shots))
+        page = kit_dir / "align.html"
+        page.write_text("".join(f"<img src='{s.render}'><img src='{s.edges}'>{s.job_id}\n" for s in shots))
+        return page
+
+    monkeypatch.setitem(sys.modules, "sweep3d.realism.edges", types.SimpleNamespace(edge_image=edge_image))
+    monkeypatch.setitem(sys.modules, "sweep3d.realism.align",
+                        types.SimpleNamespace(AlignShot=StubShot, write_align_page=write_align_page))
+    return calls
+
+
+def kit_files(folder: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def pick(spec: Path, out: Path, *extra: str) -> Any:
+    result = CliRunner().invoke(app, ["realism", "pick", str(spec), "-o", str(out), *extra])
+    return result
+
+
+T1 = datetime(2024, 2, 1, tzinfo=timezone.utc)
+
+
+def verdict(job: int, correct: bool, source: str = "photo", at: datetime = T1, valid: bool = True) -> dict[str, Any]:
+    row = {name: None for name in VERDICT_SCHEMA.names}
+    row.update(source=source, experiment="realism", job=job, model="realism_model:redblue", valid=valid,
+               correct=correct,
+               top1_label="red" if correct else "blue", created_at=at)
+    return row
+
+
+def hand(pairs: list[tuple[bool, bool]]) -> dict[str, Any]:
+    """Agreement, PPV, NPV and κ of (simulation, source) verdicts, by the textbook formulas."""
+    n = len(pairs)
+    agree = sum(a == b for a, b in pairs)
+    sim_right = [b for a, b in pairs if a]
+    sim_wrong = [b for a, b in pairs if not a]
+    p_sim = sum(a for a, _ in pairs) / n
+    p_src = sum(b for _, b in pairs) / n
+    expected = p_sim * p_src + (1 - p_sim) * (1 - p_src)
+    return {"n": n, "n_agree": agree, "agreement": agree / n,
+            "ppv": sum(sim_right) / len(sim_right) if sim_right else None,
+            "npv": sum(not b for b in sim_wrong) / len(sim_wrong) if sim_wrong else None,
+            "kappa": None if expected == 1 else (agree / n - expected) / (1 - expected)}
+
+
+def agreement_rows(folder: Path, experiment: str = "realism") -> list[dict[str, Any]]:
+    con = connect(Store(folder / "store"), experiment)
+    cursor = con.execute("SELECT * FROM agreement")
+    names = [d[0] for d in cursor.description]
+    return [dict(zip(names, r)) for r in cursor.fetchall()]
+
+
+def sim_verdicts() -> list[bool]:
+    return [redblue_row(image_of(j["rgb"]), LABELS[j["object"]])["correct"] for j in job_colours()]
+
