@@ -25,8 +25,8 @@ from rich.console import Console
 from rich.table import Table
 
 from sweep3d.spec.space import Point, SpaceShape
-from sweep3d.stages.aggregate.step_fit import fit_step
 from sweep3d.stages.plan.policies import BoundaryPolicy, GridPolicy, Outcome, Policy, RandomPolicy
+from sweep3d.stages.plan.step_fit import fit_step
 
 LOW, HIGH, THRESHOLD = 0.0, 60.0, 12.0
 SPACES = {"elevation": SpaceShape(1, ()), "+ nuisance": SpaceShape(2, (2,))}

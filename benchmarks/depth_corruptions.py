@@ -59,7 +59,7 @@ def fog_volume_control():
     """A rendered control whose ``edit`` fills a sphere around the camera with the fog medium."""
     from pydantic import Field
 
-    from sweep3d.controls import ControlParams
+    from sweep3d.core.control import ControlParams
     from sweep3d.stages.postprocess.controls.depth import airlight
     from sweep3d.stages.render.controls import RenderedControl
 
@@ -112,14 +112,14 @@ def fog_volume_control():
 def _render(mesh_by_object: dict[str, str], size: int, samples: int, physical: bool, out) -> None:
     """In a fresh process: per scene the pinhole render (with its depth pass; ``physical`` False)
     or each configuration's physical render; sends back images, depths, frames and seconds."""
-    from sweep3d.pixels import decode_png
-    from sweep3d.spec.assets import builtin_hdris
+    from sweep3d.assets.sources import builtin_hdris
+    from sweep3d.core.pixels import decode_png
+    from sweep3d.core.truth import decode_depth
     from sweep3d.stages.postprocess.frame import frame_from_state
     from sweep3d.stages.render.controls import RENDERED_CONTROLS
-    from sweep3d.stages.render.protocol import EnvironmentRef, RenderJob, RenderSettings
     from sweep3d.stages.render.scene import BlenderScene
     from sweep3d.stages.render.worker import posed_state, render_job
-    from sweep3d.truth import decode_depth
+    from sweep3d.stages.render.worker_protocol import EnvironmentRef, RenderJob, RenderSettings
 
     scratch = Path(tempfile.mkdtemp(prefix="depth-bench-"))
     quiet = os.open(os.devnull, os.O_WRONLY)
@@ -162,8 +162,8 @@ def main() -> None:
     parser.add_argument("--image", type=Path, default=None, help="write a side-by-side PNG (post | physical) here")
     args = parser.parse_args()
     import sweep3d
-    from sweep3d.spec.assets import materialise_mesh
-    from sweep3d.stages import builtin_catalogue as catalogue
+    from sweep3d.assets.sources import materialise_mesh
+    from sweep3d.engine import builtin_catalogue as catalogue
 
     folder = Path(tempfile.mkdtemp(prefix="depth-bench-"))
     spec = sweep3d.load(REPO / "specs" / "quickstart.toml").spec
@@ -216,7 +216,7 @@ def _side_by_side(path: Path, tiles: list[tuple[str, str, np.ndarray, np.ndarray
     """One row per effect: post-processed | physical render."""
     from PIL import Image
 
-    from sweep3d.pixels import to_uint8
+    from sweep3d.core.pixels import to_uint8
 
     gap = 4
     rows = [np.concatenate([post, np.ones((post.shape[0], gap, 3), np.float32), physical], axis=1)

@@ -24,12 +24,12 @@ VARIANTS = ("scalar_rgb", "llvm_ad_rgb")
 def _measure(variant: str, jobs: int, passes: tuple[str, ...], out) -> None:
     import sweep3d
     import sweep3d.stages.render.engines as engines
-    from sweep3d.spec.assets import builtin_hdris, materialise_mesh
+    from sweep3d.assets.sources import builtin_hdris, materialise_mesh
     from sweep3d.spec.models import KeyLightSpec
     from sweep3d.stages.render.controls import RENDERED_CONTROLS
     from sweep3d.stages.render.mitsuba.scene import MitsubaScene
-    from sweep3d.stages.render.protocol import EnvironmentRef, RenderJob, RenderSettings
     from sweep3d.stages.render.worker import render_job
+    from sweep3d.stages.render.worker_protocol import EnvironmentRef, RenderJob, RenderSettings
 
     engines.MITSUBA_VARIANT = variant
     spec = sweep3d.load(REPO / "specs" / "quickstart.toml").spec

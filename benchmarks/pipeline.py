@@ -128,7 +128,7 @@ BARE = textwrap.dedent("""
 
 def bare_loop(n: int, scratch: Path) -> dict:
     """Seconds of a bare bpy loop of ``n`` renders in one process (import + setup, loop)."""
-    from sweep3d.spec.assets import builtin_hdris
+    from sweep3d.assets.sources import builtin_hdris
 
     archive, member = MESH.split("#")
     started = time.perf_counter()
@@ -176,7 +176,7 @@ def pipeline(n: int, folder: Path) -> dict:
 
     import sweep3d
     from sweep3d.cache import store as store_module
-    from sweep3d.pipeline import run
+    from sweep3d.engine.pipeline import run
 
     io = {"seconds": 0.0}
 
@@ -210,10 +210,10 @@ def noop_rerun(n: int, folder: Path) -> dict:
     """Seconds for `sweep3d run` when all ``n`` jobs are cached (rows synthesised, blobs tiny)."""
     import sweep3d
     from sweep3d.cache.store import Store, atomic_write, utc_now
-    from sweep3d.pipeline import plan_spec
-    from sweep3d.pixels import encode_png
+    from sweep3d.core.pixels import encode_png
+    from sweep3d.engine.pipeline import plan_spec
     from sweep3d.stages.infer import ClassificationEvaluator
-    from sweep3d.stages.infer.stage import predictions_schema
+    from sweep3d.stages.infer.infer_stage import predictions_schema
 
     (folder / "cube.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
     spec = SPEC.replace(MESH, "cube.obj").replace('samples_per_dim = {n}', "").replace(
@@ -258,8 +258,8 @@ def quickstart_spec(folder: Path) -> Path:
 def bare_jobs(folder: Path) -> tuple[Path, int]:
     """The quickstart's distinct renders as the bare loop's input (world, object, pose order)."""
     import sweep3d
-    from sweep3d.pipeline import plan_spec
-    from sweep3d.spec.assets import materialise_mesh
+    from sweep3d.assets.sources import materialise_mesh
+    from sweep3d.engine.pipeline import plan_spec
     from sweep3d.stages.render import render_settings
 
     plan = plan_spec(sweep3d.load(quickstart_spec(folder)).spec)
@@ -322,9 +322,9 @@ def stage_multi(folder: Path) -> dict:
     """Seconds of sweep3d's render stage over the quickstart on a fresh store, and worker memory."""
     import sweep3d
     from sweep3d.cache.store import Store
-    from sweep3d.pipeline import plan_spec
-    from sweep3d.progress import RunProgress
-    from sweep3d.stages.driver import run_stage
+    from sweep3d.driver.loop import run_stage
+    from sweep3d.driver.progress import RunProgress
+    from sweep3d.engine.pipeline import plan_spec
     from sweep3d.stages.render import RenderStage
 
     plan = plan_spec(sweep3d.load(quickstart_spec(folder)).spec)
@@ -353,9 +353,9 @@ def infer_alone(stage: dict, folder: Path) -> float:
     """Seconds of the postprocess and inference stages alone over the stage's renders (the model
     loaded first, as a run's is before its renders end): sweep3d's image path."""
     import sweep3d
-    from sweep3d.pipeline import plan_spec
-    from sweep3d.progress import RunProgress
-    from sweep3d.stages.driver import run_stages
+    from sweep3d.driver.loop import run_stages
+    from sweep3d.driver.progress import RunProgress
+    from sweep3d.engine.pipeline import plan_spec
     from sweep3d.stages.infer import InferStage, ModelHandle
     from sweep3d.stages.postprocess import ImageHandoff, PostprocessStage
 
@@ -396,7 +396,7 @@ def agreement(bare: dict, stage: dict) -> tuple[float, float]:
     more than 2 levels apart (edges against a plain background are blended differently)."""
     from PIL import Image
 
-    from sweep3d.pixels import decode_png
+    from sweep3d.core.pixels import decode_png
 
     means, far = [], []
     backgrounds = {job["key"]: bare["environments"][job["environment"]]["color"] for job in bare["jobs"]}

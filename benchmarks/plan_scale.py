@@ -93,7 +93,7 @@ print("MAXRSS", usage.ru_maxrss, code, usage.ru_utime + usage.ru_stime, file=sys
 #: Times make_plan (and the jobs table it writes) in a fresh child, apart from start-up.
 IN_PROCESS = """
 import json, resource, sys, time
-from sweep3d.pipeline import plan_spec
+from sweep3d.engine.pipeline import plan_spec
 import sweep3d
 spec = sweep3d.load(sys.argv[1]).spec
 t, c = time.perf_counter(), time.process_time()
@@ -157,11 +157,11 @@ def synthesise_store(folder: Path, jobs: int) -> None:
     import sweep3d
     from sweep3d.cache.blobs import sha256_bytes
     from sweep3d.cache.store import DIGEST_COLUMN, Store, utc_now
-    from sweep3d.pipeline import plan_spec
-    from sweep3d.pixels import encode_png
+    from sweep3d.core.pixels import encode_png
+    from sweep3d.engine.pipeline import plan_spec
     from sweep3d.stages.infer import ClassificationEvaluator
-    from sweep3d.stages.infer.stage import predictions_schema
-    from sweep3d.stages.render.stage import RENDERS_SCHEMA
+    from sweep3d.stages.infer.infer_stage import predictions_schema
+    from sweep3d.stages.render.render_stage import RENDERS_SCHEMA
 
     (folder / "cube.obj").write_text(CUBE)
     (folder / "spec.toml").write_text(noop_spec(jobs))
@@ -195,7 +195,7 @@ QUERY = """
 import json, sys, time
 from sweep3d.cache.store import Store
 import sweep3d
-from sweep3d.stages.aggregate import connect
+from sweep3d.results import connect
 spec = sweep3d.load("spec.toml").spec
 t = time.perf_counter()
 con = connect(Store(spec.store), spec.name, read_only=True)
@@ -203,14 +203,14 @@ opened = time.perf_counter() - t
 t = time.perf_counter()
 rows = con.execute(sys.argv[1]).fetchall()
 queried = time.perf_counter() - t
-from sweep3d.stages.aggregate import summarise
-from sweep3d.stages.aggregate.views import stored_parameters
+from sweep3d.results import summarise
+from sweep3d.results.views import stored_parameters
 columns = stored_parameters(Store(spec.store).jobs_path(spec.name))
 t, c = time.perf_counter(), time.process_time()
 summarise(connect(Store(spec.store), spec.name), columns)
 summary, summary_cpu = time.perf_counter() - t, time.process_time() - c
 try:  # what `run` prints its findings from (absent in older checkouts)
-    from sweep3d.stages.aggregate import stored_summary
+    from sweep3d.results import stored_summary
 except ImportError:
     stored = None
 else:

@@ -55,7 +55,7 @@ samples_per_dim = {per_scene}
 
 def render_rate(folder: Path, renders: int, executor, workers: int) -> float:
     import sweep3d
-    from sweep3d.pipeline import run
+    from sweep3d.engine.pipeline import run
 
     folder.mkdir(parents=True)
     (folder / "spec.toml").write_text(SPEC.replace("{per_scene}", str(renders // 2)))
@@ -72,7 +72,7 @@ def render_rate(folder: Path, renders: int, executor, workers: int) -> float:
 def main() -> None:
     import ray
 
-    from sweep3d.stages.render.stage import LOCAL, Executor
+    from sweep3d.stages.render.render_stage import LOCAL, Executor
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--renders", type=int, default=24)

@@ -10,8 +10,8 @@ fill the gallery and redraw the heat map.
 
     .venv/bin/python benchmarks/report_scale.py [--results 10000 100000 1000000] [--repeat 3]
 
-:func:`build_store` is also used by the report's tests (``tests/test_report_scale.py``,
-``tests/test_report_explorer.py``).
+:func:`build_store` is also used by the report's tests (``tests/report/test_report_scale.py``,
+``tests/report/test_report_explorer.py``).
 """
 
 from __future__ import annotations

@@ -23,7 +23,7 @@ import duckdb
 import pandas as pd
 
 import sweep3d
-from sweep3d.stages.aggregate.compare import create_mcnemar
+from sweep3d.results.compare import create_mcnemar
 
 
 def variant(spec: Path, resolution: str | int, store: Path) -> sweep3d.Experiment:

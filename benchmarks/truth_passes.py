@@ -36,11 +36,11 @@ CONFIGS = [  # (name, passes, occlusion coverage, position x)
 
 
 def _measure(mesh: str, passes: tuple[str, ...], coverage: float, x: float, jobs: int, out) -> None:
-    from sweep3d.spec.assets import builtin_hdris
+    from sweep3d.assets.sources import builtin_hdris
     from sweep3d.stages.render.controls import RENDERED_CONTROLS
-    from sweep3d.stages.render.protocol import EnvironmentRef, RenderJob, RenderSettings
     from sweep3d.stages.render.scene import BlenderScene
     from sweep3d.stages.render.worker import render_job
+    from sweep3d.stages.render.worker_protocol import EnvironmentRef, RenderJob, RenderSettings
 
     scratch = Path(tempfile.mkdtemp(prefix="truth-bench-"))
     scene = BlenderScene(RenderSettings(resolution=256, crop=224, samples=4, denoise=True, threads=2,
@@ -70,12 +70,12 @@ def main() -> None:
     args = parser.parse_args()
     folder = Path(tempfile.mkdtemp(prefix="truth-bench-"))
     if args.cube:
-        from tests.conftest import write_cube
+        from tests.helpers import write_cube
 
         mesh = str(write_cube(folder))
     else:
         import sweep3d
-        from sweep3d.spec.assets import materialise_mesh
+        from sweep3d.assets.sources import materialise_mesh
 
         spec = sweep3d.load(REPO / "specs" / "quickstart.toml").spec
         name = spec.objects[0].name

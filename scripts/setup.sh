@@ -27,7 +27,7 @@ command -v "$python" >/dev/null 2>&1 || python=python3
 # The CPU build of torch first (an unpinned torch would pull a multi-GB CUDA build).
 .venv/bin/python -m pip install -q "torch==2.13.0"
 if [ "$with_test" = 1 ]; then
-  .venv/bin/python -m pip install -q -e ".[test,docs]"  # docs: tests/test_docs_site.py builds the site
+  .venv/bin/python -m pip install -q -e ".[test,docs]"  # docs: tests/docs/test_docs_site.py builds the site
 else
   .venv/bin/python -m pip install -q -e .
 fi

@@ -12,7 +12,7 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
-from sweep3d.errors import PluginError, SpecError, UserError
+from sweep3d.core import PluginError, SpecError, UserError
 
 __version__ = "0.1.0"
 __all__ = ["Experiment", "PluginError", "SpecError", "UserError", "load", "plugins"]

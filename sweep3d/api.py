@@ -11,10 +11,10 @@
     exp.explain(budget=200)     # the nearest fix of each failure (a seeded sample within the budget)
 
 The command line is a thin layer over this module: ``run``, ``query`` and ``report`` call the same
-functions, so both raise the same one-line :class:`~sweep3d.errors.UserError` for a user's mistake.
+functions, so both raise the same one-line :class:`~sweep3d.core.errors.UserError` for a user's mistake.
 What they read is the spec's own results: when the experiment last ran another version of the
 spec, the jobs are this one's, with a warning for those that have no result yet (see
-:mod:`sweep3d.stages.aggregate.own_jobs`).
+:mod:`sweep3d.results.own_jobs`).
 Importing it imports neither bpy nor torch.
 """
 
@@ -24,19 +24,18 @@ import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal, Mapping, Union, overload
 
-from sweep3d.errors import UserError
+from sweep3d.core import UserError
 
 if TYPE_CHECKING:
     import pandas
     import pyarrow as pa
     from rich.console import Console
 
-    from sweep3d.confirm.run import ConfirmResult
-    from sweep3d.explain.driver import ExplainResult
+    from sweep3d.confirm import ConfirmResult
+    from sweep3d.engine import PlanStatus, RunResult
+    from sweep3d.explain import ExplainResult
     from sweep3d.export import ExportResult
-    from sweep3d.pipeline import RunResult
-    from sweep3d.plan_status import PlanStatus
-    from sweep3d.spec.loader import LoadedSpec
+    from sweep3d.spec import LoadedSpec
 
 #: A spec: a file's path, TOML text (a string holding a newline or starting with ``[``) or a dict.
 SpecSource = Union[str, Path, Mapping[str, Any]]
@@ -86,7 +85,7 @@ class Experiment:
         """The plans of the spec's models and, per stage, the keys needed, cached and to compute with
         an estimate of the time (what ``sweep3d plan`` prints); ``.jobs`` and ``.table()`` are the
         first model's jobs (``.plans`` has every model's). Nothing is rendered."""
-        from sweep3d.plan_status import plan_status
+        from sweep3d.engine import plan_status
 
         return plan_status(self.spec)
 
@@ -95,7 +94,7 @@ class Experiment:
         """Render, postprocess and infer what the store lacks; resumable, like ``sweep3d run``.
 
         Args:
-            progress: show progress bars (the returned :class:`~sweep3d.pipeline.RunResult` holds the
+            progress: show progress bars (the returned :class:`~sweep3d.engine.pipeline.RunResult` holds the
                 stages' outcomes; ``sweep3d run`` prints them).
             wait: seconds to wait for another run holding the store's lock.
             executor: where renders run, ``local`` worker processes or ``ray``.
@@ -104,8 +103,8 @@ class Experiment:
         """
         from rich.console import Console
 
-        from sweep3d.pipeline import run as run_pipeline
-        from sweep3d.stages.render.stage import Executor
+        from sweep3d.engine import run as run_pipeline
+        from sweep3d.stages.render import Executor
 
         check_wait(wait)
         if executor not in EXECUTORS:
@@ -120,7 +119,7 @@ class Experiment:
         renders cached, the results in the ``counterfactuals`` view (:meth:`counterfactuals`)."""
         from rich.console import Console
 
-        from sweep3d.explain.driver import explain_spec, print_explained
+        from sweep3d.explain import explain_spec, print_explained
 
         check_wait(wait)
         console = console or (Console() if progress else None)
@@ -148,7 +147,7 @@ class Experiment:
             pandas: return a pandas DataFrame instead of a pyarrow Table: integer columns as
                 nullable integer dtypes (``Int64``: a missing value stays ``<NA>``, not a float NaN).
         """
-        from sweep3d.stages.aggregate.sql import arrow, results_connection, select_only
+        from sweep3d.results import arrow, results_connection, select_only
 
         statement = select_only(query, "read the rows and write them with pyarrow or pandas")
         with results_connection(self.spec, model, statement=statement) as con:
@@ -188,8 +187,8 @@ class Experiment:
         the findings and the report."""
         from rich.console import Console
 
-        from sweep3d.confirm.run import confirm
-        from sweep3d.stages.aggregate.confirmation import DEFAULT_RENDERS
+        from sweep3d.confirm import confirm
+        from sweep3d.results import DEFAULT_RENDERS
 
         return confirm(self.spec, renders or DEFAULT_RENDERS, seed, Console() if progress else None)
 
@@ -226,7 +225,7 @@ def _pandas() -> Any:
 def unset_parameters(spec: LoadedSpec) -> list[str]:
     """The columns of control parameters ``spec`` does not set: the planner records their
     defaults, so that a job's row says everything that made its image."""
-    from sweep3d.spec.columns import parameter_column
+    from sweep3d.spec import parameter_column
 
     listed = set(spec.parameter_columns)
     return [column for inst in spec.controls for param in inst.control.Params.model_fields
@@ -260,7 +259,7 @@ def check_wait(seconds: float) -> float:
 
 def _load_spec(spec: SpecSource, base: str | Path | None) -> LoadedSpec:
     """Load ``spec`` from wherever it comes, against the built-in plug-ins."""
+    from sweep3d.engine import builtin_catalogue
     from sweep3d.spec import read_spec
-    from sweep3d.stages import builtin_catalogue
 
     return read_spec(spec, builtin_catalogue(), base)

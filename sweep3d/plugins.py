@@ -19,11 +19,11 @@ __all__ = ["Classifier", "ControlParams", "Detector", "Evaluator", "EvaluatorPar
 # stays light and free of cycles.
 from typing import TYPE_CHECKING as _TYPE_CHECKING  # noqa: E402
 
-from sweep3d.lazy import exports as _exports  # noqa: E402
+from sweep3d.core import exports as _exports  # noqa: E402
 
 if _TYPE_CHECKING:
-    from sweep3d.controls import ControlParams, SpecPath
-    from sweep3d.spec.space import Point, SpaceShape
+    from sweep3d.core import ControlParams, SpecPath
+    from sweep3d.spec import Point, SpaceShape
     from sweep3d.stages.infer import (
         Classifier,
         Detector,
@@ -33,18 +33,15 @@ if _TYPE_CHECKING:
         Preprocess,
         Roles,
         Segmenter,
+        Truth,
     )
-    from sweep3d.stages.infer.evaluators import Truth
-    from sweep3d.stages.plan.policies import Outcome, Policy, PolicyParams
-    from sweep3d.stages.postprocess import PostControl
-    from sweep3d.stages.postprocess.frame import RenderFrame
-    from sweep3d.stages.render.controls import RenderedControl
-    from sweep3d.stages.render.scene_edit import SceneEdit
-    from sweep3d.stages.render.state import SceneState
+    from sweep3d.stages.plan import Outcome, Policy, PolicyParams
+    from sweep3d.stages.postprocess import PostControl, RenderFrame
+    from sweep3d.stages.render import RenderedControl, SceneEdit, SceneState
 
 __getattr__, __dir__ = _exports(__name__, {
     'Classifier': ('sweep3d.stages.infer', 'Classifier'),
-    'ControlParams': ('sweep3d.controls', 'ControlParams'),
+    'ControlParams': ('sweep3d.core.control', 'ControlParams'),
     'Detector': ('sweep3d.stages.infer', 'Detector'),
     'Evaluator': ('sweep3d.stages.infer', 'Evaluator'),
     'EvaluatorParams': ('sweep3d.stages.infer', 'EvaluatorParams'),
@@ -62,6 +59,6 @@ __getattr__, __dir__ = _exports(__name__, {
     'SceneState': ('sweep3d.stages.render.state', 'SceneState'),
     'Segmenter': ('sweep3d.stages.infer', 'Segmenter'),
     'SpaceShape': ('sweep3d.spec.space', 'SpaceShape'),
-    'SpecPath': ('sweep3d.controls', 'SpecPath'),
+    'SpecPath': ('sweep3d.core.control', 'SpecPath'),
     'Truth': ('sweep3d.stages.infer.evaluators', 'Truth'),
 })

@@ -258,7 +258,7 @@ def _one_onnx_export_per_model(tmp_path_factory):
 def chromium():
     """One headless Chromium per test process (the system's, ``/usr/bin/chromium``, driven by Playwright);
     each page opens in a fresh browser context (its own cookies, storage and cache), see
-    ``tests.test_report.open_page``. Skips the test where Chromium or Playwright is missing."""
+    ``tests.report.test_report.open_page``. Skips the test where Chromium or Playwright is missing."""
     if not CHROMIUM.exists():
         pytest.skip(f"headless Chromium not found at {CHROMIUM}; install it with: apt-get install chromium")
     sync_api = pytest.importorskip("playwright.sync_api", reason="the playwright package is not installed")
@@ -310,8 +310,8 @@ def tiny_copy(tiny_run: Path, tmp_path: Path) -> Path:
 def blender_scene(tmp_path_factory):
     """One Blender scene per test session (bpy holds one scene per process), 32×32, 1 sample,
     with ``.cube`` the path of a cube mesh. Tests call ``prepare`` for the object they need."""
-    from sweep3d.stages.render.protocol import RenderSettings
     from sweep3d.stages.render.scene import BlenderScene
+    from sweep3d.stages.render.worker_protocol import RenderSettings
 
     folder = tmp_path_factory.mktemp("scene")
     scene = BlenderScene(RenderSettings(resolution=32, samples=1, denoise=False), folder)

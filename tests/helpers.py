@@ -26,29 +26,28 @@ from hypothesis import strategies as st
 from PIL import Image
 
 import sweep3d
+from sweep3d.assets.sources import blender_version
 from sweep3d.cache.blobs import sha256_bytes
-from sweep3d.cache.keys import digest
+from sweep3d.cache.hashing import digest
 from sweep3d.cache.store import DIGEST_COLUMN, Store, atomic_write, segment_name, utc_now
-from sweep3d.pipeline import plan_spec, plans_as_run, write_jobs
-from sweep3d.pixels import encode_png
+from sweep3d.core.pixels import encode_png
+from sweep3d.core.truth import encode_mask
+from sweep3d.driver import Plan
+from sweep3d.engine import builtin_catalogue
+from sweep3d.engine.pipeline import plan_spec, plans_as_run, write_jobs
 from sweep3d.report import image_keys
 from sweep3d.report.panels import CORE_PANELS
-from sweep3d.spec.assets import blender_version
+from sweep3d.results import connect
+from sweep3d.results.task_views import OUTCOMES
 from sweep3d.spec.columns import PARAMETERS_METADATA
 from sweep3d.spec.framing import Framing
 from sweep3d.spec.space import SearchSpace
-from sweep3d.stages import builtin_catalogue
-from sweep3d.stages.aggregate import (
-    connect,
-)
-from sweep3d.stages.aggregate.tasks import OUTCOMES
-from sweep3d.stages.infer.keys import infer_base, pred_key
-from sweep3d.stages.plan import Plan, make_plan
-from sweep3d.stages.postprocess.keys import image_key
-from sweep3d.stages.render.keys import parts_key, render_key, scene_key
-from sweep3d.stages.render.protocol import EnvironmentRef
+from sweep3d.stages.infer.prediction_keys import infer_base, pred_key
+from sweep3d.stages.plan import make_plan
+from sweep3d.stages.postprocess.image_keys import image_key
+from sweep3d.stages.render.render_keys import parts_key, render_key, scene_key
 from sweep3d.stages.render.state import SceneState, in_frame
-from sweep3d.truth import encode_mask
+from sweep3d.stages.render.worker_protocol import EnvironmentRef
 
 # --- definitions ---
 
@@ -56,8 +55,8 @@ from sweep3d.truth import encode_mask
 def load_spec(source, plugins=None):
     """The :class:`~sweep3d.spec.LoadedSpec` of ``source`` (a path, TOML text or a dict) against
     the built-in plug-ins (or the catalogue ``plugins``): what ``sweep3d.load(source).spec`` is."""
+    from sweep3d.engine import builtin_catalogue
     from sweep3d.spec import read_spec
-    from sweep3d.stages import builtin_catalogue
 
     return read_spec(source, plugins or builtin_catalogue())
 
@@ -188,7 +187,7 @@ type = "grid"
 
 
 #: Post-processed images written to the store (the default makes them in memory): the tests of
-#: damaged, missing and verified blobs have image blobs to damage (tests/test_image_store.py
+#: damaged, missing and verified blobs have image blobs to damage (tests/cache/test_image_store.py
 #: checks that both ways give the same results).
 STORE_ALL = """
 [postprocess]
@@ -386,7 +385,7 @@ def render(scene, mesh: str, env: EnvironmentRef, controls: list[tuple[str, dict
 # from test_plugin_code.py
 SCENE_CONTROL = '''
 from pydantic import Field
-from sweep3d.controls import ControlParams
+from sweep3d.core.control import ControlParams
 from sweep3d.stages.render import RenderedControl
 
 RED = (1.0, 0.0, 0.0, 1.0)
@@ -560,7 +559,7 @@ def write_scale_spec(folder: Path, results: int) -> Path:
 def synthetic_tables(experiment: str, results: int, seed: int) -> tuple[pa.Table, pa.Table]:
     """The jobs table and the predictions table of ``results`` synthetic results, built column-wise."""
     from sweep3d.stages.infer.evaluators import ClassificationEvaluator
-    from sweep3d.stages.infer.stage import predictions_schema
+    from sweep3d.stages.infer.infer_stage import predictions_schema
 
     rng = np.random.default_rng(seed)
     index = np.arange(results)
@@ -704,7 +703,7 @@ def screenshot_panels(page: Any, prefix: str) -> None:
 def reference_jobs(spec, *, framing: Framing, model_digest: str, blender: str) -> list[tuple]:
     """The jobs of ``spec`` as the planner made them job by job: (index, object, environment,
     values, render, image, pred, point, parts, in frame)."""
-    from sweep3d.spec.assets import mesh_digest
+    from sweep3d.assets.sources import mesh_digest
 
     rendered = sorted((c for c in spec.controls if c.control.stage == "render"),
                       key=lambda c: (c.control.order, spec.controls.index(c)))

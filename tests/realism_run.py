@@ -21,10 +21,10 @@ from typer.testing import CliRunner
 from sweep3d.cache.blobs import sha256_bytes
 from sweep3d.cache.store import Store
 from sweep3d.cli import app
-from sweep3d.pixels import encode_png8
+from sweep3d.core.pixels import encode_png8
+from sweep3d.results import connect
+from sweep3d.results.agreement import VERDICT_SCHEMA
 from sweep3d.spec.columns import MODELS_METADATA, PARAMETERS_METADATA
-from sweep3d.stages.aggregate import connect
-from sweep3d.stages.aggregate.agreement import VERDICT_SCHEMA
 from tests.helpers import write_spec
 
 T0 = datetime(2024, 1, 1, tzinfo=timezone.utc)

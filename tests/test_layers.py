@@ -13,8 +13,8 @@ from pathlib import Path
 import pyarrow as pa
 
 from sweep3d.cache.store import Store
+from sweep3d.results import connect
 from sweep3d.spec.columns import PARAMETERS_METADATA
-from sweep3d.stages.aggregate import connect
 from tests.helpers import REPO, TINY_SPEC, write_spec
 
 
@@ -26,7 +26,7 @@ def _modules_after(code: str) -> set[str]:
 
 
 def test_spec_and_cache_import_no_stage_module() -> None:
-    loaded = _modules_after("import sweep3d.spec, sweep3d.cache, sweep3d.controls, sweep3d.registry")
+    loaded = _modules_after("import sweep3d.spec, sweep3d.cache, sweep3d.core.control, sweep3d.core.registry")
     assert not {m for m in loaded if m.startswith("sweep3d.stages")}, "spec/cache must not depend on a stage"
     assert not {"bpy", "torch"} & loaded
 
@@ -34,7 +34,7 @@ def test_spec_and_cache_import_no_stage_module() -> None:
 def test_loading_and_planning_import_neither_blender_nor_torch(tmp_path: Path) -> None:
     spec = write_spec(tmp_path, TINY_SPEC)
     loaded = _modules_after(f"""
-        from sweep3d.pipeline import plan_spec
+        from sweep3d.engine.pipeline import plan_spec
         from tests.helpers import load_spec
         plan = plan_spec(load_spec({str(spec)!r}))
         assert len(plan.jobs) == 8

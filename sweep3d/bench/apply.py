@@ -6,7 +6,7 @@ from pathlib import Path
 
 import tomlkit
 
-from sweep3d.bench.measure import Setting
+from sweep3d.bench.measurement import Setting
 
 
 def apply_setting(spec_path: Path, setting: Setting, spec_resolution: int | str) -> None:

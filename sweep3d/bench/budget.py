@@ -13,11 +13,11 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
-from sweep3d.bench.measure import ROUNDS, Setting
-from sweep3d.errors import UserError
-from sweep3d.spec.loader import LoadedSpec
-from sweep3d.stages.plan import Plan
-from sweep3d.stages.render.estimate import duration, estimate_render_seconds
+from sweep3d.bench.measurement import ROUNDS, Setting
+from sweep3d.core import UserError
+from sweep3d.driver import Plan
+from sweep3d.spec import LoadedSpec
+from sweep3d.stages.render import duration, estimate_render_seconds
 
 #: Per job and setting, besides the render: postprocessing and inference (2 CPU cores).
 IMAGE_SECONDS = 0.055
@@ -114,7 +114,7 @@ def render_costs(loaded: LoadedSpec, settings: Sequence[Setting], model_crop: in
 
 def budget_chooser(loaded: LoadedSpec, settings: Sequence[Setting], minutes: float,
                    report: Callable[[BudgetChoice], None]) -> Callable[[Plan], int]:
-    """For :func:`sweep3d.bench.measure.measure`: picks the jobs from the reference's plan (its
+    """For :func:`sweep3d.bench.measurement.measure`: picks the jobs from the reference's plan (its
     scenes and distinct renders) for ``settings`` (references included) and ``report`` s the choice."""
     check_budget(minutes)
 

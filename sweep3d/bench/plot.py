@@ -6,8 +6,8 @@ from pathlib import Path
 
 import plotly.graph_objects as go
 
-from sweep3d.bench.measure import BenchRow, pareto
-from sweep3d.cache.store import atomic_write
+from sweep3d.bench.measurement import BenchRow, pareto
+from sweep3d.cache import atomic_write
 
 
 def write_pareto_plot(rows: list[BenchRow], recommended: BenchRow | None, path: Path, title: str) -> Path:

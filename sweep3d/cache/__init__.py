@@ -2,24 +2,114 @@
 
 from __future__ import annotations
 
-__all__ = ["SegmentWriter", "Store", "StoreWriteError", "canonical", "digest", "file_digest", "files_digest"]
+__all__ = [
+    "ASSETS_FOLDER", "BLOB_TABLES", "DIGEST_COLUMN", "Hole", "KEY_COLUMN", "MANIFEST", "MIN_JOBS",
+    "OUTPUTS_FOLDER", "SUFFIX", "SegmentWriter", "Store", "StoreWriteError", "TABLES", "TRUTH_BLOBS",
+    "Template", "atomic_write", "canonical", "canonical_pieces", "collect_garbage", "compact_table",
+    "damaged_blobs", "digest", "digests", "file_digest", "files_digest", "float_texts",
+    "full_disk_error", "is_full_disk", "is_select", "load_image", "load_pass", "lock_down", "members",
+    "pack", "read_manifest", "record", "remember_written", "remove_killed_writers_temp_files",
+    "repair", "safe_filename", "sha256_bytes", "skip_pandas_probe", "stale", "store_stats", "unpack",
+    "utc_now", "verify", "written_from"
+]
 
 # Lazy exports (PEP 562): a name's module is imported when first used, so importing this package
 # stays light and free of cycles.
 from typing import TYPE_CHECKING as _TYPE_CHECKING  # noqa: E402
 
-from sweep3d.lazy import exports as _exports  # noqa: E402
+from sweep3d.core import exports as _exports  # noqa: E402
 
 if _TYPE_CHECKING:
-    from sweep3d.cache.keys import canonical, digest, file_digest, files_digest
-    from sweep3d.cache.store import SegmentWriter, Store, StoreWriteError
+    from sweep3d.cache.blobs import damaged_blobs, load_image, load_pass, sha256_bytes
+    from sweep3d.cache.digested import OUTPUTS_FOLDER, SUFFIX, pack, unpack
+    from sweep3d.cache.extracted import ASSETS_FOLDER, MANIFEST, members, read_manifest, record, stale
+    from sweep3d.cache.hashing import (
+        Hole,
+        Template,
+        canonical,
+        canonical_pieces,
+        digest,
+        digests,
+        file_digest,
+        files_digest,
+        float_texts,
+    )
+    from sweep3d.cache.maintenance import (
+        collect_garbage,
+        compact_table,
+        remove_killed_writers_temp_files,
+        repair,
+        store_stats,
+        verify,
+    )
+    from sweep3d.cache.pandas_probe import skip_pandas_probe
+    from sweep3d.cache.snapshot import MIN_JOBS
+    from sweep3d.cache.store import (
+        BLOB_TABLES,
+        DIGEST_COLUMN,
+        KEY_COLUMN,
+        TABLES,
+        TRUTH_BLOBS,
+        SegmentWriter,
+        Store,
+        StoreWriteError,
+        atomic_write,
+        full_disk_error,
+        is_full_disk,
+        is_select,
+        lock_down,
+        safe_filename,
+        utc_now,
+    )
+    from sweep3d.cache.written import remember_written, written_from
 
 __getattr__, __dir__ = _exports(__name__, {
-    'SegmentWriter': ('sweep3d.cache.store', 'SegmentWriter'),
-    'Store': ('sweep3d.cache.store', 'Store'),
-    'StoreWriteError': ('sweep3d.cache.store', 'StoreWriteError'),
-    'canonical': ('sweep3d.cache.keys', 'canonical'),
-    'digest': ('sweep3d.cache.keys', 'digest'),
-    'file_digest': ('sweep3d.cache.keys', 'file_digest'),
-    'files_digest': ('sweep3d.cache.keys', 'files_digest'),
+    "ASSETS_FOLDER": ("sweep3d.cache.extracted", "ASSETS_FOLDER"),
+    "BLOB_TABLES": ("sweep3d.cache.store", "BLOB_TABLES"),
+    "DIGEST_COLUMN": ("sweep3d.cache.store", "DIGEST_COLUMN"),
+    "Hole": ("sweep3d.cache.hashing", "Hole"),
+    "KEY_COLUMN": ("sweep3d.cache.store", "KEY_COLUMN"),
+    "MANIFEST": ("sweep3d.cache.extracted", "MANIFEST"),
+    "MIN_JOBS": ("sweep3d.cache.snapshot", "MIN_JOBS"),
+    "OUTPUTS_FOLDER": ("sweep3d.cache.digested", "OUTPUTS_FOLDER"),
+    "SUFFIX": ("sweep3d.cache.digested", "SUFFIX"),
+    "SegmentWriter": ("sweep3d.cache.store", "SegmentWriter"),
+    "Store": ("sweep3d.cache.store", "Store"),
+    "StoreWriteError": ("sweep3d.cache.store", "StoreWriteError"),
+    "TABLES": ("sweep3d.cache.store", "TABLES"),
+    "TRUTH_BLOBS": ("sweep3d.cache.store", "TRUTH_BLOBS"),
+    "Template": ("sweep3d.cache.hashing", "Template"),
+    "atomic_write": ("sweep3d.cache.store", "atomic_write"),
+    "canonical": ("sweep3d.cache.hashing", "canonical"),
+    "canonical_pieces": ("sweep3d.cache.hashing", "canonical_pieces"),
+    "collect_garbage": ("sweep3d.cache.maintenance", "collect_garbage"),
+    "compact_table": ("sweep3d.cache.maintenance", "compact_table"),
+    "damaged_blobs": ("sweep3d.cache.blobs", "damaged_blobs"),
+    "digest": ("sweep3d.cache.hashing", "digest"),
+    "digests": ("sweep3d.cache.hashing", "digests"),
+    "file_digest": ("sweep3d.cache.hashing", "file_digest"),
+    "files_digest": ("sweep3d.cache.hashing", "files_digest"),
+    "float_texts": ("sweep3d.cache.hashing", "float_texts"),
+    "full_disk_error": ("sweep3d.cache.store", "full_disk_error"),
+    "is_full_disk": ("sweep3d.cache.store", "is_full_disk"),
+    "is_select": ("sweep3d.cache.store", "is_select"),
+    "load_image": ("sweep3d.cache.blobs", "load_image"),
+    "load_pass": ("sweep3d.cache.blobs", "load_pass"),
+    "lock_down": ("sweep3d.cache.store", "lock_down"),
+    "members": ("sweep3d.cache.extracted", "members"),
+    "pack": ("sweep3d.cache.digested", "pack"),
+    "read_manifest": ("sweep3d.cache.extracted", "read_manifest"),
+    "record": ("sweep3d.cache.extracted", "record"),
+    "remember_written": ("sweep3d.cache.written", "remember_written"),
+    "remove_killed_writers_temp_files": ("sweep3d.cache.maintenance", "remove_killed_writers_temp_files"),
+    "repair": ("sweep3d.cache.maintenance", "repair"),
+    "safe_filename": ("sweep3d.cache.store", "safe_filename"),
+    "sha256_bytes": ("sweep3d.cache.blobs", "sha256_bytes"),
+    "skip_pandas_probe": ("sweep3d.cache.pandas_probe", "skip_pandas_probe"),
+    "stale": ("sweep3d.cache.extracted", "stale"),
+    "store_stats": ("sweep3d.cache.maintenance", "store_stats"),
+    "unpack": ("sweep3d.cache.digested", "unpack"),
+    "utc_now": ("sweep3d.cache.store", "utc_now"),
+    "verify": ("sweep3d.cache.maintenance", "verify"),
+    "written_from": ("sweep3d.cache.written", "written_from"),
 })

@@ -27,15 +27,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 
 from sweep3d.cache.key_join import positions, sorted_keys
-from sweep3d.cache.store import (
-    DIGEST_COLUMN,
-    KEY_COLUMN,
-    READ_ERRORS,
-    Store,
-    StoreReadError,
-    read_parquet,
-    store_error,
-)
+from sweep3d.cache.store import DIGEST_COLUMN, KEY_COLUMN, READ_ERRORS, Store, StoreReadError, read_parquet, store_error
 
 #: Columns of a ``verified/<table>.parquet`` memo: a blob's key, its file state when it was last
 #: hashed, and the digest it had then.
@@ -57,7 +49,7 @@ def blob_is_intact(data: bytes, digests: set[str]) -> bool:
 
 def decode_image(data: bytes) -> np.ndarray | None:
     """PNG bytes as float32 (H, W, 3) in [0, 1], or None when they do not decode."""
-    from sweep3d.pixels import decode_png
+    from sweep3d.core import decode_png
 
     try:
         return decode_png(io.BytesIO(data))  # type: ignore[arg-type]  (PIL opens file objects too)
@@ -108,7 +100,7 @@ def load_pass(store: Store, truth_key: str, name: str, digests: set[str] | None 
     ``truth_key``; None if it is missing, does not decode, or (``digests`` given and not empty)
     matches none of the digests its rows recorded (its row is then dropped by the caller, and the
     pass rendered again). A blob that cannot be read raises :class:`StoreReadError`."""
-    from sweep3d.truth import BLOB_SUFFIX, decode_depth, decode_mask
+    from sweep3d.core import BLOB_SUFFIX, decode_depth, decode_mask
 
     data = read_blob(store.blob_path(truth_key, BLOB_SUFFIX[name]))
     if data is None:

@@ -1,6 +1,6 @@
 """Copies of archive members extracted under the store's ``assets/``, checked against their source.
 
-A mesh inside a zip is extracted once into ``assets/<id>/`` (see :func:`sweep3d.spec.assets.materialise_mesh`)
+A mesh inside a zip is extracted once into ``assets/<id>/`` (see :func:`sweep3d.assets.sources.materialise_mesh`)
 and rendered from there, its render keys hashed from those files. What the extraction wrote is
 recorded beside it in :data:`MANIFEST` (JSON): each file's SHA-256, taken as it was written, and
 its file state when last checked (size, mtime, change time, inode); and the archive's members

@@ -39,7 +39,7 @@ from sweep3d.cache.store import (
     segment_name,
     with_column_list,
 )
-from sweep3d.evaluation import read_record
+from sweep3d.core import read_record
 
 TEMP_AGE = 3600.0  # seconds after which gc removes temp files (a live run's are younger)
 #: Folders that only the writer lock's holder writes (``reports/`` and ``cache/`` are not:

@@ -44,7 +44,7 @@ import pyarrow.parquet as pq
 
 from sweep3d.cache import snapshot
 from sweep3d.cache.snapshot import StateSnapshot
-from sweep3d.errors import StoreBusyError, UserError
+from sweep3d.core import StoreBusyError, UserError
 
 TABLES = ("renders", "images", "predictions", "runs", "parts", "truths", "stability")
 KEY_COLUMN = {"renders": "render_key", "images": "image_key", "predictions": "pred_key", "runs": "run_id",
@@ -56,7 +56,7 @@ BLOB_TABLES = ("renders", "images")  # tables whose rows each own the blob named
 DIGEST_COLUMN = "sha256"  # hex SHA-256 of a blob's bytes, recorded in its row when written
 BLOB_EXT = "png"  # the file type of the blobs a run makes
 BLOB_SUFFIXES = (f".{BLOB_EXT}", *(f".{suffix}" for suffix in TRUTH_BLOBS))  # the names of blobs end so
-_HEX = re.compile(r"[0-9a-f]+")  # a key, as :mod:`sweep3d.cache.keys` writes it
+_HEX = re.compile(r"[0-9a-f]+")  # a key, as :mod:`sweep3d.cache.hashing` writes it
 FEW_KEYS = 1000  # up to this many keys are checked one by one: no listing is worth its set-up
 LISTING_ADVANTAGE = 4  # listing a folder's entries costs about a quarter of a stat per entry
 LISTING_SETTLED = 2.0  # seconds since a blob folder last changed before its listing is remembered
@@ -272,7 +272,7 @@ class Store:
         Args:
             keep_same: leave ``path`` alone when it holds exactly the bytes it would be written
                 with (a run writes its unchanged plan again: the file then keeps its state, which
-                :func:`~sweep3d.stages.aggregate.stored_summary` keys on).
+                :func:`~sweep3d.results.stored_summary` keys on).
 
         Returns:
             whether ``path`` was written.
@@ -565,8 +565,8 @@ class Store:
         Views: ``renders``, ``images``, ``predictions``, ``runs``, ``parts``, ``truths`` (deduplicated
         by key), and when ``experiment`` has a plan, ``jobs`` (its latest plan). Storage only: how
         they join into ``results``, and what counts, is the aggregate stage's
-        (``sweep3d.stages.aggregate.results``), which adds its views on top
-        (``sweep3d.stages.aggregate.connect``).
+        (``sweep3d.results.results``), which adds its views on top
+        (``sweep3d.results.connect``).
         Unreadable segments are left out (and quarantined). The views read the segments listed
         now; a compaction keeps the files it replaced for ``SUPERSEDED_GRACE`` seconds, so a
         connection stays good that long whatever happens to the store meanwhile.

@@ -11,7 +11,7 @@ from rich.console import Console
 from rich.markup import escape
 
 from sweep3d.api import check_wait
-from sweep3d.errors import RenderError, UserError, plugin_failure
+from sweep3d.core import RenderError, UserError, plugin_failure
 
 __all__ = ["check_wait", "registrar"]  # check_wait: the API's, for the commands' --wait
 

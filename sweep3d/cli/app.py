@@ -17,7 +17,7 @@ from rich.table import Column, Table
 from rich.text import Text
 
 from sweep3d.cli._commands import DEBUG, check_wait, err_console, registrar
-from sweep3d.errors import UserError
+from sweep3d.core import UserError
 
 if TYPE_CHECKING:
     from sweep3d.api import Experiment
@@ -60,10 +60,10 @@ def plan(
     """Count the jobs a spec expands to, what is already cached, and an estimated time."""
     import sweep3d
     from sweep3d.cli.output import print_plan
-    from sweep3d.plan_status import plan_status
+    from sweep3d.engine import plan_status
 
     if design is not None:
-        from sweep3d.stages.plan.design import check_output
+        from sweep3d.stages.plan import check_output
 
         check_output(design)
     loaded = sweep3d.load(spec).spec
@@ -75,7 +75,7 @@ def plan(
     print_plan(console, status, jobs)
     made = status.plan
     if design is not None:
-        from sweep3d.stages.plan.design import write_design
+        from sweep3d.stages.plan import write_design
 
         rows = write_design(made.jobs.columns.table(loaded.name, loaded.parameter_columns), loaded.parameter_columns,
                             design)
@@ -210,18 +210,19 @@ def bench(
     from sweep3d.bench import (
         Setting,
         apply_setting,
+        budget_chooser,
+        check_budget,
         default_settings,
         measure,
         recommend,
+        reference_settings,
+        write_pareto_plot,
     )
-    from sweep3d.bench.budget import budget_chooser, check_budget
-    from sweep3d.bench.measure import reference_settings
-    from sweep3d.bench.plot import write_pareto_plot
-    from sweep3d.cache.store import Store
+    from sweep3d.cache import Store
     from sweep3d.cli.output import print_bench
-    from sweep3d.progress import RunProgress
+    from sweep3d.driver import RunProgress
     from sweep3d.stages.infer import ModelHandle
-    from sweep3d.stages.render.estimate import duration
+    from sweep3d.stages.render import duration
 
     if budget is not None:
         check_budget(budget)
@@ -271,8 +272,8 @@ def confirm(
     region, matched on every other parameter, never an image of the run; confirmed or not replicated."""
     from sweep3d.api import Experiment
     from sweep3d.cli.confirming import print_confirmation
-    from sweep3d.confirm.run import confirm as confirm_findings
-    from sweep3d.stages.aggregate.confirmation import DEFAULT_RENDERS
+    from sweep3d.confirm import confirm as confirm_findings
+    from sweep3d.results import DEFAULT_RENDERS
 
     experiment = Experiment(spec)
     signal.signal(signal.SIGTERM, _interrupt)
@@ -297,9 +298,9 @@ def sheet(
     A range is shown at the spec's own grid when its policy is a grid, else at five points.
     """
     import sweep3d
-    from sweep3d.cache.store import Store
-    from sweep3d.progress import RunProgress
-    from sweep3d.report.sheet import contact_sheet
+    from sweep3d.cache import Store
+    from sweep3d.driver import RunProgress
+    from sweep3d.report import contact_sheet
 
     loaded = sweep3d.load(spec).spec
     target = output or Store(loaded.store).report_path(loaded.name, "-controls.png")
@@ -323,7 +324,7 @@ def query(
 ) -> None:
     """Answer SQL over the store with DuckDB, read-only: only --output writes a file."""
     from sweep3d.api import Experiment
-    from sweep3d.stages.aggregate.sql import results_connection, select_only
+    from sweep3d.results import results_connection, select_only
 
     experiment = Experiment(spec)
     statement = select_only(sql)
@@ -491,7 +492,7 @@ def _write_report(experiment: Experiment, output: Optional[Path], model: Optiona
 
 def main() -> None:
     """Console entry point."""
-    from sweep3d.cache.pandas_probe import skip_pandas_probe
+    from sweep3d.cache import skip_pandas_probe
 
     skip_pandas_probe()
     app()

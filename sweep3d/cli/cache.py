@@ -14,7 +14,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from sweep3d.cli._commands import check_wait, registrar
-from sweep3d.errors import UserError
+from sweep3d.core import UserError
 
 cache_app = typer.Typer(no_args_is_help=True, rich_markup_mode=None, help="Check and tidy a spec's store: verify, gc, compact, stats.")
 console = Console(highlight=False)  # values from data print as text: no colouring of what looks like numbers or paths
@@ -46,9 +46,9 @@ def verify(
 ) -> None:
     """Re-read every segment and re-hash every blob, kept model output and extracted mesh; report
     corrupt or missing ones (exit 1 if any)."""
-    from sweep3d.cache.maintenance import repair as repair_store
-    from sweep3d.cache.maintenance import verify as verify_store
-    from sweep3d.cache.store import Store
+    from sweep3d.cache import Store
+    from sweep3d.cache import repair as repair_store
+    from sweep3d.cache import verify as verify_store
 
     check_wait(wait)
     root = _store_root(spec)
@@ -81,8 +81,7 @@ def gc(
     wait: float = WaitOption,
 ) -> None:
     """Remove blobs no row references, leftover temp files and segments compaction replaced."""
-    from sweep3d.cache.maintenance import collect_garbage
-    from sweep3d.cache.store import Store
+    from sweep3d.cache import Store, collect_garbage
 
     check_wait(wait)
     root = _store_root(spec)
@@ -96,8 +95,7 @@ def gc(
 @command
 def compact(spec: Path = SpecArg, wait: float = WaitOption) -> None:
     """Merge each table's segments into one (dropping duplicate rows); readers see no gap."""
-    from sweep3d.cache.maintenance import compact_table
-    from sweep3d.cache.store import TABLES, Store
+    from sweep3d.cache import TABLES, Store, compact_table
 
     check_wait(wait)
     root = _store_root(spec)
@@ -113,7 +111,7 @@ def compact(spec: Path = SpecArg, wait: float = WaitOption) -> None:
 @command
 def stats(spec: Path = SpecArg) -> None:
     """Files, rows, distinct keys and bytes per table, blobs, temp files and quarantine."""
-    from sweep3d.cache.maintenance import store_stats
+    from sweep3d.cache import store_stats
 
     root = _store_root(spec)
     table = Table("table", "files", "rows", "keys", "size", title=escape(str(root)))

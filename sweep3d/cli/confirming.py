@@ -5,8 +5,8 @@ from __future__ import annotations
 from rich.console import Console
 from rich.markup import escape
 
-from sweep3d.confirm.run import ConfirmResult
-from sweep3d.stages.aggregate.confirmation import ALPHA, CONFIRMED
+from sweep3d.confirm import ConfirmResult
+from sweep3d.results import ALPHA, CONFIRMED
 
 
 def print_confirmation(console: Console, result: ConfirmResult) -> None:

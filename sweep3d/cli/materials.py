@@ -12,11 +12,9 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
-from sweep3d.spec.assets import materialise_mesh
-from sweep3d.spec.loader import LoadedSpec
-from sweep3d.stages.render.describe import COLUMNS, describe_materials
-from sweep3d.stages.render.protocol import Look
-from sweep3d.stages.render.stage import object_error
+from sweep3d.assets import materialise_mesh
+from sweep3d.spec import LoadedSpec
+from sweep3d.stages.render import COLUMNS, Look, describe_materials, object_error
 
 NOTE = ("values as Blender's importer set them from the file, * where the spec's material overrides them; "
         "linked: a texture or node drives it. Blender's OBJ importer: d → opacity, mean of Tf → transmission, "

@@ -9,35 +9,33 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
-from sweep3d.cache.store import Store
-from sweep3d.errors import UserError
-from sweep3d.pipeline import RunResult
-from sweep3d.plan_status import PlanStatus
-from sweep3d.spec.loader import LoadedSpec
-from sweep3d.stages.aggregate import (
+from sweep3d.cache import Store
+from sweep3d.core import UserError
+from sweep3d.driver import JobList, Plan
+from sweep3d.engine import PlanStatus, RunResult
+from sweep3d.results import (
+    HIDDEN,
     Region,
     Summary,
+    boundary_phrase,
     connect,
+    control_number,
     has_view,
+    named_rules,
     nearest_miss_region,
+    numeric_scales,
+    results_store,
     stored_summary,
     weakest_regions,
     wilson_interval,
 )
-from sweep3d.stages.aggregate.boundaries import boundary_phrase, control_number, numeric_scales
-from sweep3d.stages.aggregate.own_jobs import results_store
-from sweep3d.stages.aggregate.summary import named_rules
-from sweep3d.stages.aggregate.tasks import HIDDEN
-from sweep3d.stages.infer import ModelHandle
-from sweep3d.stages.infer.evaluators import measure_of
-from sweep3d.stages.jobs import JobList
-from sweep3d.stages.plan import Plan
-from sweep3d.stages.render.device import missing_gpu_warning
-from sweep3d.stages.render.estimate import duration, slow_render_warning
+from sweep3d.spec import LoadedSpec
+from sweep3d.stages.infer import ModelHandle, measure_of
+from sweep3d.stages.render import duration, missing_gpu_warning, slow_render_warning
 
 
 def print_plan(console: Console, status: PlanStatus, jobs: int = 0) -> None:
-    """What ``sweep3d plan`` prints of ``status`` (the engine's :func:`~sweep3d.plan_status.plan_status`):
+    """What ``sweep3d plan`` prints of ``status`` (the engine's :func:`~sweep3d.engine.status.plan_status`):
     the counts per stage, cached and to compute, the estimate, and with ``jobs`` the first that many
     jobs of the first model's plan."""
     spec, plans, plan = status.spec, status.plans, status.plan
@@ -217,7 +215,7 @@ def print_findings(console: Console, plan: Plan, store: Store | None = None, fai
                   f"{summary.wrong} failures"
                   + (f", {summary.invalid} invalid predictions (NaN/inf outputs) excluded" if summary.invalid else "")
                   + (f"; {not_evaluable_line(summary)}" if summary.not_evaluable else ""))
-    from sweep3d.stages.aggregate.fragile import fragile_sentence
+    from sweep3d.results import fragile_sentence
 
     line = fragile_sentence(summary)
     if line:
@@ -262,8 +260,7 @@ def confirmation_marks(store: Store, experiment: str, regions: list[Region], bou
                        rules: list[dict] = ()) -> list[str]:
     """What follows each finding (regions, boundaries, then rules): its verdict on fresh renders, as
     ``sweep3d confirm`` recorded it (see :mod:`sweep3d.confirm.record`), or `` [unconfirmed]``."""
-    from sweep3d.confirm.claims import boundary_key, region_key, rule_key
-    from sweep3d.confirm.record import mark, read_verdicts
+    from sweep3d.confirm import boundary_key, mark, read_verdicts, region_key, rule_key
 
     verdicts = read_verdicts(store, experiment)
     keys = ([region_key(r.column, r.label) for r in regions] + [boundary_key(b) for b in boundaries]
@@ -364,7 +361,7 @@ def print_warning(console: Console, line: str | None) -> None:
 def print_bench(console: Console, rows, best, current, agreement: float) -> None:
     """The bench table: one row per setting, fastest first, the references last; the rule as its
     caption and the recommendation with its measured speed-up below."""
-    from sweep3d.bench.measure import pareto, required_agreement
+    from sweep3d.bench import pareto, required_agreement
 
     front = {id(r) for r in pareto([r for r in rows if r.is_setting])}
     base = next((r for r in rows if r.setting == current and r.is_setting), None)

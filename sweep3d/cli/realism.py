@@ -35,7 +35,7 @@ def pick(
 ) -> None:
     """Choose results worth photographing and write the kit: design.csv, renders, edges, align.html."""
     import sweep3d
-    from sweep3d.realism.pick import pick as pick_kit
+    from sweep3d.realism import pick_kit
 
     kit = pick_kit(sweep3d.load(spec).spec, output, per_object, seed, near_ties)
     for line in kit.short:
@@ -58,8 +58,8 @@ def score(
     """Run the spec's models on the photographs (or another renderer's images) of the picked jobs and
     store their verdicts; the agreement view and the report's Realism panel read them."""
     import sweep3d
-    from sweep3d.errors import UserError
-    from sweep3d.realism.score import score_engine, score_photos
+    from sweep3d.core import UserError
+    from sweep3d.realism import score_engine, score_photos
 
     check_wait(wait)
     loaded = sweep3d.load(spec).spec

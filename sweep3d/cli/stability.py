@@ -11,10 +11,10 @@ from rich.table import Table
 
 def run_stability(console: Console, spec_path: Path, sample: int, seed: int) -> None:
     from sweep3d.api import Experiment
-    from sweep3d.stability.check import check
+    from sweep3d.stability import check_stability
 
     spec = Experiment(spec_path).spec
-    for found in check(spec, sample, seed, console):
+    for found in check_stability(spec, sample, seed, console):
         which = f"{escape(found.model)}: " if len(spec.spec.all_models) > 1 else ""
         console.print(f"{which}stability check of {found.sampled} images ({found.cached} cached, {found.computed} "
                       f"inferred now; seed {seed})")

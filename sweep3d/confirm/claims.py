@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
 
-from sweep3d.spec.params import Choice, Range
+from sweep3d.spec import Choice, Range
 
 
 @dataclass(frozen=True)

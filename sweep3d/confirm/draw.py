@@ -21,7 +21,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from sweep3d.confirm.claims import Claim, Side
-from sweep3d.spec.params import Choice, Range
+from sweep3d.spec import Choice, Range
 
 #: A configuration: ``object``, ``environment`` and each applying parameter's column → value.
 Row = dict[str, Any]

@@ -12,8 +12,8 @@ import json
 from pathlib import Path
 from typing import Any
 
-from sweep3d.cache.store import Store, atomic_write, safe_filename
-from sweep3d.stages.aggregate.confirmation import UNCONFIRMED
+from sweep3d.cache import Store, atomic_write, safe_filename
+from sweep3d.results import UNCONFIRMED
 
 
 def record_path(store: Store, experiment: str) -> Path:

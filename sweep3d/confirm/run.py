@@ -1,7 +1,7 @@
 """``sweep3d confirm``: draw, render and judge fresh twins for each significant finding of a run.
 
 The fresh configurations are explicit jobs of a second experiment, ``<name>-confirm``, planned
-through the ``table`` policy (its rows given in memory) and run by :func:`sweep3d.pipeline.run`:
+through the ``table`` policy (its rows given in memory) and run by :func:`sweep3d.engine.pipeline.run`:
 the same stages, keys and cache as any run, so a second ``confirm`` with the same spec, findings,
 ``--renders`` and ``--seed`` draws the same pairs and renders nothing. A candidate pair is kept
 only when both twins are in frame and neither image is one the discovery run made (nor one an
@@ -17,17 +17,25 @@ from typing import Any
 
 from rich.console import Console
 
-from sweep3d.cache.store import Store
+from sweep3d.cache import Store
 from sweep3d.confirm.claims import Claim, boundary_claim, rule_claim, value_claim
 from sweep3d.confirm.draw import Row, Space, draw_pairs, scene_order, space_of
 from sweep3d.confirm.record import write_verdicts
-from sweep3d.errors import UserError
-from sweep3d.spec.loader import LoadedSpec
-from sweep3d.spec.models import PolicySpec
-from sweep3d.stages.aggregate.boundaries import boundary_phrase, numeric_scales
-from sweep3d.stages.aggregate.confirmation import DEFAULT_RENDERS, Verdict, judge, tally
-from sweep3d.stages.aggregate.summary import Summary, named_rules, stored_summary
-from sweep3d.stages.aggregate.views import connect, has_view
+from sweep3d.core import UserError
+from sweep3d.results import (
+    DEFAULT_RENDERS,
+    Summary,
+    Verdict,
+    boundary_phrase,
+    connect,
+    has_view,
+    judge,
+    named_rules,
+    numeric_scales,
+    stored_summary,
+    tally,
+)
+from sweep3d.spec import LoadedSpec, PolicySpec
 
 #: Candidate pairs drawn per pair wanted: room for those dropped (out of frame, a discovery image).
 OVERDRAW = 3
@@ -58,7 +66,7 @@ def confirm(loaded: LoadedSpec, renders: int = DEFAULT_RENDERS, seed: int | None
     """Confirm every significant finding of ``loaded``'s last run on ``renders`` fresh renders each
     (``renders // 2`` twin pairs), drawn with ``seed`` (default: the spec's); ``claims``: these
     instead of the run's findings."""
-    from sweep3d.pipeline import plans_as_run, run
+    from sweep3d.engine import plans_as_run, run
 
     if renders < 2:
         raise UserError(f"--renders {renders}: a finding needs at least 2 fresh renders (one twin pair)")
@@ -157,8 +165,7 @@ def _levels(store: Store, experiment: str) -> dict[tuple[str, str], tuple[float 
 
 def _variant(loaded: LoadedSpec, space: Space, rows: list[Row]) -> LoadedSpec:
     """``loaded`` as the experiment ``<name>-confirm`` whose jobs are ``rows`` (first model only)."""
-    from sweep3d.stages.plan.design import SceneRows
-    from sweep3d.stages.plan.policies import TablePolicy
+    from sweep3d.stages.plan import SceneRows, TablePolicy
 
     scenes: dict[tuple[str, str], SceneRows] = {}
     columns = {p.column: (p.control_id, p.param) for p in space.parameters}

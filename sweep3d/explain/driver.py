@@ -24,21 +24,15 @@ import pyarrow as pa
 from rich.console import Console
 from rich.markup import escape
 
-from sweep3d.cache.store import Store, atomic_write
-from sweep3d.errors import UserError
+from sweep3d.cache import Store, atomic_write
+from sweep3d.core import UserError, encode_png8
+from sweep3d.driver import Job, Plan, RunProgress, run_stages, unique_jobs
+from sweep3d.engine import plan_spec, plans_as_run, remove_leftovers
 from sweep3d.explain.search import Axis, Config, Fix, Progress, explain
-from sweep3d.pipeline import plan_spec, plans_as_run, remove_leftovers
-from sweep3d.pixels import encode_png8
-from sweep3d.progress import RunProgress
-from sweep3d.spec.loader import LoadedSpec
-from sweep3d.spec.params import Range
-from sweep3d.spec.space import Point, SearchSpace
-from sweep3d.stages.aggregate.counterfactuals import SCHEMA, counterfactuals_path
-from sweep3d.stages.driver import run_stages, unique_jobs
+from sweep3d.results import SCHEMA, counterfactuals_path
+from sweep3d.spec import LoadedSpec, Point, Range, SearchSpace
 from sweep3d.stages.infer import InferStage, ModelHandle, pending_predictions
-from sweep3d.stages.jobs import Job
-from sweep3d.stages.plan import Plan
-from sweep3d.stages.plan.policies import Listed, Policy, PolicyParams
+from sweep3d.stages.plan import Listed, Policy, PolicyParams
 from sweep3d.stages.postprocess import ImageHandoff, PostprocessStage, make_image, post_controls, truth_digests
 from sweep3d.stages.render import LOCAL, RenderStage
 
@@ -355,7 +349,7 @@ def _written(change: tuple[str, str, str, float | None, float]) -> str:
 def _write_images(spec: LoadedSpec, store: Store, stages: _Stages, failure_keys: list[str]) -> None:
     """The failures' and fixes' images as blobs (the report shows them side by side), where the
     run made them in memory only (``[postprocess] store = "none"``)."""
-    from sweep3d.pipeline import write_unstored_images
+    from sweep3d.engine import write_unstored_images
 
     if stages.post.store_images or not failure_keys:
         return

@@ -38,7 +38,7 @@ from typing import Callable, Iterator, Sequence
 
 import numpy as np
 
-from sweep3d.spec.space import Point
+from sweep3d.spec import Point
 
 Scene = tuple[str, str]
 #: Whether the model is right (valid, evaluable and correct) at each configuration asked.

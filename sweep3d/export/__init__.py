@@ -10,20 +10,23 @@ Usage::
 
 from __future__ import annotations
 
-__all__ = ["FORMATS", "ExportResult", "default_output", "export_dataset"]
+__all__ = ["ExportResult", "FORMATS", "IMAGE_DIGEST", "default_output", "export_dataset", "image_bytes"]
 
 # Lazy exports (PEP 562): a name's module is imported when first used, so importing this package
 # stays light and free of cycles.
 from typing import TYPE_CHECKING as _TYPE_CHECKING  # noqa: E402
 
-from sweep3d.lazy import exports as _exports  # noqa: E402
+from sweep3d.core import exports as _exports  # noqa: E402
 
 if _TYPE_CHECKING:
     from sweep3d.export.dataset import FORMATS, ExportResult, default_output, export_dataset
+    from sweep3d.export.selection import IMAGE_DIGEST, image_bytes
 
 __getattr__, __dir__ = _exports(__name__, {
-    'ExportResult': ('sweep3d.export.dataset', 'ExportResult'),
-    'FORMATS': ('sweep3d.export.dataset', 'FORMATS'),
-    'default_output': ('sweep3d.export.dataset', 'default_output'),
-    'export_dataset': ('sweep3d.export.dataset', 'export_dataset'),
+    "ExportResult": ("sweep3d.export.dataset", "ExportResult"),
+    "FORMATS": ("sweep3d.export.dataset", "FORMATS"),
+    "IMAGE_DIGEST": ("sweep3d.export.selection", "IMAGE_DIGEST"),
+    "default_output": ("sweep3d.export.dataset", "default_output"),
+    "export_dataset": ("sweep3d.export.dataset", "export_dataset"),
+    "image_bytes": ("sweep3d.export.selection", "image_bytes"),
 })

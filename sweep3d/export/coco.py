@@ -15,12 +15,11 @@ from typing import Any
 
 import numpy as np
 
-from sweep3d.errors import UserError
-from sweep3d.export.base import Batch, DatasetWriter, Item
+from sweep3d.core import UserError, box
+from sweep3d.driver import StageProgress
+from sweep3d.export.formats import Batch, DatasetWriter, Item
 from sweep3d.export.selection import image_bytes, mask_of
 from sweep3d.export.target import ExportFolder, Staging, json_bytes
-from sweep3d.progress import StageProgress
-from sweep3d.truth import box
 
 ANNOTATIONS = "annotations.json"
 IMAGES = "images"

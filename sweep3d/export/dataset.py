@@ -16,17 +16,17 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from sweep3d.cache.store import Store, safe_filename
-from sweep3d.errors import UserError
-from sweep3d.export.base import Batch, DatasetWriter, Item
+from sweep3d.cache import Store, safe_filename
+from sweep3d.core import UserError
+from sweep3d.driver import RunProgress
+from sweep3d.engine import write_unstored_images
 from sweep3d.export.coco import CocoWriter
+from sweep3d.export.formats import Batch, DatasetWriter, Item
 from sweep3d.export.imagefolder import ImageFolderWriter
 from sweep3d.export.parquet import ParquetWriter
 from sweep3d.export.selection import DEFAULT_WHERE, UNEVALUABLE, Selection, check_where, select
 from sweep3d.export.target import DESIGN, MANIFEST, SCENE, ExportFolder, Staging, design_table, identity, open_folder
-from sweep3d.pipeline import write_unstored_images
-from sweep3d.progress import RunProgress
-from sweep3d.spec.loader import LoadedSpec
+from sweep3d.spec import LoadedSpec
 
 if TYPE_CHECKING:
     from rich.console import Console

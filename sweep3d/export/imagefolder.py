@@ -4,10 +4,10 @@
 
 from __future__ import annotations
 
-from sweep3d.export.base import Batch, DatasetWriter, Item
+from sweep3d.driver import StageProgress
+from sweep3d.export.formats import Batch, DatasetWriter, Item
 from sweep3d.export.selection import image_bytes
 from sweep3d.export.target import ExportFolder, Staging, class_folder, csv_bytes
-from sweep3d.progress import StageProgress
 
 METADATA = "metadata.csv"
 

@@ -16,11 +16,11 @@ from pathlib import Path
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from sweep3d.errors import UserError
-from sweep3d.export.base import Batch, DatasetWriter
+from sweep3d.core import UserError
+from sweep3d.driver import StageProgress
+from sweep3d.export.formats import Batch, DatasetWriter
 from sweep3d.export.selection import image_bytes
 from sweep3d.export.target import ExportFolder, Staging
-from sweep3d.progress import StageProgress
 
 DATA = "data"
 IMAGE_TYPE = pa.struct([("bytes", pa.binary()), ("path", pa.string())])

@@ -18,13 +18,10 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
-from sweep3d.cache.blobs import sha256_bytes
-from sweep3d.cache.store import Store
-from sweep3d.errors import UserError
-from sweep3d.spec.loader import LoadedSpec
-from sweep3d.stages.aggregate.own_jobs import results_store
-from sweep3d.stages.aggregate.sql import arrow, results_connection
-from sweep3d.stages.aggregate.views import stored_parameters
+from sweep3d.cache import Store, sha256_bytes
+from sweep3d.core import UserError
+from sweep3d.results import arrow, results_connection, results_store, stored_parameters
+from sweep3d.spec import LoadedSpec
 
 #: What an export takes when no ``--where`` is given: the failures.
 DEFAULT_WHERE = "NOT correct"
@@ -153,7 +150,7 @@ def mask_of(store: Store, row: dict[str, Any]) -> np.ndarray:
     Raises:
         UserError: the job has no truth row yet, or its mask blob is missing or damaged.
     """
-    from sweep3d.truth import BLOB_SUFFIX, decode_mask
+    from sweep3d.core import BLOB_SUFFIX, decode_mask
 
     if row.get("truth_key") is None or row.get(MASK_DIGEST) is None:
         raise UserError(f"job {row['job']} of {row['experiment']} has no mask yet: run `sweep3d run` on the spec "

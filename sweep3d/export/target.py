@@ -18,9 +18,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable
 
-from sweep3d.cache.store import safe_filename
-from sweep3d.csv_text import csv_text
-from sweep3d.errors import UserError
+from sweep3d.cache import safe_filename
+from sweep3d.core import UserError, csv_text
 
 MANIFEST = "sweep3d-export.json"
 DESIGN = "design.csv"
@@ -186,7 +185,7 @@ def design_table(items: Iterable[dict[str, Any]]) -> bytes:
 
 
 def csv_bytes(columns: list[str], rows: Iterable[list[Any]]) -> bytes:
-    """CSV as DuckDB writes it (see :mod:`sweep3d.csv_text`), as bytes."""
+    """CSV as DuckDB writes it (see :mod:`sweep3d.core.csv_format`), as bytes."""
     return csv_text(columns, rows).encode()
 
 

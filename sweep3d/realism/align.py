@@ -35,7 +35,7 @@ import jinja2
 from markupsafe import Markup
 from PIL import Image
 
-from sweep3d.cache.store import atomic_write
+from sweep3d.cache import atomic_write
 
 #: The page's file name in the kit folder.
 PAGE = "align.html"

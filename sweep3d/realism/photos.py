@@ -25,7 +25,7 @@ from typing import Iterable
 
 import numpy as np
 
-from sweep3d.errors import UserError
+from sweep3d.core import UserError
 
 #: File suffixes read as photographs (any case).
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".webp", ".tif", ".tiff", ".bmp")

@@ -29,9 +29,9 @@ from typing import Any, Sequence
 import numpy as np
 import pyarrow as pa
 
-from sweep3d.cache.store import safe_filename
-from sweep3d.errors import UserError
-from sweep3d.spec.loader import LoadedSpec
+from sweep3d.cache import safe_filename
+from sweep3d.core import UserError
+from sweep3d.spec import LoadedSpec
 
 #: |p(true) − p(best other)| below this is a near tie: a verdict an imperceptible change flips.
 NEAR_TIE = 0.05
@@ -145,11 +145,9 @@ def pick(spec: LoadedSpec, output: Path | None = None, per_object: int = 10, see
     Raises:
         UserError: a bad option, an output folder holding other files, no results, a damaged blob.
     """
-    from sweep3d.export.selection import image_bytes
-    from sweep3d.pipeline import write_unstored_images
-    from sweep3d.stages.aggregate.own_jobs import results_store
-    from sweep3d.stages.aggregate.sql import arrow, results_connection
-    from sweep3d.stages.aggregate.views import stored_parameters
+    from sweep3d.engine import write_unstored_images
+    from sweep3d.export import image_bytes
+    from sweep3d.results import arrow, results_connection, results_store, stored_parameters
 
     if per_object < 1:
         raise UserError(f"--per-object {per_object}: pick at least 1 result per object")
@@ -195,7 +193,7 @@ def pick(spec: LoadedSpec, output: Path | None = None, per_object: int = 10, see
 
 def _selection_sql(con) -> str:
     """Every counted result with its image's recorded digest (as ``export`` checks it)."""
-    from sweep3d.export.selection import IMAGE_DIGEST
+    from sweep3d.export import IMAGE_DIGEST
 
     views = {name for name, in con.execute("SELECT view_name FROM duckdb_views() WHERE NOT internal").fetchall()}
     image = [f"(SELECT v.sha256 FROM {view} v WHERE v.{key} = r.image_key LIMIT 1)"
@@ -241,7 +239,7 @@ def _write_kit(folder: Path, spec: LoadedSpec, seed: int, per_object: int, thres
     """
     from PIL import Image
 
-    from sweep3d.stages.plan.design import write_design
+    from sweep3d.stages.plan import write_design
 
     edge_image, write_align_page, align_shot = kit_tools()
     folder.parent.mkdir(parents=True, exist_ok=True)

@@ -1,6 +1,6 @@
 """``sweep3d realism score``: the spec's models on another source of images of the picked jobs,
 stored as verdicts beside the renders' (the store's ``verdicts`` table, read by the ``agreement``
-view: :mod:`sweep3d.stages.aggregate.agreement`).
+view: :mod:`sweep3d.results.agreement`).
 
 Two sources, one path to the verdicts:
 
@@ -27,12 +27,12 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from sweep3d.cache.store import Store, atomic_write, utc_now
-from sweep3d.errors import UserError
+from sweep3d.cache import Store, atomic_write, utc_now
+from sweep3d.core import UserError
 from sweep3d.realism.photos import PREPROCESS, Photo, PhotoProblems, framed, match_photos, upright
 from sweep3d.realism.pick import DESIGN, RENDERS, default_kit, read_kit
-from sweep3d.spec.loader import LoadedSpec
-from sweep3d.stages.aggregate.agreement import VERDICT_SCHEMA, VERDICTS, photo_path
+from sweep3d.results import VERDICT_SCHEMA, VERDICTS, photo_path
+from sweep3d.spec import LoadedSpec
 
 PHOTO = "photo"
 #: The kit's subfolder holding the specs that replay its design with another engine.
@@ -105,20 +105,26 @@ def classify(spec: LoadedSpec, settings: Any, images: Sequence[np.ndarray], trut
     """The spec's evaluator's rows for 8-bit ``images`` (each the size of its job's render), by
     the model ``settings`` names, through the infer stage's own code (its handle, task call,
     evaluator and batch padding). ``truths``: per image its ``object`` and ``truth_key``."""
-    from sweep3d.cache.blobs import load_pass
-    from sweep3d.pixels import from_uint8
-    from sweep3d.stages.infer import EVALUATORS, ModelHandle
-    from sweep3d.stages.infer.evaluate import evaluate_checked
-    from sweep3d.stages.infer.evaluators.base import Truth
-    from sweep3d.stages.infer.stage import _truths, first_rows, padded
-    from sweep3d.stages.infer.tasks import check_task, model_outputs
+    from sweep3d.cache import load_pass
+    from sweep3d.core import from_uint8
+    from sweep3d.stages.infer import (
+        EVALUATORS,
+        ModelHandle,
+        Truth,
+        check_task,
+        evaluate_checked,
+        first_rows,
+        model_outputs,
+        object_class_ids,
+        padded,
+    )
 
     handle = ModelHandle.resolve(spec, settings)
     model = handle.classifier()
     labels = model.label_map()
     evaluator = EVALUATORS.get(spec.evaluator.kind).from_settings(spec.evaluator)
     check_task(model, evaluator.task, handle.name)
-    ids = _truths(types.SimpleNamespace(spec=spec), labels, handle.name)
+    ids = object_class_ids(types.SimpleNamespace(spec=spec), labels, handle.name)
     store = Store(spec.store)
     size = settings.batch_size
     out: list[dict[str, Any] | None] = [None] * len(images)
@@ -161,7 +167,7 @@ def _render_sizes(folder: Path, jobs: Sequence[int]) -> dict[int, tuple[int, int
 
 def _truth_rows(spec: LoadedSpec, store: Store, jobs: Sequence[int], model: str) -> list[dict[str, Any]]:
     """Per job (in ``jobs``' order) its object and truth key, from the run's results."""
-    from sweep3d.stages.aggregate.sql import results_connection
+    from sweep3d.results import results_connection
 
     several = len(spec.models) > 1
     with results_connection(spec, model if several else None) as con:
@@ -198,7 +204,7 @@ def _keep_thumb(store: Store, sha256: str, pixels: np.ndarray) -> None:
 
 def _scored(source: str, spec: LoadedSpec, store: Store, rows: list[dict[str, Any]]) -> Scored:
     """What was stored, with each model's agreement read back through the ``agreement`` view."""
-    from sweep3d.stages.aggregate.sql import results_connection
+    from sweep3d.results import results_connection
 
     agree = {}
     with results_connection(spec, store=store) as con:
@@ -240,7 +246,7 @@ def engine_spec(spec: LoadedSpec, kit: Path, engine: str) -> Path:
 
 def _run(spec: LoadedSpec, console: Any, wait: float) -> None:
     """Run ``spec`` like ``sweep3d run`` (what renders the other engine's images)."""
-    from sweep3d.pipeline import run
+    from sweep3d.engine import run
 
     run(spec, console, wait=wait)
 
@@ -253,10 +259,9 @@ def score_engine(spec: LoadedSpec, engine: str, kit: Path | None = None, console
     Raises:
         UserError: no kit; the spec loader refusing the engine or a control it cannot express.
     """
+    from sweep3d.engine import builtin_catalogue
+    from sweep3d.results import results_connection, stored_parameters
     from sweep3d.spec import read_spec
-    from sweep3d.stages import builtin_catalogue
-    from sweep3d.stages.aggregate.sql import results_connection
-    from sweep3d.stages.aggregate.views import stored_parameters
 
     if not engine or not engine.replace("-", "").replace("_", "").isalnum():
         raise UserError(f"--engine {engine!r}: name a render engine, e.g. mitsuba")
@@ -292,7 +297,7 @@ def _configurations(con: Any, jobs: Sequence[int] | None, parameters: Sequence[s
                     verdicts: bool = False) -> dict[tuple, list[Any]]:
     """Results by configuration (object, environment, each parameter's value), in job order:
     their jobs, or (``verdicts``) the rows' verdict columns; ``jobs``: only those."""
-    from sweep3d.stages.aggregate.quoting import identifier
+    from sweep3d.results import identifier
 
     columns = {name for name, *_ in con.execute("DESCRIBE results").fetchall()}
     named = [c for c in ("object", "environment", *parameters) if c in columns]

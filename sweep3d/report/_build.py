@@ -17,9 +17,9 @@ from typing import Any
 
 import duckdb
 
-from sweep3d.cache.store import Store, atomic_write
-from sweep3d.errors import UserError
-from sweep3d.pipeline import write_unstored_images
+from sweep3d.cache import Store, atomic_write
+from sweep3d.core import UserError
+from sweep3d.engine import write_unstored_images
 from sweep3d.report.figures import pct
 from sweep3d.report.overlays import read_overlays
 from sweep3d.report.page import render_page
@@ -27,24 +27,26 @@ from sweep3d.report.panel import BuiltPanel, Panel, PanelInputs, build_panels
 from sweep3d.report.panels import PANELS
 from sweep3d.report.results import Results, materialise_views
 from sweep3d.report.thumbs import Thumbnails
-from sweep3d.spec.loader import LoadedSpec
-from sweep3d.stages.aggregate import (
+from sweep3d.results import (
+    COUNTERFACTUAL_VIEWS,
     MACROS,
+    MEASURES,
     VIEWS,
+    PlannedStore,
     Summary,
     connect,
     has_view,
     no_results,
+    numeric_scales,
+    plan_protocol,
     region_min_count,
+    register_failure_boundaries,
+    results_store,
     summarise,
 )
-from sweep3d.stages.aggregate.boundaries import VIEW as BOUNDARIES_VIEW
-from sweep3d.stages.aggregate.boundaries import numeric_scales, register_failure_boundaries
-from sweep3d.stages.aggregate.counterfactuals import COUNTERFACTUAL_VIEWS
-from sweep3d.stages.aggregate.measures import MEASURES
-from sweep3d.stages.aggregate.own_jobs import PlannedStore, results_store
-from sweep3d.stages.aggregate.results import plan_protocol
-from sweep3d.stages.infer.evaluators import measure_of
+from sweep3d.results import VIEW as BOUNDARIES_VIEW
+from sweep3d.spec import LoadedSpec
+from sweep3d.stages.infer import measure_of
 
 STAGES = ("render", "postprocess", "infer")
 

@@ -16,8 +16,8 @@ import duckdb
 import numpy as np
 from PIL import Image, ImageDraw
 
-from sweep3d.cache.store import Store
-from sweep3d.truth import BLOB_SUFFIX, decode_mask
+from sweep3d.cache import Store
+from sweep3d.core import BLOB_SUFFIX, decode_mask
 
 TRUE_COLOR = (0, 230, 0)
 PRED_COLOR = (255, 0, 0)

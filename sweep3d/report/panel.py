@@ -15,11 +15,11 @@ from typing import Any, Callable
 
 import duckdb
 
-from sweep3d.cache.store import Store
+from sweep3d.cache import Store
 from sweep3d.report.results import OUTCOME_NAMES, Parameter, ResultRow, Results
 from sweep3d.report.thumbs import Thumbnails
-from sweep3d.spec.loader import LoadedSpec
-from sweep3d.stages.aggregate import Summary
+from sweep3d.results import Summary
+from sweep3d.spec import LoadedSpec
 
 
 @dataclass(frozen=True)

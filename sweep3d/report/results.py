@@ -26,9 +26,8 @@ from typing import Any, Mapping, Sequence
 
 import duckdb
 
-from sweep3d.evaluation import Roles
-from sweep3d.stages.aggregate.results import results_roles
-from sweep3d.stages.aggregate.views import SCENE_COLUMNS, materialise
+from sweep3d.core import Roles
+from sweep3d.results import SCENE_COLUMNS, materialise, results_roles
 
 WRONG, CORRECT, INVALID, NOT_EVALUABLE = 0, 1, 2, 3  # outcome codes; the first two are counted
 OUTCOME_NAMES = ("wrong", "correct", "invalid", "not-evaluable")

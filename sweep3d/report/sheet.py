@@ -15,15 +15,13 @@ from pathlib import Path
 
 from PIL import Image, ImageDraw
 
-from sweep3d.cache.store import Store
-from sweep3d.errors import UserError
-from sweep3d.pipeline import plan_spec
-from sweep3d.progress import RunProgress
-from sweep3d.spec.loader import LoadedSpec
-from sweep3d.stages.driver import run_stages
+from sweep3d.cache import Store
+from sweep3d.core import UserError
+from sweep3d.driver import Job, Plan, RunProgress, run_stages
+from sweep3d.engine import plan_spec
+from sweep3d.spec import LoadedSpec
 from sweep3d.stages.infer import ModelHandle
-from sweep3d.stages.plan import Job, Plan
-from sweep3d.stages.plan.policies import GridPolicy
+from sweep3d.stages.plan import GridPolicy
 from sweep3d.stages.postprocess import PostprocessStage
 from sweep3d.stages.render import RenderStage
 

@@ -27,8 +27,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 from PIL import Image
 
-from sweep3d.cache.blobs import sha256_bytes
-from sweep3d.cache.store import BLOB_TABLES, DIGEST_COLUMN, KEY_COLUMN, Store
+from sweep3d.cache import BLOB_TABLES, DIGEST_COLUMN, KEY_COLUMN, Store, sha256_bytes
 from sweep3d.report.overlays import Overlay, draw_overlay
 
 #: Longest side of a thumbnail by the number of distinct images in the report: 96 px up to

@@ -10,7 +10,7 @@ from __future__ import annotations
 #: The jobs table's own columns, besides the control parameters.
 JOB_COLUMNS = ("experiment", "job", "object", "environment", "render_key", "image_key", "pred_key",
                "parts_key", "in_frame", "model")
-#: Columns the ground-truth passes add to ``results`` (see ``sweep3d.truth``), reserved even when off.
+#: Columns the ground-truth passes add to ``results`` (see ``sweep3d.core.truth``), reserved even when off.
 TRUTH_RESULT_COLUMNS = ("truth_key", "gt_x0", "gt_y0", "gt_x1", "gt_y1", "visible_pixels", "silhouette_pixels",
                         "visible_fraction", "evaluable")
 #: Bookkeeping columns every prediction row has, besides its evaluator's columns.

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from sweep3d.errors import SpecError
+from sweep3d.core import SpecError
 
 LISTS = ("objects", "environments", "controls", "models")
 TABLES = ("experiment", "render", "model", "evaluator", "policy", "postprocess", "report", "aggregate")

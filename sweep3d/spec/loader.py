@@ -1,6 +1,6 @@
 """Load a TOML spec into a validated, path-resolved :class:`LoadedSpec`.
 
-Every mistake becomes a :class:`~sweep3d.errors.SpecError` naming the file, the key path and
+Every mistake becomes a :class:`~sweep3d.core.errors.SpecError` naming the file, the key path and
 what is expected, so the CLI can print one line instead of a traceback.
 """
 
@@ -18,11 +18,8 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from sweep3d.controls import Control, is_spec_path
-from sweep3d.errors import SpecError, UserError
-from sweep3d.evaluation import declaration_problem
-from sweep3d.registry import is_user_plugin
-from sweep3d.spec.assets import check_archive, resolve_hdri, resolve_mesh
+from sweep3d.assets import check_archive, check_file, check_hdri, check_mesh, resolve_hdri, resolve_mesh
+from sweep3d.core import Control, SpecError, UserError, declaration_problem, is_spec_path, is_user_plugin
 from sweep3d.spec.catalogue import Catalogue
 from sweep3d.spec.class_names import NameClash, spec_class_names
 from sweep3d.spec.columns import (
@@ -45,15 +42,7 @@ from sweep3d.spec.models import (
     ReportSpec,
     Spec,
 )
-from sweep3d.spec.params import (
-    Choice,
-    Fixed,
-    ParamSyntaxError,
-    Range,
-    Space,
-    parse_space,
-)
-from sweep3d.spec.sniff import check_file, check_hdri, check_mesh
+from sweep3d.spec.params import Choice, Fixed, ParamSyntaxError, Range, Space, parse_space
 
 RESERVED_CONTROL_KEYS = {"type", "id", "objects", "environments"}
 log = logging.getLogger("sweep3d.spec")
@@ -588,7 +577,7 @@ def _load_policy(spec: Spec, fail, catalogue: Catalogue, controls: list[ControlI
 def _check_policy_class(cls: Any, name: str, fail) -> None:
     """Refuse a ``[policy] type`` naming something that is not a policy class (a function, another
     class), which would otherwise fail deep in planning with an AttributeError."""
-    from sweep3d.stages.plan.policies import Policy  # that module imports this one
+    from sweep3d.stages.plan import Policy  # that module imports this one
 
     if not (isinstance(cls, type) and issubclass(cls, Policy)):
         what = f"a {type(cls).__name__}" if not isinstance(cls, type) else f"class {cls.__qualname__}"

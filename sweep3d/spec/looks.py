@@ -1,8 +1,8 @@
 """Check an object's ``parts`` and ``materials`` names against its mesh file when the spec loads.
 
-Names are read without Blender (:mod:`sweep3d.spec.names`) for OBJ and glTF; a typo is one line
+Names are read without Blender (:mod:`sweep3d.assets.mesh_names`) for OBJ and glTF; a typo is one line
 with "did you mean" and the file's names. Other formats are checked by the render worker that
-imports them (``stages/render/looks.py``), with the same wording.
+imports them (``stages/render/blender_looks.py``), with the same wording.
 """
 
 from __future__ import annotations
@@ -13,9 +13,9 @@ from typing import Any, Callable, Union, get_args, get_origin
 
 from pydantic import BaseModel
 
-from sweep3d.errors import SpecError
+from sweep3d.assets import file_names, read_mesh_bytes
+from sweep3d.core import SpecError
 from sweep3d.spec.models import ObjectSpec
-from sweep3d.spec.names import file_names, read_mesh_bytes
 
 #: Names listed in a message before "…".
 SHOWN = 12

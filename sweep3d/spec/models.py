@@ -14,7 +14,7 @@ from pydantic import (
     model_validator,
 )
 
-from sweep3d.typed import Typed, printable
+from sweep3d.core import Typed, printable
 
 Name = Annotated[str, Field(min_length=1, max_length=200), AfterValidator(printable)]
 

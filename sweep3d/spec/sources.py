@@ -15,8 +15,7 @@ import json
 from pathlib import Path
 from typing import Any, Mapping
 
-from sweep3d.errors import SpecError, UserError
-from sweep3d.registry import Registry
+from sweep3d.core import Registry, SpecError, UserError
 from sweep3d.spec.catalogue import Catalogue
 from sweep3d.spec.loader import LoadedSpec, parse_toml, spec_from_file, validate_spec
 

@@ -22,10 +22,9 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from sweep3d.cache.keys import digest
-from sweep3d.cache.store import Store, utc_now
-from sweep3d.errors import UserError
-from sweep3d.spec.loader import LoadedSpec
+from sweep3d.cache import Store, digest, utc_now
+from sweep3d.core import UserError
+from sweep3d.spec import LoadedSpec
 from sweep3d.stability.changes import CHANGES, RANDOM_CHANGES, changed, margins
 
 #: Bumped when the check gives other rows for the same inputs.
@@ -64,7 +63,7 @@ def stability_key(pred_key: str, change: str, seed: int) -> str:
 def stratified_sample(rows: list[tuple[str, float]], n: int, seed: int) -> list[str]:
     """``n`` prediction keys of ``rows`` ((pred_key, margin), distinct keys): bins of ``|margin|``
     take turns, lowest first, each giving its next key in an order seeded by ``seed``."""
-    from sweep3d.stages.aggregate.fragile import MARGIN_EDGES
+    from sweep3d.results import MARGIN_EDGES
 
     bins: list[list[str]] = [[] for _ in MARGIN_EDGES]
     for key, margin in rows:
@@ -82,15 +81,15 @@ def stratified_sample(rows: list[tuple[str, float]], n: int, seed: int) -> list[
     return out
 
 
-def check(spec: LoadedSpec, sample: int = DEFAULT_SAMPLE, seed: int = 0, console: Any = None) -> list[Checked]:
+def check_stability(spec: LoadedSpec, sample: int = DEFAULT_SAMPLE, seed: int = 0, console: Any = None) -> list[Checked]:
     """Run the stability check of ``spec``'s results (every model of it); returns what each found.
 
     Raises:
         UserError: no results yet, or an evaluator that does not rank classes.
     """
-    from sweep3d.pipeline import plan_spec
-    from sweep3d.stages.aggregate.own_jobs import results_store
-    from sweep3d.stages.infer.handle import ModelHandle
+    from sweep3d.engine import plan_spec
+    from sweep3d.results import results_store
+    from sweep3d.stages.infer import ModelHandle
 
     if spec.evaluator.kind != "classification":
         raise UserError(f"stability: [evaluator] kind = {spec.evaluator.kind!r}; the check reads the margin of "
@@ -117,8 +116,7 @@ def check(spec: LoadedSpec, sample: int = DEFAULT_SAMPLE, seed: int = 0, console
 
 def _sampled_results(store: Store, spec: LoadedSpec, model: str | None) -> list[tuple[str, float]]:
     """(pred_key, margin) of the counted results with a margin, one per prediction key."""
-    from sweep3d.stages.aggregate import connect
-    from sweep3d.stages.aggregate.views import no_results
+    from sweep3d.results import connect, no_results
 
     con = connect(store, spec.name, model=model)
     try:
@@ -138,7 +136,7 @@ def _sampled_results(store: Store, spec: LoadedSpec, model: str | None) -> list[
 
 def _inapplicable(handle: Any, plan: Any) -> dict[str, str]:
     """Changes that cannot change this model's answers, and why."""
-    from sweep3d.stages.infer.models import Preprocess
+    from sweep3d.stages.infer import Preprocess
 
     view = handle.view
     if view is None:
@@ -161,16 +159,15 @@ def _compute(store: Store, spec: LoadedSpec, plan: Any, handle: Any, jobs: list,
     """Infer the baseline and each change of ``jobs``' images and append their rows; returns how many images."""
     if not jobs:
         return 0
-    from sweep3d.cache.blobs import load_image
-    from sweep3d.pixels import from_uint8, to_uint8
-    from sweep3d.progress import RunProgress
-    from sweep3d.stages.infer.stage import _truths
-    from sweep3d.stages.infer.tasks import predict
-    from sweep3d.stages.postprocess.stage import make_image, post_controls, truth_digests
+    from sweep3d.cache import load_image
+    from sweep3d.core import from_uint8, to_uint8
+    from sweep3d.driver import RunProgress
+    from sweep3d.stages.infer import object_class_ids, predict
+    from sweep3d.stages.postprocess import make_image, post_controls, truth_digests
 
     model = handle.classifier()
     other = _other_arithmetic(model)
-    truths = _truths(plan, model.label_map(), handle.name)
+    truths = object_class_ids(plan, model.label_map(), handle.name)
     digests = {t: store.digests(t) for t in ("renders", "images")}
     passes = truth_digests(store)
     have = store.key_set("stability")
@@ -242,12 +239,11 @@ def _rows(jobs: list, ids: list, base: np.ndarray, answers: dict[str, np.ndarray
 
 def _found(spec: LoadedSpec, model: str, sampled: int, computed: int, cached: int, skipped: list[str]) -> Checked:
     """What the views say of ``model`` once its rows are stored."""
-    from sweep3d.stages.aggregate.own_jobs import results_store
+    from sweep3d.results import results_store
 
     several = len(spec.spec.all_models) > 1
     with results_store(spec) as reading:
-        from sweep3d.stages.aggregate import connect
-        from sweep3d.stages.aggregate.quoting import literal
+        from sweep3d.results import connect, literal
 
         con = connect(reading, spec.name, model=model if several else None)
         try:

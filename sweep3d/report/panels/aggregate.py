@@ -6,15 +6,7 @@ from __future__ import annotations
 from collections import defaultdict
 from typing import Any
 
-from sweep3d.report.figures import (
-    ACCURACY_AXIS,
-    COLORS,
-    Figure,
-    layout,
-    make_figure,
-    plot_text,
-    title,
-)
+from sweep3d.report.figures import ACCURACY_AXIS, COLORS, Figure, layout, make_figure, plot_text, title
 from sweep3d.report.panel import PanelInputs
 from sweep3d.report.results import Parameter
 

@@ -5,7 +5,7 @@ certain first): the accuracy of the group's results in equal-width bins of the v
 with their 95 % Wilson interval, counts in the hover), the fitted step, and the boundary with
 its 95 % interval as a band. A table lists every fit, boundaries first; a fit without a
 significant step says so ("no boundary"). Numbers from ``failure_boundaries`` (see
-:mod:`sweep3d.stages.aggregate.boundaries`), which the report registers on its connection.
+:mod:`sweep3d.results.boundaries`), which the report registers on its connection.
 """
 
 from __future__ import annotations
@@ -14,9 +14,7 @@ from typing import Any
 
 from sweep3d.report.figures import ACCURACY_AXIS, COLORS, Figure, layout, make_figure, p_text, pct, title
 from sweep3d.report.panel import PanelInputs
-from sweep3d.stages.aggregate.boundaries import VIEW, Scale, boundary_phrase, control_number, numeric_scales
-from sweep3d.stages.aggregate.quoting import identifier, literal
-from sweep3d.stages.aggregate.views import has_view
+from sweep3d.results import VIEW, Scale, boundary_phrase, control_number, has_view, identifier, literal, numeric_scales
 
 FIGURES = 8  # boundaries drawn
 BINS = 10  # equal-width bins of a group's values in its figure

@@ -1,7 +1,7 @@
 """Model comparison: is the second model more robust, and where is it worse?
 
 Shown when the spec tests several models. Each model after the first is compared with the first
-on the jobs both answered (see :mod:`sweep3d.stages.aggregate.compare`): overall accuracy with
+on the jobs both answered (see :mod:`sweep3d.results.compare`): overall accuracy with
 McNemar's exact test and the models' agreement, accuracy per control value side by side with
 95 % intervals, the regions where the difference holds after Holm's correction, and the images
 the new model gets right that the first got wrong ("fixed") and the reverse ("broken").
@@ -24,7 +24,7 @@ from sweep3d.report.figures import (
     signed_points,
 )
 from sweep3d.report.panel import PanelInputs
-from sweep3d.stages.aggregate import has_view
+from sweep3d.results import has_view
 
 REGIONS = 12  # regions listed per pair
 EXAMPLES = 8  # fixed and broken images shown per pair

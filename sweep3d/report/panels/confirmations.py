@@ -3,20 +3,17 @@
 Shown once a confirmation has been recorded for the experiment: every significant failure mode
 and boundary the run names, marked confirmed, not replicated or unconfirmed (not tested since it
 was found), with the fresh twins' accuracy inside and outside and the paired difference (see
-:mod:`sweep3d.stages.aggregate.confirmation`).
+:mod:`sweep3d.results.confirmation`).
 """
 
 from __future__ import annotations
 
 from typing import Any
 
-from sweep3d.confirm.claims import boundary_key, region_key, rule_key
-from sweep3d.confirm.record import read_verdicts
+from sweep3d.confirm import boundary_key, read_verdicts, region_key, rule_key
 from sweep3d.report.figures import p_text, pct
 from sweep3d.report.panel import PanelInputs
-from sweep3d.stages.aggregate.boundaries import boundary_phrase
-from sweep3d.stages.aggregate.confirmation import UNCONFIRMED
-from sweep3d.stages.aggregate.summary import named_rules
+from sweep3d.results import UNCONFIRMED, boundary_phrase, named_rules
 
 
 def build(inputs: PanelInputs) -> dict[str, Any] | None:

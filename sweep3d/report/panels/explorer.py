@@ -2,7 +2,7 @@
 
 Besides the spec's parameters, the results' measures are axes too, binned as ``control_accuracy``
 bins them: the object's visible fraction (truth passes), the classifier's margin and the IoU
-(:mod:`sweep3d.stages.aggregate.measures`): accuracy against how much of the object shows is one
+(:mod:`sweep3d.results.measures`): accuracy against how much of the object shows is one
 choice of axis.
 
 The page carries counts, not rows: the non-empty cells of the contingency table over every
@@ -30,7 +30,7 @@ from typing import Any
 from sweep3d.report.figures import ACCURACY_COLORSCALE, layout_json
 from sweep3d.report.panel import PanelInputs
 from sweep3d.report.results import Parameter, ResultRow
-from sweep3d.stages.aggregate.views import SCENE_COLUMNS
+from sweep3d.results import SCENE_COLUMNS
 
 GALLERY_LIMIT = 60  # tiles shown for a clicked cell (wrong ones first)
 MAX_CELLS = 200_000  # cells of the joint table at most; beyond, pair tables and no sliders

@@ -8,23 +8,14 @@ and called significant at a false discovery rate of 5 % over every region tested
 interval of their difference from the rest: the most certainly large drop first. The table and
 the figure show the significant regions; the others are listed apart, greyed, without examples.
 The list comes from the ``failure_modes`` SQL macro (see
-:mod:`sweep3d.stages.aggregate.failure_modes`).
+:mod:`sweep3d.results.failure_modes`).
 """
 
 from __future__ import annotations
 
 from typing import Any
 
-from sweep3d.report.figures import (
-    COLORS,
-    Figure,
-    interval,
-    layout,
-    make_figure,
-    p_text,
-    pct,
-    plot_text,
-)
+from sweep3d.report.figures import COLORS, Figure, interval, layout, make_figure, p_text, pct, plot_text
 from sweep3d.report.panel import PanelInputs
 
 TOP = 12  # regions listed

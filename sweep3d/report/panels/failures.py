@@ -6,11 +6,10 @@ from __future__ import annotations
 
 from typing import Any
 
-from sweep3d.evaluation import Roles
+from sweep3d.core import Roles
 from sweep3d.report.figures import pct
 from sweep3d.report.panel import PanelInputs
-from sweep3d.stages.aggregate.fragile import fragile_sentence
-from sweep3d.stages.aggregate.results import results_roles
+from sweep3d.results import fragile_sentence, results_roles
 
 
 def build(inputs: PanelInputs) -> dict[str, Any]:

@@ -2,7 +2,7 @@
 ``sweep3d explain`` found it, with the change written out ("orientation_yaw +14 makes it a
 toaster"), and per parameter how often it is part of the cheapest fix. Shown only once
 ``explain`` has run (its ``counterfactuals`` views; see
-:mod:`sweep3d.stages.aggregate.counterfactuals`)."""
+:mod:`sweep3d.results.counterfactuals`)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from typing import Any
 
 from sweep3d.report.figures import pct
 from sweep3d.report.panel import PanelInputs
-from sweep3d.stages.aggregate.views import has_view
+from sweep3d.results import has_view
 
 CARDS = 12  # failure | fix pairs shown, nearest first
 

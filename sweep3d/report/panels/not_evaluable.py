@@ -3,7 +3,7 @@ object visible).
 
 A model cannot be right or wrong about an object it was not shown, so these jobs are counted
 apart, never as failures. Every number comes from the ``not_evaluable`` view (see
-:mod:`sweep3d.stages.aggregate.tasks`); the panel is left out when there are none.
+:mod:`sweep3d.results.task_views`); the panel is left out when there are none.
 """
 
 from __future__ import annotations
@@ -13,8 +13,7 @@ from typing import Any
 
 from sweep3d.report.figures import Figure, layout, make_figure, pct, plot_text
 from sweep3d.report.panel import PanelInputs
-from sweep3d.stages.aggregate import has_view
-from sweep3d.stages.aggregate.tasks import HIDDEN, OCCLUDED, OUT_OF_FRAME
+from sweep3d.results import HIDDEN, OCCLUDED, OUT_OF_FRAME, has_view
 
 REASONS = (OUT_OF_FRAME, OCCLUDED, HIDDEN)
 REASON_COLORS = {OUT_OF_FRAME: "#9aa0a6", OCCLUDED: "#8c6d5a", HIDDEN: "#dd8452"}

@@ -16,8 +16,7 @@ from typing import Any
 
 from sweep3d.report.figures import Figure, interval, layout, make_figure, pct, plot_text
 from sweep3d.report.panel import PanelInputs
-from sweep3d.stages.aggregate.results import results_roles
-from sweep3d.stages.aggregate.views import has_view
+from sweep3d.results import has_view, results_roles
 
 SENSITIVE = 3  # parameters listed per object
 CONFUSIONS = 3  # wrong predictions listed per object

@@ -14,8 +14,7 @@ from typing import Any
 from sweep3d.report.figures import COLORS, Figure, layout, make_figure, plot_text, title
 from sweep3d.report.panel import PanelInputs
 from sweep3d.report.results import Parameter
-from sweep3d.stages.aggregate import has_view
-from sweep3d.stages.aggregate.tasks import OUTCOMES
+from sweep3d.results import OUTCOMES, has_view
 
 OUTCOME_STYLE = {"correct": ("correct", COLORS["correct"]), "wrong_class": ("wrong class", COLORS["wrong"]),
                  "wrong_box": ("right class, wrong box", COLORS["interaction"]),

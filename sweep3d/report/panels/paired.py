@@ -2,7 +2,7 @@
 
 Shown when the spec asks for a paired design (``[policy] paired``): its environments were then
 tried on the same points, so each difference is paired and McNemar's exact test on the
-discordant pairs says whether it is more than chance (see :mod:`sweep3d.stages.aggregate.paired`).
+discordant pairs says whether it is more than chance (see :mod:`sweep3d.results.paired`).
 Lists the pairs of environments, then the pairs of values of the other listed parameters that
 have pairs, and the images of the pair of environments whose difference is the most certain.
 """
@@ -13,9 +13,8 @@ from typing import Any
 
 from sweep3d.report.figures import p_text, pct, signed_points
 from sweep3d.report.panel import PanelInputs
-from sweep3d.spec.columns import parameter_column
-from sweep3d.spec.params import Choice
-from sweep3d.stages.aggregate import has_view
+from sweep3d.results import has_view
+from sweep3d.spec import Choice, parameter_column
 
 ROWS = 24  # value pairs listed per table
 EXAMPLES = 6  # discordant image pairs shown

@@ -16,28 +16,13 @@ from typing import Any
 
 import numpy as np
 
-from sweep3d.cache.keys import digest
-from sweep3d.cache.store import Store, atomic_write
-from sweep3d.parts import (
-    AZIMUTH_PARTS,
-    ELEVATION_PARTS,
-    PARTS,
-    PARTS_LAYOUT,
-    part_bounds,
-)
-from sweep3d.report.figures import (
-    ACCURACY_COLORSCALE,
-    Figure,
-    accuracy_rgb,
-    layout,
-    make_figure,
-    pct,
-)
+from sweep3d.assets import materialise_mesh, mesh_digest
+from sweep3d.cache import Store, atomic_write, digest
+from sweep3d.core import AZIMUTH_PARTS, ELEVATION_PARTS, PARTS, PARTS_LAYOUT, part_bounds
+from sweep3d.report.figures import ACCURACY_COLORSCALE, Figure, accuracy_rgb, layout, make_figure, pct
 from sweep3d.report.panel import PanelInputs
-from sweep3d.spec.assets import materialise_mesh, mesh_digest
-from sweep3d.stages.aggregate.views import has_view
-from sweep3d.stages.render.paint import SIDES, paint_objects
-from sweep3d.stages.render.protocol import Look
+from sweep3d.results import has_view
+from sweep3d.stages.render import SIDES, Look, paint_objects
 
 UNSEEN = (0.93, 0.93, 0.93)  # never shown in an image
 TOO_FEW = (0.72, 0.72, 0.72)  # shown, but in fewer images than the panel's minimum

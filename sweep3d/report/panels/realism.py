@@ -17,8 +17,7 @@ from typing import Any
 
 from sweep3d.report.figures import interval, pct
 from sweep3d.report.panel import PanelInputs
-from sweep3d.stages.aggregate import has_view
-from sweep3d.stages.aggregate.agreement import photo_path
+from sweep3d.results import has_view, photo_path
 
 PAIRS = 24  # render | photo pairs shown per source
 JPEG_QUALITY = 80

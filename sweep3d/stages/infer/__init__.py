@@ -2,18 +2,26 @@
 
 from __future__ import annotations
 
-__all__ = ["EVALUATORS", "IMAGENET", "MODELS", "ClassificationEvaluator", "Classifier", "Detector", "Evaluator", "EvaluatorParams", "ImageTensors", "InferStage",
-           "LabelMap", "ModelHandle", "Normalize", "Preprocess", "Segmenter", "builtin_labels", "builtin_model", "load_model", "pending_predictions", "predict", "Roles"]
+__all__ = [
+    "ClassificationEvaluator", "Classifier", "Detector", "EVALUATORS", "Evaluator", "EvaluatorParams",
+    "IMAGENET", "ImageTensors", "InferStage", "LabelMap", "MODELS", "ModelHandle", "Normalize",
+    "Preprocess", "Roles", "Segmenter", "Truth", "builtin_labels", "builtin_model", "check_task",
+    "evaluate_checked", "evaluator_key", "first_rows", "infer_base", "load_model", "measure_of",
+    "model_outputs", "object_class_ids", "padded", "pending_predictions", "pred_keys", "predict"
+]
 
 # Lazy exports (PEP 562): a name's module is imported when first used, so importing this package
 # stays light and free of cycles.
 from typing import TYPE_CHECKING as _TYPE_CHECKING  # noqa: E402
 
-from sweep3d.lazy import exports as _exports  # noqa: E402
+from sweep3d.core import exports as _exports  # noqa: E402
 
 if _TYPE_CHECKING:
-    from sweep3d.stages.infer.evaluators import EVALUATORS, ClassificationEvaluator, Evaluator, EvaluatorParams, Roles
+    from sweep3d.stages.infer.evaluate import evaluate_checked
+    from sweep3d.stages.infer.evaluators import ClassificationEvaluator, measure_of
+    from sweep3d.stages.infer.evaluators.evaluator import EVALUATORS, Evaluator, EvaluatorParams, Roles, Truth
     from sweep3d.stages.infer.handle import ModelHandle
+    from sweep3d.stages.infer.infer_stage import InferStage, first_rows, object_class_ids, padded, pending_predictions
     from sweep3d.stages.infer.labels import IMAGENET, LabelMap
     from sweep3d.stages.infer.models import (
         MODELS,
@@ -27,29 +35,40 @@ if _TYPE_CHECKING:
         builtin_model,
         load_model,
     )
-    from sweep3d.stages.infer.stage import InferStage, pending_predictions
-    from sweep3d.stages.infer.tasks import predict
+    from sweep3d.stages.infer.prediction_keys import evaluator_key, infer_base, pred_keys
+    from sweep3d.stages.infer.task_calls import check_task, model_outputs, predict
 
 __getattr__, __dir__ = _exports(__name__, {
-    'ClassificationEvaluator': ('sweep3d.stages.infer.evaluators', 'ClassificationEvaluator'),
-    'Classifier': ('sweep3d.stages.infer.models', 'Classifier'),
-    'Detector': ('sweep3d.stages.infer.models', 'Detector'),
-    'EVALUATORS': ('sweep3d.stages.infer.evaluators', 'EVALUATORS'),
-    'Evaluator': ('sweep3d.stages.infer.evaluators', 'Evaluator'),
-    'EvaluatorParams': ('sweep3d.stages.infer.evaluators', 'EvaluatorParams'),
-    'IMAGENET': ('sweep3d.stages.infer.labels', 'IMAGENET'),
-    'ImageTensors': ('sweep3d.stages.infer.models', 'ImageTensors'),
-    'InferStage': ('sweep3d.stages.infer.stage', 'InferStage'),
-    'LabelMap': ('sweep3d.stages.infer.labels', 'LabelMap'),
-    'MODELS': ('sweep3d.stages.infer.models', 'MODELS'),
-    'ModelHandle': ('sweep3d.stages.infer.handle', 'ModelHandle'),
-    'Normalize': ('sweep3d.stages.infer.models', 'Normalize'),
-    'Preprocess': ('sweep3d.stages.infer.models', 'Preprocess'),
-    'Roles': ('sweep3d.stages.infer.evaluators', 'Roles'),
-    'Segmenter': ('sweep3d.stages.infer.models', 'Segmenter'),
-    'builtin_labels': ('sweep3d.stages.infer.models', 'builtin_labels'),
-    'builtin_model': ('sweep3d.stages.infer.models', 'builtin_model'),
-    'load_model': ('sweep3d.stages.infer.models', 'load_model'),
-    'pending_predictions': ('sweep3d.stages.infer.stage', 'pending_predictions'),
-    'predict': ('sweep3d.stages.infer.tasks', 'predict'),
+    "ClassificationEvaluator": ("sweep3d.stages.infer.evaluators", "ClassificationEvaluator"),
+    "Classifier": ("sweep3d.stages.infer.models", "Classifier"),
+    "Detector": ("sweep3d.stages.infer.models", "Detector"),
+    "EVALUATORS": ("sweep3d.stages.infer.evaluators.evaluator", "EVALUATORS"),
+    "Evaluator": ("sweep3d.stages.infer.evaluators.evaluator", "Evaluator"),
+    "EvaluatorParams": ("sweep3d.stages.infer.evaluators.evaluator", "EvaluatorParams"),
+    "IMAGENET": ("sweep3d.stages.infer.labels", "IMAGENET"),
+    "ImageTensors": ("sweep3d.stages.infer.models", "ImageTensors"),
+    "InferStage": ("sweep3d.stages.infer.infer_stage", "InferStage"),
+    "LabelMap": ("sweep3d.stages.infer.labels", "LabelMap"),
+    "MODELS": ("sweep3d.stages.infer.models", "MODELS"),
+    "ModelHandle": ("sweep3d.stages.infer.handle", "ModelHandle"),
+    "object_class_ids": ("sweep3d.stages.infer.infer_stage", "object_class_ids"),
+    "Normalize": ("sweep3d.stages.infer.models", "Normalize"),
+    "Preprocess": ("sweep3d.stages.infer.models", "Preprocess"),
+    "Roles": ("sweep3d.stages.infer.evaluators.evaluator", "Roles"),
+    "Segmenter": ("sweep3d.stages.infer.models", "Segmenter"),
+    "Truth": ("sweep3d.stages.infer.evaluators.evaluator", "Truth"),
+    "builtin_labels": ("sweep3d.stages.infer.models", "builtin_labels"),
+    "builtin_model": ("sweep3d.stages.infer.models", "builtin_model"),
+    "check_task": ("sweep3d.stages.infer.task_calls", "check_task"),
+    "evaluate_checked": ("sweep3d.stages.infer.evaluate", "evaluate_checked"),
+    "evaluator_key": ("sweep3d.stages.infer.prediction_keys", "evaluator_key"),
+    "first_rows": ("sweep3d.stages.infer.infer_stage", "first_rows"),
+    "infer_base": ("sweep3d.stages.infer.prediction_keys", "infer_base"),
+    "load_model": ("sweep3d.stages.infer.models", "load_model"),
+    "measure_of": ("sweep3d.stages.infer.evaluators", "measure_of"),
+    "model_outputs": ("sweep3d.stages.infer.task_calls", "model_outputs"),
+    "padded": ("sweep3d.stages.infer.infer_stage", "padded"),
+    "pending_predictions": ("sweep3d.stages.infer.infer_stage", "pending_predictions"),
+    "pred_keys": ("sweep3d.stages.infer.prediction_keys", "pred_keys"),
+    "predict": ("sweep3d.stages.infer.task_calls", "predict"),
 })

@@ -1,7 +1,7 @@
 """Running an evaluator on a batch, and the checks on what it returns.
 
 An evaluator is a plug-in: what it returns is checked before a row is written, so a broken one
-stops the run in one line naming it (:class:`~sweep3d.errors.PluginError`, exit 2) instead of
+stops the run in one line naming it (:class:`~sweep3d.core.errors.PluginError`, exit 2) instead of
 writing rows that read as a verdict. The rows of earlier batches are kept (they are right);
 the checks: one row per image, each a dict of the evaluator's own columns, each value of its
 column's type, and ``valid`` and the verdict (the ``correct`` role) set on every valid row.
@@ -14,7 +14,7 @@ from typing import Any, Sequence
 import numpy as np
 import pyarrow as pa
 
-from sweep3d.errors import PLUGIN_FAILURES, PluginError, plugin_failure
+from sweep3d.core import PLUGIN_FAILURES, PluginError, plugin_failure
 from sweep3d.stages.infer.evaluators import Evaluator, Truth
 from sweep3d.stages.infer.labels import LabelMap
 

@@ -12,11 +12,8 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
-from sweep3d.errors import SpecError, UserError
-from sweep3d.registry import code_identity
-from sweep3d.spec.framing import Framing
-from sweep3d.spec.loader import LoadedSpec
-from sweep3d.spec.models import ModelSpec
+from sweep3d.core import SpecError, UserError, code_identity
+from sweep3d.spec import Framing, LoadedSpec, ModelSpec
 from sweep3d.stages.infer.labels import LabelMap
 from sweep3d.stages.infer.models import (
     MODELS,

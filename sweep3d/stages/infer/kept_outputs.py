@@ -25,9 +25,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from sweep3d.cache.digested import OUTPUTS_FOLDER, SUFFIX, pack, unpack
-from sweep3d.cache.keys import digest
-from sweep3d.cache.store import Store, atomic_write
+from sweep3d.cache import OUTPUTS_FOLDER, SUFFIX, Store, atomic_write, digest, pack, unpack
 
 #: The tasks whose outputs are one array per image, kept when small.
 KEPT_TASKS = ("classification", "raw")

@@ -10,7 +10,7 @@ import difflib
 from functools import cached_property
 from typing import Sequence
 
-from sweep3d.spec.class_names import normal_name
+from sweep3d.spec import normal_name
 
 
 class LabelError(ValueError):

@@ -19,9 +19,8 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from sweep3d.cache.keys import digest, file_digest
-from sweep3d.errors import PLUGIN_FAILURES, UserError, plugin_failure
-from sweep3d.registry import Registry
+from sweep3d.cache import digest, file_digest
+from sweep3d.core import PLUGIN_FAILURES, Registry, UserError, plugin_failure
 from sweep3d.stages.infer.labels import IMAGENET, LabelMap
 
 IMAGENET_MEAN = (0.485, 0.456, 0.406)

@@ -27,8 +27,8 @@ from typing import Any
 
 import numpy as np
 
-from sweep3d.cache.store import atomic_write
-from sweep3d.errors import UserError
+from sweep3d.cache import atomic_write
+from sweep3d.core import UserError
 from sweep3d.stages.infer.models import Classifier, on_device
 
 TOLERANCE = 1e-3  # max |logit difference| accepted between torch and ONNX Runtime

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from sweep3d.errors import UserError
+from sweep3d.core import UserError
 
 
 @dataclass(frozen=True, eq=False)

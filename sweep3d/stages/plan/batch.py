@@ -23,12 +23,10 @@ import annotated_types
 import numpy as np
 from pydantic import BaseModel
 
-from sweep3d.cache.keys import Hole, Template, canonical, canonical_pieces, float_texts
-from sweep3d.controls import Control, wrap_periodic_many
-from sweep3d.spec.loader import ControlInstance
-from sweep3d.spec.space import Column
-from sweep3d.stages.jobs import ControlValues
-from sweep3d.typed import Typed
+from sweep3d.cache import Hole, Template, canonical, canonical_pieces, float_texts
+from sweep3d.core import Control, Typed, wrap_periodic_many
+from sweep3d.driver import ControlValues
+from sweep3d.spec import Column, ControlInstance
 
 #: Metadata a range field may carry and stay plain: bounds, which every value in range meets.
 INTERVALS = (annotated_types.Ge, annotated_types.Gt, annotated_types.Le, annotated_types.Lt)
@@ -219,7 +217,7 @@ def _folds_fixed(control: Control, ranges: list[str], given: set[str]) -> bool:
 
 
 def _own_decorators(model: type[BaseModel], kind: str) -> dict[str, Any]:
-    """The model's decorators of ``kind``, but for :class:`~sweep3d.typed.Typed`'s type check,
+    """The model's decorators of ``kind``, but for :class:`~sweep3d.core.typed.Typed`'s type check,
     which refuses a value of the wrong type and never changes one that fits (a number in range)."""
     found = dict(getattr(model.__pydantic_decorators__, kind, None) or {})
     typed = Typed.__pydantic_decorators__.field_validators["_no_coercion"]

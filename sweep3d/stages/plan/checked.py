@@ -12,8 +12,8 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from sweep3d.errors import PLUGIN_FAILURES, PluginError, UserError, plugin_failure
-from sweep3d.spec.space import Point, PointError, SearchSpace, SpaceShape, contract
+from sweep3d.core import PLUGIN_FAILURES, PluginError, UserError, plugin_failure
+from sweep3d.spec import Point, PointError, SearchSpace, SpaceShape, contract
 from sweep3d.stages.plan.policies import Outcome, Policy
 
 

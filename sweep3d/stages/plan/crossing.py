@@ -20,9 +20,7 @@ from typing import Mapping
 
 import numpy as np
 
-from sweep3d.spec.loader import ControlInstance
-from sweep3d.spec.params import Choice, Fixed
-from sweep3d.spec.space import SearchSpace
+from sweep3d.spec import Choice, ControlInstance, Fixed, SearchSpace
 
 
 @dataclasses.dataclass(frozen=True)

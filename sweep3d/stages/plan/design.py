@@ -22,11 +22,8 @@ from typing import Any, Sequence
 
 import pyarrow as pa
 
-from sweep3d.csv_text import csv_text
-from sweep3d.errors import SpecError
-from sweep3d.spec.columns import parameter_column
-from sweep3d.spec.loader import ControlInstance
-from sweep3d.spec.params import Choice, Fixed, Range
+from sweep3d.core import SpecError, csv_text
+from sweep3d.spec import Choice, ControlInstance, Fixed, Range, parameter_column
 
 SCENE_COLUMNS = ("object", "environment")
 SUFFIXES = (".csv", ".parquet")
@@ -222,7 +219,7 @@ def _text(number: float) -> str:
 
 def check_output(path: Path) -> None:
     """Refuse a design file ``write_design`` cannot write, before any work (one line: the fix)."""
-    from sweep3d.errors import UserError
+    from sweep3d.core import UserError
 
     if path.suffix.lower() not in SUFFIXES:
         raise UserError(f"--design {path}: write a {' or '.join(SUFFIXES)} file")

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from sweep3d.spec.loader import LoadedSpec
+from sweep3d.spec import LoadedSpec
 
 JOB_BYTES = 500
 PARAMETER_BYTES = 360

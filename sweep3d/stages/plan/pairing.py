@@ -18,8 +18,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from sweep3d.cache.keys import digest
-from sweep3d.spec.space import Point, SearchSpace
+from sweep3d.cache import digest
+from sweep3d.spec import Point, SearchSpace
 from sweep3d.stages.plan.checked import policy_arrays
 from sweep3d.stages.plan.policies import Outcome, Policy
 

@@ -13,34 +13,43 @@ from typing import Any, Callable
 
 import numpy as np
 
-from sweep3d.cache.keys import Template, digests, file_digest
-from sweep3d.cache.store import StoreWriteError
-from sweep3d.controls import blamed
-from sweep3d.errors import SpecError, UserError
-from sweep3d.spec.assets import mesh_digest
-from sweep3d.spec.class_names import NameClash, spec_class_names
-from sweep3d.spec.framing import Framing
-from sweep3d.spec.loader import ControlInstance, LoadedSpec
-from sweep3d.spec.models import ModelSpec
-from sweep3d.spec.sniff import unreadable
-from sweep3d.spec.space import Column, Point, SearchSpace
-from sweep3d.stages.infer.keys import evaluator_key, infer_base, pred_keys
-from sweep3d.stages.infer.labels import LabelMap
-from sweep3d.stages.infer.models import builtin_labels
-from sweep3d.stages.jobs import JobList, Plan, PlanColumns, SceneBlock
-from sweep3d.stages.passes import truth_passes
+from sweep3d.assets import mesh_digest, unreadable
+from sweep3d.cache import StoreWriteError, Template, digests, file_digest
+from sweep3d.core import SpecError, UserError, blamed
+from sweep3d.driver import JobList, Plan, PlanColumns, SceneBlock, truth_passes
+from sweep3d.spec import (
+    Column,
+    ControlInstance,
+    Framing,
+    LoadedSpec,
+    ModelSpec,
+    NameClash,
+    Point,
+    SearchSpace,
+    spec_class_names,
+)
+from sweep3d.stages.infer import LabelMap, builtin_labels, evaluator_key, infer_base, pred_keys
 from sweep3d.stages.plan.batch import ControlBatch, control_batch, groups, keyed_texts
 from sweep3d.stages.plan.checked import policy_count
 from sweep3d.stages.plan.crossing import crossing
 from sweep3d.stages.plan.memory import check_memory
 from sweep3d.stages.plan.pairing import scene_points
 from sweep3d.stages.plan.policies import Outcome
-from sweep3d.stages.postprocess.keys import image_template
-from sweep3d.stages.render.controls.base import frame_fields
-from sweep3d.stages.render.device import resolve_device
-from sweep3d.stages.render.engines import check_engine, engine_key, plan_device
-from sweep3d.stages.render.keys import parts_keys, render_template, scene_key, truth_keys
-from sweep3d.stages.render.state import SceneState, in_frame, in_frame_many
+from sweep3d.stages.postprocess import image_template
+from sweep3d.stages.render import (
+    SceneState,
+    check_engine,
+    engine_key,
+    frame_fields,
+    in_frame,
+    in_frame_many,
+    parts_keys,
+    plan_device,
+    render_template,
+    resolve_device,
+    scene_key,
+    truth_keys,
+)
 
 #: What an adaptive policy learns per scene: the outcome of each point already evaluated.
 History = dict[tuple[str, str], dict[Point, Outcome]]

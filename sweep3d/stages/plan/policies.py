@@ -10,13 +10,11 @@ from typing import TYPE_CHECKING, ClassVar, Mapping, Sequence
 import numpy as np
 from pydantic import ConfigDict, Field, StrictBool
 
-from sweep3d.registry import Registry
-from sweep3d.spec.params import Range
-from sweep3d.spec.space import Point, SearchSpace, SpaceShape, as_arrays, as_points
-from sweep3d.typed import Typed
+from sweep3d.core import Registry, Typed
+from sweep3d.spec import Point, Range, SearchSpace, SpaceShape, as_arrays, as_points
 
 if TYPE_CHECKING:
-    from sweep3d.spec.loader import ControlInstance
+    from sweep3d.spec import ControlInstance
 
 
 class PolicyParams(Typed):
@@ -284,7 +282,7 @@ class BoundaryPolicy(RoundsPolicy):
 
     Starts with ``initial`` Sobol points; each later round fits a step to the outcomes so far
     along every continuous dimension that does not wrap (the fit ``failure_boundaries`` makes:
-    see :mod:`sweep3d.stages.aggregate.step_fit`), takes the one with the strongest step (its
+    see :mod:`sweep3d.stages.plan.step_fit`), takes the one with the strongest step (its
     likelihood ratio at least :data:`BoundaryPolicy.EVIDENCE`) and puts ``batch`` points where
     that boundary is still uncertain: its 95 % interval widened by ``margin`` of its width on
     each side, spread evenly across it, the other coordinates and lists drawn at random (so the
@@ -307,7 +305,7 @@ class BoundaryPolicy(RoundsPolicy):
                history: Mapping[Point, Outcome]) -> tuple[int, float, float] | None:
         """(dimension, low, high): the strongest step's 95 % interval in unit coordinates, or None
         when no dimension shows a step with :data:`EVIDENCE`."""
-        from sweep3d.stages.aggregate.step_fit import fit_step
+        from sweep3d.stages.plan.step_fit import fit_step
 
         if not points:
             return None
@@ -353,8 +351,8 @@ class TablePolicy(Policy):
 
     def bind(self, base: Path, controls: Sequence[ControlInstance], objects: Sequence[str],
              environments: Sequence[str]) -> None:
-        from sweep3d.errors import SpecError
-        from sweep3d.spec.sniff import check_file
+        from sweep3d.assets import check_file
+        from sweep3d.core import SpecError
         from sweep3d.stages.plan.design import SUFFIXES, read_design
 
         path = Path(self.params.file).expanduser()

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sweep3d.pixels import linear_to_srgb, srgb_to_linear
+from sweep3d.core import linear_to_srgb, srgb_to_linear
 
 #: At most this many depth layers; their spacing in blur radius is at least :data:`LAYER_STEP` px.
 MAX_LAYERS = 32

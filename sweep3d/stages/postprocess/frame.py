@@ -1,7 +1,7 @@
 """What a depth-aware post control reads beside the image: the render's passes and its camera.
 
 The postprocess stage builds one :class:`RenderFrame` per job for the controls that declare
-``passes`` (see :class:`~sweep3d.stages.postprocess.controls.base.PostControl`). Its numbers are
+``passes`` (see :class:`~sweep3d.stages.postprocess.controls.post_control.PostControl`). Its numbers are
 functions of the render key (the camera comes from the job's rendered controls and the frame's
 size), so an image key made of the render key and the post controls' values stays correct.
 """
@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
-    from sweep3d.stages.render.state import SceneState
+    from sweep3d.stages.render import SceneState
 
 
 @dataclass(frozen=True)
@@ -62,7 +62,7 @@ def frame_from_state(state: SceneState, size: int, crop: int | None, depth: np.n
                      mask: np.ndarray | None) -> RenderFrame:
     """The frame of a render of ``state`` on a ``size``-pixel square frame whose centre ``crop``
     (None: all of it) is stored, as ``stages/render/scene.py`` sets Blender's camera up."""
-    from sweep3d.stages.render.state import SENSOR_WIDTH_MM
+    from sweep3d.stages.render import SENSOR_WIDTH_MM
 
     left = (size - (crop or size)) // 2  # where the stored crop starts, from the top and left
     position, *_ = state.camera_basis()

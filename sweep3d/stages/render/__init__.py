@@ -5,26 +5,71 @@ This package's public API never imports bpy; only :mod:`.worker` (in child proce
 
 from __future__ import annotations
 
-__all__ = ["LOCAL", "RENDERED_CONTROLS", "Executor", "RenderStage", "RenderedControl", "SceneState",
-           "render_settings"]
+__all__ = [
+    "COLUMNS", "Executor", "LOCAL", "Look", "RENDERED_CONTROLS", "RenderInfo", "RenderStage",
+    "RenderedControl", "SENSOR_WIDTH_MM", "SIDES", "SceneEdit", "SceneState", "check_engine",
+    "connect", "describe_materials", "device_note", "duration", "engine_key",
+    "estimate_render_seconds", "frame_fields", "in_frame", "in_frame_many", "missing_gpu_warning",
+    "object_error", "paint_objects", "parts_keys", "plan_device", "remove_stale_scratch",
+    "render_settings", "render_template", "resolve_device", "scene_key", "scratch_root",
+    "slow_render_warning", "truth_keys"
+]
 
 # Lazy exports (PEP 562): a name's module is imported when first used, so importing this package
 # stays light and free of cycles.
 from typing import TYPE_CHECKING as _TYPE_CHECKING  # noqa: E402
 
-from sweep3d.lazy import exports as _exports  # noqa: E402
+from sweep3d.core import exports as _exports  # noqa: E402
 
 if _TYPE_CHECKING:
-    from sweep3d.stages.render.controls import RENDERED_CONTROLS, RenderedControl
-    from sweep3d.stages.render.stage import LOCAL, Executor, RenderStage, render_settings
-    from sweep3d.stages.render.state import SceneState
+    from sweep3d.stages.render.controls.rendered_control import RENDERED_CONTROLS, RenderedControl, frame_fields
+    from sweep3d.stages.render.describe import COLUMNS, describe_materials
+    from sweep3d.stages.render.device import device_note, missing_gpu_warning, resolve_device
+    from sweep3d.stages.render.engines import check_engine, engine_key, plan_device
+    from sweep3d.stages.render.estimate import duration, estimate_render_seconds, slow_render_warning
+    from sweep3d.stages.render.paint import SIDES, paint_objects
+    from sweep3d.stages.render.pool import remove_stale_scratch, scratch_root
+    from sweep3d.stages.render.ray_pool import connect
+    from sweep3d.stages.render.render_keys import parts_keys, render_template, scene_key, truth_keys
+    from sweep3d.stages.render.render_stage import LOCAL, Executor, RenderStage, object_error, render_settings
+    from sweep3d.stages.render.scene_edit import SceneEdit
+    from sweep3d.stages.render.state import SENSOR_WIDTH_MM, SceneState, in_frame, in_frame_many
+    from sweep3d.stages.render.worker_protocol import Look, RenderInfo
 
 __getattr__, __dir__ = _exports(__name__, {
-    'Executor': ('sweep3d.stages.render.stage', 'Executor'),
-    'LOCAL': ('sweep3d.stages.render.stage', 'LOCAL'),
-    'RENDERED_CONTROLS': ('sweep3d.stages.render.controls', 'RENDERED_CONTROLS'),
-    'RenderStage': ('sweep3d.stages.render.stage', 'RenderStage'),
-    'RenderedControl': ('sweep3d.stages.render.controls', 'RenderedControl'),
-    'SceneState': ('sweep3d.stages.render.state', 'SceneState'),
-    'render_settings': ('sweep3d.stages.render.stage', 'render_settings'),
+    "COLUMNS": ("sweep3d.stages.render.describe", "COLUMNS"),
+    "Executor": ("sweep3d.stages.render.render_stage", "Executor"),
+    "LOCAL": ("sweep3d.stages.render.render_stage", "LOCAL"),
+    "Look": ("sweep3d.stages.render.worker_protocol", "Look"),
+    "RENDERED_CONTROLS": ("sweep3d.stages.render.controls.rendered_control", "RENDERED_CONTROLS"),
+    "RenderInfo": ("sweep3d.stages.render.worker_protocol", "RenderInfo"),
+    "RenderStage": ("sweep3d.stages.render.render_stage", "RenderStage"),
+    "RenderedControl": ("sweep3d.stages.render.controls.rendered_control", "RenderedControl"),
+    "SENSOR_WIDTH_MM": ("sweep3d.stages.render.state", "SENSOR_WIDTH_MM"),
+    "SIDES": ("sweep3d.stages.render.paint", "SIDES"),
+    "SceneEdit": ("sweep3d.stages.render.scene_edit", "SceneEdit"),
+    "SceneState": ("sweep3d.stages.render.state", "SceneState"),
+    "check_engine": ("sweep3d.stages.render.engines", "check_engine"),
+    "connect": ("sweep3d.stages.render.ray_pool", "connect"),
+    "describe_materials": ("sweep3d.stages.render.describe", "describe_materials"),
+    "device_note": ("sweep3d.stages.render.device", "device_note"),
+    "duration": ("sweep3d.stages.render.estimate", "duration"),
+    "engine_key": ("sweep3d.stages.render.engines", "engine_key"),
+    "estimate_render_seconds": ("sweep3d.stages.render.estimate", "estimate_render_seconds"),
+    "frame_fields": ("sweep3d.stages.render.controls.rendered_control", "frame_fields"),
+    "in_frame": ("sweep3d.stages.render.state", "in_frame"),
+    "in_frame_many": ("sweep3d.stages.render.state", "in_frame_many"),
+    "missing_gpu_warning": ("sweep3d.stages.render.device", "missing_gpu_warning"),
+    "object_error": ("sweep3d.stages.render.render_stage", "object_error"),
+    "paint_objects": ("sweep3d.stages.render.paint", "paint_objects"),
+    "parts_keys": ("sweep3d.stages.render.render_keys", "parts_keys"),
+    "plan_device": ("sweep3d.stages.render.engines", "plan_device"),
+    "remove_stale_scratch": ("sweep3d.stages.render.pool", "remove_stale_scratch"),
+    "render_settings": ("sweep3d.stages.render.render_stage", "render_settings"),
+    "render_template": ("sweep3d.stages.render.render_keys", "render_template"),
+    "resolve_device": ("sweep3d.stages.render.device", "resolve_device"),
+    "scene_key": ("sweep3d.stages.render.render_keys", "scene_key"),
+    "scratch_root": ("sweep3d.stages.render.pool", "scratch_root"),
+    "slow_render_warning": ("sweep3d.stages.render.estimate", "slow_render_warning"),
+    "truth_keys": ("sweep3d.stages.render.render_keys", "truth_keys"),
 })

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from sweep3d.errors import UserError
+from sweep3d.core import UserError
 
 
 def import_bpy():

@@ -211,7 +211,7 @@ def call_in_child(func: Callable[..., Any], *args: Any, name: str = "sweep3d-ble
     Raises:
         RenderError: the child died without an answer.
     """
-    from sweep3d.errors import RenderError
+    from sweep3d.core import RenderError
     from sweep3d.stages.render.pool import death_cause
 
     child = Child(_answer, (func, args), name)

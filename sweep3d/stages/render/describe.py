@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from sweep3d.stages.render.child import call_in_child
-from sweep3d.stages.render.protocol import Look
+from sweep3d.stages.render.worker_protocol import Look
 
 #: What a row holds per material, beside ``part``, ``material`` and ``overridden``.
 COLUMNS = ("base_color", "opacity", "roughness", "metallic", "transmission", "ior", "coat")
@@ -31,10 +31,10 @@ def describe_materials(items: list[tuple[str, Look | None]]) -> list[list[dict[s
 
 def _describe_in_this_process(items: list[tuple[str, Look | None]]) -> list[list[dict[str, Any]] | str]:
     os.dup2(os.open(os.devnull, os.O_WRONLY), 1)  # Blender prints progress straight to fd 1
-    from sweep3d.errors import UserError
-    from sweep3d.stages.render.looks import effective_materials
-    from sweep3d.stages.render.protocol import EnvironmentRef, RenderSettings
+    from sweep3d.core import UserError
+    from sweep3d.stages.render.blender_looks import effective_materials
     from sweep3d.stages.render.scene import BlenderScene
+    from sweep3d.stages.render.worker_protocol import EnvironmentRef, RenderSettings
 
     out: list[list[dict[str, Any]] | str] = []
     with tempfile.TemporaryDirectory(prefix="sweep3d-materials-") as scratch:

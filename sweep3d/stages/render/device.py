@@ -21,8 +21,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from sweep3d.errors import UserError
-from sweep3d.spec.models import RenderSpec
+from sweep3d.core import UserError
+from sweep3d.spec import RenderSpec
 from sweep3d.stages.render import gpus as gpus_module
 
 PROBE_TIMEOUT = 120.0  # seconds the probe may take to import bpy and list Cycles' devices

@@ -14,8 +14,8 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-from sweep3d.errors import SpecError
-from sweep3d.spec.loader import LoadedSpec
+from sweep3d.core import SpecError
+from sweep3d.spec import LoadedSpec
 
 ENGINES = ("cycles", "mitsuba")
 #: Mitsuba's variant: ``scalar_rgb`` needs no system library, compiles no kernels, and took about

@@ -3,7 +3,7 @@ would run for hours (``samples = 65536``, ``resolution = 4096``) before ``run`` 
 
 from __future__ import annotations
 
-from sweep3d.spec.models import RenderSpec
+from sweep3d.spec import RenderSpec
 
 # Fallback per-image costs on a 2-core CPU (measured with bench), when the store has no history.
 SECONDS_PER_SAMPLE_224 = 0.034

@@ -1,7 +1,7 @@
 """Paint an object with one colour per part and render it from a few sides.
 
 The part-visibility panel shows accuracy "as a coloured render of the object" (the paper's
-Figure 8): each part of the surface (see :mod:`sweep3d.parts`) takes the colour of the accuracy
+Figure 8): each part of the surface (see :mod:`sweep3d.core.uv_cells`) takes the colour of the accuracy
 of the images that show it. The paint is an image texture of one texel per part on the parts UV
 map, sampled without interpolation, lit by a plain white world so the colours read true.
 
@@ -16,9 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
-from sweep3d.parts import AZIMUTH_PARTS, ELEVATION_PARTS, PARTS, UV_MAP
+from sweep3d.core import AZIMUTH_PARTS, ELEVATION_PARTS, PARTS, UV_MAP
 from sweep3d.stages.render.child import call_in_child
-from sweep3d.stages.render.protocol import Look
+from sweep3d.stages.render.worker_protocol import Look
 
 #: (label, camera azimuth, camera elevation): the sides shown, as the camera control names them.
 SIDES = (("front", 0.0, 15.0), ("right", 90.0, 15.0), ("back", 180.0, 15.0), ("left", 270.0, 15.0),
@@ -44,10 +44,10 @@ def paint_objects(items: list[tuple[str, np.ndarray]], resolution: int = 160, sa
 def _paint_in_this_process(items: list[tuple[str, np.ndarray, Look | None]], resolution: int,
                            samples: int) -> list[list[bytes]]:
     os.dup2(os.open(os.devnull, os.O_WRONLY), 1)  # Blender prints progress straight to fd 1
-    from sweep3d.pixels import encode_png
-    from sweep3d.stages.render.protocol import EnvironmentRef, RenderSettings
+    from sweep3d.core import encode_png
     from sweep3d.stages.render.scene import BlenderScene
     from sweep3d.stages.render.state import SceneState
+    from sweep3d.stages.render.worker_protocol import EnvironmentRef, RenderSettings
 
     # the UV pass builds the parts UV map the paint is laid on
     settings = RenderSettings(resolution=resolution, samples=samples, denoise=True, passes=("uv",))
@@ -71,7 +71,7 @@ def _paint_in_this_process(items: list[tuple[str, np.ndarray, Look | None]], res
 
 
 def _paint_material(bpy, colours: np.ndarray):
-    """A diffuse material whose colour is the part's texel (two turns of ``u``: see parts.py)."""
+    """A diffuse material whose colour is the part's texel (two turns of ``u``: see core/uv_cells.py)."""
     texels = np.ones((ELEVATION_PARTS, 2 * AZIMUTH_PARTS, 4), dtype=np.float32)
     grid = colours.reshape(ELEVATION_PARTS, AZIMUTH_PARTS, 3)
     texels[:, :AZIMUTH_PARTS, :3] = texels[:, AZIMUTH_PARTS:, :3] = grid

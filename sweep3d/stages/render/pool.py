@@ -27,12 +27,11 @@ from multiprocessing.connection import Connection, wait
 from pathlib import Path
 from typing import Iterator, Literal
 
-from sweep3d.controls import control_label
-from sweep3d.errors import RenderError, UserError
-from sweep3d.registry import is_user_plugin
+from sweep3d.core import RenderError, UserError, control_label, is_user_plugin
 from sweep3d.stages.render.child import Child
 from sweep3d.stages.render.device import KERNEL_GRACE, prepare_gpu_environment
-from sweep3d.stages.render.protocol import (
+from sweep3d.stages.render.worker import worker_main
+from sweep3d.stages.render.worker_protocol import (
     NO_LIMITS,
     Editing,
     Fatal,
@@ -45,7 +44,6 @@ from sweep3d.stages.render.protocol import (
     Started,
     WorkerLimits,
 )
-from sweep3d.stages.render.worker import worker_main
 
 SCRATCH_PREFIX = "sweep3d-"  # + the parent's pid: a later run can tell a killed run's folder
 START_TIMEOUT = 120.0  # seconds a worker may take to import bpy and build its scene

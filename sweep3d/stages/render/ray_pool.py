@@ -18,12 +18,10 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any, Iterator
 
-from sweep3d.cache.keys import digest
-from sweep3d.cache.store import atomic_write
-from sweep3d.errors import UserError
-from sweep3d.registry import is_user_plugin
-from sweep3d.spec.assets import bpy_root, mesh_files
-from sweep3d.stages.render.protocol import RenderJob, RenderReply, RenderSettings
+from sweep3d.assets import bpy_root, mesh_files
+from sweep3d.cache import atomic_write, digest
+from sweep3d.core import UserError, is_user_plugin
+from sweep3d.stages.render.worker_protocol import RenderJob, RenderReply, RenderSettings
 
 MAX_GROUP_RETRIES = 2
 

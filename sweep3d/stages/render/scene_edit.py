@@ -15,15 +15,13 @@ from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
-from sweep3d.controls import blamed, control_label
-from sweep3d.errors import PluginError
-from sweep3d.registry import is_user_plugin
+from sweep3d.core import PluginError, blamed, control_label, is_user_plugin
 from sweep3d.stages.render.sandbox import clean_up, snapshot
 
 if TYPE_CHECKING:
     from pydantic import BaseModel
 
-    from sweep3d.stages.render.controls.base import RenderedControl
+    from sweep3d.stages.render.controls.rendered_control import RenderedControl
     from sweep3d.stages.render.scene import BlenderScene
 
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from sweep3d.errors import UserError
+from sweep3d.core import UserError
 
 # skin -> (texture node, its settings, ramp stops as (position, RGB), interpolation)
 _CREAM, _BLACK = (0.92, 0.88, 0.78), (0.02, 0.02, 0.02)

@@ -5,7 +5,7 @@ the pass is part of the worker's settings and set up before the scene renders an
 compositor writes the pass as three 16-bit greyscale PNGs (u, v and an object mask from the
 object-index pass) next to the frame; Blender's Render Result holds no pixels headless.
 
-The pass reads the ``sweep3d_parts`` UV map (see :mod:`sweep3d.parts`), which is
+The pass reads the ``sweep3d_parts`` UV map (see :mod:`sweep3d.core.uv_cells`), which is
 made the mesh's render UV map; image textures that used the mesh's own UV map implicitly are
 pointed at it explicitly first, so the RGB image does not change.
 """
@@ -18,8 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from sweep3d.errors import UserError
-from sweep3d.parts import UV_MAP, loop_uvs, part_counts
+from sweep3d.core import UV_MAP, UserError, loop_uvs, part_counts
 from sweep3d.stages.render.compositor import pass_outputs
 
 CHANNELS = ("u", "v", "mask")

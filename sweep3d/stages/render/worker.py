@@ -24,9 +24,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from sweep3d.errors import UserError
+from sweep3d.core import UserError
 from sweep3d.stages.render.child import orphaned
-from sweep3d.stages.render.protocol import (
+from sweep3d.stages.render.worker_protocol import (
     NO_LIMITS,
     Editing,
     Fatal,
@@ -121,7 +121,7 @@ def posed_state(job: RenderJob):
     Raises:
         PluginError: a control's ``apply`` raised.
     """
-    from sweep3d.controls import blamed
+    from sweep3d.core import blamed
     from sweep3d.stages.render.state import SceneState
 
     state = SceneState()
@@ -147,9 +147,8 @@ def render_job(scene, job: RenderJob, keep_pixels: bool = False, on_edit: OnEdit
         A :class:`UserError` (the spec's input, a full disk) gives kind "user"; any other
         failure "internal", so one bad job does not kill the sweep.
     """
-    from sweep3d.cache.store import atomic_write
-    from sweep3d.errors import PluginError
-    from sweep3d.pixels import encode_png, png_size
+    from sweep3d.cache import atomic_write
+    from sweep3d.core import PluginError, encode_png, png_size
     from sweep3d.stages.render.scene_edit import EditedRenderError, render_edited
 
     key = job.render_key

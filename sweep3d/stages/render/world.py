@@ -12,10 +12,10 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from sweep3d.errors import UserError
+from sweep3d.core import UserError
 from sweep3d.stages.render._rna import assign
-from sweep3d.stages.render.protocol import EnvironmentRef
 from sweep3d.stages.render.state import SceneState
+from sweep3d.stages.render.worker_protocol import EnvironmentRef
 
 GROUND_ALBEDO = 0.3  # below the horizon of a procedural sky
 

@@ -3,7 +3,9 @@
 Each task is a module that registers its evaluator; a user's own is named ``module:Class``.
 """
 
-from sweep3d.stages.infer.evaluators.base import (
+from sweep3d.stages.infer.evaluators.classification import ClassificationEvaluator
+from sweep3d.stages.infer.evaluators.detection import DetectionEvaluator
+from sweep3d.stages.infer.evaluators.evaluator import (
     EVALUATORS,
     OUTCOMES,
     TASKS,
@@ -14,8 +16,6 @@ from sweep3d.stages.infer.evaluators.base import (
     box_iou,
     log_softmax,
 )
-from sweep3d.stages.infer.evaluators.classification import ClassificationEvaluator
-from sweep3d.stages.infer.evaluators.detection import DetectionEvaluator
 from sweep3d.stages.infer.evaluators.localization import LocalizationEvaluator
 from sweep3d.stages.infer.evaluators.segmentation import SegmentationEvaluator
 

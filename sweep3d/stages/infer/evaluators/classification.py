@@ -7,7 +7,15 @@ from typing import Sequence
 import numpy as np
 import pyarrow as pa
 
-from sweep3d.stages.infer.evaluators.base import EVALUATORS, Evaluator, EvaluatorParams, Roles, TopK, Truth, log_softmax
+from sweep3d.stages.infer.evaluators.evaluator import (
+    EVALUATORS,
+    Evaluator,
+    EvaluatorParams,
+    Roles,
+    TopK,
+    Truth,
+    log_softmax,
+)
 from sweep3d.stages.infer.labels import LabelMap
 
 #: The columns every evaluator that ranks classes shares (localization adds its box to them).

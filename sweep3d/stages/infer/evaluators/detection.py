@@ -6,7 +6,7 @@ the continuous box [x0, x1] × [y0, y1] in the stored image's pixels.
 
 Besides the per-image verdict, every matching detection (kept or not) is stored with its score
 and IoU, so average precision can be computed over any subset of images later, in SQL
-(:mod:`sweep3d.stages.aggregate.detection`), without re-running the model.
+(:mod:`sweep3d.results.detection`), without re-running the model.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import numpy as np
 import pyarrow as pa
 from pydantic import Field
 
-from sweep3d.stages.infer.evaluators.base import EVALUATORS, Evaluator, EvaluatorParams, IoU, Roles, Truth, box_iou
+from sweep3d.stages.infer.evaluators.evaluator import EVALUATORS, Evaluator, EvaluatorParams, IoU, Roles, Truth, box_iou
 from sweep3d.stages.infer.labels import LabelMap
 from sweep3d.stages.infer.outputs import Detections
 

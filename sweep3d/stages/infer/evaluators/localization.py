@@ -11,7 +11,8 @@ from typing import Sequence
 import numpy as np
 import pyarrow as pa
 
-from sweep3d.stages.infer.evaluators.base import (
+from sweep3d.stages.infer.evaluators.classification import RANKED_FIELDS, ranked_rows
+from sweep3d.stages.infer.evaluators.evaluator import (
     EVALUATORS,
     Evaluator,
     EvaluatorParams,
@@ -21,7 +22,6 @@ from sweep3d.stages.infer.evaluators.base import (
     Truth,
     box_iou,
 )
-from sweep3d.stages.infer.evaluators.classification import RANKED_FIELDS, ranked_rows
 from sweep3d.stages.infer.labels import LabelMap
 from sweep3d.stages.infer.outputs import Localized
 

@@ -11,9 +11,9 @@ from typing import Sequence
 import numpy as np
 import pyarrow as pa
 
-from sweep3d.stages.infer.evaluators.base import EVALUATORS, Evaluator, EvaluatorParams, IoU, Roles, Truth
+from sweep3d.core import encode_mask
+from sweep3d.stages.infer.evaluators.evaluator import EVALUATORS, Evaluator, EvaluatorParams, IoU, Roles, Truth
 from sweep3d.stages.infer.labels import LabelMap
-from sweep3d.truth import encode_mask
 
 SEGMENTATION_FIELDS = [
     ("valid", pa.bool_()),

@@ -8,9 +8,8 @@ import numpy as np
 from PIL import Image
 from pydantic import Field
 
-from sweep3d.controls import ControlParams
-from sweep3d.pixels import to_uint8
-from sweep3d.stages.postprocess.controls.base import POST_CONTROLS, PostControl
+from sweep3d.core import ControlParams, to_uint8
+from sweep3d.stages.postprocess.controls.post_control import POST_CONTROLS, PostControl
 
 
 @POST_CONTROLS.register("jpeg")

@@ -11,9 +11,8 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import Field
 
-from sweep3d.controls import ControlParams
-from sweep3d.errors import UserError
-from sweep3d.stages.postprocess.controls.base import POST_CONTROLS, PostControl
+from sweep3d.core import ControlParams, UserError
+from sweep3d.stages.postprocess.controls.post_control import POST_CONTROLS, PostControl
 
 CORRUPTIONS = (
     "gaussian_noise", "shot_noise", "impulse_noise", "defocus_blur", "glass_blur", "motion_blur",

@@ -1,7 +1,7 @@
 """Depth-aware corruptions: fog and a lens's defocus, from the depth pass of the job's own render.
 
 They declare ``passes = ("depth",)``: the render stage then writes the depth pass (see
-``sweep3d.stages.passes``) and the postprocess stage hands it to ``apply`` with the camera, as a
+``sweep3d.driver.passes``) and the postprocess stage hands it to ``apply`` with the camera, as a
 :class:`~sweep3d.stages.postprocess.frame.RenderFrame`. Distances are in object radii (Blender
 metres: the object fits a sphere of radius 1). The optics are in ``postprocess.depth_effects``.
 """
@@ -13,8 +13,8 @@ from typing import Any
 import numpy as np
 from pydantic import Field
 
-from sweep3d.controls import ControlParams
-from sweep3d.stages.postprocess.controls.base import POST_CONTROLS, PostControl
+from sweep3d.core import ControlParams
+from sweep3d.stages.postprocess.controls.post_control import POST_CONTROLS, PostControl
 from sweep3d.stages.postprocess.depth_effects import defocus, fog, signed_coc
 from sweep3d.stages.postprocess.frame import RenderFrame
 
@@ -67,7 +67,7 @@ class Fog(PostControl):
 
 def airlight(color: str) -> np.ndarray:
     """A "#rrggbb" sRGB colour as linear RGB (3,)."""
-    from sweep3d.pixels import srgb_to_linear
+    from sweep3d.core import srgb_to_linear
 
     h = color.lstrip("#")
     return srgb_to_linear(np.array([int(h[i : i + 2], 16) / 255.0 for i in (0, 2, 4)])).astype(np.float64)

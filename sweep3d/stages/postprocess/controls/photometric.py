@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 from pydantic import Field
 
-from sweep3d.controls import ControlParams
-from sweep3d.stages.postprocess.controls.base import POST_CONTROLS, PostControl
+from sweep3d.core import ControlParams
+from sweep3d.stages.postprocess.controls.post_control import POST_CONTROLS, PostControl
 
 
 @POST_CONTROLS.register("blur")

@@ -6,10 +6,9 @@ from typing import Any, Literal
 
 from pydantic import Field
 
-from sweep3d.cache.keys import file_digest
-from sweep3d.controls import ControlParams, SpecPath
-from sweep3d.errors import UserError
-from sweep3d.stages.render.controls.base import RENDERED_CONTROLS, RenderedControl
+from sweep3d.cache import file_digest
+from sweep3d.core import ControlParams, SpecPath, UserError
+from sweep3d.stages.render.controls.rendered_control import RENDERED_CONTROLS, RenderedControl
 from sweep3d.stages.render.state import Occluder, SceneState
 
 SKINS = ("original", "zebra", "tiger", "cow", "giraffe", "leopard", "image")

@@ -6,8 +6,8 @@ from typing import Any
 
 from pydantic import Field
 
-from sweep3d.controls import ControlParams
-from sweep3d.stages.render.controls.base import RENDERED_CONTROLS, RenderedControl
+from sweep3d.core import ControlParams
+from sweep3d.stages.render.controls.rendered_control import RENDERED_CONTROLS, RenderedControl
 from sweep3d.stages.render.state import SceneState, zoom_for_fill
 
 

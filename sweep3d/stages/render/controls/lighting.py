@@ -7,8 +7,8 @@ from typing import Any, Literal
 
 from pydantic import Field
 
-from sweep3d.controls import ControlParams
-from sweep3d.stages.render.controls.base import RENDERED_CONTROLS, RenderedControl
+from sweep3d.core import ControlParams
+from sweep3d.stages.render.controls.rendered_control import RENDERED_CONTROLS, RenderedControl
 from sweep3d.stages.render.lights import kelvin_to_rgb
 from sweep3d.stages.render.state import PointLight, SceneState, Sky
 

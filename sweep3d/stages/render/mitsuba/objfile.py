@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sweep3d.errors import UserError
+from sweep3d.core import UserError
 
 DEFAULT_MATERIAL = ""  # faces before any usemtl, or naming a material the MTL lacks
 

@@ -22,17 +22,15 @@ from typing import Any
 
 import numpy as np
 
-from sweep3d.errors import UserError
-from sweep3d.pixels import encode_png
-from sweep3d.spec.looks import unknown_name
+from sweep3d.core import TRUTH_PASSES, UserError, encode_png
+from sweep3d.spec import unknown_name
 from sweep3d.stages.render import engines
 from sweep3d.stages.render.lights import WHITE, SunLight
 from sweep3d.stages.render.mitsuba import translate
 from sweep3d.stages.render.mitsuba.hdri import load_bitmap
 from sweep3d.stages.render.mitsuba.objfile import MtlMaterial, ObjMesh, read_obj
-from sweep3d.stages.render.protocol import EnvironmentRef, Look, RenderSettings
 from sweep3d.stages.render.state import SceneState
-from sweep3d.truth import TRUTH_PASSES
+from sweep3d.stages.render.worker_protocol import EnvironmentRef, Look, RenderSettings
 
 #: The pixel filter's standard deviation in pixels: close to Cycles' 1.5 px Blackman-Harris.
 FILTER_STDDEV = 0.3

@@ -6,7 +6,7 @@ Blender's conventions, translated once here so the two engines agree:
   elevation, after the Mapping node turns the direction about Z by the world's rotation;
   Mitsuba's ``envmap`` looks up u = atan2(x', −z') / 2π, v = acos(y') / π in its local frame.
   The two agree when local = (y, z, x) of the turned direction: :func:`envmap_to_world`
-  (tests/test_mitsuba.py renders a marked map in both engines).
+  (tests/stages/render/test_mitsuba.py renders a marked map in both engines).
   Strength is the map's ``scale``.
 - **Camera.** Blender's camera looks down its −Z with Y up and a horizontal 36 mm sensor:
   Mitsuba's ``perspective`` with ``fov_axis = "x"`` and ``look_at`` along the same basis.

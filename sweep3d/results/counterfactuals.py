@@ -1,0 +1,87 @@
+"""The ``counterfactuals`` views: what ``sweep3d explain`` found, queryable like the results.
+
+``explain`` writes one row per failure it searched to ``<store>/explain/<experiment>.parquet``
+(:func:`counterfactuals_path`); its fixing jobs are not the experiment's jobs (they would tilt
+every accuracy towards right answers), so they live here and in the keyed stage tables only.
+
+Views (only once ``explain`` has run):
+
+``counterfactuals``
+    one row per failure searched: the failure's job, scene, keys, what the model said
+    (``failure_label``, ``failure_loss``, ``failure_probability`` of the true class,
+    ``failure_margin``: its probability less the best other class's), whether a fix was found
+    (``found``) and the search ran to its end (``complete``: false when the budget stopped it),
+    the fixing configuration's keys and verdict (``fix_*``, the same measures), the parameters
+    changed (``parameters``, ``from_values``, ``to_values``, ``deltas`` in the parameter's own
+    units, NULL for a text option; ``shares``, signed shares of the range), their normalised
+    ``distance`` (Euclidean over the shares) and ``change``, the move written out.
+``counterfactual_parameters``
+    per parameter: ``cheapest`` (how many found fixes change it), ``alone`` (of which change
+    nothing else), ``share`` (of the found fixes), and the median absolute share it moves.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import duckdb
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from sweep3d.cache import Store, safe_filename
+
+COUNTERFACTUAL_VIEWS = ("counterfactuals", "counterfactual_parameters")
+
+_MEASURES = [("label", pa.string()), ("correct", pa.bool_()), ("loss", pa.float64()),
+             ("probability", pa.float64()), ("margin", pa.float64())]
+
+SCHEMA = pa.schema([
+    ("experiment", pa.string()), ("model", pa.string()), ("failure_job", pa.int64()),
+    ("object", pa.string()), ("environment", pa.string()), ("true_labels", pa.string()),
+    ("failure_pred_key", pa.string()), ("failure_image_key", pa.string()),
+    *[(f"failure_{name}", kind) for name, kind in _MEASURES],
+    ("found", pa.bool_()), ("complete", pa.bool_()), ("probes", pa.int64()),
+    ("fix_render_key", pa.string()), ("fix_image_key", pa.string()), ("fix_pred_key", pa.string()),
+    *[(f"fix_{name}", kind) for name, kind in _MEASURES],
+    ("parameters", pa.list_(pa.string())), ("from_values", pa.list_(pa.string())),
+    ("to_values", pa.list_(pa.string())), ("deltas", pa.list_(pa.float64())), ("shares", pa.list_(pa.float64())),
+    ("n_changed", pa.int64()), ("distance", pa.float64()), ("change", pa.string()),
+    ("seed", pa.int64()), ("budget", pa.int64()),
+])
+
+
+def counterfactuals_path(store: Store, experiment: str) -> Path:
+    """Where ``explain`` keeps an experiment's counterfactuals."""
+    return store.root / "explain" / f"{safe_filename(experiment)}.parquet"
+
+
+def register_counterfactual_views(con: duckdb.DuckDBPyConnection, store: Store, experiment: str | None) -> list[Path]:
+    """Create the views when ``explain`` has run for ``experiment``; returns the files they read."""
+    if experiment is None:
+        return []
+    path = counterfactuals_path(store, experiment)
+    try:
+        if "failure_job" not in pq.read_schema(path).names:
+            return []
+    except (OSError, ValueError, pa.ArrowException):  # none yet, or unreadable: no views
+        return []
+    own = "WHERE failure_pred_key IN (SELECT pred_key FROM jobs) " if _has(con, "jobs") else ""
+    con.execute(f"CREATE OR REPLACE VIEW counterfactuals AS SELECT * FROM read_parquet('{_quoted(path)}') "
+                f"{own}ORDER BY failure_job")  # a failure the spec no longer plans is not shown
+    con.execute("""CREATE OR REPLACE VIEW counterfactual_parameters AS
+        WITH moves AS (
+            SELECT failure_job, n_changed, unnest(parameters) AS parameter, unnest(shares) AS share
+            FROM counterfactuals WHERE found),
+        fixes AS (SELECT count(*) AS n FROM counterfactuals WHERE found)
+        SELECT parameter, count(*) AS cheapest, count(*) FILTER (WHERE n_changed = 1) AS alone,
+               count(*) / (SELECT n FROM fixes) AS share, median(abs(share)) AS median_share
+        FROM moves GROUP BY parameter ORDER BY cheapest DESC, parameter""")
+    return [path]
+
+
+def _has(con: duckdb.DuckDBPyConnection, view: str) -> bool:
+    return bool(con.execute("SELECT count(*) FROM duckdb_views() WHERE view_name = ?", [view]).fetchone()[0])
+
+
+def _quoted(path: Path) -> str:
+    return str(path).replace("'", "''")

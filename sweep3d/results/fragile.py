@@ -1,0 +1,164 @@
+"""Margins and fragile verdicts: how near a classification result is to the other verdict, and
+whether changes no eye sees have been seen to flip verdicts that near.
+
+``margin`` (a column of ``results`` for an evaluator that ranks classes) is the best true class's
+probability minus the best other class's: positive when the top-1 class is a true one, negative for
+a failure, 0 for a tie. It is computed from what every stored prediction already holds (the top-k
+ids and probabilities, the label ids and ``label_prob``), so existing stores need nothing redone.
+Where the top-k cannot say exactly, it is the bound nearest 0 (see :data:`MARGIN_MACRO`), so a
+result is never called surer than it is.
+
+``fragile`` comes from the stability check (``sweep3d stability``, rows in the store's
+``stability`` table): per model, the *threshold* is the upper edge of the highest margin bin in
+which any checked image flipped its verdict under any change; a result is fragile when
+``|margin|`` is below it, or its own image flipped in the check. Without a check, ``fragile`` is
+null (unknown), never false.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import duckdb
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from sweep3d.results.quoting import identifier
+from sweep3d.spec import DROP_FRAGILE_METADATA
+
+#: Upper edges of the ``|margin|`` bins the stability check reports (the first bin starts at 0;
+#: each bin is [previous edge, edge), the last also holds 1).
+MARGIN_EDGES = (0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0)
+#: The prediction columns the margin is computed from (every evaluator that ranks classes has them).
+MARGIN_INPUTS = ("topk", "topk_probs", "label_ids", "label_prob")
+
+#: ``class_margin(topk, probs, ids, label_prob)``: the best true class's probability minus the best
+#: other class's, from the stored top-k.
+#:
+#: - best true: the highest top-k probability of a true class; none in the top-k: ``label_prob``
+#:   when the object has one label (exact), else ``least(label_prob, lowest top-k probability)``
+#:   (an upper bound: each true class is below the top-k and below the set's sum); no label: 0.
+#: - best other: the highest top-k probability of another class; every top-k class true:
+#:   ``least(lowest top-k probability, 1 - label_prob)`` (an upper bound), never below 0.
+#:
+#: Both fallbacks move the margin towards 0, the conservative side for fragility. NULL when an
+#: input is (an invalid prediction; DuckDB's greatest/least would skip a NULL); clamped to [-1, 1].
+MARGIN_MACRO = """CREATE OR REPLACE MACRO class_margin(topk, probs, ids, label_prob) AS (
+    CASE WHEN topk IS NULL OR probs IS NULL OR ids IS NULL OR label_prob IS NULL OR len(topk) = 0 THEN NULL
+    ELSE greatest(-1.0, least(1.0,
+        coalesce(
+            list_max(list_transform(list_filter(list_zip(topk, probs), lambda x: list_contains(ids, x[1])),
+                                    lambda x: x[2]::DOUBLE)),
+            CASE WHEN len(ids) = 0 THEN 0.0
+                 WHEN len(ids) = 1 THEN label_prob
+                 ELSE least(label_prob, list_min(probs)::DOUBLE) END)
+        - greatest(0.0, coalesce(
+            list_max(list_transform(list_filter(list_zip(topk, probs), lambda x: NOT list_contains(ids, x[1])),
+                                    lambda x: x[2]::DOUBLE)),
+            least(list_min(probs)::DOUBLE, 1.0 - label_prob))))) END)"""
+
+
+def create_margin_macro(con: duckdb.DuckDBPyConnection) -> None:
+    con.execute(MARGIN_MACRO)
+
+
+def margin_sql(columns: set[str] | dict[str, str], prefix: str = "p.") -> str | None:
+    """The ``margin`` expression over a predictions relation with ``columns``; None when it lacks
+    one of :data:`MARGIN_INPUTS` (an evaluator that does not rank classes)."""
+    if not set(MARGIN_INPUTS) <= set(columns):
+        return None
+    args = ", ".join(f"{prefix}{identifier(c)}" for c in MARGIN_INPUTS)
+    return f"class_margin({args})"
+
+
+def bin_sql(value: str) -> str:
+    """The bin index (0-based) of ``|value|`` among :data:`MARGIN_EDGES`."""
+    cases = " ".join(f"WHEN abs({value}) < {edge!r}::DOUBLE THEN {i}" for i, edge in enumerate(MARGIN_EDGES[:-1]))
+    return f"CASE {cases} ELSE {len(MARGIN_EDGES) - 1} END"
+
+
+def _edges_sql() -> str:
+    lows = (0.0, *MARGIN_EDGES[:-1])
+    rows = ", ".join(f"({i}, {lo!r}::DOUBLE, {hi!r}::DOUBLE)" for i, (lo, hi) in enumerate(zip(lows, MARGIN_EDGES)))
+    return f"(VALUES {rows}) e(bin, lower, upper)"
+
+
+def register_fragile(con: duckdb.DuckDBPyConnection, drop: bool = False) -> bool:
+    """Add ``fragile`` to ``results`` (all models' rows, before one is chosen) and the views of the
+    stability check: ``stability_images`` (one row per checked image and model: its base margin
+    and whether any change flipped it), ``stability_bins`` (flip rate per margin bin, with Wilson
+    intervals), ``stability_changes`` (the same per change) and ``fragile_threshold`` (per model).
+
+    Args:
+        drop: ``[aggregate] drop_fragile``: fragile results are not ``counted`` (the column
+            ``counted_with_fragile`` keeps what was), so failure modes, boundaries and every
+            accuracy leave them out.
+
+    Returns:
+        False when ``results`` has no ``margin`` (nothing added).
+    """
+    have = {row[0] for row in con.execute("DESCRIBE results").fetchall()}
+    if "margin" not in have:
+        return False
+    checked = _has_relation(con, "stability")
+    con.execute("ALTER VIEW results RENAME TO results_unjudged")
+    model = "r.model" if "model" in have else "NULL::VARCHAR"
+    source = ("SELECT s.*, r.model FROM stability s JOIN (SELECT DISTINCT pred_key, "
+              f"{model} AS model FROM results_unjudged r) r USING (pred_key)") if checked else \
+        ("SELECT NULL::VARCHAR AS model, NULL::VARCHAR AS pred_key, NULL::VARCHAR AS change, "
+         "NULL::DOUBLE AS base_margin, NULL::BOOLEAN AS flipped WHERE false")
+    con.execute(f"CREATE OR REPLACE VIEW stability_checks AS {source}")
+    con.execute("CREATE OR REPLACE VIEW stability_images AS SELECT model, pred_key, any_value(base_margin) AS base_margin, "
+                f"bool_or(flipped) AS flipped, {bin_sql('any_value(base_margin)')} AS bin "
+                "FROM stability_checks GROUP BY model, pred_key")
+    for view, by, rows in (("stability_bins", "", "stability_images"),
+                           ("stability_changes", "change, ",
+                            f"(SELECT model, change, flipped, {bin_sql('base_margin')} AS bin FROM stability_checks)")):
+        con.execute(
+            f"CREATE OR REPLACE VIEW {view} AS SELECT m.model, {'m.change, ' if by else ''}e.bin, e.lower, e.upper, "
+            "coalesce(c.n, 0) AS n, coalesce(c.flips, 0) AS flips, c.flips::DOUBLE / c.n AS flip_rate, "
+            "wilson_low(c.flips, c.n) AS wilson_low, wilson_high(c.flips, c.n) AS wilson_high "
+            f"FROM (SELECT DISTINCT model{', change' if by else ''} FROM {rows}) m CROSS JOIN {_edges_sql()} "
+            f"LEFT JOIN (SELECT model, {by}bin, count(*) AS n, count(*) FILTER (WHERE flipped) AS flips "
+            f"FROM {rows} GROUP BY ALL) c ON c.model IS NOT DISTINCT FROM m.model "
+            f"{'AND c.change = m.change ' if by else ''}AND c.bin = e.bin ORDER BY ALL")
+    con.execute("CREATE OR REPLACE VIEW fragile_threshold AS SELECT model, coalesce(max(upper) FILTER (WHERE flips > 0), "
+                "0.0) AS threshold, sum(n)::BIGINT AS checked, sum(flips)::BIGINT AS flipped FROM stability_bins "
+                "GROUP BY model")
+    fragile = ("CASE WHEN t.threshold IS NULL OR r.margin IS NULL THEN NULL "
+               "ELSE abs(r.margin) < t.threshold OR coalesce(i.flipped, false) END")
+    on = "t.model IS NOT DISTINCT FROM r.model" if "model" in have else "true"
+    on_image = " AND i.model IS NOT DISTINCT FROM r.model" if "model" in have else ""
+    counted = (f", r.counted AND ({fragile}) IS NOT TRUE AS counted, r.counted AS counted_with_fragile"
+               if drop and "counted" in have else "")
+    con.execute(f"CREATE VIEW results AS SELECT r.*{' EXCLUDE (counted)' if counted else ''}, {fragile} AS fragile"
+                f"{counted} FROM results_unjudged r LEFT JOIN fragile_threshold t ON {on} "
+                f"LEFT JOIN stability_images i ON i.pred_key = r.pred_key{on_image}")
+    return True
+
+
+def _has_relation(con: duckdb.DuckDBPyConnection, name: str) -> bool:
+    return bool(con.execute("SELECT count(*) FROM duckdb_views() WHERE view_name = ? AND NOT internal",
+                            [name]).fetchone()[0])
+
+
+def plan_drops_fragile(jobs: Path) -> bool:
+    """Whether the plan at ``jobs`` was made from a spec with ``[aggregate] drop_fragile = true``."""
+    try:
+        return (pq.read_schema(jobs).metadata or {}).get(DROP_FRAGILE_METADATA) == b"true"
+    except (OSError, ValueError, pa.ArrowException):
+        return False
+
+
+def fragile_sentence(summary: Any) -> str:
+    """How many failures are fragile, for ``run``'s findings and the report; "" before any check."""
+    if summary.fragile_failures is None or summary.fragile_threshold is None:
+        return ""
+    failures = summary.wrong + (summary.fragile_failures if summary.fragile_dropped else 0)
+    rule = (f"|margin| < {summary.fragile_threshold:.3g} or flipped in the check" if summary.fragile_threshold
+            else "flipped in the check; no checked image flipped")
+    dropped = (f"; [aggregate] drop_fragile: the {summary.fragile_dropped} fragile results, right or wrong, are left "
+               "out of every count, accuracy, failure mode and boundary" if summary.fragile_dropped else "")
+    return (f"fragile: {summary.fragile_failures} of {failures} failures ({rule}; stability check of "
+            f"{summary.fragile_checked} images){dropped}")

@@ -1,0 +1,293 @@
+"""The postprocess stage: one image per image key, from its render and the job's post controls.
+
+An image is valid only if its render was valid and the post controls left every pixel finite.
+A render blob that is missing or damaged (its bytes do not match the digest its row recorded,
+or it does not decode) is reported to the driver, which discards it so the run's next pass
+renders it again. Renders arrive while the render stage goes on (see ``stages.driver``), so
+their rows are read through the feed, which knows the rows of this pass before they are flushed.
+
+Controls that declare render passes (``passes = ("depth",)``) get the job's pass arrays and its
+camera as a :class:`RenderFrame`: the stage loads the blobs under the job's truth key, checked
+against the digests its ``truths`` row recorded. A pass blob that is missing or damaged is
+reported like a damaged render: its truth row is dropped and the run's next pass renders the
+passes again (the RGB render is kept).
+"""
+
+from __future__ import annotations
+
+import inspect
+import time
+from dataclasses import dataclass
+from functools import lru_cache
+from typing import Any, Iterator, Sequence
+
+import numpy as np
+import pyarrow as pa
+
+from sweep3d.cache import DIGEST_COLUMN, TRUTH_BLOBS, Store, atomic_write, load_image, load_pass, sha256_bytes, utc_now
+from sweep3d.core import BLOB_SUFFIX, TRUTH_PASSES, PluginError, blamed, encode_png8, is_user_plugin, to_uint8
+from sweep3d.driver import Computed, Feed, Job, JobList, Plan
+from sweep3d.spec import ControlInstance, LoadedSpec
+from sweep3d.stages.postprocess.frame import RenderFrame, frame_from_state
+from sweep3d.stages.postprocess.handoff import ImageHandoff
+
+IMAGES_SCHEMA = pa.schema([
+    ("image_key", pa.string()), ("render_key", pa.string()), ("valid", pa.bool_()),
+    ("seconds", pa.float64()), ("created_at", pa.timestamp("us")), (DIGEST_COLUMN, pa.string()),
+])
+
+
+def apply_post(image: np.ndarray, controls: Sequence[ControlInstance], values: dict[str, dict[str, Any]],
+               seed_key: str, frame: RenderFrame | None = None) -> np.ndarray:
+    """Apply the post controls that this job has, in spec order.
+
+    Args:
+        image: float32 (H, W, 3) in [0, 1].
+        seed_key: the job's image key; seeds the random generator so results are reproducible.
+        frame: the job's render passes and camera, for the controls that declare ``passes``.
+    """
+    rng = np.random.default_rng(int(seed_key[:16], 16))
+    out = image
+    for inst in controls:
+        if inst.id in values and not inst.control.is_identity(values[inst.id]):
+            out = _applied(inst, out, inst.control.params(values[inst.id]), rng, frame)
+    return np.asarray(out, dtype=np.float32)
+
+
+def reads_passes(inst: ControlInstance, values: dict[str, dict[str, Any]]) -> tuple[str, ...]:
+    """The truth passes ``inst`` reads for a job with ``values`` (none when it is neutral there)."""
+    passes = tuple(p for p in getattr(inst.control, "passes", ()) if p in TRUTH_PASSES)
+    if not passes or inst.id not in values or inst.control.is_identity(values[inst.id]):
+        return ()
+    return passes
+
+
+@lru_cache(maxsize=None)
+def takes_frame(cls: type) -> bool:
+    """Whether ``cls.apply`` accepts a fourth argument (the frame): older controls take three."""
+    try:
+        parameters = list(inspect.signature(cls.apply).parameters.values())[1:]  # after self
+    except (TypeError, ValueError):
+        return False
+    if any(p.kind is inspect.Parameter.VAR_POSITIONAL for p in parameters):
+        return True
+    positional = [p for p in parameters if p.kind in (inspect.Parameter.POSITIONAL_ONLY,
+                                                      inspect.Parameter.POSITIONAL_OR_KEYWORD)]
+    return len(positional) >= 4
+
+
+def _applied(inst: ControlInstance, image: np.ndarray, params: Any, rng: np.random.Generator,
+             frame: RenderFrame | None = None) -> np.ndarray:
+    """One control's ``apply`` (with the frame when it declares passes and takes one); a user's
+    control that raises or returns no image of ``image``'s shape is a :class:`PluginError` naming
+    it (sweep3d's own controls' failures are bugs: raised)."""
+    control = inst.control
+    with blamed(control, "apply()"):
+        if getattr(control, "passes", ()) and takes_frame(type(control)):
+            out = control.apply(image, params, rng, frame)
+        else:
+            out = control.apply(image, params, rng)
+    try:
+        array = np.asarray(out, dtype=np.float32)
+    except (TypeError, ValueError):
+        array = None
+    if array is None or array.shape != image.shape:
+        what = f"an array of shape {array.shape}" if array is not None else f"a {type(out).__name__}"
+        raise PluginError(f"control {control.type_name!r} (id {inst.id!r}) returned {what} from apply(); return the image as a float array of shape "
+                          f"{image.shape} (H, W, 3), values in [0, 1]")
+    return in_range(inst, array) if is_user_plugin(control.type_name) else array
+
+
+#: How far outside [0, 1] a user's post control may go (float rounding), clipped; beyond it is refused.
+RANGE_TOLERANCE = 1e-3
+
+
+def in_range(inst: ControlInstance, array: np.ndarray) -> np.ndarray:
+    """A user's control's image, its finite values in [0, 1]: a float overshoot within
+    :data:`RANGE_TOLERANCE` is clipped; further out (an 8-bit image, 1e30) is a :class:`PluginError`
+    naming the control, or the model would be tested on pixels no image has. NaN and infinity
+    are left as they are: they make the image invalid, counted apart (see :class:`Made`)."""
+    finite = np.isfinite(array)
+    low = float(np.min(array, initial=np.inf, where=finite))  # no finite pixel: inf and -inf, nothing to refuse
+    high = float(np.max(array, initial=-np.inf, where=finite))
+    if low >= 0.0 and high <= 1.0:
+        return array
+    if low < -RANGE_TOLERANCE or high > 1.0 + RANGE_TOLERANCE:
+        hint = " (divide an 8-bit image by 255)" if 1.5 < high <= 255.0 and low >= 0.0 else ""
+        raise PluginError(f"control {inst.control.type_name!r} (id {inst.id!r}) returned values from {low:g} to "
+                          f"{high:g} from apply(); return the image with values in [0, 1]{hint}")
+    return np.clip(array, 0.0, 1.0, out=array.copy(), where=finite)
+
+
+def job_frame(plan: Plan, job: Job, arrays: dict[str, np.ndarray]) -> RenderFrame:
+    """The job's :class:`RenderFrame`: its pass ``arrays`` and the camera its rendered controls
+    pose (in their order, on a fresh ``SceneState``, as the render worker does)."""
+    from sweep3d.stages.render import SceneState
+
+    state = SceneState()
+    rendered = sorted((c.control for c in plan.spec.controls if c.control.stage == "render"), key=lambda c: c.order)
+    for control in rendered:
+        if control.id in job.values:
+            with blamed(control, "apply()"):
+                control.apply(state, control.params(job.values[control.id]))
+    return frame_from_state(state, plan.framing.size, plan.framing.crop, arrays.get("depth"), arrays.get("mask"))
+
+
+class PostprocessStage:
+    """Applies post controls to renders (a job whose image is its render has nothing to do here).
+
+    Args:
+        store_images: write each image to the store (``[postprocess] store = "all"``); without,
+            its row records no digest and inference or the report make it again from its render.
+        handoff: where inference takes the pixels of the images made in this process.
+    """
+
+    name = "postprocess"
+    table = "images"
+    side_tables: dict[str, pa.Schema] = {}
+
+    def __init__(self, store_images: bool = True, handoff: ImageHandoff | None = None) -> None:
+        self.store_images = store_images
+        self.handoff = handoff
+
+    @classmethod
+    def for_spec(cls, spec: LoadedSpec, handoff: ImageHandoff | None = None) -> PostprocessStage:
+        """The stage as ``spec``'s ``[postprocess] store`` asks."""
+        return cls(store_images=spec.postprocess.store == "all", handoff=handoff)
+
+    @property
+    def owns_blobs(self) -> bool:  # type: ignore[override]  (a run that stores no image owns no blob)
+        return self.store_images
+
+    def schema(self, plan: Plan) -> pa.Schema:
+        return IMAGES_SCHEMA
+
+    def key(self, job: Job) -> str | None:
+        return job.image_key if job.image_key != job.render_key else None
+
+    def keys_of(self, jobs: JobList) -> list[str | None]:
+        return [image if image != render else None
+                for render, image in zip(jobs.key_column("render_key"), jobs.key_column("image_key"))]
+
+    def upstream(self, job: Job) -> tuple[str, str]:
+        return ("renders", job.render_key)
+
+    def incomplete(self, plan: Plan, store: Store, cached: set[str]) -> set[str]:
+        return set()
+
+    def compute(self, todo: Feed, plan: Plan, store: Store) -> Iterator[Computed]:
+        post = post_controls(plan)
+        render_valid = todo.column("renders", "valid")  # live: renders of this pass arrive with their jobs
+        render_digests = todo.digests("renders")
+        pass_digests = truth_digests(todo)
+        damaged: set[str] = set()
+        seen = _SeenRenders(plan, self.handoff)
+        for job in todo:
+            t0 = time.perf_counter()
+            if job.render_key in damaged:
+                yield Computed(job.image_key, damaged=("renders", job.render_key))
+                continue
+            render = seen.render(store, job.render_key, render_digests.get(job.render_key))
+            made = make_image(store, plan, job, post, render_digests.get(job.render_key), pass_digests, render)
+            if made.pixels is None:
+                if made.damaged is not None and made.damaged[0] == "renders":
+                    damaged.add(job.render_key)
+                yield Computed(job.image_key, damaged=made.damaged, error=made.error)
+                continue
+            valid = render_valid.get(job.render_key) is not False and made.finite
+            digest = None
+            if self.store_images:
+                data = encode_png8(made.pixels)
+                atomic_write(store.blob_path(job.image_key), data)
+                digest = sha256_bytes(data)
+            if valid and self.handoff is not None:
+                self.handoff.put(job.image_key, made.pixels)
+            yield Computed(job.image_key, {"image_key": job.image_key, "render_key": job.render_key, "valid": valid,
+                                           "seconds": time.perf_counter() - t0, "created_at": utc_now(),
+                                           DIGEST_COLUMN: digest})
+
+
+class _SeenRenders:
+    """The render the stage decoded last (a render's post-processed images come one after another
+    in plan order: it is read and checked once, not once per image), handed to inference too where
+    a job's image is that render itself."""
+
+    def __init__(self, plan: Plan, handoff: ImageHandoff | None) -> None:
+        self.handoff = handoff
+        self.last: tuple[str, np.ndarray] | None = None
+        self._as_images: set[str] | None = None
+        self._plan = plan
+
+    def render(self, store: Store, key: str, digests: set[str] | None) -> np.ndarray | None:
+        """The render ``key``, decoded (a copy: a control may change its input in place)."""
+        if self.last is None or self.last[0] != key:
+            render = load_image(store, key, digests)
+            self.last = (key, render) if render is not None else None
+            if render is not None and self.handoff is not None and key in self.as_images():
+                self.handoff.put(key, to_uint8(render))
+        return self.last[1].copy() if self.last is not None else None
+
+    def as_images(self) -> set[str]:
+        """Render keys that are also some job's image key (no post control changes that job's)."""
+        if self._as_images is None:
+            jobs = self._plan.jobs
+            images = jobs.key_column("image_key") if isinstance(jobs, JobList) else [j.image_key for j in jobs]
+            self._as_images = set(images)
+        return self._as_images
+
+
+@dataclass(frozen=True)
+class Made:
+    """One post-processed image as the store keeps it, or why it could not be made.
+
+    Attributes:
+        pixels: uint8 (H, W, 3), what a stored PNG holds (None: not made).
+        finite: the float image had no NaN or inf before it was quantised.
+        damaged: (table, key) of an input blob missing or damaged (its row goes; made again).
+        error: why the job cannot be post-processed at all.
+    """
+
+    pixels: np.ndarray | None
+    finite: bool = False
+    damaged: tuple[str, str] | None = None
+    error: str | None = None
+
+
+def post_controls(plan: Plan) -> list[ControlInstance]:
+    """The plan's post controls, in spec order."""
+    return [c for c in plan.spec.controls if c.control.stage == "post"]
+
+
+def truth_digests(source: Feed | Store) -> dict[str, Any]:
+    """Pass name → (truth key → the digests its truth rows recorded), live where ``source`` is a feed."""
+    return {name: source.digests("truths", TRUTH_BLOBS[BLOB_SUFFIX[name]]) for name in TRUTH_PASSES}
+
+
+def make_image(store: Store, plan: Plan, job: Job, post: Sequence[ControlInstance], render_digests: set[str] | None,
+               pass_digests: dict[str, Any], render: np.ndarray | None = None) -> Made:
+    """The job's post-processed image from its stored render (``render``: decoded already; and
+    passes, for the controls that read them): what the stage computes, and what inference and the
+    report make again for an image that was not stored."""
+    render = render if render is not None else load_image(store, job.render_key, render_digests)
+    if render is None:
+        return Made(None, damaged=("renders", job.render_key))
+    frame = None
+    wanted = sorted({p for inst in post for p in reads_passes(inst, job.values)})
+    if wanted and job.truth_key is None:
+        return Made(None, error="a post control reads render passes the plan did not ask for")
+    if wanted:
+        arrays = {name: _pass(store, job, name, pass_digests[name], render.shape[:2]) for name in wanted}
+        if any(a is None for a in arrays.values()):  # its truth row goes: the passes are rendered again
+            assert job.truth_key is not None
+            return Made(None, damaged=("truths", job.truth_key))
+        frame = job_frame(plan, job, arrays)
+    image = apply_post(render, post, job.values, job.image_key, frame)
+    return Made(to_uint8(image), bool(np.isfinite(image).all()))
+
+
+def _pass(store: Store, job: Job, name: str, digests: Any, shape: tuple[int, ...]) -> np.ndarray | None:
+    """One pass of the job's render, checked against the digests its truth rows recorded (and
+    against the image's size); None when it is missing, damaged or of another size."""
+    assert job.truth_key is not None
+    array = load_pass(store, job.truth_key, name, digests.get(job.truth_key))
+    return array if array is not None and array.shape == tuple(shape) else None

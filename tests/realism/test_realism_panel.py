@@ -1,0 +1,73 @@
+"""The report's Realism panel: absent without another source's verdicts; with them, the agreement
+table (per object and over all objects) and render | photo pairs with both verdicts, the
+disagreements first, every image drawn (checked in headless Chromium)."""
+
+from __future__ import annotations
+
+import hashlib
+import io
+from datetime import datetime, timezone
+from pathlib import Path
+
+import pytest
+from PIL import Image
+
+from sweep3d.cache.store import Store
+from sweep3d.realism.photos import photo_like
+from sweep3d.report import write_report
+from sweep3d.results.agreement import VERDICT_SCHEMA, VERDICTS, photo_path
+from tests.helpers import ARTIFACTS, assert_clean, load_spec, open_page
+from tests.realism_run import image_of, job_colours, make_run, sim_verdicts, verdict
+
+T2 = datetime(2024, 3, 1, tzinfo=timezone.utc)
+
+
+def scored_run(folder: Path) -> tuple[Path, dict[int, bool]]:
+    """A synthetic run with photo verdicts of every third job (every other one flipped) and the
+    photographs kept as ``realism score`` keeps them. Returns the spec and the verdicts."""
+    spec = make_run(folder)
+    sim, colours = sim_verdicts(), job_colours()
+    store = Store(folder / "store")
+    photos, rows = {}, []
+    for n, job in enumerate(range(0, len(sim), 3)):
+        photos[job] = sim[job] if n % 2 else not sim[job]
+        data = photo_like(image_of(colours[job]["rgb"]), seed=job)
+        sha = hashlib.sha256(data).hexdigest()
+        path = photo_path(store, sha)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        Image.open(io.BytesIO(data)).save(path, format="JPEG")
+        rows.append({**verdict(job, photos[job], at=T2), "photo": f"{job}.jpg", "photo_sha256": sha,
+                     "preprocess": "EXIF orientation applied; framed as the render"})
+    store.append(VERDICTS, rows, VERDICT_SCHEMA)
+    return spec, photos
+
+
+def test_no_verdicts_no_realism_panel(tmp_path: Path) -> None:
+    html = write_report(load_spec(make_run(tmp_path))).read_text()
+    assert 'id="realism"' not in html
+
+
+@pytest.mark.browser
+def test_the_realism_panel_draws_the_table_and_the_pairs(tmp_path: Path, chromium) -> None:
+    spec, photos = scored_run(tmp_path)
+    sim = sim_verdicts()
+    path = write_report(load_spec(spec))
+    with open_page(chromium, path) as (page, events):
+        table = page.evaluate("Array.from(document.querySelectorAll('#realism table.realism tbody tr'))"
+                              ".map(r => Array.from(r.cells).map(c => c.textContent.trim()))")
+        assert [r[1] for r in table] == ["all objects", "apple", "plum"]
+        overall = table[0]
+        assert overall[2] == str(len(photos))
+        agree = sum(photos[j] == sim[j] for j in photos)
+        assert overall[3] == f"{agree / len(photos):.0%} ({agree})"
+        pairs = page.evaluate("Array.from(document.querySelectorAll('#realism .realism-pair'))"
+                              ".map(p => [Number(p.dataset.job), p.classList.contains('disagree'), "
+                              "p.querySelectorAll('figure.tile').length])")
+        assert [job for job, _, _ in pairs] == sorted(photos, key=lambda j: (photos[j] == sim[j], j))
+        assert all(disagree == (photos[job] != sim[job]) and tiles == 2 for job, disagree, tiles in pairs)
+        images = page.evaluate("Array.from(document.querySelectorAll('#realism .realism-pair img'))"
+                               ".map(i => i.naturalWidth)")
+        assert len(images) == 2 * len(photos) and all(width > 0 for width in images)
+        ARTIFACTS.mkdir(exist_ok=True)
+        page.locator("#realism").screenshot(path=str(ARTIFACTS / "realism-panel.png"))
+        assert_clean(path, events)

@@ -1,0 +1,228 @@
+"""The statistics of ``sweep3d confirm`` with a synthetic oracle: nothing is rendered.
+
+A true region (the oracle fails exactly there, or mostly there) must be confirmed in at least
+95 % of seeds; a chance region, picked because it looked significant in a small discovery set
+where nothing matters, must be called confirmed in no more seeds than the stated error rate."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.stats import hypergeom
+
+from sweep3d.confirm.claims import boundary_claim, value_claim
+from sweep3d.confirm.draw import Parameter, Space, draw_pairs
+from sweep3d.results.confirmation import (
+    ALPHA,
+    CONFIRMED,
+    DEFAULT_RENDERS,
+    NOT_REPLICATED,
+    UNCONFIRMED,
+    Pairs,
+    holm,
+    judge,
+    mcnemar_one_sided,
+    paired_difference_interval,
+    tally,
+    wilson,
+)
+from sweep3d.results.views import wilson_interval
+from sweep3d.spec.params import Choice, Range
+
+SCENES = frozenset({("mug", "white"), ("mug", "studio"), ("toaster", "white"), ("toaster", "studio")})
+SPACE = Space(
+    objects=("mug", "toaster"), environments=("white", "studio"),
+    parameters=(
+        Parameter("orientation_yaw", "orientation", "yaw", Range(-180.0, 180.0), SCENES),
+        Parameter("camera_elevation", "camera", "elevation", Range(0.0, 80.0), SCENES),
+        Parameter("occluder_coverage", "occluder", "coverage", Choice(("none", "half", "full")),
+                  frozenset({("mug", "white"), ("mug", "studio")})),
+    ))
+SEEDS = 200
+
+
+def boundary_row(parameter: str, fails: str, at: float, scope: str = "all", name: str | None = None) -> dict:
+    return {"parameter": parameter, "scope": scope, "object": name if scope == "object" else None,
+            "environment": name if scope == "environment" else None, "fails": fails, "boundary": at,
+            "values": 40, "boundary_low": at - 1, "boundary_high": at + 1}
+
+
+def verdict_of(claim, oracle, seed: int, pairs: int = DEFAULT_RENDERS // 2):
+    """The verdict on ``pairs`` fresh twin pairs judged by ``oracle(row, rng) -> correct``."""
+    rng = np.random.default_rng([seed, 99])
+    drawn = draw_pairs(SPACE, claim, pairs, seed)
+    return judge([tally((oracle(a, rng), oracle(b, rng)) for a, b in drawn)])[0]
+
+
+# -- the pure pieces -------------------------------------------------------------------------------
+
+def test_the_one_sided_mcnemar_p_is_the_binomial_tail_of_the_discordant_pairs() -> None:
+    assert mcnemar_one_sided(0, 0) == 1.0
+    assert mcnemar_one_sided(5, 0) == pytest.approx(1 / 32)
+    assert mcnemar_one_sided(0, 5) == 1.0  # against the finding: no evidence for it
+    assert mcnemar_one_sided(3, 1) == pytest.approx(5 / 16)  # P(X >= 3), X ~ Bin(4, 1/2)
+
+
+def test_wilson_is_the_views_interval() -> None:
+    for k, n in ((0, 5), (3, 7), (12, 12), (40, 97)):
+        assert wilson(k, n) == pytest.approx(wilson_interval(k, n), abs=1e-12)
+
+
+def test_holm_steps_down_and_stays_monotone() -> None:
+    assert holm([0.01, 0.04, 0.03]) == pytest.approx([0.03, 0.06, 0.06])
+    assert holm([]) == []
+
+
+def test_tally_counts_each_cell() -> None:
+    pairs = tally([(True, True), (False, True), (False, True), (True, False), (False, False)])
+    assert (pairs.both_right, pairs.inside_wrong, pairs.inside_right, pairs.both_wrong) == (1, 2, 1, 1)
+    assert pairs.accuracy_inside == pytest.approx(2 / 5) and pairs.accuracy_outside == pytest.approx(3 / 5)
+
+
+def test_the_paired_interval_holds_the_difference_and_covers_it_95_percent_of_the_time() -> None:
+    rng = np.random.default_rng(3)
+    p_inside, p_outside, flip, n = 0.4, 0.7, 0.3, 40
+    truth = p_inside - (p_outside * (1 - flip) + (1 - p_outside) * flip)
+    covered = 0
+    for _ in range(2000):
+        shared = rng.random(n)  # correlated twins: a hard configuration is hard on both sides
+        inside = shared < p_inside
+        outside = (shared < p_outside) ^ (rng.random(n) < flip)
+        pairs = tally(zip(inside, outside))
+        low, high = paired_difference_interval(pairs)
+        difference = pairs.accuracy_inside - pairs.accuracy_outside
+        assert -1 <= low <= difference <= high <= 1
+        covered += low <= truth <= high
+    assert covered / 2000 >= 0.93  # Newcombe reports 93-95 % at small n
+
+
+def test_a_finding_without_pairs_is_unconfirmed_and_left_out_of_the_family() -> None:
+    empty, strong = judge([Pairs(), Pairs(inside_wrong=8)])
+    assert empty.status == UNCONFIRMED and empty.difference is None
+    assert strong.status == CONFIRMED and strong.findings == 1 and strong.p_holm == pytest.approx(2 ** -8)
+
+
+# -- drawing ---------------------------------------------------------------------------------------
+
+def test_twins_differ_only_in_the_claims_parameter_and_fall_on_its_two_sides() -> None:
+    claim = boundary_claim(boundary_row("camera_elevation", "above", 40.0), "elevation fails above 40",
+                           Range(0.0, 80.0))
+    for inside, outside in draw_pairs(SPACE, claim, 50, seed=1):
+        assert inside["camera_elevation"] > 40 >= outside["camera_elevation"]
+        rest = lambda row: {k: v for k, v in row.items() if k != "camera_elevation"}  # noqa: E731
+        assert rest(inside) == rest(outside)
+        assert ("occluder_coverage" in inside) == (inside["object"] == "mug")  # only where it applies
+
+
+def test_draws_are_seeded_per_claim() -> None:
+    claim = value_claim("occluder_coverage", "half", "", Choice(("none", "half", "full")))
+    assert draw_pairs(SPACE, claim, 10, seed=4) == draw_pairs(SPACE, claim, 10, seed=4)
+    assert draw_pairs(SPACE, claim, 10, seed=4) != draw_pairs(SPACE, claim, 10, seed=5)
+    for inside, outside in draw_pairs(SPACE, claim, 30, seed=4):
+        assert inside["object"] == "mug"  # the occluder applies to the mug only
+        assert inside["occluder_coverage"] == "half" != outside["occluder_coverage"]
+
+
+def test_a_bin_claim_draws_inside_the_bin_and_outside_it_over_the_rest_of_the_range() -> None:
+    claim = value_claim("orientation_yaw", "80–110", "", Range(-180.0, 180.0), level_value=95.0, width=30.0)
+    drawn = draw_pairs(SPACE, claim, 200, seed=2)
+    assert all(80 <= a["orientation_yaw"] <= 110 for a, _ in drawn)
+    assert all(not 80 <= b["orientation_yaw"] <= 110 for _, b in drawn)
+    assert min(b["orientation_yaw"] for _, b in drawn) < -100 and max(b["orientation_yaw"] for _, b in drawn) > 120
+
+
+def test_an_object_claim_swaps_the_object_and_keeps_the_rest() -> None:
+    claim = value_claim("object", "toaster", "", None, ("mug", "toaster"))
+    for inside, outside in draw_pairs(SPACE, claim, 20, seed=3):
+        assert (inside["object"], outside["object"]) == ("toaster", "mug")
+        assert inside["environment"] == outside["environment"]
+        assert inside["orientation_yaw"] == outside["orientation_yaw"]
+
+
+def test_a_scoped_boundary_draws_in_its_object_only() -> None:
+    claim = boundary_claim(boundary_row("orientation_yaw", "below", 0.0, "object", "toaster"), "",
+                           Range(-180.0, 180.0))
+    assert {a["object"] for a, _ in draw_pairs(SPACE, claim, 20, seed=3)} == {"toaster"}
+
+
+# -- a true region is confirmed; a chance one is not -----------------------------------------------
+
+def test_a_true_region_is_confirmed_in_at_least_95_percent_of_seeds() -> None:
+    """Two true regions: a boundary the oracle fails beyond exactly, and a bin of yaw where it fails
+    60 % of the time against 15 % elsewhere (a noisy model)."""
+    boundary = boundary_claim(boundary_row("camera_elevation", "above", 40.0), "", Range(0.0, 80.0))
+    exact = lambda row, rng: row["camera_elevation"] <= 40  # noqa: E731
+    assert sum(verdict_of(boundary, exact, s).status == CONFIRMED for s in range(SEEDS)) >= 0.95 * SEEDS
+    region = value_claim("orientation_yaw", "80–110", "", Range(-180.0, 180.0), level_value=95.0, width=30.0)
+
+    def noisy(row, rng) -> bool:
+        return rng.random() >= (0.6 if 80 <= row["orientation_yaw"] <= 110 else 0.15)
+    verdicts = [verdict_of(region, noisy, s) for s in range(SEEDS)]
+    assert sum(v.status == CONFIRMED for v in verdicts) >= 0.95 * SEEDS
+    assert np.mean([v.difference for v in verdicts]) == pytest.approx(-0.45, abs=0.05)
+
+
+def test_a_chance_region_significant_in_a_small_discovery_set_is_not_replicated_at_the_stated_rate() -> None:
+    """Where nothing matters (the oracle is right 60 % of the time everywhere), discovery sets of
+    30 random jobs are searched for an occluder value significantly below the rest (one-sided
+    Fisher, p < 0.05 as it would look before any adjustment); each one found is confirmed on the
+    default number of fresh pairs. At most ALPHA of them may be called confirmed (with sampling slack)."""
+    rng = np.random.default_rng(11)
+    options = ("none", "half", "full")
+    planted = []
+    while len(planted) < 300:
+        levels = rng.integers(3, size=30)
+        correct = rng.random(30) < 0.6
+        for level in range(3):
+            inside = levels == level
+            p = hypergeom.cdf(correct[inside].sum(), 30, correct.sum(), inside.sum())
+            if 0 < inside.sum() < 30 and p < 0.05:
+                planted.append(options[level])
+                break
+    null = lambda row, rng: rng.random() < 0.6  # noqa: E731
+    confirmed = 0
+    for seed, label in enumerate(planted):
+        claim = value_claim("occluder_coverage", label, "", Choice(options))
+        verdict = verdict_of(claim, null, 1000 + seed)
+        assert verdict.status in (CONFIRMED, NOT_REPLICATED)
+        confirmed += verdict.status == CONFIRMED
+    # exact McNemar is conservative: about 3 % expected; ALPHA + 2.5 standard errors of 300 draws
+    assert confirmed / len(planted) <= ALPHA + 2.5 * (ALPHA * (1 - ALPHA) / len(planted)) ** 0.5
+
+
+# -- the record, as run's findings and the report read it -------------------------------------------
+
+def test_the_report_panel_marks_each_finding_by_its_recorded_verdict(tmp_path) -> None:
+    from types import SimpleNamespace
+
+    from sweep3d.cache.store import Store
+    from sweep3d.cli.output import UNCONFIRMED_MARK, confirmation_marks
+    from sweep3d.confirm.claims import boundary_key, region_key
+    from sweep3d.confirm.record import write_verdicts
+    from sweep3d.report.panels import confirmations
+    from sweep3d.results.summary import Region
+
+    store = Store(tmp_path / "store")
+    region = {"column": "occluder_coverage", "label": "half"}
+    boundary = boundary_row("camera_elevation", "above", 40.0)
+    inputs = SimpleNamespace(store=store, loaded=SimpleNamespace(name="e"),
+                             summary=SimpleNamespace(regions=[region], boundaries=[boundary], rules=[]))
+    assert confirmations.build(inputs) is None  # nothing confirmed yet: no panel
+    (verdict,) = judge([Pairs(both_right=10, inside_wrong=12, inside_right=1, both_wrong=3)])
+    write_verdicts(store, "e", {region_key("occluder_coverage", "half"): {"text": "", "verdict": verdict.as_dict()}})
+    rows = confirmations.build(inputs)["rows"]
+    assert [r["status"] for r in rows] == [CONFIRMED, UNCONFIRMED]
+    assert rows[0]["pairs"] == 26 and rows[0]["difference"].startswith("-42 pts")
+    assert boundary_key(boundary) == "boundary camera_elevation fails above 40"
+    marks = confirmation_marks(store, "e", [Region("occluder_coverage", "half", 0.2, 5, 0.8, 5, -0.6, -0.9, -0.2,
+                                                   0.01)], [boundary])
+    assert marks[0].startswith(" [confirmed on 26 fresh pairs: -42 pts") and marks[1] == UNCONFIRMED_MARK
+
+
+def test_a_value_of_an_integer_range_is_drawn_as_the_integer_the_plan_holds() -> None:
+    claim = value_claim("scale_steps", "3", "", Range(1.0, 9.0, integer=True), level_value=3.0)
+    space = Space(("mug",), ("white",), (Parameter("scale_steps", "scale", "steps", Range(1.0, 9.0, integer=True),
+                                                   frozenset({("mug", "white")})),))
+    for inside, outside in draw_pairs(space, claim, 20, seed=1):
+        assert inside["scale_steps"] == 3 and type(inside["scale_steps"]) is int
+        assert outside["scale_steps"] != 3 and type(outside["scale_steps"]) is int

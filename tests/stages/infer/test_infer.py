@@ -1,0 +1,223 @@
+"""The real pretrained classifier and the classification evaluator."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from sweep3d.core.errors import UserError
+from sweep3d.stages.infer import IMAGENET, ClassificationEvaluator, load_model, predict
+from sweep3d.stages.infer.evaluators import Truth, log_softmax
+from sweep3d.stages.infer.infer_stage import STAND_IN
+from tests.helpers import TINY_SPEC, examples, write_spec
+
+
+@pytest.fixture(scope="module")
+def lite0():
+    return load_model("efficientnet-lite0")
+
+
+def test_pretrained_model_recognises_a_real_photo(lite0) -> None:
+    from skimage import data
+
+    coffee = data.coffee().astype(np.float32) / 255.0  # a cup of espresso, 400×600
+    logits = predict(lite0, coffee[None])
+    assert logits.shape == (1, 1000) and np.isfinite(logits).all()
+    top = int(logits[0].argmax())
+    assert IMAGENET.names[top] in {"espresso", "cup", "coffee mug"}
+    row = ClassificationEvaluator(top_k=5).evaluate(logits, [Truth((IMAGENET.index("espresso"),))], IMAGENET)[0]
+    assert row["valid"] and row["topk_labels"][0] == IMAGENET.names[top]
+    assert row["loss"] == pytest.approx(-np.log(row["label_prob"]), rel=1e-6)
+
+
+def test_batched_and_single_predictions_agree(lite0) -> None:
+    rng = np.random.default_rng(0)
+    images = rng.random((3, 64, 80, 3), dtype=np.float32)
+    batch = predict(lite0, images)
+    single = np.concatenate([predict(lite0, images[i : i + 1]) for i in range(3)])
+    assert np.allclose(batch, single, atol=1e-4)
+
+
+def test_labels_match_names_and_synonyms() -> None:
+    assert IMAGENET.index("soccer ball") == IMAGENET.index("Soccer_Ball") == 805
+    assert IMAGENET.index(950) == 950
+    with pytest.raises(ValueError, match="did you mean"):
+        IMAGENET.index("basket ball")
+
+
+@pytest.mark.torch
+def test_wrong_output_shape_is_a_user_error() -> None:
+    import torch
+
+    from sweep3d.stages.infer import Classifier
+
+    bad = Classifier(torch.nn.Identity())  # returns (N, 3, H, W), not logits
+    with pytest.raises(UserError, match=r"\(batch, classes\)"):
+        predict(bad, np.zeros((2, 32, 32, 3), np.float32))
+
+
+finite = st.floats(allow_nan=False, allow_infinity=False, width=32)  # up to ±3.4e38
+
+
+@settings(max_examples=examples(200), deadline=None)
+@given(st.lists(finite, min_size=2, max_size=50), st.integers(0, 1))
+def test_log_softmax_is_stable_for_huge_logits(values, label) -> None:
+    logits = np.array([values], dtype=np.float32)
+    logp = log_softmax(logits)
+    assert np.isfinite(logp).all()
+    assert np.exp(logp).sum() == pytest.approx(1.0, abs=1e-9)
+    row = ClassificationEvaluator(top_k=2).evaluate(logits, [Truth((label,))], _names(len(values)))[0]
+    assert row["valid"] and np.isfinite(row["loss"]) and row["loss"] >= 0
+    assert row["correct"] == (int(np.argmax(logits[0])) == label)  # ties go to the first class
+
+
+def test_non_finite_logits_are_flagged_invalid_not_averaged() -> None:
+    logits = np.array([[1.0, np.nan, 0.0], [1.0, 2.0, 3.0]], dtype=np.float32)
+    rows = ClassificationEvaluator(top_k=2).evaluate(logits, [Truth((0,)), Truth((2,))], _names(3))
+    assert rows[0]["valid"] is False and rows[0]["correct"] is None and rows[0]["loss"] is None
+    assert rows[1]["valid"] and rows[1]["correct"]
+
+
+def _names(n: int):
+    from sweep3d.stages.infer import LabelMap
+
+    return LabelMap([[f"c{i}"] for i in range(n)])
+
+
+def test_onnx_backend_agrees_with_torch(lite0, tmp_path) -> None:
+    from skimage import data
+
+    from sweep3d.stages.infer.onnx_backend import OnnxRunner
+
+    runner = OnnxRunner(lite0, tmp_path, "lite0", threads=2)
+    assert (tmp_path / "lite0.onnx").is_file()
+    coffee = data.coffee().astype(np.float32) / 255.0
+    images = np.stack([coffee, coffee[::-1], coffee[:, ::-1]])
+    torch_logits = predict(lite0, images)
+    onnx_logits = predict(lite0, images, runner=runner)
+    assert np.array_equal(torch_logits.argmax(1), onnx_logits.argmax(1))
+    assert 0 < np.abs(torch_logits - onnx_logits).max() < 1e-3  # not torch's own bits: ONNX Runtime ran
+    again = OnnxRunner(lite0, tmp_path, "lite0", threads=2)  # reuses the export, checked again
+    assert np.allclose(again(lite0.preprocess(images)), onnx_logits, atol=1e-4)  # threads: last-bit noise
+
+
+def tied_model():
+    """A small classifier whose classes 0 and 1 always tie, at the top (same weights, larger bias)."""
+    import torch
+
+    from sweep3d.stages.infer import Classifier, Preprocess
+
+    torch.manual_seed(0)
+    head = torch.nn.Linear(4, 6)
+    with torch.no_grad():
+        head.weight[1] = head.weight[0]
+        head.bias[:2] = 10.0
+    module = torch.nn.Sequential(torch.nn.Conv2d(3, 4, 3, stride=4), torch.nn.ReLU(), torch.nn.AdaptiveAvgPool2d(1),
+                                 torch.nn.Flatten(), head).eval()
+    return Classifier(module, Preprocess(resize=32, crop=32), labels=[f"c{i}" for i in range(6)])
+
+
+@pytest.mark.torch
+def test_standing_in_for_torch_runs_near_ties_through_torch(tmp_path) -> None:
+    from sweep3d.stages.infer.onnx_backend import OnnxRunner
+
+    model = tied_model()
+    images = np.random.default_rng(1).random((5, 40, 40, 3), dtype=np.float32)
+    torch_logits = predict(model, images)
+    own = OnnxRunner(model, tmp_path, "tied", threads=1)
+    assert own.by_torch == 0 and np.abs(predict(model, images, runner=own) - torch_logits).max() < 1e-3
+    stand_in = OnnxRunner(model, tmp_path, "tied", threads=1, exact_ranks=1)
+    logits = predict(model, images, runner=stand_in)
+    assert stand_in.by_torch == 5  # every image has the tie at the top: each went through torch
+    assert np.allclose(logits, torch_logits, rtol=0, atol=1e-6)
+
+
+@settings(max_examples=examples(200), deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), ranks=st.integers(1, 6), scale=st.sampled_from([1e-3, 1e-2, 1.0, 10.0]))
+def test_rows_without_near_ties_rank_alike_under_any_error_within_the_tolerance(seed, ranks, scale) -> None:
+    from sweep3d.stages.infer.onnx_backend import TOLERANCE, near_ties
+
+    rng = np.random.default_rng(seed)
+    torch_logits = (rng.standard_normal((64, 8)) * scale).astype(np.float32)
+    onnx_logits = torch_logits + (rng.uniform(-0.99, 0.99, torch_logits.shape) * TOLERANCE).astype(np.float32)
+    flagged = set(near_ties(onnx_logits, ranks).tolist())
+    for row in set(range(64)) - flagged:
+        assert list(np.argsort(-onnx_logits[row], kind="stable")[:ranks]) == \
+            list(np.argsort(-torch_logits[row], kind="stable")[:ranks])
+    assert set(near_ties(np.array([[1.0, np.nan, 0.0], [3.0, 2.0, 1.0]]), 1).tolist()) == {0}
+
+
+@pytest.mark.parametrize(("model", "on_ray", "backend"), [
+    ("", False, STAND_IN),  # left out, built-in model: ONNX Runtime standing in for torch
+    ('backend = "torch"\n', False, "torch"),  # written out: used as written
+    ('backend = "onnx"\n', False, "onnx"),
+    ("", True, "torch"),  # inference on a Ray actor (a GPU) runs torch
+    ('name = "my_models:make"\n', False, "torch"),  # a user's model: torch unless asked
+])
+def test_the_backend_is_the_spec_s_or_onnx_standing_in_for_the_built_in_model(tmp_path, model, on_ray,
+                                                                                backend) -> None:
+    from sweep3d.stages.infer.infer_stage import choose_backend
+    from tests.helpers import load_spec
+
+    (tmp_path / "my_models.py").write_text("def make():\n    raise NotImplementedError\n")
+    write_spec(tmp_path, TINY_SPEC.replace("[model]\n", "[model]\n" + model))
+    loaded = load_spec(tmp_path / "spec.toml")
+    assert choose_backend(loaded, loaded.model, on_ray) == backend
+
+
+def test_top5_and_label_ids_whatever_top_k() -> None:
+    logits = np.array([[9.0, 8.0, 7.0, 6.0, 5.0, 4.0, 3.0]])
+    names = _names(7)
+    third = ClassificationEvaluator(top_k=1).evaluate(logits, [Truth((2, 6))], names)[0]
+    assert third["correct"] is False and third["correct_top5"] is True and third["label_ids"] == [2, 6]
+    assert len(third["topk"]) == 1  # top_k still bounds the stored ranking
+    sixth = ClassificationEvaluator(top_k=5).evaluate(logits, [Truth((5,))], names)[0]
+    assert sixth["correct_top5"] is False and sixth["correct"] is False
+
+
+def _infer_in_batches(folder, orders: list[list[int]], images: np.ndarray, model: str) -> list[list[dict]]:
+    """Each order of ``images`` through the infer stage's own batching (``compute``), each image
+    under a key of its own per order (so no kept outputs are read back); the rows in that order."""
+    from sweep3d.cache.store import Store
+    from sweep3d.core.pixels import encode_png
+    from sweep3d.driver.jobs import Job
+    from sweep3d.driver.loop import Feed
+    from sweep3d.engine.pipeline import plan_spec
+    from sweep3d.stages.infer import InferStage, ModelHandle
+    from tests.helpers import load_spec
+
+    loaded = load_spec(write_spec(folder, TINY_SPEC.replace("batch_size = 8\n", f"batch_size = 4\nthreads = 1\n{model}")))
+    handle = ModelHandle.resolve(loaded)
+    plan, store = plan_spec(loaded, handle), Store(loaded.store)
+    stage = InferStage(handle)
+    out = []
+    for n, order in enumerate(orders):
+        jobs = []
+        for i in order:
+            key = f"{n:02d}{i:02d}" + "0" * 36
+            store.blob_path(key).parent.mkdir(parents=True, exist_ok=True)
+            store.blob_path(key).write_bytes(encode_png(images[i]))
+            jobs.append(Job(len(jobs), "box", "white", {}, key, key, f"p{key}"))
+        rows = {c.key: c.row for c in stage.compute(Feed(store, {}, jobs), plan, store)}
+        out.append([rows[job.pred_key] for job in jobs])
+    return out, stage
+
+
+@pytest.mark.torch
+@pytest.mark.parametrize(("model", "near_ties"), [
+    pytest.param('backend = "torch"\n', False, id="torch"),  # padded to batch_size
+    pytest.param('backend = "onnx"\n', False, id="onnx"),  # not padded: ONNX Runtime's rows need not be
+    # ONNX Runtime standing in for torch, 101 ranks checked: near ties everywhere, each run through torch
+    pytest.param("[evaluator]\ntop_k = 100\n", True, id="stand-in"),
+])
+def test_an_image_s_outputs_are_the_same_bytes_whatever_batch_it_is_in(tmp_path, model, near_ties) -> None:
+    images = np.random.default_rng(3).random((6, 32, 32, 3), dtype=np.float32)
+    # image 0 alone, in a short batch at the end, in a short batch of two after a full one, first of a full one
+    orders = [[0], [1, 2, 0], [2, 3, 4, 5, 1, 0], [0, 5, 4, 3]]
+    runs, stage = _infer_in_batches(tmp_path, orders, images, model)
+    assert (stage._runner is not None and stage._runner.by_torch > 0) == near_ties
+    seen = [rows[order.index(0)] for rows, order in zip(runs, orders)]
+    for field in ("topk_probs", "label_prob", "loss", "top1"):
+        assert len({repr(row[field]) for row in seen}) == 1, [row[field] for row in seen]
