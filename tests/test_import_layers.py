@@ -32,7 +32,11 @@ UNITS = (
     "sweep3d.results",             # SQL views over a store
     "sweep3d.export",
     "sweep3d.bench",
+    "sweep3d.stability",           # follow-ups of a finished run: which verdicts are fragile,
+    "sweep3d.explain",             # the nearest fix of each failure,
+    "sweep3d.confirm",             # findings confirmed on fresh renders,
     "sweep3d.report",
+    "sweep3d.realism",             # agreement with photographs and another renderer
     "sweep3d",                     # the public API: sweep3d.load, Experiment, plugins
     "sweep3d.cli",                 # the command line, over the API (and ``python -m sweep3d``)
 )
