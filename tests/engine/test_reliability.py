@@ -198,9 +198,10 @@ def test_blob_states_taken_ahead_by_a_child_are_the_states_and_damage_is_still_f
 def test_a_run_forgets_its_snapshot_of_blob_states_before_it_computes(tiny_copy, monkeypatch) -> None:
     from sweep3d.cache import snapshot
     from sweep3d.driver import loop as driver
+    from sweep3d.engine import pipeline
 
     monkeypatch.setattr(snapshot, "MIN_BLOBS", 0)
-    monkeypatch.setattr(snapshot, "MIN_JOBS", 0)
+    monkeypatch.setattr(pipeline, "SNAPSHOT_MIN_JOBS", 0)  # the threshold as the pipeline reads it
     taken: list[bool] = []
     real_begin = driver.begin
 
@@ -226,7 +227,7 @@ def test_a_run_forgets_its_snapshot_of_blob_states_before_it_computes(tiny_copy,
     assert taken == [True, True, True], "every stage's first look at the store reads the snapshot"
     assert computing == [False], "gone before anything is computed and written"
     assert looked == ["images", "predictions"], "the renders found before the pass are not looked up again"
-    monkeypatch.setattr(snapshot, "MIN_JOBS", 10**9)
+    monkeypatch.setattr(pipeline, "SNAPSHOT_MIN_JOBS", 10**9)
     taken.clear()
     assert run(load_spec(tiny_copy / "spec.toml")).failed == 0
     assert taken == [False, False, False], "a plan of few jobs does not wait for the child's look at every blob"
