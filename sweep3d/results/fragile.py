@@ -10,8 +10,8 @@ result is never called surer than it is.
 
 ``fragile`` comes from the stability check (``sweep3d stability``, rows in the store's
 ``stability`` table): per model, the *threshold* is the upper edge of the highest margin bin in
-which any checked image flipped its verdict under any change; a result is fragile when
-``|margin|`` is below it, or its own image flipped in the check. Without a check, ``fragile`` is
+which at least :data:`FLIP_RATE` of the checked images flipped their verdict under some change; a
+result is fragile when ``|margin|`` is below it, or its own image flipped in the check. Without a check, ``fragile`` is
 null (unknown), never false.
 """
 
@@ -30,6 +30,11 @@ from sweep3d.spec import DROP_FRAGILE_METADATA
 #: Upper edges of the ``|margin|`` bins the stability check reports (the first bin starts at 0;
 #: each bin is [previous edge, edge), the last also holds 1).
 MARGIN_EDGES = (0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0)
+#: The share of a margin bin's checked images that must flip for the bin's margins to be fragile:
+#: at 1 in 10, a verdict that near the other is a coin one no eye sees could toss. (Any single flip
+#: would call nearly every failure of a blurred sweep fragile: one of 40 images flips even at
+#: margins 0.2–0.5.) An image that flipped is fragile whatever its bin's rate.
+FLIP_RATE = 0.1
 #: The prediction columns the margin is computed from (every evaluator that ranks classes has them).
 MARGIN_INPUTS = ("topk", "topk_probs", "label_ids", "label_prob")
 
@@ -123,8 +128,9 @@ def register_fragile(con: duckdb.DuckDBPyConnection, drop: bool = False) -> bool
             f"LEFT JOIN (SELECT model, {by}bin, count(*) AS n, count(*) FILTER (WHERE flipped) AS flips "
             f"FROM {rows} GROUP BY ALL) c ON c.model IS NOT DISTINCT FROM m.model "
             f"{'AND c.change = m.change ' if by else ''}AND c.bin = e.bin ORDER BY ALL")
-    con.execute("CREATE OR REPLACE VIEW fragile_threshold AS SELECT model, coalesce(max(upper) FILTER (WHERE flips > 0), "
-                "0.0) AS threshold, sum(n)::BIGINT AS checked, sum(flips)::BIGINT AS flipped FROM stability_bins "
+    con.execute("CREATE OR REPLACE VIEW fragile_threshold AS SELECT model, coalesce(max(upper) FILTER "
+                f"(WHERE flips > 0 AND flips >= {FLIP_RATE!r} * n), 0.0) AS threshold, sum(n)::BIGINT AS checked, "
+                "sum(flips)::BIGINT AS flipped FROM stability_bins "
                 "GROUP BY model")
     fragile = ("CASE WHEN t.threshold IS NULL OR r.margin IS NULL THEN NULL "
                "ELSE abs(r.margin) < t.threshold OR coalesce(i.flipped, false) END")
@@ -156,8 +162,9 @@ def fragile_sentence(summary: Any) -> str:
     if summary.fragile_failures is None or summary.fragile_threshold is None:
         return ""
     failures = summary.wrong + (summary.fragile_failures if summary.fragile_dropped else 0)
-    rule = (f"|margin| < {summary.fragile_threshold:.3g} or flipped in the check" if summary.fragile_threshold
-            else "flipped in the check; no checked image flipped")
+    share = f"1 in {round(1 / FLIP_RATE)}"
+    rule = (f"|margin| < {summary.fragile_threshold:.3g}, where {share} checked images or more flipped, or flipped "
+            "in the check" if summary.fragile_threshold else f"flipped in the check; no margin bin flipped {share}")
     dropped = (f"; [aggregate] drop_fragile: the {summary.fragile_dropped} fragile results, right or wrong, are left "
                "out of every count, accuracy, failure mode and boundary" if summary.fragile_dropped else "")
     return (f"fragile: {summary.fragile_failures} of {failures} failures ({rule}; stability check of "

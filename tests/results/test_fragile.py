@@ -166,6 +166,23 @@ def test_an_image_that_flipped_is_fragile_even_above_the_threshold_rule(tmp_path
     assert con.execute("SELECT fragile FROM results WHERE job = 6").fetchone()[0] is False
 
 
+def test_a_bin_where_fewer_than_one_in_ten_flipped_sets_no_threshold(tmp_path: Path) -> None:
+    margins = [0.3 + i / 100 for i in range(20)] + [-0.6, 0.005]  # 20 in bin [0.2, 0.5), then two more
+    store = _store(tmp_path, margins)
+    # 1 of 20 flipped in [0.2, 0.5) (5 %): no threshold from it, but that image is fragile
+    _checked(store, {f"k{i}": (margins[i], i == 3) for i in range(20)})
+    con = connect(store, "e")
+    assert con.execute("SELECT threshold, checked, flipped FROM fragile_threshold").fetchone() == (0.0, 20, 1)
+    fragile = dict(con.execute("SELECT job, fragile FROM results").fetchall())
+    assert [j for j, f in fragile.items() if f] == [3]
+    store = _store(tmp_path / "two", margins)  # 2 of 20 (10 %): the bin's margins are fragile
+    _checked(store, {f"k{i}": (margins[i], i in (3, 4)) for i in range(20)})
+    con = connect(store, "e")
+    assert con.execute("SELECT threshold FROM fragile_threshold").fetchone()[0] == 0.5
+    fragile = dict(con.execute("SELECT job, fragile FROM results").fetchall())
+    assert sorted(j for j, f in fragile.items() if f) == [*range(20), 21]  # -0.6 is not
+
+
 def test_no_flip_makes_nothing_fragile_but_the_check_is_known(tmp_path: Path) -> None:
     store = _store(tmp_path, MARGINS)
     _checked(store, {"k4": (-0.005, False), "k5": (0.003, False)})
