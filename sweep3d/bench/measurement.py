@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import statistics
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -49,16 +49,19 @@ class Setting:
     resolution: int | str | None = None  # None: the spec's; "model": the model's input
     adaptive: float = 0.0  # Cycles adaptive sampling threshold (0 = off)
     seed: int = 0  # Cycles seed: the noise-floor reference differs from the reference only here
+    engine: str = "cycles"  # another renderer's row: its time against agreement with Cycles' reference
 
     def render_update(self, spec_resolution: int | str) -> dict:
         return {"samples": self.samples, "denoise": self.denoise != "off",
                 "denoise_prefilter": "fast" if self.denoise == "off" else self.denoise,
                 "max_bounces": self.max_bounces, "resolution": self.resolution or spec_resolution,
-                "adaptive_threshold": self.adaptive, "seed": self.seed}
+                "adaptive_threshold": self.adaptive, "seed": self.seed, "engine": self.engine}
 
     def label(self) -> str:
         """Compact, e.g. ``4spp oidn-fast``, ``64spp plain b2 160px``, ``4spp oidn-fast model``."""
         parts = [f"{self.samples}spp", "plain" if self.denoise == "off" else f"oidn-{self.denoise}"]
+        if self.engine != "cycles":
+            parts.insert(0, self.engine)
         if self.adaptive:
             parts.append(f"adaptive {self.adaptive:g}")
         if self.max_bounces != 8:
@@ -112,13 +115,15 @@ class BenchRow:
         return not (self.is_reference or self.is_floor)
 
 
-def default_settings(current: Setting, model_view: bool = True, full_frame: int | None = None) -> list[Setting]:
+def default_settings(current: Setting, model_view: bool = True, full_frame: int | None = None,
+                     engines: Sequence[str] = ()) -> list[Setting]:
     """The grid: samples × denoiser, adaptive sampling, bounces, resolutions, the model's view
-    (when its input size is known), and the spec's own setting.
+    (when its input size is known), the spec's own setting, and that setting in each of ``engines``.
 
     Args:
         full_frame: the pixel size of the grid's full-frame settings when the spec itself renders
             at the model's framing (they would otherwise repeat the model-framed ones).
+        engines: other renderers to time and compare with the (Cycles) reference at the spec's setting.
     """
     side = full_frame if current.resolution == "model" else None
     grid = [Setting(s, d, resolution=side) for s in (1, 4, 16) for d in ("off", "fast", "accurate")]
@@ -127,7 +132,8 @@ def default_settings(current: Setting, model_view: bool = True, full_frame: int 
     grid += [Setting(4, "fast", resolution=160)]
     if model_view:
         grid += [Setting(s, d, resolution="model") for s, d in ((1, "fast"), (4, "fast"), (4, "accurate"), (16, "fast"))]
-    return list(dict.fromkeys(grid + [current]))
+    others = [dataclasses.replace(current, engine=e) for e in engines if e != current.engine]
+    return list(dict.fromkeys(grid + [current] + others))
 
 
 def reference_settings(samples: int, denoise: str, current: Setting, model_view: bool) -> tuple[Setting, Setting]:
@@ -207,8 +213,11 @@ def split_times(keys: list[str], timings: dict[str, RenderInfo], stored: dict[st
             "timed": len(fresh), "render_total": sum(info.render_seconds for info in fresh)}
 
 
-def recommend(rows: list[BenchRow], agreement: float = 0.99) -> BenchRow | None:
-    """The fastest setting that passes; marks each row's ``passes``.
+def recommend(rows: list[BenchRow], agreement: float = 0.99, engine: str = "cycles") -> BenchRow | None:
+    """The fastest setting of ``engine`` (the spec's renderer) that passes; marks each row's ``passes``.
+
+    Another renderer's rows are measured and marked but never recommended: the bench tunes the
+    spec's renders; a change of renderer is the user's call (``[render] engine``).
 
     A setting passes when its top-1 agreement with the reference is not clearly below the
     target: the top of its 95 % Wilson interval reaches ``agreement``, or the noise floor's
@@ -218,7 +227,7 @@ def recommend(rows: list[BenchRow], agreement: float = 0.99) -> BenchRow | None:
     target = required_agreement(rows, agreement)
     for row in rows:
         row.passes = row.is_setting and row.interval()[1] >= target
-    return min((r for r in rows if r.passes), key=lambda r: r.seconds, default=None)
+    return min((r for r in rows if r.passes and r.setting.engine == engine), key=lambda r: r.seconds, default=None)
 
 
 def required_agreement(rows: list[BenchRow], agreement: float) -> float:

@@ -193,6 +193,9 @@ def bench(
     agreement: float = typer.Option(0.99, min=0.0, max=1.0, help="Top-1 agreement with the reference a setting "
                                                                  "needs (lowered to the noise floor's, if lower)."),
     apply: bool = typer.Option(False, "--apply", help="Write the recommended setting into the spec's [render]."),
+    engine: list[str] = typer.Option([], "--engine", help="Also render the spec's setting with this renderer "
+                                                          "(mitsuba): its time against agreement with the "
+                                                          "Cycles reference (never recommended). Repeatable."),
 ) -> None:
     """Render time against error: find the cheapest render setting the model cannot tell apart.
 
@@ -236,9 +239,14 @@ def bench(
     view = ModelHandle.resolve(loaded).view  # None: a user's own preprocessing, compared at the spec's size
     model_view, full_frame = view is not None, view.crop if view is not None else None
     current = Setting(r.samples, r.denoise_prefilter if r.denoise else "off", r.max_bounces,
-                      "model" if r.resolution == "model" else None, r.adaptive_threshold)
+                      "model" if r.resolution == "model" else None, r.adaptive_threshold, engine=r.engine)
     reference, twin = reference_settings(reference_samples, reference_denoise, current, model_view)
-    settings = default_settings(current, model_view, full_frame)
+    from sweep3d.spec import ENGINES
+
+    unknown = [e for e in engine if e not in ENGINES]
+    if unknown:
+        raise UserError(f"--engine {unknown[0]!r}: use one of {', '.join(ENGINES)}")
+    settings = default_settings(current, model_view, full_frame, engine)
     references = [reference] + ([twin] if floor else [])
     sample = 100 if jobs is None else jobs
     if budget is not None:
@@ -247,7 +255,7 @@ def bench(
     started = time.perf_counter()
     with RunProgress(console) as progress:
         rows = measure(loaded, settings, reference, twin if floor else None, sample, progress)
-    best = recommend(rows, agreement)
+    best = recommend(rows, agreement, current.engine)
     print_bench(console, rows, best, current, agreement)
     if budget is not None:
         console.print(f"the bench took {duration(time.perf_counter() - started)} (--budget {budget:g} min)")

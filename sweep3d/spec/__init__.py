@@ -7,7 +7,7 @@ from __future__ import annotations
 
 __all__ = [
     "CLASS_NAMES_METADATA", "Catalogue", "Choice", "Column", "ControlInstance",
-    "DROP_FRAGILE_METADATA", "Fixed", "Framing", "JOB_COLUMNS", "KeyLightSpec", "LoadedSpec",
+    "DROP_FRAGILE_METADATA", "ENGINES", "Fixed", "Framing", "JOB_COLUMNS", "KeyLightSpec", "LoadedSpec",
     "MIN_VISIBLE_METADATA", "MIN_VISIBLE_OFF", "MODELS_METADATA", "MODEL_NAME_COLUMNS", "MaterialSpec",
     "ModelSpec", "NameClash", "ObjectSpec", "PARAMETERS_METADATA", "PREDICTION_COLUMNS",
     "PROTOCOL_METADATA", "Point", "PointError", "PolicySpec", "Range", "RenderSpec", "SearchSpace",
@@ -40,7 +40,16 @@ if _TYPE_CHECKING:
     from sweep3d.spec.framing import Framing
     from sweep3d.spec.loader import ControlInstance, LoadedSpec
     from sweep3d.spec.looks import unknown_name
-    from sweep3d.spec.models import KeyLightSpec, MaterialSpec, ModelSpec, ObjectSpec, PolicySpec, RenderSpec, Spec
+    from sweep3d.spec.models import (
+        ENGINES,
+        KeyLightSpec,
+        MaterialSpec,
+        ModelSpec,
+        ObjectSpec,
+        PolicySpec,
+        RenderSpec,
+        Spec,
+    )
     from sweep3d.spec.params import Choice, Fixed, Range, Space
     from sweep3d.spec.sources import read_spec
     from sweep3d.spec.space import Column, Point, PointError, SearchSpace, SpaceShape, as_arrays, as_points, contract
@@ -52,6 +61,7 @@ __getattr__, __dir__ = _exports(__name__, {
     "Column": ("sweep3d.spec.space", "Column"),
     "ControlInstance": ("sweep3d.spec.loader", "ControlInstance"),
     "DROP_FRAGILE_METADATA": ("sweep3d.spec.columns", "DROP_FRAGILE_METADATA"),
+    "ENGINES": ("sweep3d.spec.models", "ENGINES"),
     "Fixed": ("sweep3d.spec.params", "Fixed"),
     "Framing": ("sweep3d.spec.framing", "Framing"),
     "JOB_COLUMNS": ("sweep3d.spec.columns", "JOB_COLUMNS"),

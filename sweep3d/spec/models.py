@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, get_args
 
 from pydantic import (
     AfterValidator,
@@ -43,6 +43,11 @@ class ExperimentSpec(StrictModel):
         return store
 
 
+#: The renderers ``[render] engine`` names (Cycles first: the default and the bench's reference).
+Engine = Literal["cycles", "mitsuba"]
+ENGINES: tuple[str, ...] = get_args(Engine)
+
+
 class RenderSpec(StrictModel):
     resolution: int | Literal["model"] = Field(
         224, description="Square image side in pixels, or 'model': render exactly the model's input "
@@ -75,7 +80,7 @@ class RenderSpec(StrictModel):
     world_map_resolution: int = Field(1024, ge=4, le=16384,
                                       description="The world's importance map side with world_sampling = 'manual' "
                                                   "(Blender's sample_map_resolution).")
-    engine: Literal["cycles", "mitsuba"] = Field(
+    engine: Engine = Field(
         "cycles", description="The renderer: Blender's Cycles, or Mitsuba 3 (a second renderer, to tell a model's "
                               "failure from a simulator artifact; docs/how-to/second-renderer.md). Keyed apart.")
 

@@ -154,3 +154,23 @@ def test_bench_reports_load_apart_and_runs_the_jobs_its_budget_chose(tmp_path: P
     assert all(float(m.group(1)) > 0 and int(m.group(2)) >= 1 for m in loads)
     assert re.search(r"scene loads: \d+ of \d+ renders in this run switched scene first", result.output)
     assert "the bench took" in result.output
+
+
+def test_another_engine_is_measured_beside_the_grid_but_never_recommended() -> None:
+    from sweep3d.bench.measurement import BenchRow, recommend
+
+    current = Setting(4, "fast", resolution="model")
+    settings = default_settings(current, True, 256, ["mitsuba", "cycles"])
+    others = [s for s in settings if s.engine != "cycles"]
+    assert others == [Setting(4, "fast", resolution="model", engine="mitsuba")]  # the spec's setting, once
+    assert others[0].label() == "mitsuba 4spp oidn-fast model" and others[0].render_update(256)["engine"] == "mitsuba"
+    rows = [BenchRow(current, 1.0, 40.0, 0.99, 100, 100, 100),
+            BenchRow(others[0], 0.5, 30.0, 0.9, 100, 100, 100)]  # faster, agrees as well: still not chosen
+    assert recommend(rows, 0.99) is rows[0] and rows[1].passes
+    assert recommend(rows, 0.99, engine="mitsuba") is rows[1]  # a Mitsuba spec's bench tunes Mitsuba
+
+
+def test_an_unknown_engine_is_one_line_and_exit_code_2(tmp_path: Path) -> None:
+    result = CliRunner().invoke(app, ["bench", str(write_spec(tmp_path, TINY_SPEC)), "--engine", "luxcore"])
+    assert result.exit_code == 2 and "--engine 'luxcore': use one of cycles, mitsuba" in result.output
+    assert len(result.output.strip().splitlines()) == 1
