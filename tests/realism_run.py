@@ -26,7 +26,7 @@ from sweep3d.cache.store import Store
 from sweep3d.cli import app
 from sweep3d.core.pixels import encode_png8
 from sweep3d.results import connect
-from sweep3d.results.agreement import VERDICT_SCHEMA
+from sweep3d.results.agreement import VERDICT_SCHEMA, verdict_key
 from sweep3d.spec.columns import MODELS_METADATA, PARAMETERS_METADATA
 from tests.helpers import CHROMIUM, CHROMIUM_ARGS, write_spec
 
@@ -209,7 +209,8 @@ T1 = datetime(2024, 2, 1, tzinfo=timezone.utc)
 
 def verdict(job: int, correct: bool, source: str = "photo", at: datetime = T1, valid: bool = True) -> dict[str, Any]:
     row = {name: None for name in VERDICT_SCHEMA.names}
-    row.update(source=source, experiment="realism", job=job, model="realism_model:redblue", valid=valid,
+    row.update(verdict_key=verdict_key(source, "realism", job, "realism_model:redblue"), source=source,
+               experiment="realism", job=job, model="realism_model:redblue", valid=valid,
                correct=correct,
                top1_label="red" if correct else "blue", created_at=at)
     return row

@@ -31,7 +31,7 @@ from sweep3d.cache import Store, atomic_write, utc_now
 from sweep3d.core import UserError
 from sweep3d.realism.photos import PREPROCESS, Photo, PhotoProblems, framed, match_photos, upright
 from sweep3d.realism.pick import DESIGN, RENDERS, default_kit, read_kit
-from sweep3d.results import VERDICT_SCHEMA, VERDICTS, photo_path
+from sweep3d.results import VERDICT_SCHEMA, VERDICTS, photo_path, verdict_key
 from sweep3d.spec import LoadedSpec
 
 PHOTO = "photo"
@@ -184,7 +184,8 @@ def _truth_rows(spec: LoadedSpec, store: Store, jobs: Sequence[int], model: str)
 
 def _row(source: str, experiment: str, job: int, model: str, verdict: dict[str, Any], **extra: Any) -> dict[str, Any]:
     row = {name: None for name in VERDICT_SCHEMA.names}
-    row.update(source=source, experiment=experiment, job=job, model=model, valid=bool(verdict.get("valid")),
+    row.update(verdict_key=verdict_key(source, experiment, job, model), source=source, experiment=experiment,
+               job=job, model=model, valid=bool(verdict.get("valid")),
                correct=verdict.get("correct"), top1_label=verdict.get("top1_label"),
                label_prob=verdict.get("label_prob"), created_at=utc_now(), **extra)
     return row
