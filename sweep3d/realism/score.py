@@ -260,7 +260,7 @@ def score_engine(spec: LoadedSpec, engine: str, kit: Path | None = None, console
     Raises:
         UserError: no kit; the spec loader refusing the engine or a control it cannot express.
     """
-    from sweep3d.engine import builtin_catalogue
+    from sweep3d.engine import builtin_catalogue, write_unstored_images
     from sweep3d.results import results_connection, stored_parameters
     from sweep3d.spec import read_spec
 
@@ -290,6 +290,10 @@ def score_engine(spec: LoadedSpec, engine: str, kit: Path | None = None, console
                                  preprocess=f"rendered by {engine}; the model's own preprocessing, as for the render"))
     rows.sort(key=lambda r: (r["model"], r["job"]))
     with store.lock(wait):
+        # the other engine's images the report's pairs show: a run keeps its post-processed images
+        # in memory only ([postprocess] store = "none", the default), and the report makes again
+        # only its own experiment's, so they are written here, as `pick` writes the renders'
+        write_unstored_images(other, store, [r["image_key"] for r in rows])
         store.append(VERDICTS, rows, VERDICT_SCHEMA)
     return _scored(source, spec, store, rows)
 
