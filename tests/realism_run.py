@@ -1,6 +1,7 @@
 """A synthetic run for the realism tests: red and blue objects a tiny user model classifies by
-colour, its store with real PNG blobs, stand-ins for the kit's page tools, and the agreement
-expected by the textbook formulas. Tests import from here, never from one another."""
+colour, its store with real PNG blobs, stand-ins for the kit's page tools, the agreement
+expected by the textbook formulas, and the alignment page in a browser with a fake camera. Tests
+import from here, never from one another."""
 
 from __future__ import annotations
 
@@ -9,6 +10,8 @@ import json
 import math
 import sys
 import types
+from collections.abc import Iterator
+from contextlib import contextmanager
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
@@ -23,9 +26,9 @@ from sweep3d.cache.store import Store
 from sweep3d.cli import app
 from sweep3d.core.pixels import encode_png8
 from sweep3d.results import connect
-from sweep3d.results.agreement import VERDICT_SCHEMA
+from sweep3d.results.agreement import VERDICT_SCHEMA, verdict_key
 from sweep3d.spec.columns import MODELS_METADATA, PARAMETERS_METADATA
-from tests.helpers import write_spec
+from tests.helpers import CHROMIUM, CHROMIUM_ARGS, write_spec
 
 T0 = datetime(2024, 1, 1, tzinfo=timezone.utc)
 SIDE = 32
@@ -206,7 +209,8 @@ T1 = datetime(2024, 2, 1, tzinfo=timezone.utc)
 
 def verdict(job: int, correct: bool, source: str = "photo", at: datetime = T1, valid: bool = True) -> dict[str, Any]:
     row = {name: None for name in VERDICT_SCHEMA.names}
-    row.update(source=source, experiment="realism", job=job, model="realism_model:redblue", valid=valid,
+    row.update(verdict_key=verdict_key(source, "realism", job, "realism_model:redblue"), source=source,
+               experiment="realism", job=job, model="realism_model:redblue", valid=valid,
                correct=correct,
                top1_label="red" if correct else "blue", created_at=at)
     return row
@@ -237,3 +241,52 @@ def agreement_rows(folder: Path, experiment: str = "realism") -> list[dict[str, 
 def sim_verdicts() -> list[bool]:
     return [redblue_row(image_of(j["rgb"]), LABELS[j["object"]])["correct"] for j in job_colours()]
 
+
+# -- the alignment page in a browser with a fake camera ----------------------------------------
+def write_y4m(path: Path, rgb: np.ndarray, frames: int = 3) -> Path:
+    """A YUV4MPEG2 file of ``frames`` copies of ``rgb``: a text header, then per frame ``FRAME`` and
+    the planes Y, U, V (4:2:0: chroma at half width and height), BT.601 studio range."""
+    h, w, _ = rgb.shape
+    r, g, b = (rgb[..., i].astype(np.float64) for i in range(3))
+    y = 16 + (65.481 * r + 128.553 * g + 24.966 * b) / 255
+    u = 128 + (-37.797 * r - 74.203 * g + 112.0 * b) / 255
+    v = 128 + (112.0 * r - 93.786 * g - 18.214 * b) / 255
+    half = [c.reshape(h // 2, 2, w // 2, 2).mean(axis=(1, 3)) for c in (u, v)]
+    planes = b"".join(np.clip(np.round(p), 0, 255).astype(np.uint8).tobytes() for p in (y, *half))
+    path.write_bytes(f"YUV4MPEG2 W{w} H{h} F30:1 Ip A1:1 C420jpeg\n".encode() + b"FRAME\n".join([b""] + [planes] * frames))
+    return path
+
+
+@contextmanager
+def open_align(browser: Any, page_path: Path, width: int = 400, height: int = 700,
+               init_script: str | None = None) -> Iterator[tuple[Any, dict[str, list]]]:
+    """``align.html`` in a fresh context of ``browser`` (a phone-sized viewport by default), once
+    its camera (or the fallback) is set up; its errors, requests and dialogs collected."""
+    context = browser.new_context(viewport={"width": width, "height": height}, accept_downloads=True)
+    try:
+        page = context.new_page()
+        events: dict[str, list] = {"errors": [], "console": [], "requests": [], "dialogs": []}
+        page.on("pageerror", lambda exc: events["errors"].append(str(exc)))
+        page.on("console", lambda msg: events["console"].append(msg.text) if msg.type == "error" else None)
+        page.on("request", lambda req: events["requests"].append(req.url))
+        page.on("dialog", lambda dialog: (events["dialogs"].append(dialog.message), dialog.dismiss()))
+        if init_script:
+            page.add_init_script(init_script)
+        page.goto(page_path.as_uri())
+        page.wait_for_function("() => document.documentElement.dataset.ready === '1'", timeout=30_000)
+        yield page, events
+    finally:
+        context.close()
+
+
+@contextmanager
+def fake_camera(chromium: Any, video: Path) -> Iterator[Any]:
+    """A second headless Chromium (from the ``chromium`` fixture's Playwright) whose camera is a
+    fake device playing ``video`` (a ``.y4m`` file, :func:`write_y4m`), granted without asking."""
+    browser = chromium.browser_type.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS + [
+        "--use-fake-device-for-media-stream", "--use-fake-ui-for-media-stream",
+        f"--use-file-for-fake-video-capture={video}"])
+    try:
+        yield browser
+    finally:
+        browser.close()

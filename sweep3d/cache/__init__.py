@@ -4,12 +4,12 @@ from __future__ import annotations
 
 __all__ = [
     "ASSETS_FOLDER", "BLOB_TABLES", "DIGEST_COLUMN", "Hole", "KEY_COLUMN", "MANIFEST", "MIN_JOBS",
-    "OUTPUTS_FOLDER", "SUFFIX", "SegmentWriter", "Store", "StoreWriteError", "TABLES", "TRUTH_BLOBS",
-    "Template", "atomic_write", "canonical", "canonical_pieces", "collect_garbage", "compact_table",
+    "NEWEST_WINS", "OUTPUTS_FOLDER", "PHOTOS_FOLDER", "SUFFIX", "SegmentWriter", "Store", "StoreWriteError",
+    "TABLES", "TRUTH_BLOBS", "Template", "atomic_write", "canonical", "canonical_pieces", "collect_garbage", "compact_table",
     "damaged_blobs", "digest", "digests", "file_digest", "files_digest", "float_texts",
     "full_disk_error", "is_full_disk", "is_select", "load_image", "load_pass", "lock_down", "members",
-    "pack", "read_manifest", "record", "remember_written", "remove_killed_writers_temp_files",
-    "repair", "safe_filename", "sha256_bytes", "skip_pandas_probe", "stale", "store_stats", "unpack",
+    "pack", "photo_path", "read_manifest", "record", "remember_written",
+    "remove_killed_writers_temp_files", "repair", "safe_filename", "sha256_bytes", "skip_pandas_probe", "stale", "store_stats", "unpack",
     "utc_now", "verify", "written_from"
 ]
 
@@ -48,6 +48,8 @@ if _TYPE_CHECKING:
         BLOB_TABLES,
         DIGEST_COLUMN,
         KEY_COLUMN,
+        NEWEST_WINS,
+        PHOTOS_FOLDER,
         TABLES,
         TRUTH_BLOBS,
         SegmentWriter,
@@ -58,6 +60,7 @@ if _TYPE_CHECKING:
         is_full_disk,
         is_select,
         lock_down,
+        photo_path,
         safe_filename,
         utc_now,
     )
@@ -71,6 +74,8 @@ __getattr__, __dir__ = _exports(__name__, {
     "KEY_COLUMN": ("sweep3d.cache.store", "KEY_COLUMN"),
     "MANIFEST": ("sweep3d.cache.extracted", "MANIFEST"),
     "MIN_JOBS": ("sweep3d.cache.snapshot", "MIN_JOBS"),
+    "NEWEST_WINS": ("sweep3d.cache.store", "NEWEST_WINS"),
+    "PHOTOS_FOLDER": ("sweep3d.cache.store", "PHOTOS_FOLDER"),
     "OUTPUTS_FOLDER": ("sweep3d.cache.digested", "OUTPUTS_FOLDER"),
     "SUFFIX": ("sweep3d.cache.digested", "SUFFIX"),
     "SegmentWriter": ("sweep3d.cache.store", "SegmentWriter"),
@@ -98,6 +103,7 @@ __getattr__, __dir__ = _exports(__name__, {
     "lock_down": ("sweep3d.cache.store", "lock_down"),
     "members": ("sweep3d.cache.extracted", "members"),
     "pack": ("sweep3d.cache.digested", "pack"),
+    "photo_path": ("sweep3d.cache.store", "photo_path"),
     "read_manifest": ("sweep3d.cache.extracted", "read_manifest"),
     "record": ("sweep3d.cache.extracted", "record"),
     "remember_written": ("sweep3d.cache.written", "remember_written"),

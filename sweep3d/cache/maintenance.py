@@ -15,6 +15,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,6 +29,8 @@ from sweep3d.cache.blobs import blob_is_intact
 from sweep3d.cache.store import (
     BLOB_TABLES,
     KEY_COLUMN,
+    NEWEST_WINS,
+    PHOTOS_FOLDER,
     TABLE_COLUMNS,
     TABLES,
     TRUTH_BLOBS,
@@ -35,6 +38,7 @@ from sweep3d.cache.store import (
     StoreReadError,
     atomic_write,
     blob_key,
+    photo_path,
     scan,
     segment_name,
     with_column_list,
@@ -44,7 +48,8 @@ from sweep3d.core import read_record
 TEMP_AGE = 3600.0  # seconds after which gc removes temp files (a live run's are younger)
 #: Folders that only the writer lock's holder writes (``reports/`` and ``cache/`` are not:
 #: ``sweep3d report`` writes them without the lock).
-LOCKED_FOLDERS = ("tables", "blobs", "jobs", "models", "outputs")
+LOCKED_FOLDERS = ("tables", "blobs", "jobs", "models", "outputs", "realism")
+_HEX_NAME = re.compile(r"[0-9a-f]{64}")  # a kept photo's name: its photograph's SHA-256
 TEMP_PATTERN = ".*.tmp"  # how atomic_write names its temp files (a dot, the file's name, a tag, .tmp)
 
 
@@ -52,7 +57,7 @@ TEMP_PATTERN = ".*.tmp"  # how atomic_write names its temp files (a dot, the fil
 @dataclass(frozen=True)
 class Problem:
     kind: str  # "corrupt segment", "corrupt blob", "missing blob", "corrupt jobs table", "corrupt kept output",
-    # "corrupt extracted asset"
+    # "corrupt extracted asset", "corrupt kept photo", "missing kept photo"
     table: str
     path: Path
     key: str | None = None
@@ -69,6 +74,7 @@ class Verification:
     rows: int = 0
     blobs: int = 0
     outputs: int = 0  # kept model outputs
+    photos: int = 0  # kept photographs (``realism score``)
     assets: int = 0  # folders extracted from mesh archives
     problems: list[Problem] = field(default_factory=list)
 
@@ -79,7 +85,8 @@ class Verification:
 
 def verify(root: Path) -> Verification:
     """Re-read every segment (checking its columns are its table's), re-hash every blob that a
-    row references, every kept model output and every extracted mesh; change nothing."""
+    row references, every kept model output and every extracted mesh, decode every kept
+    photograph a verdict names; change nothing."""
     store = Store(root, quarantine=False, warn=False)
     report = Verification()
     for table in TABLES:
@@ -114,6 +121,7 @@ def verify(root: Path) -> Verification:
                 detail = "content does not match its recorded SHA-256" if digests else "does not decode"
                 report.problems.append(Problem("corrupt blob", table, path, key, detail))
     _verify_truth_blobs(store, report)
+    _verify_kept_photos(store, report)
     _verify_kept_outputs(root, report)
     _verify_assets(root, report)
     return report
@@ -136,6 +144,38 @@ def evaluated_columns_lacking(store: Store) -> list[Path]:
         columns = (*TABLE_COLUMNS["predictions"], *record.columns)
         found += store.require_columns("predictions", columns, keys, f"every row of the {record.kind} evaluator has")
     return found
+
+
+def kept_photo_digests(store: Store) -> set[str]:
+    """The photographs the ``verdicts`` rows name (their ``photo_sha256``): the kept photos in use."""
+    data = store.table("verdicts", ["photo_sha256"])
+    if data is None or "photo_sha256" not in data.column_names:
+        return set()
+    return {d for d in data.column("photo_sha256").to_pylist() if d}
+
+
+def _verify_kept_photos(store: Store, report: Verification) -> None:
+    """Check that every kept photograph a verdict names is there and decodes (``realism score``
+    keeps them for the report's render | photo pairs; their bytes are a re-encoded thumbnail, so
+    no digest of them is recorded)."""
+    from PIL import Image
+
+    for sha256 in sorted(kept_photo_digests(store)):
+        path = photo_path(store.root, sha256)
+        report.photos += 1
+        try:
+            with Image.open(path) as im:
+                im.load()
+        except FileNotFoundError:
+            report.problems.append(Problem("missing kept photo", "verdicts", path, sha256,
+                                           "run sweep3d realism score again to keep it"))
+        except (OSError, ValueError, Image.DecompressionBombError) as exc:
+            why = _first_line(exc).replace(f"'{path}'", "").replace(str(path), path.name).strip()
+            report.problems.append(Problem("corrupt kept photo", "verdicts", path, sha256, why))
+
+
+def _first_line(exc: BaseException) -> str:
+    return (str(exc).splitlines() or [type(exc).__name__])[0]
 
 
 def _verify_kept_outputs(root: Path, report: Verification) -> None:
@@ -212,6 +252,9 @@ def repair(root: Path, report: Verification) -> int:
     for problem in report.problems:  # caches: the next run runs the model, or extracts the mesh, again
         if problem.kind == "corrupt kept output" and store.quarantine(problem.path) is not None:
             fixed += 1
+    for problem in report.problems:  # the report's pair then shows no photo; scoring again keeps it anew
+        if problem.kind == "corrupt kept photo" and store.quarantine(problem.path) is not None:
+            fixed += 1
     for name in {p.key for p in report.problems if p.kind == "corrupt extracted asset" and p.key is not None}:
         fixed += store.quarantine(root / extracted.ASSETS_FOLDER / name) is not None
     truths = {p.key for p in report.problems if p.table == "truths" and p.key is not None}
@@ -230,14 +273,15 @@ def repair(root: Path, report: Verification) -> int:
 @dataclass
 class Collected:
     blobs: int = 0
+    photos: int = 0  # kept photographs no verdict names any more
     temp_files: int = 0
     quarantined: int = 0
     bytes: int = 0
 
 
 def collect_garbage(root: Path, older_than: float = TEMP_AGE, purge_quarantine: bool = False) -> Collected:
-    """Remove blobs that no row references, and temp files and segments a compaction replaced
-    that are older than ``older_than`` seconds.
+    """Remove blobs that no row references, kept photographs that no verdict names, and temp
+    files and segments a compaction replaced that are older than ``older_than`` seconds.
 
     Only what the store wrote goes: files named as it names blobs (:func:`blob_key`) and temp
     files (:data:`TEMP_PATTERN`); anything else put in its folders stays, and symbolic links are
@@ -252,6 +296,7 @@ def collect_garbage(root: Path, older_than: float = TEMP_AGE, purge_quarantine: 
     referenced: set[str] = set()
     for table in (*BLOB_TABLES, "truths"):  # a truth key owns its mask and depth blobs
         referenced |= store.keys(table)
+    photos_kept = kept_photo_digests(store)
     _refuse_unread(store)
     out = Collected()
     now = time.time()
@@ -277,6 +322,11 @@ def collect_garbage(root: Path, older_than: float = TEMP_AGE, purge_quarantine: 
             out.temp_files += old(entry) and remove(entry)
         elif (key := blob_key(entry.name, folder)) is not None and key not in referenced:
             out.blobs += remove(entry)
+    for entry in store_files(root.joinpath(*PHOTOS_FOLDER)):  # kept photos of no verdict (the user's own stay)
+        if _is_temp(entry.name):
+            out.temp_files += old(entry) and remove(entry)
+        elif entry.name.endswith(".jpg") and _HEX_NAME.fullmatch(entry.name[:-4]) and entry.name[:-4] not in photos_kept:
+            out.photos += remove(entry)
     for table in TABLES:
         out.temp_files += store.sweep_superseded(table, older_than)
     for folder in (root / "tables", root / "jobs", root / "reports"):
@@ -286,7 +336,7 @@ def collect_garbage(root: Path, older_than: float = TEMP_AGE, purge_quarantine: 
     quarantine = root / "quarantine"
     if purge_quarantine:
         out.quarantined += sum(remove(e) for e in store_files(quarantine))
-    for folder in (blobs, scratch, quarantine):
+    for folder in (blobs, scratch, quarantine, root.joinpath(*PHOTOS_FOLDER)):
         _remove_empty_dirs(folder)
     return out
 
@@ -406,7 +456,8 @@ class Compacted:
 
 def compact_table(store: Store, table: str) -> Compacted | None:
     """Merge every readable segment of ``table`` into one, dropping duplicate rows of a key
-    (keeping the row the views show: the earliest ``created_at``). Call it holding the lock.
+    (keeping the row the views show: the earliest ``created_at``, or the latest in a table of
+    ``NEWEST_WINS``: a verdict scored again). Call it holding the lock.
 
     The merged segment is written (atomically) first, then a record of the segments it replaces
     (from then on they are no longer listed); the replaced files stay on disk for
@@ -425,8 +476,9 @@ def compact_table(store: Store, table: str) -> Compacted | None:
     merged = pa.concat_tables([t for _, t in parts], promote_options="permissive")
     rows_before = merged.num_rows
     key = KEY_COLUMN[table]
-    if "created_at" in merged.column_names:
-        merged = merged.take(pc.sort_indices(merged, sort_keys=[("created_at", "ascending")]))
+    if "created_at" in merged.column_names:  # the row that counts first (NEWEST_WINS: the latest)
+        order = "descending" if table in NEWEST_WINS else "ascending"
+        merged = merged.take(pc.sort_indices(merged, sort_keys=[("created_at", order)]))
     seen: set[str] = set()
     first = [i for i, k in enumerate(merged.column(key).to_pylist()) if not (k in seen or seen.add(k))]
     if len(parts) == 1 and len(first) == rows_before:
@@ -450,7 +502,8 @@ class TableStats:
 
 
 def store_stats(root: Path) -> list[TableStats]:
-    """Files, rows, distinct keys and bytes per table, then blobs, temp files and quarantine."""
+    """Files, rows, distinct keys and bytes per table, then blobs, kept photographs (keys: those
+    a verdict names), temp files and quarantine."""
     store = Store(root, quarantine=False, warn=False)
     out = []
     for table in TABLES:
@@ -466,6 +519,9 @@ def store_stats(root: Path) -> list[TableStats]:
     replaced = [store.table_dir(t) / n for t in TABLES for _, names, _ in store.superseded(t) for n in names]
     replaced = [p for p in replaced if p.is_file()]
     out.append(TableStats("compacted away", len(replaced), 0, 0, sum(_size(p) for p in replaced)))
+    photos = [Path(e.path) for e in store_files(root.joinpath(*PHOTOS_FOLDER)) if not _is_temp(e.name)]
+    out.append(TableStats("kept photos", len(photos), len(photos), len(kept_photo_digests(store)),
+                          sum(_size(p) for p in photos)))
     temp = [p for p in root.rglob(".*.tmp")] if root.is_dir() else []
     out.append(TableStats("temp files", len(temp), 0, 0, sum(_size(p) for p in temp)))
     quarantine = [p for p in (root / "quarantine").rglob("*") if p.is_file()] if (root / "quarantine").is_dir() else []

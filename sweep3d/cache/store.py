@@ -4,7 +4,9 @@ Layout under the store root::
 
     blobs/ab/abcdef….png          one file per key (renders and post-processed images)
     blobs/ab/abcdef….mask.png     a truth key's object mask (and ``.depth.npz``, its depth)
-    tables/<table>/<seg>.parquet  append-only row segments (renders, images, predictions, runs, parts, truths)
+    tables/<table>/<seg>.parquet  append-only row segments (renders, images, predictions, runs, parts, truths,
+                                  stability, verdicts)
+    realism/photos/<sha256>.jpg   the photographs ``realism score`` scored, as the model saw them
     jobs/<experiment>.parquet     the latest plan of each experiment (its jobs and their keys)
     lock                          held by the one process that writes
 
@@ -46,9 +48,16 @@ from sweep3d.cache import snapshot
 from sweep3d.cache.snapshot import StateSnapshot
 from sweep3d.core import StoreBusyError, UserError
 
-TABLES = ("renders", "images", "predictions", "runs", "parts", "truths", "stability")
+TABLES = ("renders", "images", "predictions", "runs", "parts", "truths", "stability", "verdicts")
 KEY_COLUMN = {"renders": "render_key", "images": "image_key", "predictions": "pred_key", "runs": "run_id",
-              "parts": "parts_key", "truths": "truth_key", "stability": "stability_key"}
+              "parts": "parts_key", "truths": "truth_key", "stability": "stability_key", "verdicts": "verdict_key"}
+#: Tables whose newest row of a key is the one that counts: a verdict of a job scored again
+#: (``sweep3d realism score``) replaces the earlier one. In every other table a key names its
+#: inputs, so its rows are alike and the first one counts.
+NEWEST_WINS = frozenset({"verdicts"})
+#: Where ``realism score`` keeps each photograph it scored (framed as its render, a small JPEG
+#: named by the SHA-256 of the photograph's file, recorded in its verdicts' ``photo_sha256``).
+PHOTOS_FOLDER = ("realism", "photos")
 #: Blobs a ``truths`` row owns beside its key (``blobs/ab/<truth_key>.<suffix>``) and the column
 #: recording each one's SHA-256 (null: the pass was not rendered).
 TRUTH_BLOBS = {"mask.png": "mask_sha256", "depth.npz": "depth_sha256"}
@@ -94,6 +103,7 @@ TABLE_COLUMNS = {
                "created_at"),
     "stability": ("stability_key", "pred_key", "image_key", "change", "base_correct", "base_margin", "correct",
                   "margin", "flipped", "created_at"),
+    "verdicts": ("verdict_key", "source", "experiment", "job", "model", "valid", "correct", "created_at"),
 }
 
 log = logging.getLogger("sweep3d.store")
@@ -562,8 +572,8 @@ class Store:
                 files: dict[str, list[Path]] | None = None) -> duckdb.DuckDBPyConnection:
         """An in-memory DuckDB connection with views over this store's Parquet files.
 
-        Views: ``renders``, ``images``, ``predictions``, ``runs``, ``parts``, ``truths`` (deduplicated
-        by key), and when ``experiment`` has a plan, ``jobs`` (its latest plan). Storage only: how
+        Views: one per table of :data:`TABLES` (deduplicated by key: a key's first row, or its
+        newest in the tables of :data:`NEWEST_WINS`), and when ``experiment`` has a plan, ``jobs`` (its latest plan). Storage only: how
         they join into ``results``, and what counts, is the aggregate stage's
         (``sweep3d.results.results``), which adds its views on top
         (``sweep3d.results.connect``).
@@ -582,7 +592,7 @@ class Store:
                 listing = ", ".join(_sql_str(str(p)) for p in files[table])
                 con.execute(
                     f"CREATE VIEW {table} AS SELECT * FROM read_parquet([{listing}], union_by_name = true) "
-                    f"QUALIFY row_number() OVER (PARTITION BY {KEY_COLUMN[table]} ORDER BY created_at) = 1"
+                    f"QUALIFY row_number() OVER (PARTITION BY {KEY_COLUMN[table]} ORDER BY {row_order(table)}) = 1"
                 )
         if "jobs" in files:
             con.execute(f"CREATE VIEW jobs AS SELECT * FROM read_parquet({_sql_str(str(files['jobs'][0]))})")
@@ -747,6 +757,16 @@ class SegmentWriter:
 
 
 # -- a segment's columns ------------------------------------------------------------------------
+def row_order(table: str) -> str:
+    """SQL ordering a key's rows of ``table`` so that the one that counts comes first (:data:`NEWEST_WINS`)."""
+    return "created_at DESC" if table in NEWEST_WINS else "created_at"
+
+
+def photo_path(root: Path, sha256: str) -> Path:
+    """The kept copy of the photograph whose file has the SHA-256 ``sha256`` (:data:`PHOTOS_FOLDER`)."""
+    return root.joinpath(*PHOTOS_FOLDER, f"{sha256}.jpg")
+
+
 def with_column_list(table: pa.Table) -> pa.Table:
     """``table`` with the list of its columns in its metadata, so a segment that later lacks one
     (a tool rewrote it without a column) reads as damaged rather than as rows with nulls."""

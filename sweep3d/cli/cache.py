@@ -44,8 +44,8 @@ def verify(
                                 "so the next run recomputes them."),
     wait: float = WaitOption,
 ) -> None:
-    """Re-read every segment and re-hash every blob, kept model output and extracted mesh; report
-    corrupt or missing ones (exit 1 if any)."""
+    """Re-read every segment and re-hash every blob, kept model output and extracted mesh, decode
+    every kept photo; report corrupt or missing ones (exit 1 if any)."""
     from sweep3d.cache import Store
     from sweep3d.cache import repair as repair_store
     from sweep3d.cache import verify as verify_store
@@ -53,7 +53,8 @@ def verify(
     check_wait(wait)
     root = _store_root(spec)
     report = verify_store(root)
-    console.print(f"checked {report.segments} segments ({report.rows} rows), {report.blobs} blobs, "
+    photos = f", {report.photos} kept photos" if report.photos else ""
+    console.print(f"checked {report.segments} segments ({report.rows} rows), {report.blobs} blobs{photos}, "
                   f"{report.outputs} kept model outputs and {report.assets} extracted meshes in {escape(str(root))}")
     for problem in report.problems[:MAX_LISTED]:
         console.print(f"[red]{escape(problem.line(root))}[/]", highlight=False)
@@ -80,14 +81,17 @@ def gc(
     purge_quarantine: bool = typer.Option(False, "--purge-quarantine", help="Also delete quarantined files."),
     wait: float = WaitOption,
 ) -> None:
-    """Remove blobs no row references, leftover temp files and segments compaction replaced."""
+    """Remove blobs no row references, kept photos no verdict names, leftover temp files and
+    segments compaction replaced."""
     from sweep3d.cache import Store, collect_garbage
 
     check_wait(wait)
     root = _store_root(spec)
     with Store(root).lock(wait):
         out = collect_garbage(root, older_than, purge_quarantine)
-    console.print(f"removed {out.blobs} unreferenced blobs, {out.temp_files} temp or compacted-away files"
+    console.print(f"removed {out.blobs} unreferenced blobs, "
+                  + (f"{out.photos} kept photos no verdict names, " if out.photos else "")
+                  + f"{out.temp_files} temp or compacted-away files"
                   + (f", {out.quarantined} quarantined files" if purge_quarantine else "")
                   + f" ({_bytes(out.bytes)})")
 

@@ -31,7 +31,7 @@ from sweep3d.cache import Store, atomic_write, utc_now
 from sweep3d.core import UserError
 from sweep3d.realism.photos import PREPROCESS, Photo, PhotoProblems, framed, match_photos, upright
 from sweep3d.realism.pick import DESIGN, RENDERS, default_kit, read_kit
-from sweep3d.results import VERDICT_SCHEMA, VERDICTS, photo_path
+from sweep3d.results import VERDICT_SCHEMA, VERDICTS, photo_path, verdict_key
 from sweep3d.spec import LoadedSpec
 
 PHOTO = "photo"
@@ -184,7 +184,8 @@ def _truth_rows(spec: LoadedSpec, store: Store, jobs: Sequence[int], model: str)
 
 def _row(source: str, experiment: str, job: int, model: str, verdict: dict[str, Any], **extra: Any) -> dict[str, Any]:
     row = {name: None for name in VERDICT_SCHEMA.names}
-    row.update(source=source, experiment=experiment, job=job, model=model, valid=bool(verdict.get("valid")),
+    row.update(verdict_key=verdict_key(source, experiment, job, model), source=source, experiment=experiment,
+               job=job, model=model, valid=bool(verdict.get("valid")),
                correct=verdict.get("correct"), top1_label=verdict.get("top1_label"),
                label_prob=verdict.get("label_prob"), created_at=utc_now(), **extra)
     return row
@@ -259,7 +260,7 @@ def score_engine(spec: LoadedSpec, engine: str, kit: Path | None = None, console
     Raises:
         UserError: no kit; the spec loader refusing the engine or a control it cannot express.
     """
-    from sweep3d.engine import builtin_catalogue
+    from sweep3d.engine import builtin_catalogue, write_unstored_images
     from sweep3d.results import results_connection, stored_parameters
     from sweep3d.spec import read_spec
 
@@ -289,6 +290,10 @@ def score_engine(spec: LoadedSpec, engine: str, kit: Path | None = None, console
                                  preprocess=f"rendered by {engine}; the model's own preprocessing, as for the render"))
     rows.sort(key=lambda r: (r["model"], r["job"]))
     with store.lock(wait):
+        # the other engine's images the report's pairs show: a run keeps its post-processed images
+        # in memory only ([postprocess] store = "none", the default), and the report makes again
+        # only its own experiment's, so they are written here, as `pick` writes the renders'
+        write_unstored_images(other, store, [r["image_key"] for r in rows])
         store.append(VERDICTS, rows, VERDICT_SCHEMA)
     return _scored(source, spec, store, rows)
 

@@ -17,7 +17,7 @@ __all__ = [
     "no_results", "numeric_scales", "photo_path", "plan_protocol", "region_min_count",
     "register_failure_boundaries", "register_views", "results_connection", "results_roles",
     "results_store", "select_only", "stored_parameters", "stored_summary", "summarise", "tally",
-    "weakest_regions", "wilson_interval"
+    "verdict_key", "weakest_regions", "wilson_interval"
 ]
 
 # Lazy exports (PEP 562): a name's module is imported when first used, so importing this package
@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING as _TYPE_CHECKING  # noqa: E402
 from sweep3d.core import exports as _exports  # noqa: E402
 
 if _TYPE_CHECKING:
-    from sweep3d.results.agreement import VERDICT_SCHEMA, VERDICTS, photo_path
+    from sweep3d.results.agreement import VERDICT_SCHEMA, VERDICTS, photo_path, verdict_key
     from sweep3d.results.boundaries import (
         VIEW,
         Scale,
@@ -112,6 +112,7 @@ __getattr__, __dir__ = _exports(__name__, {
     "no_results": ("sweep3d.results.views", "no_results"),
     "numeric_scales": ("sweep3d.results.boundaries", "numeric_scales"),
     "photo_path": ("sweep3d.results.agreement", "photo_path"),
+    "verdict_key": ("sweep3d.results.agreement", "verdict_key"),
     "plan_protocol": ("sweep3d.results.results", "plan_protocol"),
     "region_min_count": ("sweep3d.results.summary", "region_min_count"),
     "register_failure_boundaries": ("sweep3d.results.boundaries", "register_failure_boundaries"),

@@ -4,7 +4,8 @@ A *source* is another way of seeing a job's configuration: ``photo`` (photograph
 recreated in a real room, ``sweep3d realism score``) or ``engine:<name>`` (the same
 configuration rendered by another renderer). Its verdicts are rows of the store's ``verdicts``
 table (``tables/verdicts/<segment>.parquet``, :data:`VERDICT_SCHEMA`): one per (source,
-experiment, job, model), the latest written winning, so scoring again replaces a verdict.
+experiment, job, model) (its :func:`verdict_key`), the latest written winning, so scoring again
+replaces a verdict.
 
 Views (made by :func:`register_agreement_views` when the store holds verdicts of the experiment):
 
@@ -25,6 +26,8 @@ Views (made by :func:`register_agreement_views` when the store holds verdicts of
 
 from __future__ import annotations
 
+import hashlib
+import json
 from pathlib import Path
 from typing import Sequence
 
@@ -32,6 +35,7 @@ import duckdb
 import pyarrow as pa
 
 from sweep3d.cache import Store
+from sweep3d.cache import photo_path as kept_photo_path
 from sweep3d.results.quoting import literal
 
 #: The store's table of other sources' verdicts (``tables/verdicts``).
@@ -39,6 +43,7 @@ VERDICTS = "verdicts"
 AGREEMENT_VIEWS = ("source_verdicts", "agreement")
 #: One source's verdict on one job for one model.
 VERDICT_SCHEMA = pa.schema([
+    ("verdict_key", pa.string()),   # names what the verdict is of: :func:`verdict_key`
     ("source", pa.string()),        # "photo", "engine:mitsuba"
     ("experiment", pa.string()),
     ("job", pa.int64()),
@@ -55,14 +60,20 @@ VERDICT_SCHEMA = pa.schema([
 ])
 
 
-#: Where ``realism score`` keeps each photograph as the model saw it (framed as its render, as a
-#: small JPEG named by the SHA-256 of the photograph's file), for the report's render | photo pairs.
-PHOTOS_FOLDER = ("realism", "photos")
+
+
+def verdict_key(source: str, experiment: str, job: int, model: str) -> str:
+    """The ``verdicts`` table's key: what the verdict is of (a source's view of one job for one
+    model), so the store's housekeeping (``cache compact``, ``stats``) keeps one per key, the
+    newest (the table is one of the store's ``NEWEST_WINS``): scoring again replaces a verdict."""
+    return hashlib.sha256(json.dumps([source, experiment, int(job), model]).encode()).hexdigest()
 
 
 def photo_path(store: Store, sha256: str) -> Path:
-    """The kept copy of the photograph whose file has the SHA-256 ``sha256``."""
-    return store.root.joinpath(*PHOTOS_FOLDER, f"{sha256}.jpg")
+    """The kept copy of the photograph whose file has the SHA-256 ``sha256``: as the model saw it
+    (framed as its render, a small JPEG), for the report's render | photo pairs; under the
+    store's ``realism/photos/``, which ``cache verify``, ``gc`` and ``stats`` know."""
+    return kept_photo_path(store.root, sha256)
 
 
 def verdict_files(store: Store) -> list[Path]:

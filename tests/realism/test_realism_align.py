@@ -12,8 +12,6 @@ from __future__ import annotations
 import base64
 import io
 import re
-from collections.abc import Iterator
-from contextlib import contextmanager
 from html import unescape
 from pathlib import Path
 from typing import Any
@@ -24,7 +22,8 @@ from PIL import Image
 
 from sweep3d.realism.align import PAGE, AlignShot, write_align_page
 from sweep3d.realism.edges import EDGE_RGB, edge_image
-from tests.helpers import CHROMIUM, CHROMIUM_ARGS, REPO
+from tests.helpers import REPO
+from tests.realism_run import fake_camera, open_align, write_y4m
 
 ARTIFACTS = REPO / "test-artifacts"
 CAMERA_SIZE = (320, 240)  # the fake camera's frame, width × height (4:3, as a phone's)
@@ -44,20 +43,6 @@ def render_like(width: int, height: int) -> np.ndarray:
     rgb = np.full((height, width, 3), 40, dtype=np.uint8)
     rgb[height // 4:3 * height // 4, width // 4:3 * width // 4] = FILL
     return rgb
-
-
-def write_y4m(path: Path, rgb: np.ndarray, frames: int = 3) -> Path:
-    """A YUV4MPEG2 file of ``frames`` copies of ``rgb``: a text header, then per frame ``FRAME`` and
-    the planes Y, U, V (4:2:0: chroma at half width and height), BT.601 studio range."""
-    h, w, _ = rgb.shape
-    r, g, b = (rgb[..., i].astype(np.float64) for i in range(3))
-    y = 16 + (65.481 * r + 128.553 * g + 24.966 * b) / 255
-    u = 128 + (-37.797 * r - 74.203 * g + 112.0 * b) / 255
-    v = 128 + (112.0 * r - 93.786 * g - 18.214 * b) / 255
-    half = [c.reshape(h // 2, 2, w // 2, 2).mean(axis=(1, 3)) for c in (u, v)]
-    planes = b"".join(np.clip(np.round(p), 0, 255).astype(np.uint8).tobytes() for p in (y, *half))
-    path.write_bytes(f"YUV4MPEG2 W{w} H{h} F30:1 Ip A1:1 C420jpeg\n".encode() + b"FRAME\n".join([b""] + [planes] * frames))
-    return path
 
 
 def fit(box_w: float, box_h: float, w: float, h: float) -> tuple[float, float, float, float]:
@@ -191,36 +176,8 @@ def camera_browser(chromium, tmp_path_factory):
     w, h = CAMERA_SIZE
     frame = np.zeros((h, w, 3), dtype=np.uint8)
     frame[:, :w // 2], frame[:, w // 2:] = CAMERA_LEFT, CAMERA_RIGHT
-    video = write_y4m(tmp_path_factory.mktemp("camera") / "camera.y4m", frame)
-    browser = chromium.browser_type.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS + [
-        "--use-fake-device-for-media-stream", "--use-fake-ui-for-media-stream",
-        f"--use-file-for-fake-video-capture={video}"])
-    try:
+    with fake_camera(chromium, write_y4m(tmp_path_factory.mktemp("camera") / "camera.y4m", frame)) as browser:
         yield browser
-    finally:
-        browser.close()
-
-
-@contextmanager
-def open_align(browser: Any, page_path: Path, width: int = 400, height: int = 700,
-               init_script: str | None = None) -> Iterator[tuple[Any, dict[str, list]]]:
-    """``align.html`` in a fresh context of ``browser`` (a phone-sized viewport by default), once
-    its camera (or the fallback) is set up; its errors, requests and dialogs collected."""
-    context = browser.new_context(viewport={"width": width, "height": height}, accept_downloads=True)
-    try:
-        page = context.new_page()
-        events: dict[str, list] = {"errors": [], "console": [], "requests": [], "dialogs": []}
-        page.on("pageerror", lambda exc: events["errors"].append(str(exc)))
-        page.on("console", lambda msg: events["console"].append(msg.text) if msg.type == "error" else None)
-        page.on("request", lambda req: events["requests"].append(req.url))
-        page.on("dialog", lambda dialog: (events["dialogs"].append(dialog.message), dialog.dismiss()))
-        if init_script:
-            page.add_init_script(init_script)
-        page.goto(page_path.as_uri())
-        page.wait_for_function("() => document.documentElement.dataset.ready === '1'", timeout=30_000)
-        yield page, events
-    finally:
-        context.close()
 
 
 def assert_clean(page_path: Path, events: dict[str, list]) -> None:
