@@ -48,8 +48,19 @@ def registrar(app: typer.Typer) -> Callable[[Callable], Callable]:
 def _exits_as_errors(func: Callable, *args, **kwargs):
     """``func``'s result, a ``SystemExit`` escaping it raised as a PluginError instead. sweep3d's
     commands end with ``typer.Exit``, never ``SystemExit``, so one that escapes came from plug-in
-    code that no boundary caught; passing it on would exit with its code, 0 as if all went well."""
+    code that no boundary caught; passing it on would exit with its code, 0 as if all went well.
+    The one exception is rich's own exit when the reader of a pipe went away (``query … | head``)."""
     try:
         return func(*args, **kwargs)
     except SystemExit as exc:
+        if _raised_in(exc, "on_broken_pipe"):
+            raise
         raise plugin_failure("a plug-in", exc) from None
+
+
+def _raised_in(exc: BaseException, function: str) -> bool:
+    """Whether ``exc`` was raised by a function named ``function`` (its innermost frame)."""
+    tb = exc.__traceback__
+    while tb is not None and tb.tb_next is not None:
+        tb = tb.tb_next
+    return tb is not None and tb.tb_frame.f_code.co_name == function

@@ -251,3 +251,15 @@ def test_an_edit_that_leaves_no_camera_is_named() -> None:
     assert camera_problem(SimpleNamespace(camera=camera, objects={"Camera": camera})) is None
     assert camera_problem(SimpleNamespace(camera=None, objects={})) == "removed the scene's camera"
     assert camera_problem(SimpleNamespace(camera=camera, objects={})) == "unlinked the scene's camera from the scene"
+
+
+def test_a_reader_that_closes_the_pipe_early_is_not_blamed_on_a_plug_in(tmp_path: Path) -> None:
+    """``sweep3d plan … | head -1``: rich exits when the pipe closes; that is no plug-in's exit."""
+    import subprocess
+
+    spec = write_spec(tmp_path, TINY_SPEC)
+    child = subprocess.Popen([sys.executable, "-m", "sweep3d", "plan", str(spec)], stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE)
+    child.stdout.close()  # the reader is gone before anything is printed
+    _, err = child.communicate(timeout=120)
+    assert b"plug-in" not in err and b"Traceback" not in err, err.decode()
