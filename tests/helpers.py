@@ -162,6 +162,20 @@ type = "grid"
 """)
 
 
+#: Two models in place of TINY_SPEC's ``[model]``: the same network by two backends.
+TWO_MODELS = """\
+[[models]]
+name = "efficientnet-lite0"
+batch_size = 8
+
+[[models]]
+name = "efficientnet-lite0"
+id = "lite0-onnx"
+backend = "onnx"
+batch_size = 8
+"""
+
+
 #: Post-processed images written to the store (the default makes them in memory): the tests of
 #: damaged, missing and verified blobs have image blobs to damage (tests/cache/test_image_store.py
 #: checks that both ways give the same results).
@@ -366,6 +380,17 @@ class Slab(RenderedControl):
 ARTIFACTS = REPO / "test-artifacts"
 
 
+def watch_page(page: Any) -> dict[str, list]:
+    """What ``page`` does from now on, for :func:`assert_clean`: its script errors, console
+    errors, requests, and dialogs (dismissed)."""
+    events: dict[str, list] = {"errors": [], "console": [], "requests": [], "dialogs": []}
+    page.on("pageerror", lambda exc: events["errors"].append(str(exc)))
+    page.on("console", lambda msg: events["console"].append(msg.text) if msg.type == "error" else None)
+    page.on("request", lambda req: events["requests"].append(req.url))
+    page.on("dialog", lambda dialog: (events["dialogs"].append(dialog.message), dialog.dismiss()))
+    return events
+
+
 @contextmanager
 def open_page(chromium: Any, path: Path, wait_all: bool = True,
               width: int = 1280) -> Iterator[tuple[Any, dict[str, list]]]:
@@ -375,11 +400,7 @@ def open_page(chromium: Any, path: Path, wait_all: bool = True,
     context = chromium.new_context(viewport={"width": width, "height": 900})
     try:
         page = context.new_page()
-        events: dict[str, list] = {"errors": [], "console": [], "requests": [], "dialogs": []}
-        page.on("pageerror", lambda exc: events["errors"].append(str(exc)))
-        page.on("console", lambda msg: events["console"].append(msg.text) if msg.type == "error" else None)
-        page.on("request", lambda req: events["requests"].append(req.url))
-        page.on("dialog", lambda dialog: (events["dialogs"].append(dialog.message), dialog.dismiss()))
+        events = watch_page(page)
         page.goto(path.as_uri())
         page.wait_for_function("() => document.documentElement.dataset.ready === '1'", timeout=60_000)
         if wait_all:

@@ -24,7 +24,7 @@ from PIL import Image
 
 from sweep3d.realism.align import PAGE, AlignShot, write_align_page
 from sweep3d.realism.edges import EDGE_RGB, edge_image
-from tests.helpers import CHROMIUM, CHROMIUM_ARGS, REPO
+from tests.helpers import CHROMIUM, CHROMIUM_ARGS, REPO, watch_page
 
 ARTIFACTS = REPO / "test-artifacts"
 CAMERA_SIZE = (320, 240)  # the fake camera's frame, width × height (4:3, as a phone's)
@@ -209,11 +209,7 @@ def open_align(browser: Any, page_path: Path, width: int = 400, height: int = 70
     context = browser.new_context(viewport={"width": width, "height": height}, accept_downloads=True)
     try:
         page = context.new_page()
-        events: dict[str, list] = {"errors": [], "console": [], "requests": [], "dialogs": []}
-        page.on("pageerror", lambda exc: events["errors"].append(str(exc)))
-        page.on("console", lambda msg: events["console"].append(msg.text) if msg.type == "error" else None)
-        page.on("request", lambda req: events["requests"].append(req.url))
-        page.on("dialog", lambda dialog: (events["dialogs"].append(dialog.message), dialog.dismiss()))
+        events = watch_page(page)
         if init_script:
             page.add_init_script(init_script)
         page.goto(page_path.as_uri())

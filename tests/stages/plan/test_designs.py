@@ -112,31 +112,6 @@ def test_crossing_every_draw_is_the_product_with_the_list(tmp_path: Path) -> Non
     assert count_jobs(plan.spec) == len(every_job(plan))
 
 
-@pytest.mark.parametrize("cross, problem", [
-    ('["blur.radius"]', "names no control parameter"),
-    ('["orientation.yaw"]', "a range, which the policy draws"),
-    ('["camera.zoom"]', "a range"),
-    ('["nothing"]', "names no control parameter"),
-    ('{ "blur.sigma" = 0 }', "a number k >= 1"),
-    ('{ environment = 3 }', "give true"),
-])
-def test_a_bad_cross_is_one_line_naming_the_key(tmp_path: Path, cross: str, problem: str) -> None:
-    body = paired_spec(seed=3, policy=f'type = "random"\nsamples = 4\ncross = {cross}')
-    with pytest.raises(SpecError) as caught:
-        load_spec(write_spec(tmp_path, body))
-    assert "policy" in caught.value.key and problem in str(caught.value) and "\n" not in str(caught.value)
-
-
-def test_cross_refuses_a_learning_policy_and_disagreeing_paired(tmp_path: Path) -> None:
-    for i, policy in enumerate(['type = "adaptive"\ncross = ["blur.sigma"]',
-                                'type = "random"\npaired = false\ncross = ["environment"]']):
-        folder = tmp_path / str(i)
-        folder.mkdir()
-        with pytest.raises(SpecError) as caught:
-            load_spec(write_spec(folder, paired_spec(seed=3, policy=policy)))
-        assert caught.value.key.startswith("policy") and "\n" not in str(caught.value)
-
-
 # -- a paired protocol in one spec: its statistics ----------------------------------------------------
 
 

@@ -144,21 +144,6 @@ def test_stratified_random_policy_balances_every_list(n: int, sizes: list[int], 
 # -- bad input: one line, exit 2 ----------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("policy, key, says", [
-    ('type = "random"\nsamples = 4\npaired = "sometimes"', "policy.paired", 'true, false or "all"'),
-    ('type = "random"\nsamples = 4\npaired = 1', "policy.paired", 'true, false or "all"'),
-    ('type = "adaptive"\npaired = true', "policy.paired", "learns per scene"),
-    ('type = "random"\nstratify = "yes"', "policy.stratify", "boolean"),
-    ('type = "sobol"\nstratify = true', "policy.stratify", "unknown key"),
-])
-def test_bad_pairing_is_one_line(tmp_path: Path, policy: str, key: str, says: str) -> None:
-    spec = write_spec(tmp_path, TINY_SPEC.replace('[policy]\ntype = "grid"', f"[policy]\n{policy}"))
-    result = CliRunner().invoke(app, ["plan", str(spec)])
-    assert result.exit_code == 2, result.output
-    lines = result.output.strip().splitlines()
-    assert len(lines) == 1 and key in lines[0] and says in lines[0], result.output
-
-
 # -- the paired views -----------------------------------------------------------------------------------
 
 
