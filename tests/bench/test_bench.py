@@ -1,8 +1,8 @@
 """`sweep3d bench`: scene-load time reported apart from steady-state render time, and `--budget`.
 
 Most tests here need neither Blender nor torch (the parsing of Blender's progress, the split of
-times, the job count a budget buys, the command line's refusals); the ones marked ``blender``
-start real render workers at 32×32 pixels and a few samples.
+times, the job count a budget buys); the ones marked ``blender`` start real render workers at
+32×32 pixels and a few samples. The command line's refusals are in tests/cli/test_bad_input.py.
 """
 
 from __future__ import annotations

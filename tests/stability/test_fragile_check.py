@@ -1,5 +1,5 @@
 """``sweep3d stability`` end to end: on a tiny real run (32 px, so the model resizes and every
-change applies), cached under its keys, and its bad inputs as one line."""
+change applies), cached under its keys (its bad inputs are in tests/cli/test_bad_input.py)."""
 
 from __future__ import annotations
 
