@@ -85,13 +85,15 @@ def toml_table(header: str, values: dict) -> str:
 
 
 def spec_toml(name: str, *, seed: int | None = None, store: str | None = "store", render: dict | None = None,
-              objects=("box",), environments=("white",), body: str = "") -> str:
-    """A spec's text: ``[experiment]``, ``[render]`` (default :data:`TINY_RENDER`), one
-    ``[[objects]]`` per name or (name, mesh, labels), one ``[[environments]]`` per name or (name,
-    table), then ``body`` (controls, policy, model, ... as TOML text). Tests write the tables they
-    are about and take the rest from here, rather than pasting a whole spec."""
+              model: dict | None = None, objects=("box",), environments=("white",), body: str = "") -> str:
+    """A spec's text: ``[experiment]``, ``[render]`` (default :data:`TINY_RENDER`), ``[model]``
+    when given, one ``[[objects]]`` per name or (name, mesh, labels), one ``[[environments]]`` per
+    name or (name, table), then ``body`` (controls, policy, evaluator, ... as TOML text). Tests
+    write the tables they are about and take the rest from here, rather than pasting a whole spec."""
     experiment = {"name": name, **({"seed": seed} if seed is not None else {}), **({"store": store} if store else {})}
     text = toml_table("[experiment]", experiment) + toml_table("[render]", TINY_RENDER if render is None else render)
+    if model is not None:
+        text += toml_table("[model]", model)
     for obj in objects:
         obj_name, mesh, labels = (obj, *SPEC_OBJECTS[obj]) if isinstance(obj, str) else obj
         text += toml_table("[[objects]]", {"name": obj_name, "mesh": mesh, "labels": labels})
@@ -146,33 +148,7 @@ def write_spec(folder: Path, body: str, *, cube: bool = True, name: str = "spec.
     return path
 
 
-TINY_SPEC = """\
-[experiment]
-name = "tiny"
-seed = 7
-store = "store"
-
-[render]
-resolution = 32
-samples = 1
-denoise = false
-
-[model]
-batch_size = 8
-
-[[objects]]
-name = "box"
-mesh = "cube.obj"
-labels = ["carton"]
-
-[[environments]]
-name = "white"
-color = [1.0, 1.0, 1.0]
-
-[[environments]]
-name = "studio"
-hdri = "builtin:studio"
-
+TINY_SPEC = spec_toml("tiny", seed=7, model={"batch_size": 8}, environments=("white", "studio"), body="""\
 [[controls]]
 type = "orientation"
 yaw = [0, 45]
@@ -183,6 +159,20 @@ sigma = [0.0, 1.5]
 
 [policy]
 type = "grid"
+""")
+
+
+#: Two models in place of TINY_SPEC's ``[model]``: the same network by two backends.
+TWO_MODELS = """\
+[[models]]
+name = "efficientnet-lite0"
+batch_size = 8
+
+[[models]]
+name = "efficientnet-lite0"
+id = "lite0-onnx"
+backend = "onnx"
+batch_size = 8
 """
 
 
@@ -241,38 +231,14 @@ def rows_of(con: duckdb.DuckDBPyConnection, sql: str) -> list[dict[str, Any]]:
 
 
 # from test_paired.py
-#: Two objects × two environments; the camera applies to "grey" only, so its scenes have an extra control.
-PAIRED_SPEC = """\
-[experiment]
-name = "freeze"
-seed = {seed}
-store = "store"
-
-[render]
-resolution = 32
-samples = 1
-denoise = false
-
-[[objects]]
-name = "box"
-mesh = "cube.obj"
-labels = ["carton"]
-
-[[objects]]
-name = "crate"
-mesh = "cube.obj"
-labels = ["crate"]
-
-[[environments]]
-name = "white"
-color = [1.0, 1.0, 1.0]
-key_light = false  # lit as before plain backgrounds had a key light: the keys of the frozen plans
-
-[[environments]]
-name = "grey"
-color = [0.5, 0.5, 0.5]
-key_light = false
-
+def paired_spec(seed: int, policy: str) -> str:
+    """Two objects × two environments; the camera applies to "grey" only, so its scenes have an
+    extra control. The environments are lit without a key light (as plain backgrounds were before
+    they had one): the keys of the frozen plans."""
+    unlit = {"key_light": False}
+    return spec_toml("freeze", seed=seed, objects=("box", "crate"),
+                     environments=(("white", SPEC_ENVIRONMENTS["white"] | unlit), ("grey", SPEC_ENVIRONMENTS["grey"] | unlit)),
+                     body=f"""\
 [[controls]]
 type = "orientation"
 yaw = {{ range = [-180, 180] }}
@@ -289,7 +255,7 @@ sigma = [0, 1, 2]
 
 [policy]
 {policy}
-"""
+""")
 
 
 def every_job(p) -> list:
@@ -414,6 +380,17 @@ class Slab(RenderedControl):
 ARTIFACTS = REPO / "test-artifacts"
 
 
+def watch_page(page: Any) -> dict[str, list]:
+    """What ``page`` does from now on, for :func:`assert_clean`: its script errors, console
+    errors, requests, and dialogs (dismissed)."""
+    events: dict[str, list] = {"errors": [], "console": [], "requests": [], "dialogs": []}
+    page.on("pageerror", lambda exc: events["errors"].append(str(exc)))
+    page.on("console", lambda msg: events["console"].append(msg.text) if msg.type == "error" else None)
+    page.on("request", lambda req: events["requests"].append(req.url))
+    page.on("dialog", lambda dialog: (events["dialogs"].append(dialog.message), dialog.dismiss()))
+    return events
+
+
 @contextmanager
 def open_page(chromium: Any, path: Path, wait_all: bool = True,
               width: int = 1280) -> Iterator[tuple[Any, dict[str, list]]]:
@@ -423,11 +400,7 @@ def open_page(chromium: Any, path: Path, wait_all: bool = True,
     context = chromium.new_context(viewport={"width": width, "height": 900})
     try:
         page = context.new_page()
-        events: dict[str, list] = {"errors": [], "console": [], "requests": [], "dialogs": []}
-        page.on("pageerror", lambda exc: events["errors"].append(str(exc)))
-        page.on("console", lambda msg: events["console"].append(msg.text) if msg.type == "error" else None)
-        page.on("request", lambda req: events["requests"].append(req.url))
-        page.on("dialog", lambda dialog: (events["dialogs"].append(dialog.message), dialog.dismiss()))
+        events = watch_page(page)
         page.goto(path.as_uri())
         page.wait_for_function("() => document.documentElement.dataset.ready === '1'", timeout=60_000)
         if wait_all:

@@ -28,50 +28,20 @@ from sweep3d.core.pixels import encode_png8
 from sweep3d.results import connect
 from sweep3d.results.agreement import VERDICT_SCHEMA, verdict_key
 from sweep3d.spec.columns import MODELS_METADATA, PARAMETERS_METADATA
-from tests.helpers import CHROMIUM, CHROMIUM_ARGS, write_spec
+from tests.helpers import CHROMIUM, CHROMIUM_ARGS, spec_toml, watch_page, write_spec
 
 T0 = datetime(2024, 1, 1, tzinfo=timezone.utc)
 SIDE = 32
-SPEC = """\
-[experiment]
-name = "realism"
-seed = 5
-store = "store"
-
-[render]
-resolution = 32
-samples = 1
-denoise = false
-
-[model]
-name = "realism_model:redblue"
-batch_size = 4
-
-[[objects]]
-name = "apple"
-mesh = "cube.obj"
-labels = ["red"]
-
-[[objects]]
-name = "plum"
-mesh = "cube.obj"
-labels = ["blue"]
-
-[[environments]]
-name = "white"
-color = [1.0, 1.0, 1.0]
-
-[[environments]]
-name = "grey"
-color = [0.5, 0.5, 0.5]
-
+SPEC = spec_toml("realism", seed=5, model={"name": "realism_model:redblue", "batch_size": 4},
+                 objects=(("apple", "cube.obj", ["red"]), ("plum", "cube.obj", ["blue"])),
+                 environments=("white", "grey"), body="""\
 [[controls]]
 type = "orientation"
 yaw = [0, 90, 180]
 
 [policy]
 type = "grid"
-"""
+""")
 
 #: Red if the image's mean red exceeds its mean blue, else blue: logits ±20·(r − b) on pixels in [0, 1].
 MODEL = '''
@@ -265,11 +235,7 @@ def open_align(browser: Any, page_path: Path, width: int = 400, height: int = 70
     context = browser.new_context(viewport={"width": width, "height": height}, accept_downloads=True)
     try:
         page = context.new_page()
-        events: dict[str, list] = {"errors": [], "console": [], "requests": [], "dialogs": []}
-        page.on("pageerror", lambda exc: events["errors"].append(str(exc)))
-        page.on("console", lambda msg: events["console"].append(msg.text) if msg.type == "error" else None)
-        page.on("request", lambda req: events["requests"].append(req.url))
-        page.on("dialog", lambda dialog: (events["dialogs"].append(dialog.message), dialog.dismiss()))
+        events = watch_page(page)
         if init_script:
             page.add_init_script(init_script)
         page.goto(page_path.as_uri())

@@ -14,7 +14,7 @@ from typer.testing import CliRunner
 
 from sweep3d.assets.mesh_names import file_names
 from sweep3d.cli import app
-from tests.helpers import load_spec, plan_for, write_spec
+from tests.helpers import load_spec, plan_for, spec_toml, write_spec
 
 DIGEST = "0" * 64  # a stand-in model digest: the plan needs no model
 
@@ -64,34 +64,23 @@ def meshes(tmp_path: Path) -> Path:
     return tmp_path
 
 
-SPEC = """\
-[experiment]
-name = "looks"
-store = "store"
-
-[render]
-resolution = 32
-samples = 1
-denoise = false
-
+def looks_spec(extra: str = "") -> str:
+    """The frame (its parts, materials and angles as ``extra`` says) on white, at two yaws."""
+    return spec_toml("looks", objects=(), body=f"""\
 [[objects]]
 name = "frame"
 mesh = "frame.obj"
 labels = ["carton"]
 {extra}
 
-[[environments]]
-name = "white"
-color = [1.0, 1.0, 1.0]
-
 [[controls]]
 type = "orientation"
 yaw = [0, 90]
-"""
+""")
 
 
 def spec(folder: Path, extra: str = "") -> Path:
-    return write_spec(folder, SPEC.format(extra=extra), cube=False)
+    return write_spec(folder, looks_spec(extra), cube=False)
 
 
 def render_keys(path: Path) -> list[str]:
@@ -367,7 +356,7 @@ def test_a_worker_process_renders_the_look_and_a_missing_part_stops_the_run_in_o
     assert not replies["tri"].ok and replies["tri"].kind == "user"
 
     # the render stage names the spec's key: the object's parts
-    loaded = load_spec(write_spec(meshes, SPEC.format(extra='parts = ["Tri"]').replace("frame.obj", "tri.ply"),
+    loaded = load_spec(write_spec(meshes, looks_spec('parts = ["Tri"]').replace("frame.obj", "tri.ply"),
                                   cube=False))  # loads: only Blender knows a PLY's object names
     plan = plan_for(loaded, DIGEST)
     error = _user_error(plan, plan.jobs[0], replies["tri"].error)

@@ -1,8 +1,8 @@
 """`sweep3d bench`: scene-load time reported apart from steady-state render time, and `--budget`.
 
 Most tests here need neither Blender nor torch (the parsing of Blender's progress, the split of
-times, the job count a budget buys, the command line's refusals); the ones marked ``blender``
-start real render workers at 32×32 pixels and a few samples.
+times, the job count a budget buys); the ones marked ``blender`` start real render workers at
+32×32 pixels and a few samples. The command line's refusals are in tests/cli/test_bad_input.py.
 """
 
 from __future__ import annotations
@@ -82,28 +82,6 @@ def test_budget_chooses_from_the_specs_plan_and_its_settings(tmp_path: Path) -> 
     assert [c.jobs for c in said] == picks
     assert all(line.count("\n") == 0 and line.startswith(f"--budget {m} min: {n} job")
                for line, m, n in zip((c.line() for c in said), (4, 8, 60), picks))
-
-
-@pytest.mark.parametrize("args, message", [
-    (["--budget", "0"], "--budget 0: give the minutes the bench may take, a finite number > 0"),
-    (["--budget", "-5"], "--budget -5: give the minutes"),
-    (["--budget", "nan"], "--budget nan: give the minutes"),
-    (["--budget", "10", "--jobs", "20"], "--budget 10 and --jobs 20 together: give one"),
-])
-def test_a_bad_budget_is_one_line_and_exit_code_2(tmp_path: Path, args: list[str], message: str) -> None:
-    spec = write_spec(tmp_path, TINY_SPEC)
-    result = runner.invoke(app, ["bench", str(spec), *args])
-    assert result.exit_code == 2, result.output
-    assert message in result.output and len(result.output.strip().splitlines()) == 1, result.output
-
-
-def test_a_budget_too_short_for_one_job_is_one_line_and_exit_code_2(tmp_path: Path) -> None:
-    spec = write_spec(tmp_path, TINY_SPEC)
-    result = runner.invoke(app, ["bench", str(spec), "--budget", "0.05"])
-    assert result.exit_code == 2, result.output
-    lines = result.output.strip().splitlines()
-    assert len(lines) == 1 and "--budget 0.05 min is too short" in lines[0], result.output
-    assert not (tmp_path / "store" / "blobs").exists()  # refused before anything rendered
 
 
 @pytest.mark.blender

@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from sweep3d.cache.hashing import canonical, digest, file_digest, files_digest
 from sweep3d.core.control import wrap_periodic
 from sweep3d.stages.render.controls import Camera, Orientation
-from tests.helpers import examples, load_spec, plan_for, write_spec
+from tests.helpers import examples, load_spec, plan_for, spec_toml, write_spec
 
 FAST = settings(max_examples=examples(150), deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
@@ -224,42 +224,12 @@ def test_only_periodic_params_are_wrapped():
 
 # -- plan-level keys -------------------------------------------------------------------------
 
-PLAN_SPEC = """\
-[experiment]
-name = "keys"
-seed = {seed}
-
-[render]
-resolution = 32
-samples = {samples}
-workers = {workers}
-threads = {threads}
-
-[[objects]]
-name = "box"
-mesh = "cube.obj"
-labels = ["carton"]
-
-[[environments]]
-name = "white"
-color = [1.0, 1.0, 1.0]
-
-[[environments]]
-name = "grey"
-color = [0.5, 0.5, 0.5]
-
-{controls}
-
-[policy]
-{policy}
-"""
-
-
 def plan_of(folder: Path, controls: str = "", *, seed: int = 1, samples: int = 1, workers: int = 1,
             threads: int = 0, policy: str = 'type = "grid"', model_digest: str = "model-x", objects: str = ""):
     """Write a spec into a fresh subfolder of ``folder`` and plan it (no rendering, no model load)."""
-    body = PLAN_SPEC.format(seed=seed, samples=samples, workers=workers, threads=threads,
-                            controls=textwrap.dedent(controls), policy=policy) + textwrap.dedent(objects)
+    render = {"resolution": 32, "samples": samples, "workers": workers, "threads": threads}
+    body = spec_toml("keys", seed=seed, store=None, render=render, environments=("white", "grey"),
+                     body=f"{textwrap.dedent(controls)}\n\n[policy]\n{policy}\n") + textwrap.dedent(objects)
     sub = folder / f"spec{len(list(folder.iterdir()))}"
     sub.mkdir()
     return plan_for(load_spec(write_spec(sub, body)), model_digest)

@@ -297,23 +297,6 @@ def test_query_output_files_hold_every_row(tiny_run, tmp_path, suffix):
         assert pq.read_table(out).num_rows == expected
 
 
-@pytest.mark.parametrize(
-    "args, text",
-    [
-        (["select nope from results"], "query failed"),
-        (["select 1", "--output", "x.xlsx"], "unsupported format"),
-    ],
-)
-def test_query_mistakes_are_one_line_errors(tiny_run, tmp_path, args, text):
-    if "--output" in args:
-        args = [*args[:-1], str(tmp_path / args[-1])]
-    result = CliRunner().invoke(app, ["query", str(tiny_run / "spec.toml"), *args])
-    assert result.exit_code == 2
-    assert "Traceback" not in result.output
-    assert text in result.output
-    assert len([line for line in result.output.splitlines() if line.strip()]) == 1
-
-
 def test_a_run_merges_a_table_grown_past_the_segment_limit(tmp_path: Path) -> None:
     from sweep3d.engine.pipeline import compact_crowded_tables
 
@@ -425,35 +408,6 @@ def test_a_failed_export_leaves_no_file(synthetic: Path, tmp_path: Path) -> None
     result = CliRunner().invoke(app, ["query", str(synthetic), "SELECT nope FROM results", "--output", str(out)])
     assert result.exit_code == 2 and "query failed" in one_line(result.output)
     assert list(tmp_path.iterdir()) == []
-
-
-# -- no results yet ----------------------------------------------------------------------------
-
-
-def first_seconds_of_a_run(folder: Path) -> Path:
-    """A spec whose store holds what a first run writes in its first seconds: renders, no results."""
-    from tests.helpers import TINY_SPEC, write_spec
-
-    spec = write_spec(folder, TINY_SPEC)
-    store = Store(folder / "store")
-    atomic_write(store.blob_path("ab" * 20), b"png")
-    store.append("renders", [render_row("ab" * 20)])
-    return spec
-
-
-@pytest.mark.parametrize("command", [["report"], ["query", "SELECT count(*) FROM results"],
-                                     ["query", "SELECT * FROM failure_modes()"]])
-@pytest.mark.parametrize("started", [False, True], ids=["never-run", "first-seconds"])
-def test_query_and_report_before_any_result_say_so_in_one_line(tmp_path: Path, command: list[str],
-                                                               started: bool) -> None:
-    from tests.helpers import TINY_SPEC, write_spec
-
-    spec = first_seconds_of_a_run(tmp_path) if started else write_spec(tmp_path, TINY_SPEC)
-    result = CliRunner().invoke(app, [command[0], str(spec), *command[1:]])
-    assert result.exit_code == 2, result.output
-    line = one_line(result.output)
-    assert f"no results for experiment 'tiny' yet in {tmp_path / 'store'}" in line
-    assert f"run: sweep3d run {spec}" in line and "does not exist" not in line
 
 
 def test_query_never_cuts_values_whatever_the_terminal_width(synthetic: Path) -> None:

@@ -15,25 +15,10 @@ from sweep3d.confirm.run import findings_claims
 from sweep3d.results.boundaries import numeric_scales
 from sweep3d.results.confirmation import CONFIRMED, judge, tally
 from sweep3d.results.summary import named_rules, summarise
-from tests.helpers import load_spec, make_store, write_spec
+from tests.helpers import SPEC_ENVIRONMENTS, load_spec, make_store, spec_toml, write_spec
 
-SPEC = """\
-[experiment]
-name = "e"
-store = "store"
-
-[render]
-resolution = 32
-
-[[objects]]
-name = "obj"
-mesh = "cube.obj"
-labels = ["carton"]
-
-[[environments]]
-name = "env"
-color = [1.0, 1.0, 1.0]
-
+SPEC = spec_toml("e", render={"resolution": 32}, objects=(("obj", "cube.obj", ["carton"]),),
+                 environments=(("env", SPEC_ENVIRONMENTS["white"]),), body="""\
 [[controls]]
 type = "camera"
 elevation = { range = [0, 80] }
@@ -49,7 +34,7 @@ sigma = [0.0, 1.5, 3.0]
 [policy]
 type = "random"
 samples = 240
-"""
+""")
 
 
 def truth(row: dict) -> bool:

@@ -16,33 +16,11 @@ from sweep3d.confirm.record import read_verdicts
 from sweep3d.confirm.run import SUFFIX, confirm
 from sweep3d.results.confirmation import CONFIRMED, NOT_REPLICATED
 from sweep3d.spec.params import Range
-from tests.helpers import load_spec, write_spec
+from tests.helpers import load_spec, spec_toml, write_spec
 
 pytestmark = [pytest.mark.slow, pytest.mark.blender, pytest.mark.torch]
 
-SPEC = """\
-[experiment]
-name = "fresh"
-seed = 3
-store = "store"
-
-[render]
-resolution = 32
-samples = 1
-denoise = false
-
-[model]
-batch_size = 8
-
-[[objects]]
-name = "box"
-mesh = "cube.obj"
-labels = ["carton"]
-
-[[environments]]
-name = "white"
-color = [1.0, 1.0, 1.0]
-
+SPEC = spec_toml("fresh", seed=3, model={"batch_size": 8}, body="""\
 [[controls]]
 type = "orientation"
 yaw = { range = [-180, 180] }
@@ -51,7 +29,7 @@ pitch = { range = [-20, 20] }
 [policy]
 type = "random"
 samples = 4
-"""
+""")
 
 
 def test_confirm_renders_fresh_matched_twins_once_and_records_the_verdict(tmp_path: Path) -> None:

@@ -387,37 +387,23 @@ def test_any_finite_range_maps_the_unit_interval_inside_itself_monotonically(a, 
     assert mid == pytest.approx(r.low / 2 + r.high / 2, rel=0, abs=1e-12 * max(abs(r.low), abs(r.high), 1e-300))
 
 
-SAMPLING_SPEC = """\
-[experiment]
-name = "sampling"
-seed = {seed}
-
-[render]
-resolution = 32
-samples = 1
-
-[[objects]]
-name = "box"
-mesh = "cube.obj"
-labels = ["carton"]
-
-[[environments]]
-name = "white"
-color = [1.0, 1.0, 1.0]
-
+def sampling_spec(seed: int, zoom: tuple[float, float], el: tuple[float, float], scale: tuple[float, float],
+                  policy: str) -> str:
+    """The camera's zoom and elevation and the scale's factor over the ranges given, drawn 7 times."""
+    return spec_toml("sampling", seed=seed, store=None, render={"resolution": 32, "samples": 1}, body=f"""\
 [[controls]]
 type = "camera"
-zoom = {{ range = [{zoom_low!r}, {zoom_high!r}], log = true }}
-elevation = {{ range = [{el_low!r}, {el_high!r}] }}
+zoom = {{ range = [{zoom[0]!r}, {zoom[1]!r}], log = true }}
+elevation = {{ range = [{el[0]!r}, {el[1]!r}] }}
 
 [[controls]]
 type = "scale"
-factor = {{ range = [{s_low!r}, {s_high!r}] }}
+factor = {{ range = [{scale[0]!r}, {scale[1]!r}] }}
 
 [policy]
 type = "{policy}"
 samples = 7
-"""
+""")
 
 positive = st.floats(1e-6, 1e6)
 elevation = st.floats(-90.0, 90.0)
@@ -434,8 +420,7 @@ def test_planned_values_stay_inside_declared_ranges_and_follow_the_seed(tmp_path
 
     folder = tmp_path_factory.mktemp("sampling")
     (zl, zh), (el_lo, el_hi), (sl, sh) = sorted(zoom), sorted(el), sorted(scale)
-    body = SAMPLING_SPEC.format(seed=seed, zoom_low=zl, zoom_high=zh, el_low=el_lo, el_high=el_hi,
-                                s_low=sl, s_high=sh, policy=policy)
+    body = sampling_spec(seed, (zl, zh), (el_lo, el_hi), (sl, sh), policy)
     loaded = load_spec(write_spec(folder, body))
     jobs = plan_for(loaded, "m").jobs
     assert len(jobs) == 7

@@ -505,14 +505,6 @@ def test_cache_commands_on_a_real_store(tiny_copy: Path) -> None:
     assert runner.invoke(app, ["cache", "verify", spec]).exit_code == 0
 
 
-def test_cache_commands_on_a_store_that_does_not_exist_are_one_line_errors(tmp_path) -> None:
-    spec = write_spec(tmp_path, TINY_SPEC)
-    result = CliRunner().invoke(app, ["cache", "verify", str(spec)])
-    assert result.exit_code == 2
-    lines = [line for line in result.output.splitlines() if line.strip()]
-    assert len(lines) == 1 and "does not exist yet" in lines[0] and "sweep3d run" in lines[0]
-
-
 @pytest.mark.parametrize("wait", ["-5", "nan", "inf"])
 @pytest.mark.parametrize("command", [["run"], ["cache", "verify"], ["cache", "gc"], ["cache", "compact"]])
 def test_wait_must_be_a_finite_number_of_seconds(tmp_path, command, wait) -> None:

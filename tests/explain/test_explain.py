@@ -16,7 +16,7 @@ from sweep3d.api import Experiment
 from sweep3d.cache.store import Store
 from sweep3d.cli import app
 from sweep3d.report import write_report
-from tests.helpers import ARTIFACTS, assert_clean, open_page, write_spec
+from tests.helpers import ARTIFACTS, assert_clean, open_page, spec_toml, write_spec
 
 SHARP_MODEL = '''
 import torch
@@ -40,30 +40,7 @@ def sharp():
     return Classifier(Sharp(0.09), Preprocess(resize=32, crop=32), labels=["carton", "blurred"])
 '''
 
-SPEC = """\
-[experiment]
-name = "explain-tiny"
-seed = 3
-store = "store"
-
-[render]
-resolution = 32
-samples = 1
-denoise = false
-
-[model]
-name = "explain_sharp_model:sharp"
-batch_size = 8
-
-[[objects]]
-name = "box"
-mesh = "cube.obj"
-labels = ["carton"]
-
-[[environments]]
-name = "white"
-color = [1.0, 1.0, 1.0]
-
+SPEC = spec_toml("explain-tiny", seed=3, model={"name": "explain_sharp_model:sharp", "batch_size": 8}, body="""\
 [[controls]]
 type = "orientation"
 yaw = { range = [0, 90] }
@@ -75,7 +52,7 @@ sigma = { range = [0.0, 3.0] }
 [policy]
 type = "grid"
 samples_per_dim = 3
-"""
+""")
 
 pytestmark = [pytest.mark.blender, pytest.mark.torch, pytest.mark.slow]
 

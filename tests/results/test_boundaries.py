@@ -391,21 +391,6 @@ def test_the_boundary_policy_explores_where_it_sees_no_step() -> None:
     assert units[0] < 0.2 and units[-1] > 0.8  # spread over the range, not aimed anywhere
 
 
-@pytest.mark.parametrize("policy, key, says", [
-    ('type = "boundary"\npaired = true', "policy.paired", "learns per scene"),
-    ('type = "boundary"\ncross = ["environment"]', "policy.cross", "learns per scene"),
-    ('type = "boundary"\nmargin = -1', "policy.margin", "greater than or equal to 0"),
-])
-def test_the_boundary_policy_refuses_pairing_in_one_line(tmp_path: Path, policy: str, key: str, says: str) -> None:
-    from tests.helpers import TINY_SPEC, write_spec
-
-    spec = write_spec(tmp_path, TINY_SPEC.replace('[policy]\ntype = "grid"', f"[policy]\n{policy}"))
-    result = CliRunner().invoke(app, ["plan", str(spec)])
-    assert result.exit_code == 2, result.output
-    lines = result.output.strip().splitlines()
-    assert len(lines) == 1 and key in lines[0] and says in lines[0], result.output
-
-
 def test_scenes_that_are_all_right_keep_their_successes_in_every_permutation() -> None:
     # a step in one scene; the other scenes all right (they add the same successes to each
     # permutation, as they do to the observed counts)

@@ -25,20 +25,9 @@ from sweep3d.cli import app
 from sweep3d.results import connect
 from sweep3d.results.compare import create_mcnemar
 from sweep3d.spec.columns import MODELS_METADATA, PARAMETERS_METADATA
-from tests.helpers import TINY_SPEC, examples, write_spec
+from tests.helpers import TINY_SPEC, TWO_MODELS, examples, write_spec
 
 T0 = datetime(2024, 1, 1)
-TWO_MODELS = """\
-[[models]]
-name = "efficientnet-lite0"
-batch_size = 8
-
-[[models]]
-name = "efficientnet-lite0"
-id = "lite0-onnx"
-backend = "onnx"
-batch_size = 8
-"""
 
 
 def mcnemar(b: int, c: int) -> float:
@@ -155,22 +144,6 @@ def test_an_unknown_model_is_one_line(tmp_path: Path) -> None:
     result = CliRunner().invoke(app, ["query", str(spec), "SELECT 1", "--model", "newer"])
     assert result.exit_code == 2
     assert result.output.strip().splitlines() == ["error: --model newer: the experiment's models are old, new"]
-
-
-@pytest.mark.parametrize("body, key, says", [
-    (TINY_SPEC + "\n" + TWO_MODELS, "model", "either [model] or [[models]]"),
-    (TINY_SPEC.replace("[model]\nbatch_size = 8\n", TWO_MODELS.replace('id = "lite0-onnx"\n', "")),
-     "models", "give it its own id"),
-    (TINY_SPEC.replace("[model]\nbatch_size = 8\n", TWO_MODELS.replace('name = "efficientnet-lite0"\nid',
-                                                                       'name = "efficientnet-lite9"\nid')),
-     "models[1].name", "unknown model 'efficientnet-lite9' (did you mean"),
-])
-def test_bad_models_are_one_line(tmp_path: Path, body: str, key: str, says: str) -> None:
-    spec = write_spec(tmp_path, body)
-    result = CliRunner().invoke(app, ["plan", str(spec)])
-    assert result.exit_code == 2, result.output
-    [line] = result.output.strip().splitlines()
-    assert key in line and says in line
 
 
 def test_plan_lists_each_model_and_says_renders_are_shared(tmp_path: Path) -> None:

@@ -2,9 +2,12 @@
 unwritable store, a full disk. Each one is a single ``error:`` line naming the file, the key and
 the fix, exit code 2, and leaves the store exactly as it was.
 
-Spec-level mistakes caught by the loader (unknown keys, empty ranges, NaN in a range, unknown
-labels, ...) are in tests/spec/test_spec.py; this table covers what needs the files' contents, Blender,
-the model or the disk, plus spec values that table does not.
+This is where a spec's mistakes are tested. The loader's table of key-by-key mistakes (unknown keys,
+empty ranges, NaN in a range, unknown labels, ...) stays in tests/spec/test_spec.py beside the valid
+specs it edits; this file holds what needs the files' contents, Blender, the model or the disk, and
+the one-line refusals of a spec's other tables (a policy's pairing and crossing, a light, a post
+control's parameters, the render's knobs, the models). A command's mistakes are in
+tests/cli/test_bad_input.py, a user's plug-in code that exits in tests/driver/test_bad_input.py.
 
 Cases refused before anything renders or loads a model (the loader's checks of files and values,
 the store's folder) run in the fast lane, on a copy of a store holding a synthetic finished run;
@@ -28,8 +31,9 @@ import pytest
 from typer.testing import CliRunner
 
 from sweep3d.cli import app
+from sweep3d.core.errors import SpecError
 from tests import files
-from tests.helpers import CUBE_OBJ, TINY_SPEC, write_cube
+from tests.helpers import CUBE_OBJ, TINY_SPEC, TWO_MODELS, load_spec, paired_spec, write_cube, write_spec
 
 RNG = np.random.default_rng(0)
 GARBAGE = RNG.integers(0, 256, 4096, dtype=np.uint8).tobytes()
@@ -351,3 +355,105 @@ def test_a_full_disk_while_extracting_a_mesh_says_the_disk_is_full_and_where(tmp
     assert ": the disk is full (No space left on device; " in line and " free on the disk mounted at /" in line, line
     assert line.endswith("free some disk space, or set experiment.store to a folder on another disk"), line
     assert not any(assets_folder.iterdir())  # what was extracted is gone: no half folder, the space back
+
+
+@pytest.mark.parametrize("policy, key, says", [
+    ('type = "random"\nsamples = 4\npaired = "sometimes"', "policy.paired", 'true, false or "all"'),
+    ('type = "random"\nsamples = 4\npaired = 1', "policy.paired", 'true, false or "all"'),
+    ('type = "adaptive"\npaired = true', "policy.paired", "learns per scene"),
+    ('type = "random"\nstratify = "yes"', "policy.stratify", "boolean"),
+    ('type = "sobol"\nstratify = true', "policy.stratify", "unknown key"),
+])
+def test_bad_pairing_is_one_line(tmp_path: Path, policy: str, key: str, says: str) -> None:
+    spec = write_spec(tmp_path, TINY_SPEC.replace('[policy]\ntype = "grid"', f"[policy]\n{policy}"))
+    result = CliRunner().invoke(app, ["plan", str(spec)])
+    assert result.exit_code == 2, result.output
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 1 and key in lines[0] and says in lines[0], result.output
+
+
+@pytest.mark.parametrize("policy, key, says", [
+    ('type = "boundary"\npaired = true', "policy.paired", "learns per scene"),
+    ('type = "boundary"\ncross = ["environment"]', "policy.cross", "learns per scene"),
+    ('type = "boundary"\nmargin = -1', "policy.margin", "greater than or equal to 0"),
+])
+def test_the_boundary_policy_refuses_pairing_in_one_line(tmp_path: Path, policy: str, key: str, says: str) -> None:
+    from tests.helpers import TINY_SPEC, write_spec
+
+    spec = write_spec(tmp_path, TINY_SPEC.replace('[policy]\ntype = "grid"', f"[policy]\n{policy}"))
+    result = CliRunner().invoke(app, ["plan", str(spec)])
+    assert result.exit_code == 2, result.output
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 1 and key in lines[0] and says in lines[0], result.output
+
+
+@pytest.mark.parametrize("cross, problem", [
+    ('["blur.radius"]', "names no control parameter"),
+    ('["orientation.yaw"]', "a range, which the policy draws"),
+    ('["camera.zoom"]', "a range"),
+    ('["nothing"]', "names no control parameter"),
+    ('{ "blur.sigma" = 0 }', "a number k >= 1"),
+    ('{ environment = 3 }', "give true"),
+])
+def test_a_bad_cross_is_one_line_naming_the_key(tmp_path: Path, cross: str, problem: str) -> None:
+    body = paired_spec(seed=3, policy=f'type = "random"\nsamples = 4\ncross = {cross}')
+    with pytest.raises(SpecError) as caught:
+        load_spec(write_spec(tmp_path, body))
+    assert "policy" in caught.value.key and problem in str(caught.value) and "\n" not in str(caught.value)
+
+
+def test_cross_refuses_a_learning_policy_and_disagreeing_paired(tmp_path: Path) -> None:
+    for i, policy in enumerate(['type = "adaptive"\ncross = ["blur.sigma"]',
+                                'type = "random"\npaired = false\ncross = ["environment"]']):
+        folder = tmp_path / str(i)
+        folder.mkdir()
+        with pytest.raises(SpecError) as caught:
+            load_spec(write_spec(folder, paired_spec(seed=3, policy=policy)))
+        assert caught.value.key.startswith("policy") and "\n" not in str(caught.value)
+
+
+def test_a_key_light_on_an_hdri_is_refused(tmp_path) -> None:
+    path = write_spec(tmp_path, TINY_SPEC.replace('hdri = "builtin:studio"\n', 'hdri = "builtin:studio"\nkey_light = true\n'))
+    with pytest.raises(SpecError, match=r"environments\[1\]: key_light is for a plain colour"):
+        load_spec(path)
+
+
+# -- spec errors --------------------------------------------------------------------------------
+@pytest.mark.parametrize("body, key", [
+    ('type = "fog"\ndensity = [0.0, -0.5]', "density"),
+    ('type = "fog"\ndensity = 0.2\ncolor = "grey"', "color"),
+    ('type = "defocus"\nfstop = -1.0', "fstop"),
+    ('type = "defocus"\nfstop = 2.0\nfocus_distance = "near"', "focus_distance"),
+])
+def test_a_bad_parameter_is_one_line_naming_the_key(tmp_path: Path, body: str, key: str) -> None:
+    spec = write_spec(tmp_path, TINY_SPEC.replace('type = "blur"\nsigma = [0.0, 1.5]', body))
+    with pytest.raises(SpecError) as caught:
+        load_spec(spec)
+    message = str(caught.value)
+    assert "\n" not in message and f"controls[1].{key}" in message and "spec.toml" in message
+
+
+def test_a_bad_knob_is_one_line_naming_its_key(tmp_path: Path) -> None:
+    for line, key in (("dither = -1", "render.dither"), ('world_sampling = "importance"', "render.world_sampling")):
+        folder = tmp_path / key.replace(".", "_")
+        folder.mkdir()
+        spec = write_spec(folder, TINY_SPEC.replace("denoise = false", f"denoise = false\n{line}"))
+        result = CliRunner().invoke(app, ["plan", str(spec)])
+        assert result.exit_code == 2
+        assert key in result.output and "Traceback" not in result.output
+
+
+@pytest.mark.parametrize("body, key, says", [
+    (TINY_SPEC + "\n" + TWO_MODELS, "model", "either [model] or [[models]]"),
+    (TINY_SPEC.replace("[model]\nbatch_size = 8\n", TWO_MODELS.replace('id = "lite0-onnx"\n', "")),
+     "models", "give it its own id"),
+    (TINY_SPEC.replace("[model]\nbatch_size = 8\n", TWO_MODELS.replace('name = "efficientnet-lite0"\nid',
+                                                                       'name = "efficientnet-lite9"\nid')),
+     "models[1].name", "unknown model 'efficientnet-lite9' (did you mean"),
+])
+def test_bad_models_are_one_line(tmp_path: Path, body: str, key: str, says: str) -> None:
+    spec = write_spec(tmp_path, body)
+    result = CliRunner().invoke(app, ["plan", str(spec)])
+    assert result.exit_code == 2, result.output
+    [line] = result.output.strip().splitlines()
+    assert key in line and says in line

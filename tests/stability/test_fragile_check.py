@@ -1,5 +1,5 @@
 """``sweep3d stability`` end to end: on a tiny real run (32 px, so the model resizes and every
-change applies), cached under its keys, and its bad inputs as one line."""
+change applies), cached under its keys (its bad inputs are in tests/cli/test_bad_input.py)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,6 @@ from typer.testing import CliRunner
 
 from sweep3d.cache.store import Store
 from sweep3d.cli import app
-from tests.helpers import TINY_SPEC, write_spec
 
 
 def test_the_check_stores_a_row_per_image_and_change_and_recomputes_nothing(tiny_copy: Path) -> None:
@@ -47,13 +46,3 @@ def test_the_check_stores_a_row_per_image_and_change_and_recomputes_nothing(tiny
     assert f"stability check of {images} images" in page and "Fragile: " in page  # the failures panel says it
 
 
-def test_a_check_before_any_result_or_of_another_task_is_one_line(tmp_path: Path) -> None:
-    spec = write_spec(tmp_path, TINY_SPEC)
-    result = CliRunner().invoke(app, ["stability", str(spec)])
-    assert result.exit_code == 2 and "Traceback" not in result.output
-    assert "sweep3d run" in result.output
-    boxed = tmp_path / "boxed"
-    boxed.mkdir()
-    spec = write_spec(boxed, TINY_SPEC + '\n[evaluator]\nkind = "localization"\n')
-    result = CliRunner().invoke(app, ["stability", str(spec)])
-    assert result.exit_code == 2 and 'kind = "classification"' in result.output

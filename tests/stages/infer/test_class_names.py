@@ -28,44 +28,25 @@ from sweep3d.stages.infer.evaluators.evaluator import Truth
 from sweep3d.stages.infer.infer_stage import predictions_schema
 from sweep3d.stages.infer.labels import IMAGENET, LabelMap
 from sweep3d.stages.plan import make_plan
-from tests.helpers import load_spec, write_spec
+from tests.helpers import load_spec, spec_toml, write_spec
 
 SNEAKER, CURTAIN, TEA_CUP = 770, 854, 968  # ImageNet's sneaker / running shoe, front / theater curtain, tea cup / cup
 
-SPEC = """\
-[experiment]
-name = "names"
-store = "store"
-{models}
-[render]
-resolution = 32
-
-[[objects]]
-name = "shoe"
-mesh = "cube.obj"
-labels = ["running shoe"]
-
-[[objects]]
-name = "curtain"
-mesh = "cube.obj"
-labels = ["theater curtain"]
-
-[[objects]]
-name = "cup"
-mesh = "cube.obj"
-labels = [968]                   # an id names nothing: the model's name stands
-
-[[environments]]
-name = "white"
-color = [1.0, 1.0, 1.0]
-
+def names_spec(models: str = "") -> str:
+    """Three objects on white, labelled by name (the cup by an ImageNet id, which names nothing:
+    the model's name stands), and the ``models`` tables given."""
+    return spec_toml("names", render={"resolution": 32}, objects=(
+        ("shoe", "cube.obj", ["running shoe"]), ("curtain", "cube.obj", ["theater curtain"]), ("cup", "cube.obj", [968])),
+        body=models + """
 [[controls]]
 type = "orientation"
 yaw = [0, 90, 180, 270]
 
 [policy]
 type = "grid"
-"""
+""")
+
+
 #: What the model answers for each object, yaw by yaw: right, or another object's class.
 ANSWERS = {"shoe": [SNEAKER, CURTAIN, SNEAKER, SNEAKER], "curtain": [CURTAIN, SNEAKER, SNEAKER, CURTAIN],
            "cup": [TEA_CUP, SNEAKER, TEA_CUP, CURTAIN]}
@@ -75,7 +56,7 @@ def _store(folder: Path, models: str = "", flip: bool = False) -> tuple[Path, du
     """Plan the spec (each model with a stand-in digest), write its jobs as a run does, and a
     prediction row per job from logits whose top class is :data:`ANSWERS`' (the next one with
     ``flip`` for every model after the first)."""
-    spec = write_spec(folder, SPEC.format(models=models))
+    spec = write_spec(folder, names_spec(models=models))
     loaded = load_spec(spec)
     plans = [make_plan(loaded, framing=Framing.full(32), model_digest=f"stand-in-{i}", blender=blender_version(),
                        model=settings, view=(256, 224)) for i, settings in enumerate(loaded.models)]
@@ -149,7 +130,7 @@ def test_compare_names_both_models_answers_as_the_spec_does(tmp_path: Path) -> N
     ('["running shoe", "sneaker"]\n', "objects[0].labels[1]"),
 ])
 def test_two_labels_naming_one_class_differently_are_refused(tmp_path: Path, labels: str, key: str | None) -> None:
-    text = SPEC.format(models="").replace('["running shoe"]\n', labels)
+    text = names_spec(models="").replace('["running shoe"]\n', labels)
     if key is None:
         text = text.replace('["theater curtain"]', '["sneaker"]')
     spec = write_spec(tmp_path, text)
@@ -162,7 +143,7 @@ def test_two_labels_naming_one_class_differently_are_refused(tmp_path: Path, lab
 
 
 def test_a_users_model_whose_classes_clash_is_refused_when_planned(tmp_path: Path) -> None:
-    spec = write_spec(tmp_path, SPEC.format(models='\n[model]\nname = "mymodels:shoes"\n')
+    spec = write_spec(tmp_path, names_spec(models='\n[model]\nname = "mymodels:shoes"\n')
                       .replace("[968]", '["sneaker"]'))
     loaded = load_spec(spec)  # a user's classes are unknown until its factory runs
     classes = LabelMap([["sneaker", "running shoe"], ["theater curtain"], ["cup"]])
@@ -182,7 +163,7 @@ def test_without_ids_a_name_the_model_gives_two_classes_keeps_the_models_name() 
 
 
 def test_spellings_of_one_name_are_one_name_printed_as_first_written(tmp_path: Path) -> None:
-    text = SPEC.format(models="").replace('["theater curtain"]', '["Running-Shoe", "running shoe", "Theatre_Curtain"]')
+    text = names_spec(models="").replace('["theater curtain"]', '["Running-Shoe", "running shoe", "Theatre_Curtain"]')
     loaded = load_spec(write_spec(tmp_path, text))
     plan = make_plan(loaded, framing=Framing.full(32), model_digest="m", blender="4")
     assert list(plan.class_names) == [(SNEAKER, "sneaker", "running shoe", False),

@@ -16,48 +16,9 @@ from sweep3d.cache.blobs import load_image, load_pass
 from sweep3d.cache.store import Store
 from sweep3d.cli import app
 from sweep3d.core.truth import box
-from tests.helpers import load_spec, plan_for, write_spec
+from tests.helpers import load_spec, plan_for, spec_toml, write_spec
 
 pytestmark = [pytest.mark.slow, pytest.mark.blender, pytest.mark.torch]
-
-SPEC = """\
-[experiment]
-name = "detect"
-seed = 1
-store = "store"
-
-[render]
-resolution = 48
-samples = 1
-denoise = false
-
-[model]
-name = "oracle_detector:{factory}"
-
-[evaluator]
-kind = "{kind}"
-{extra}
-
-[[objects]]
-name = "box"
-mesh = "cube.obj"
-labels = ["{label}"]
-
-[[environments]]
-name = "white"
-color = [1.0, 1.0, 1.0]
-
-[[controls]]
-type = "orientation"
-yaw = [0, 45]
-
-[[controls]]
-type = "position"
-x = [-0.3, 0.3]
-
-[policy]
-type = "grid"
-"""
 
 #: The test's detector: it knows each stored image's true box (read from the mask pass by the
 #: test) and answers with it, or with it shifted; the other factories break the rules.
@@ -128,7 +89,23 @@ def three_columns():
 
 
 def spec_text(factory: str = "oracle", kind: str = "detection", label: str = "carton", extra: str = "") -> str:
-    return SPEC.format(factory=factory, kind=kind, label=label, extra=extra)
+    return spec_toml("detect", seed=1, render={"resolution": 48, "samples": 1, "denoise": False},
+                     model={"name": f"oracle_detector:{factory}"}, objects=(("box", "cube.obj", [label]),), body=f"""\
+[evaluator]
+kind = "{kind}"
+{extra}
+
+[[controls]]
+type = "orientation"
+yaw = [0, 45]
+
+[[controls]]
+type = "position"
+x = [-0.3, 0.3]
+
+[policy]
+type = "grid"
+""")
 
 
 @pytest.fixture(scope="module")

@@ -9,39 +9,12 @@ from pathlib import Path
 from sweep3d.results.rules import rules_of
 from sweep3d.spec.framing import Framing
 from sweep3d.stages.plan import make_plan
-from tests.helpers import every_job, load_spec, make_store, rows_of, write_spec
+from tests.helpers import SPEC_ENVIRONMENTS, every_job, load_spec, make_store, rows_of, spec_toml, write_spec
 
-SPEC = """\
-[experiment]
-name = "treatments"
-seed = 2
-store = "store"
-
-[render]
-resolution = 32
-
-[[objects]]
-name = "box"
-mesh = "cube.obj"
-labels = ["carton"]
-
-[[objects]]
-name = "crate"
-mesh = "cube.obj"
-labels = ["crate"]
-
-[[environments]]
-name = "none"
-color = [0.5, 0.5, 0.5]
-
-[[environments]]
-name = "plate"
-color = [0.5, 0.5, 0.5]
-
-[[environments]]
-name = "plant"
-color = [0.5, 0.5, 0.5]
-
+TREATMENTS = ("none", "plate", "plant")
+#: One environment per treatment, all on the same grey background.
+SPEC = spec_toml("treatments", seed=2, render={"resolution": 32}, objects=("box", "crate"),
+                 environments=[(t, SPEC_ENVIRONMENTS["grey"]) for t in TREATMENTS], body="""\
 [[controls]]
 type = "orientation"
 yaw = { range = [-180, 180] }
@@ -65,8 +38,7 @@ environments = ["plant"]
 type = "random"
 samples = 6
 cross = ["environment"]
-"""
-TREATMENTS = ("none", "plate", "plant")
+""")
 
 
 def planned(folder: Path):

@@ -140,33 +140,15 @@ def specs(draw) -> str:
         f'type = "random"\nsamples = {draw(st.integers(1, 12))}',
         f'type = "sobol"\nsamples = {draw(st.integers(1, 8))}']))
     part_visibility = "\n[report]\npart_visibility = true\n" if draw(st.booleans()) else ""
-    return f"""\
-[experiment]
-name = "columns"
-seed = {draw(st.integers(0, 5))}
-
-[render]
-resolution = 32
-samples = 1
-
-[[objects]]
-name = "box"
-mesh = "cube.obj"
-labels = ["carton"]
-
-[[environments]]
-name = "white"
-color = [1.0, 1.0, 1.0]
-
-[[environments]]
-name = "grey"
-color = [0.5, 0.5, 0.5]
+    seed = draw(st.integers(0, 5))
+    return spec_toml("columns", seed=seed, store=None, render={"resolution": 32, "samples": 1},
+                     environments=("white", "grey"), body=f"""\
 {part_visibility}
 {chr(10).join(blocks)}
 
 [policy]
 {policy}
-"""
+""")
 
 
 @settings(max_examples=examples(60), deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])

@@ -13,7 +13,6 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sweep3d.core.control import ControlParams
-from sweep3d.core.errors import SpecError
 from sweep3d.core.pixels import linear_to_srgb, srgb_to_linear
 from sweep3d.engine import builtin_catalogue as catalogue
 from sweep3d.stages.postprocess import PostControl, apply_post
@@ -230,21 +229,6 @@ def test_user_controls_get_the_frame_only_when_their_apply_takes_it() -> None:
     insts = [ControlInstance(control=c, spaces={}) for c in (OldStyle("old", "t:Old"), NewStyle("new", "t:New"))]
     out = apply_post(image, insts, {"old": {"strength": 1.0}, "new": {"strength": 1.0}}, "ab" * 10, frame(depth))
     assert np.allclose(out[5:9, 5:9], image[5:9, 5:9] * 0.5) and not out[0, 0].any()
-
-
-# -- spec errors --------------------------------------------------------------------------------
-@pytest.mark.parametrize("body, key", [
-    ('type = "fog"\ndensity = [0.0, -0.5]', "density"),
-    ('type = "fog"\ndensity = 0.2\ncolor = "grey"', "color"),
-    ('type = "defocus"\nfstop = -1.0', "fstop"),
-    ('type = "defocus"\nfstop = 2.0\nfocus_distance = "near"', "focus_distance"),
-])
-def test_a_bad_parameter_is_one_line_naming_the_key(tmp_path: Path, body: str, key: str) -> None:
-    spec = write_spec(tmp_path, TINY_SPEC.replace('type = "blur"\nsigma = [0.0, 1.5]', body))
-    with pytest.raises(SpecError) as caught:
-        load_spec(spec)
-    message = str(caught.value)
-    assert "\n" not in message and f"controls[1].{key}" in message and "spec.toml" in message
 
 
 def test_the_controls_ask_for_the_depth_pass_and_neutral_jobs_keep_the_render_key(tmp_path: Path) -> None:

@@ -74,12 +74,6 @@ def test_a_bad_light_is_one_line_naming_the_file_and_key(tmp_path, extra: str, e
         assert text in message, message
 
 
-def test_a_key_light_on_an_hdri_is_refused(tmp_path) -> None:
-    path = write_spec(tmp_path, TINY_SPEC.replace('hdri = "builtin:studio"\n', 'hdri = "builtin:studio"\nkey_light = true\n'))
-    with pytest.raises(SpecError, match=r"environments\[1\]: key_light is for a plain colour"):
-        load_spec(path)
-
-
 def test_the_cli_says_a_negative_light_in_one_line_and_exits_2(tmp_path) -> None:
     path = spec_with(tmp_path, AREA + "watts = -5.0\n")
     result = CliRunner().invoke(app, ["plan", str(path)])

@@ -10,6 +10,7 @@ from sweep3d.core.control import ControlParams
 from sweep3d.stages.render.controls.rendered_control import RenderedControl, frame_fields
 from sweep3d.stages.render.worker import render_job
 from sweep3d.stages.render.worker_protocol import EnvironmentRef, RenderJob
+from tests.helpers import CUBE_OBJ
 
 WHITE = EnvironmentRef(color=(1.0, 1.0, 1.0))
 
@@ -135,26 +136,10 @@ def test_an_edit_only_control_needs_no_state_and_moves_nothing_in_the_plan() -> 
     assert not RenderedControl("x", "x").edits_scene
 
 
-TWO_MATERIALS_OBJ = """\
-mtllib two.mtl
-v -1 -1 -1
-v 1 -1 -1
-v 1 1 -1
-v -1 1 -1
-v -1 -1 1
-v 1 -1 1
-v 1 1 1
-v -1 1 1
-o box
-usemtl grey
-f 1 2 3 4
-f 5 8 7 6
-f 1 5 6 2
-usemtl blue
-f 2 6 7 3
-f 3 7 8 4
-f 5 1 4 8
-"""
+#: The unit cube of the spec builder, as one object: its first three faces grey, the others blue.
+_CUBE_LINES = CUBE_OBJ.splitlines()
+TWO_MATERIALS_OBJ = "\n".join(["mtllib two.mtl", *[line for line in _CUBE_LINES if line.startswith("v ")],
+                               "o box", "usemtl grey", *_CUBE_LINES[-6:-3], "usemtl blue", *_CUBE_LINES[-3:]]) + "\n"
 TWO_MATERIALS_MTL = "newmtl grey\nKd 0.5 0.5 0.5\nnewmtl blue\nKd 0.1 0.2 0.8\n"
 
 
