@@ -16,8 +16,7 @@ import pytest
 from typer.testing import CliRunner
 
 from sweep3d.cli import app
-from tests import files
-from tests.helpers import CUBE_OBJ, TINY_SPEC, write_spec
+from tests.helpers import CUBE_OBJ, TINY_SPEC, files, write_spec
 
 
 def _tree(root: Path) -> dict[str, bytes]:

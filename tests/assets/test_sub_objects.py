@@ -279,7 +279,7 @@ def test_auto_smooth_shades_a_faceted_sphere_smooth(blender_scene, meshes: Path)
 def test_a_part_a_ply_lacks_is_found_on_import_with_did_you_mean(blender_scene, tmp_path: Path) -> None:
     from sweep3d.core.errors import UserError
     from sweep3d.stages.render.worker_protocol import Look
-    from tests import files
+    from tests.helpers import files
 
     ply = tmp_path / "tri.ply"
     ply.write_bytes(files.ply_binary([(0, 0, 0), (1, 0, 0), (0, 1, 0)]))
@@ -290,7 +290,7 @@ def test_a_part_a_ply_lacks_is_found_on_import_with_did_you_mean(blender_scene, 
 
 @pytest.mark.blender
 def test_plan_materials_prints_what_blender_renders_and_a_render_time_mistake_is_one_line(meshes: Path) -> None:
-    from tests import files
+    from tests.helpers import files
 
     path = spec(meshes, 'parts = ["gem"]\nmaterials = { green = { roughness = 0.25 } }')
     text = path.read_text() + '\n[[objects]]\nname = "ball"\nmesh = "ball.obj"\nlabels = ["carton"]\n'
@@ -341,7 +341,7 @@ def test_a_worker_process_renders_the_look_and_a_missing_part_stops_the_run_in_o
     from sweep3d.stages.render.pool import RenderPool
     from sweep3d.stages.render.render_stage import _user_error
     from sweep3d.stages.render.worker_protocol import EnvironmentRef, Look, RenderJob, RenderSettings
-    from tests import files
+    from tests.helpers import files
 
     (meshes / "tri.ply").write_bytes(files.ply_binary([(0, 0, 0), (1, 0, 0), (0, 1, 0)]))
     white, mesh = EnvironmentRef(color=WHITE), str(meshes / "frame.obj")

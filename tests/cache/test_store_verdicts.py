@@ -18,7 +18,7 @@ from sweep3d.cache.store import TABLES, Store, photo_path
 from sweep3d.cli import app
 from sweep3d.realism.photos import photo_like
 from sweep3d.results.agreement import VERDICT_SCHEMA, VERDICTS
-from tests.realism_run import T1, image_of, make_run, verdict
+from tests.helpers.realism import T1, image_of, make_run, verdict
 
 
 def cache(spec: Path, *args: str) -> tuple[int, str]:

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from sweep3d.stages.postprocess import apply_post
-from tests.doc_blocks import block
 from tests.helpers import REPO, TINY_SPEC, load_spec, plan_for, write_cube, write_spec
+from tests.helpers.doc_blocks import block
 
 
 def test_ci_runs_the_readmes_test_command() -> None:

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.doc_blocks import REPO
+from tests.helpers.doc_blocks import REPO
 
 if not os.environ.get("CI"):  # CI installs the docs extra (scripts/setup.sh --test): there a missing one fails
     pytest.importorskip("mkdocs", reason="the docs extra: pip install -e '.[docs]'")

@@ -1,4 +1,4 @@
-"""Every code block of the tutorials runs as written (tests/doc_blocks.py says how a page marks them).
+"""Every code block of the tutorials runs as written (tests/helpers/doc_blocks.py says how a page marks them).
 
 Each tutorial runs in a folder of its own: titled blocks are written there as files, Python blocks
 run there in one namespace, and bash blocks' ``sweep3d`` commands run in-process and must exit 0.
@@ -13,8 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from tests.doc_blocks import FURNITURE, Block, blocks, markers, tutorials
 from tests.helpers import write_cube
+from tests.helpers.doc_blocks import FURNITURE, Block, blocks, markers, tutorials
 
 #: Blocks that show something and run nothing: a command's output, a file's layout.
 SHOWN = {"text", "console", "csv", ""}
@@ -79,6 +79,6 @@ def test_the_tutorials_mark_what_they_need() -> None:
 
 def test_the_tutorials_fence_every_code_block() -> None:
     """An indented block would be shown and never run: every tutorial block is fenced."""
-    from tests.doc_blocks import indented
+    from tests.helpers.doc_blocks import indented
 
     assert {page: indented(page) for page in tutorials() if indented(page)} == {}

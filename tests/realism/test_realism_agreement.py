@@ -18,7 +18,7 @@ from sweep3d.results import connect, wilson_interval
 from sweep3d.results.agreement import VERDICT_SCHEMA, VERDICTS
 from sweep3d.results.quoting import literal
 from tests.helpers import examples
-from tests.realism_run import LABELS, T1, agreement_rows, hand, job_colours, make_run, sim_verdicts, verdict
+from tests.helpers.realism import LABELS, T1, agreement_rows, hand, job_colours, make_run, sim_verdicts, verdict
 
 MODEL = "realism_model:redblue"
 

@@ -23,7 +23,7 @@ from PIL import Image
 from sweep3d.realism.align import PAGE, AlignShot, write_align_page
 from sweep3d.realism.edges import EDGE_RGB, edge_image
 from tests.helpers import REPO
-from tests.realism_run import fake_camera, open_align, write_y4m
+from tests.helpers.realism import fake_camera, open_align, write_y4m
 
 ARTIFACTS = REPO / "test-artifacts"
 CAMERA_SIZE = (320, 240)  # the fake camera's frame, width × height (4:3, as a phone's)

@@ -1,4 +1,4 @@
-"""Issue 33 end to end, on the synthetic run (tests/realism_run.py): ``sweep3d realism pick``
+"""Issue 33 end to end, on the synthetic run (tests/helpers/realism.py): ``sweep3d realism pick``
 writes a kit with the real edge images and ``align.html`` (no stand-ins); the page, opened in
 headless Chromium with a fake camera, draws the render over the camera's frames and saves a
 capture under its job's name; ``sweep3d realism score`` with that capture (and stand-in
@@ -28,7 +28,7 @@ from sweep3d.realism.photos import framed, photo_like, upright
 from sweep3d.report import write_report
 from sweep3d.results.agreement import VERDICTS
 from tests.helpers import ARTIFACTS, assert_clean, load_spec, open_page
-from tests.realism_run import (
+from tests.helpers.realism import (
     LABELS,
     agreement_rows,
     fake_camera,

@@ -22,7 +22,16 @@ from sweep3d.cache.store import Store
 from sweep3d.cli import app
 from sweep3d.results.agreement import VERDICTS
 from sweep3d.spec.columns import MODELS_METADATA, PARAMETERS_METADATA
-from tests.realism_run import LABELS, T0, agreement_rows, image_of, job_colours, make_run, redblue_row, stub_kit_tools
+from tests.helpers.realism import (
+    LABELS,
+    T0,
+    agreement_rows,
+    image_of,
+    job_colours,
+    make_run,
+    redblue_row,
+    stub_kit_tools,
+)
 
 
 def test_another_engine_is_a_source_matched_by_configuration(tmp_path: Path, monkeypatch) -> None:

@@ -17,7 +17,7 @@ from sweep3d.realism.photos import photo_like
 from sweep3d.report import write_report
 from sweep3d.results.agreement import VERDICT_SCHEMA, VERDICTS, photo_path
 from tests.helpers import ARTIFACTS, assert_clean, load_spec, open_page
-from tests.realism_run import image_of, job_colours, make_run, sim_verdicts, verdict
+from tests.helpers.realism import image_of, job_colours, make_run, sim_verdicts, verdict
 
 T2 = datetime(2024, 3, 1, tzinfo=timezone.utc)
 

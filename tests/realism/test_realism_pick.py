@@ -20,7 +20,7 @@ from PIL import Image
 
 from sweep3d.cache.store import Store
 from sweep3d.realism.pick import margin, near_tie
-from tests.realism_run import (
+from tests.helpers.realism import (
     LABELS,
     SIDE,
     image_of,

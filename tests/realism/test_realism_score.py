@@ -23,7 +23,16 @@ from sweep3d.cache.store import Store
 from sweep3d.cli import app
 from sweep3d.realism.photos import framed, photo_like, upright
 from sweep3d.results.agreement import VERDICTS
-from tests.realism_run import LABELS, agreement_rows, hand, image_of, job_colours, make_run, redblue_row, stub_kit_tools
+from tests.helpers.realism import (
+    LABELS,
+    agreement_rows,
+    hand,
+    image_of,
+    job_colours,
+    make_run,
+    redblue_row,
+    stub_kit_tools,
+)
 
 PER_OBJECT = 6
 

@@ -32,8 +32,7 @@ from typer.testing import CliRunner
 
 from sweep3d.cli import app
 from sweep3d.core.errors import SpecError
-from tests import files
-from tests.helpers import CUBE_OBJ, TINY_SPEC, TWO_MODELS, load_spec, paired_spec, write_cube, write_spec
+from tests.helpers import CUBE_OBJ, TINY_SPEC, TWO_MODELS, files, load_spec, paired_spec, write_cube, write_spec
 
 RNG = np.random.default_rng(0)
 GARBAGE = RNG.integers(0, 256, 4096, dtype=np.uint8).tobytes()

@@ -23,8 +23,7 @@ from sweep3d.cli import app
 from sweep3d.core.errors import SpecError
 from sweep3d.spec import Choice, Fixed, Range
 from sweep3d.spec.space import Point, SearchSpace
-from tests import files
-from tests.helpers import CUBE_OBJ, TINY_SPEC, load_spec, write_cube, write_spec
+from tests.helpers import CUBE_OBJ, TINY_SPEC, files, load_spec, write_cube, write_spec
 
 BASE = TINY_SPEC.replace('name = "tiny"\nseed = 7\nstore = "store"', 'name = "mistakes"\nseed = 3')
 

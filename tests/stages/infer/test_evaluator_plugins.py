@@ -290,7 +290,7 @@ def test_the_docs_evaluator_loads_and_its_rows_pass_the_checks(tmp_path: Path, m
     line its failure message names."""
     import numpy as np
 
-    from tests.doc_blocks import block, page_text
+    from tests.helpers.doc_blocks import block, page_text
 
     (tmp_path / "mydepth.py").write_text(block("how-to/own-evaluator.md", "# Your own evaluator"))
     monkeypatch.syspath_prepend(str(tmp_path))

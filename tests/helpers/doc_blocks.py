@@ -16,7 +16,7 @@ import shlex
 from dataclasses import dataclass
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 DOCS = REPO / "docs"
 #: The furniture meshes tutorials name, where Debian's sweethome3d-furniture installs them.
 FURNITURE = "/usr/share/sweethome3d/furniture/"

@@ -1,7 +1,8 @@
-"""The one module tests share besides conftest's fixtures: a spec builder (tiny specs and a cube
+"""The one package tests share besides conftest's fixtures: a spec builder (tiny specs and a cube
 mesh written into a folder), the spec loader tests use, synthetic stores and the small pieces
-several test files need. Tests import from here, never from another test file or from
-``benchmarks/``."""
+several test files need; beside it, :mod:`.files` (asset files built byte by byte),
+:mod:`.doc_blocks` (the docs' code blocks) and :mod:`.realism` (the realism tests' synthetic run).
+Tests import from here, never from another test file or from ``benchmarks/``."""
 
 from __future__ import annotations
 
@@ -111,7 +112,7 @@ def examples(n: int) -> int:
 
 
 # from conftest.py
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]  # tests/helpers/__init__.py → the repository
 
 
 CUBE_OBJ = """\
