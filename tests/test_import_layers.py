@@ -183,3 +183,20 @@ def test_a_plug_in_s_import_loads_neither_duckdb_nor_pyarrow(code: str) -> None:
     out = subprocess.run([sys.executable, "-c", probe], cwd=REPO, capture_output=True, text=True, check=True)
     loaded = set(json.loads(out.stdout.splitlines()[-1]))
     assert not {"duckdb", "pyarrow", "pandas", "torch", "bpy"} & loaded
+
+
+def test_no_test_imports_another_test_file_or_a_benchmark() -> None:
+    """Tests share pieces through ``tests/helpers/`` (and conftest's fixtures), never by importing
+    another test module or ``benchmarks/`` (a benchmark is run as a program, not imported)."""
+    wrong = []
+    for path in sorted((REPO / "tests").rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else \
+                [node.module or ""] if isinstance(node, ast.ImportFrom) and node.level == 0 else []
+            if isinstance(node, ast.ImportFrom) and node.level == 0 and node.module == "tests":
+                names = [f"tests.{a.name}" for a in node.names]
+            for name in names:
+                last = name.rsplit(".", 1)[-1]
+                if name.startswith("benchmarks") or (name.startswith("tests.") and last.startswith("test_")):
+                    wrong.append(f"{path.relative_to(REPO)}:{node.lineno} imports {name}")
+    assert not wrong, "\n".join(wrong)
