@@ -88,7 +88,7 @@ class Control:
 
     def key_part(self, values: dict[str, Any]) -> dict[str, Any]:
         """What of this control goes into a cache key: for a user's control (``module:Name``) also
-        the identity of its code (``registry.code_identity``)."""
+        the identity of its code (``core.registry.code_identity``)."""
         part = {"type": self.type_name, "v": self.version, "values": self.canonical(values)}
         if is_user_plugin(self.type_name):
             part["code"] = code_identity(type(self))

@@ -1,6 +1,6 @@
 """A spec's own plug-ins (``module:Name``) and the identity of their code.
 
-Each identity is part of the keys of the stage its plug-in feeds (``registry.code_identity``):
+Each identity is part of the keys of the stage its plug-in feeds (``core.registry.code_identity``):
 rendered controls the render keys, post controls the image keys, evaluators and model factories
 the prediction keys. A run records them with the experiment's jobs, so that ``plan`` can say which
 plug-in changed since and how much work the change redoes. Policies are left out: their points

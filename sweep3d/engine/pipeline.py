@@ -2,7 +2,7 @@
 
 The process holding the store's lock is its single writer. Each stage computes only the keys
 the store lacks, and flushes rows every few seconds, so a killed run resumes where it stopped.
-The stages overlap (``stages.driver``): images are postprocessed and inferred in this process
+The stages overlap (``driver.loop``): images are postprocessed and inferred in this process
 while the Blender workers render the next ones.
 
 Before anything is rendered the model is loaded and tried on a blank image (when anything

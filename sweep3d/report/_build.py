@@ -94,7 +94,7 @@ def build_context(loaded: LoadedSpec, con: duckdb.DuckDBPyConnection, store: Sto
 
     Args:
         loaded: the experiment's spec.
-        con: a connection from ``aggregate.connect`` for this experiment (the views the report
+        con: a connection from ``results.connect`` for this experiment (the views the report
             reads often are computed once on it: see :func:`~sweep3d.report.results.materialise_views`).
         store: the store holding the image blobs.
         panels: the panels to build, in page order (those whose data is absent are left out).

@@ -28,7 +28,7 @@ class PanelInputs:
 
     Attributes:
         loaded: the experiment's spec.
-        con: a connection from ``aggregate.connect`` (``results`` and the aggregate views).
+        con: a connection from ``results.connect`` (``results`` and the aggregate views).
         summary: counts, the worst failures and per-control effects.
         results: every result with its parameter levels (kept by DuckDB; ask it for examples
             or counts, never for every row).

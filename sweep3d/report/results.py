@@ -74,7 +74,7 @@ class Results:
     """Every result with its level of each parameter, kept by DuckDB (see the module's doc).
 
     Args:
-        con: a connection from ``aggregate.connect`` (with the aggregate views).
+        con: a connection from ``results.connect`` (with the aggregate views).
         names: parameter names in the order wanted, e.g. ``object``, ``environment``, then the
             spec's control columns (names with no levels are skipped).
     """

@@ -80,7 +80,7 @@ def register_results(con: duckdb.DuckDBPyConnection, jobs: Path, truths: bool) -
     # experiment whose job has its key, so its own ``model`` is what the first called it.
     own = "model" in job_columns
     kept = [c for c in ("model", "model_digest", "seconds") if c in have and not (c == "model" and own)]
-    # Class names as the spec wrote them (the model's own beside them): see aggregate.class_names.
+    # Class names as the spec wrote them (the model's own beside them): see results.class_name_views.
     named = named_columns(have, record.columns, record.roles.prediction, read_class_names(jobs), own)
     picked = [f"{named.get(c, f'p.{identifier(c)}')} AS {identifier(c)}" if c in have else f"NULL AS {identifier(c)}"
               for c in record.columns]
@@ -89,7 +89,7 @@ def register_results(con: duckdb.DuckDBPyConnection, jobs: Path, truths: bool) -
     picked += [f"{named[c]} AS {identifier(c)}" for c in MODEL_NAME_COLUMNS.values()
                if c in named and c not in record.columns]
     margin = margin_sql(set(have) & set(record.columns)) if "margin" not in record.columns else None
-    if margin is not None:  # the best true class's probability less the best other's (aggregate.fragile)
+    if margin is not None:  # the best true class's probability less the best other's (results.fragile)
         create_margin_macro(con)
         picked.append(f"{margin} AS margin")
     valid = record.roles.valid

@@ -86,7 +86,7 @@ class Summary:
     #: significant boundaries of single objects or environments beyond the ones named
     boundaries_left_out: int = 0
     #: failures whose verdict the stability check says changes no eye sees could flip (None: no check
-    #: yet, or an evaluator without a margin); see ``aggregate.fragile``
+    #: yet, or an evaluator without a margin); see ``results.fragile``
     fragile_failures: int | None = None
     fragile_threshold: float | None = None  # |margin| below which a result is fragile
     fragile_checked: int = 0  # images the stability check re-inferred
@@ -117,7 +117,7 @@ def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit:
     jobs = con.execute("SELECT count(*) FROM jobs").fetchone()[0] if has_view(con, "jobs") else 0
     if not has_view(con, "results"):
         return Summary(jobs, 0, 0, 0, None, [], [], [], [])
-    if not has_view(con, "control_accuracy"):  # a connection made without aggregate.connect
+    if not has_view(con, "control_accuracy"):  # a connection made without results.connect
         register_views(con)
     # failure_modes (the significant values) reads the levels and their pairs several times
     materialise(con, ["results", "control_stats", "control_levels", "control_parameters", "control_accuracy",

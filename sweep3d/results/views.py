@@ -467,7 +467,7 @@ def result_measures(result_columns: dict[str, str], roles: Roles) -> list[tuple[
     """(name, SQL over ``results``) of each measure of ``measures.MEASURES`` the results have (as
     numbers; ``result_columns``: name → DuckDB type): the object's visible fraction (truth passes),
     a classifier's ``margin`` (the best true class's probability less the best other's, from
-    ``aggregate.fragile``: one meaning of margin everywhere) and the IoU (an evaluator with the
+    ``results.fragile``: one meaning of margin everywhere) and the IoU (an evaluator with the
     ``iou`` role)."""
     out = []
     if _is_numeric(result_columns.get("visible_fraction", "")):

@@ -1,7 +1,7 @@
 """The stability check: re-infer a seeded sample of a run's images under changes no eye sees
 (:mod:`sweep3d.stability.changes`) and record, per image and change, whether the verdict flipped.
 
-The sample is stratified by ``|margin|`` (the bins of ``aggregate.fragile.MARGIN_EDGES``): bins take
+The sample is stratified by ``|margin|`` (the bins of ``results.fragile.MARGIN_EDGES``): bins take
 turns, lowest first, each giving its next image in a seeded order, so the near-ties that decide
 the fragile threshold are all checked when there are few of them, and every bin gets a share.
 

@@ -77,7 +77,7 @@ def choose_backend(spec: LoadedSpec, model: ModelSpec, on_ray: bool = False) -> 
 class InferStage:
     """Predicts every image of the plan that has no prediction yet, with the run's model.
 
-    Images arrive while the stages upstream go on (see ``stages.driver``); a batch is inferred
+    Images arrive while the stages upstream go on (see ``driver.loop``); a batch is inferred
     once ``batch_size`` images are there, or the last ones are.
 
     Args:

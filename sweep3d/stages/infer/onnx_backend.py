@@ -1,6 +1,6 @@
 """ONNX Runtime for classifiers: about 4× faster than eager torch per image on this project's CPU.
 
-It serves in two ways (``stages.infer.stage.choose_backend`` picks):
+It serves in two ways (``stages.infer.infer_stage.choose_backend`` picks):
 
 - ``[model] backend = "onnx"``: ONNX Runtime's own answers, for any model torch can export; the
   backend is part of the prediction keys, so they are stored apart from torch's.

@@ -1,6 +1,6 @@
 """Expand a spec into jobs, each with the cache keys of the stages it passes through.
 
-Each stage owns its key recipe (``render.keys``, ``postprocess.keys``, ``infer.keys``); the
+Each stage owns its key recipe (``render.render_keys``, ``postprocess.image_keys``, ``infer.prediction_keys``); the
 planner only coordinates them: it hashes what is fixed per scene once, asks the policy for
 points, maps them to control values and derives each job's keys. It needs neither Blender nor
 the model: the Blender version and the model's digest are inputs.

@@ -3,7 +3,7 @@
 An image is valid only if its render was valid and the post controls left every pixel finite.
 A render blob that is missing or damaged (its bytes do not match the digest its row recorded,
 or it does not decode) is reported to the driver, which discards it so the run's next pass
-renders it again. Renders arrive while the render stage goes on (see ``stages.driver``), so
+renders it again. Renders arrive while the render stage goes on (see ``driver.loop``), so
 their rows are read through the feed, which knows the rows of this pass before they are flushed.
 
 Controls that declare render passes (``passes = ("depth",)``) get the job's pass arrays and its
