@@ -71,7 +71,8 @@ def score(
         if photos is None:
             raise UserError("give the folder of photographs (PHOTOS), or --engine NAME to score another renderer")
         console.print("photographs are read upright (EXIF orientation), resized and centre-cropped to their "
-                      "render's size, then given the model's own preprocessing, as the renders were", soft_wrap=True)
+                      "render's size, given their job's 2D controls (blur, noise, ...) as its render was, then "
+                      "the model's own preprocessing, as the renders were", soft_wrap=True)
         scored = score_photos(loaded, photos, match, kit, wait)
     for line in scored.lines():
         console.print(escape(line), soft_wrap=True)

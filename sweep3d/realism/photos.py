@@ -33,7 +33,8 @@ IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".webp", ".tif", ".tiff", ".bmp")
 KIT_FILES = frozenset({"kit.json", "design.csv", "align.html"})
 #: What the verdicts record about how a photograph reached the model.
 PREPROCESS = ("EXIF orientation applied; resized (short side, Lanczos) and centre-cropped to the render's "
-              "{width}x{height}; then the model's own preprocessing, as for the render")
+              "{width}x{height}; the job's 2D controls (blur, noise, ...) applied as to its render; then the "
+              "model's own preprocessing, as for the render")
 
 
 class PhotoProblems(UserError):

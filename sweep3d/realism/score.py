@@ -82,7 +82,7 @@ def score_photos(spec: LoadedSpec, photos: Path, match: Path | None = None, kit:
     jobs = [int(j) for j in document["jobs"]]
     matched = match_photos(photos, jobs, match)
     sizes = _render_sizes(folder, jobs)
-    frames = {p.job: framed(upright(p.path), *sizes[p.job]) for p in matched}
+    frames = post_processed(spec, {p.job: framed(upright(p.path), *sizes[p.job]) for p in matched})
     digests = {p.job: hashlib.sha256(p.path.read_bytes()).hexdigest() for p in matched}
     store = Store(spec.store)
     rows: list[dict[str, Any]] = []
@@ -98,6 +98,37 @@ def score_photos(spec: LoadedSpec, photos: Path, match: Path | None = None, kit:
             _keep_thumb(store, digests[job], pixels)
         store.append(VERDICTS, rows, VERDICT_SCHEMA)
     return _scored(PHOTO, spec, store, rows)
+
+
+def post_processed(spec: LoadedSpec, frames: dict[int, np.ndarray]) -> dict[int, np.ndarray]:
+    """Each framed photograph (8-bit) with its job's 2D controls applied as they were to its render
+    (blur, noise, ...: part of the job's configuration, so the photo is judged as the render was),
+    seeded by the job's image key as the postprocess stage does.
+
+    Raises:
+        PhotoProblems: a job's control reads the render's passes (depth, mask), which a photograph has not.
+    """
+    from sweep3d.core import from_uint8, to_uint8
+    from sweep3d.engine import plan_spec
+    from sweep3d.stages.postprocess import apply_post, post_controls
+
+    plan = plan_spec(spec)
+    post = post_controls(plan)
+    if not post:
+        return frames
+    out, problems = {}, []
+    for job_id, pixels in frames.items():
+        job = plan.jobs[job_id]
+        needs = [inst.id for inst in post if getattr(inst.control, "passes", ()) and inst.id in job.values
+                 and not inst.control.is_identity(job.values[inst.id])]
+        if needs:
+            problems.append(f"job {job_id}: control {needs[0]!r} reads the render's passes, which a photograph "
+                            "has not; leave the job out (its row in kit.json) or the control out of the spec")
+            continue
+        out[job_id] = to_uint8(apply_post(from_uint8(pixels), post, job.values, job.image_key))
+    if problems:
+        raise PhotoProblems(problems)
+    return out
 
 
 def classify(spec: LoadedSpec, settings: Any, images: Sequence[np.ndarray], truths: Sequence[dict[str, Any]]

@@ -162,3 +162,29 @@ def test_a_real_run_s_renders_as_photographs_agree_with_it(tiny_copy: Path, monk
     assert result.exit_code == 0, result.output  # the kit found by default beside the spec
     overall = next(r for r in agreement_rows(tiny_copy, "tiny") if r["overall"])
     assert (overall["n"], overall["agreement"]) == (len(jobs), 1.0)
+
+
+def test_a_photo_gets_its_job_s_2d_controls_as_the_render_did(tmp_path) -> None:
+    """A job blurred at σ = 1.5 is judged on a blurred photo (its blur is part of its configuration);
+    a job at σ = 0 on the photo as taken; a control that reads the render's depth cannot apply."""
+    import numpy as np
+
+    from sweep3d.engine import plan_spec
+    from sweep3d.realism.photos import PhotoProblems
+    from sweep3d.realism.score import post_processed
+    from tests.helpers import TINY_SPEC, load_spec, write_spec
+
+    spec = load_spec(write_spec(tmp_path, TINY_SPEC))
+    jobs = plan_spec(spec).jobs
+    sharp = next(j.index for j in jobs if j.values["blur"]["sigma"] == 0.0)
+    blurred = next(j.index for j in jobs if j.values["blur"]["sigma"] == 1.5)
+    checks = (np.indices((32, 32)).sum(0) % 2 * 255).astype(np.uint8)[..., None].repeat(3, -1)
+    out = post_processed(spec, {sharp: checks, blurred: checks})
+    assert np.array_equal(out[sharp], checks)
+    assert out[blurred].dtype == np.uint8 and out[blurred].std() < checks.std() / 4  # the checks are smoothed
+    (tmp_path / "fog").mkdir()
+    foggy = load_spec(write_spec(tmp_path / "fog", TINY_SPEC.replace('type = "blur"\nsigma = [0.0, 1.5]',
+                                                                      'type = "fog"\ndensity = [0.0, 0.5]')))
+    job = next(j.index for j in plan_spec(foggy).jobs if j.values["fog"]["density"] == 0.5)
+    with pytest.raises(PhotoProblems, match=f"job {job}: control 'fog' reads the render's passes"):
+        post_processed(foggy, {job: checks})
