@@ -6,16 +6,23 @@ from rich.console import Console
 from rich.markup import escape
 
 from sweep3d.confirm import ConfirmResult
-from sweep3d.results import ALPHA, CONFIRMED
+from sweep3d.results import ALPHA, CONFIRMED, pairs_needed
 
 
 def print_confirmation(console: Console, result: ConfirmResult) -> None:
     if not result.confirmations:
         console.print("no significant finding to confirm: the run names no failure mode and no boundary")
         return
+    tested = sum(x.verdict.pairs > 0 for x in result.confirmations)
+    needed = pairs_needed(tested)
     for x in result.confirmations:
         v = x.verdict
         style = "green" if v.status == CONFIRMED else "yellow"
+        if 0 < v.pairs < needed:
+            console.print(f"[{style}]{v.status}[/]: {escape(x.claim.text)}: {v.pairs} fresh pairs are too few for any "
+                          f"outcome to confirm it among {tested} findings ({needed} at least; --renders "
+                          f"{2 * needed} or more)", soft_wrap=True)
+            continue
         if not v.pairs:
             console.print(f"[{style}]{v.status}[/]: {escape(x.claim.text)}: no fresh pair could be drawn and "
                           "predicted (every configuration of its region is a discovery job, out of frame or "
@@ -27,6 +34,11 @@ def print_confirmation(console: Console, result: ConfirmResult) -> None:
             f"{100 * v.difference_low:+.1f} to {100 * v.difference_high:+.1f}); {v.inside_wrong} pairs wrong only "
             f"inside, {v.inside_right} only outside; p = {v.p_value:.2g}, Holm p = {v.p_holm:.2g}", soft_wrap=True)
     n = len(result.confirmations)
+    fewest = min((x.verdict.pairs for x in result.confirmations if x.verdict.pairs), default=0)
+    if 0 < fewest < 2 * needed:
+        console.print(f"[dim]few pairs: with {fewest} pairs a finding is confirmed only if nearly all of its "
+                      f"discordant pairs go its way, so 'not replicated' says little; --renders {4 * needed} "
+                      "or more for power[/]", soft_wrap=True)
     console.print(
         f"fresh jobs: {result.jobs}, renders {result.rendered} made and {result.cached} cached (experiment "
         f"{escape(result.experiment)}); "

@@ -206,10 +206,10 @@ def explain_spec(spec: LoadedSpec, *, budget: int | None = None, seed: int | Non
     and write the counterfactuals; resumable, its probes cached like any job.
 
     Raises:
-        UserError: a budget below 0, or a run that has not finished.
+        UserError: a budget below 1, or a run that has not finished.
     """
-    if budget is not None and budget < 0:
-        raise UserError(f"--budget {budget}: give how many new renders the search may make, 0 or more")
+    if budget is not None and budget < 1:
+        raise UserError(f"--budget {budget}: give how many new configurations the search may render, 1 or more")
     seed = spec.experiment.seed if seed is None else seed
     store = Store(spec.store)
     store.ensure_writable()
@@ -369,7 +369,7 @@ def print_explained(console: Console, result: ExplainResult) -> None:
     searched = len(result.fixes)
     complete = sum(f.complete for f in result.fixes)
     console.print(f"{result.found} of {searched} failures searched have a nearest fix ({result.failures} failures "
-                  f"in the run; {complete} searches ran to their end); {result.probes} configurations probed, "
+                  f"in the run; {complete} of them searched to the end); {result.probes} configurations probed, "
                   f"{result.rendered} rendered now, in {result.seconds:.1f} s", highlight=False, soft_wrap=True)
     console.print(f"[dim]read them: sweep3d query SPEC \"SELECT * FROM counterfactuals\" "
                   f"({escape(str(result.path))})[/]", highlight=False, soft_wrap=True)

@@ -65,9 +65,10 @@ def margin(row: dict[str, Any]) -> float | None:
 
 
 def near_tie(row: dict[str, Any], threshold: float = NEAR_TIE) -> bool:
-    """Whether a result's verdict is a near tie (see :func:`margin`)."""
+    """Whether a result's verdict is a near tie (see :func:`margin`), or one the stability check
+    calls fragile (``sweep3d stability``: a change no eye sees flips verdicts that near)."""
     m = margin(row)
-    return m is not None and abs(m) < threshold
+    return row.get("fragile") is True or (m is not None and abs(m) < threshold)
 
 
 @dataclass(frozen=True)

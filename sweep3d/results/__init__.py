@@ -8,7 +8,7 @@
 from __future__ import annotations
 
 __all__ = [
-    "ALPHA", "CONFIRMED", "COUNTERFACTUAL_VIEWS", "ControlEffect", "DEFAULT_RENDERS", "HIDDEN",
+    "ALPHA", "CONFIRMED", "pairs_needed", "COUNTERFACTUAL_VIEWS", "ControlEffect", "DEFAULT_RENDERS", "HIDDEN",
     "MACROS", "MARGIN_EDGES", "MEASURES", "OCCLUDED", "OUTCOMES", "OUT_OF_FRAME", "PlannedStore",
     "Region", "SCENE_COLUMNS", "SCHEMA", "Scale", "Summary", "UNCONFIRMED", "VERDICTS",
     "VERDICT_SCHEMA", "VIEW", "VIEWS", "Verdict", "arrow", "boundary_phrase", "connect",
@@ -36,7 +36,16 @@ if _TYPE_CHECKING:
         numeric_scales,
         register_failure_boundaries,
     )
-    from sweep3d.results.confirmation import ALPHA, CONFIRMED, DEFAULT_RENDERS, UNCONFIRMED, Verdict, judge, tally
+    from sweep3d.results.confirmation import (
+        ALPHA,
+        CONFIRMED,
+        DEFAULT_RENDERS,
+        UNCONFIRMED,
+        Verdict,
+        judge,
+        pairs_needed,
+        tally,
+    )
     from sweep3d.results.counterfactuals import COUNTERFACTUAL_VIEWS, SCHEMA, counterfactuals_path
     from sweep3d.results.fragile import MARGIN_EDGES, fragile_sentence
     from sweep3d.results.measures import MEASURES
@@ -73,6 +82,7 @@ if _TYPE_CHECKING:
 __getattr__, __dir__ = _exports(__name__, {
     "ALPHA": ("sweep3d.results.confirmation", "ALPHA"),
     "CONFIRMED": ("sweep3d.results.confirmation", "CONFIRMED"),
+    "pairs_needed": ("sweep3d.results.confirmation", "pairs_needed"),
     "COUNTERFACTUAL_VIEWS": ("sweep3d.results.counterfactuals", "COUNTERFACTUAL_VIEWS"),
     "ControlEffect": ("sweep3d.results.summary", "ControlEffect"),
     "DEFAULT_RENDERS": ("sweep3d.results.confirmation", "DEFAULT_RENDERS"),

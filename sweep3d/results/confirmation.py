@@ -17,7 +17,10 @@ finding as the worst of many. The p-values of the findings confirmed together ar
 Holm's method, and a finding is **confirmed** when its adjusted p < :data:`ALPHA`: the chance that
 *any* finding without a real effect is called confirmed in one ``confirm`` is at most 5 % (the
 exact test is conservative: below 5 % in practice). Otherwise it is **not replicated** (which does
-not prove there is no effect: a small one needs more pairs).
+not prove there is no effect: a small one needs more pairs) — unless its pairs were too few for
+any outcome to confirm it (even every discordant pair its way: 2^-n times the findings tested
+together is not below :data:`ALPHA`); it then stays **unconfirmed**, and :func:`pairs_needed` says
+how many would do.
 
 **Effect**: the fresh accuracy inside less outside, ``(inside_right - inside_wrong) / pairs``, with
 Newcombe's hybrid score interval for paired proportions (his method 10, from the two Wilson
@@ -144,6 +147,12 @@ def holm(p_values: Sequence[float]) -> list[float]:
     return out
 
 
+def pairs_needed(findings: int, alpha: float = ALPHA) -> int:
+    """The fewest twin pairs with which a finding tested among ``findings`` can be confirmed at
+    all: every pair discordant its way gives p = 2^-n, which Holm multiplies by up to ``findings``."""
+    return max(1, math.floor(math.log2(max(findings, 1) / alpha)) + 1)
+
+
 def judge(findings: Sequence[Pairs], alpha: float = ALPHA) -> list[Verdict]:
     """One :class:`Verdict` per finding's fresh pairs, tested together (Holm over those with pairs)."""
     tested = [i for i, pairs in enumerate(findings) if pairs.n]
@@ -154,7 +163,8 @@ def judge(findings: Sequence[Pairs], alpha: float = ALPHA) -> list[Verdict]:
         p = raw[tested.index(i)] if i in adjusted else 1.0
         q = adjusted.get(i, 1.0)
         interval = paired_difference_interval(pairs)
-        status = UNCONFIRMED if not pairs.n else CONFIRMED if q < alpha else NOT_REPLICATED
+        too_few = pairs.n < pairs_needed(len(tested), alpha)  # no outcome of so few pairs could confirm it
+        status = UNCONFIRMED if not pairs.n or too_few else CONFIRMED if q < alpha else NOT_REPLICATED
         inside, outside = pairs.accuracy_inside, pairs.accuracy_outside
         verdicts.append(Verdict(
             status, pairs.n, pairs.both_right, pairs.inside_wrong, pairs.inside_right, pairs.both_wrong, inside,

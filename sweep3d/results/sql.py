@@ -18,7 +18,8 @@ from sweep3d.results.rules import names_rules, register_rules
 from sweep3d.results.views import connect, has_view, no_results
 from sweep3d.spec import LoadedSpec
 
-QUERY_HINT = "sweep3d query runs one SELECT over the views results, jobs, predictions, renders, images, runs"
+QUERY_HINT = ("sweep3d query runs one SELECT over the views results, jobs, predictions, renders, images, runs, "
+              "control_accuracy, failure_modes, ...; the list: docs/how-to/query.md")
 
 
 def select_only(sql: str, refusal_hint: str = "write rows to a file with --output FILE") -> str:

@@ -226,3 +226,15 @@ def test_a_value_of_an_integer_range_is_drawn_as_the_integer_the_plan_holds() ->
     for inside, outside in draw_pairs(space, claim, 20, seed=1):
         assert inside["scale_steps"] == 3 and type(inside["scale_steps"]) is int
         assert outside["scale_steps"] != 3 and type(outside["scale_steps"]) is int
+
+
+def test_pairs_too_few_for_any_outcome_to_confirm_leave_a_finding_unconfirmed_not_refuted() -> None:
+    from sweep3d.results.confirmation import pairs_needed
+
+    for findings in (1, 3, 10):
+        n = pairs_needed(findings)
+        assert 0.5 ** n * findings < ALPHA <= 0.5 ** (n - 1) * findings  # the fewest with which it can be done
+        all_its_way = judge([Pairs(inside_wrong=n)] + [Pairs(both_right=n)] * (findings - 1))
+        assert all_its_way[0].status == CONFIRMED
+        one_short = judge([Pairs(inside_wrong=n - 1)] + [Pairs(both_right=n - 1)] * (findings - 1))
+        assert {v.status for v in one_short} == {UNCONFIRMED}  # "not replicated" would claim what was not tested
