@@ -25,7 +25,8 @@ round, so the oracle is asked in batches.
 A *budget* bounds the probes charged (``free`` says which are not: the run's own jobs); the
 failures are taken in a seeded order, a few at a time, and a failure whose next probes no longer
 fit is stopped with the nearest fix it had (``complete`` false), or left out when its first
-probes do not fit (not reached). The same failures, seed,
+probes do not fit (not reached); then no later failure is taken, so the failures reached are the
+first of the seeded order, a random sample of them all. The same failures, seed,
 budget and verdicts give the same probes in the same order, so a search killed and run again
 replays what is cached and goes on.
 """
@@ -273,8 +274,9 @@ def explain(failures: Sequence[Config], axes: Callable[[Scene], list[Axis]], ora
     queue = iter(order)
     active: list[_Search] = []
     results: list[Fix] = []
+    spent = False  # a failure was not reached: later ones are not taken (the reached stay a prefix)
     while True:
-        while len(active) < concurrent:
+        while len(active) < concurrent and not spent:
             failure = next(queue, None)
             if failure is None:
                 break
@@ -302,6 +304,7 @@ def explain(failures: Sequence[Config], axes: Callable[[Scene], list[Axis]], ora
             active.remove(search)
             if not complete and search.probes == 0:  # not reached: the budget was spent before it
                 state.started -= 1
+                spent = True
                 continue
             results.append(search.result(complete))
             state.finished += 1

@@ -98,6 +98,8 @@ def test_a_budget_is_never_exceeded_and_free_configurations_cost_nothing() -> No
         assert len(set(asked)) <= budget
         assert len(fixes) < len(everything) or not all(f.complete for f in fixes)
         assert all(not inside(f.fix.point) for f in fixes if f.fix is not None)
+        order = [f.failure for f in everything]  # the seeded order: the failures reached are its first ones
+        assert [f.failure for f in fixes] == order[:len(fixes)], "a random sample, not those with cheap probes"
     fixes = explain(failures(12), lambda scene: AXES, counting, seed=2, budget=0, free=lambda c: True)
     assert len(fixes) == 12 and all(f.complete for f in fixes)  # nothing charged: the budget never bites
     assert [f.fix for f in fixes] == [f.fix for f in everything]
@@ -159,3 +161,16 @@ def test_a_change_across_a_whole_turn_is_written_the_short_way_round(tmp_path) -
     assert changes["orientation_yaw"][3] == pytest.approx(14.4)
     assert changes["blur_sigma"][1:4] == ("1.5", "0", -1.5)
     assert _written(changes["orientation_yaw"]) == "orientation_yaw +14.4 (4.0% of its range)"
+
+
+def test_the_failures_a_budget_reaches_are_the_first_of_the_seeded_order() -> None:
+    """When the budget runs out, a failure whose probes happen to be free (another scene's, already
+    evaluated) is not taken in place of those before it: the reached stay a random sample."""
+    cheap = ("ball", "white")
+    mixed = failures(8) + [Config(cheap, c.point) for c in failures(8, seed=4)]
+    free = lambda c: c.scene == cheap  # noqa: E731
+    everything = explain(mixed, lambda scene: AXES, oracle([]), seed=1, free=free)
+    order = [f.failure for f in everything]
+    fixes = explain(mixed, lambda scene: AXES, oracle([]), seed=1, budget=10, free=free, concurrent=2)
+    assert 0 < len(fixes) < len(mixed)
+    assert [f.failure for f in fixes] == order[:len(fixes)]
