@@ -293,10 +293,10 @@ def score_engine(spec: LoadedSpec, engine: str, kit: Path | None = None, console
     """
     from sweep3d.engine import builtin_catalogue, write_unstored_images
     from sweep3d.results import results_connection, stored_parameters
-    from sweep3d.spec import read_spec
+    from sweep3d.spec import ENGINES, read_spec
 
-    if not engine or not engine.replace("-", "").replace("_", "").isalnum():
-        raise UserError(f"--engine {engine!r}: name a render engine, e.g. mitsuba")
+    if engine not in ENGINES:  # before anything is written into the kit
+        raise UserError(f"--engine {engine!r}: use one of {', '.join(ENGINES)}")
     folder = find_kit(spec, None, kit)
     document = read_kit(folder)
     jobs = [int(j) for j in document["jobs"]]

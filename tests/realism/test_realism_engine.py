@@ -50,7 +50,7 @@ def test_another_engine_is_a_source_matched_by_configuration(tmp_path: Path, mon
     def run(spec, console, wait):
         """The replaying spec's run: one result per design row, numbered backwards."""
         written["spec"] = spec.path.read_text()
-        assert spec.name == "realism.engine-other" and spec.spec.policy.type == "table"
+        assert spec.name == "realism.engine-mitsuba" and spec.spec.policy.type == "table"
         store = Store(spec.store)
         jobs, predictions = [], []
         for new, old in enumerate(reversed(picked)):
@@ -71,19 +71,18 @@ def test_another_engine_is_a_source_matched_by_configuration(tmp_path: Path, mon
         store.append("predictions", predictions)
 
     monkeypatch.setattr(score, "_run", run)
-    monkeypatch.setattr(score, "ENGINE_SPEC", score.ENGINE_SPEC.replace("engine = {engine_value}", ""))
-    result = CliRunner().invoke(app, ["realism", "score", str(spec), "--engine", "other", "--kit",
+    result = CliRunner().invoke(app, ["realism", "score", str(spec), "--engine", "mitsuba", "--kit",
                                       str(tmp_path / "kit")])
     assert result.exit_code == 0, result.output
     replay = tomllib.loads(written["spec"])
     assert replay["policy"] == {"type": "table", "file": str((tmp_path / "kit" / "design.csv").resolve())}
     assert replay["include"] == [str(spec.resolve())]
     stored = Store(tmp_path / "store").table(VERDICTS).to_pylist()
-    assert sorted(r["job"] for r in stored) == picked and {r["source"] for r in stored} == {"engine:other"}
+    assert sorted(r["job"] for r in stored) == picked and {r["source"] for r in stored} == {"engine:mitsuba"}
     for r in stored:  # each verdict is the other engine's on the same configuration, under the picked job's id
         assert r["correct"] == (sim[r["job"]] != (r["job"] in flipped)) and r["image_key"].startswith("e")
     overall = next(r for r in agreement_rows(tmp_path) if r["overall"])
-    assert (overall["source"], overall["n"], overall["n_agree"]) == ("engine:other", len(picked),
+    assert (overall["source"], overall["n"], overall["n_agree"]) == ("engine:mitsuba", len(picked),
                                                                      len(picked) - len(flipped))
     assert f"agrees with the render's on {len(picked) - len(flipped)} of {len(picked)} jobs" in result.output
 
@@ -92,10 +91,12 @@ def test_an_engine_the_spec_cannot_take_is_one_line(tmp_path: Path, monkeypatch)
     spec = make_run(tmp_path)
     stub_kit_tools(monkeypatch)
     assert CliRunner().invoke(app, ["realism", "pick", str(spec), "-o", str(tmp_path / "kit")]).exit_code == 0
-    for args, words in ((["--engine", "../x"], "name a render engine"),
-                        (["--engine", "other", str(tmp_path / "kit")], "leave PHOTOS and --match out"),
+    for args, words in ((["--engine", "../x"], "use one of cycles, mitsuba"),
+                        (["--engine", "mitsuba", str(tmp_path / "kit")], "leave PHOTOS and --match out"),
+                        (["--engine", "povray"], "use one of cycles, mitsuba"),
                         ([], "give the folder of photographs")):
         result = CliRunner().invoke(app, ["realism", "score", str(spec), *args, "--kit", str(tmp_path / "kit")])
         assert result.exit_code == 2 and words in result.output, result.output
         assert len(result.output.strip().splitlines()) == 1
     assert not Store(tmp_path / "store").segments(VERDICTS)
+    assert not (tmp_path / "kit" / "engines").exists()  # a refused engine leaves nothing in the kit
