@@ -125,7 +125,7 @@ class Experiment:
         console = console or (Console() if progress else None)
         result = explain_spec(self.spec, budget=budget, seed=seed, console=console, wait=wait)
         if console is not None:
-            print_explained(console, result)
+            print_explained(console, result, self.spec.path)
         return result
 
     def counterfactuals(self) -> pa.Table:

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import shlex
 import time
 from dataclasses import dataclass
 from typing import Any, Callable, Sequence
@@ -364,12 +365,12 @@ def _write_images(spec: LoadedSpec, store: Store, stages: _Stages, failure_keys:
                 atomic_write(store.blob_path(key), encode_png8(made.pixels), durable=False)
 
 
-def print_explained(console: Console, result: ExplainResult) -> None:
-    """The end of ``sweep3d explain``: what was found, and where to read it."""
+def print_explained(console: Console, result: ExplainResult, spec: Any = "SPEC") -> None:
+    """The end of ``sweep3d explain``: what was found, and where to read it (``spec``: its path)."""
     searched = len(result.fixes)
     complete = sum(f.complete for f in result.fixes)
     console.print(f"{result.found} of {searched} failures searched have a nearest fix ({result.failures} failures "
                   f"in the run; {complete} of them searched to the end); {result.probes} configurations probed, "
                   f"{result.rendered} rendered now, in {result.seconds:.1f} s", highlight=False, soft_wrap=True)
-    console.print(f"[dim]read them: sweep3d query SPEC \"SELECT * FROM counterfactuals\" "
+    console.print(f"[dim]read them: sweep3d query {escape(shlex.quote(str(spec)))} \"SELECT * FROM counterfactuals\" "
                   f"({escape(str(result.path))})[/]", highlight=False, soft_wrap=True)
