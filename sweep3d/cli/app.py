@@ -165,7 +165,8 @@ def stability(
     spec: Path = SpecArg,
     sample: int = typer.Option(64, "--sample", min=1, help="Images to re-infer (per model), spread over margin bins, "
                                                              "near-ties first."),
-    seed: int = typer.Option(0, "--seed", min=0, help="Seeds the sample's order and the random changes."),
+    seed: Optional[int] = typer.Option(None, "--seed", min=0, show_default=False,
+                                       help="Seeds the sample's order and the random changes (default: the spec's)."),
 ) -> None:
     """Re-infer a sample of the run's images under changes no eye sees (±1 level of noise, dither, 8-bit
     resizing): the flip rate per margin bin, and which results are fragile."""
