@@ -35,7 +35,8 @@ def run_stability(console: Console, spec_path: Path, sample: int, seed: int | No
             n, flips = by_change.get(row["change"], (0, 0))
             by_change[row["change"]] = (n + row["n"], flips + row["flips"])
         console.print("flips per change: " + ", ".join(f"{c} {f} of {n}" for c, (n, f) in by_change.items()))
-        rule = (f"|margin| < {found.threshold:.3g} (bins where 1 in 10 checked images or more flipped)"
-                if found.threshold else "no margin bin where 1 in 10 checked images or more flipped")
+        rule = (f"|margin| < {found.threshold:.3g} (bins where 1 in 10 checked images or more flip, beyond doubt: "
+                "the lower end of the Wilson interval)" if found.threshold
+                else "no margin bin where 1 in 10 checked images or more flip beyond doubt")
         console.print(f"{which}fragile: {rule}, or flipped in the check: {found.fragile_failures} of "
                       f"{found.failures} failures")

@@ -82,7 +82,8 @@ def score_photos(spec: LoadedSpec, photos: Path, match: Path | None = None, kit:
     jobs = [int(j) for j in document["jobs"]]
     matched = match_photos(photos, jobs, match)
     sizes = _render_sizes(folder, jobs)
-    frames = post_processed(spec, {p.job: framed(upright(p.path), *sizes[p.job]) for p in matched})
+    photos = {p.job: framed(upright(p.path), *sizes[p.job]) for p in matched}
+    frames = post_processed(spec, photos)  # what the model sees; the kept thumbnail is the photo as taken
     digests = {p.job: hashlib.sha256(p.path.read_bytes()).hexdigest() for p in matched}
     store = Store(spec.store)
     rows: list[dict[str, Any]] = []
@@ -94,7 +95,7 @@ def score_photos(spec: LoadedSpec, photos: Path, match: Path | None = None, kit:
             rows.append(_row(PHOTO, spec.name, job, settings.label, verdict, photo=photo.path.name,
                              photo_sha256=digests[job], preprocess=PREPROCESS.format(width=w, height=h)))
     with store.lock(wait):
-        for job, pixels in frames.items():
+        for job, pixels in photos.items():
             _keep_thumb(store, digests[job], pixels)
         store.append(VERDICTS, rows, VERDICT_SCHEMA)
     return _scored(PHOTO, spec, store, rows)
@@ -116,9 +117,13 @@ def post_processed(spec: LoadedSpec, frames: dict[int, np.ndarray]) -> dict[int,
     post = post_controls(plan)
     if not post:
         return frames
+    planned = {job.index: job for job in plan.jobs}  # by job number: the plan lists in-frame jobs only
     out, problems = {}, []
     for job_id, pixels in frames.items():
-        job = plan.jobs[job_id]
+        job = planned.get(job_id)
+        if job is None:
+            problems.append(f"job {job_id}: the spec no longer plans it; pick the kit again (`sweep3d realism pick`)")
+            continue
         needs = [inst.id for inst in post if getattr(inst.control, "passes", ()) and inst.id in job.values
                  and not inst.control.is_identity(job.values[inst.id])]
         if needs:

@@ -9,9 +9,11 @@ Where the top-k cannot say exactly, it is the bound nearest 0 (see :data:`MARGIN
 result is never called surer than it is.
 
 ``fragile`` comes from the stability check (``sweep3d stability``, rows in the store's
-``stability`` table): per model, the *threshold* is the upper edge of the highest margin bin in
-which at least :data:`FLIP_RATE` of the checked images flipped their verdict under some change; a
-result is fragile when ``|margin|`` is below it, or its own image flipped in the check. Without a check, ``fragile`` is
+``stability`` table; per image and change its latest check): per model, the *threshold* is the
+upper edge of the highest margin bin whose flip rate is at least :data:`FLIP_RATE` beyond
+reasonable doubt (the lower end of its 95 % Wilson interval), so that one flip among a handful
+of images does not make every margin below it fragile; a result is fragile when ``|margin|`` is
+below it, or its own image flipped in the check. Without a check, ``fragile`` is
 null (unknown), never false.
 """
 
@@ -30,10 +32,10 @@ from sweep3d.spec import DROP_FRAGILE_METADATA
 #: Upper edges of the ``|margin|`` bins the stability check reports (the first bin starts at 0;
 #: each bin is [previous edge, edge), the last also holds 1).
 MARGIN_EDGES = (0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0)
-#: The share of a margin bin's checked images that must flip for the bin's margins to be fragile:
-#: at 1 in 10, a verdict that near the other is a coin one no eye sees could toss. (Any single flip
-#: would call nearly every failure of a blurred sweep fragile: one of 40 images flips even at
-#: margins 0.2–0.5.) An image that flipped is fragile whatever its bin's rate.
+#: The flip rate at which a margin bin's margins are fragile, once the lower end of its 95 % Wilson
+#: interval reaches it: at 1 in 10, a verdict that near the other is a coin no eye sees could toss.
+#: (Any single flip would call nearly every failure of a blurred sweep fragile: one of 40 images
+#: flips even at margins 0.2–0.5.) An image that flipped is fragile whatever its bin's rate.
 FLIP_RATE = 0.1
 #: The prediction columns the margin is computed from (every evaluator that ranks classes has them).
 MARGIN_INPUTS = ("topk", "topk_probs", "label_ids", "label_prob")
@@ -109,8 +111,11 @@ def register_fragile(con: duckdb.DuckDBPyConnection, drop: bool = False) -> bool
     checked = _has_relation(con, "stability")
     con.execute("ALTER VIEW results RENAME TO results_unjudged")
     model = "r.model" if "model" in have else "NULL::VARCHAR"
+    # the latest check of each image and change: another --seed replaces its rows, never adds a chance to flip
     source = ("SELECT s.*, r.model FROM stability s JOIN (SELECT DISTINCT pred_key, "
-              f"{model} AS model FROM results_unjudged r) r USING (pred_key)") if checked else \
+              f"{model} AS model FROM results_unjudged r) r USING (pred_key) QUALIFY row_number() OVER "
+              "(PARTITION BY r.model, s.pred_key, s.change ORDER BY s.created_at DESC, s.stability_key DESC) = 1") \
+        if checked else \
         ("SELECT NULL::VARCHAR AS model, NULL::VARCHAR AS pred_key, NULL::VARCHAR AS change, "
          "NULL::DOUBLE AS base_margin, NULL::BOOLEAN AS flipped WHERE false")
     con.execute(f"CREATE OR REPLACE VIEW stability_checks AS {source}")
@@ -129,7 +134,7 @@ def register_fragile(con: duckdb.DuckDBPyConnection, drop: bool = False) -> bool
             f"FROM {rows} GROUP BY ALL) c ON c.model IS NOT DISTINCT FROM m.model "
             f"{'AND c.change = m.change ' if by else ''}AND c.bin = e.bin ORDER BY ALL")
     con.execute("CREATE OR REPLACE VIEW fragile_threshold AS SELECT model, coalesce(max(upper) FILTER "
-                f"(WHERE flips > 0 AND flips >= {FLIP_RATE!r} * n), 0.0) AS threshold, sum(n)::BIGINT AS checked, "
+                f"(WHERE flips > 0 AND wilson_low >= {FLIP_RATE!r}), 0.0) AS threshold, sum(n)::BIGINT AS checked, "
                 "sum(flips)::BIGINT AS flipped FROM stability_bins "
                 "GROUP BY model")
     fragile = ("CASE WHEN t.threshold IS NULL OR r.margin IS NULL THEN NULL "
@@ -163,8 +168,9 @@ def fragile_sentence(summary: Any) -> str:
         return ""
     failures = summary.wrong + (summary.fragile_failures if summary.fragile_dropped else 0)
     share = f"1 in {round(1 / FLIP_RATE)}"
-    rule = (f"|margin| < {summary.fragile_threshold:.3g}, where {share} checked images or more flipped, or flipped "
-            "in the check" if summary.fragile_threshold else f"flipped in the check; no margin bin flipped {share}")
+    rule = (f"|margin| < {summary.fragile_threshold:.3g}, where {share} checked images or more flip beyond doubt, or "
+            "flipped in the check" if summary.fragile_threshold
+            else f"flipped in the check; no margin bin flips {share} beyond doubt")
     dropped = (f"; [aggregate] drop_fragile: the {summary.fragile_dropped} fragile results, right or wrong, are left "
                "out of every count, accuracy, failure mode and boundary" if summary.fragile_dropped else "")
     return (f"fragile: {summary.fragile_failures} of {failures} failures ({rule}; stability check of "

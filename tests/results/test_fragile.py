@@ -3,7 +3,7 @@ the stability views' threshold rule, ``drop_fragile``, the check's sample and it
 
 from __future__ import annotations
 
-from datetime import datetime, timezone
+from datetime import datetime, timedelta, timezone
 from pathlib import Path
 from typing import Any
 
@@ -166,7 +166,7 @@ def test_an_image_that_flipped_is_fragile_even_above_the_threshold_rule(tmp_path
     assert con.execute("SELECT fragile FROM results WHERE job = 6").fetchone()[0] is False
 
 
-def test_a_bin_where_fewer_than_one_in_ten_flipped_sets_no_threshold(tmp_path: Path) -> None:
+def test_a_bin_sets_the_threshold_only_when_one_in_ten_flips_beyond_doubt(tmp_path: Path) -> None:
     margins = [0.3 + i / 100 for i in range(20)] + [-0.6, 0.005]  # 20 in bin [0.2, 0.5), then two more
     store = _store(tmp_path, margins)
     # 1 of 20 flipped in [0.2, 0.5) (5 %): no threshold from it, but that image is fragile
@@ -175,12 +175,26 @@ def test_a_bin_where_fewer_than_one_in_ten_flipped_sets_no_threshold(tmp_path: P
     assert con.execute("SELECT threshold, checked, flipped FROM fragile_threshold").fetchone() == (0.0, 20, 1)
     fragile = dict(con.execute("SELECT job, fragile FROM results").fetchall())
     assert [j for j, f in fragile.items() if f] == [3]
-    store = _store(tmp_path / "two", margins)  # 2 of 20 (10 %): the bin's margins are fragile
+    store = _store(tmp_path / "two", margins)  # 2 of 20 (10 %, Wilson's lower bound 2.8 %): not beyond doubt
     _checked(store, {f"k{i}": (margins[i], i in (3, 4)) for i in range(20)})
+    assert connect(store, "e").execute("SELECT threshold FROM fragile_threshold").fetchone()[0] == 0.0
+    store = _store(tmp_path / "six", margins)  # 6 of 20 (30 %, lower bound 14.5 %): the bin's margins are fragile
+    _checked(store, {f"k{i}": (margins[i], i < 6) for i in range(20)})
     con = connect(store, "e")
     assert con.execute("SELECT threshold FROM fragile_threshold").fetchone()[0] == 0.5
     fragile = dict(con.execute("SELECT job, fragile FROM results").fetchall())
     assert sorted(j for j, f in fragile.items() if f) == [*range(20), 21]  # -0.6 is not
+
+
+def test_a_later_check_replaces_an_image_s_rows_instead_of_adding_chances_to_flip(tmp_path: Path) -> None:
+    store = _store(tmp_path, MARGINS)
+    _checked(store, {"k6": (0.012, True)})  # seed 0: flipped
+    later = [{"stability_key": stability_key("k6", "noise", 1), "pred_key": "k6", "image_key": "k6",
+              "change": "noise", "seed": 1, "base_correct": True, "base_margin": 0.012, "correct": True,
+              "margin": 0.012, "flipped": False, "created_at": T0 + timedelta(seconds=1)}]
+    store.append("stability", later, SCHEMA)  # seed 1, checked later: not flipped
+    con = connect(store, "e")
+    assert con.execute("SELECT checked, flipped FROM fragile_threshold").fetchone() == (1, 0)
 
 
 def test_no_flip_makes_nothing_fragile_but_the_check_is_known(tmp_path: Path) -> None:
