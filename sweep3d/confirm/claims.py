@@ -139,6 +139,8 @@ def rule_claim(rule: Mapping[str, Any], spaces: Mapping[str, Choice | Range]) ->
             assert isinstance(space, Range)
             low = space.low if c["low"] is None else c["low"]
             high = space.high if c["high"] is None else c["high"]
+            if not low < high:  # the spec's range no longer reaches the rule's interval: nothing to draw
+                return None
             box.append((column, Side(intervals=((low, high),))))
     if not box:
         return None

@@ -371,8 +371,10 @@ def summary_key(store: Store, experiment: str, columns: list[str], failure_limit
             states.append([path.name, st.st_size, st.st_mtime_ns, st.st_ctime_ns, st.st_ino])
         except OSError:
             states.append([path.name, None])
-    # every module of this package: a view's code (class names, boundaries, ...) changes what is summarised
-    sources = [path.read_bytes() for path in sorted(Path(__file__).parent.glob("*.py"))]
+    # every module of this package (a view's code: class names, boundaries, ... changes what is
+    # summarised) and the step fit the boundaries view imports from the planner
+    here = Path(__file__).parent
+    sources = [path.read_bytes() for path in [*sorted(here.glob("*.py")), here.parent / "stages" / "plan" / "step_fit.py"]]
     code = hashlib.sha256(b"\0".join(sources)).hexdigest()
     described = {"format": SUMMARY_FORMAT, "experiment": experiment, "columns": list(columns),
                  "failure_limit": failure_limit, "files": states, "code": code, "duckdb": duckdb.__version__,

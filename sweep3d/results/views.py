@@ -163,27 +163,31 @@ def connect(store: Store, experiment: str | None = None, read_only: bool = False
     """
     files = store.view_files(experiment)
     con = store.connect(experiment, files)
-    parameters, models, min_visible = None, [], None
-    if "jobs" in files:
-        register_results(con, files["jobs"][0], "truths" in files)
-    if experiment is not None and store.jobs_path(experiment).exists():
-        parameters = stored_parameters(store.jobs_path(experiment))
-        models = stored_models(store.jobs_path(experiment))
-        min_visible = plan_min_visible(store.jobs_path(experiment))
-    shown = None
-    if has_view(con, "results"):
-        _create_macros(con)  # the stability views' Wilson intervals
-        register_fragile(con, drop=experiment is not None and plan_drops_fragile(store.jobs_path(experiment)))
-        shown = _select_model(con, models, model)
-    elif model is not None:
-        raise UserError(f"--model {model}: the experiment has no results yet")
-    if register_views(con, parameters, model=shown, min_visible=min_visible) and has_view(con, "results_all"):
-        register_compare_views(con, models, results_roles(con).has("prediction"))
-    verdicts = verdict_files(store)  # other sources' verdicts (photographs, another renderer)
-    register_agreement_views(con, verdicts, experiment)
-    explained = register_counterfactual_views(con, store, experiment)  # once `sweep3d explain` ran
-    if read_only:
-        lock_down(con, [path for paths in files.values() for path in paths] + verdicts + explained, writable)
+    try:  # a view that cannot be made (a damaged file, a bad model name) leaves no connection open
+        parameters, models, min_visible = None, [], None
+        if "jobs" in files:
+            register_results(con, files["jobs"][0], "truths" in files)
+        if experiment is not None and store.jobs_path(experiment).exists():
+            parameters = stored_parameters(store.jobs_path(experiment))
+            models = stored_models(store.jobs_path(experiment))
+            min_visible = plan_min_visible(store.jobs_path(experiment))
+        shown = None
+        if has_view(con, "results"):
+            _create_macros(con)  # the stability views' Wilson intervals
+            register_fragile(con, drop=experiment is not None and plan_drops_fragile(store.jobs_path(experiment)))
+            shown = _select_model(con, models, model)
+        elif model is not None:
+            raise UserError(f"--model {model}: the experiment has no results yet")
+        if register_views(con, parameters, model=shown, min_visible=min_visible) and has_view(con, "results_all"):
+            register_compare_views(con, models, results_roles(con).has("prediction"))
+        verdicts = verdict_files(store)  # other sources' verdicts (photographs, another renderer)
+        register_agreement_views(con, verdicts, experiment)
+        explained = register_counterfactual_views(con, store, experiment)  # once `sweep3d explain` ran
+        if read_only:
+            lock_down(con, [path for paths in files.values() for path in paths] + verdicts + explained, writable)
+    except BaseException:
+        con.close()
+        raise
     return con
 
 

@@ -102,13 +102,17 @@ def check_stability(spec: LoadedSpec, sample: int = DEFAULT_SAMPLE, seed: int = 
             rows = _sampled_results(reading, spec, settings.label if len(spec.spec.all_models) > 1 else None)
         keys = stratified_sample(rows, sample, seed)
         plan = plan_spec(spec, handle)
-        jobs = {job.pred_key: job for job in plan.jobs if job.pred_key in set(keys)}
+        sampled = set(keys)
+        jobs = {job.pred_key: job for job in plan.jobs if job.pred_key in sampled}
+        if len(jobs) < len(sampled):
+            raise UserError(f"{spec.path}: {len(sampled) - len(jobs)} sampled results are not in the spec's plan "
+                            "any more (the spec changed since the run): `sweep3d run` it, then check again")
         todo_changes = _applicable(handle, plan)
         wanted = {(key, change): stability_key(key, change, seed) for key in keys for change in todo_changes}
         have = store.key_set("stability")
         todo = sorted({key for (key, _), skey in wanted.items() if skey not in have}, key=keys.index)
         computed = _compute(store, spec, plan, handle, [jobs[k] for k in todo], todo_changes, seed, wanted, console,
-                            cached=len(keys) - len(todo))
+                            cached=len(keys) - len(todo), batch_size=settings.batch_size)
         skipped = [f"{c}: {why}" for c, why in _inapplicable(handle, plan).items()]
         out.append(_found(spec, settings.label, len(keys), computed, len(keys) - len(todo), skipped))
     return out
@@ -155,7 +159,7 @@ def _applicable(handle: Any, plan: Any) -> list[str]:
 
 
 def _compute(store: Store, spec: LoadedSpec, plan: Any, handle: Any, jobs: list, changes: list[str], seed: int,
-             wanted: dict[tuple[str, str], str], console: Any, cached: int = 0) -> int:
+             wanted: dict[tuple[str, str], str], console: Any, cached: int = 0, batch_size: int = 32) -> int:
     """Infer the baseline and each change of ``jobs``' images and append their rows; returns how many images."""
     if not jobs:
         return 0
@@ -172,7 +176,7 @@ def _compute(store: Store, spec: LoadedSpec, plan: Any, handle: Any, jobs: list,
     passes = truth_digests(store)
     have = store.key_set("stability")
     post = post_controls(plan)
-    batch = max(1, spec.spec.all_models[0].batch_size // (1 + len(changes)))
+    batch = max(1, batch_size // (1 + len(changes)))  # this model's batch, shared by the changed copies
     rows: list[dict[str, Any]] = []
     with RunProgress(console) as progress, progress.stage("stability", len(jobs), cached) as bar:
         for start in range(0, len(jobs), batch):

@@ -21,6 +21,9 @@ ENGINES = ("cycles", "mitsuba")
 #: Mitsuba's variant: ``scalar_rgb`` needs no system library, compiles no kernels, and took about
 #: the time ``llvm_ad_rgb`` took per 224² render here (benchmarks/mitsuba_variant.py; RESULTS.md).
 MITSUBA_VARIANT = "scalar_rgb"
+#: Bump when sweep3d's own translation of a scene into Mitsuba's (the OBJ/MTL reader, materials,
+#: lights, the world, the filter) changes its pixels: part of every Mitsuba render key.
+MITSUBA_TRANSLATION = 1
 #: Mesh files the Mitsuba engine reads (its own OBJ/MTL reader: ``mitsuba/objfile.py``).
 MITSUBA_MESHES = (".obj",)
 
@@ -38,7 +41,8 @@ def engine_key(engine: str) -> dict[str, Any] | None:
     """The engine's part of every render key: None for Cycles (its keys stay as they were)."""
     if engine == "cycles":
         return None
-    return {"name": engine, "version": mitsuba_version(), "variant": MITSUBA_VARIANT}
+    return {"name": engine, "version": mitsuba_version(), "variant": MITSUBA_VARIANT,
+            "translation": MITSUBA_TRANSLATION}
 
 
 def plan_device(engine: str, device: str) -> str:

@@ -272,3 +272,25 @@ def test_material_edits_and_parts_reach_mitsuba_s_pixels(tmp_path: Path) -> None
         scene.render()
     with pytest.raises(UserError, match="no object 'Bx'.*did you mean 'Box'"):
         scene.prepare(str(tmp_path / "two.obj"), black, Look(parts=("Bx",)))
+
+
+@pytest.mark.parametrize("bad", ["v 1 2", "v a b c", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1/x 2 3"])
+def test_a_malformed_mesh_line_is_one_line_naming_the_file_and_line(tmp_path, bad: str) -> None:
+    from sweep3d.core import UserError
+    from sweep3d.stages.render.mitsuba.objfile import read_obj
+
+    path = tmp_path / "bad.obj"
+    path.write_text(bad + "\n")
+    with pytest.raises(UserError, match=rf"bad\.obj:{len(bad.splitlines())}: cannot read"):
+        read_obj(path)
+
+
+def test_an_mtl_ior_below_one_is_blender_s_one_not_an_infinite_mitsuba_eta() -> None:
+    from sweep3d.stages.render.mitsuba.translate import principled
+
+    from sweep3d.stages.render.mitsuba.translate import MIN_SPECULAR
+
+    for ior in (0.0, 0.5, 1.0):  # "Ni 0.000000" is common; Blender's IOR input stops at 1: no reflection
+        assert principled({"ior": ior, "specular": 0.5})["bsdf"]["specular"] == MIN_SPECULAR
+    assert principled({"ior": 1.5, "specular": 0.5})["bsdf"]["specular"] == pytest.approx(0.5)  # Blender's default
+    assert principled({"ior": 1e6, "specular": 1.0})["bsdf"]["specular"] < 12.5  # never Mitsuba's infinite eta

@@ -81,19 +81,24 @@ def read_obj(path: Path) -> ObjMesh:
     libraries: list[str] = []
     obj = path.stem
     material, smooth = DEFAULT_MATERIAL, False
-    for line in text.splitlines():
+    for number, line in enumerate(text.splitlines(), 1):
         parts = line.split()
         if not parts:
             continue
         tag = parts[0]
-        if tag == "v":
-            positions.append((float(parts[1]), float(parts[2]), float(parts[3])))
-        elif tag == "vt":
-            texcoords.append((float(parts[1]), float(parts[2]) if len(parts) > 2 else 0.0))
-        elif tag == "vn":
-            normals.append((float(parts[1]), float(parts[2]), float(parts[3])))
-        elif tag == "f":
-            corners = [_corner(c, len(positions), len(texcoords), len(normals)) for c in parts[1:]]
+        try:
+            if tag == "v":
+                positions.append((float(parts[1]), float(parts[2]), float(parts[3])))
+            elif tag == "vt":
+                texcoords.append((float(parts[1]), float(parts[2]) if len(parts) > 2 else 0.0))
+            elif tag == "vn":
+                normals.append((float(parts[1]), float(parts[2]), float(parts[3])))
+            elif tag == "f":
+                corners = [_corner(c, len(positions), len(texcoords), len(normals)) for c in parts[1:]]
+        except (IndexError, ValueError):
+            raise UserError(f"{path}:{number}: cannot read {line.strip()[:60]!r} (a '{tag}' line needs numbers: "
+                            "fix or re-export the mesh)") from None
+        if tag == "f":
             bucket = faces.setdefault(obj, {}).setdefault((material, smooth), [])
             for tri in triangulate([positions[c[0]] for c in corners]):
                 bucket += (corners[tri[0]], corners[tri[1]], corners[tri[2]])

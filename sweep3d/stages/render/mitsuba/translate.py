@@ -155,7 +155,7 @@ def principled(values: dict[str, Any], texture: Any = None) -> dict[str, Any]:
 
     Blender's dielectric reflectance at normal incidence is ((ior − 1)/(ior + 1))² · 2 · level;
     Mitsuba's ``specular`` s gives 0.08 · s, so s = that / 0.08. Opacity wraps it in a ``mask``."""
-    ior = float(values.get("ior", 1.5))
+    ior = max(float(values.get("ior", 1.5)), 1.0)  # Blender's IOR input stops at 1 (an MTL's "Ni 0" is common)
     level = float(values.get("specular", 0.5))
     f0 = ((ior - 1.0) / (ior + 1.0)) ** 2 * 2.0 * level
     bsdf: dict[str, Any] = {
@@ -163,7 +163,7 @@ def principled(values: dict[str, Any], texture: Any = None) -> dict[str, Any]:
         "base_color": texture if texture is not None else _rgb(values.get("base_color", (0.8, 0.8, 0.8))),
         "roughness": float(min(max(values.get("roughness", 0.5), 0.0), 1.0)),
         "metallic": float(values.get("metallic", 0.0)),
-        "specular": max(f0 / 0.08, MIN_SPECULAR),
+        "specular": min(max(f0 / 0.08, MIN_SPECULAR), 12.0),  # Mitsuba's eta is infinite at 12.5
     }
     if values.get("coat"):
         bsdf["clearcoat"] = float(values["coat"])
