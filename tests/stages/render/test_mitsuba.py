@@ -286,9 +286,7 @@ def test_a_malformed_mesh_line_is_one_line_naming_the_file_and_line(tmp_path, ba
 
 
 def test_an_mtl_ior_below_one_is_blender_s_one_not_an_infinite_mitsuba_eta() -> None:
-    from sweep3d.stages.render.mitsuba.translate import principled
-
-    from sweep3d.stages.render.mitsuba.translate import MIN_SPECULAR
+    from sweep3d.stages.render.mitsuba.translate import MIN_SPECULAR, principled
 
     for ior in (0.0, 0.5, 1.0):  # "Ni 0.000000" is common; Blender's IOR input stops at 1: no reflection
         assert principled({"ior": ior, "specular": 0.5})["bsdf"]["specular"] == MIN_SPECULAR
