@@ -9,6 +9,7 @@ is the range's part below the boundary against the part above (a list's values o
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
 
@@ -139,7 +140,12 @@ def rule_claim(rule: Mapping[str, Any], spaces: Mapping[str, Choice | Range]) ->
             assert isinstance(space, Range)
             low = space.low if c["low"] is None else c["low"]
             high = space.high if c["high"] is None else c["high"]
-            if not low < high:  # the spec's range no longer reaches the rule's interval: nothing to draw
+            if space.integer:  # the rule's low < x <= high in whole numbers (an exclusive low is not in it)
+                low = math.floor(low) + 1 if c["low"] is not None else math.ceil(low)
+                high = math.floor(high)
+                if low > high:  # no whole number in it
+                    return None
+            elif not low < high:  # the spec's range no longer reaches the rule's interval: nothing to draw
                 return None
             box.append((column, Side(intervals=((low, high),))))
     if not box:

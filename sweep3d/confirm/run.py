@@ -89,12 +89,13 @@ def confirm(loaded: LoadedSpec, renders: int = DEFAULT_RENDERS, seed: int | None
         jobs = _jobs_by_index(plans_as_run(probe, store)[0])
         order = iter(scene_order(space, rows))
         for c in claims:
-            for pair in candidates[c.key]:
+            used = set(seen)  # the run's images and this claim's own twins: never another claim's choice,
+            for pair in candidates[c.key]:  # so a claim's pairs do not depend on the claims beside it
                 twins = [jobs.get(next(order)), jobs.get(next(order))]
                 keys = [j.image_key if j is not None and j.in_frame else None for j in twins]
-                if len(chosen[c.key]) < wanted and None not in keys and not (set(keys) & seen) and keys[0] != keys[1]:
+                if len(chosen[c.key]) < wanted and None not in keys and not (set(keys) & used) and keys[0] != keys[1]:
                     chosen[c.key].append(pair)
-                    seen.update(keys)
+                    used.update(keys)
     fresh = [row for c in claims for pair in chosen[c.key] for row in pair]
     outcomes: dict[int, tuple[bool, bool]] = {}
     rendered = cached = failed = 0

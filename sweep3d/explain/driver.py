@@ -30,7 +30,7 @@ from sweep3d.core import UserError, encode_png8
 from sweep3d.driver import Job, Plan, RunProgress, run_stages, unique_jobs
 from sweep3d.engine import plan_spec, plans_as_run, remove_leftovers
 from sweep3d.explain.search import Axis, Config, Fix, Progress, explain
-from sweep3d.results import SCHEMA, counterfactuals_path
+from sweep3d.results import SCHEMA, counterfactuals_path, create_margin_macro, margin_sql
 from sweep3d.spec import LoadedSpec, Point, Range, SearchSpace
 from sweep3d.stages.infer import InferStage, ModelHandle, pending_predictions
 from sweep3d.stages.plan import Listed, Policy, PolicyParams
@@ -147,19 +147,21 @@ def read_verdicts(plan: Plan, store: Store, jobs: Sequence[Job] | None = None) -
         label = f'"{roles.prediction}"' if roles.prediction else "NULL"
         loss = f'"{roles.loss}"' if roles.loss else "NULL"
         prob = "label_prob" if "label_prob" in present else "NULL"
-        topk = "topk_probs" if "topk_probs" in present else "NULL"
+        margin = margin_sql(present, prefix="")  # the results' own margin: one meaning everywhere
+        if margin is not None:
+            create_margin_macro(con)
         rows = con.execute(
-            f'SELECT pred_key, "{roles.valid}", "{roles.correct}", {label}, {loss}, {prob}, {topk} FROM predictions '
-            "WHERE pred_key IN (SELECT unnest(?))", [[j.pred_key for j in jobs]]).fetchall()
+            f'SELECT pred_key, "{roles.valid}", "{roles.correct}", {label}, {loss}, {prob}, {margin or "NULL"} '
+            "FROM predictions WHERE pred_key IN (SELECT unnest(?))", [[j.pred_key for j in jobs]]).fetchall()
         hidden = _hidden(jobs, store, con, plan.spec.evaluator.min_visible)
     finally:
         con.close()
     out = {}
     truth_of = {j.pred_key: j.truth_key for j in jobs}
-    for key, valid, correct, name, loss_value, probability, topk in rows:
+    for key, valid, correct, name, loss_value, probability, margin_value in rows:
         evaluable = truth_of.get(key) not in hidden
         out[key] = Verdict(bool(valid and correct) and evaluable, evaluable, name, bool(correct) if valid else None, _finite(loss_value),
-                           _finite(probability), _margin(correct, probability, topk))
+                           _finite(probability), _finite(margin_value) if valid else None)
     return out
 
 
@@ -174,15 +176,6 @@ def _hidden(jobs: Sequence[Job], store: Store, con, min_visible: float) -> set[s
 
 def _finite(value: Any) -> float | None:
     return float(value) if value is not None and math.isfinite(float(value)) else None
-
-
-def _margin(correct: bool | None, probability: float | None, topk: list[float] | None) -> float | None:
-    """The true class's probability less the best other class's: the top-1's when wrong, the
-    second's when right (as far as the top k tells)."""
-    if probability is None or not topk:
-        return None
-    other = topk[0] if not correct else (topk[1] if len(topk) > 1 else None)
-    return _finite(probability - other) if other is not None else None
 
 
 def run_failures(spec: LoadedSpec, store: Store) -> tuple[Plan, list[Job]]:

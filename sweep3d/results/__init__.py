@@ -8,7 +8,7 @@
 from __future__ import annotations
 
 __all__ = [
-    "ALPHA", "CONFIRMED", "pairs_needed", "COUNTERFACTUAL_VIEWS", "ControlEffect", "DEFAULT_RENDERS", "HIDDEN",
+    "ALPHA", "CONFIRMED", "create_margin_macro", "margin_sql", "pairs_needed", "COUNTERFACTUAL_VIEWS", "ControlEffect", "DEFAULT_RENDERS", "HIDDEN",
     "MACROS", "MARGIN_EDGES", "MEASURES", "OCCLUDED", "OUTCOMES", "OUT_OF_FRAME", "PlannedStore",
     "Region", "SCENE_COLUMNS", "SCHEMA", "Scale", "Summary", "UNCONFIRMED", "VERDICTS",
     "VERDICT_SCHEMA", "VIEW", "VIEWS", "Verdict", "arrow", "boundary_phrase", "connect",
@@ -47,7 +47,7 @@ if _TYPE_CHECKING:
         tally,
     )
     from sweep3d.results.counterfactuals import COUNTERFACTUAL_VIEWS, SCHEMA, counterfactuals_path
-    from sweep3d.results.fragile import MARGIN_EDGES, fragile_sentence
+    from sweep3d.results.fragile import MARGIN_EDGES, create_margin_macro, fragile_sentence, margin_sql
     from sweep3d.results.measures import MEASURES
     from sweep3d.results.own_jobs import PlannedStore, results_store
     from sweep3d.results.quoting import identifier, literal
@@ -83,6 +83,8 @@ __getattr__, __dir__ = _exports(__name__, {
     "ALPHA": ("sweep3d.results.confirmation", "ALPHA"),
     "CONFIRMED": ("sweep3d.results.confirmation", "CONFIRMED"),
     "pairs_needed": ("sweep3d.results.confirmation", "pairs_needed"),
+    "create_margin_macro": ("sweep3d.results.fragile", "create_margin_macro"),
+    "margin_sql": ("sweep3d.results.fragile", "margin_sql"),
     "COUNTERFACTUAL_VIEWS": ("sweep3d.results.counterfactuals", "COUNTERFACTUAL_VIEWS"),
     "ControlEffect": ("sweep3d.results.summary", "ControlEffect"),
     "DEFAULT_RENDERS": ("sweep3d.results.confirmation", "DEFAULT_RENDERS"),
