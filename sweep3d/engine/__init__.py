@@ -5,7 +5,7 @@ from __future__ import annotations
 
 __all__ = [
     "PlanStatus", "RunResult", "builtin_catalogue", "jobs_table", "plan_spec", "plan_status",
-    "plans_as_run", "remove_leftovers", "run", "write_unstored_images"
+    "plans_as_run", "remove_leftovers", "run", "write_plan_images", "write_unstored_images"
 ]
 
 # Lazy exports (PEP 562): a name's module is imported when first used, so importing this package
@@ -23,6 +23,7 @@ if _TYPE_CHECKING:
         plans_as_run,
         remove_leftovers,
         run,
+        write_plan_images,
         write_unstored_images,
     )
     from sweep3d.engine.status import PlanStatus, plan_status
@@ -37,5 +38,6 @@ __getattr__, __dir__ = _exports(__name__, {
     "plans_as_run": ("sweep3d.engine.pipeline", "plans_as_run"),
     "remove_leftovers": ("sweep3d.engine.pipeline", "remove_leftovers"),
     "run": ("sweep3d.engine.pipeline", "run"),
+    "write_plan_images": ("sweep3d.engine.pipeline", "write_plan_images"),
     "write_unstored_images": ("sweep3d.engine.pipeline", "write_unstored_images"),
 })

@@ -346,17 +346,27 @@ def write_unstored_images(spec: LoadedSpec, store: Store, keys: Iterable[str]) -
     wanted = {k for k in keys if k and not store.blob_path(k).exists()} & store.key_set("images")
     written = 0
     for plan in plans_as_run(spec, store) if wanted else ():
-        jobs = unique_jobs(PostprocessStage(), plan.jobs)
-        post, renders, passes = post_controls(plan), store.digests("renders"), truth_digests(store)
-        for key in sorted(wanted & jobs.keys()):
-            made = make_image(store, plan, jobs[key], post, renders.get(jobs[key].render_key), passes)
-            if made.pixels is not None:
-                atomic_write(store.blob_path(key), encode_png8(made.pixels), durable=False)
-                written += 1
-        wanted -= jobs.keys()
+        made, held = write_plan_images(store, plan, wanted)
+        written, wanted = written + made, wanted - held
         if not wanted:
             break
     return written
+
+
+def write_plan_images(store: Store, plan: Plan, keys: set[str] | None = None) -> tuple[int, set[str]]:
+    """Write the blobs of ``plan``'s post-processed images among ``keys`` (None: all of the plan's)
+    that have none, each made again from its stored render. Returns (how many were written, the
+    keys of ``keys`` the plan holds)."""
+    jobs = unique_jobs(PostprocessStage(), plan.jobs)
+    held = set(jobs) if keys is None else keys & jobs.keys()
+    post, renders, passes = post_controls(plan), store.digests("renders"), truth_digests(store)
+    written = 0
+    for key in sorted(k for k in held if not store.blob_path(k).exists()):
+        made = make_image(store, plan, jobs[key], post, renders.get(jobs[key].render_key), passes)
+        if made.pixels is not None:
+            atomic_write(store.blob_path(key), encode_png8(made.pixels), durable=False)
+            written += 1
+    return written, held
 
 
 def _missing_renders(plans: list[Plan], store: Store, executor: Executor) -> tuple[dict[int, int], list[Found]]:

@@ -25,16 +25,16 @@ import pyarrow as pa
 from rich.console import Console
 from rich.markup import escape
 
-from sweep3d.cache import Store, atomic_write
-from sweep3d.core import UserError, encode_png8
-from sweep3d.driver import Job, Plan, RunProgress, run_stages, unique_jobs
+from sweep3d.cache import Store
+from sweep3d.core import UserError
+from sweep3d.driver import Job, Plan, RunProgress, run_stages
 from sweep3d.engine import plan_spec, plans_as_run, remove_leftovers
 from sweep3d.explain.search import Axis, Config, Fix, Progress, explain
 from sweep3d.results import SCHEMA, counterfactuals_path, create_margin_macro, margin_sql
 from sweep3d.spec import LoadedSpec, Point, Range, SearchSpace
 from sweep3d.stages.infer import InferStage, ModelHandle, pending_predictions
 from sweep3d.stages.plan import Listed, Policy, PolicyParams
-from sweep3d.stages.postprocess import ImageHandoff, PostprocessStage, make_image, post_controls, truth_digests
+from sweep3d.stages.postprocess import ImageHandoff, PostprocessStage
 from sweep3d.stages.render import LOCAL, RenderStage
 
 CONCURRENT = 16  # failures searched together when the budget allows
@@ -343,19 +343,13 @@ def _written(change: tuple[str, str, str, float | None, float]) -> str:
 def _write_images(spec: LoadedSpec, store: Store, stages: _Stages, failure_keys: list[str]) -> None:
     """The failures' and fixes' images as blobs (the report shows them side by side), where the
     run made them in memory only (``[postprocess] store = "none"``)."""
-    from sweep3d.engine import write_unstored_images
+    from sweep3d.engine import write_plan_images, write_unstored_images
 
     if stages.post.store_images or not failure_keys:
         return
     write_unstored_images(spec, store, failure_keys)
-    plan = stages.fix_plan
-    jobs = [job for job in (plan.jobs if plan is not None else []) if not store.blob_path(job.image_key).exists()]
-    if plan is not None and jobs:
-        post, renders, passes = post_controls(plan), store.digests("renders"), truth_digests(store)
-        for key, job in unique_jobs(PostprocessStage(), jobs).items():
-            made = make_image(store, plan, job, post, renders.get(job.render_key), passes)
-            if made.pixels is not None:
-                atomic_write(store.blob_path(key), encode_png8(made.pixels), durable=False)
+    if stages.fix_plan is not None:
+        write_plan_images(store, stages.fix_plan)
 
 
 def print_explained(console: Console, result: ExplainResult, spec: Any = "SPEC") -> None:

@@ -909,3 +909,9 @@ def _png() -> bytes:
 CHROMIUM = Path("/usr/bin/chromium")
 CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
                  "--disable-component-update", "--no-first-run", "--disable-sync"]
+
+
+def scene_render_keys(path: Path) -> dict[tuple[str, int], str]:
+    """The render key of each (environment, yaw) of the spec at ``path`` (a TINY_SPEC-like grid)."""
+    plan = plan_for(load_spec(path), "stand-in")
+    return {(j.environment, j.values["orientation"]["yaw"]): j.render_key for j in plan.jobs}

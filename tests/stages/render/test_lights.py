@@ -16,7 +16,7 @@ from sweep3d.spec.models import KeyLightSpec
 from sweep3d.stages.render.lights import direction, facing, kelvin_to_rgb, light_colour
 from sweep3d.stages.render.state import SceneState
 from sweep3d.stages.render.worker_protocol import EnvironmentRef
-from tests.helpers import TINY_SPEC, load_spec, plan_for, render, sphere_obj, write_spec
+from tests.helpers import TINY_SPEC, load_spec, plan_for, render, scene_render_keys, sphere_obj, write_spec
 
 SUN = '[[controls]]\ntype = "sun_light"\n'
 AREA = '[[controls]]\ntype = "area_light"\n'
@@ -26,11 +26,6 @@ def spec_with(tmp_path: Path, extra: str = "", env: str = "") -> Path:
     tmp_path.mkdir(parents=True, exist_ok=True)
     body = TINY_SPEC.replace('color = [1.0, 1.0, 1.0]\n', f'color = [1.0, 1.0, 1.0]\n{env}', 1)
     return write_spec(tmp_path, body + extra)
-
-
-def render_keys(path: Path) -> dict[tuple[str, int], str]:
-    plan = plan_for(load_spec(path), "stand-in")
-    return {(j.environment, j.values["orientation"]["yaw"]): j.render_key for j in plan.jobs}
 
 
 # -- the spec ---------------------------------------------------------------------------------
@@ -85,9 +80,9 @@ def test_the_cli_says_a_negative_light_in_one_line_and_exits_2(tmp_path) -> None
 # -- keys -------------------------------------------------------------------------------------
 
 def test_lights_at_zero_render_nothing_new(tmp_path) -> None:
-    plain = render_keys(spec_with(tmp_path / "a"))
-    assert render_keys(spec_with(tmp_path / "b", SUN + 'strength = 0.0\nrelative_to = "camera"\n')) == plain
-    assert render_keys(spec_with(tmp_path / "c", AREA + "watts = [0.0]\nsize = 3.0\n")) == plain
+    plain = scene_render_keys(spec_with(tmp_path / "a"))
+    assert scene_render_keys(spec_with(tmp_path / "b", SUN + 'strength = 0.0\nrelative_to = "camera"\n')) == plain
+    assert scene_render_keys(spec_with(tmp_path / "c", AREA + "watts = [0.0]\nsize = 3.0\n")) == plain
     lit = {j.render_key for j in plan_for(load_spec(spec_with(tmp_path / "d", SUN + "strength = [0.0, 2.0]\n")),
                                           "stand-in").jobs}
     assert len(lit) == 2 * len(plain)  # strength 2 makes new renders, strength 0 is the old ones
@@ -95,9 +90,9 @@ def test_lights_at_zero_render_nothing_new(tmp_path) -> None:
 
 
 def test_the_key_light_is_in_a_plain_colour_render_key_and_off_is_the_old_key(tmp_path) -> None:
-    default = render_keys(spec_with(tmp_path / "a"))
-    off = render_keys(spec_with(tmp_path / "b", env="key_light = false\n"))
-    softer = render_keys(spec_with(tmp_path / "c", env="key_light = { angle = 20 }\n"))
+    default = scene_render_keys(spec_with(tmp_path / "a"))
+    off = scene_render_keys(spec_with(tmp_path / "b", env="key_light = false\n"))
+    softer = scene_render_keys(spec_with(tmp_path / "c", env="key_light = { angle = 20 }\n"))
     for yaw in (0, 45):
         assert default["white", yaw] != off["white", yaw] != softer["white", yaw] != default["white", yaw]
         assert default["studio", yaw] == off["studio", yaw] == softer["studio", yaw]
@@ -106,9 +101,9 @@ def test_the_key_light_is_in_a_plain_colour_render_key_and_off_is_the_old_key(tm
 
 
 def test_a_camera_relative_key_light_keys_as_before_and_a_world_one_does_not(tmp_path) -> None:
-    default = render_keys(spec_with(tmp_path / "a"))
-    riding = render_keys(spec_with(tmp_path / "b", env='key_light = { relative_to = "camera" }\n'))
-    world = render_keys(spec_with(tmp_path / "c", env='key_light = { relative_to = "world" }\n'))
+    default = scene_render_keys(spec_with(tmp_path / "a"))
+    riding = scene_render_keys(spec_with(tmp_path / "b", env='key_light = { relative_to = "camera" }\n'))
+    world = scene_render_keys(spec_with(tmp_path / "c", env='key_light = { relative_to = "world" }\n'))
     assert riding == default
     assert all(world["white", yaw] != default["white", yaw] and world["studio", yaw] == default["studio", yaw]
                for yaw in (0, 45))

@@ -22,7 +22,7 @@ from sweep3d.stages.render.controls.rendered_control import RenderedControl
 from sweep3d.stages.render.engines import engine_key, mitsuba_version
 from sweep3d.stages.render.render_keys import scene_key
 from sweep3d.stages.render.worker_protocol import EnvironmentRef, RenderJob, RenderSettings
-from tests.helpers import TINY_SPEC, load_spec, plan_for, write_cube, write_spec
+from tests.helpers import TINY_SPEC, load_spec, plan_for, scene_render_keys, write_cube, write_spec
 
 CONTROLS = builtin_catalogue().controls
 
@@ -33,17 +33,12 @@ def spec_with(folder: Path, render: str = "", extra: str = "") -> Path:
     return write_spec(folder, body + extra)
 
 
-def render_keys(path: Path) -> dict[tuple[str, int], str]:
-    plan = plan_for(load_spec(path), "stand-in")
-    return {(j.environment, j.values["orientation"]["yaw"]): j.render_key for j in plan.jobs}
-
-
 # -- keys and refusals (no rendering) ------------------------------------------------------------
 
 def test_the_engine_keys_mitsuba_apart_and_cycles_as_before(tmp_path: Path) -> None:
-    default = render_keys(spec_with(tmp_path / "a"))
-    cycles = render_keys(spec_with(tmp_path / "b", 'engine = "cycles"\n'))
-    mitsuba = render_keys(spec_with(tmp_path / "c", 'engine = "mitsuba"\n'))
+    default = scene_render_keys(spec_with(tmp_path / "a"))
+    cycles = scene_render_keys(spec_with(tmp_path / "b", 'engine = "cycles"\n'))
+    mitsuba = scene_render_keys(spec_with(tmp_path / "c", 'engine = "mitsuba"\n'))
     assert cycles == default  # naming the default changes no key
     assert set(mitsuba) == set(default) and not set(mitsuba.values()) & set(default.values())
     assert len(set(mitsuba.values())) == len(mitsuba)
