@@ -19,7 +19,6 @@ run by pyproject's addopts; ``pytest -m soak`` runs it.
 
 from __future__ import annotations
 
-import fcntl
 import os
 import re
 import shutil
@@ -217,41 +216,23 @@ def pytest_terminal_summary(terminalreporter, exitstatus: int, config: pytest.Co
 
 
 @pytest.fixture(scope="session", autouse=True)
-def _one_onnx_export_per_model(tmp_path_factory):
-    """One ONNX export per model per test run: every run into a fresh store exports its model again
-    (2-3 s for EfficientNet-Lite0 on 2 cores), so the first export of each model digest is kept here
-    and copied into later stores instead. Only the export is shared: each runner still loads the
-    file and checks it against torch (``OnnxRunner._check``), and a failing export is never kept.
-    Runs in child processes (``python -m sweep3d``) export as before. Not in the fast lane (no inference)."""
-    if LANE:
-        yield
-        return
-    from sweep3d.stages.infer.onnx_backend import OnnxRunner
-
+def _one_user_cache_per_test_run(tmp_path_factory):
+    """The user's cache folder (``SWEEP3D_CACHE``: ONNX exports and their checks) is one folder of
+    this test run, shared by its worker processes and the ``python -m sweep3d`` children they
+    start: a fresh store then takes its model's export from it, as a user's does (EfficientNet-Lite0's
+    export takes 2-3 s on 2 cores), and no test writes into the real ``~/.cache``."""
     base = tmp_path_factory.getbasetemp()
-    cache = (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / "onnx_exports"  # the processes' own
-    cache.mkdir(exist_ok=True)
-    export = OnnxRunner._export
-
-    def cached_export(self, classifier, scratch):
-        kept = cache / self.path.name  # named by the model's digest (weights and preprocessing), as in a store
-        with open(cache / f"{self.path.name}.lock", "w") as lock:
-            fcntl.flock(lock, fcntl.LOCK_EX)  # another process exporting the same model: wait for its file
-            if not kept.exists():
-                export(self, classifier, scratch)
-                shutil.copyfile(self.path, kept.with_suffix(".partial"))
-                kept.with_suffix(".partial").rename(kept)
-                return
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        staged = self.path.with_name(f".{self.path.name}.copy.tmp")
-        shutil.copyfile(kept, staged)
-        staged.replace(self.path)
-
-    OnnxRunner._export = cached_export
+    folder = (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / "user_cache"
+    folder.mkdir(exist_ok=True)
+    before = os.environ.get("SWEEP3D_CACHE")
+    os.environ["SWEEP3D_CACHE"] = str(folder)
     try:
-        yield
+        yield folder
     finally:
-        OnnxRunner._export = export
+        if before is None:
+            os.environ.pop("SWEEP3D_CACHE", None)
+        else:
+            os.environ["SWEEP3D_CACHE"] = before
 
 
 @pytest.fixture(scope="session")

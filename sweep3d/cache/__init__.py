@@ -7,7 +7,7 @@ __all__ = [
     "NEWEST_WINS", "OUTPUTS_FOLDER", "PHOTOS_FOLDER", "SUFFIX", "SegmentWriter", "Store", "StoreWriteError",
     "TABLES", "TRUTH_BLOBS", "Template", "atomic_write", "canonical", "canonical_pieces", "collect_garbage", "compact_table",
     "damaged_blobs", "digest", "digests", "file_digest", "files_digest", "float_texts",
-    "full_disk_error", "is_full_disk", "is_select", "load_image", "load_pass", "lock_down", "members",
+    "full_disk_error", "is_full_disk", "is_select", "load_image", "load_pass", "load_pixels", "lock_down", "members",
     "pack", "photo_path", "read_manifest", "record", "remember_written",
     "remove_killed_writers_temp_files", "repair", "safe_filename", "sha256_bytes", "skip_pandas_probe", "stale", "store_stats", "unpack",
     "utc_now", "verify", "written_from"
@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING as _TYPE_CHECKING  # noqa: E402
 from sweep3d.core import exports as _exports  # noqa: E402
 
 if _TYPE_CHECKING:
-    from sweep3d.cache.blobs import damaged_blobs, load_image, load_pass, sha256_bytes
+    from sweep3d.cache.blobs import damaged_blobs, load_image, load_pass, load_pixels, sha256_bytes
     from sweep3d.cache.digested import OUTPUTS_FOLDER, SUFFIX, pack, unpack
     from sweep3d.cache.extracted import ASSETS_FOLDER, MANIFEST, members, read_manifest, record, stale
     from sweep3d.cache.hashing import (
@@ -99,6 +99,7 @@ __getattr__, __dir__ = _exports(__name__, {
     "is_full_disk": ("sweep3d.cache.store", "is_full_disk"),
     "is_select": ("sweep3d.cache.store", "is_select"),
     "load_image": ("sweep3d.cache.blobs", "load_image"),
+    "load_pixels": ("sweep3d.cache.blobs", "load_pixels"),
     "load_pass": ("sweep3d.cache.blobs", "load_pass"),
     "lock_down": ("sweep3d.cache.store", "lock_down"),
     "members": ("sweep3d.cache.extracted", "members"),

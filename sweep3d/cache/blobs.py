@@ -49,10 +49,18 @@ def blob_is_intact(data: bytes, digests: set[str]) -> bool:
 
 def decode_image(data: bytes) -> np.ndarray | None:
     """PNG bytes as float32 (H, W, 3) in [0, 1], or None when they do not decode."""
-    from sweep3d.core import decode_png
+    from sweep3d.core import from_uint8
+
+    pixels = decode_pixels(data)
+    return None if pixels is None else from_uint8(pixels)
+
+
+def decode_pixels(data: bytes) -> np.ndarray | None:
+    """PNG bytes as their uint8 (H, W, 3) pixels, or None when they do not decode."""
+    from sweep3d.core import decode_png8
 
     try:
-        return decode_png(io.BytesIO(data))  # type: ignore[arg-type]  (PIL opens file objects too)
+        return decode_png8(io.BytesIO(data))
     except Exception:  # noqa: BLE001  (any decoder failure means a damaged blob)
         return None
 
@@ -81,6 +89,18 @@ def read_blob(path: Path) -> bytes | None:
 def load_image(store: Store, key: str, digests: set[str] | None) -> np.ndarray | None:
     """The blob ``key`` as float32 (H, W, 3) in [0, 1]; None if it is missing or damaged.
 
+    Raises:
+        StoreReadError: it cannot be read (see :func:`read_blob`).
+    """
+    from sweep3d.core import from_uint8
+
+    pixels = load_pixels(store, key, digests)
+    return None if pixels is None else from_uint8(pixels)
+
+
+def load_pixels(store: Store, key: str, digests: set[str] | None) -> np.ndarray | None:
+    """The blob ``key`` as its uint8 (H, W, 3) pixels; None if it is missing or damaged.
+
     Args:
         digests: the SHA-256 digests its rows recorded (empty or None: only check it decodes).
 
@@ -92,7 +112,7 @@ def load_image(store: Store, key: str, digests: set[str] | None) -> np.ndarray |
         return None
     if digests and sha256_bytes(data) not in digests:
         return None
-    return decode_image(data)
+    return decode_pixels(data)
 
 
 def load_pass(store: Store, truth_key: str, name: str, digests: set[str] | None = None) -> np.ndarray | None:

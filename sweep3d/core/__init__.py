@@ -9,7 +9,7 @@ __all__ = [
     "PARTS_LAYOUT", "PASSES", "PLUGIN_FAILURES", "PluginError", "Registry", "RenderError", "Roles",
     "SpecError", "SpecPath", "StoreBusyError", "TRUTH_PASSES", "TRUTH_VERSION", "Typed", "UV_MAP",
     "UserError", "blamed", "box", "code_identity", "control_label", "csv_text", "declaration_problem",
-    "decode_depth", "decode_mask", "decode_png", "encode_depth", "encode_mask", "encode_png",
+    "decode_depth", "decode_mask", "decode_png", "decode_png8", "encode_depth", "encode_mask", "encode_png",
     "encode_png8", "exports", "from_uint8", "ground_truth", "is_spec_path", "is_user_plugin",
     "linear_to_srgb", "loop_uvs", "part_bounds", "part_counts", "plugin_failure", "png_size",
     "printable", "read_record", "srgb_to_linear", "to_uint8", "wrap_periodic_many"
@@ -53,6 +53,7 @@ if _TYPE_CHECKING:
     from sweep3d.core.lazy import exports
     from sweep3d.core.pixels import (
         decode_png,
+        decode_png8,
         encode_png,
         encode_png8,
         from_uint8,
@@ -123,6 +124,7 @@ __getattr__, __dir__ = _exports(__name__, {
     "decode_depth": ("sweep3d.core.truth", "decode_depth"),
     "decode_mask": ("sweep3d.core.truth", "decode_mask"),
     "decode_png": ("sweep3d.core.pixels", "decode_png"),
+    "decode_png8": ("sweep3d.core.pixels", "decode_png8"),
     "encode_depth": ("sweep3d.core.truth", "encode_depth"),
     "encode_mask": ("sweep3d.core.truth", "encode_mask"),
     "encode_png": ("sweep3d.core.pixels", "encode_png"),

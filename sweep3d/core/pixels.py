@@ -10,9 +10,14 @@ from PIL import Image
 
 
 def to_uint8(rgb: np.ndarray) -> np.ndarray:
-    """Quantise a float image; NaN becomes 0 (callers flag non-finite images before this)."""
-    clean = np.nan_to_num(rgb, nan=0.0, posinf=1.0, neginf=0.0)
-    return (np.clip(clean, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
+    """Quantise a float image (round half up after clipping to [0, 1]); NaN becomes 0, +inf 255
+    (callers flag non-finite images before this). One copy, then in place: it runs once per
+    post-processed image, so its passes over the image count (benchmarks/RESULTS.md, issue 37)."""
+    scaled = np.clip(rgb, 0.0, 1.0)  # +inf → 1, -inf → 0; NaN stays NaN
+    scaled *= 255.0
+    scaled += 0.5
+    scaled[np.isnan(scaled)] = 0.0
+    return scaled.astype(np.uint8)
 
 
 def from_uint8(pixels: np.ndarray) -> np.ndarray:
@@ -41,8 +46,13 @@ def png_size(data: bytes) -> tuple[int, int]:
 
 def decode_png(path: str | Path) -> np.ndarray:
     """A PNG file as float32 (H, W, 3) in [0, 1]."""
+    return from_uint8(decode_png8(path))
+
+
+def decode_png8(path: str | Path | io.BytesIO) -> np.ndarray:
+    """A PNG file (or its bytes in a file object) as its uint8 (H, W, 3) RGB pixels."""
     with Image.open(path) as img:
-        return np.asarray(img.convert("RGB"), dtype=np.float32) / 255.0
+        return np.asarray(img if img.mode == "RGB" else img.convert("RGB"), dtype=np.uint8)
 
 
 def srgb_to_linear(rgb: np.ndarray) -> np.ndarray:

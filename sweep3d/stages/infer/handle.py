@@ -107,6 +107,14 @@ class ModelHandle:
             return builtin_labels(self.name)
         return self._classifier.label_map() if self._classifier is not None else None
 
+    def unloaded(self) -> Classifier:
+        """A built-in model's preprocessing for this framing and its classes, its torch module not
+        loaded (None): what ONNX Runtime needs to serve it (see ``onnx_backend``)."""
+        if builtin_model(self.name) is None:
+            raise ValueError(f"{self.name!r} is not a built-in model: its factory gives its preprocessing")
+        preprocess = for_model_framing(self.preprocess, self.name) if self.framing.model else self.preprocess
+        return Classifier(None, preprocess, None)
+
     def classifier(self) -> Classifier:
         """The model ready for inference (loaded on first use), preprocessing for this framing."""
         if self._classifier is None:

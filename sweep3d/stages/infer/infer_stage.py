@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING, Any, Callable, Iterable, Iterator, Mapping
 import numpy as np
 import pyarrow as pa
 
-from sweep3d.cache import Store, load_image, load_pass, utc_now
+from sweep3d.cache import Store, load_pass, load_pixels, utc_now
 from sweep3d.core import SpecError, UserError, from_uint8
 from sweep3d.driver import Computed, Feed, Job, JobList, Plan, unique_jobs
 from sweep3d.spec import PREDICTION_COLUMNS, LoadedSpec, ModelSpec
@@ -36,7 +36,7 @@ from sweep3d.stages.infer.evaluators import EVALUATORS, Evaluator, Truth
 from sweep3d.stages.infer.handle import ModelHandle, model_key_path
 from sweep3d.stages.infer.kept_outputs import KeptOutputs
 from sweep3d.stages.infer.labels import LabelMap
-from sweep3d.stages.infer.models import builtin_model
+from sweep3d.stages.infer.models import Classifier, builtin_model
 from sweep3d.stages.infer.outputs import Localized
 from sweep3d.stages.infer.task_calls import check_task, model_outputs
 from sweep3d.stages.postprocess import ImageHandoff, make_image, post_controls, truth_digests
@@ -105,6 +105,7 @@ class InferStage:
         self.backend: str | None = None  # chosen by ``prepare``
         self._labels: LabelMap | None = None
         self._runner: OnnxRunner | None = None
+        self._model: Classifier | None = None  # what prepare tried: the loaded model, or a built-in's unloaded view
         self._made: tuple[Any, Evaluator] | None = None  # (the spec's [evaluator], the evaluator it made)
 
     def schema(self, plan: Plan) -> pa.Schema:
@@ -130,37 +131,53 @@ class InferStage:
 
     def prepare(self, plan: Plan, store: Store) -> None:
         """Load the model and try it on one blank image, so that a broken model, a wrong output
-        shape or a label it lacks fails in seconds, before anything is rendered.
+        shape or a label it lacks fails in seconds, before anything is rendered. A built-in model
+        that ONNX Runtime serves is tried through ONNX Runtime, and torch is not imported unless
+        its graph must be exported or checked (see ``onnx_kept``).
 
         Raises:
             SpecError: naming ``model.name`` or the object's labels, with the fix.
         """
-        import torch
-
         spec = plan.spec
-        torch.set_num_threads(self._threads())
         task = self._evaluator(plan).task
+        self.backend = choose_backend(spec, self.model.settings, self.on_ray)
+        if self.backend == "onnx" and task != "classification":
+            raise SpecError(str(spec.path), model_key_path(spec, self.model.settings).replace("name", "backend"),
+                            f"the onnx backend serves classification only, not {task!r}; use backend = \"torch\"")
+        served = self.backend in ("onnx", STAND_IN) and builtin_model(self.model.name) is not None
+        if served:
+            self._model = self.model.unloaded()
+            object_class_ids(plan, self._model.label_map(), self.model.name)
+            self._runner = self._runner or self._served_by_onnx(plan, store, beside=self.backend == STAND_IN)
+            served = self._runner is not None  # else torch, which stood in for a failed stand-in
+        if not served:
+            import torch
+
+            torch.set_num_threads(self._threads())
+            self._model = self.model.classifier()
+        model = self._model
         try:
-            model = self.model.classifier()
             labels = model.label_map()
             check_task(model, task, self.model.name)
             size = self.model.framing.crop
-            outputs = model_outputs(model, np.zeros((1, size, size, 3), np.float32), task, self.model.name)
+            outputs = model_outputs(model, np.zeros((1, size, size, 3), np.float32), task, self.model.name,
+                                    self._runner if served else None)
             _check_classes(outputs, labels, self.model.name)
         except SpecError:
             raise
         except UserError as exc:
             raise SpecError(str(spec.path), model_key_path(spec, self.model.settings), str(exc)) from None
         object_class_ids(plan, labels, self.model.name)  # a label the model lacks fails now, naming the object
-        self.backend = choose_backend(spec, self.model.settings, self.on_ray)
-        if self.backend == "onnx" and task != "classification":
-            raise SpecError(str(spec.path), model_key_path(spec, self.model.settings).replace("name", "backend"),
-                            f"the onnx backend serves classification only, not {task!r}; use backend = \"torch\"")
-        if self.backend == "onnx":  # asked for: its failure is the user's to see now
-            self._runner = self._onnx(plan, store, self._threads())
-        elif self.backend == STAND_IN and self._runner is None:  # exported and checked now, while
-            self._runner = self._stand_in(plan, store, self._threads(beside=True))  # Blender starts
+        if self.backend in ("onnx", STAND_IN) and self._runner is None:
+            self._runner = self._served_by_onnx(plan, store, beside=self.backend == STAND_IN)
         self._labels = labels
+
+    def _served_by_onnx(self, plan: Plan, store: Store, beside: bool) -> OnnxRunner | None:
+        """The ONNX Runtime runner of the run's backend: asked for (its failure is the user's to see
+        now) or standing in (exported and checked now, while Blender starts; None: torch instead)."""
+        if self.backend == "onnx":
+            return self._onnx(plan, store, self._threads())
+        return self._stand_in(plan, store, self._threads(beside=beside))
 
     def compute(self, todo: Feed, plan: Plan, store: Store) -> Iterator[Computed]:
         if self._labels is None:
@@ -192,18 +209,19 @@ class InferStage:
                   threads: int) -> Callable[[list[Job], list[np.ndarray], list[dict]], list[dict]]:
         """A function from a batch's jobs and pixels to their evaluator rows, on the run's backend
         with ``threads`` threads."""
-        import torch
-
-        model, labels = self.model.classifier(), self._labels
+        labels = self._labels
         truths = object_class_ids(plan, labels, self.model.name)
         evaluator, kind = self._evaluator(plan), plan.spec.evaluator.kind
         if self.backend == STAND_IN and self._runner is None:
             self._runner = self._stand_in(plan, store, threads)
-        if self._runner is not None:
+        if self._runner is not None:  # torch, if ever loaded, runs the odd near tie on one thread (onnx_backend)
             self._runner.use_threads(threads)
-        # Beside ONNX Runtime, torch only normalises batches and runs the odd near tie: with more
-        # threads, its idle ones would spin on the cores ONNX Runtime's threads are working on.
-        torch.set_num_threads(threads if self._runner is None else 1)
+            model = self._model if self._model is not None else self.model.classifier()
+        else:
+            import torch
+
+            model = self.model.classifier()
+            torch.set_num_threads(threads)
         remote = None
         if self.on_ray and self.backend == "torch" and evaluator.task == "classification":  # batches go to an inference actor (GPU if any)
             from sweep3d.stages.infer.ray_actor import remote_runner
@@ -219,7 +237,7 @@ class InferStage:
             if computed:
                 stacked = padded(np.stack(pixels), self.model.settings.batch_size if self._pads() else 0)
                 if remote is not None:
-                    outputs = remote(stacked)
+                    outputs = remote(from_uint8(stacked))
                 else:
                     outputs = model_outputs(model, stacked, evaluator.task, self.model.name, self._runner)
                 outputs = first_rows(outputs, len(pixels))
@@ -244,7 +262,7 @@ class InferStage:
     def _onnx(self, plan: Plan, store: Store, threads: int, exact_ranks: int | None = None) -> OnnxRunner:
         from sweep3d.stages.infer.onnx_backend import OnnxRunner
 
-        return OnnxRunner(self.model.classifier(), store.root / "models", self.model.digest, threads,
+        return OnnxRunner(self.model.classifier, store.root / "models", self.model.digest, threads,
                           exact_ranks, scratch=store.root / "tmp")
 
     def _stand_in(self, plan: Plan, store: Store, threads: int) -> OnnxRunner | None:
@@ -326,11 +344,13 @@ class ModelInputs:
         self.post = post_controls(plan)
 
     def pixels(self, job: Job) -> np.ndarray | tuple[str, str]:
-        """float32 (H, W, 3) in [0, 1], or the (table, key) of the input found damaged or missing."""
+        """uint8 (H, W, 3), what the stored PNG holds (the model's preprocessing makes them float,
+        or looks them up: ``models.preprocessed``), or the (table, key) of the input found damaged
+        or missing."""
         table = _table(job)
         kept = self.handoff.take(job.image_key) if self.handoff is not None else None
         if kept is not None:  # made (or decoded, for a render) by the postprocess stage in this process
-            return from_uint8(kept)
+            return kept
         if table == "images":
             recorded = self.digests["images"].get(job.image_key)
             if not recorded:  # not stored: made again (a blob the report wrote, unrecorded, is a copy)
@@ -338,8 +358,8 @@ class ModelInputs:
                                   self.digests["renders"].get(job.render_key), self.passes)
                 if made.pixels is None:
                     return made.damaged or ("images", job.image_key)
-                return from_uint8(made.pixels)
-        image = load_image(self.store, job.image_key, self.digests[table].get(job.image_key))
+                return made.pixels
+        image = load_pixels(self.store, job.image_key, self.digests[table].get(job.image_key))
         return (table, job.image_key) if image is None else image
 
 

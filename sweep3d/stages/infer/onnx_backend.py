@@ -12,9 +12,12 @@ It serves in two ways (``stages.infer.infer_stage.choose_backend`` picks):
   finite), that image is run through torch: the ranks the evaluator records (top-1, top-k and
   their order) are torch's.
 
-The torch module is exported once per model digest into the store (``models/<digest>.onnx``);
-the check runs every time a runner is made (a second or so), so a new onnxruntime or torch
-release is checked too.
+The torch module is exported once per model digest into the store (``models/<digest>.onnx``), and
+its check's outcome is kept beside it under the graph's bytes, the torch and onnxruntime releases
+and the CPU (``onnx_kept``): a new release or another machine is checked again. Both are also kept
+in the user's cache folder, so that a fresh store neither exports nor checks again. With both
+kept, ONNX Runtime answers without torch being imported: the module is loaded at the first near
+tie (a second and a half on two cores, benchmarks/RESULTS.md, issue 37), or never.
 """
 
 from __future__ import annotations
@@ -24,12 +27,13 @@ import os
 import uuid
 import warnings
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
 from sweep3d.cache import atomic_write
 from sweep3d.core import UserError
+from sweep3d.stages.infer import onnx_kept
 from sweep3d.stages.infer.models import Classifier, on_device
 
 TOLERANCE = 1e-3  # max |logit difference| accepted between torch and ONNX Runtime
@@ -46,6 +50,8 @@ class OnnxRunner:
     """Runs a classifier's module through ONNX Runtime; call it with the preprocessed batch.
 
     Args:
+        model: the torch model, or what loads it: called only when torch is needed (an export,
+            its check, a near tie).
         folder: where the exported model is kept (the store's ``models/``).
         digest: the model's digest (its weights and preprocessing), naming the file.
         threads: ONNX Runtime's intra-op threads; idle ones sleep instead of spinning, so that
@@ -59,25 +65,38 @@ class OnnxRunner:
         UserError: when onnxruntime is missing, the export fails, or it disagrees with torch.
     """
 
-    def __init__(self, classifier: Classifier, folder: Path, digest: str, threads: int,
+    def __init__(self, model: Classifier | Callable[[], Classifier], folder: Path, digest: str, threads: int,
                  exact_ranks: int | None = None, scratch: Path | None = None) -> None:
         try:
             import onnxruntime  # noqa: F401  (the sessions import it again)
         except ImportError:
             raise UserError("model.backend = 'onnx' needs onnxruntime: pip install onnxruntime") from None
-        self.classifier, self.exact_ranks = classifier, exact_ranks
+        self._load = model if callable(model) else (lambda: model)
+        self._classifier: Classifier | None = None
+        self.exact_ranks = exact_ranks
         self.by_torch = 0  # images run through torch instead (near ties)
         self.error = TOLERANCE  # how far a logit may be from torch's: set by the check below
         self.path = folder / f"{digest}.onnx"
-        if not self.path.exists():
-            self._export(classifier, scratch or folder)
+        if not self.path.exists() and not onnx_kept.fetch(self.path):
+            self._export(scratch or folder)
         self.threads = threads
         self.session = _session(self.path, threads)
         # On the CPU, a row's logits are the same bits at any batch size, position, company and
         # thread count (checked on EfficientNet-Lite0); on CUDA that is not known.
         self.batch_invariant = self.session.get_providers() == ["CPUExecutionProvider"]
         self.input = self.session.get_inputs()[0].name
-        self._check(classifier)
+        checked = onnx_kept.checked_error(self.path, self.session.get_providers())
+        self.error = checked if checked is not None else self._check()
+
+    @property
+    def classifier(self) -> Classifier:
+        """The torch model (loaded, and torch imported, on first use: the export, its check, a near tie)."""
+        if self._classifier is None:
+            import torch
+
+            self._classifier = self._load()
+            torch.set_num_threads(1)  # beside ONNX Runtime's threads: idle torch threads would spin on its cores
+        return self._classifier
 
     def use_threads(self, threads: int) -> None:
         """Run with ``threads`` threads from now on (a new session of the same checked export)."""
@@ -112,8 +131,10 @@ class OnnxRunner:
                 out.append((logits[0] if isinstance(logits, (tuple, list)) else logits).float().cpu().numpy())
         return np.concatenate(out)
 
-    def _export(self, classifier: Classifier, scratch: Path) -> None:
+    def _export(self, scratch: Path) -> None:
         import torch
+
+        classifier = self.classifier
 
         sample = on_device(classifier.module, classifier.preprocess(np.full((1, 256, 256, 3), 0.5, np.float32)))
         buffer = io.BytesIO()
@@ -130,11 +151,15 @@ class OnnxRunner:
         atomic_write(staged, buffer.getvalue())
         self.path.parent.mkdir(parents=True, exist_ok=True)
         os.replace(staged, self.path)
+        onnx_kept.keep(self.path)
 
-    def _check(self, classifier: Classifier) -> None:
-        """Refuse an export whose top-1 or logits differ from torch's on a fixed batch."""
+    def _check(self) -> float:
+        """The largest logit difference from torch on a fixed batch, times ``SAFETY`` (see
+        :data:`SAFETY`), kept for the next runner; an export whose top-1 or logits differ from
+        torch's is refused (and deleted)."""
         import torch
 
+        classifier = self.classifier
         rng = np.random.default_rng(0)
         images = np.concatenate([rng.random((CHECK_BATCH - 1, 240, 240, 3), dtype=np.float32),
                                  np.full((1, 240, 240, 3), 0.5, np.float32)])
@@ -147,7 +172,9 @@ class OnnxRunner:
             self.path.unlink(missing_ok=True)
             raise UserError(f"the ONNX export disagrees with torch (max logit difference {diff:.2g}); "
                             "use model.backend = 'torch'")
-        self.error = min(TOLERANCE, max(SAFETY * diff, FLOOR))
+        error = min(TOLERANCE, max(SAFETY * diff, FLOOR))
+        onnx_kept.keep_check(self.path, self.session.get_providers(), error)
+        return error
 
 
 def _session(path: Path, threads: int) -> Any:

@@ -11,11 +11,11 @@ from typing import Any, Callable
 
 import numpy as np
 
-from sweep3d.core import PLUGIN_FAILURES, UserError, plugin_failure
+from sweep3d.core import PLUGIN_FAILURES, UserError, from_uint8, plugin_failure
 from sweep3d.stages.infer import outputs
 from sweep3d.stages.infer.cam import cam_localize, supports_cam
 from sweep3d.stages.infer.evaluators.evaluator import TASKS
-from sweep3d.stages.infer.models import Classifier, Detector, Preprocess, Segmenter, on_device
+from sweep3d.stages.infer.models import Classifier, Detector, Preprocess, Segmenter, on_device, preprocessed
 from sweep3d.stages.infer.outputs import Localized
 
 
@@ -23,7 +23,7 @@ def predict(model: Classifier, images: np.ndarray, name: str = "the model", runn
     """Logits of a batch.
 
     Args:
-        images: float32 (N, H, W, 3) in [0, 1].
+        images: float32 (N, H, W, 3) in [0, 1], or their uint8 pixels.
         name: the model's name in the spec, for error messages.
         runner: runs the preprocessed batch instead of the torch module (e.g. ONNX Runtime).
     Returns:
@@ -31,24 +31,25 @@ def predict(model: Classifier, images: np.ndarray, name: str = "the model", runn
     Raises:
         UserError: if the model raises or its output is not (N, C).
     """
-    import torch
-
     out = _call(model, images, name, runner)
     if isinstance(out, (tuple, list)):
         out = out[0]
-    if isinstance(out, np.ndarray):
-        out = torch.from_numpy(out)
-    if not isinstance(out, torch.Tensor) or out.ndim != 2 or out.shape[0] != len(images):
-        shape = tuple(out.shape) if isinstance(out, torch.Tensor) else type(out).__name__
+    if hasattr(out, "detach"):  # a torch tensor
+        out = out.detach().float().cpu().numpy()
+    if not isinstance(out, np.ndarray) or out.ndim != 2 or out.shape[0] != len(images):
+        shape = tuple(out.shape) if isinstance(out, np.ndarray) else type(out).__name__
         raise UserError(f"the model must return logits of shape (batch, classes); got {shape}")
-    return out.detach().float().cpu().numpy()
+    return out.astype(np.float32, copy=False)
 
 
 def model_outputs(model: Classifier, images: np.ndarray, task: str, name: str,
                   runner: Callable | None = None) -> Any:
-    """What ``task``'s evaluator reads, for a batch of stored images (N, H, W, 3) in [0, 1]."""
+    """What ``task``'s evaluator reads, for a batch of stored images (N, H, W, 3): float32 in
+    [0, 1], or their uint8 pixels."""
     if task == "classification":
         return predict(model, images, name, runner)
+    if images.dtype == np.uint8:
+        images = from_uint8(images)
     if task == "localization":
         return localize(model, images, name)
     if task == "detection":
@@ -110,13 +111,18 @@ def check_task(model: Classifier, task: str, name: str) -> None:
 
 
 def _call(model: Classifier, images: np.ndarray, name: str, runner: Callable | None = None) -> Any:
-    """The module's (or ``runner``'s) output on the preprocessed batch; its failure as a UserError."""
-    import torch
-
+    """The module's (or ``runner``'s) output on the preprocessed batch; its failure as a UserError.
+    A runner (ONNX Runtime) is called without torch, which it imports only if it needs it."""
     try:
+        if runner is not None:
+            return runner(preprocessed(model.preprocess, images))
+        import torch
+
         with torch.inference_mode():
-            batch = model.preprocess(images)
-            return torch.from_numpy(runner(batch)) if runner is not None else model.module(on_device(model.module, batch))
+            batch = preprocessed(model.preprocess, images)
+            if isinstance(batch, np.ndarray):
+                batch = torch.from_numpy(batch)
+            return model.module(on_device(model.module, batch))
     except PLUGIN_FAILURES as exc:  # a user's model failing on its input (or exiting) is a user error
         raise _raised(name, exc, images) from None
 

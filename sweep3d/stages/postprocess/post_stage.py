@@ -24,8 +24,27 @@ from typing import Any, Iterator, Sequence
 import numpy as np
 import pyarrow as pa
 
-from sweep3d.cache import DIGEST_COLUMN, TRUTH_BLOBS, Store, atomic_write, load_image, load_pass, sha256_bytes, utc_now
-from sweep3d.core import BLOB_SUFFIX, TRUTH_PASSES, PluginError, blamed, encode_png8, is_user_plugin, to_uint8
+from sweep3d.cache import (
+    DIGEST_COLUMN,
+    TRUTH_BLOBS,
+    Store,
+    atomic_write,
+    load_image,
+    load_pass,
+    load_pixels,
+    sha256_bytes,
+    utc_now,
+)
+from sweep3d.core import (
+    BLOB_SUFFIX,
+    TRUTH_PASSES,
+    PluginError,
+    blamed,
+    encode_png8,
+    from_uint8,
+    is_user_plugin,
+    to_uint8,
+)
 from sweep3d.driver import Computed, Feed, Job, JobList, Plan
 from sweep3d.spec import ControlInstance, LoadedSpec
 from sweep3d.stages.postprocess.frame import RenderFrame, frame_from_state
@@ -221,10 +240,10 @@ class _SeenRenders:
     def render(self, store: Store, key: str, digests: set[str] | None) -> np.ndarray | None:
         """The render ``key``, decoded (a copy: a control may change its input in place)."""
         if self.last is None or self.last[0] != key:
-            render = load_image(store, key, digests)
-            self.last = (key, render) if render is not None else None
-            if render is not None and self.handoff is not None and key in self.as_images():
-                self.handoff.put(key, to_uint8(render))
+            pixels = load_pixels(store, key, digests)
+            self.last = (key, from_uint8(pixels)) if pixels is not None else None
+            if pixels is not None and self.handoff is not None and key in self.as_images():
+                self.handoff.put(key, pixels)
         return self.last[1].copy() if self.last is not None else None
 
     def as_images(self) -> set[str]:

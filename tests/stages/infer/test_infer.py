@@ -12,6 +12,7 @@ from sweep3d.stages.infer import IMAGENET, ClassificationEvaluator, load_model, 
 from sweep3d.stages.infer.evaluators import Truth, log_softmax
 from sweep3d.stages.infer.infer_stage import STAND_IN
 from tests.helpers import TINY_SPEC, examples, write_spec
+from tests.helpers.models import tied_model
 
 
 @pytest.fixture(scope="module")
@@ -101,22 +102,6 @@ def test_onnx_backend_agrees_with_torch(lite0, tmp_path) -> None:
     assert 0 < np.abs(torch_logits - onnx_logits).max() < 1e-3  # not torch's own bits: ONNX Runtime ran
     again = OnnxRunner(lite0, tmp_path, "lite0", threads=2)  # reuses the export, checked again
     assert np.allclose(again(lite0.preprocess(images)), onnx_logits, atol=1e-4)  # threads: last-bit noise
-
-
-def tied_model():
-    """A small classifier whose classes 0 and 1 always tie, at the top (same weights, larger bias)."""
-    import torch
-
-    from sweep3d.stages.infer import Classifier, Preprocess
-
-    torch.manual_seed(0)
-    head = torch.nn.Linear(4, 6)
-    with torch.no_grad():
-        head.weight[1] = head.weight[0]
-        head.bias[:2] = 10.0
-    module = torch.nn.Sequential(torch.nn.Conv2d(3, 4, 3, stride=4), torch.nn.ReLU(), torch.nn.AdaptiveAvgPool2d(1),
-                                 torch.nn.Flatten(), head).eval()
-    return Classifier(module, Preprocess(resize=32, crop=32), labels=[f"c{i}" for i in range(6)])
 
 
 @pytest.mark.torch
