@@ -18,6 +18,15 @@ inference of the same images (timed alone on the stage's store): on 2 cores both
 so overlapping them cannot beat their sum by much. Stores and frames are on disk, as a user's are.
 
     .venv/bin/python benchmarks/pipeline.py --multi-scene [--rounds 2]
+
+`--image-path` times the image path alone, per image: sweep3d's postprocess and infer stages (in a
+fresh process each, on a copy of one store of the quickstart's renders) against the bare process
+(`bare_infer.py`), each over the 240 renders blurred at 4 and at 8 σ (960 and 1,920 images),
+interleaved. The difference between the two sizes is the cost of 960 images, set-up left out; the
+set-up is reported apart. sweep3d runs with its user cache (an ONNX export and check kept from an
+earlier run), with nothing kept (`SWEEP3D_CACHE=off`), and optionally as another checkout:
+
+    .venv/bin/python benchmarks/pipeline.py --image-path [--rounds 2] [--old ../other-checkout]
 """
 
 from __future__ import annotations
@@ -39,7 +48,9 @@ from rich.console import Console
 from rich.table import Table
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
+#: The sweep3d this process imports: this checkout, or another one's (``--image-path --old``).
+CHECKOUT = Path(os.environ.get("SWEEP3D_CHECKOUT", REPO))
+sys.path.insert(0, str(CHECKOUT))
 
 MESH = "/usr/share/sweethome3d/furniture/BlendSwap-CC-0.sh3f#blendswap-cc-0/basketball/basketball.obj"
 SETTINGS = {"resolution": 224, "samples": 4}
@@ -349,7 +360,20 @@ def cli_multi(folder: Path) -> dict:
     return {"seconds": time.perf_counter() - started}
 
 
-def infer_alone(stage: dict, folder: Path) -> float:
+#: The blur's σ values of the image-path comparison: the quickstart's four, and eight.
+SIGMAS = {4: [0.0, 1.0, 2.0, 3.0], 8: [0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5]}
+
+
+def blurred_spec(folder: Path, sigmas: list[float]) -> Path:
+    """The quickstart with its blur at ``sigmas`` (its renders are the same: blur is post-processing)."""
+    spec = quickstart_spec(folder)
+    text = spec.read_text()
+    assert "sigma = [0.0, 1.0, 2.0, 3.0]" in text
+    spec.write_text(text.replace("sigma = [0.0, 1.0, 2.0, 3.0]", f"sigma = {sigmas}"))
+    return spec
+
+
+def infer_alone(stage: dict, folder: Path, sigmas: list[float] | None = None) -> float:
     """Seconds of the postprocess and inference stages alone over the stage's renders (the model
     loaded first, as a run's is before its renders end): sweep3d's image path."""
     import sweep3d
@@ -359,7 +383,13 @@ def infer_alone(stage: dict, folder: Path) -> float:
     from sweep3d.stages.infer import InferStage, ModelHandle
     from sweep3d.stages.postprocess import ImageHandoff, PostprocessStage
 
-    spec = sweep3d.load(quickstart_spec(folder)).spec
+    try:
+        from sweep3d.cache import skip_pandas_probe
+
+        skip_pandas_probe()  # as the CLI does
+    except ImportError:  # an older checkout
+        pass
+    spec = sweep3d.load(blurred_spec(folder, sigmas or SIGMAS[4])).spec
     model = ModelHandle.resolve(spec)
     plan = plan_spec(spec, model)
     post = PostprocessStage.for_spec(spec, ImageHandoff())  # as a run wires them
@@ -370,16 +400,70 @@ def infer_alone(stage: dict, folder: Path) -> float:
     return time.perf_counter() - started
 
 
+def image_path_side(renders: Path, folder: Path, sigmas: list[float], checkout: Path, keep: bool) -> float:
+    """Seconds of sweep3d's image path in a fresh process of ``checkout`` over a copy of the store
+    at ``renders`` (its renders only), with the user's cache or (``keep`` False) nothing kept."""
+    shutil.copytree(renders, folder)
+    env = {**os.environ, "SWEEP3D_CHECKOUT": str(checkout), **({} if keep else {"SWEEP3D_CACHE": "off"})}
+    done = subprocess.run([sys.executable, __file__, "--infer-alone", str(folder), "--sigmas", str(len(sigmas))],
+                          capture_output=True, text=True, env=env)
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+    shutil.rmtree(folder)
+    return float(done.stdout.strip().splitlines()[-1])
+
+
+def image_path(rounds: int, old: Path | None, console: Console) -> None:
+    """The image path per image: sweep3d's stages against the bare process at 960 and 1,920 images."""
+    sides = {"bare": None, "sweep3d": (REPO, True), "sweep3d, nothing kept": (REPO, False),
+             **({"old checkout": (old, False)} if old else {})}
+    seconds: dict[tuple[str, int], list[float]] = {(side, n): [] for side in sides for n in SIGMAS}
+    with tempfile.TemporaryDirectory(prefix="sweep3d-path-") as tmp:
+        console.print("the quickstart's renders, once ...")
+        stage = stage_multi(Path(tmp) / "renders")
+        renders = Path(tmp) / "renders"
+        model = export_onnx(Path(tmp) / "lite0.onnx")
+        image_path_side(renders, Path(tmp) / "warm", SIGMAS[4], REPO, True)  # the user cache holds the export
+        order = [(side, n) for n in SIGMAS for side in sides]
+        for i in range(rounds):
+            for side, n in order if i % 2 == 0 else order[::-1]:
+                console.print(f"round {i + 1}: {side}, {n} σ ...")
+                if side == "bare":
+                    wall = bare_infer(stage["store"].root / "blobs", model, SIGMAS[n])["wall"]
+                else:
+                    checkout, keep = sides[side]
+                    wall = image_path_side(renders, Path(tmp) / "side", SIGMAS[n], checkout, keep)
+                seconds[(side, n)].append(wall)
+    renders_n = stage["n"]
+    small, large = (renders_n * n for n in SIGMAS)
+    table = Table(title=f"the image path per image: {renders_n} renders blurred at 4 and 8 σ ({small} and {large} "
+                        f"images), read, post-processed, classified (rounds: {rounds}, interleaved)")
+    for column in ("side", f"{small} images (s)", f"{large} images (s)", "per image (ms)", "set-up (s)",
+                   "per image / bare"):
+        table.add_column(column, justify="left" if column == "side" else "right")
+    bare_slope = None
+    for side in sides:
+        a, b = (float(np.mean(seconds[(side, n)])) for n in SIGMAS)
+        slope = (b - a) / (large - small)
+        bare_slope = slope if side == "bare" else bare_slope
+        table.add_row(side, " / ".join(f"{x:.2f}" for x in seconds[(side, 4)]),
+                      " / ".join(f"{x:.2f}" for x in seconds[(side, 8)]), f"{slope * 1000:.2f}",
+                      f"{a - slope * small:.2f}", f"{slope / bare_slope:.2f}" if bare_slope else "")
+    console.print(table)
+    console.print("sweep3d's times are its stages' in a fresh process (imports left out); the bare process's, "
+                  "start to exit. per image: (time at 1,920 − time at 960) / 960; set-up: the rest at 960.")
+
+
 BARE_INFER = Path(__file__).with_name("bare_infer.py")
 
 
-def bare_infer(renders: Path, model: Path) -> dict:
+def bare_infer(renders: Path, model: Path, sigmas: list[float] | None = None) -> dict:
     """The hand-written image path over ``renders`` (PNGs, searched recursively): read, blur at
     σ = 0, 1, 2, 3, classify with ONNX Runtime on 2 threads in batches of 32, in a fresh process;
     its JSON line and its wall time from start to exit."""
     started = time.perf_counter()
     done = subprocess.run([sys.executable, str(BARE_INFER), str(renders), "--backend", "onnx", "--model", str(model),
-                           "--threads", "2"], capture_output=True, text=True)
+                           "--threads", "2", "--sigmas", ",".join(str(s) for s in sigmas or SIGMAS[4])],
+                          capture_output=True, text=True)
     assert done.returncode == 0, done.stderr[-3000:]
     return {**json.loads(done.stdout.strip().splitlines()[-1]), "wall": time.perf_counter() - started}
 
@@ -539,9 +623,21 @@ def main() -> None:
     parser.add_argument("--post-heavy", action="store_true",
                         help="only the post-heavy spec: the quickstart's renders × 18 corruptions × 5 severities")
     parser.add_argument("--objects", type=int, default=5, help="with --post-heavy: the quickstart's first N objects")
-    parser.add_argument("--old", type=Path, help="with --post-heavy: another checkout to time beside this one")
+    parser.add_argument("--old", type=Path, help="with --post-heavy or --image-path: another checkout to time beside this one")
+    parser.add_argument("--image-path", action="store_true",
+                        help="only the image path, per image: sweep3d's stages against the bare process")
+    parser.add_argument("--infer-alone", type=Path, help=argparse.SUPPRESS)  # one side of --image-path
+    parser.add_argument("--sigmas", type=int, default=4, choices=sorted(SIGMAS), help=argparse.SUPPRESS)
     args = parser.parse_args()
     console = Console()
+    if args.infer_alone:
+        from sweep3d.cache.store import Store
+
+        print(infer_alone({"store": Store(args.infer_alone / "store")}, args.infer_alone, SIGMAS[args.sigmas]))
+        return
+    if args.image_path:
+        image_path(args.rounds, args.old, console)
+        return
     if args.post_heavy:
         post_heavy(args.rounds, args.objects, args.old, console)
         return

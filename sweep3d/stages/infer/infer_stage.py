@@ -160,7 +160,7 @@ class InferStage:
             labels = model.label_map()
             check_task(model, task, self.model.name)
             size = self.model.framing.crop
-            outputs = model_outputs(model, np.zeros((1, size, size, 3), np.float32), task, self.model.name,
+            outputs = model_outputs(model, np.zeros((1, size, size, 3), np.uint8), task, self.model.name,
                                     self._runner if served else None)
             _check_classes(outputs, labels, self.model.name)
         except SpecError:
