@@ -844,7 +844,8 @@ def utc_now() -> datetime:
 
 
 def atomic_write(path: Path, data: bytes, durable: bool = True) -> None:
-    """Write ``data`` to ``path`` through a temp file in the same folder and a rename.
+    """Write ``data`` to ``path`` through a temp file in the same folder and a rename; the folder
+    is made when it is missing (not asked for each time: writers of many small files call this).
 
     Args:
         durable: fsync before the rename; a cache whose damaged file is only a miss may skip it.
@@ -854,8 +855,12 @@ def atomic_write(path: Path, data: bytes, durable: bool = True) -> None:
     """
     tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with open(tmp, "wb") as fh:
+        try:
+            fh = open(tmp, "wb")
+        except FileNotFoundError:  # its folder is not there yet
+            path.parent.mkdir(parents=True, exist_ok=True)
+            fh = open(tmp, "wb")
+        with fh:
             fh.write(data)
             if durable:
                 fh.flush()
