@@ -148,7 +148,7 @@ class InferStage:
         if served:
             self._model = self.model.unloaded()
             object_class_ids(plan, self._model.label_map(), self.model.name)
-            self._runner = self._runner or self._served_by_onnx(plan, store, beside=self.backend == STAND_IN)
+            self._runner = self._runner or self._served_by_onnx(plan, store)
             served = self._runner is not None  # else torch, which stood in for a failed stand-in
         if not served:
             import torch
@@ -169,15 +169,15 @@ class InferStage:
             raise SpecError(str(spec.path), model_key_path(spec, self.model.settings), str(exc)) from None
         object_class_ids(plan, labels, self.model.name)  # a label the model lacks fails now, naming the object
         if self.backend in ("onnx", STAND_IN) and self._runner is None:
-            self._runner = self._served_by_onnx(plan, store, beside=self.backend == STAND_IN)
+            self._runner = self._served_by_onnx(plan, store)
         self._labels = labels
 
-    def _served_by_onnx(self, plan: Plan, store: Store, beside: bool) -> OnnxRunner | None:
+    def _served_by_onnx(self, plan: Plan, store: Store) -> OnnxRunner | None:
         """The ONNX Runtime runner of the run's backend: asked for (its failure is the user's to see
         now) or standing in (exported and checked now, while Blender starts; None: torch instead)."""
         if self.backend == "onnx":
             return self._onnx(plan, store, self._threads())
-        return self._stand_in(plan, store, self._threads(beside=beside))
+        return self._stand_in(plan, store, self._threads(beside=True))
 
     def compute(self, todo: Feed, plan: Plan, store: Store) -> Iterator[Computed]:
         if self._labels is None:

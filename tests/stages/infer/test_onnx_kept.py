@@ -108,3 +108,41 @@ def test_pixels_looked_up_are_torch_s_input_bit_for_bit(shape) -> None:
     assert torch.from_numpy(fast).stride() == slow.stride()
     with torch.inference_mode():
         assert np.array_equal(model.module(slow).numpy(), model.module(torch.from_numpy(fast)).numpy())
+
+
+_PREPARE = """
+import sys
+from sweep3d import load
+from sweep3d.cache import Store
+from sweep3d.engine.pipeline import plan_spec
+from sweep3d.stages.infer import InferStage, ModelHandle
+
+spec = load(sys.argv[1]).spec
+model = ModelHandle.resolve(spec)
+stage = InferStage(model)
+stage.prepare(plan_spec(spec, model), Store(spec.store))
+print(stage.backend, "torch" in sys.modules)
+"""
+
+
+def test_a_built_in_model_is_tried_and_served_without_torch_once_its_export_is_kept(tmp_path) -> None:
+    """``prepare`` of the default backend (ONNX Runtime standing in for torch) in a fresh store:
+    it takes the export and its check from the user cache (this test run's) and imports no torch
+    (at the model's input size: a resize would be torch's)."""
+    import subprocess
+    import sys
+
+    from tests.helpers import REPO, TINY_SPEC, write_spec
+
+    for name in ("first", "fresh"):
+        (tmp_path / name).mkdir()
+    spec = TINY_SPEC.replace("resolution = 32", 'resolution = "model"')
+    assert spec != TINY_SPEC
+    first = write_spec(tmp_path / "first", spec)  # exports and checks, or finds them kept
+    done = subprocess.run([sys.executable, "-c", _PREPARE, str(first)], capture_output=True, text=True, cwd=REPO)
+    assert done.returncode == 0, done.stderr[-2000:]
+    fresh = write_spec(tmp_path / "fresh", spec)
+    done = subprocess.run([sys.executable, "-c", _PREPARE, str(fresh)], capture_output=True, text=True, cwd=REPO)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.split() == ["onnx-as-torch", "False"]
+    assert list((tmp_path / "fresh").rglob("*.onnx"))  # the store has its own copy
