@@ -131,7 +131,6 @@ def explain(
 
     check_wait(wait)
     experiment = Experiment(spec)
-    require_store(experiment.spec)  # explain extends a finished run: no store, nothing to extend
     signal.signal(signal.SIGTERM, _interrupt)  # clean up workers and scratch files as on Ctrl-C
     experiment.explain(budget=budget, seed=seed, wait=wait, console=console)
     if report:
