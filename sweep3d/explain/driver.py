@@ -106,7 +106,7 @@ class _Stages:
 
     def __init__(self, spec: LoadedSpec, store: Store, model: ModelHandle, progress: RunProgress) -> None:
         self.spec, self.store, self.model, self.progress = spec, store, model, progress
-        self.render = RenderStage(LOCAL)
+        self.render = RenderStage(LOCAL, keep_open=True)
         self.post = PostprocessStage.for_spec(spec, ImageHandoff())
         self.infer = InferStage(model, on_ray=False, several=False, handoff=self.post.handoff,
                                 images_stored=self.post.store_images)
