@@ -1,10 +1,11 @@
 """How every command reports a user's mistake (one red line on stderr, exit code 2) and a failed
-render worker (one line, exit code 1)."""
+render worker (one line, exit code 1); how a command that reads results refuses a store that
+does not exist."""
 
 from __future__ import annotations
 
 import functools
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import typer
 from rich.console import Console
@@ -13,7 +14,10 @@ from rich.markup import escape
 from sweep3d.api import check_wait
 from sweep3d.core import RenderError, UserError, plugin_failure
 
-__all__ = ["check_wait", "registrar"]  # check_wait: the API's, for the commands' --wait
+if TYPE_CHECKING:
+    from sweep3d.spec import LoadedSpec
+
+__all__ = ["check_wait", "registrar", "require_store"]  # check_wait: the API's, for the commands' --wait
 
 err_console = Console(stderr=True, highlight=False)
 DEBUG = {"on": False}  # set by ``sweep3d --debug``: a failing plug-in's traceback is printed too
@@ -43,6 +47,17 @@ def registrar(app: typer.Typer) -> Callable[[Callable], Callable]:
         return app.command()(wrapper)
 
     return command
+
+
+def require_store(spec: LoadedSpec) -> None:
+    """Refuse, before anything is written, a command that reads results when ``spec``'s store does
+    not exist: one line naming the store and ``sweep3d run SPEC``, exit 2, no folder made (a
+    reader must leave the file system as it found it)."""
+    if not spec.store.is_dir():
+        from sweep3d.cache import Store
+        from sweep3d.results import no_results
+
+        raise no_results(Store(spec.store), spec.name, spec.path)
 
 
 def _exits_as_errors(func: Callable, *args, **kwargs):

@@ -16,7 +16,7 @@ from rich.markup import escape
 from rich.table import Column, Table
 from rich.text import Text
 
-from sweep3d.cli._commands import DEBUG, check_wait, err_console, registrar
+from sweep3d.cli._commands import DEBUG, check_wait, err_console, registrar, require_store
 from sweep3d.core import UserError
 
 if TYPE_CHECKING:
@@ -146,7 +146,9 @@ def report(
     """Write a self-contained HTML dashboard of the spec's results."""
     from sweep3d.api import Experiment
 
-    _write_report(Experiment(spec), output, model)
+    experiment = Experiment(spec)
+    require_store(experiment.spec)
+    _write_report(experiment, output, model)
 
 
 @command
@@ -157,6 +159,7 @@ def compare(spec: Path = SpecArg) -> None:
 
     loaded = Experiment(spec).spec
     require_models(loaded)
+    require_store(loaded)
     print_comparison(console, loaded)
 
 
@@ -285,6 +288,7 @@ def confirm(
     from sweep3d.results import DEFAULT_RENDERS
 
     experiment = Experiment(spec)
+    require_store(experiment.spec)
     signal.signal(signal.SIGTERM, _interrupt)
     result = confirm_findings(experiment.spec, renders or DEFAULT_RENDERS, seed, console)
     print_confirmation(console, result)
@@ -337,6 +341,7 @@ def query(
 
     experiment = Experiment(spec)
     statement = select_only(sql)
+    require_store(experiment.spec)
     export = _export_target(output, experiment.store) if output is not None else None
     with results_connection(experiment.spec, model, writable=[export[0]] if export else [],
                             statement=statement) as con:
@@ -373,7 +378,9 @@ def export(
     from sweep3d.api import Experiment
     from sweep3d.export import export_dataset
 
-    result = export_dataset(Experiment(spec).spec, form, output=output, where=where, model=model,
+    loaded = Experiment(spec).spec
+    require_store(loaded)
+    result = export_dataset(loaded, form, output=output, where=where, model=model,
                             unevaluable=unevaluable, append=append, link=link, console=console)
     console.print(escape(result.line()), soft_wrap=True)
 

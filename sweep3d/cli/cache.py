@@ -13,8 +13,7 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
-from sweep3d.cli._commands import check_wait, registrar
-from sweep3d.core import UserError
+from sweep3d.cli._commands import check_wait, registrar, require_store
 
 cache_app = typer.Typer(no_args_is_help=True, rich_markup_mode=None, help="Check and tidy a spec's store: verify, gc, compact, stats.")
 console = Console(highlight=False)  # values from data print as text: no colouring of what looks like numbers or paths
@@ -32,8 +31,7 @@ def _store_root(spec: Path) -> Path:
     import sweep3d
 
     loaded = sweep3d.load(spec).spec
-    if not loaded.store.is_dir():
-        raise UserError(f"store {loaded.store} does not exist yet; run: sweep3d run {spec}")
+    require_store(loaded)
     return loaded.store
 
 

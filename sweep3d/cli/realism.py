@@ -10,7 +10,7 @@ import typer
 from rich.console import Console
 from rich.markup import escape
 
-from sweep3d.cli._commands import check_wait, registrar
+from sweep3d.cli._commands import check_wait, registrar, require_store
 
 realism_app = typer.Typer(no_args_is_help=True, rich_markup_mode=None,
                           help="Agreement with photographs or another renderer: pick jobs, then score them.")
@@ -37,7 +37,9 @@ def pick(
     import sweep3d
     from sweep3d.realism import pick_kit
 
-    kit = pick_kit(sweep3d.load(spec).spec, output, per_object, seed, near_ties)
+    loaded = sweep3d.load(spec).spec
+    require_store(loaded)
+    kit = pick_kit(loaded, output, per_object, seed, near_ties)
     for line in kit.short:
         console.print(f"[yellow]note:[/] {escape(line)}", soft_wrap=True)
     console.print(escape(kit.line()), soft_wrap=True)
@@ -63,6 +65,7 @@ def score(
 
     check_wait(wait)
     loaded = sweep3d.load(spec).spec
+    require_store(loaded)
     if engine is not None:
         if photos is not None or match is not None:
             raise UserError("--engine scores renders, not photographs: leave PHOTOS and --match out")

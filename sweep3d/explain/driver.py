@@ -30,7 +30,7 @@ from sweep3d.core import UserError
 from sweep3d.driver import Job, Plan, RunProgress, run_stages
 from sweep3d.engine import plan_spec, plans_as_run, remove_leftovers
 from sweep3d.explain.search import Axis, Config, Fix, Progress, explain
-from sweep3d.results import SCHEMA, counterfactuals_path, create_margin_macro, margin_sql
+from sweep3d.results import SCHEMA, counterfactuals_path, create_margin_macro, margin_sql, no_results
 from sweep3d.spec import LoadedSpec, Point, Range, SearchSpace
 from sweep3d.stages.infer import InferStage, ModelHandle, pending_predictions
 from sweep3d.stages.plan import Listed, Policy, PolicyParams
@@ -106,7 +106,7 @@ class _Stages:
 
     def __init__(self, spec: LoadedSpec, store: Store, model: ModelHandle, progress: RunProgress) -> None:
         self.spec, self.store, self.model, self.progress = spec, store, model, progress
-        self.render = RenderStage(LOCAL)
+        self.render = RenderStage(LOCAL, keep_open=True)
         self.post = PostprocessStage.for_spec(spec, ImageHandoff())
         self.infer = InferStage(model, on_ray=False, several=False, handoff=self.post.handoff,
                                 images_stored=self.post.store_images)
@@ -200,12 +200,15 @@ def explain_spec(spec: LoadedSpec, *, budget: int | None = None, seed: int | Non
     and write the counterfactuals; resumable, its probes cached like any job.
 
     Raises:
-        UserError: a budget below 1, or a run that has not finished.
+        UserError: a budget below 1, no store (nothing made: explain extends a finished run), or a
+            run that has not finished.
     """
     if budget is not None and budget < 1:
         raise UserError(f"--budget {budget}: give how many new configurations the search may render, 1 or more")
     seed = spec.experiment.seed if seed is None else seed
     store = Store(spec.store)
+    if not spec.store.is_dir():  # before the lock would make the store's folder
+        raise no_results(store, spec.name, spec.path)
     store.ensure_writable()
     with store.lock(wait):
         started = time.perf_counter()

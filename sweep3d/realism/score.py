@@ -48,9 +48,13 @@ class Scored:
     verdicts: int
     models: list[str]
     agree: dict[str, tuple[int, int]]  # model → (jobs agreeing, jobs)
+    #: Why no agreement could be read (the ``agreement`` view was not made), else None.
+    missing: str | None = None
 
     def lines(self) -> list[str]:
         out = [f"stored {self.verdicts} verdicts of source {self.source!r} ({', '.join(self.models)})"]
+        if self.missing is not None:
+            return [*out, self.missing]
         for model, (same, n) in self.agree.items():
             out.append(f"{model}: the {self.source} verdict agrees with the render's on {same} of {n} jobs")
         return out
@@ -240,15 +244,33 @@ def _keep_thumb(store: Store, sha256: str, pixels: np.ndarray) -> None:
 
 
 def _scored(source: str, spec: LoadedSpec, store: Store, rows: list[dict[str, Any]]) -> Scored:
-    """What was stored, with each model's agreement read back through the ``agreement`` view."""
-    from sweep3d.results import results_connection
+    """What was stored, with each model's agreement read back through the ``agreement`` view (a
+    line saying why instead, where the view was not made: the verdicts are stored all the same)."""
+    from sweep3d.results import has_view, results_connection
 
     agree = {}
     with results_connection(spec, store=store) as con:
+        if not has_view(con, "agreement"):
+            return Scored(source, len(rows), [m.label for m in spec.models], {}, _no_agreement(con, spec))
         for model, same, n in con.execute(
                 "SELECT model, n_agree, n FROM agreement WHERE source = ? AND overall ORDER BY model", [source]).fetchall():
             agree[model] = (same, n)
     return Scored(source, len(rows), [m.label for m in spec.models], agree)
+
+
+def _no_agreement(con: Any, spec: LoadedSpec) -> str:
+    """The one line saying why ``con`` has no ``agreement`` view (what
+    :func:`~sweep3d.results.agreement.register_agreement_views` needs and did not find)."""
+    from sweep3d.results import has_view
+
+    if has_view(con, "results_all"):
+        columns = {name for name, *_ in con.execute("DESCRIBE results_all").fetchall()}
+        lacking = [c for c in ("job", "object", "correct", "counted") if c not in columns]
+        if lacking:
+            return (f"no agreement to show: the results of {spec.name} lack the column(s) {', '.join(lacking)} "
+                    f"(stored by an older version); run `sweep3d run {spec.path}` to bring them up to date")
+    return (f"no agreement to show: the store holds no readable verdict of experiment {spec.name} "
+            f"(score the kit's photographs or --engine first), or no results of it (run `sweep3d run {spec.path}`)")
 
 
 # -- another renderer as a source ------------------------------------------------------------

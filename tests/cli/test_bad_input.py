@@ -60,12 +60,31 @@ def test_query_and_report_before_any_result_say_so_in_one_line(tmp_path: Path, c
     assert f"run: sweep3d run {spec}" in line and "does not exist" not in line
 
 
-def test_cache_commands_on_a_store_that_does_not_exist_are_one_line_errors(tmp_path) -> None:
-    spec = write_spec(tmp_path, TINY_SPEC)
-    result = CliRunner().invoke(app, ["cache", "verify", str(spec)])
-    assert result.exit_code == 2
-    lines = [line for line in result.output.splitlines() if line.strip()]
-    assert len(lines) == 1 and "does not exist yet" in lines[0] and "sweep3d run" in lines[0]
+READERS = [["query", "SELECT 1"], ["query", "SELECT 1", "--output", "rows.csv"], ["report"], ["compare"],
+           ["export", "--format", "parquet"], ["stability"], ["confirm"], ["explain", "--no-report"],
+           ["cache", "verify"], ["cache", "stats"], ["cache", "gc"], ["cache", "compact"], ["realism", "pick"],
+           ["realism", "score", "--engine", "cycles"]]
+
+
+@pytest.mark.parametrize("command", READERS, ids=[" ".join(c[:2]) if c[0] in ("cache", "realism") else c[0]
+                                                  + ("-o" if "--output" in c else "") for c in READERS])
+def test_a_reader_of_a_store_that_does_not_exist_says_so_and_writes_nothing(tmp_path: Path,
+                                                                             command: list[str]) -> None:
+    """No store yet: one line naming the store and ``sweep3d run SPEC``, exit 2, and the folder
+    left as it was (no store, lock, summary cache, report or kit made)."""
+    from tests.helpers import TWO_MODELS
+
+    text = TINY_SPEC.replace('[model]\nbatch_size = 8\n', "") + TWO_MODELS if command[0] == "compare" else TINY_SPEC
+    spec = write_spec(tmp_path, text)
+    before = sorted(tmp_path.rglob("*"))
+    args = [str(tmp_path / a) if a == "rows.csv" else a for a in command]
+    at = 2 if args[0] in ("cache", "realism") else 1
+    result = runner.invoke(app, [*args[:at], str(spec), *args[at:]])
+    assert result.exit_code == 2, result.output
+    line = one_line(result.output)
+    assert f"no results for experiment 'tiny' yet in {tmp_path / 'store'}" in line, line
+    assert f"sweep3d run {spec}" in line
+    assert sorted(tmp_path.rglob("*")) == before
 
 
 def test_a_check_before_any_result_or_of_another_task_is_one_line(tmp_path: Path) -> None:

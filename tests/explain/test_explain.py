@@ -109,15 +109,17 @@ def test_a_rerun_renders_nothing_and_writes_the_same_counterfactuals(explained: 
     assert path.read_bytes() == before
 
 
-def test_a_budget_and_a_missing_run_are_one_line_each(explained: Path, tmp_path: Path) -> None:
+def test_a_budget_and_a_missing_run_are_one_line_each(tmp_path: Path) -> None:
+    """Neither needs a run (a test that takes ``explained`` makes its worker run it)."""
     runner = CliRunner()
-    bad = runner.invoke(app, ["explain", str(explained / "spec.toml"), "--budget", "-1"])
-    assert bad.exit_code == 2 and "--budget -1" in bad.output and "Traceback" not in bad.output
     (tmp_path / "explain_sharp_model.py").write_text(SHARP_MODEL)
     fresh = write_spec(tmp_path, SPEC)
     sys.modules.pop("explain_sharp_model", None)
+    bad = runner.invoke(app, ["explain", str(fresh), "--budget", "-1"])
+    assert bad.exit_code == 2 and "--budget -1" in bad.output and "Traceback" not in bad.output
     early = runner.invoke(app, ["explain", str(fresh)])
-    assert early.exit_code == 2 and "sweep3d run" in early.output, early.output
+    assert early.exit_code == 2 and f"sweep3d run {fresh}" in early.output, early.output
+    assert not (tmp_path / "store").exists()  # refused before the lock would make the store
 
 
 @pytest.mark.browser

@@ -188,3 +188,21 @@ def test_a_photo_gets_its_job_s_2d_controls_as_the_render_did(tmp_path) -> None:
     job = next(j.index for j in plan_spec(foggy).jobs if j.values["fog"]["density"] == 0.5)
     with pytest.raises(PhotoProblems, match=f"job {job}: control 'fog' reads the render's passes"):
         post_processed(foggy, {job: checks})
+
+
+def test_the_summary_without_an_agreement_view_is_one_line_not_a_failure(tmp_path: Path) -> None:
+    """The closing summary reads the ``agreement`` view only where it was made: without verdicts
+    of the experiment, or on results lacking ``counted`` (an older store), it says so in one line."""
+    import duckdb
+
+    from sweep3d.realism.score import _no_agreement, _scored
+    from tests.helpers import load_spec
+
+    spec = load_spec(make_run(tmp_path))
+    lines = _scored("photo", spec, Store(tmp_path / "store"), []).lines()
+    assert lines[0].startswith("stored 0 verdicts of source 'photo'")
+    assert len(lines) == 2 and lines[1].startswith("no agreement to show: the store holds no readable verdict")
+    con = duckdb.connect()
+    con.execute("CREATE VIEW results_all AS SELECT 1 AS job, 'apple' AS object, true AS correct")
+    line = _no_agreement(con, spec)
+    assert "lack the column(s) counted" in line and f"sweep3d run {spec.path}" in line

@@ -104,6 +104,9 @@ class RenderStage:
         timings: when given, each render made here adds its worker's :class:`RenderInfo` under
             its key (``bench`` reads scene-load time apart from render time there; the renders
             table keeps only the whole job's seconds).
+        keep_open: keep the local workers between :meth:`compute` calls (the caller then closes
+            the stage, :meth:`close`): a caller computing many small plans in turn (``explain``'s
+            rounds) pays Blender's start once, not once a plan.
     """
 
     name = "render"
@@ -111,9 +114,11 @@ class RenderStage:
     owns_blobs = True
     side_tables = {"parts": PARTS_SCHEMA, "truths": TRUTHS_SCHEMA}
 
-    def __init__(self, executor: Executor = LOCAL, timings: dict[str, RenderInfo] | None = None) -> None:
+    def __init__(self, executor: Executor = LOCAL, timings: dict[str, RenderInfo] | None = None,
+                 keep_open: bool = False) -> None:
         self.executor = executor
         self.timings = timings
+        self.keep_open = keep_open and executor.kind == "local"
         self._warm: tuple[RenderSettings, RenderExecutor] | None = None  # see warm_up
 
     def warm_up(self, plan: Plan) -> None:
@@ -128,7 +133,7 @@ class RenderStage:
         self._warm = settings, pool
 
     def close(self) -> None:
-        """Stop a worker started by :meth:`warm_up` that no :meth:`compute` used."""
+        """Stop a worker started by :meth:`warm_up` that no :meth:`compute` used (or kept open)."""
         if self._warm is not None:
             self._warm[1].close()
             self._warm = None
@@ -172,12 +177,20 @@ class RenderStage:
         else:
             if warm is not None:  # planned again with other settings: not this worker
                 warm[1].close()
-            workers = min(worker_count(spec, plan.device), len(groups))
-            pool = self.executor.pool(settings, workers, spec)
-        with pool:
+            workers = worker_count(spec, plan.device)  # a pool starts only the workers its groups need
+            pool = self.executor.pool(settings, workers if self.keep_open else min(workers, len(groups)), spec)
+        kept = False
+        try:
             yield from self._replies(pool.run(groups), plan, store, jobs, stored)
             if pool.recycled:
                 log.warning(recycled_note(spec, pool.recycled))
+                pool.recycled.clear()
+            kept = self.keep_open
+        finally:
+            if kept:  # warm for the next compute; close() stops it
+                self._warm = settings, pool
+            else:
+                pool.close()
 
     def _replies(self, replies: Iterator[RenderReply], plan: Plan, store: Store, jobs: dict[str, Job],
                  stored: set[str]) -> Iterator[Computed]:

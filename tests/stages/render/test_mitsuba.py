@@ -14,11 +14,9 @@ import pytest
 from typer.testing import CliRunner
 
 from sweep3d.cli import app
-from sweep3d.core.control import ControlParams
 from sweep3d.core.truth import decode_mask
 from sweep3d.engine import builtin_catalogue
 from sweep3d.spec.models import KeyLightSpec
-from sweep3d.stages.render.controls.rendered_control import RenderedControl
 from sweep3d.stages.render.engines import engine_key, mitsuba_version
 from sweep3d.stages.render.render_keys import scene_key
 from sweep3d.stages.render.worker_protocol import EnvironmentRef, RenderJob, RenderSettings
@@ -55,10 +53,13 @@ def test_the_engine_keys_mitsuba_apart_and_cycles_as_before(tmp_path: Path) -> N
     ('[[controls]]\ntype = "sky"\nenabled = [false, true]\n', "'sky'"),
     ('[[controls]]\ntype = "material"\nskin = ["original", "zebra"]\n', "'material'"),
     ('[[controls]]\ntype = "pin_to_ground"\nenabled = true\n', "'pin_to_ground'"),
-    ('[[controls]]\ntype = "tests.stages.render.test_mitsuba:Edits"\nwhat = 1.0\n', "'tests.stages.render.test_mitsuba:Edits'"),
+    ('[[controls]]\ntype = "mitsuba_edits:Edits"\nwhat = 1.0\n', "'mitsuba_edits:Edits'"),
 ])
 def test_a_control_mitsuba_cannot_render_is_refused_at_plan_in_one_line(tmp_path: Path, extra: str,
                                                                          named: str) -> None:
+    for folder in (tmp_path, tmp_path / "c"):  # a user's control module beside each spec: its code
+        folder.mkdir(exist_ok=True)  # identity reads this file alone, not the tests' own modules
+        (folder / "mitsuba_edits.py").write_text(EDITS)
     path = spec_with(tmp_path, 'engine = "mitsuba"\n', extra)
     result = CliRunner().invoke(app, ["plan", str(path)])
     lines = result.output.strip().splitlines()
@@ -76,9 +77,13 @@ def test_mitsuba_plans_cpu_renders_and_no_uv_pass(tmp_path: Path) -> None:
     assert result.exit_code == 2 and "render.device" in result.output and len(result.output.strip().splitlines()) == 1
 
 
-class Edits(RenderedControl):
-    """A user's control with an ``edit``: Mitsuba has no Blender scene to edit."""
+#: A user's control with an ``edit``: Mitsuba has no Blender scene to edit.
+EDITS = """\
+from sweep3d.core.control import ControlParams
+from sweep3d.stages.render.controls.rendered_control import RenderedControl
 
+
+class Edits(RenderedControl):
     class Params(ControlParams):
         what: float = 0.0
 
@@ -87,6 +92,7 @@ class Edits(RenderedControl):
 
     def edit(self, scene, params) -> None:
         pass
+"""
 
 
 def test_an_obj_reads_as_blender_imports_it(tmp_path: Path) -> None:
