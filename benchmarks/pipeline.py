@@ -373,9 +373,10 @@ def blurred_spec(folder: Path, sigmas: list[float]) -> Path:
     return spec
 
 
-def infer_alone(stage: dict, folder: Path, sigmas: list[float] | None = None) -> float:
+def infer_alone(stage: dict, folder: Path, sigmas: list[float] | None = None, cpu: dict | None = None) -> float:
     """Seconds of the postprocess and inference stages alone over the stage's renders (the model
-    loaded first, as a run's is before its renders end): sweep3d's image path."""
+    loaded first, as a run's is before its renders end): sweep3d's image path. ``cpu`` gets the
+    CPU seconds they took (every thread's) under ``"cpu"``."""
     import sweep3d
     from sweep3d.driver.loop import run_stages
     from sweep3d.driver.progress import RunProgress
@@ -394,29 +395,32 @@ def infer_alone(stage: dict, folder: Path, sigmas: list[float] | None = None) ->
     plan = plan_spec(spec, model)
     post = PostprocessStage.for_spec(spec, ImageHandoff())  # as a run wires them
     infer = InferStage(model, handoff=post.handoff, images_stored=post.store_images)
-    started = time.perf_counter()
+    started, cpu_started = time.perf_counter(), time.process_time()
     outcomes = run_stages([post, infer], plan, stage["store"], RunProgress(None))
     assert all(o.failed == 0 for o in outcomes), outcomes
+    if cpu is not None:
+        cpu["cpu"] = time.process_time() - cpu_started
     return time.perf_counter() - started
 
 
-def image_path_side(renders: Path, folder: Path, sigmas: list[float], checkout: Path, keep: bool) -> float:
-    """Seconds of sweep3d's image path in a fresh process of ``checkout`` over a copy of the store
-    at ``renders`` (its renders only), with the user's cache or (``keep`` False) nothing kept."""
+def image_path_side(renders: Path, folder: Path, sigmas: list[float], checkout: Path, keep: bool) -> dict:
+    """Wall and CPU seconds of sweep3d's image path in a fresh process of ``checkout`` over a copy
+    of the store at ``renders`` (its renders only), with the user's cache or (``keep`` False)
+    nothing kept."""
     shutil.copytree(renders, folder)
     env = {**os.environ, "SWEEP3D_CHECKOUT": str(checkout), **({} if keep else {"SWEEP3D_CACHE": "off"})}
     done = subprocess.run([sys.executable, __file__, "--infer-alone", str(folder), "--sigmas", str(len(sigmas))],
                           capture_output=True, text=True, env=env)
     assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
     shutil.rmtree(folder)
-    return float(done.stdout.strip().splitlines()[-1])
+    return json.loads(done.stdout.strip().splitlines()[-1])
 
 
 def image_path(rounds: int, old: Path | None, console: Console) -> None:
     """The image path per image: sweep3d's stages against the bare process at 960 and 1,920 images."""
     sides = {"bare": None, "sweep3d": (REPO, True), "sweep3d, nothing kept": (REPO, False),
              **({"old checkout": (old, False)} if old else {})}
-    seconds: dict[tuple[str, int], list[float]] = {(side, n): [] for side in sides for n in SIGMAS}
+    seconds: dict[tuple[str, int], list[dict]] = {(side, n): [] for side in sides for n in SIGMAS}
     with tempfile.TemporaryDirectory(prefix="sweep3d-path-") as tmp:
         console.print("the quickstart's renders, once ...")
         stage = stage_multi(Path(tmp) / "renders")
@@ -428,27 +432,29 @@ def image_path(rounds: int, old: Path | None, console: Console) -> None:
             for side, n in order if i % 2 == 0 else order[::-1]:
                 console.print(f"round {i + 1}: {side}, {n} σ ...")
                 if side == "bare":
-                    wall = bare_infer(stage["store"].root / "blobs", model, SIGMAS[n])["wall"]
+                    took = bare_infer(stage["store"].root / "blobs", model, SIGMAS[n])
                 else:
                     checkout, keep = sides[side]
-                    wall = image_path_side(renders, Path(tmp) / "side", SIGMAS[n], checkout, keep)
-                seconds[(side, n)].append(wall)
+                    took = image_path_side(renders, Path(tmp) / "side", SIGMAS[n], checkout, keep)
+                seconds[(side, n)].append({"wall": took["wall"], "cpu": took["cpu"]})
     renders_n = stage["n"]
     small, large = (renders_n * n for n in SIGMAS)
-    table = Table(title=f"the image path per image: {renders_n} renders blurred at 4 and 8 σ ({small} and {large} "
-                        f"images), read, post-processed, classified (rounds: {rounds}, interleaved)")
-    for column in ("side", f"{small} images (s)", f"{large} images (s)", "per image (ms)", "set-up (s)",
-                   "per image / bare"):
-        table.add_column(column, justify="left" if column == "side" else "right")
-    bare_slope = None
-    for side in sides:
-        a, b = (float(np.mean(seconds[(side, n)])) for n in SIGMAS)
-        slope = (b - a) / (large - small)
-        bare_slope = slope if side == "bare" else bare_slope
-        table.add_row(side, " / ".join(f"{x:.2f}" for x in seconds[(side, 4)]),
-                      " / ".join(f"{x:.2f}" for x in seconds[(side, 8)]), f"{slope * 1000:.2f}",
-                      f"{a - slope * small:.2f}", f"{slope / bare_slope:.2f}" if bare_slope else "")
-    console.print(table)
+    for measure, unit in (("wall", "s"), ("cpu", "CPU s")):
+        table = Table(title=f"the image path per image, {measure}: {renders_n} renders blurred at 4 and 8 σ ({small} "
+                            f"and {large} images), read, post-processed, classified (rounds: {rounds}, interleaved; "
+                            "medians)")
+        for column in ("side", f"{small} images ({unit})", f"{large} images ({unit})", "per image (ms)",
+                       f"set-up ({unit})", "per image / bare"):
+            table.add_column(column, justify="left" if column == "side" else "right")
+        bare_slope = None
+        for side in sides:
+            a, b = (float(np.median([t[measure] for t in seconds[(side, n)]])) for n in SIGMAS)
+            slope = (b - a) / (large - small)
+            bare_slope = slope if side == "bare" else bare_slope
+            table.add_row(side, " / ".join(f"{t[measure]:.2f}" for t in seconds[(side, 4)]),
+                          " / ".join(f"{t[measure]:.2f}" for t in seconds[(side, 8)]), f"{slope * 1000:.2f}",
+                          f"{a - slope * small:.2f}", f"{slope / bare_slope:.2f}" if bare_slope else "")
+        console.print(table)
     console.print("sweep3d's times are its stages' in a fresh process (imports left out); the bare process's, "
                   "start to exit. per image: (time at 1,920 − time at 960) / 960; set-up: the rest at 960.")
 
@@ -460,12 +466,16 @@ def bare_infer(renders: Path, model: Path, sigmas: list[float] | None = None) ->
     """The hand-written image path over ``renders`` (PNGs, searched recursively): read, blur at
     σ = 0, 1, 2, 3, classify with ONNX Runtime on 2 threads in batches of 32, in a fresh process;
     its JSON line and its wall time from start to exit."""
-    started = time.perf_counter()
+    import resource
+
+    started, before = time.perf_counter(), resource.getrusage(resource.RUSAGE_CHILDREN)
     done = subprocess.run([sys.executable, str(BARE_INFER), str(renders), "--backend", "onnx", "--model", str(model),
                            "--threads", "2", "--sigmas", ",".join(str(s) for s in sigmas or SIGMAS[4])],
                           capture_output=True, text=True)
     assert done.returncode == 0, done.stderr[-3000:]
-    return {**json.loads(done.stdout.strip().splitlines()[-1]), "wall": time.perf_counter() - started}
+    wall, after = time.perf_counter() - started, resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime
+    return {**json.loads(done.stdout.strip().splitlines()[-1]), "wall": wall, "cpu": cpu}
 
 
 def export_onnx(path: Path) -> Path:
@@ -633,7 +643,9 @@ def main() -> None:
     if args.infer_alone:
         from sweep3d.cache.store import Store
 
-        print(infer_alone({"store": Store(args.infer_alone / "store")}, args.infer_alone, SIGMAS[args.sigmas]))
+        took: dict = {}
+        took["wall"] = infer_alone({"store": Store(args.infer_alone / "store")}, args.infer_alone, SIGMAS[args.sigmas], took)
+        print(json.dumps(took))
         return
     if args.image_path:
         image_path(args.rounds, args.old, console)
