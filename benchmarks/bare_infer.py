@@ -75,6 +75,42 @@ def torch_runner(device: str, weights: str | None, threads: int):
     return run
 
 
+def image_path(frames: Path, run, sigmas: list[float], batch: int) -> dict:
+    """Read every PNG under ``frames``, blur it at each σ, scale it and classify the images in
+    batches through ``run``: the seconds of each part, the images and the top-1 classes."""
+    import numpy as np
+    from PIL import Image
+    from scipy import ndimage
+
+    seconds = {"read": 0.0, "blur": 0.0, "preprocess": 0.0, "model": 0.0}
+    pending, top1 = [], []
+
+    def flush() -> None:
+        t = time.perf_counter()
+        logits = run(np.stack(pending))
+        seconds["model"] += time.perf_counter() - t
+        top1.extend(int(i) for i in logits.argmax(1))
+        pending.clear()
+
+    for png in sorted(frames.rglob("*.png")):
+        t0 = time.perf_counter()
+        image = np.asarray(Image.open(png).convert("RGB"), dtype=np.float32) / 255.0
+        t1 = time.perf_counter()
+        seconds["read"] += t1 - t0
+        for sigma in sigmas:
+            t1 = time.perf_counter()
+            blurred = ndimage.gaussian_filter(image, sigma=(sigma, sigma, 0), mode="nearest") if sigma else image
+            t2 = time.perf_counter()
+            pending.append(np.ascontiguousarray(((blurred - 0.5) / 0.5).transpose(2, 0, 1)))
+            seconds["blur"] += t2 - t1
+            seconds["preprocess"] += time.perf_counter() - t2
+            if len(pending) == batch:
+                flush()
+    if pending:
+        flush()
+    return {"seconds": seconds, "top1": top1}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("frames", type=Path, nargs="?")
@@ -91,40 +127,13 @@ def main() -> None:
         export(args.export, args.weights)
         return
     import numpy as np
-    from PIL import Image
-    from scipy import ndimage
 
     run = onnx_runner(args.model, args.threads) if args.backend == "onnx" else \
         torch_runner(args.device, args.weights, args.threads)
     run(np.zeros((1, 3, 224, 224), np.float32))  # the first call's set-up, as a stage's warm model
     loaded = time.perf_counter()
-    sigmas = [float(s) for s in args.sigmas.split(",")]
-    seconds = {"read": 0.0, "blur": 0.0, "preprocess": 0.0, "model": 0.0}
-    pending, top1 = [], []
-
-    def flush() -> None:
-        t = time.perf_counter()
-        logits = run(np.stack(pending))
-        seconds["model"] += time.perf_counter() - t
-        top1.extend(int(i) for i in logits.argmax(1))
-        pending.clear()
-
-    for png in sorted(args.frames.rglob("*.png")):
-        t0 = time.perf_counter()
-        image = np.asarray(Image.open(png).convert("RGB"), dtype=np.float32) / 255.0
-        t1 = time.perf_counter()
-        seconds["read"] += t1 - t0
-        for sigma in sigmas:
-            t1 = time.perf_counter()
-            blurred = ndimage.gaussian_filter(image, sigma=(sigma, sigma, 0), mode="nearest") if sigma else image
-            t2 = time.perf_counter()
-            pending.append(np.ascontiguousarray(((blurred - 0.5) / 0.5).transpose(2, 0, 1)))
-            seconds["blur"] += t2 - t1
-            seconds["preprocess"] += time.perf_counter() - t2
-            if len(pending) == args.batch:
-                flush()
-    if pending:
-        flush()
+    done = image_path(args.frames, run, [float(s) for s in args.sigmas.split(",")], args.batch)
+    seconds, top1 = done["seconds"], done["top1"]
     loop = time.perf_counter() - loaded
     print(json.dumps({
         "backend": args.backend, "device": args.device if args.backend == "torch" else "cpu",

@@ -27,6 +27,12 @@ set-up is reported apart. sweep3d runs with its user cache (an ONNX export and c
 earlier run), with nothing kept (`SWEEP3D_CACHE=off`), and optionally as another checkout:
 
     .venv/bin/python benchmarks/pipeline.py --image-path [--rounds 2] [--old ../other-checkout]
+
+`--image-path-paired` runs both sides in this one process instead, alternated run by run (ABBA),
+at 960 images, torch imported first (its import is reported apart): on a machine whose speed
+drifts, the tightest comparison.
+
+    .venv/bin/python benchmarks/pipeline.py --image-path-paired [--rounds 2]
 """
 
 from __future__ import annotations
@@ -459,6 +465,59 @@ def image_path(rounds: int, old: Path | None, console: Console) -> None:
                   "start to exit. per image: (time at 1,920 − time at 960) / 960; set-up: the rest at 960.")
 
 
+def image_path_paired(rounds: int, console: Console) -> None:
+    """The image path, sweep3d's stages against the bare loop (``bare_infer.image_path``), both in
+    this one process, alternated image set by image set (ABBA): on a machine whose speed drifts,
+    each pair of runs sees the same machine. torch is imported first, so that neither side pays
+    its import (sweep3d pays it once per process at its first near tie: timed here apart)."""
+    import bare_infer
+
+    from sweep3d.cache.store import Store
+
+    started = time.perf_counter()
+    import torch  # noqa: F401  (see above)
+
+    torch_import = time.perf_counter() - started
+    sides: dict[str, list[dict]] = {"bare": [], "sweep3d": []}
+    with tempfile.TemporaryDirectory(prefix="sweep3d-paired-") as tmp:
+        console.print("the quickstart's renders, once ...")
+        stage = stage_multi(Path(tmp) / "renders")
+        model = export_onnx(Path(tmp) / "lite0.onnx")
+        scratch = Path(tmp) / "side"
+        for i in range(rounds * 2 + 1):  # the first sweep3d round only fills the user cache: not counted
+            for side in ("sweep3d", "bare") if i % 2 == 0 else ("bare", "sweep3d"):
+                if i == 0 and side == "bare":
+                    continue
+                wall, cpu = time.perf_counter(), time.process_time()
+                if side == "bare":
+                    run = bare_infer.onnx_runner(model, 2)
+                    run(np.zeros((1, 3, 224, 224), np.float32))
+                    images = len(bare_infer.image_path(stage["store"].root / "blobs", run, SIGMAS[4], 32)["top1"])
+                else:
+                    shutil.copytree(Path(tmp) / "renders", scratch)
+                    wall, cpu = time.perf_counter(), time.process_time()
+                    infer_alone({"store": Store(scratch / "store")}, scratch)
+                    shutil.rmtree(scratch)
+                    images = stage["n"] * len(SIGMAS[4])
+                took = {"wall": time.perf_counter() - wall, "cpu": time.process_time() - cpu, "images": images}
+                console.print(f"round {i}: {side} {took['wall']:.2f} s")
+                if i:
+                    sides[side].append(took)
+    table = Table(title=f"the image path in one process, alternated (ABBA, {rounds * 2} runs a side): the "
+                        f"quickstart's {stage['n']} renders blurred at 4 σ, read, post-processed, classified")
+    for column in ("side", "runs (s)", "per image (ms)", "CPU per image (ms)", "/ bare (wall)", "/ bare (CPU)"):
+        table.add_column(column, justify="left" if column == "side" else "right")
+    per = {side: (sum(t["wall"] for t in runs) / sum(t["images"] for t in runs),
+                  sum(t["cpu"] for t in runs) / sum(t["images"] for t in runs)) for side, runs in sides.items()}
+    for side, runs in sides.items():
+        table.add_row(side, " / ".join(f"{t['wall']:.2f}" for t in runs), f"{per[side][0] * 1000:.2f}",
+                      f"{per[side][1] * 1000:.2f}", f"{per[side][0] / per['bare'][0]:.2f}",
+                      f"{per[side][1] / per['bare'][1]:.2f}")
+    console.print(table)
+    console.print(f"torch's import in this process: {torch_import:.2f} s (sweep3d pays it at its first near tie, "
+                  "if any; the bare loop never)")
+
+
 BARE_INFER = Path(__file__).with_name("bare_infer.py")
 
 
@@ -636,6 +695,8 @@ def main() -> None:
     parser.add_argument("--old", type=Path, help="with --post-heavy or --image-path: another checkout to time beside this one")
     parser.add_argument("--image-path", action="store_true",
                         help="only the image path, per image: sweep3d's stages against the bare process")
+    parser.add_argument("--image-path-paired", action="store_true",
+                        help="only the image path: sweep3d's stages and the bare loop in one process, alternated")
     parser.add_argument("--infer-alone", type=Path, help=argparse.SUPPRESS)  # one side of --image-path
     parser.add_argument("--sigmas", type=int, default=4, choices=sorted(SIGMAS), help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -649,6 +710,9 @@ def main() -> None:
         return
     if args.image_path:
         image_path(args.rounds, args.old, console)
+        return
+    if args.image_path_paired:
+        image_path_paired(args.rounds, console)
         return
     if args.post_heavy:
         post_heavy(args.rounds, args.objects, args.old, console)
