@@ -188,9 +188,18 @@ class InferStage:
         first = next(jobs, None)
         if first is None:
             return  # nothing came (its inputs failed): nothing to load
-        infer = self._inferrer(plan, store, self._threads(beside=todo.upstream))  # while the next images are made
+        kept = KeptOutputs(store, plan.model_digest, self._answers(plan), self._evaluator(plan).task)
+        try:
+            yield from self._predicted(plan, store, todo, images, valid, itertools.chain([first], jobs), kept)
+        finally:
+            kept.close()
+
+    def _predicted(self, plan: Plan, store: Store, todo: Feed, images: ModelInputs, valid: dict[str, Mapping[str, Any]],
+                 jobs: Iterable[Job], kept: KeptOutputs) -> Iterator[Computed]:
+        """The prediction rows of ``jobs``, batch by batch."""
+        infer = self._inferrer(plan, store, self._threads(beside=todo.upstream), kept)  # while the next images are made
         passes = self._evaluator(plan).passes
-        for batch_jobs in _batches(itertools.chain([first], jobs), self.model.settings.batch_size):
+        for batch_jobs in _batches(jobs, self.model.settings.batch_size):
             t0 = time.perf_counter()
             batch, pixels, invalid, damaged = _load(images, batch_jobs, valid)
             arrays, lost = _load_passes(store, batch, passes)
@@ -205,10 +214,10 @@ class InferStage:
             for job in lost:  # its truth row goes, so the render stage renders its passes again
                 yield Computed(job.pred_key, damaged=("truths", job.truth_key))
 
-    def _inferrer(self, plan: Plan, store: Store,
-                  threads: int) -> Callable[[list[Job], list[np.ndarray], list[dict]], list[dict]]:
+    def _inferrer(self, plan: Plan, store: Store, threads: int,
+                  kept: KeptOutputs) -> Callable[[list[Job], list[np.ndarray], list[dict]], list[dict]]:
         """A function from a batch's jobs and pixels to their evaluator rows, on the run's backend
-        with ``threads`` threads."""
+        with ``threads`` threads (the model's outputs read from and kept in ``kept``)."""
         labels = self._labels
         truths = object_class_ids(plan, labels, self.model.name)
         evaluator, kind = self._evaluator(plan), plan.spec.evaluator.kind
@@ -227,8 +236,6 @@ class InferStage:
             from sweep3d.stages.infer.ray_actor import remote_runner
 
             remote = remote_runner(self.model.name, self.model.framing.model)
-
-        kept = KeptOutputs(store, plan.model_digest, self._answers(plan), evaluator.task)
 
         def infer(jobs: list[Job], pixels: list[np.ndarray], arrays: list[dict]) -> list[dict]:
             images = [j.image_key for j in jobs]

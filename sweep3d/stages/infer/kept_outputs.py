@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import io
 import logging
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -46,6 +47,9 @@ class KeptOutputs:
     def __init__(self, store: Store, model_digest: str, answers: str, task: str) -> None:
         self.root = store.root / OUTPUTS_FOLDER
         self.model_digest, self.answers, self.task = model_digest, answers, task
+        self._writer: ThreadPoolExecutor | None = None
+        self._pending: list[Future] = []
+        self._unwritten: dict[Path, bytes] = {}  # saved, not yet on disk: what load reads meanwhile
 
     def _path(self, image_key: str) -> Path:
         key = outputs_key(self.model_digest, self.answers, self.task, image_key)
@@ -60,7 +64,8 @@ class KeptOutputs:
         mismatched: list[Path] = []
         for key in image_keys:
             path = self._path(key)
-            array = _read(path)
+            waiting = self._unwritten.get(path)  # saved, its file not written yet
+            array = _read(path) if waiting is None else _array(waiting)
             if isinstance(array, np.ndarray):
                 arrays.append(array)
             elif array == "mismatch":
@@ -72,13 +77,38 @@ class KeptOutputs:
         return np.stack(arrays)
 
     def save(self, image_keys: Sequence[str], outputs: Any) -> None:
-        """Keep each image's outputs, where the task's are one small array per image."""
+        """Keep each image's outputs, where the task's are one small array per image. The files are
+        written by one thread of their own (a file an image costs the disk more than the model
+        costs the CPU on a slow disk: benchmarks/RESULTS.md, issue 37) until :meth:`close`; a
+        write that failed (a full disk) is raised by the next call."""
         if self.task not in KEPT_TASKS or not isinstance(outputs, np.ndarray) or len(outputs) != len(image_keys):
             return
         if outputs[0].nbytes > MAX_BYTES:
             return
-        for key, array in zip(image_keys, outputs):
-            atomic_write(self._path(key), pack(array), durable=False)  # a torn file reads as a mismatch
+        files = [(self._path(key), pack(array)) for key, array in zip(image_keys, outputs)]
+        if self._writer is None:
+            self._writer = ThreadPoolExecutor(1, thread_name_prefix="sweep3d-kept-outputs")
+        self._raise_failed()
+        self._unwritten.update(files)
+        self._pending.append(self._writer.submit(self._write, files))
+
+    def _write(self, files: list[tuple[Path, bytes]]) -> None:
+        for path, data in files:
+            atomic_write(path, data, durable=False)  # a torn file reads as a mismatch
+            self._unwritten.pop(path, None)
+
+    def close(self) -> None:
+        """Wait for the files being written; raise a write that failed."""
+        if self._writer is not None:
+            self._writer.shutdown(wait=True)
+            self._writer = None
+        self._raise_failed()
+
+    def _raise_failed(self) -> None:
+        done = [f for f in self._pending if f.done()]
+        self._pending = [f for f in self._pending if not f.done()]
+        for future in done:
+            future.result()
 
 
 def _read(path: Path) -> np.ndarray | str:
@@ -88,6 +118,11 @@ def _read(path: Path) -> np.ndarray | str:
         data = path.read_bytes()
     except OSError:
         return "missing"
+    return _array(data)
+
+
+def _array(data: bytes) -> np.ndarray | str:
+    """The array a kept file's bytes hold, or "mismatch"."""
     body = unpack(data)
     if body is None:
         return "mismatch"

@@ -14,11 +14,34 @@ def test_a_batch_comes_back_only_when_every_image_is_kept_and_readable(tmp_path:
     kept = KeptOutputs(Store(tmp_path / "store"), "model", "torch", "classification")
     logits = np.arange(12, dtype=np.float32).reshape(3, 4)
     kept.save(["a", "b", "c"], logits)
-    assert np.array_equal(kept.load(["c", "a"]), logits[[2, 0]])
+    assert np.array_equal(kept.load(["c", "a"]), logits[[2, 0]])  # whether or not its files are written yet
     assert kept.load(["a", "d"]) is None, "one image not kept: the model runs for the batch"
+    kept.close()
+    assert np.array_equal(KeptOutputs(Store(tmp_path / "store"), "model", "torch", "classification").load(["b"]),
+                          logits[[1]])  # on disk
     kept._path("b").write_bytes(b"not an array")
     assert kept.load(["a", "b"]) is None, "a damaged file is a miss, not an error"
     assert kept.load([]) is None
+
+
+def test_files_are_written_beside_the_model_and_a_failed_write_is_raised(tmp_path: Path, monkeypatch) -> None:
+    import pytest
+
+    from sweep3d.cache import StoreWriteError
+    from sweep3d.stages.infer import kept_outputs
+
+    kept = KeptOutputs(Store(tmp_path / "store"), "model", "torch", "classification")
+    kept.save(["a"], np.ones((1, 4), np.float32))
+    kept.close()
+    assert kept._path("a").is_file() and not kept._unwritten
+
+    def full(path, data, durable=True):
+        raise StoreWriteError(f"cannot write {path}: the disk is full")
+
+    monkeypatch.setattr(kept_outputs, "atomic_write", full)
+    kept.save(["b"], np.ones((1, 4), np.float32))
+    with pytest.raises(StoreWriteError, match="disk is full"):
+        kept.close()
 
 
 def test_only_small_arrays_of_the_array_tasks_are_kept(tmp_path: Path) -> None:
