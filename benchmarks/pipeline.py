@@ -380,9 +380,9 @@ def blurred_spec(folder: Path, sigmas: list[float]) -> Path:
 
 
 def infer_alone(stage: dict, folder: Path, sigmas: list[float] | None = None, cpu: dict | None = None) -> float:
-    """Seconds of the postprocess and inference stages alone over the stage's renders (the model
-    loaded first, as a run's is before its renders end): sweep3d's image path. ``cpu`` gets the
-    CPU seconds they took (every thread's) under ``"cpu"``."""
+    """Seconds of the postprocess and inference stages alone over the stage's renders, overlapped
+    as a run overlaps them (the model loaded first, as a run's is before its renders end):
+    sweep3d's image path. ``cpu`` gets the CPU seconds they took (every thread's) under ``"cpu"``."""
     import sweep3d
     from sweep3d.driver.loop import run_stages
     from sweep3d.driver.progress import RunProgress
@@ -402,7 +402,7 @@ def infer_alone(stage: dict, folder: Path, sigmas: list[float] | None = None, cp
     post = PostprocessStage.for_spec(spec, ImageHandoff())  # as a run wires them
     infer = InferStage(model, handoff=post.handoff, images_stored=post.store_images)
     started, cpu_started = time.perf_counter(), time.process_time()
-    outcomes = run_stages([post, infer], plan, stage["store"], RunProgress(None))
+    outcomes = run_stages([post, infer], plan, stage["store"], RunProgress(None), overlap=True)  # as a run does
     assert all(o.failed == 0 for o in outcomes), outcomes
     if cpu is not None:
         cpu["cpu"] = time.process_time() - cpu_started

@@ -250,9 +250,11 @@ class _Pass:
         self.runs, self.plan, self.store, self.bars, self.writers = runs, plan, store, bars, writers
         self.recorded: dict[str, dict[str, dict[str, Any]]] = {
             table: {} for r in runs for table in (r.stage.table, *r.stage.side_tables)}
-        self.feeds = [Feed(store, self.recorded, r.ready, more=bool(r.waiting)) for r in runs]
-        self.events: queue.Queue = queue.Queue()
         self.running = [bool(r.ready or r.waiting) for r in runs]  # stages still computing
+        self.feeds = [Feed(store, self.recorded, r.ready, more=bool(r.waiting),
+                           computing=tuple(b.stage.name for b, busy in zip(runs[:i], self.running) if busy))
+                      for i, r in enumerate(runs)]
+        self.events: queue.Queue = queue.Queue()
         self.threads: list[threading.Thread] = []
         self.started = time.perf_counter()
 

@@ -54,13 +54,15 @@ class Feed:
     """
 
     def __init__(self, store: Store, recorded: Mapping[str, dict[str, dict[str, Any]]], jobs: Iterable[Job] = (),
-                 more: bool = False) -> None:
+                 more: bool = False, computing: tuple[str, ...] = ()) -> None:
         self._store, self._recorded = store, recorded
         self._jobs = list(jobs)
         self._open, self._cancelled = more, False
-        # Whether the pass began with jobs to come from stages upstream: fixed, unlike ``more``
-        # (which says how fast they went), so what a stage chooses from it is the same run to run.
+        # Whether the pass began with jobs to come from stages upstream, and which of the stages
+        # before this one compute in it: fixed, unlike ``more`` (which says how fast they went),
+        # so what a stage chooses from them is the same run to run.
         self.upstream = more
+        self.computing = computing
         self._changed = threading.Condition()
 
     def put(self, job: Job) -> None:

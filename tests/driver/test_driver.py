@@ -265,3 +265,23 @@ def test_a_damaged_input_found_by_two_stages_is_discarded_once_and_redone_in_the
     assert not (render.failed or post.failed or infer.failed)
     rows = stored(store)
     assert len(rows["predictions"]) == 8 and len(rows["renders"]) == 4  # its first row went with its blob
+
+
+def test_a_stage_s_feed_names_the_stages_before_it_that_compute_in_the_pass(tmp_path: Path) -> None:
+    """What inference's thread count is chosen from (one thread beside renders, every core beside
+    post-processing alone): fixed at the pass's start, by what each stage before had to do."""
+    seen: dict[str, tuple[str, ...]] = {}
+
+    class Noting(Infer):
+        def compute(self, todo: Feed, plan: Plan, store: Store) -> Iterator[Computed]:
+            seen.setdefault("infer", todo.computing)
+            yield from super().compute(todo, plan, store)
+
+    store = Store(tmp_path)
+    overlapped([Render()], make_plan(), store)  # renders stored: post-processing alone computes next
+    overlapped([Render(), Post(), Noting()], make_plan(), store)
+    assert seen.pop("infer") == ("postprocess",)
+    overlapped([Render(), Post(), Noting()], make_plan(), Store(tmp_path / "fresh"))
+    assert seen.pop("infer") == ("render", "postprocess")
+    overlapped([Render(), Post(), Noting(damaged={"i000"})], make_plan(), Store(tmp_path / "fresh"))  # cached
+    assert "infer" not in seen  # nothing to compute: no feed at all

@@ -197,7 +197,7 @@ class InferStage:
     def _predicted(self, plan: Plan, store: Store, todo: Feed, images: ModelInputs, valid: dict[str, Mapping[str, Any]],
                  jobs: Iterable[Job], kept: KeptOutputs) -> Iterator[Computed]:
         """The prediction rows of ``jobs``, batch by batch."""
-        infer = self._inferrer(plan, store, self._threads(beside=todo.upstream), kept)  # while the next images are made
+        infer = self._inferrer(plan, store, self._threads(beside="render" in todo.computing), kept)
         passes = self._evaluator(plan).passes
         for batch_jobs in _batches(jobs, self.model.settings.batch_size):
             t0 = time.perf_counter()
@@ -297,10 +297,11 @@ class InferStage:
         return self._runner is None or not self._runner.batch_invariant
 
     def _threads(self, beside: bool = False) -> int:
-        """Inference threads: the model's setting, else one ``beside`` stages that compute in the
-        pass (Blender renders on every core: one thread gave the shortest runs, benchmarks/RESULTS.md),
-        else every core. Chosen from what the pass had to do, not from how fast upstream went,
-        since torch's answers change with its thread count."""
+        """Inference threads: the model's setting, else one ``beside`` renders of the pass
+        (Blender renders on every core: one thread gave the shortest runs, benchmarks/RESULTS.md),
+        else every core (beside post-processing alone, which takes one core for a fraction of
+        the time, every core took the quickstart's 960 images from 13–15 s to 8–10 s: issue 37). Chosen from what the pass had to do, not
+        from how fast upstream went, since torch's answers change with its thread count."""
         return self.model.settings.threads or (1 if beside else os.cpu_count() or 1)
 
     def _evaluator(self, plan: Plan) -> Evaluator:
