@@ -15,11 +15,11 @@ import hashlib
 import json
 import os
 import platform
-import shutil
-import uuid
 from functools import lru_cache
 from importlib import metadata
 from pathlib import Path
+
+from sweep3d.cache import StoreWriteError, atomic_write
 
 #: Where the user's cache folder is (default ``$XDG_CACHE_HOME/sweep3d``, else ``~/.cache/sweep3d``);
 #: ``off`` keeps nothing outside the stores.
@@ -117,21 +117,12 @@ def _cpu() -> str:
 
 
 def _copy(source: Path, target: Path) -> None:
-    """Copy ``source`` to ``target`` through a temporary file and a rename (readers see all or nothing)."""
-    target.parent.mkdir(parents=True, exist_ok=True)
-    staged = target.with_name(f".{target.name}.{uuid.uuid4().hex}.tmp")
-    try:
-        shutil.copyfile(source, staged)
-        os.replace(staged, target)
-    finally:
-        staged.unlink(missing_ok=True)
+    """Copy ``source`` to ``target`` whole or not at all (readers never see half a graph)."""
+    _write(target, source.read_bytes())
 
 
 def _write(target: Path, data: bytes) -> None:
-    target.parent.mkdir(parents=True, exist_ok=True)
-    staged = target.with_name(f".{target.name}.{uuid.uuid4().hex}.tmp")
     try:
-        staged.write_bytes(data)
-        os.replace(staged, target)
-    finally:
-        staged.unlink(missing_ok=True)
+        atomic_write(target, data, durable=False)  # a torn file is a different graph: checked again
+    except StoreWriteError as exc:  # a full or read-only disk: only a cache, said by the caller's OSError
+        raise OSError(str(exc)) from None
