@@ -379,7 +379,6 @@ def export(
     from sweep3d.export import export_dataset
 
     loaded = Experiment(spec).spec
-    require_store(loaded)
     result = export_dataset(loaded, form, output=output, where=where, model=model,
                             unevaluable=unevaluable, append=append, link=link, console=console)
     console.print(escape(result.line()), soft_wrap=True)

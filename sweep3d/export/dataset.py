@@ -26,6 +26,7 @@ from sweep3d.export.imagefolder import ImageFolderWriter
 from sweep3d.export.parquet import ParquetWriter
 from sweep3d.export.selection import DEFAULT_WHERE, UNEVALUABLE, Selection, check_where, select
 from sweep3d.export.target import DESIGN, MANIFEST, SCENE, ExportFolder, Staging, design_table, identity, open_folder
+from sweep3d.results import no_results
 from sweep3d.spec import LoadedSpec
 
 if TYPE_CHECKING:
@@ -126,6 +127,8 @@ def export_dataset(spec: LoadedSpec, fmt: str, *, output: Path | None = None, wh
         raise UserError(f"--link: a {fmt} export holds the images' bytes, not files; leave --link out")
     condition = check_where(DEFAULT_WHERE if where is None else where)
     folder = open_folder(Path(output) if output is not None else default_output(spec, fmt), spec.store, fmt, append)
+    if not Path(spec.store).is_dir():  # after the options' own mistakes, before anything is made
+        raise no_results(Store(spec.store), spec.name, spec.path)
     selection = select(spec, condition, model, unevaluable)
     if writer.needs_mask and not selection.truth:
         raise UserError(f"--format {fmt} takes boxes and masks from the mask pass, which {spec.path} does not render: "

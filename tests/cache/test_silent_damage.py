@@ -70,6 +70,7 @@ LOGITS = np.array([[0.1, 3.0, 0.2, 0.3], [2.0, 0.1, 0.1, 0.1], [0.1, 0.1, 0.1, 4
 def test_a_kept_output_edited_in_place_is_refused_with_a_warning_and_kept_anew(tmp_path: Path, caplog) -> None:
     kept = KeptOutputs(Store(tmp_path / "store"), "model", "torch", "classification")
     kept.save(["a", "b", "c"], LOGITS)
+    kept.close()  # its files written
     edit_in_place(kept._path("b"), another_winner)
     assert np.argmax(np.load(kept._path("b"))) != np.argmax(LOGITS[1]), "the edit would change the prediction"
 
@@ -86,6 +87,7 @@ def test_a_kept_output_without_a_digest_is_never_used(tmp_path: Path, caplog) ->
     """Written before digests were kept, or saved over by another tool: the model runs again."""
     kept = KeptOutputs(Store(tmp_path / "store"), "model", "torch", "classification")
     kept.save(["a"], LOGITS[:1])
+    kept.close()
     np.save(kept._path("a"), LOGITS[2])
     with caplog.at_level(logging.WARNING, logger="sweep3d.store"):
         assert kept.load(["a"]) is None
@@ -96,6 +98,7 @@ def test_verify_finds_an_edited_kept_output_and_repair_quarantines_it(tmp_path: 
     root = tmp_path / "store"
     kept = KeptOutputs(Store(root), "model", "torch", "classification")
     kept.save(["a", "b"], LOGITS[:2])
+    kept.close()
     assert verify(root).ok and verify(root).outputs == 2
     edit_in_place(kept._path("a"), another_winner)
 
