@@ -58,10 +58,8 @@ class Feed:
         self._store, self._recorded = store, recorded
         self._jobs = list(jobs)
         self._open, self._cancelled = more, False
-        # Whether the pass began with jobs to come from stages upstream, and which of the stages
-        # before this one compute in it: fixed, unlike ``more`` (which says how fast they went),
-        # so what a stage chooses from them is the same run to run.
-        self.upstream = more
+        # Which of the stages before this one compute in the pass: fixed, unlike ``more`` (which
+        # says how fast they went), so what a stage chooses from it is the same run to run.
         self.computing = computing
         self._changed = threading.Condition()
 
