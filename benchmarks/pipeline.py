@@ -639,16 +639,19 @@ HEAVY_CORRUPTIONS = ["gaussian_noise", "shot_noise", "impulse_noise", "defocus_b
 def post_heavy_spec(folder: Path, objects: int) -> Path:
     """The quickstart with its first ``objects`` objects, blur replaced by the corruptions above at
     severities 1–5: 48 renders an object, 90 images a render."""
-    text = quickstart_spec(folder).read_text()
+    (folder / "spec.toml").write_text(post_heavy_text(quickstart_spec(folder).read_text(), objects))
+    return folder / "spec.toml"
+
+
+def post_heavy_text(text: str, objects: int) -> str:
+    """A quickstart spec's text made post-heavy (see :func:`post_heavy_spec`)."""
     head, *blocks = text.split("[[objects]]")
     kept, rest = blocks[:objects], blocks[-1].split("[[environments]]", 1)[1]
     kept[-1] = kept[-1].split("[[environments]]", 1)[0] if len(blocks) == objects else kept[-1]
     text = head + "".join("[[objects]]" + b for b in kept) + "[[environments]]" + rest
     blur = text[text.index('type  = "blur"'):text.index("[policy]")]
     names = ", ".join(f'"{n}"' for n in HEAVY_CORRUPTIONS)
-    text = text.replace(blur, f'type     = "corruption"\nname     = [{names}]\nseverity = [1, 2, 3, 4, 5]\n\n')
-    (folder / "spec.toml").write_text(text)
-    return folder / "spec.toml"
+    return text.replace(blur, f'type     = "corruption"\nname     = [{names}]\nseverity = [1, 2, 3, 4, 5]\n\n')
 
 
 def post_heavy(rounds: int, objects: int, old: Path | None, console: Console) -> None:
