@@ -106,7 +106,7 @@ def timed_run(folder: Path, scratch: Path, name: str, text: str, env: dict[str, 
     return row
 
 
-def bare(folder: Path, scratch: Path, args: list[str]) -> dict:
+def bare(folder: Path, args: list[str]) -> dict:
     """`bare_infer.py` over the store's renders, blurred at the quickstart's four σ."""
     started = time.perf_counter()
     done = subprocess.run([sys.executable, str(REPO / "benchmarks" / "bare_infer.py"), str(folder / "store" / "blobs"),
@@ -119,28 +119,29 @@ def bare(folder: Path, scratch: Path, args: list[str]) -> dict:
 
 
 def time_all(folder: Path, results: Path, heavy_objects: int) -> None:
+    """The runs the module's docstring lists, in order: a JSON line each, then the table."""
     results.mkdir(parents=True, exist_ok=True)
-    scratch = Path(tempfile.mkdtemp(prefix="sweep3d-gpu-"))
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     quickstart = (folder / "quickstart.toml").read_text()
     torch_text = quickstart.replace('batch_size = 32', 'batch_size = 32\nbackend    = "torch"')
-    heavy = post_heavy_text(quickstart, heavy_objects)
-    heavy_torch = post_heavy_text(torch_text, heavy_objects)
-    onnx = scratch / "lite0.onnx"
-    scratch.mkdir(parents=True, exist_ok=True)
-    subprocess.run([sys.executable, str(REPO / "benchmarks" / "bare_infer.py"), "--export", str(onnx)], check=True)
-    runs = [
-        lambda: timed_run(folder, scratch, "quickstart, default backend", quickstart, env),
-        lambda: timed_run(folder, scratch, "quickstart, torch", torch_text, env),
-        lambda: bare(folder, scratch, ["--backend", "torch", "--device", "cuda"]),
-        lambda: bare(folder, scratch, ["--backend", "onnx", "--model", str(onnx)]),
-        lambda: timed_run(folder, scratch, "quickstart, default backend, again", quickstart, env),
-        lambda: timed_run(folder, scratch, "quickstart, torch, again", torch_text, env),
-        lambda: timed_run(folder, scratch, f"post-heavy ({heavy_objects} objects), torch", heavy_torch, env),
-        lambda: timed_run(folder, scratch, f"post-heavy ({heavy_objects} objects), default backend", heavy, env),
-    ]
+    heavy = f"post-heavy ({heavy_objects} objects)"
     rows = []
-    with (results / "image_path.jsonl").open("a") as log:
+    with tempfile.TemporaryDirectory(prefix="sweep3d-gpu-") as tmp, \
+            (results / "image_path.jsonl").open("a") as log:
+        scratch = Path(tmp)
+        onnx = scratch / "lite0.onnx"
+        subprocess.run([sys.executable, str(REPO / "benchmarks" / "bare_infer.py"), "--export", str(onnx)], check=True)
+        runs = [
+            lambda: timed_run(folder, scratch, "quickstart, default backend", quickstart, env),
+            lambda: timed_run(folder, scratch, "quickstart, torch", torch_text, env),
+            lambda: bare(folder, ["--backend", "torch", "--device", "cuda"]),
+            lambda: bare(folder, ["--backend", "onnx", "--model", str(onnx)]),
+            lambda: timed_run(folder, scratch, "quickstart, default backend, again", quickstart, env),
+            lambda: timed_run(folder, scratch, "quickstart, torch, again", torch_text, env),
+            lambda: timed_run(folder, scratch, f"{heavy}, torch", post_heavy_text(torch_text, heavy_objects), env),
+            lambda: timed_run(folder, scratch, f"{heavy}, default backend", post_heavy_text(quickstart, heavy_objects),
+                              env),
+        ]
         for run in runs:
             row = run()
             rows.append(row)
