@@ -10,8 +10,9 @@ The fast lane (``pytest -m fast``): every test without a ``blender``, ``browser`
 worker fails the test, and property tests run the ``fast`` Hypothesis profile (those that set
 their own ``max_examples`` go through :func:`examples`).
 
-The suite runs in two processes (pytest-xdist, ``-n 2`` in pyproject's addopts; the fast lane in
-one, where its guard can see every import). Once per process: one headless Chromium
+The suite runs in two processes (pytest-xdist, ``-n 2`` in pyproject's addopts; the fast lane too:
+each process installs the guard in ``pytest_configure``, before it collects). ``scripts/test.sh`` runs
+the lane under its guard, then the rest, as CI does. Once per process: one headless Chromium
 (``chromium``); once per test run, whatever the processes: one ONNX export per model
 (``_one_onnx_export_per_model``). The ``soak`` lane (the 20-kill soak) is left out of the default
 run by pyproject's addopts; ``pytest -m soak`` runs it.
@@ -139,13 +140,6 @@ def _refuse_workers(guard: _LaneGuard) -> None:
 
 
 _GUARD = pytest.StashKey[_LaneGuard]()
-
-
-@pytest.hookimpl(tryfirst=True)
-def pytest_cmdline_main(config: pytest.Config) -> None:
-    """The fast lane runs in one process: its guard must see every import, collection's included."""
-    if _selects_lane(config.getoption("markexpr") or "") and hasattr(config.option, "numprocesses"):
-        config.option.numprocesses = 0
 
 
 def pytest_configure(config: pytest.Config) -> None:

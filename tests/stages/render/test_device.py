@@ -194,6 +194,7 @@ def test_capabilities_without_a_shipped_cubin_are_the_ones_the_driver_compiles(t
     assert uncompiled([], tmp_path) == []
 
 
+@pytest.mark.blender  # starts render pools (their workers import bpy)
 def test_a_gpu_workers_first_job_may_compile_kernels_and_its_cache_is_sized(tmp_path, monkeypatch) -> None:
     from sweep3d.stages.render.pool import RenderPool, _Worker
 
