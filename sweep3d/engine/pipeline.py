@@ -67,6 +67,7 @@ from sweep3d.stages.render import (
     remove_stale_scratch,
     scratch_root,
     slow_render_warning,
+    variant_note,
 )
 
 AUTO_COMPACT_SEGMENTS = 64  # a run ends by merging a table's segments beyond this many
@@ -384,9 +385,10 @@ def _missing_renders(plans: list[Plan], store: Store, executor: Executor) -> tup
 def _note_device(plans: list[Plan], missing: dict[int, int], console: Console | None) -> None:
     """One line before a run that renders when ``device = "auto"`` found no GPU (it renders on the
     CPU), or when the driver must compile Cycles' kernels for this GPU first (minutes, once)."""
-    note = device_note(plans[0].spec.render, plans[0].device)
-    if note and any(missing.values()) and console is not None:
-        console.print(f"[dim]note: {escape(note)}[/]", highlight=False, soft_wrap=True)
+    render = plans[0].spec.render
+    for note in (device_note(render, plans[0].device), variant_note(render.engine)):
+        if note and any(missing.values()) and console is not None:
+            console.print(f"[dim]note: {escape(note)}[/]", highlight=False, soft_wrap=True)
 
 
 def _warn_if_slow(plans: list[Plan], store: Store, executor: Executor, console: Console | None,

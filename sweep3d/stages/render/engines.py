@@ -10,6 +10,7 @@ Mitsuba: the version comes from the package's metadata.
 
 from __future__ import annotations
 
+import os
 from importlib import metadata
 from pathlib import Path
 from typing import Any
@@ -18,12 +19,15 @@ from sweep3d.core import SpecError
 from sweep3d.spec import LoadedSpec
 
 ENGINES = ("cycles", "mitsuba")
-#: Mitsuba's variant: ``scalar_rgb`` needs no system library, compiles no kernels, and took about
-#: the time ``llvm_ad_rgb`` took per 224² render here (benchmarks/mitsuba_variant.py; RESULTS.md).
-MITSUBA_VARIANT = "scalar_rgb"
+#: Mitsuba's variant when set (benchmarks); None: :func:`mitsuba_variant` picks it by what this machine has.
+MITSUBA_VARIANT: str | None = None
+#: LLVM libraries Dr.Jit's ``llvm_ad_rgb`` runs on (Debian's ``libllvm19``); Debian 12's default
+#: LLVM 14 cannot compile Mitsuba 3.9's kernels, so it is never picked up by a search of Dr.Jit's own.
+LLVM_LIBRARIES = ("/usr/lib/x86_64-linux-gnu/libLLVM-19.so", "/usr/lib/llvm-19/lib/libLLVM.so",
+                  "/usr/lib/aarch64-linux-gnu/libLLVM-19.so")
 #: Bump when sweep3d's own translation of a scene into Mitsuba's (the OBJ/MTL reader, materials,
 #: lights, the world, the filter) changes its pixels: part of every Mitsuba render key.
-MITSUBA_TRANSLATION = 1
+MITSUBA_TRANSLATION = 2  # 2: poses applied to the vertices, suns by their to_world (mitsuba/kept.py)
 #: Mesh files the Mitsuba engine reads (its own OBJ/MTL reader: ``mitsuba/objfile.py``).
 MITSUBA_MESHES = (".obj",)
 
@@ -37,11 +41,37 @@ def mitsuba_version() -> str:
         return ""
 
 
+def llvm_library() -> str | None:
+    """The LLVM library ``llvm_ad_rgb`` runs on: the user's ``DRJIT_LIBLLVM_PATH``, else the first
+    of :data:`LLVM_LIBRARIES` present (None: none, and Mitsuba renders with ``scalar_rgb``)."""
+    chosen = os.environ.get("DRJIT_LIBLLVM_PATH")
+    if chosen:
+        return chosen
+    return next((p for p in LLVM_LIBRARIES if Path(p).exists()), None)
+
+
+def mitsuba_variant() -> str:
+    """Mitsuba's variant here: ``llvm_ad_rgb`` where LLVM is present (its kernels, kept per worker
+    scene, render a quickstart job in about 0.4 of ``scalar_rgb``'s time: benchmarks/RESULTS.md,
+    "Mitsuba at half Cycles' cost"), ``scalar_rgb`` otherwise. Part of every Mitsuba render key."""
+    if MITSUBA_VARIANT:
+        return MITSUBA_VARIANT
+    return "llvm_ad_rgb" if llvm_library() else "scalar_rgb"
+
+
+def variant_note(engine: str) -> str | None:
+    """The line a Mitsuba run says once when it renders with the slower ``scalar_rgb``."""
+    if engine != "mitsuba" or mitsuba_variant() != "scalar_rgb":
+        return None
+    return ("the mitsuba engine renders with its scalar_rgb variant (no LLVM 19 library found): llvm_ad_rgb renders "
+            "about 2.5x faster; install it with apt-get install libllvm19 (or set DRJIT_LIBLLVM_PATH)")
+
+
 def engine_key(engine: str) -> dict[str, Any] | None:
     """The engine's part of every render key: None for Cycles (its keys stay as they were)."""
     if engine == "cycles":
         return None
-    return {"name": engine, "version": mitsuba_version(), "variant": MITSUBA_VARIANT,
+    return {"name": engine, "version": mitsuba_version(), "variant": mitsuba_variant(),
             "translation": MITSUBA_TRANSLATION}
 
 

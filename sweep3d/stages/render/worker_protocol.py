@@ -61,6 +61,7 @@ class RenderSettings:
     world_sampling: Literal["automatic", "manual", "none"] = _SPEC.world_sampling
     world_map_resolution: int = _SPEC.world_map_resolution
     engine: str = _SPEC.engine  # "cycles" or "mitsuba": which scene the worker builds
+    variant: str = ""  # Mitsuba's variant, as its render keys name it ("" for Cycles)
 
     @classmethod
     def from_spec(cls, spec: RenderSpec, framing: Framing, passes: Iterable[str] = (),
@@ -71,9 +72,12 @@ class RenderSettings:
         The frame replaces ``resolution`` because the spec's may be "model", resolved elsewhere;
         the device replaces ``device``, which may be "auto".
         """
+        from sweep3d.stages.render.engines import mitsuba_variant
+
         shared = {f.name: getattr(spec, f.name) for f in fields(cls) if f.name in RenderSpec.model_fields}
+        variant = mitsuba_variant() if spec.engine == "mitsuba" else ""  # the key's, wherever the worker runs
         return cls(**{**shared, "resolution": framing.size, "crop": framing.crop, "passes": tuple(passes),
-                      "device": device})
+                      "device": device, "variant": variant})
 
 
 @dataclass(frozen=True)

@@ -107,11 +107,24 @@ def surfaces(scene: MitsubaScene, size: int, widen: float, window: tuple[int, in
         loaded = scene.load(scene.describe(SURFACES, sensor, scenery=scenery, lit=False))
         image = mi.render(loaded, spp=1, seed=scene.settings.seed)
     image = np.asarray(image, dtype=np.float64)
-    ids = [shape.id() for shape in loaded.shapes()]
-    is_object = np.array([False] + [i.startswith("object_") for i in ids])
+    numbers = shape_numbers(mi, loaded)
+    is_object = np.zeros(max(numbers) + 1, dtype=bool)
+    for number, shape in zip(numbers, loaded.shapes(), strict=True):
+        is_object[number] = shape.id().startswith("object_")
     index = np.rint(image[..., 4]).astype(np.int64)
     hit = (image[..., 0] > 0) & (index > 0) & (index < len(is_object))
     obj = hit & is_object[np.where(hit, index, 0)]
     position, _, _, forward = state.camera_basis()
     z = (image[..., 1:4] - position) @ forward
     return hit, obj, np.where(hit, z, np.inf)
+
+
+def shape_numbers(mi, loaded) -> list[int]:
+    """What the ``shape_index`` AOV gives for each of ``loaded.shapes()``: its place from 1 under
+    ``scalar_rgb``, its number in Dr.Jit's registry (shared by every scene in the process) under
+    ``llvm_ad_rgb``."""
+    if mi.variant().startswith("scalar"):
+        return list(range(1, len(loaded.shapes()) + 1))
+    import drjit as dr
+
+    return [int(n) for n in dr.reinterpret_array(mi.UInt32, loaded.shapes_dr())]

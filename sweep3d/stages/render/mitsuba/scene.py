@@ -4,8 +4,9 @@
 a ``BlenderScene`` (``prepare``, ``pose_scene``, ``render_png``, ``truth_pass``, ``parts``,
 ``load_seconds``, ``rebuild_if_stale``), so the stage, the pool, the blobs and the rows are the
 same for both engines. An object is read once per (mesh, look) into triangle meshes per material
-(PLY files in the worker's scratch folder); each job then describes the whole scene to
-``mitsuba.load_dict`` (a few milliseconds) and renders it.
+(PLY files in the worker's scratch folder); each job then describes the whole scene, and
+:mod:`.kept` updates the worker's loaded scene in place when only values changed (a fresh
+``mitsuba.load_dict`` otherwise) and renders it.
 
 Pixels follow Cycles' output: linear radiance, OpenImageDenoise with albedo and normals when
 the settings (or the ``denoiser`` control) ask, Blender's "Standard" view transform (the sRGB
@@ -28,6 +29,7 @@ from sweep3d.stages.render import engines
 from sweep3d.stages.render.lights import WHITE, SunLight
 from sweep3d.stages.render.mitsuba import translate
 from sweep3d.stages.render.mitsuba.hdri import load_bitmap
+from sweep3d.stages.render.mitsuba.kept import KeptScene
 from sweep3d.stages.render.mitsuba.objfile import MtlMaterial, ObjMesh, read_obj
 from sweep3d.stages.render.state import SceneState
 from sweep3d.stages.render.worker_protocol import EnvironmentRef, Look, RenderSettings
@@ -36,21 +38,20 @@ from sweep3d.stages.render.worker_protocol import EnvironmentRef, Look, RenderSe
 FILTER_STDDEV = 0.3
 #: Objects (mesh, look) a worker keeps read, least recently used first out (as Cycles' workers keep 16).
 MAX_KEPT_OBJECTS = 16
-LLVM_LIBRARIES = ("/usr/lib/x86_64-linux-gnu/libLLVM-19.so", "/usr/lib/llvm-19/lib/libLLVM.so")
 
 
 def load_mitsuba(variant: str | None = None) -> Any:
-    """``mitsuba`` with ``variant`` (default: ``engines.MITSUBA_VARIANT``) set (Debian's libLLVM for an llvm variant when
-    ``DRJIT_LIBLLVM_PATH`` is unset), errors only in the log.
+    """``mitsuba`` with ``variant`` (default: ``engines.mitsuba_variant()``) set, an llvm variant on
+    ``engines.llvm_library()`` (Dr.Jit's own search could find Debian's LLVM 14, which fails),
+    errors only in the log.
 
     Raises:
         UserError: mitsuba is not installed, or the variant cannot run here.
     """
-    variant = variant or engines.MITSUBA_VARIANT
-    if variant.startswith("llvm") and "DRJIT_LIBLLVM_PATH" not in os.environ:
-        found = next((p for p in LLVM_LIBRARIES if Path(p).exists()), None)
-        if found:
-            os.environ["DRJIT_LIBLLVM_PATH"] = found
+    variant = variant or engines.mitsuba_variant()
+    library = engines.llvm_library()
+    if variant.startswith("llvm") and library:
+        os.environ["DRJIT_LIBLLVM_PATH"] = library
     try:
         import mitsuba as mi
     except ImportError:
@@ -84,7 +85,7 @@ class MitsubaScene:
     """
 
     def __init__(self, settings: RenderSettings, scratch: Path, log: Any = None, gpu: int | None = None) -> None:
-        self.mi = load_mitsuba()
+        self.mi = load_mitsuba(settings.variant or None)
         self.settings = settings
         self.scratch = scratch
         self.folder = scratch / f"mitsuba-{os.getpid()}"
@@ -103,6 +104,7 @@ class MitsubaScene:
         self.textures: dict[str, Any] = {}  # texture path → loaded bitmap, shared by jobs
         self.hdris: dict[str, Any] = {}  # HDRI path → its bitmap as Blender reads it (hdri.py)
         self.loaded: Any = None  # the latest job's loaded Mitsuba scene
+        self.kept = KeptScene(self.mi, self.converted)  # loaded once per structure, updated per job (kept.py)
         self.serial = 0  # names each read object's PLY files
         self.stale = False
         truth = tuple(p for p in settings.passes if p in TRUTH_PASSES)
@@ -151,7 +153,7 @@ class MitsubaScene:
         integrator = ({"type": "aov", "aovs": "albedo:albedo,normal:sh_normal", "integrator": path}
                       if denoise else path)
         scene = self.describe(integrator, translate.camera(state, s.resolution, s.crop, FILTER_STDDEV))
-        self.loaded = self.load(scene)  # the truth passes look at the same scene
+        self.loaded = self.kept.scene_for(scene)  # the truth passes look at the same scene
         image = np.asarray(mi.render(self.loaded, spp=s.samples, seed=s.seed), dtype=np.float32)
         rgb, alpha = np.maximum(image[..., :3], 0.0), np.clip(image[..., 3:4], 0.0, 1.0)
         if denoise:
@@ -194,8 +196,8 @@ class MitsubaScene:
         return scene
 
     def load(self, scene: dict[str, Any]) -> Any:
-        """``mitsuba.load_dict`` of a description whose matrices are numpy arrays."""
-        return self.mi.load_dict(self.converted(scene))
+        """A description (matrices as numpy arrays) loaded afresh, its values set as the kept scene's are."""
+        return KeptScene(self.mi, self.converted).scene_for(scene)
 
     def converted(self, value: Any) -> Any:
         """A description with its numpy 4×4 matrices as Mitsuba transforms."""

@@ -95,6 +95,17 @@ def look_at(position: np.ndarray, forward: np.ndarray, up: np.ndarray) -> np.nda
     return m
 
 
+def along(z: np.ndarray) -> np.ndarray:
+    """A rotation (4×4) taking +Z to the unit vector ``z``: a directional light's to_world."""
+    z = np.asarray(z, dtype=np.float64) / np.linalg.norm(z)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    x = np.cross(helper, z)
+    x /= np.linalg.norm(x)
+    m = np.eye(4)
+    m[:3, 0], m[:3, 1], m[:3, 2] = x, np.cross(z, x), z
+    return m
+
+
 def lights(lights_: list, state: SceneState) -> dict[str, dict[str, Any]]:
     """Each light as a Mitsuba emitter (an area light as an emitting shape)."""
     out: dict[str, dict[str, Any]] = {}
@@ -105,7 +116,7 @@ def lights(lights_: list, state: SceneState) -> dict[str, dict[str, Any]]:
                          "intensity": _rgb(np.asarray(light.rgb) * light.watts / (4.0 * math.pi))}
         elif isinstance(light, SunLight):
             d = direction(state, light.azimuth, light.elevation, light.relative_to)
-            out[name] = {"type": "directional", "direction": (-d).tolist(),
+            out[name] = {"type": "directional", "to_world": along(-d),  # a parameter, where "direction" is not
                          "irradiance": _rgb(np.asarray(light.rgb) * light.strength)}
         elif isinstance(light, AreaLight):
             out[name] = area_light(light, state)

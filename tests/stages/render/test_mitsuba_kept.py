@@ -1,0 +1,111 @@
+"""The Mitsuba worker's kept scene (``stages/render/mitsuba/kept.py``): a job's pixels are the same
+whether the worker updates the scene it kept or loads the job afresh (to the last bits that
+Mitsuba's threads leave to chance), whatever came before; and a
+sequence of jobs that change only values loads once.
+
+In-process, 32 px and 2 samples: no Blender and no worker process."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sweep3d.spec.models import KeyLightSpec
+from sweep3d.stages.render.engines import llvm_library
+from sweep3d.stages.render.lights import AreaLight, SunLight
+from sweep3d.stages.render.state import Occluder, PointLight, SceneState
+from sweep3d.stages.render.worker_protocol import EnvironmentRef, RenderSettings
+from tests.helpers import write_cube
+
+pytestmark = pytest.mark.blender  # Mitsuba's JIT and renders: kept out of the fast lane with the engine's other renders
+
+BASE = SceneState(yaw=10.0, lights=[SunLight((1.0, 1.0, 1.0), 3.0, 0.0, 30.0, 40.0, "camera")])
+#: How far two renders of one job may differ: Mitsuba's film adds the overlapping borders of image
+#: blocks in the order its threads finish them, so a pixel may move by a float's last bits (a
+#: wrong parameter moves pixels by far more).
+ULPS = 1e-6
+#: Jobs as a run's worker meets them: values change, then the structure, then values again.
+STATES = [
+    BASE,
+    replace(BASE, yaw=75.0, pitch=10.0),
+    replace(BASE, yaw=-40.0, scale=0.8, elevation=35.0, azimuth=20.0),
+    replace(BASE, focal_length=35.0, world_strength=0.5),
+    replace(BASE, lights=[SunLight((1.0, 0.8, 0.6), 5.0, 0.0, -60.0, 20.0, "camera")]),
+    replace(BASE, material_edits=(("grey", (("base_color", (0.8, 0.1, 0.1)), ("roughness", 0.2))),)),
+    replace(BASE, occluder=Occluder(0.4, 90.0)),  # a new shape: loaded afresh
+    replace(BASE, occluder=Occluder(0.6, 0.0, 0.3), yaw=120.0),
+    replace(BASE, lights=[PointLight((1.0, 1.0, 1.0), 200.0, 4.0, 30.0, 30.0)]),
+    replace(BASE, lights=[PointLight((1.0, 1.0, 1.0), 80.0, 3.0, -30.0, 50.0)], yaw=200.0),
+    replace(BASE, lights=[AreaLight((1.0, 1.0, 1.0), 100.0, 1.0, "square", 4.0, 10.0, 45.0)]),
+    BASE,
+]
+
+
+@pytest.fixture
+def mesh(tmp_path: Path) -> str:
+    (tmp_path / "box.mtl").write_text("newmtl grey\nKd 0.6 0.6 0.6\n")
+    (tmp_path / "box.obj").write_text("mtllib box.mtl\no Box\nusemtl grey\n" + write_cube(tmp_path).read_text())
+    return str(tmp_path / "box.obj")
+
+
+def _scene(tmp_path: Path, variant: str):
+    from sweep3d.stages.render.mitsuba.scene import MitsubaScene
+
+    settings = RenderSettings(resolution=32, samples=2, denoise=False, engine="mitsuba", variant=variant)
+    return MitsubaScene(settings, tmp_path)
+
+
+#: Both variants where LLVM is present (scalar_rgb alone elsewhere).
+VARIANTS = ["scalar_rgb", pytest.param("llvm_ad_rgb", marks=pytest.mark.skipif(
+    llvm_library() is None, reason="no LLVM library: Mitsuba renders with scalar_rgb here"))]
+
+
+@pytest.mark.parametrize("variant", VARIANTS)
+@pytest.mark.parametrize("environment", [EnvironmentRef(color=(0.2, 0.3, 0.4), key_light=KeyLightSpec()),
+                                         EnvironmentRef(color=(1.0, 1.0, 1.0))], ids=["key-light", "plain"])
+def test_a_job_renders_the_same_pixels_kept_or_loaded_afresh(tmp_path: Path, mesh: str,
+                                                             environment: EnvironmentRef, variant: str) -> None:
+    kept = _scene(tmp_path, variant)
+    kept.prepare(mesh, environment)
+    images = []
+    for state in STATES:
+        kept.pose_scene(state)
+        images.append(kept.render())
+    assert kept.kept.loads < len(STATES) / 2  # values changed in place, not loaded per job
+    for i in (1, 4, 5, 7, 9, 10, 11):  # each alone, in a fresh worker's scene
+        fresh = _scene(tmp_path, variant)
+        fresh.prepare(mesh, environment)
+        fresh.pose_scene(STATES[i])
+        again = fresh.render()
+        assert np.abs(again - images[i]).max() <= ULPS, f"job {i} differs from its fresh render"
+    assert np.abs(images[0] - images[-1]).max() <= ULPS  # the first job again, after all the others
+    assert not np.array_equal(images[0], images[1]) and not np.array_equal(images[3], images[4])
+
+
+def test_what_no_parameter_updates_loads_the_scene_again() -> None:
+    """The split: floats, colours and matrices are values under Mitsuba's parameter names; types,
+    sizes and flags are structure; the objects' poses apart."""
+    from sweep3d.stages.render.mitsuba.kept import split
+
+    pose = np.eye(4)
+    description = {
+        "type": "scene", "integrator": {"type": "path", "max_depth": 9, "hide_emitters": False},
+        "sensor": {"type": "perspective", "fov": 40.0, "to_world": np.eye(4),
+                   "film": {"type": "hdrfilm", "width": 32, "height": 32}},
+        "object_0000": {"type": "ply", "filename": "a.ply", "to_world": pose,
+                        "bsdf": {"type": "mask", "opacity": 0.5,
+                                 "bsdf": {"type": "twosided", "bsdf": {"type": "principled", "roughness": 0.3,
+                                                                       "base_color": {"type": "rgb",
+                                                                                      "value": [0.1, 0.2, 0.3]}}}}},
+    }
+    parts = split(description)
+    assert parts.poses == {"object_0000": pose}
+    assert set(parts.values) == {"sensor.x_fov", "sensor.to_world", "object_0000.bsdf.opacity",
+                                 "object_0000.bsdf.nested_bsdf.brdf_0.roughness",
+                                 "object_0000.bsdf.nested_bsdf.brdf_0.base_color.value"}
+    structure = dict(parts.structure)
+    assert structure["integrator.max_depth"] == 9 and structure["integrator.hide_emitters"] is False
+    assert structure["sensor.film.width"] == 32 and structure["object_0000.filename"] == "a.ply"
