@@ -14,6 +14,8 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
+from sweep3d.assets import check_materials
+from sweep3d.assets.texture_images import MITSUBA_FORMATS
 from sweep3d.core import SpecError
 from sweep3d.spec import LoadedSpec
 
@@ -76,6 +78,11 @@ def check_engine(spec: LoadedSpec) -> None:
         if suffix not in MITSUBA_MESHES:
             raise SpecError(path, f"objects[{i}].mesh", f"the mitsuba engine reads only .obj meshes (with their "
                                                         f"MTL), not {suffix or 'this file'}")
+        for where, fmt in check_materials(mesh).base_textures:
+            if fmt not in MITSUBA_FORMATS:
+                raise SpecError(path, f"objects[{i}].mesh", f"{where}: a {fmt} texture, which the mitsuba engine "
+                                                            f"cannot read (it reads {', '.join(sorted(MITSUBA_FORMATS))}); "
+                                                            "save it as PNG and name that in the MTL")
         if obj.auto_smooth is not None:
             raise SpecError(path, f"objects[{i}].auto_smooth", "the mitsuba engine cannot smooth by angle; "
                                                                "remove auto_smooth")
