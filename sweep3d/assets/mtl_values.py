@@ -5,7 +5,7 @@ renders) and reads ``Ns abc`` as some roughness; Mitsuba's principled BSDF refus
 of ``1e300`` or ``-5`` and so fails every job at render time. Neither says a word at ``plan``. These
 checks read each line of an MTL and name the line to fix: a number that is not one (``abc``,
 ``1_0``), one that is not finite in the 32 bits renderers keep (``nan``, ``inf``, ``1e39``), and a
-colour outside 0–1 (with :data:`COLOUR_SLACK` for rounding).
+base colour outside 0–1 (with :data:`COLOUR_SLACK` for rounding) or a negative one.
 
 What neither renderer reads is only warned about: ``Ka`` (ambient) is ignored by Blender's
 importer (4.5) and by the Mitsuba engine, so a bad ``Ka`` changes no pixel.
@@ -17,12 +17,15 @@ import math
 import re
 from dataclasses import dataclass
 
-#: Colours read as reflectances: each channel must lie in [0, 1] (give or take the slack).
-UNIT_COLOURS = ("kd", "ks", "tf")
+#: The base colour, a reflectance: each channel must lie in [0, 1] (give or take the slack); Mitsuba's
+#: principled BSDF refuses any other value and Cycles' would reflect more light than it receives.
+UNIT_COLOURS = ("kd",)
 #: Colours neither renderer reads (checked, but only warned about).
 UNUSED_COLOURS = ("ka",)
-#: Emission: finite and not negative, but may exceed 1 (a bright emitter).
-OPEN_COLOURS = ("ke",)
+#: Colours that must be finite and not negative but may exceed 1: specular (exporters write ``Ks`` up
+#: to 2: Blender's Specular IOR Level, which Mitsuba's translation bounds), transmission (its mean,
+#: clamped to 1 by both) and emission (a bright emitter).
+OPEN_COLOURS = ("ks", "tf", "ke")
 #: Scalar keys Blender's importer reads (``illum`` is an integer).
 NUMBERS = ("ns", "ni", "d", "tr", "pr", "pm", "ps", "pc", "pcr", "aniso", "anisor", "sharpness", "illum")
 #: How far past 0 and 1 a colour channel may be written (an exporter's rounding: ``1.0000001``).
