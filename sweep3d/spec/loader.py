@@ -27,6 +27,7 @@ from sweep3d.assets import (
     resolve_hdri,
     resolve_mesh,
 )
+from sweep3d.cache import store_folder_problem
 from sweep3d.core import Control, SpecError, UserError, declaration_problem, is_spec_path, is_user_plugin
 from sweep3d.spec.catalogue import Catalogue
 from sweep3d.spec.class_names import NameClash, spec_class_names
@@ -229,6 +230,9 @@ def _validated(raw: dict[str, Any], catalogue: Catalogue, *, path: Path, base: P
     policy = _load_policy(spec, fail, catalogue, controls, base)
     store = Path(spec.experiment.store)
     store = (store if store.is_absolute() else base / store).resolve()
+    problem = store_folder_problem(store)
+    if problem:
+        raise fail("experiment.store", problem)
     return LoadedSpec(path, spec, store, meshes, hdris, labels, controls, policy, source)
 
 
