@@ -10,7 +10,7 @@ extracted with it (its own folder's, see ``sources.extracted_members``).
 
 Errors: a missing or unreadable MTL; a number that is not one or not finite, a colour out of range;
 a texture that is missing or not an image. Warnings (the run goes on): the same for what neither
-renderer reads, ``Ka`` and the ``map_Ka``, ``disp`` and ``decal`` textures.
+renderer reads, ``Ka`` and the ``map_Ka``, ``disp`` (``map_Disp``) and ``decal`` textures.
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ from sweep3d.core import UserError
 MTLLIB = re.compile(rb"(?m)^[ \t]*mtllib[ \t]+([^\r\n#]*)")
 #: Texture statements of an MTL (lower case); those neither renderer reads are only warned about.
 TEXTURE_KEYS = ("bump", "disp", "decal", "refl", "norm")
-UNUSED_TEXTURES = ("map_ka", "disp", "decal")
+UNUSED_TEXTURES = ("map_ka", "disp", "map_disp", "decal", "map_decal")
 #: A texture statement's options before its file, with how many values each takes (at most).
 TEXTURE_OPTIONS = {"-o": 3, "-s": 3, "-t": 3, "-mm": 2, "-bm": 1, "-boost": 1, "-texres": 1, "-clamp": 1,
                    "-blendu": 1, "-blendv": 1, "-cc": 1, "-imfchan": 1, "-type": 1}

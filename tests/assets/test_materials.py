@@ -62,7 +62,7 @@ BAD_TEXTURES = [
 GOOD_MTLS = [
     "newmtl m\nKd 0.8 0.8 0.8\nKs 1.35 1.35 1.35\nKe 5 5 5\nNs 96.078431\nNi 1.45\nd 1.0\nillum 2\n",
     "newmtl m\nKd 1.000001 0 0 # rounding\nKd spectral file.rfl\nTf xyz 0.5 0.5 0.5\n",
-    "newmtl m\nKa nan 0 0\nmap_Ka missing.png\n",  # warnings only
+    "newmtl m\nKa nan 0 0\nmap_Ka missing.png\nmap_Disp /Users/someone/rug.jpg\n",  # warnings only
 ]
 
 
@@ -142,7 +142,7 @@ def test_good_materials_load(tmp_path: Path, mtl: str) -> None:
 def test_what_neither_renderer_reads_is_a_warning(tmp_path: Path) -> None:
     """A NaN ``Ka`` and a missing ``map_Ka`` change no pixel: one warning line each, and the plan goes on."""
     audit = check_materials(str(_spec(tmp_path, GOOD_MTLS[2]).parent / "cube.obj"))
-    assert len(audit.warnings) == 2
+    assert len(audit.warnings) == 3
     assert "line 2 ('Ka nan 0 0')" in audit.warnings[0] and "reads Ka, so it is ignored" in audit.warnings[0]
     assert "line 3 ('map_Ka missing.png')" in audit.warnings[1] and "reads map_Ka" in audit.warnings[1]
 
