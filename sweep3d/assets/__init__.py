@@ -4,7 +4,7 @@ digests, the names a mesh holds, and the cheap checks a file passes before Blend
 from __future__ import annotations
 
 __all__ = [
-    "blender_version", "bpy_root", "check_archive", "check_file", "check_hdri", "check_mesh",
+    "blender_version", "bpy_root", "check_archive", "check_file", "check_hdri", "check_materials", "check_mesh",
     "file_names", "materialise_mesh", "mesh_digest", "mesh_files", "read_mesh_bytes", "resolve_hdri",
     "resolve_mesh", "unreadable"
 ]
@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING as _TYPE_CHECKING  # noqa: E402
 from sweep3d.core import exports as _exports  # noqa: E402
 
 if _TYPE_CHECKING:
+    from sweep3d.assets.materials import check_materials
     from sweep3d.assets.mesh_names import file_names, read_mesh_bytes
     from sweep3d.assets.sniff import check_file, check_hdri, check_mesh, unreadable
     from sweep3d.assets.sources import (
@@ -35,6 +36,7 @@ __getattr__, __dir__ = _exports(__name__, {
     "check_archive": ("sweep3d.assets.sources", "check_archive"),
     "check_file": ("sweep3d.assets.sniff", "check_file"),
     "check_hdri": ("sweep3d.assets.sniff", "check_hdri"),
+    "check_materials": ("sweep3d.assets.materials", "check_materials"),
     "check_mesh": ("sweep3d.assets.sniff", "check_mesh"),
     "file_names": ("sweep3d.assets.mesh_names", "file_names"),
     "materialise_mesh": ("sweep3d.assets.sources", "materialise_mesh"),

@@ -9,7 +9,8 @@ __all__ = [
     "damaged_blobs", "digest", "digests", "file_digest", "files_digest", "float_texts",
     "full_disk_error", "is_full_disk", "is_select", "load_image", "load_pass", "load_pixels", "lock_down", "members",
     "pack", "photo_path", "read_manifest", "record", "remember_written",
-    "remove_killed_writers_temp_files", "repair", "safe_filename", "sha256_bytes", "skip_pandas_probe", "stale", "store_stats", "unpack",
+    "remove_killed_writers_temp_files", "repair", "safe_filename", "sha256_bytes", "skip_pandas_probe", "stale",
+    "store_folder_problem", "store_stats", "unpack",
     "utc_now", "verify", "written_from"
 ]
 
@@ -64,6 +65,7 @@ if _TYPE_CHECKING:
         safe_filename,
         utc_now,
     )
+    from sweep3d.cache.store_folder import store_folder_problem
     from sweep3d.cache.written import remember_written, written_from
 
 __getattr__, __dir__ = _exports(__name__, {
@@ -114,6 +116,7 @@ __getattr__, __dir__ = _exports(__name__, {
     "sha256_bytes": ("sweep3d.cache.blobs", "sha256_bytes"),
     "skip_pandas_probe": ("sweep3d.cache.pandas_probe", "skip_pandas_probe"),
     "stale": ("sweep3d.cache.extracted", "stale"),
+    "store_folder_problem": ("sweep3d.cache.store_folder", "store_folder_problem"),
     "store_stats": ("sweep3d.cache.maintenance", "store_stats"),
     "unpack": ("sweep3d.cache.digested", "unpack"),
     "utc_now": ("sweep3d.cache.store", "utc_now"),

@@ -110,7 +110,9 @@ def run(
     from sweep3d.cli.output import check_some_valid
 
     check_some_valid(result.plan, result.store)
-    if report:
+    from sweep3d.cli.output import nothing_to_report
+
+    if report and not nothing_to_report(result):  # every job failed: the failure line said why, no report
         _write_report(experiment, None)
     if result.failed:
         raise typer.Exit(1)

@@ -167,9 +167,17 @@ def failed_line(result: RunResult, missing: int) -> str:
     stages = "; ".join(f"{o.stage}: {o.failed} failed ({_cause(o.errors[0]) if o.errors else 'no error given'})"
                        for o in result.outcomes if o.failed)
     jobs = len(result.plan.jobs)
+    if missing and missing == jobs:  # nothing to report: the cause, not "run it", is what to fix
+        return (f"error: all {jobs} jobs failed, so there are no findings and no report was written; {stages}; "
+                "fix what it names, then run again")
     left = (f"{missing} of {jobs} jobs failed and are missing from the findings and the report" if missing
             else "every job has a prediction, but some of their keys failed to compute again")
     return f"error: {left}; {stages}"
+
+
+def nothing_to_report(result: RunResult) -> bool:
+    """Whether every job of the run's (first) plan failed: its report would have no result to show."""
+    return bool(result.failed) and len(result.plan.jobs) > 0 and unpredicted_jobs(result) == len(result.plan.jobs)
 
 
 def _cause(error: str) -> str:

@@ -287,18 +287,24 @@ file = {design}
 
 [render]
 engine = {engine_value}
-"""
+{neutral}"""
 
 
 def engine_spec(spec: LoadedSpec, kit: Path, engine: str) -> Path:
     """Write the spec that replays the kit's ``design.csv`` with ``[render] engine = engine``."""
     import json
 
+    from sweep3d.stages.render import cycles_only_defaults
+
     path = kit / ENGINES / f"{engine}.toml"
     path.parent.mkdir(exist_ok=True)
+    # the included spec's Cycles-only settings mean nothing to another engine, which refuses them
+    # away from their defaults: set back, as this spec renders the same configurations elsewhere
+    neutral = "".join(f"{name} = {json.dumps(value)}\n" for name, value in cycles_only_defaults(engine).items())
     text = ENGINE_SPEC.format(engine=engine, name=spec.name, spec=json.dumps(str(spec.path.resolve())),
                               experiment=json.dumps(f"{spec.name}.engine-{engine}"),
-                              design=json.dumps(str((kit / DESIGN).resolve())), engine_value=json.dumps(engine))
+                              design=json.dumps(str((kit / DESIGN).resolve())), engine_value=json.dumps(engine),
+                              neutral=neutral)
     path.write_text(text, encoding="utf-8")
     return path
 

@@ -551,9 +551,34 @@ def no_results(store: Store, experiment: str, spec: str | Path) -> UserError:
     """The one line for a query or report that finds no results: the experiment never ran, or
     its first run is still going (a run records its jobs table, which ``results`` joins, once
     its stages are through)."""
+    failed = last_run_failed(store, experiment)
+    if failed:  # rerunning as it was would fail again: say what failed, not "run it"
+        return UserError(f"no results for experiment {experiment!r} in {store.root}: {failed}; `sweep3d run` prints "
+                         "each stage's first error: fix what it names, then run again")
     how = "run it first" if str(spec).startswith("<") else f"run: sweep3d run {spec}"  # <dict>: no file to name
     return UserError(f"no results for experiment {experiment!r} yet in {store.root}; {how} "
                      "(a run in progress shows its results when its stages finish)")
+
+
+def last_run_failed(store: Store, experiment: str) -> str | None:
+    """``every job of its last run (run 0dfd3a16fc5b, 2 jobs) failed: render 2`` when the
+    experiment's latest recorded run failed somewhere, else None (never run, or nothing failed)."""
+    stages = ("render", "postprocess", "infer")
+    try:
+        runs = store.table("runs")
+    except (OSError, ValueError):  # an unreadable runs table: say no more than before
+        return None
+    if runs is None or "experiment" not in runs.column_names:
+        return None
+    mine = [row for row in runs.to_pylist() if row.get("experiment") == experiment and row.get("created_at")]
+    if not mine:
+        return None
+    last = max(mine, key=lambda row: row["created_at"])
+    failed = {stage: int(last.get(f"{stage}_failed") or 0) for stage in stages}
+    if not any(failed.values()):
+        return None
+    counts = ", ".join(f"{stage} {n}" for stage, n in failed.items() if n)
+    return f"every job of its last run (run {last.get('run_id')}, {last.get('jobs')} jobs) failed: {counts}"
 
 
 def has_view(con: duckdb.DuckDBPyConnection, name: str) -> bool:

@@ -18,7 +18,16 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from sweep3d.assets import check_archive, check_file, check_hdri, check_mesh, resolve_hdri, resolve_mesh
+from sweep3d.assets import (
+    check_archive,
+    check_file,
+    check_hdri,
+    check_materials,
+    check_mesh,
+    resolve_hdri,
+    resolve_mesh,
+)
+from sweep3d.cache import store_folder_problem
 from sweep3d.core import Control, SpecError, UserError, declaration_problem, is_spec_path, is_user_plugin
 from sweep3d.spec.catalogue import Catalogue
 from sweep3d.spec.class_names import NameClash, spec_class_names
@@ -193,8 +202,11 @@ def _validated(raw: dict[str, Any], catalogue: Catalogue, *, path: Path, base: P
             meshes[obj.name] = resolve_mesh(obj.mesh, base)
             check_archive(meshes[obj.name], spec.experiment.max_archive_mb)
             check_mesh(meshes[obj.name])
+            materials = check_materials(meshes[obj.name])
         except UserError as exc:
             raise fail(f"objects[{i}].mesh", _naming(obj.mesh, exc)) from None
+        for warning in materials.warnings:
+            log.warning(f"warning: {path}: objects[{i}].mesh: {_naming(obj.mesh, warning)}")
         check_look(obj, meshes[obj.name], i, fail)
     hdris: dict[str, str | None] = {}
     for i, env in enumerate(spec.environments):
@@ -218,6 +230,9 @@ def _validated(raw: dict[str, Any], catalogue: Catalogue, *, path: Path, base: P
     policy = _load_policy(spec, fail, catalogue, controls, base)
     store = Path(spec.experiment.store)
     store = (store if store.is_absolute() else base / store).resolve()
+    problem = store_folder_problem(store)
+    if problem:
+        raise fail("experiment.store", problem)
     return LoadedSpec(path, spec, store, meshes, hdris, labels, controls, policy, source)
 
 

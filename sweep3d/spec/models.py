@@ -69,8 +69,9 @@ class RenderSpec(StrictModel):
                             "cuda or optix. A GPU's renders are keyed apart (GPU Cycles does not give CPU's pixels).")
     worker_memory: int = Field(4096, ge=0, le=2**22, description="MB of resident memory a render worker may hold "
                                "after a job before it is replaced by a fresh one (between jobs); 0 = no limit.")
-    worker_jobs: int = Field(0, ge=0, description="Replace a render worker by a fresh one after this many jobs; "
-                                                  "0 = never.")
+    worker_jobs: int = Field(0, ge=0, le=10**9, description="Replace a render worker by a fresh one after this "
+                                                            "many jobs (at most 10^9: more than any run makes); "
+                                                            "0 = never.")
     dither: float = Field(1.0, ge=0.0, le=10.0, allow_inf_nan=False,
                           description="Blender's scene.render.dither_intensity: noise added before the 8-bit "
                                       "quantisation (Blender's default 1.0; 0 = none). Keyed only when not 1.0.")

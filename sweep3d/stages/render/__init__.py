@@ -8,7 +8,8 @@ from __future__ import annotations
 __all__ = [
     "COLUMNS", "Executor", "LOCAL", "Look", "RENDERED_CONTROLS", "RenderInfo", "RenderStage",
     "RenderedControl", "SENSOR_WIDTH_MM", "SIDES", "SceneEdit", "SceneState", "check_engine",
-    "connect", "describe_materials", "device_note", "duration", "engine_key", "variant_note",
+    "connect", "cycles_only_defaults", "describe_materials", "device_note", "duration", "engine_key",
+    "variant_note",
     "estimate_render_seconds", "frame_fields", "in_frame", "in_frame_many", "missing_gpu_warning",
     "object_error", "paint_objects", "parts_keys", "plan_device", "remove_stale_scratch",
     "render_settings", "render_template", "resolve_device", "scene_key", "scratch_root",
@@ -25,7 +26,13 @@ if _TYPE_CHECKING:
     from sweep3d.stages.render.controls.rendered_control import RENDERED_CONTROLS, RenderedControl, frame_fields
     from sweep3d.stages.render.describe import COLUMNS, describe_materials
     from sweep3d.stages.render.device import device_note, missing_gpu_warning, resolve_device
-    from sweep3d.stages.render.engines import check_engine, engine_key, plan_device, variant_note
+    from sweep3d.stages.render.engines import (
+        check_engine,
+        cycles_only_defaults,
+        engine_key,
+        plan_device,
+        variant_note,
+    )
     from sweep3d.stages.render.estimate import duration, estimate_render_seconds, slow_render_warning
     from sweep3d.stages.render.paint import SIDES, paint_objects
     from sweep3d.stages.render.pool import remove_stale_scratch, scratch_root
@@ -51,6 +58,7 @@ __getattr__, __dir__ = _exports(__name__, {
     "SceneState": ("sweep3d.stages.render.state", "SceneState"),
     "check_engine": ("sweep3d.stages.render.engines", "check_engine"),
     "connect": ("sweep3d.stages.render.ray_pool", "connect"),
+    "cycles_only_defaults": ("sweep3d.stages.render.engines", "cycles_only_defaults"),
     "describe_materials": ("sweep3d.stages.render.describe", "describe_materials"),
     "device_note": ("sweep3d.stages.render.device", "device_note"),
     "duration": ("sweep3d.stages.render.estimate", "duration"),

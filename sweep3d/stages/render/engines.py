@@ -15,6 +15,8 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
+from sweep3d.assets import check_materials
+from sweep3d.assets.texture_images import MITSUBA_FORMATS
 from sweep3d.core import SpecError
 from sweep3d.spec import LoadedSpec
 
@@ -30,6 +32,25 @@ LLVM_LIBRARIES = ("/usr/lib/x86_64-linux-gnu/libLLVM-19.so", "/usr/lib/llvm-19/l
 MITSUBA_TRANSLATION = 2  # 2: poses applied to the vertices, suns by their to_world (mitsuba/kept.py)
 #: Mesh files the Mitsuba engine reads (its own OBJ/MTL reader: ``mitsuba/objfile.py``).
 MITSUBA_MESHES = (".obj",)
+
+#: ``[render]`` settings only Cycles reads, and what each is to Cycles: the Mitsuba engine ignores
+#: them, so a spec setting one to anything but its default is refused (the default changes nothing).
+CYCLES_ONLY = {
+    "dither": "Blender's noise before the 8-bit quantisation; the mitsuba engine does not dither",
+    "world_sampling": "how Cycles importance-samples the world; Mitsuba's envmap samples its own way",
+    "world_map_resolution": "the side of Cycles' world importance map; Mitsuba's envmap has none",
+    "adaptive_threshold": "Cycles' adaptive sampling; the mitsuba engine takes every sample",
+}
+
+
+def cycles_only_defaults(engine: str) -> dict[str, Any]:
+    """The Cycles-only settings at their defaults, for a spec rendering with ``engine`` that
+    includes a Cycles spec (``realism score --engine``): nothing for Cycles itself."""
+    if engine == "cycles":
+        return {}
+    from sweep3d.spec import RenderSpec
+
+    return {name: RenderSpec.model_fields[name].default for name in CYCLES_ONLY}
 
 
 def mitsuba_version() -> str:
@@ -86,7 +107,8 @@ def check_engine(spec: LoadedSpec) -> None:
 
     Raises:
         SpecError: Mitsuba is not installed, or the spec asks it for a GPU device, a mesh format
-            it does not read, smoothing, part visibility, or a control it cannot express.
+            it does not read (or a texture format), smoothing, part visibility, a Cycles-only
+            setting (:data:`CYCLES_ONLY`) away from its default, or a control it cannot express.
     """
     engine = spec.render.engine
     if engine == "cycles":
@@ -100,12 +122,22 @@ def check_engine(spec: LoadedSpec) -> None:
     if spec.report.part_visibility:
         raise SpecError(path, "report.part_visibility", "part visibility needs Cycles' UV pass; the mitsuba "
                                                         "engine cannot render it (set it false)")
+    for name, what in CYCLES_ONLY.items():
+        value = getattr(spec.render, name)
+        if value != type(spec.render).model_fields[name].default:
+            raise SpecError(path, f"render.{name}", f"{name} = {value!r} is a Cycles setting ({what}), so it "
+                                                    f"would change nothing with engine \"mitsuba\"; remove it")
     for i, obj in enumerate(spec.objects):
         mesh = spec.meshes[obj.name]
         suffix = Path(str(mesh).partition("#")[2] or str(mesh)).suffix.lower()
         if suffix not in MITSUBA_MESHES:
             raise SpecError(path, f"objects[{i}].mesh", f"the mitsuba engine reads only .obj meshes (with their "
                                                         f"MTL), not {suffix or 'this file'}")
+        for where, fmt in check_materials(mesh).base_textures:
+            if fmt not in MITSUBA_FORMATS:
+                raise SpecError(path, f"objects[{i}].mesh", f"{where}: a {fmt} texture, which the mitsuba engine "
+                                                            f"cannot read (it reads {', '.join(sorted(MITSUBA_FORMATS))}); "
+                                                            "save it as PNG and name that in the MTL")
         if obj.auto_smooth is not None:
             raise SpecError(path, f"objects[{i}].auto_smooth", "the mitsuba engine cannot smooth by angle; "
                                                                "remove auto_smooth")

@@ -8,6 +8,14 @@ from sweep3d.spec import RenderSpec
 # Fallback per-image costs on a 2-core CPU (measured with bench), when the store has no history.
 SECONDS_PER_SAMPLE_224 = 0.034
 DENOISE_SECONDS_224 = {"fast": 0.04, "accurate": 0.3, "none": 0.02}
+#: Each engine's (seconds per sample, seconds per render besides samples and the denoiser) at 224².
+#: Cycles': measured with bench. Mitsuba's (issue 45): the same tiny spec (2 objects × white and
+#: studio × 6 yaws, 224² of 256², denoised) run with each engine at 4 and 16 samples; the runs' CPU
+#: seconds, steadier than their wall time on a shared machine, gave Mitsuba 2.2× Cycles' CPU per
+#: sample and 0.17 s more per render (its scene is translated per job, its denoiser's albedo and
+#: normals rendered), put on Cycles' basis: about 2.5× Cycles' estimate at 4–16 samples
+#: (benchmarks/RESULTS.md, "The Mitsuba engine's cost in plan's estimate").
+ENGINE_SECONDS_224 = {"cycles": (SECONDS_PER_SAMPLE_224, 0.02), "mitsuba": (0.075, 0.19)}
 #: Estimated render time past which ``plan`` and ``run`` warn.
 LONG_RENDERING_SECONDS = 3600.0
 
@@ -21,8 +29,8 @@ SECOND_RENDER_SECONDS_224 = 0.15
 
 def estimate_render_seconds(render: RenderSpec, pixels: int, truth_passes: bool = False,
                             hidden: bool = False) -> float:
-    """A rough per-render cost from the settings and the rendered side in pixels (measured on 2
-    CPU cores; see docs/architecture.md).
+    """A rough per-render cost from the settings, the engine and the rendered side in pixels
+    (measured on 2 CPU cores; see docs/architecture.md).
 
     Args:
         truth_passes: the renders carry the mask (and depth) pass.
@@ -32,7 +40,8 @@ def estimate_render_seconds(render: RenderSpec, pixels: int, truth_passes: bool 
     scale = (pixels / 224) ** 2
     denoise = DENOISE_SECONDS_224[render.denoise_prefilter] if render.denoise else 0.0
     passes = (TRUTH_SECONDS_224 + (SECOND_RENDER_SECONDS_224 if hidden else 0.0)) if truth_passes else 0.0
-    return (SECONDS_PER_SAMPLE_224 * render.samples + denoise + 0.02 + passes) * scale
+    per_sample, per_render = ENGINE_SECONDS_224[render.engine]
+    return (per_sample * render.samples + denoise + per_render + passes) * scale
 
 
 def slow_render_warning(render: RenderSpec, pixels: int, renders: int) -> str | None:

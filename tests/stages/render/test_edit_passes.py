@@ -117,7 +117,10 @@ def test_a_run_with_failed_jobs_counts_and_names_them_beside_its_findings(tmp_pa
 def test_a_run_whose_every_job_failed_says_so_instead_of_nothing(tmp_path: Path) -> None:
     output = _findings(tmp_path, failed=8)
     assert "no accuracy: 8 jobs failed in the run and are not counted" in output
-    assert output.strip().splitlines()[-1].startswith("error: 8 of 8 jobs failed")
+    last = output.strip().splitlines()[-1]
+    assert last.startswith("error: all 8 jobs failed, so there are no findings and no report was written; render: "
+                           "8 failed (the worker rendered no truth passes"), last
+    assert "sweep3d run" not in last  # the same command would fail again: the cause is what to fix
 
 
 def test_a_clean_run_prints_no_failure_line(tmp_path: Path) -> None:

@@ -77,6 +77,52 @@ def test_mitsuba_plans_cpu_renders_and_no_uv_pass(tmp_path: Path) -> None:
     assert result.exit_code == 2 and "render.device" in result.output and len(result.output.strip().splitlines()) == 1
 
 
+#: (the ``[render]`` line, its key): Cycles-only settings away from their defaults (issue 45, item 6).
+CYCLES_ONLY = [
+    ("dither = 0.5\n", "render.dither"),
+    ('world_sampling = "manual"\n', "render.world_sampling"),
+    ("world_map_resolution = 2048\n", "render.world_map_resolution"),
+    ("adaptive_threshold = 0.01\n", "render.adaptive_threshold"),
+]
+
+
+@pytest.mark.parametrize(("line", "key"), CYCLES_ONLY, ids=[k for _, k in CYCLES_ONLY])
+def test_a_cycles_only_setting_is_refused_with_mitsuba_at_plan(tmp_path: Path, line: str, key: str) -> None:
+    """A setting the engine ignores would read as applied: one line naming the key, exit 2, nothing
+    written; the same spec plans under Cycles."""
+    path = spec_with(tmp_path / "m", f'engine = "mitsuba"\n{line}')
+    result = CliRunner().invoke(app, ["plan", str(path)])
+    lines = result.output.strip().splitlines()
+    assert result.exit_code == 2 and len(lines) == 1, result.output
+    assert f"{path}: {key}: " in lines[0] and "is a Cycles setting" in lines[0] and 'engine "mitsuba"' in lines[0]
+    assert not (tmp_path / "m" / "store").exists()
+    assert CliRunner().invoke(app, ["plan", str(spec_with(tmp_path / "c", line))]).exit_code == 0
+
+
+def test_a_cycles_only_setting_at_its_default_is_no_setting_for_mitsuba(tmp_path: Path) -> None:
+    """Only a value that would change Cycles' image is refused: written at the default, it changes nothing."""
+    path = spec_with(tmp_path, 'engine = "mitsuba"\ndither = 1.0\nworld_sampling = "automatic"\n'
+                               "world_map_resolution = 1024\nadaptive_threshold = 0.0\n")
+    result = CliRunner().invoke(app, ["plan", str(path)])
+    assert result.exit_code == 0, result.output
+
+
+def test_the_engine_spec_of_realism_score_sets_cycles_only_settings_back(tmp_path: Path) -> None:
+    """``realism score --engine mitsuba`` renders a Cycles spec's picked configurations: the spec it
+    writes includes the Cycles spec, whose Cycles-only settings it sets back to their defaults."""
+    from sweep3d.realism.score import engine_spec
+
+    base = load_spec(spec_with(tmp_path, 'dither = 0.5\nworld_sampling = "manual"\nadaptive_threshold = 0.02\n'))
+    kit = tmp_path / "kit"
+    kit.mkdir()
+    (kit / "design.csv").write_text("object,environment,orientation_yaw,blur_sigma\nbox,white,45.0,0.0\n")
+    replay = load_spec(engine_spec(base, kit, "mitsuba"))
+    plan = plan_for(replay, "stand-in")  # check_engine passes
+    assert len(plan.jobs) == 1 and replay.render.engine == "mitsuba"
+    assert (replay.render.dither, replay.render.world_sampling, replay.render.adaptive_threshold) == \
+        (1.0, "automatic", 0.0)
+
+
 #: A user's control with an ``edit``: Mitsuba has no Blender scene to edit.
 EDITS = """\
 from sweep3d.core.control import ControlParams

@@ -171,7 +171,9 @@ def principled(values: dict[str, Any], texture: Any = None) -> dict[str, Any]:
     f0 = ((ior - 1.0) / (ior + 1.0)) ** 2 * 2.0 * level
     bsdf: dict[str, Any] = {
         "type": "principled",
-        "base_color": texture if texture is not None else _rgb(values.get("base_color", (0.8, 0.8, 0.8))),
+        # an MTL's Kd may overshoot 1 by rounding (sweep3d.assets.mtl_values.COLOUR_SLACK; more is refused at
+        # load), which Mitsuba refuses as an invalid reflectance: bounded here
+        "base_color": texture if texture is not None else _rgb(values.get("base_color", (0.8, 0.8, 0.8)), unit=True),
         "roughness": float(min(max(values.get("roughness", 0.5), 0.0), 1.0)),
         "metallic": float(values.get("metallic", 0.0)),
         "specular": min(max(f0 / 0.08, MIN_SPECULAR), 12.0),  # Mitsuba's eta is infinite at 12.5
@@ -191,5 +193,6 @@ def principled(values: dict[str, Any], texture: Any = None) -> dict[str, Any]:
     return bsdf
 
 
-def _rgb(value: Any) -> dict[str, Any]:
-    return {"type": "rgb", "value": [float(c) for c in value]}
+def _rgb(value: Any, unit: bool = False) -> dict[str, Any]:
+    """Mitsuba's RGB of ``value``; with ``unit``, each channel bounded to [0, 1] (a reflectance)."""
+    return {"type": "rgb", "value": [min(max(float(c), 0.0), 1.0) if unit else float(c) for c in value]}

@@ -1,0 +1,44 @@
+"""``plan``'s render estimate is each engine's own (issue 45, item 6): Mitsuba's measured cost per
+sample and per render, not Cycles' (``stages/render/estimate.py`` says where each figure comes from)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from sweep3d.spec import RenderSpec
+from sweep3d.stages.render.estimate import ENGINE_SECONDS_224, estimate_render_seconds
+from tests.helpers import TINY_SPEC, write_spec
+
+
+@pytest.mark.parametrize("samples", [1, 4, 16, 256])
+@pytest.mark.parametrize("side", [32, 224, 1024])
+def test_mitsuba_is_estimated_from_its_own_costs(samples: int, side: int) -> None:
+    cycles = RenderSpec(samples=samples)
+    mitsuba = RenderSpec(samples=samples, engine="mitsuba")
+    for truth, hidden in ((False, False), (True, True)):
+        c, m = (estimate_render_seconds(r, side, truth, hidden) for r in (cycles, mitsuba))
+        per_sample, per_render = ENGINE_SECONDS_224["mitsuba"]
+        assert m > c
+        assert m - c == pytest.approx((side / 224) ** 2 * ((per_sample - ENGINE_SECONDS_224["cycles"][0]) * samples
+                                                           + per_render - ENGINE_SECONDS_224["cycles"][1]))
+
+
+def test_plan_estimates_a_mitsuba_spec_apart_from_the_same_cycles_spec(tmp_path: Path) -> None:
+    pytest.importorskip("mitsuba")
+    from sweep3d.api import Experiment
+
+    for folder in ("c", "m"):
+        (tmp_path / folder).mkdir()
+    cycles = write_spec(tmp_path / "c", TINY_SPEC)
+    mitsuba = write_spec(tmp_path / "m", TINY_SPEC.replace("[render]\n", '[render]\nengine = "mitsuba"\n', 1))
+    seconds = {}
+    for name, path in (("cycles", cycles), ("mitsuba", mitsuba)):
+        status = Experiment(path).plan()
+        [render] = [s for s in status.stages if s.stage.startswith("render")]
+        seconds[name] = render.seconds
+        spec = Experiment(path).spec
+        assert render.seconds == pytest.approx(render.to_compute * estimate_render_seconds(
+            spec.render, render.crop, bool(status.passes), False))
+    assert seconds["mitsuba"] > seconds["cycles"] > 0
