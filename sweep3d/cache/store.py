@@ -58,6 +58,9 @@ NEWEST_WINS = frozenset({"verdicts"})
 #: Where ``realism score`` keeps each photograph it scored (framed as its render, a small JPEG
 #: named by the SHA-256 of the photograph's file, recorded in its verdicts' ``photo_sha256``).
 PHOTOS_FOLDER = ("realism", "photos")
+#: Where ``realism pick`` writes an experiment's kit by default (``kits/<experiment>``): the one
+#: folder of the store that is the user's to read and add photographs to, not a run's.
+KITS_FOLDER = "kits"
 #: Blobs a ``truths`` row owns beside its key (``blobs/ab/<truth_key>.<suffix>``) and the column
 #: recording each one's SHA-256 (null: the pass was not rendered).
 TRUTH_BLOBS = {"mask.png": "mask_sha256", "depth.npz": "depth_sha256"}
