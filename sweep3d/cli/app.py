@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import os
 import re
 import signal
@@ -479,11 +480,25 @@ def _export(con, statement: str, output: Path, tmp: Path, options: str) -> None:
     The connection may write only ``tmp``; the newlines keep a trailing ``--`` comment in the
     statement from swallowing the closing parenthesis.
     """
+    import duckdb
+
+    from sweep3d.cache import full_disk_error, is_full_disk
+
     target = str(tmp).replace("'", "''")
     try:
-        con.execute(f"COPY (\n{statement}\n) TO '{target}' ({options}, USE_TMP_FILE false)")
+        try:
+            con.execute(f"COPY (\n{statement}\n) TO '{target}' ({options}, USE_TMP_FILE false)")
+        except duckdb.IOException as exc:  # writing the file (not the SQL: no hint about the query)
+            if "No space left on device" in str(exc):
+                raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC)) from None
+            if str(tmp) in str(exc):
+                raise OSError(errno.EIO, str(exc).splitlines()[0]) from None
+            raise  # reading the store: the connection says it
         os.replace(tmp, output)
     except OSError as exc:
+        if is_full_disk(exc):
+            raise full_disk_error(exc, f"write --output {output}", output.parent,
+                                  "write it to another disk") from None
         raise UserError(f"--output {output}: cannot write it ({exc.strerror})") from None
     finally:
         tmp.unlink(missing_ok=True)

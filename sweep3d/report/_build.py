@@ -18,6 +18,7 @@ from typing import Any
 import duckdb
 
 from sweep3d.cache import Store, atomic_write
+from sweep3d.cache.store import STORE_FIX
 from sweep3d.core import UserError
 from sweep3d.engine import write_unstored_images
 from sweep3d.report.figures import pct
@@ -74,8 +75,10 @@ def write_report(loaded: LoadedSpec, output: Path | None = None, model: str | No
         finally:
             con.close()
     path = Path(output) if output is not None else default_path(loaded, model)
+    # a page the user placed outside the store: moving the store would not help it
+    fix = "write it to another disk with --output FILE.html" if output is not None else STORE_FIX
     try:
-        atomic_write(path, render_html(context).encode("utf-8"))
+        atomic_write(path, render_html(context).encode("utf-8"), fix=fix)
     except OSError as exc:
         raise UserError(f"cannot write the report to {path} ({exc.strerror}); pass --output FILE.html") from None
     return path

@@ -20,7 +20,7 @@ from sweep3d.cache.store import Store, atomic_write
 from sweep3d.cli import app
 from sweep3d.core.errors import StoreBusyError, UserError
 from sweep3d.results import connect as connect_results
-from tests.helpers import one_line, store_tree
+from tests.helpers import FixedUuid, one_line, store_tree
 
 T0 = datetime(2024, 1, 1, tzinfo=timezone.utc)
 
@@ -464,3 +464,23 @@ def test_machine_formats_print_every_row_and_notes_go_to_stderr(synthetic: Path)
 def test_help_texts_print_table_names_in_brackets() -> None:
     result = CliRunner().invoke(app, ["bench", "--help"])
     assert result.exit_code == 0 and "spec's [render]" in " ".join(result.output.split())
+
+
+def test_query_output_on_a_full_disk_is_the_disk_not_the_sql(synthetic: Path, tmp_path: Path, monkeypatch) -> None:
+    """A real ENOSPC (the temp file is /dev/full): one line saying the disk is full and to write
+    elsewhere, without the SQL hint a failed query gets, nor advice to move the store."""
+    import importlib
+
+    monkeypatch.setattr(importlib.import_module("sweep3d.cli.app").uuid, "uuid4", FixedUuid)
+    out = tmp_path / "rows.csv"
+    (tmp_path / ".rows.csv.fixed.tmp").symlink_to("/dev/full")
+    store = synthetic.parent / "store"
+    before = store_tree(store)
+    result = CliRunner().invoke(app, ["query", str(synthetic), "SELECT * FROM results", "--output", str(out)])
+    line = one_line(result.output)
+    assert result.exit_code == 2, result.output
+    assert line.startswith(f"error: cannot write --output {out}: the disk is full (No space left on device; "), line
+    assert line.endswith("free some disk space, or write it to another disk"), line
+    assert "docs/how-to/query.md" not in line and "experiment.store" not in line
+    assert list(tmp_path.iterdir()) == [] and store_tree(store) == before  # the link to /dev/full removed, not it
+    assert Path("/dev/full").exists()

@@ -273,3 +273,24 @@ def test_report_on_an_empty_store_says_how_to_fix(tmp_path: Path) -> None:
     assert "no results for experiment 'tiny' yet" in lines[0]
     assert f"sweep3d run {spec}" in lines[0]
     assert not (tmp_path / "store" / "reports").exists()
+
+
+def test_a_report_on_a_full_disk_outside_the_store_says_to_write_it_elsewhere(tmp_path: Path, monkeypatch) -> None:
+    """A real ENOSPC (the page's temp file is /dev/full): ``-o`` names a file outside the store,
+    so moving the store would not help; the line says to write the page elsewhere."""
+    import uuid
+
+    from tests.helpers import FixedUuid, build_store, one_line
+
+    spec = build_store(tmp_path / "run", 40, images=False)
+    out = tmp_path / "pages" / "r.html"
+    out.parent.mkdir()
+    (out.parent / ".r.html.fixed.tmp").symlink_to("/dev/full")
+    monkeypatch.setattr(uuid, "uuid4", FixedUuid)
+    result = CliRunner().invoke(app, ["report", str(spec), "-o", str(out)])
+    line = one_line(result.output)
+    assert result.exit_code == 2, result.output
+    assert line.startswith(f"error: cannot write {out}: the disk is full (No space left on device; "), line
+    assert line.endswith("free some disk space, or write it to another disk with --output FILE.html"), line
+    assert "experiment.store" not in line
+    assert list(out.parent.iterdir()) == [] and Path("/dev/full").exists()
