@@ -405,12 +405,37 @@ def _print_rows(cursor, limit: int, form: str = "auto") -> None:
         table.add_row(*[Text(visible(_cell(v))) for v in row])
     fits = console.measure(table).minimum <= console.width and all(
         len(c) <= max(console.width // max(len(columns), 1) - 3, 1) for c in columns)
-    if form == "table" or (form == "auto" and fits):
+    if form == "auto" and fits or form == "table" and console.measure(table).minimum <= console.width and fits:
         console.print(table)
+    elif form == "table":  # too wide for one table: a table per group of columns that fits, never a grid of slivers
+        _print_folded(columns, [[Text(visible(_cell(v))) for v in row] for row in shown])
     else:
         _print_records(columns, shown)
     if len(rows) > limit:
         err_console.print(f"[dim]first {limit} rows shown; --limit N or --output FILE for more[/]")
+
+
+def _print_folded(columns: list[str], cells: list[list[Text]]) -> None:
+    """``cells`` as several tables, each of as many columns as fit the terminal whole (headers
+    unbroken where the terminal allows), each row numbered so the tables line up."""
+    number = len(str(len(cells)))
+    room = console.width - (number + 3) - 1  # the row number's column and the table's left edge
+    need = [max([len(visible(c)), *(len(line) for row in cells for line in row[i].plain.splitlines())]) + 3
+            for i, c in enumerate(columns)]
+    groups: list[list[int]] = [[]]
+    for i, width in enumerate(need):
+        if groups[-1] and sum(need[j] for j in groups[-1]) + width > room:
+            groups.append([])
+        groups[-1].append(i)
+    for group in groups:
+        title = (f"column {group[0] + 1}" if len(group) == 1 else f"columns {group[0] + 1}–{group[-1] + 1}") + \
+            f" of {len(columns)}"
+        table = Table(Column(header="#", style="dim", justify="right"),
+                      *(Column(header=Text(visible(columns[i])), overflow="fold") for i in group),
+                      title=title, title_justify="left", title_style="dim")
+        for n, row in enumerate(cells, start=1):
+            table.add_row(str(n), *(row[i] for i in group))
+        console.print(table)
 
 
 def _print_records(columns: list[str], rows: list[tuple]) -> None:

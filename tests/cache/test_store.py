@@ -484,3 +484,21 @@ def test_query_output_on_a_full_disk_is_the_disk_not_the_sql(synthetic: Path, tm
     assert "docs/how-to/query.md" not in line and "experiment.store" not in line
     assert list(tmp_path.iterdir()) == [] and store_tree(store) == before  # the link to /dev/full removed, not it
     assert Path("/dev/full").exists()
+
+
+@pytest.mark.parametrize("width", [60, 80, 120])
+def test_a_table_too_wide_for_the_terminal_is_folded_into_tables_of_whole_columns(synthetic: Path,
+                                                                                  width: int) -> None:
+    """``--format table`` on ``SELECT * FROM runs``: it drew a grid of one-letter slivers with no
+    header or value readable; now a table per group of columns that fits, headers whole, every
+    value there, rows numbered so the tables line up."""
+    sql = "SELECT * EXCLUDE (spec) FROM runs"
+    result = CliRunner().invoke(app, ["query", str(synthetic), sql, "--format", "table"], env={"COLUMNS": str(width)})
+    assert result.exit_code == 0, result.output
+    columns = json.loads(CliRunner().invoke(app, ["query", str(synthetic), sql, "--format", "json"]).output)[0]
+    lines = result.output.splitlines()
+    assert all(len(line) <= width for line in lines)
+    assert all(f"┃ {name} " in result.output for name in columns), result.output  # every header whole
+    titles = [line.strip() for line in lines if line.strip().startswith(("columns ", "column "))]
+    assert len(titles) > 1 and titles[-1].endswith(f"{len(columns)} of {len(columns)}"), titles
+    assert "│ synthetic0 " in result.output and "│ 1 │" in result.output
