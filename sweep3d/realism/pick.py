@@ -30,8 +30,7 @@ from typing import Any, Sequence
 import numpy as np
 import pyarrow as pa
 
-from sweep3d.cache import safe_filename
-from sweep3d.cache.store import KITS_FOLDER
+from sweep3d.cache import KITS_FOLDER, safe_filename
 from sweep3d.core import UserError
 from sweep3d.spec import LoadedSpec
 

@@ -17,8 +17,7 @@ from typing import Any
 
 import duckdb
 
-from sweep3d.cache import Store, atomic_write
-from sweep3d.cache.store import STORE_FIX
+from sweep3d.cache import STORE_FIX, Store, atomic_write
 from sweep3d.core import UserError
 from sweep3d.engine import write_unstored_images
 from sweep3d.report.figures import pct

@@ -30,8 +30,7 @@ import duckdb
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from sweep3d.cache import Store, safe_filename
-from sweep3d.cache.store import store_error
+from sweep3d.cache import Store, safe_filename, store_error
 
 COUNTERFACTUAL_VIEWS = ("counterfactuals", "counterfactual_parameters")
 
