@@ -4,12 +4,12 @@ from __future__ import annotations
 
 __all__ = [
     "ASSETS_FOLDER", "BLOB_TABLES", "DIGEST_COLUMN", "Hole", "KEY_COLUMN", "MANIFEST", "MIN_JOBS",
-    "NEWEST_WINS", "OUTPUTS_FOLDER", "PHOTOS_FOLDER", "SUFFIX", "SegmentWriter", "Store", "StoreWriteError",
+    "KITS_FOLDER", "NEWEST_WINS", "OUTPUTS_FOLDER", "PHOTOS_FOLDER", "STORE_FIX", "SUFFIX", "SegmentWriter", "Store", "StoreWriteError",
     "TABLES", "TRUTH_BLOBS", "Template", "atomic_write", "canonical", "canonical_pieces", "collect_garbage", "compact_table",
     "damaged_blobs", "digest", "digests", "file_digest", "files_digest", "float_texts",
     "full_disk_error", "is_full_disk", "is_select", "load_image", "load_pass", "load_pixels", "lock_down", "members",
     "pack", "photo_path", "read_manifest", "record", "remember_written",
-    "remove_killed_writers_temp_files", "repair", "safe_filename", "sha256_bytes", "skip_pandas_probe", "stale",
+    "remove_killed_writers_temp_files", "repair", "safe_filename", "sha256_bytes", "skip_pandas_probe", "stale", "store_error",
     "store_folder_problem", "store_stats", "unpack",
     "utc_now", "verify", "written_from"
 ]
@@ -49,8 +49,10 @@ if _TYPE_CHECKING:
         BLOB_TABLES,
         DIGEST_COLUMN,
         KEY_COLUMN,
+        KITS_FOLDER,
         NEWEST_WINS,
         PHOTOS_FOLDER,
+        STORE_FIX,
         TABLES,
         TRUTH_BLOBS,
         SegmentWriter,
@@ -63,6 +65,7 @@ if _TYPE_CHECKING:
         lock_down,
         photo_path,
         safe_filename,
+        store_error,
         utc_now,
     )
     from sweep3d.cache.store_folder import store_folder_problem
@@ -78,6 +81,9 @@ __getattr__, __dir__ = _exports(__name__, {
     "MIN_JOBS": ("sweep3d.cache.snapshot", "MIN_JOBS"),
     "NEWEST_WINS": ("sweep3d.cache.store", "NEWEST_WINS"),
     "PHOTOS_FOLDER": ("sweep3d.cache.store", "PHOTOS_FOLDER"),
+    "KITS_FOLDER": ("sweep3d.cache.store", "KITS_FOLDER"),
+    "STORE_FIX": ("sweep3d.cache.store", "STORE_FIX"),
+    "store_error": ("sweep3d.cache.store", "store_error"),
     "OUTPUTS_FOLDER": ("sweep3d.cache.digested", "OUTPUTS_FOLDER"),
     "SUFFIX": ("sweep3d.cache.digested", "SUFFIX"),
     "SegmentWriter": ("sweep3d.cache.store", "SegmentWriter"),

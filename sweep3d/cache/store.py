@@ -58,6 +58,9 @@ NEWEST_WINS = frozenset({"verdicts"})
 #: Where ``realism score`` keeps each photograph it scored (framed as its render, a small JPEG
 #: named by the SHA-256 of the photograph's file, recorded in its verdicts' ``photo_sha256``).
 PHOTOS_FOLDER = ("realism", "photos")
+#: Where ``realism pick`` writes an experiment's kit by default (``kits/<experiment>``): the one
+#: folder of the store that is the user's to read and add photographs to, not a run's.
+KITS_FOLDER = "kits"
 #: Blobs a ``truths`` row owns beside its key (``blobs/ab/<truth_key>.<suffix>``) and the column
 #: recording each one's SHA-256 (null: the pass was not rendered).
 TRUTH_BLOBS = {"mask.png": "mask_sha256", "depth.npz": "depth_sha256"}
@@ -843,12 +846,18 @@ def utc_now() -> datetime:
     return datetime.now(timezone.utc).replace(tzinfo=None)
 
 
-def atomic_write(path: Path, data: bytes, durable: bool = True) -> None:
+#: The way out of a full or read-only disk under the store (a file the user chose elsewhere has its own).
+STORE_FIX = "set experiment.store to a folder on another disk"
+
+
+def atomic_write(path: Path, data: bytes, durable: bool = True, fix: str = STORE_FIX) -> None:
     """Write ``data`` to ``path`` through a temp file in the same folder and a rename; the folder
     is made when it is missing (not asked for each time: writers of many small files call this).
 
     Args:
         durable: fsync before the rename; a cache whose damaged file is only a miss may skip it.
+        fix: what the error advises besides freeing space or permissions: the store's own way
+            (:data:`STORE_FIX`), or, for a file written outside the store, how to write it elsewhere.
 
     Raises:
         StoreWriteError: the disk is full or the folder is not writable (no temp file is left).
@@ -869,7 +878,7 @@ def atomic_write(path: Path, data: bytes, durable: bool = True) -> None:
     except BaseException as exc:
         _unlink_quietly(tmp)
         if _is_write_error(exc):
-            raise _as_write_error(exc, path) from None
+            raise _as_write_error(exc, path, fix) from None
         raise
 
 
@@ -879,16 +888,15 @@ def _is_write_error(exc: BaseException) -> bool:
     return exc.errno in WRITE_ERRNOS or "No space left on device" in str(exc)
 
 
-def _as_write_error(exc: BaseException, path: Path) -> StoreWriteError:
+def _as_write_error(exc: BaseException, path: Path, fix: str = STORE_FIX) -> StoreWriteError:
     assert isinstance(exc, OSError)
     code = exc.errno if exc.errno in WRITE_ERRNOS else errno.ENOSPC
     reason = exc.strerror or os.strerror(code)
     if code in (errno.EISDIR, errno.ENOTDIR):
         return StoreWriteError(f"cannot write {path}: {reason}; {FIXES[code]}")
     if code in FULL_ERRNOS:
-        return full_disk_error(OSError(code, reason), f"write {path}", path)
-    return StoreWriteError(f"cannot write {path}: {reason}; make the folder writable, or set experiment.store to a "
-                           "folder on another disk")
+        return full_disk_error(OSError(code, reason), f"write {path}", path, fix)
+    return StoreWriteError(f"cannot write {path}: {reason}; make the folder writable, or {fix}")
 
 
 #: What a full disk, or a used-up quota, raises.
@@ -900,9 +908,10 @@ def is_full_disk(exc: BaseException) -> bool:
     return isinstance(exc, OSError) and (exc.errno in FULL_ERRNOS or "No space left on device" in str(exc))
 
 
-def full_disk_error(exc: OSError, doing: str, path: Path) -> StoreWriteError:
+def full_disk_error(exc: OSError, doing: str, path: Path, fix: str = STORE_FIX) -> StoreWriteError:
     """One line for a full disk met while ``doing`` (``"write <path>"``) at ``path``: that the disk
-    is full, which one (where it is mounted, what is left) and the fix."""
+    is full, which one (where it is mounted, what is left) and the fix (``fix``: the store's, or
+    how to write a file of the user's choosing elsewhere)."""
     reason = exc.strerror or os.strerror(exc.errno or errno.ENOSPC)
     what = "the disk quota is used up" if exc.errno == errno.EDQUOT else "the disk is full"
     mount = mount_point(path)
@@ -910,8 +919,7 @@ def full_disk_error(exc: OSError, doing: str, path: Path) -> StoreWriteError:
         left = f"{_size(shutil.disk_usage(mount).free)} free on the disk mounted at {mount}"
     except OSError:
         left = f"the disk mounted at {mount}"
-    return StoreWriteError(f"cannot {doing}: {what} ({reason}; {left}); free some disk space, or set "
-                           "experiment.store to a folder on another disk")
+    return StoreWriteError(f"cannot {doing}: {what} ({reason}; {left}); free some disk space, or {fix}")
 
 
 def mount_point(path: Path) -> Path:

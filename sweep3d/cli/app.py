@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import os
 import re
 import signal
@@ -406,12 +407,37 @@ def _print_rows(cursor, limit: int, form: str = "auto") -> None:
         table.add_row(*[Text(visible(_cell(v))) for v in row])
     fits = console.measure(table).minimum <= console.width and all(
         len(c) <= max(console.width // max(len(columns), 1) - 3, 1) for c in columns)
-    if form == "table" or (form == "auto" and fits):
+    if form == "auto" and fits or form == "table" and console.measure(table).minimum <= console.width and fits:
         console.print(table)
+    elif form == "table":  # too wide for one table: a table per group of columns that fits, never a grid of slivers
+        _print_folded(columns, [[Text(visible(_cell(v))) for v in row] for row in shown])
     else:
         _print_records(columns, shown)
     if len(rows) > limit:
         err_console.print(f"[dim]first {limit} rows shown; --limit N or --output FILE for more[/]")
+
+
+def _print_folded(columns: list[str], cells: list[list[Text]]) -> None:
+    """``cells`` as several tables, each of as many columns as fit the terminal whole (headers
+    unbroken where the terminal allows), each row numbered so the tables line up."""
+    number = len(str(len(cells)))
+    room = console.width - (number + 3) - 1  # the row number's column and the table's left edge
+    need = [max([len(visible(c)), *(len(line) for row in cells for line in row[i].plain.splitlines())]) + 3
+            for i, c in enumerate(columns)]
+    groups: list[list[int]] = [[]]
+    for i, width in enumerate(need):
+        if groups[-1] and sum(need[j] for j in groups[-1]) + width > room:
+            groups.append([])
+        groups[-1].append(i)
+    for group in groups:
+        title = (f"column {group[0] + 1}" if len(group) == 1 else f"columns {group[0] + 1}–{group[-1] + 1}") + \
+            f" of {len(columns)}"
+        table = Table(Column(header="#", style="dim", justify="right"),
+                      *(Column(header=Text(visible(columns[i])), overflow="fold") for i in group),
+                      title=title, title_justify="left", title_style="dim")
+        for n, row in enumerate(cells, start=1):
+            table.add_row(str(n), *(row[i] for i in group))
+        console.print(table)
 
 
 def _print_records(columns: list[str], rows: list[tuple]) -> None:
@@ -481,11 +507,25 @@ def _export(con, statement: str, output: Path, tmp: Path, options: str) -> None:
     The connection may write only ``tmp``; the newlines keep a trailing ``--`` comment in the
     statement from swallowing the closing parenthesis.
     """
+    import duckdb
+
+    from sweep3d.cache import full_disk_error, is_full_disk
+
     target = str(tmp).replace("'", "''")
     try:
-        con.execute(f"COPY (\n{statement}\n) TO '{target}' ({options}, USE_TMP_FILE false)")
+        try:
+            con.execute(f"COPY (\n{statement}\n) TO '{target}' ({options}, USE_TMP_FILE false)")
+        except duckdb.IOException as exc:  # writing the file (not the SQL: no hint about the query)
+            if "No space left on device" in str(exc):
+                raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC)) from None
+            if str(tmp) in str(exc):
+                raise OSError(errno.EIO, str(exc).splitlines()[0]) from None
+            raise  # reading the store: the connection says it
         os.replace(tmp, output)
     except OSError as exc:
+        if is_full_disk(exc):
+            raise full_disk_error(exc, f"write --output {output}", output.parent,
+                                  "write it to another disk") from None
         raise UserError(f"--output {output}: cannot write it ({exc.strerror})") from None
     finally:
         tmp.unlink(missing_ok=True)

@@ -6,7 +6,7 @@ from rich.console import Console
 from rich.markup import escape
 
 from sweep3d.confirm import ConfirmResult
-from sweep3d.results import ALPHA, CONFIRMED, pairs_needed
+from sweep3d.results import ALPHA, CONFIRMED, pairs_needed, renders_for
 
 
 def print_confirmation(console: Console, result: ConfirmResult) -> None:
@@ -18,10 +18,10 @@ def print_confirmation(console: Console, result: ConfirmResult) -> None:
     for x in result.confirmations:
         v = x.verdict
         style = "green" if v.status == CONFIRMED else "yellow"
-        if 0 < v.pairs < needed:
+        if 0 < v.pairs < needed:  # the advice counts the pairs kept of those --renders drew (some are dropped)
             console.print(f"[{style}]{v.status}[/]: {escape(x.claim.text)}: {v.pairs} fresh pairs are too few for any "
                           f"outcome to confirm it among {tested} findings ({needed} at least; --renders "
-                          f"{2 * needed} or more)", soft_wrap=True)
+                          f"{renders_for(needed, v.pairs, result.renders)} or more)", soft_wrap=True)
             continue
         if not v.pairs:
             console.print(f"[{style}]{v.status}[/]: {escape(x.claim.text)}: no fresh pair could be drawn and "
@@ -37,7 +37,8 @@ def print_confirmation(console: Console, result: ConfirmResult) -> None:
     fewest = min((x.verdict.pairs for x in result.confirmations if x.verdict.pairs), default=0)
     if 0 < fewest < 2 * needed:
         console.print(f"[dim]few pairs: with {fewest} pairs a finding is confirmed only if nearly all of its "
-                      f"discordant pairs go its way, so 'not replicated' says little; --renders {4 * needed} "
+                      f"discordant pairs go its way, so 'not replicated' says little; --renders "
+                      f"{renders_for(2 * needed, fewest, result.renders)} "
                       "or more for power[/]", soft_wrap=True)
     console.print(
         f"fresh jobs: {result.jobs}, renders {result.rendered} made and {result.cached} cached (experiment "

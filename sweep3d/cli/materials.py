@@ -10,7 +10,7 @@ from typing import Any
 
 from rich.console import Console
 from rich.markup import escape
-from rich.table import Table
+from rich.table import Column, Table
 
 from sweep3d.assets import materialise_mesh
 from sweep3d.spec import LoadedSpec
@@ -38,8 +38,8 @@ def effective_materials(spec: LoadedSpec) -> list[list[dict[str, Any]]]:
 def print_materials(console: Console, spec: LoadedSpec, described: list[list[dict[str, Any]]]) -> None:
     """One table per object: each rendered part's materials and their effective values."""
     for obj, rows in zip(spec.objects, described):
-        table = Table("part", "material", *COLUMNS, title=f"{escape(obj.name)}: {escape(obj.mesh)}",
-                      title_justify="left")
+        table = Table(*(Column(name, overflow="fold") for name in ("part", "material", *COLUMNS)),
+                      title=f"{escape(obj.name)}: {escape(obj.mesh)}", title_justify="left")  # wrapped, never cut
         for row in rows:
             table.add_row(escape(row["part"]), escape(row["material"]),
                           *(_cell(row[c], c in row["overridden"]) for c in COLUMNS))
@@ -52,5 +52,13 @@ def _cell(value: Any, overridden: bool) -> str:
     if value is None:
         return "–"
     if isinstance(value, list):
-        return "(" + ", ".join(f"{v:.3g}" for v in value) + ")" + mark
-    return (value if isinstance(value, str) else f"{value:.3g}") + mark
+        return "(" + ", ".join(exact(v) for v in value) + ")" + mark
+    return (value if isinstance(value, str) else exact(value)) + mark
+
+
+def exact(value: float) -> str:
+    """The value Blender holds (a 32-bit float), in the fewest digits that give it back exactly:
+    what a user copies into a spec (``0.8``, not ``0.800000011920929``, nor ``0.123`` for 0.12345679)."""
+    import numpy as np
+
+    return np.format_float_positional(np.float32(value), unique=True, trim="-")

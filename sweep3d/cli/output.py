@@ -285,16 +285,19 @@ def describe_region(region: Region) -> str:
 
 def describe_boundary(row: dict) -> str:
     """``toaster: camera_elevation fails below 12.1 (95% interval 8.03–15.2), 61% of 40 → 18% of 12``:
-    the accuracy on the side that passes, then on the side that fails. With two values, the value
-    it fails at against the other (``fails at 5 against 35, 53% of 96 → 19% of 96``)."""
+    the accuracy on the side that passes, then (→) on the side that fails. With two values, the
+    value it fails at against the other, and the accuracies in the order of those words
+    (``fails at 5 against 35, 19% of 96 against 53% of 96``)."""
     who = row["object"] if row["scope"] == "object" else row["environment"] if row["scope"] == "environment" else None
     below = row["fails"] == "below"
     passing = (row["accuracy_above"], row["n_above"]) if below else (row["accuracy_below"], row["n_below"])
     failing = (row["accuracy_below"], row["n_below"]) if below else (row["accuracy_above"], row["n_above"])
-    where = ("" if row["values"] == 2 else
-             f" (95% interval {control_number(row['boundary_low'])}–{control_number(row['boundary_high'])})")
-    return (f"{escape(who) + ': ' if who else ''}{escape(row['parameter'])} {boundary_phrase(row)}{where},"
-            f" {passing[0]:.0%} of {passing[1]} → {failing[0]:.0%} of {failing[1]}")
+    if row["values"] == 2:  # "at 5 against 35": the failing value's accuracy first, as its words go
+        where, sides = "", f"{failing[0]:.0%} of {failing[1]} against {passing[0]:.0%} of {passing[1]}"
+    else:
+        where = f" (95% interval {control_number(row['boundary_low'])}–{control_number(row['boundary_high'])})"
+        sides = f"{passing[0]:.0%} of {passing[1]} → {failing[0]:.0%} of {failing[1]}"
+    return f"{escape(who) + ': ' if who else ''}{escape(row['parameter'])} {boundary_phrase(row)}{where}, {sides}"
 
 
 #: Objects or environments a "no boundary" finding names per parameter.

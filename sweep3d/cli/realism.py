@@ -19,7 +19,7 @@ command = registrar(realism_app)
 
 SpecArg = typer.Argument(..., help="Path to the experiment's TOML spec.", show_default=False, readable=False)
 KitOption = typer.Option(None, "--kit", help="The kit's folder (default: PHOTOS when it holds kit.json, else "
-                                              "realism/<experiment> beside the spec).")
+                                              "kits/<experiment> in the store).")
 WaitOption = typer.Option(0.0, help="Seconds to wait for a run holding the store's lock.")
 
 
@@ -29,7 +29,7 @@ def pick(
     per_object: int = typer.Option(10, "--per-object", help="Results per object and model: half right, half wrong."),
     seed: Optional[int] = typer.Option(None, "--seed", help="Seed of the draw (default: the spec's seed)."),
     output: Optional[Path] = typer.Option(None, "--output", "-o", help="The kit's folder: new, empty or an earlier "
-                                          "kit (default: realism/<experiment> beside the spec)."),
+                                          "kit (default: kits/<experiment> in the store)."),
     near_ties: str = typer.Option("leave", "--near-ties", help="Results whose true and best other class are within "
                                   "0.05 probability: leave them out, or mark them (kept, flagged in kit.json)."),
 ) -> None:
@@ -73,9 +73,10 @@ def score(
     else:
         if photos is None:
             raise UserError("give the folder of photographs (PHOTOS), or --engine NAME to score another renderer")
+        scored = score_photos(loaded, photos, match, kit, wait)
+        # said once the photographs are scored, so that an error is the only line of a refused score
         console.print("photographs are read upright (EXIF orientation), resized and centre-cropped to their "
                       "render's size, given their job's 2D controls (blur, noise, ...) as its render was, then "
                       "the model's own preprocessing, as the renders were", soft_wrap=True)
-        scored = score_photos(loaded, photos, match, kit, wait)
     for line in scored.lines():
         console.print(escape(line), soft_wrap=True)

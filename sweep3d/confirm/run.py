@@ -59,6 +59,7 @@ class ConfirmResult:
     rendered: int  # renders this call made
     cached: int  # renders it found in the store
     failed: int
+    renders: int = DEFAULT_RENDERS  # fresh renders asked for per finding (--renders)
 
 
 def confirm(loaded: LoadedSpec, renders: int = DEFAULT_RENDERS, seed: int | None = None,
@@ -116,7 +117,7 @@ def confirm(loaded: LoadedSpec, renders: int = DEFAULT_RENDERS, seed: int | None
     write_verdicts(store, loaded.name, {
         x.claim.key: {"text": x.claim.text, "verdict": x.verdict.as_dict(), "renders": renders, "seed": seed,
                       "drawn": x.drawn, "experiment": loaded.name + SUFFIX} for x in confirmations})
-    return ConfirmResult(loaded.name + SUFFIX, confirmations, len(fresh), rendered, cached, failed)
+    return ConfirmResult(loaded.name + SUFFIX, confirmations, len(fresh), rendered, cached, failed, renders)
 
 
 def findings_claims(loaded: LoadedSpec, store: Store, summary: Summary, space: Space) -> list[Claim]:

@@ -1,5 +1,9 @@
 """Progress of long stages: counts, cache hits, failures and rate.
 
+A stage's count is of every key it needs in the pass, the cached ones counted done from the start
+(``render: 14/28 (14 cached, 0 failed)``, then ``28/28``): a count never says fewer done than cached.
+The rate and the time left are of what is computed.
+
 On a terminal, Rich progress bars; when the output is not a terminal (a pipe, a log file, CI),
 where bars would show only at the end, one plain line per running stage every
 :data:`PLAIN_EVERY` seconds, and each stage's last line when it ends.
@@ -28,14 +32,19 @@ from rich.progress import (
 from rich.text import Text
 
 
+def computed(task: Task) -> float:
+    """What ``task`` has computed so far (its count less the cached keys it started from)."""
+    return task.completed - task.fields.get("cached", 0)
+
+
 class RateColumn(ProgressColumn):
-    """Items per second over the stage so far."""
+    """Items computed per second over the stage so far."""
 
     def render(self, task: Task) -> Text:
         elapsed = task.finished_time if task.finished else task.elapsed
-        if not elapsed or not task.completed:
+        if not elapsed or not computed(task):
             return Text("     -/s", style="cyan")
-        return Text(f"{task.completed / elapsed:6.2f}/s", style="cyan")
+        return Text(f"{computed(task) / elapsed:6.2f}/s", style="cyan")
 
 
 class StageProgress:
@@ -57,14 +66,15 @@ PLAIN_EVERY = 10.0
 
 def plain_line(task: Task) -> str:
     """One stage's progress as plain text: ``render: 120/264 (0 cached, 0 failed), 4.12/s, 0:00:29 elapsed,
-    about 0:00:35 left``."""
+    about 0:00:35 left`` (the count includes the cached keys; the rate is of those computed)."""
     elapsed = task.finished_time if task.finished else task.elapsed
     line = (f"{task.description}: {int(task.completed)}/{int(task.total or 0)} ({task.fields.get('cached', 0)} cached, "
             f"{task.fields.get('failed', 0)} failed)")
-    if elapsed and task.completed:
-        line += f", {task.completed / elapsed:.2f}/s, {datetime.timedelta(seconds=int(elapsed))} elapsed"
+    done = computed(task)
+    if elapsed and done:
+        line += f", {done / elapsed:.2f}/s, {datetime.timedelta(seconds=int(elapsed))} elapsed"
         if not task.finished and task.total:
-            left = (task.total - task.completed) * elapsed / task.completed
+            left = (task.total - task.completed) * elapsed / done
             line += f", about {datetime.timedelta(seconds=int(left))} left"
     return line
 
@@ -121,10 +131,12 @@ class RunProgress:
 
     @contextmanager
     def stage(self, name: str, total: int, cached: int) -> Iterator[StageProgress]:
+        """A bar for a stage that computes ``total`` keys and finds ``cached`` more stored: it
+        counts to ``total + cached``, starting from ``cached``."""
         if self.progress is None:
             yield StageProgress(None, None)
             return
-        task = self.progress.add_task(name, total=total, cached=cached, failed=0)
+        task = self.progress.add_task(name, total=total + cached, completed=cached, cached=cached, failed=0)
         try:
             yield StageProgress(self.progress, task)
         finally:

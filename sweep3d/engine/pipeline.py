@@ -249,18 +249,12 @@ def run(spec: LoadedSpec, console: Console | None = None, wait: float = 0.0, exe
     """
     store = Store(spec.store)
     _writable(spec, store)
-    owns_ray = False
-    if executor.kind == "ray":
-        from sweep3d.stages.render import connect
-
-        owns_ray = connect(executor.address)
-    try:
+    if executor.kind != "ray":
         return _run_locked(spec, store, console, wait, executor, overlap)
-    finally:
-        if owns_ray:
-            import ray
+    from sweep3d.stages.render import ray_session
 
-            ray.shutdown()
+    with ray_session(executor.address):  # joined when something renders or infers: not for a cached rerun
+        return _run_locked(spec, store, console, wait, executor, overlap)
 
 
 def _run_locked(spec: LoadedSpec, store: Store, console: Console | None, wait: float, executor: Executor,

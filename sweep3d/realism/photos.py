@@ -76,7 +76,7 @@ def match_photos(folder: Path, jobs: Iterable[int], match: Path | None = None) -
             continue
         problem = unreadable(path)
         if problem:
-            problems.append(f"{path}: {problem}; replace it with the photograph (JPEG or PNG) or remove it")
+            problems.append(f"{path}: {problem}; replace it with the photograph (JPEG, PNG, WebP, TIFF or BMP) or remove it")
             continue
         found[job] = Photo(job, path)
     for job in wanted:

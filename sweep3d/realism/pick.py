@@ -7,11 +7,12 @@ far). Near ties — the true class and the best other class within :data:`NEAR_T
 — are coin flips that an invisible change flips, so they are left out (or, with
 ``near_ties="mark"``, kept and flagged in ``kit.json``).
 
-The kit folder holds ``design.csv`` (the picked jobs' configurations; a spec whose ``[policy]``
-is ``type = "table"``, ``file = "design.csv"`` renders them again), ``renders/<job>.png`` (the
-image the model saw), ``edges/<job>.png`` (its edges, to lay over the live camera view),
-``align.html`` (the page that does so and saves each photograph as ``<job>.jpg``) and
-``kit.json`` (what was picked and why). Same store, spec and seed: the same bytes.
+The kit folder (default ``kits/<experiment>`` in the store) holds ``design.csv`` (the picked
+jobs' configurations; a spec whose ``[policy]`` is ``type = "table"``, ``file = "design.csv"``
+renders them again), ``renders/<job>.png`` (the image the model saw), ``edges/<job>.png`` (its
+edges, to lay over the live camera view), ``align.html`` (the page that does so and saves each
+photograph as ``<job>.jpg``) and ``kit.json`` (what was picked and why). Same store, spec and
+seed: the same bytes.
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ from typing import Any, Sequence
 import numpy as np
 import pyarrow as pa
 
-from sweep3d.cache import safe_filename
+from sweep3d.cache import KITS_FOLDER, safe_filename
 from sweep3d.core import UserError
 from sweep3d.spec import LoadedSpec
 
@@ -103,8 +104,9 @@ class Kit:
 
 
 def default_kit(spec: LoadedSpec) -> Path:
-    """``realism/<experiment>`` beside the spec."""
-    return spec.path.parent / "realism" / safe_filename(spec.name)
+    """``kits/<experiment>`` in the store: beside the spec, a kit of renders would land in the
+    user's repository (``git status`` would show it)."""
+    return spec.store / KITS_FOLDER / safe_filename(spec.name)
 
 
 def choose(rows: Sequence[dict[str, Any]], per_object: int, seed: int, parameters: Sequence[str],
@@ -220,11 +222,13 @@ def check_kit_folder(folder: Path, store: Path) -> Path:
     """``folder`` if a kit may be written there: new, empty, or an earlier kit (replaced whole).
 
     Raises:
-        UserError: it is inside the store, a file, or a folder holding files that are not a kit.
+        UserError: it is inside the store but not in its kits folder, a file, or a folder holding
+            files that are not a kit.
     """
-    if Path(os.path.realpath(folder)).is_relative_to(os.path.realpath(store)):
+    real = Path(os.path.realpath(folder))
+    if real.is_relative_to(os.path.realpath(store)) and not real.is_relative_to(os.path.realpath(store / KITS_FOLDER)):
         raise UserError(f"-o {folder}: inside the store {store}, whose files only sweep3d's runs write; "
-                        "choose another folder")
+                        f"choose a folder outside it, or leave -o out for {store / KITS_FOLDER}/<experiment>")
     if folder.exists() and not folder.is_dir():
         raise UserError(f"-o {folder}: is a file; name a folder for the kit")
     if folder.is_dir() and any(folder.iterdir()) and not (folder / KIT).is_file():

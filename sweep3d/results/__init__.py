@@ -8,7 +8,7 @@
 from __future__ import annotations
 
 __all__ = [
-    "ALPHA", "CONFIRMED", "create_margin_macro", "margin_sql", "pairs_needed", "COUNTERFACTUAL_VIEWS", "ControlEffect", "DEFAULT_RENDERS", "HIDDEN",
+    "ALPHA", "CONFIRMED", "create_margin_macro", "margin_sql", "pairs_needed", "renders_for", "COUNTERFACTUAL_VIEWS", "ControlEffect", "DEFAULT_RENDERS", "HIDDEN",
     "MACROS", "MARGIN_EDGES", "MEASURES", "OCCLUDED", "OUTCOMES", "OUT_OF_FRAME", "PlannedStore",
     "Region", "SCENE_COLUMNS", "SCHEMA", "Scale", "Summary", "UNCONFIRMED", "VERDICTS",
     "VERDICT_SCHEMA", "VIEW", "VIEWS", "Verdict", "arrow", "boundary_phrase", "connect",
@@ -44,6 +44,7 @@ if _TYPE_CHECKING:
         Verdict,
         judge,
         pairs_needed,
+        renders_for,
         tally,
     )
     from sweep3d.results.counterfactuals import COUNTERFACTUAL_VIEWS, SCHEMA, counterfactuals_path
@@ -83,6 +84,7 @@ __getattr__, __dir__ = _exports(__name__, {
     "ALPHA": ("sweep3d.results.confirmation", "ALPHA"),
     "CONFIRMED": ("sweep3d.results.confirmation", "CONFIRMED"),
     "pairs_needed": ("sweep3d.results.confirmation", "pairs_needed"),
+    "renders_for": ("sweep3d.results.confirmation", "renders_for"),
     "create_margin_macro": ("sweep3d.results.fragile", "create_margin_macro"),
     "margin_sql": ("sweep3d.results.fragile", "margin_sql"),
     "COUNTERFACTUAL_VIEWS": ("sweep3d.results.counterfactuals", "COUNTERFACTUAL_VIEWS"),

@@ -153,6 +153,14 @@ def pairs_needed(findings: int, alpha: float = ALPHA) -> int:
     return max(1, math.floor(math.log2(max(findings, 1) / alpha)) + 1)
 
 
+def renders_for(want: int, got: int, renders: int) -> int:
+    """The ``--renders`` (even) that would give ``want`` twin pairs where ``renders`` gave ``got``:
+    pairs dropped (a hidden object, an invalid prediction) are lost in the same proportion, so
+    the advice scales with what was kept, never below two renders a pair."""
+    wanted = max(2 * want, math.ceil(want * renders / got)) if got > 0 else 2 * want
+    return wanted + wanted % 2
+
+
 def judge(findings: Sequence[Pairs], alpha: float = ALPHA) -> list[Verdict]:
     """One :class:`Verdict` per finding's fresh pairs, tested together (Holm over those with pairs)."""
     tested = [i for i, pairs in enumerate(findings) if pairs.n]

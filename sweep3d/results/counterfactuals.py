@@ -22,13 +22,15 @@ Views (only once ``explain`` has run):
 
 from __future__ import annotations
 
+import errno
+import os
 from pathlib import Path
 
 import duckdb
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from sweep3d.cache import Store, safe_filename
+from sweep3d.cache import Store, safe_filename, store_error
 
 COUNTERFACTUAL_VIEWS = ("counterfactuals", "counterfactual_parameters")
 
@@ -63,7 +65,12 @@ def register_counterfactual_views(con: duckdb.DuckDBPyConnection, store: Store, 
     try:
         if "failure_job" not in pq.read_schema(path).names:
             return []
-    except (OSError, ValueError, pa.ArrowException):  # none yet, or unreadable: no views
+    except OSError as exc:
+        if isinstance(exc, PermissionError) or exc.errno in (errno.EACCES, errno.EPERM):
+            code = exc.errno or errno.EACCES  # there, but not for us: said, not "no such table"
+            raise store_error(OSError(code, os.strerror(code), str(path)), "read") from None
+        return []  # none yet
+    except (ValueError, pa.ArrowException):  # not a table explain wrote: no views
         return []
     own = "WHERE failure_pred_key IN (SELECT pred_key FROM jobs) " if _has(con, "jobs") else ""
     con.execute(f"CREATE OR REPLACE VIEW counterfactuals AS SELECT * FROM read_parquet('{_quoted(path)}') "

@@ -20,7 +20,7 @@ from sweep3d.cache.store import Store, atomic_write
 from sweep3d.cli import app
 from sweep3d.core.errors import StoreBusyError, UserError
 from sweep3d.results import connect as connect_results
-from tests.helpers import one_line, store_tree
+from tests.helpers import FixedUuid, one_line, store_tree
 
 T0 = datetime(2024, 1, 1, tzinfo=timezone.utc)
 
@@ -464,3 +464,41 @@ def test_machine_formats_print_every_row_and_notes_go_to_stderr(synthetic: Path)
 def test_help_texts_print_table_names_in_brackets() -> None:
     result = CliRunner().invoke(app, ["bench", "--help"])
     assert result.exit_code == 0 and "spec's [render]" in " ".join(result.output.split())
+
+
+def test_query_output_on_a_full_disk_is_the_disk_not_the_sql(synthetic: Path, tmp_path: Path, monkeypatch) -> None:
+    """A real ENOSPC (the temp file is /dev/full): one line saying the disk is full and to write
+    elsewhere, without the SQL hint a failed query gets, nor advice to move the store."""
+    import importlib
+
+    monkeypatch.setattr(importlib.import_module("sweep3d.cli.app").uuid, "uuid4", FixedUuid)
+    out = tmp_path / "rows.csv"
+    (tmp_path / ".rows.csv.fixed.tmp").symlink_to("/dev/full")
+    store = synthetic.parent / "store"
+    before = store_tree(store)
+    result = CliRunner().invoke(app, ["query", str(synthetic), "SELECT * FROM results", "--output", str(out)])
+    line = one_line(result.output)
+    assert result.exit_code == 2, result.output
+    assert line.startswith(f"error: cannot write --output {out}: the disk is full (No space left on device; "), line
+    assert line.endswith("free some disk space, or write it to another disk"), line
+    assert "docs/how-to/query.md" not in line and "experiment.store" not in line
+    assert list(tmp_path.iterdir()) == [] and store_tree(store) == before  # the link to /dev/full removed, not it
+    assert Path("/dev/full").exists()
+
+
+@pytest.mark.parametrize("width", [60, 80, 120])
+def test_a_table_too_wide_for_the_terminal_is_folded_into_tables_of_whole_columns(synthetic: Path,
+                                                                                  width: int) -> None:
+    """``--format table`` on ``SELECT * FROM runs``: it drew a grid of one-letter slivers with no
+    header or value readable; now a table per group of columns that fits, headers whole, every
+    value there, rows numbered so the tables line up."""
+    sql = "SELECT * EXCLUDE (spec) FROM runs"
+    result = CliRunner().invoke(app, ["query", str(synthetic), sql, "--format", "table"], env={"COLUMNS": str(width)})
+    assert result.exit_code == 0, result.output
+    columns = json.loads(CliRunner().invoke(app, ["query", str(synthetic), sql, "--format", "json"]).output)[0]
+    lines = result.output.splitlines()
+    assert all(len(line) <= width for line in lines)
+    assert all(f"┃ {name} " in result.output for name in columns), result.output  # every header whole
+    titles = [line.strip() for line in lines if line.strip().startswith(("columns ", "column "))]
+    assert len(titles) > 1 and titles[-1].endswith(f"{len(columns)} of {len(columns)}"), titles
+    assert "│ synthetic0 " in result.output and "│ 1 │" in result.output

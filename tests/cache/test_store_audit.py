@@ -446,3 +446,20 @@ def test_only_the_lock_holder_quarantines_a_damaged_segment(run_dir: Path, caplo
     assert not bad.exists() and (root / "quarantine" / "tables" / "renders" / bad.name).is_file()
     [skipped, moved] = warnings_of(caplog)
     assert "skipping it" in skipped and "moved it to quarantine/" in moved
+
+
+def test_counterfactuals_the_user_may_not_read_are_named_not_a_missing_table(shared_dir: Path) -> None:
+    """``explain``'s file made unreadable: one line naming it and the fix, not DuckDB's "Table with
+    name counterfactuals does not exist"; a store that was never explained still has no such view."""
+    from sweep3d.results.counterfactuals import SCHEMA, counterfactuals_path
+
+    sql = "SELECT count(*) FROM counterfactuals"
+    assert "counterfactuals does not exist" in one_error(*cli(shared_dir, "query", "SPEC", sql))  # never explained
+    path = counterfactuals_path(Store(shared_dir / "store"), "scale")
+    path.parent.mkdir()
+    pq.write_table(pa.Table.from_pylist([], schema=SCHEMA), path)
+    hand_over(shared_dir)
+    assert cli(shared_dir, "query", "SPEC", sql)[0] == 0  # readable: the view, empty
+    path.chmod(0)
+    line = one_error(*as_user(lambda: cli(shared_dir, "query", "SPEC", sql)))
+    assert line == f"error: cannot read {path} (Permission denied); fix its permissions", line

@@ -314,6 +314,13 @@ def store_tree(root: Path) -> dict[str, tuple[int, int]]:
     return {str(p.relative_to(root)): (p.stat().st_size, p.stat().st_mtime_ns) for p in root.rglob("*") if p.is_file()}
 
 
+class FixedUuid:
+    """A uuid whose ``hex`` is ``fixed``: patched in for ``uuid.uuid4``, a test can put something
+    (a link to /dev/full: a real full disk) where a temp file will be written."""
+
+    hex = "fixed"
+
+
 def one_line(output: str) -> str:
     lines = [line for line in output.splitlines() if line.strip()]
     assert len(lines) == 1, output

@@ -71,3 +71,22 @@ def test_the_realism_panel_draws_the_table_and_the_pairs(tmp_path: Path, chromiu
         ARTIFACTS.mkdir(exist_ok=True)
         page.locator("#realism").screenshot(path=str(ARTIFACTS / "realism-panel.png"))
         assert_clean(path, events)
+
+
+def test_each_image_of_a_pair_names_its_job_and_configuration_on_hover(tmp_path: Path) -> None:
+    """The hover text of both images of a pair: the job, its object, environment and control
+    values (as the gallery's tiles say them), then what each source's verdict was."""
+    import html
+    import re
+
+    spec, photos = scored_run(tmp_path)
+    page = write_report(load_spec(spec)).read_text()
+    section = re.search(r'<section id="realism">(.*?)</section>', page, re.S).group(1)
+    colours = job_colours()
+    for job in photos:
+        pair = re.search(rf'<div class="realism-pair[^"]*" data-job="{job}"(.*?)</div>', section, re.S).group(1)
+        render, photo = [html.unescape(t) for t in re.findall(r'<figure [^>]*title="([^"]*)"', pair)]
+        scene = f"job {job} · object = {colours[job]['object']} · environment = "
+        assert render.startswith(scene) and " · orientation_yaw = " in render and " · render: " in render, render
+        assert photo.startswith(scene) and f" · photo {job}.jpg: " in photo, photo
+        assert render.split(" · render: ")[0] == photo.split(" · photo ")[0]  # the same configuration on both

@@ -134,3 +134,24 @@ def test_a_folder_of_other_files_or_a_bad_option_is_one_line(tmp_path: Path, mon
         assert result.exit_code == 2, result.output
         assert words in result.output and len(result.output.strip().splitlines()) == 1
     assert (tmp_path / "busy" / "notes.txt").read_text() == "mine" and not (tmp_path / "k").exists()
+
+
+def test_the_kit_goes_to_the_store_by_default_not_beside_the_spec(tmp_path: Path, monkeypatch) -> None:
+    """Beside the spec, a kit of renders lands in the user's repository; in the store's kits
+    folder it does not, and ``-o`` may name it (elsewhere in the store stays refused)."""
+    from typer.testing import CliRunner
+
+    from sweep3d.cli import app
+
+    spec = make_run(tmp_path)
+    stub_kit_tools(monkeypatch)
+    beside = set(tmp_path.iterdir())
+    result = CliRunner().invoke(app, ["realism", "pick", str(spec), "--per-object", "2"])
+    assert result.exit_code == 0, result.output
+    kit = tmp_path / "store" / "kits" / "realism"
+    assert (kit / "kit.json").is_file() and str(kit / "align.html") in result.output.replace("\n", "")
+    assert set(tmp_path.iterdir()) == beside  # nothing new beside the spec
+    again = pick(spec, kit, "--per-object", "2")  # the default, named outright: an earlier kit, replaced
+    assert again.exit_code == 0, again.output
+    result = pick(spec, tmp_path / "store" / "tables" / "kit")
+    assert result.exit_code == 2 and "inside the store" in result.output and "kits" in result.output

@@ -141,9 +141,12 @@ def test_each_bad_input_is_one_line_and_stores_nothing(tmp_path: Path, monkeypat
         result = score(spec, photos, *extra)
         assert result.exit_code == 2, (photos.name, result.output)
         printed = result.output.strip().splitlines()
-        assert len(printed) == len(lines) + 1, (photos.name, result.output)  # the note on framing, then one each
+        assert len(printed) == len(lines), (photos.name, result.output)  # one each, and no note before them
+        assert all(p.startswith("error: ") for p in printed), (photos.name, result.output)
         for line in lines:
             assert sum(line in p for p in printed) == 1, (photos.name, line, result.output)
+        if photos is text:  # every format the store reads is named, not only two
+            assert "(JPEG, PNG, WebP, TIFF or BMP)" in result.output
     assert not Store(tmp_path / "store").segments(VERDICTS)
     assert not (tmp_path / "store" / "realism").exists()
 
@@ -155,11 +158,11 @@ def test_a_real_run_s_renders_as_photographs_agree_with_it(tiny_copy: Path, monk
     spec = tiny_copy / "spec.toml"
     result = CliRunner().invoke(app, ["realism", "pick", str(spec), "--per-object", "4", "--near-ties", "mark"])
     assert result.exit_code == 0, result.output
-    kit_dir = tiny_copy / "realism" / "tiny"
+    kit_dir = tiny_copy / "store" / "kits" / "tiny"  # the default: in the store
     jobs = json.loads((kit_dir / "kit.json").read_text())["jobs"]
     assert jobs and len(jobs) <= 4
     result = CliRunner().invoke(app, ["realism", "score", str(spec), str(kit_dir / "renders")])
-    assert result.exit_code == 0, result.output  # the kit found by default beside the spec
+    assert result.exit_code == 0, result.output  # the kit found by default in the store
     overall = next(r for r in agreement_rows(tiny_copy, "tiny") if r["overall"])
     assert (overall["n"], overall["agreement"]) == (len(jobs), 1.0)
 

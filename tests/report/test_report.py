@@ -273,3 +273,54 @@ def test_report_on_an_empty_store_says_how_to_fix(tmp_path: Path) -> None:
     assert "no results for experiment 'tiny' yet" in lines[0]
     assert f"sweep3d run {spec}" in lines[0]
     assert not (tmp_path / "store" / "reports").exists()
+
+
+def test_a_report_on_a_full_disk_outside_the_store_says_to_write_it_elsewhere(tmp_path: Path, monkeypatch) -> None:
+    """A real ENOSPC (the page's temp file is /dev/full): ``-o`` names a file outside the store,
+    so moving the store would not help; the line says to write the page elsewhere."""
+    import uuid
+
+    from tests.helpers import FixedUuid, build_store, one_line
+
+    spec = build_store(tmp_path / "run", 40, images=False)
+    out = tmp_path / "pages" / "r.html"
+    out.parent.mkdir()
+    (out.parent / ".r.html.fixed.tmp").symlink_to("/dev/full")
+    monkeypatch.setattr(uuid, "uuid4", FixedUuid)
+    result = CliRunner().invoke(app, ["report", str(spec), "-o", str(out)])
+    line = one_line(result.output)
+    assert result.exit_code == 2, result.output
+    assert line.startswith(f"error: cannot write {out}: the disk is full (No space left on device; "), line
+    assert line.endswith("free some disk space, or write it to another disk with --output FILE.html"), line
+    assert "experiment.store" not in line
+    assert list(out.parent.iterdir()) == [] and Path("/dev/full").exists()
+
+
+def test_after_a_cached_rerun_the_run_card_shows_the_run_that_computed_the_results(tmp_path: Path) -> None:
+    """A rerun that found everything cached took 0.2 s: the card's headline stays the time of the
+    run that computed the results, and says the rerun beside it."""
+    from datetime import timedelta
+
+    from sweep3d.cache.store import utc_now
+    from tests.helpers import build_store
+
+    spec = build_store(tmp_path / "run", 40, images=False)
+    loaded = load_spec(spec)
+    store = Store(loaded.store)
+
+    def card() -> dict:
+        return build_context(loaded, connect(store, loaded.name), store, ())["run"]
+
+    first = card()
+    assert (first["label"], first["id"], first["rerun"]) == ("latest run", "synthetic0", None)
+    later = utc_now() + timedelta(minutes=5)
+    store.append("runs", [{
+        "run_id": "rerun", "experiment": loaded.name, "spec_path": str(spec), "spec": spec.read_text(),
+        "jobs": 40, "started_at": later, "created_at": later, "seconds": 0.2,
+        **{f"{stage}_{k}": v for stage in ("render", "postprocess", "infer")
+           for k, v in (("total", 40), ("cached", 40), ("computed", 0), ("failed", 0))},
+    }])
+    shown = card()
+    assert (shown["label"], shown["id"], shown["seconds"]) == ("run time", "synthetic0", "0.0 s")
+    assert shown["rerun"] == f"rerun {later:%Y-%m-%d %H:%M} UTC in 0.2 s, everything cached"
+    assert [(s["cached"], s["total"]) for s in shown["stages"]] == [(40, 40)] * 3  # the rerun's cache hits

@@ -210,9 +210,27 @@ def test_two_values_are_tested_and_the_interval_is_the_gap_between_them() -> Non
     # the midpoint was never rendered: the findings name the value it fails at against the other
     line = describe_boundary(step)
     assert line.startswith("camera_elevation fails at 5 against 35, ") and "interval" not in line
-    assert line.endswith(f"{step['accuracy_above']:.0%} of 120 → {step['accuracy_below']:.0%} of 120")
+    # ... and the accuracies in the order of those words: at 5 (failing), then against 35
+    assert line.endswith(f"{step['accuracy_below']:.0%} of 120 against {step['accuracy_above']:.0%} of 120")
     above = dict(step, fails="above")
-    assert describe_boundary(above).startswith("camera_elevation fails at 35 against 5, ")
+    assert describe_boundary(above) == (f"camera_elevation fails at 35 against 5, {step['accuracy_above']:.0%} of 120 "
+                                        f"against {step['accuracy_below']:.0%} of 120")
+
+
+def test_the_two_value_sentence_gives_each_value_its_own_accuracy_as_on_the_quickstart() -> None:
+    """The quickstart's elevations 5 and 35, 480 results each, 61.7 % right at 5 and 69 % at 35:
+    the line's first accuracy is that of the value it fails at (the words' order), counted here
+    from the results, not read from the fit."""
+    rng = np.random.default_rng(45)
+    x = np.repeat([5.0, 35.0], 480)
+    right = {5.0: 296, 35.0: 331}  # 61.7 % and 69.0 % of 480
+    correct = np.concatenate([rng.permutation(np.arange(480) < right[v]) for v in (5.0, 35.0)])
+    objects, environments = np.array(["a"] * 960, object), np.array(["e"] * 960, object)
+    (row,) = adjust(fit_parameter("camera_elevation", Scale(), x, correct, objects, environments))
+    assert row["significant"] and row["fails"] == "below"
+    seen = {v: f"{correct[x == v].mean():.0%} of {int((x == v).sum())}" for v in (5.0, 35.0)}
+    assert seen == {5.0: "62% of 480", 35.0: "69% of 480"}
+    assert describe_boundary(row) == f"camera_elevation fails at 5 against 35, {seen[5.0]} against {seen[35.0]}"
 
 
 def test_the_findings_say_where_there_is_no_boundary(tmp_path: Path) -> None:

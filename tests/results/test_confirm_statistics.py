@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 from scipy.stats import hypergeom
 
 from sweep3d.confirm.claims import boundary_claim, value_claim
@@ -238,3 +240,20 @@ def test_pairs_too_few_for_any_outcome_to_confirm_leave_a_finding_unconfirmed_no
         assert all_its_way[0].status == CONFIRMED
         one_short = judge([Pairs(inside_wrong=n - 1)] + [Pairs(both_right=n - 1)] * (findings - 1))
         assert {v.status for v in one_short} == {UNCONFIRMED}  # "not replicated" would claim what was not tested
+
+
+@given(want=st.integers(1, 40), renders=st.integers(2, 10_000), kept=st.floats(0.01, 1.0))
+def test_the_renders_advised_give_the_pairs_wanted_at_the_share_kept(want: int, renders: int, kept: float) -> None:
+    """Pairs dropped as hidden or invalid are lost in proportion: the advice scales with the pairs
+    a run of ``renders`` kept, is even, and is above what was given whenever it gave too few."""
+    from sweep3d.results.confirmation import renders_for
+
+    got = max(1, min(renders // 2, int(kept * renders // 2)))
+    advised = renders_for(want, got, renders)
+    assert advised % 2 == 0 and advised >= 2 * want
+    assert got * advised / renders >= want  # at the yield of this run, enough pairs
+    if got < want:
+        assert advised > renders  # never "--renders 14 or more" to one who gave 16
+    if got == renders // 2 and renders % 2 == 0:  # nothing dropped: two renders a pair, as before
+        assert advised == 2 * want
+

@@ -25,8 +25,11 @@ def build(inputs: PanelInputs) -> dict[str, Any] | None:
                          "FROM counterfactuals")[0]
     if not totals["searched"]:
         return None
+    # the run's failures (as explain counts them: counted, wrong): "all of them", or a sample of how many
+    totals["failures"] = inputs.rows("SELECT count(*) AS n FROM results WHERE counted AND NOT correct")[0]["n"]
     pairs = inputs.rows("SELECT * FROM counterfactuals WHERE found ORDER BY distance, failure_job LIMIT ?", [CARDS])
-    cards = [_card(inputs, row) for row in pairs]
+    described = {r.job: inputs.results.describe(r) for r in inputs.results.rows([p["failure_job"] for p in pairs])}
+    cards = [_card(inputs, row, described.get(row["failure_job"], f"job {row['failure_job']}")) for row in pairs]
     parameters = [{"parameter": p["parameter"], "cheapest": p["cheapest"], "alone": p["alone"],
                    "share": pct(p["share"], 0), "width": round(100 * (p["share"] or 0)),
                    "median": pct(p["median_share"], 1)}
@@ -34,20 +37,30 @@ def build(inputs: PanelInputs) -> dict[str, Any] | None:
     return {"cards": cards, "parameters": parameters, "model": model, **totals}
 
 
-def _card(inputs: PanelInputs, row: dict[str, Any]) -> dict[str, Any]:
+def _card(inputs: PanelInputs, row: dict[str, Any], described: str) -> dict[str, Any]:
+    """One failure | fix pair. Each side's caption is what the model said and the probability it
+    gave the true class, named as such (``balloon · p(basketball) 19.6 %``); each image's hover
+    text names the job and its configuration (``described``: ``job 3 · object = mug · …``), the
+    fix's as the failure's with the change."""
     moves = [_move(p, a, b, d) for p, a, b, d in zip(row["parameters"], row["from_values"], row["to_values"],
                                                         row["deltas"])]
     fixed_as = row["fix_label"] or row["true_labels"]
+    true = f"p({row['true_labels'] or fixed_as})"
+    said = row["failure_label"] or "no prediction"
+    moved = "; ".join(f"{p} {a} → {b}" for p, a, b in zip(row["parameters"], row["from_values"], row["to_values"]))
+    failure_probability, fix_probability = _pct(row["failure_probability"]), _pct(row["fix_probability"])
+    failure_caption = f"{said} · {true} {failure_probability}" if failure_probability else said
+    fix_caption = f"{fixed_as} · {true} {fix_probability}" if fix_probability else fixed_as
     return {
         "job": row["failure_job"], "object": row["object"], "environment": row["environment"],
         "failure_thumb": inputs.thumbs.want(row["failure_image_key"]),
         "fix_thumb": inputs.thumbs.want(row["fix_image_key"]),
-        "said": row["failure_label"] or "no prediction", "fix_label": fixed_as,
+        "said": said, "fix_label": fixed_as, "true": true,
+        "failure_title": f"{described} · predicted {failure_caption} (wrong)",
+        "fix_title": f"nearest fix of {described}, with {moved} · predicted {fix_caption} (right)",
         "sentence": f"{' and '.join(moves)} makes it a {fixed_as}",
-        "failure_probability": _pct(row["failure_probability"]), "fix_probability": _pct(row["fix_probability"]),
-        "distance": f"{row['distance']:.3f}",
-        "moved": "; ".join(f"{p} {a} → {b}" for p, a, b in zip(row["parameters"], row["from_values"],
-                                                              row["to_values"])),
+        "failure_probability": failure_probability, "fix_probability": fix_probability,
+        "distance": f"{row['distance']:.3f}", "moved": moved,
     }
 
 

@@ -53,14 +53,16 @@ def _pairs(inputs: PanelInputs, source: str) -> dict[str, Any]:
         "SELECT * FROM source_verdicts WHERE source = ? AND model = (SELECT min(model) FROM source_verdicts "
         "WHERE source = ?) ORDER BY sim_correct = source_correct, job LIMIT ?", [source, source, PAIRS])
     pairs = []
+    # each image's hover text names its job and configuration (``job 3 · object = mug · …``)
+    described = {row.job: inputs.results.describe(row) for row in inputs.results.rows([r["job"] for r in rows])}
     for r in rows:
         agree = r["sim_correct"] == r["source_correct"]
+        job = described.get(r["job"], f"job {r['job']} · object = {r['object']} · environment = {r['environment']}")
         render = {"thumb": inputs.thumbs.want(r["image_key"]), "outcome": _outcome(r["sim_correct"]),
                   "caption": f"render: {r['sim_top1']}",
-                  "title": f"job {r['job']}: {r['object']} in {r['environment']}; render: {r['sim_top1']} "
-                           f"({_outcome(r['sim_correct'])})"}
+                  "title": f"{job} · render: {r['sim_top1']} ({_outcome(r['sim_correct'])})"}
         other = {"outcome": _outcome(r["source_correct"]), "caption": f"{_short(source)}: {r['source_top1']}",
-                 "title": f"job {r['job']}: {_short(source)} {r['photo'] or ''}: {r['source_top1']} "
+                 "title": f"{job} · {_short(source)}{' ' + r['photo'] if r['photo'] else ''}: {r['source_top1']} "
                           f"({_outcome(r['source_correct'])})"}
         if r["source_image_key"]:
             other["thumb"] = inputs.thumbs.want(r["source_image_key"])

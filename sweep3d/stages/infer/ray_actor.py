@@ -37,8 +37,11 @@ class InferenceActor:
 
 
 def remote_runner(name: str, model_framed: bool = False) -> Any:
-    """A callable mapping images (N, H, W, 3) to logits through a Ray actor."""
-    import ray
+    """A callable mapping images (N, H, W, 3) to logits through a Ray actor (Ray joined now, if
+    the run has not yet: see :func:`~sweep3d.stages.render.ray_pool.ray_session`)."""
+    from sweep3d.stages.render import join_ray
+
+    ray = join_ray()
 
     gpus = 1 if ray.cluster_resources().get("GPU", 0) >= 1 else 0
     actor = ray.remote(num_gpus=gpus, num_cpus=1)(InferenceActor).remote(name, model_framed)

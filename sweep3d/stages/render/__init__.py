@@ -9,7 +9,7 @@ __all__ = [
     "COLUMNS", "Executor", "LOCAL", "Look", "RENDERED_CONTROLS", "RenderInfo", "RenderStage",
     "RenderedControl", "SENSOR_WIDTH_MM", "SIDES", "SceneEdit", "SceneState", "check_engine",
     "connect", "cycles_only_defaults", "describe_materials", "device_note", "duration", "engine_key",
-    "variant_note",
+    "join_ray", "ray_session", "variant_note",
     "estimate_render_seconds", "frame_fields", "in_frame", "in_frame_many", "missing_gpu_warning",
     "object_error", "paint_objects", "parts_keys", "plan_device", "remove_stale_scratch",
     "render_settings", "render_template", "resolve_device", "scene_key", "scratch_root",
@@ -36,7 +36,8 @@ if _TYPE_CHECKING:
     from sweep3d.stages.render.estimate import duration, estimate_render_seconds, slow_render_warning
     from sweep3d.stages.render.paint import SIDES, paint_objects
     from sweep3d.stages.render.pool import remove_stale_scratch, scratch_root
-    from sweep3d.stages.render.ray_pool import connect
+    from sweep3d.stages.render.ray_pool import connect, ray_session
+    from sweep3d.stages.render.ray_pool import join as join_ray
     from sweep3d.stages.render.render_keys import parts_keys, render_template, scene_key, truth_keys
     from sweep3d.stages.render.render_stage import LOCAL, Executor, RenderStage, object_error, render_settings
     from sweep3d.stages.render.scene_edit import SceneEdit
@@ -59,6 +60,8 @@ __getattr__, __dir__ = _exports(__name__, {
     "check_engine": ("sweep3d.stages.render.engines", "check_engine"),
     "connect": ("sweep3d.stages.render.ray_pool", "connect"),
     "cycles_only_defaults": ("sweep3d.stages.render.engines", "cycles_only_defaults"),
+    "ray_session": ("sweep3d.stages.render.ray_pool", "ray_session"),
+    "join_ray": ("sweep3d.stages.render.ray_pool", "join"),
     "describe_materials": ("sweep3d.stages.render.describe", "describe_materials"),
     "device_note": ("sweep3d.stages.render.device", "device_note"),
     "duration": ("sweep3d.stages.render.estimate", "duration"),

@@ -87,7 +87,10 @@ def worker_count(spec: RenderSpec, device: str) -> int:
 
 def device_note(spec: RenderSpec, device: str) -> str | None:
     """The line a run that renders says first about its device: that auto found no GPU, or that
-    the driver must first compile Cycles' kernels for this GPU (None: nothing to say)."""
+    the driver must first compile Cycles' kernels for this GPU (None: nothing to say, as for
+    another engine: Mitsuba renders on the CPU whatever ``device`` says)."""
+    if spec.engine != "cycles":
+        return None
     if spec.device == "auto" and device == "cpu":
         return ('render.device = "auto" found no NVIDIA GPU that Cycles can use (OptiX or CUDA): rendering on '
                 'the CPU')

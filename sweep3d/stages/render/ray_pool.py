@@ -10,11 +10,15 @@ a new actor; results are yielded only for finished groups, so nothing is counted
 
 from __future__ import annotations
 
+import importlib.util
 import io
+import os
 import sys
 import tarfile
+import tempfile
 from collections import Counter, deque
-from dataclasses import replace
+from contextlib import contextmanager
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -26,25 +30,125 @@ from sweep3d.stages.render.worker_protocol import RenderJob, RenderReply, Render
 MAX_GROUP_RETRIES = 2
 
 
+#: Ray's switch for token authentication, and where it finds a token (its own names).
+AUTH_MODE = "RAY_AUTH_MODE"
+TOKEN_SOURCES = ("RAY_AUTH_TOKEN", "RAY_AUTH_TOKEN_PATH")
+
+
+def require_ray() -> None:
+    """Refuse ``--executor ray`` in one line where Ray is not installed (without importing it:
+    a run with nothing to compute never does)."""
+    if importlib.util.find_spec("ray") is None:
+        raise UserError("--executor ray needs Ray: pip install 'sweep3d[ray]'")
+
+
 def _ray():
-    try:
-        import ray
-    except ImportError:
-        raise UserError("--executor ray needs Ray: pip install 'sweep3d[ray]'") from None
+    require_ray()
+    import ray
+
     return ray
+
+
+@dataclass
+class _Session:
+    """One run's Ray: the cluster to join, and whether joining started Ray (then the run stops it)."""
+
+    address: str | None
+    started: bool = False
+
+
+_session: _Session | None = None
+
+
+@contextmanager
+def ray_session(address: str | None) -> Iterator[None]:
+    """Ray for one run, joined only when something renders or infers on it: a run whose every
+    result is cached never starts it (seconds). What it started is shut down when the run ends."""
+    global _session
+    require_ray()
+    outer, _session = _session, _Session(address)
+    try:
+        yield
+    finally:
+        session, _session = _session, outer
+        if session is not None and session.started:
+            import ray
+
+            ray.shutdown()
+
+
+def join() -> Any:
+    """``ray``, joined to the current run's cluster (now, if this is the first use)."""
+    connect(_session.address if _session is not None else None)
+    return _ray()
 
 
 def connect(address: str | None) -> bool:
     """Join the cluster at ``address``, or start a local one bound to 127.0.0.1; True if this
-    call started Ray (the caller then shuts it down)."""
+    call started Ray and the caller must shut it down (False within a :func:`ray_session`, which
+    shuts down what it started).
+
+    Raises:
+        UserError: one line: the cluster asks for an authentication token this process does not
+            send (Ray 2.52+ with token authentication), or there is no cluster at ``address``.
+    """
+    if address:
+        _use_token_if_there_is_one()
     ray = _ray()
     if ray.is_initialized():
         return False
     if address:
-        ray.init(address=address, include_dashboard=False, log_to_driver=False)
+        _join(ray, address)
     else:
         ray.init(_node_ip_address="127.0.0.1", include_dashboard=False, log_to_driver=False)
+    if _session is not None:
+        _session.started = True
+        return False
     return True
+
+
+def _use_token_if_there_is_one() -> None:
+    """Send this user's Ray token to an explicit address, as Ray itself does only for a cluster
+    it finds on its own (``ray start`` turns token authentication on when a token exists, and a
+    client given an address sends none unless ``RAY_AUTH_MODE=token``). Ray reads the mode once,
+    at import: this runs before it is imported."""
+    if os.environ.get(AUTH_MODE) is not None or "ray" in sys.modules:
+        return
+    if any(os.environ.get(name) for name in TOKEN_SOURCES) or (Path.home() / ".ray" / "auth_token").is_file():
+        os.environ[AUTH_MODE] = "token"
+
+
+def _join(ray: Any, address: str) -> None:
+    """``ray.init(address)``, its C++ client's retries (one stderr line a second for 20 s when the
+    cluster refuses the token) kept out of the terminal unless the join succeeds."""
+    with tempfile.TemporaryFile() as held:
+        saved = os.dup(2)
+        sys.stderr.flush()
+        os.dup2(held.fileno(), 2)
+        try:
+            ray.init(address=address, include_dashboard=False, log_to_driver=False)
+            failure = None
+        except Exception as exc:  # noqa: BLE001  (Ray's ConnectionError, RuntimeError, AuthenticationError)
+            failure = exc
+        finally:
+            sys.stderr.flush()
+            os.dup2(saved, 2)
+            os.close(saved)
+        held.seek(0)
+        said = held.read().decode("utf-8", "replace")
+    if failure is None:
+        sys.stderr.write(said)
+        return
+    auth = type(failure).__name__ == "AuthenticationError" or "InvalidAuthToken" in said + str(failure)
+    if auth:
+        sent = os.environ.get(AUTH_MODE, "").lower() == "token"
+        raise UserError(
+            f"--address {address}: the Ray cluster asks for an authentication token and this process "
+            f"{'sent one it does not accept' if sent else 'sends none'}: set RAY_AUTH_TOKEN to the cluster's "
+            "token (`ray get-auth-token` on its head node) and RAY_AUTH_MODE=token, or start the cluster with "
+            "RAY_AUTH_MODE=disabled") from None
+    raise UserError(f"--address {address}: cannot join a Ray cluster there ({str(failure).splitlines()[0]}); start "
+                    "one with `ray start --head`, or leave --address out for a local one") from None
 
 
 class RenderActor:

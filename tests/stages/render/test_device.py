@@ -143,6 +143,8 @@ def test_a_run_says_once_that_auto_renders_on_the_cpu_and_only_when_it_renders(t
     (line,) = console.export_text().splitlines()
     assert line == f"note: {device_note(RenderSpec(), 'cpu')}" and 'render.device = "auto"' in line
     assert device_note(RenderSpec(), "optix") is None
+    # Mitsuba renders on the CPU whatever auto finds: Cycles' GPU is nothing to it
+    assert device_note(RenderSpec(engine="mitsuba"), "cpu") is None
 
 
 @pytest.mark.parametrize("device, backend", [("cuda", "CUDA"), ("optix", "OptiX")])

@@ -1,0 +1,107 @@
+"""The report's *Nearest fixes* panel on a synthetic store and a counterfactuals file written
+here (no render, no search): what its sentence says was searched, and what each pair's caption
+and hover text say.
+
+The caption's percentage is the probability the model gave the true class, and says so
+(``balloon · p(basketball) 19.6 %``, not ``balloon · 19.6 % basketball``); each image's hover
+text names the job and its configuration; "a seeded sample within a budget" only when the
+budget left failures unsearched.
+"""
+
+from __future__ import annotations
+
+import html
+import re
+from pathlib import Path
+
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+
+from sweep3d.cache.store import Store
+from sweep3d.report import build_context, render_html
+from sweep3d.report.panels import PANELS
+from sweep3d.results import connect
+from sweep3d.results.counterfactuals import SCHEMA, counterfactuals_path
+from tests.helpers import build_store, load_spec
+
+NEAREST = tuple(p for p in PANELS if p.id == "nearest-fixes")
+
+
+def failures(spec: Path) -> list[dict]:
+    """The synthetic run's failures, as explain finds them (counted, wrong), in job order."""
+    loaded = load_spec(spec)
+    con = connect(Store(loaded.store), loaded.name)
+    try:
+        cursor = con.execute("SELECT job, object, environment, pred_key, image_key, top1_label, label_prob, "
+                             "blur_sigma FROM results WHERE counted AND NOT correct ORDER BY job")
+        names = [d[0] for d in cursor.description]
+        return [dict(zip(names, row)) for row in cursor.fetchall()]
+    finally:
+        con.close()
+
+
+def write_counterfactuals(spec: Path, rows: list[dict], budget: int | None) -> None:
+    loaded = load_spec(spec)
+    out = []
+    for r in rows:
+        row = {name: None for name in SCHEMA.names}
+        row.update(experiment=loaded.name, model=loaded.model.label, failure_job=r["job"], object=r["object"],
+                   environment=r["environment"], true_labels=f"{r['object']}-label", failure_pred_key=r["pred_key"],
+                   failure_image_key=r["image_key"], failure_label=r["top1_label"], failure_correct=False,
+                   failure_probability=r["label_prob"], found=True, complete=True, probes=3,
+                   fix_image_key=r["image_key"], fix_label=f"{r['object']}-label", fix_correct=True,
+                   fix_probability=0.62, parameters=["blur_sigma"], from_values=[str(r["blur_sigma"])],
+                   to_values=["0"], deltas=[-r["blur_sigma"]], shares=[-0.5], n_changed=1, distance=0.5,
+                   change="blur_sigma -1", seed=0, budget=budget)
+        out.append(row)
+    path = counterfactuals_path(Store(loaded.store), loaded.name)
+    path.parent.mkdir(exist_ok=True)
+    pq.write_table(pa.Table.from_pylist(out, schema=SCHEMA), path)
+
+
+def panel_html(spec: Path) -> str:
+    loaded = load_spec(spec)
+    store = Store(loaded.store)
+    page = render_html(build_context(loaded, connect(store, loaded.name), store, NEAREST))
+    return re.search(r'<section id="nearest-fixes">(.*?)</section>', page, re.S).group(1)
+
+
+def text(fragment: str) -> str:
+    return " ".join(html.unescape(re.sub(r"<[^>]+>", " ", fragment)).split())
+
+
+@pytest.fixture(scope="module")
+def spec(tmp_path_factory) -> Path:
+    return build_store(tmp_path_factory.mktemp("fixes"), 60, images=False)
+
+
+@pytest.mark.parametrize("searched, budget, says", [
+    ("all", 20, "For all {n} of the run's failures (within a budget of 20 new configurations),"),
+    ("all", None, "For all {n} of the run's failures,"),
+    (2, 20, "For 2 of the run's {n} failures (a seeded sample: those a budget of 20 new configurations reached),"),
+])
+def test_the_sentence_says_a_sample_only_when_the_budget_left_failures_unsearched(spec: Path, searched, budget,
+                                                                                 says: str) -> None:
+    wrong = failures(spec)
+    assert len(wrong) > 2
+    write_counterfactuals(spec, wrong if searched == "all" else wrong[:searched], budget)
+    assert text(panel_html(spec)).removeprefix("Nearest fixes ").startswith(says.format(n=len(wrong)))
+
+
+def test_each_caption_says_whose_probability_and_each_image_names_its_job_and_configuration(spec: Path) -> None:
+    wrong = failures(spec)[:3]
+    write_counterfactuals(spec, wrong, None)
+    found = panel_html(spec)
+    for r in wrong:
+        pair = re.search(rf'<div class="fix-pair" data-job="{r["job"]}">(.*?)<div class="body">', found, re.S).group(1)
+        failure, fix = re.findall(r"<figure (.*?)</figure>", pair, re.S)
+        true = f"p({r['object']}-label)"
+        assert text(failure.split(">", 1)[1]) == f"{r['top1_label']} · {true} {r['label_prob']:.1%}"
+        assert text(fix.split(">", 1)[1]) == f"{r['object']}-label · {true} 62.0%"
+        failure_title = html.unescape(re.search(r'title="([^"]*)"', failure).group(1))
+        fix_title = html.unescape(re.search(r'title="([^"]*)"', fix).group(1))
+        configuration = f"job {r['job']} · object = {r['object']} · environment = {r['environment']}"
+        assert failure_title.startswith(configuration) and "blur_sigma = " in failure_title, failure_title
+        assert fix_title.startswith(f"nearest fix of {configuration}") and "blur_sigma" in fix_title, fix_title
+        assert f"with blur_sigma {r['blur_sigma']} → 0" in fix_title
