@@ -192,7 +192,7 @@ def test_verify_reports_files_whose_columns_are_not_their_tables(run_dir: Path, 
     shutil.copy(predictions, stray)
 
     code, output = cli(run_dir, "cache", "verify", "SPEC")
-    assert code == 1, output
+    assert code == 2, output
     problems = " ".join(output.split()).split(" corrupt ")[1:]  # the lines it prints wrap on a narrow terminal
     assert problems[0] == (f"segment: tables/renders/{stray.name} (its columns are not the renders table's: it has "
                            "no render_key column)")
@@ -325,6 +325,48 @@ def test_a_blob_the_user_may_not_read_is_one_line_not_damaged_and_not_made_again
         assert line == (f"cannot read {blob} (Permission denied); fix its permissions (a blob that cannot be read is "
                         "not damaged: sweep3d leaves it, and its results, as they are)"), lines
     assert after == before  # neither quarantined nor its row dropped
+
+
+def test_verify_names_what_it_may_not_read_and_repair_moves_only_what_is_damaged(shared_dir: Path) -> None:
+    """Issue 45, item 1: ``verify`` called an intact blob the OS would not let it read corrupt and
+    advised ``--repair``, which moved it (and dropped its row) into quarantine. Run as a user the
+    permissions hold for: such a blob, and such a segment, are named unreadable and left as they
+    are, with their rows; a blob whose bytes are wrong beside them is still quarantined. Problems
+    exit 2."""
+    root = shared_dir / "store"
+    store = Store(root)
+    earlier = set(store.segments("renders"))
+    add_render(store, key("ab"))  # intact, but the user may not read it
+    [its_rows] = set(store.segments("renders")) - earlier
+    add_render(store, key("cd"))  # its bytes damaged
+    refused, damaged = store.blob_path(key("ab")), store.blob_path(key("cd"))
+    damaged.write_bytes(b"not the PNG it was")
+    segment = store.append("renders", [render_row(key("ef"))])  # a segment the user may not read
+    hand_over(shared_dir)
+    refused.chmod(0)
+    segment.chmod(0)
+    kept = [str(p.relative_to(root)) for p in (refused, its_rows, segment)]
+    before = saved(root)
+    try:
+        (code, output), (repair_code, repaired) = as_user(lambda: [
+            cli(shared_dir, "cache", "verify", "SPEC"), cli(shared_dir, "cache", "verify", "SPEC", "--repair")])
+    finally:
+        refused.chmod(0o644)
+        segment.chmod(0o644)
+    after = saved(root)
+    output, repaired = " ".join(output.split()), " ".join(repaired.split())
+
+    assert code == 2, output
+    blob, damaged_name = refused.relative_to(root), damaged.relative_to(root)
+    assert f"unreadable blob: {blob} (Permission denied; fix its permissions)" in output, output
+    assert f"unreadable segment: {segment.relative_to(root)} (Permission denied; fix its permissions)" in output
+    assert f"corrupt blob: {damaged_name} (content does not match its recorded SHA-256)" in output, output
+    assert f"corrupt blob: {blob}" not in output and "corrupt segment" not in output, output
+    assert "1 problems; run: sweep3d cache verify" in output and "2 files cannot be read" in output, output
+    assert repair_code == 2 and "repaired 1 problems" in repaired and "2 files cannot be read" in repaired, repaired
+    assert {name: after.get(name) for name in kept} == {name: before[name] for name in kept}  # in place, unchanged
+    assert sorted(after.keys() - before.keys()) == [f"quarantine/{damaged_name}"], after.keys() - before.keys()
+    assert key("ab") in Store(root).keys("renders") and key("cd") not in Store(root).keys("renders")
 
 
 # -- 10: readers read around a damaged segment; only the lock's holder repairs -----------------
