@@ -18,7 +18,7 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from sweep3d.assets import check_archive, check_file, check_hdri, check_mesh, resolve_hdri, resolve_mesh
+from sweep3d.assets import check_archive, check_file, check_hdri, check_mesh, not_a_file, resolve_hdri, resolve_mesh
 from sweep3d.core import Control, SpecError, UserError, declaration_problem, is_spec_path, is_user_plugin
 from sweep3d.spec.catalogue import Catalogue
 from sweep3d.spec.class_names import NameClash, spec_class_names
@@ -244,6 +244,9 @@ def _naming(ref: str, problem: UserError | str) -> str:
 
 
 def _read_text(path: Path) -> str:
+    kind = not_a_file(path)
+    if kind is not None and kind != "a directory":  # a FIFO's read would wait for a writer for ever
+        raise SpecError(str(path), "", f"is {kind}, not a spec file; give the path of a TOML file")
     try:
         return path.read_text(encoding="utf-8")
     except FileNotFoundError:
