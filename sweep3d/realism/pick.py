@@ -16,6 +16,7 @@ image the model saw), ``edges/<job>.png`` (its edges, to lay over the live camer
 
 from __future__ import annotations
 
+import errno
 import io
 import json
 import os
@@ -281,8 +282,6 @@ def _write_kit(folder: Path, spec: LoadedSpec, seed: int, per_object: int, thres
 
 def _unwritable(folder: Path, exc: OSError) -> UserError:
     """One line for ``exc``, met writing the kit into ``folder``: what the OS said and the fix."""
-    import errno
-
     if exc.errno in (errno.ENOSPC, errno.EDQUOT):
         fix = "free some disk space, or write the kit to another disk with -o"
     elif exc.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
