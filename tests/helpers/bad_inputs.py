@@ -5,8 +5,9 @@ tests/cli/test_bad_input_corpus.py runs each spec case against ``plan``, ``run``
 score``, and each photograph against ``realism score``: one ``error:`` line, exit code 2, no
 traceback, and the store's files unchanged, byte for byte. Big inputs are made at test time, and
 cheaply: a photograph of 16,000² pixels is a 31 kB PNG of one colour, one of 100,000² a header
-that claims it. The loader's key-by-key table (tests/spec/test_bad_input.py) stays beside the
-specs it edits; this corpus holds what more than one command meets.
+that claims it. The table of bad meshes, maps and values the loader refuses
+(tests/spec/test_bad_input.py) stays beside the specs it edits, and runs against the same three
+commands there.
 
 To add a case, add it to the list of its kind: :data:`SPECS`, :data:`ASSETS`, :data:`MATERIALS`
 (bad ``.mtl`` files: an OBJ naming them, in :attr:`BadSpec.files`) or :data:`PHOTOS`.
