@@ -9,7 +9,11 @@ agrees, the PSNR of the Mitsuba image against the Cycles one, and the median sec
 (the renders table's, a worker's whole job); then each image whose verdict differs, with the
 margin of each (the true class's probability minus the best other's, from the top 5). The machine may be shared: say so next to figures.
 
-    .venv/bin/python benchmarks/engines.py [--samples-per-dim 6] [--keep DIR]
+    .venv/bin/python benchmarks/engines.py [--samples-per-dim 6] [--rounds 2] [--keep DIR]
+
+With ``--rounds 2`` each engine runs twice, alternated (cycles, mitsuba, mitsuba, cycles), each run in a
+fresh store: the ratio of their per-render medians is the figure. Dr.Jit's kernel cache (``~/.drjit``)
+is kept between runs, as on a user's machine after its first Mitsuba run.
 """
 
 from __future__ import annotations
@@ -47,6 +51,14 @@ def derived_spec(folder: Path, engine: str, samples_per_dim: int) -> Path:
     return path
 
 
+def load_average() -> str:
+    """The 1-, 5- and 15-minute load averages (the machine's load, said beside every figure)."""
+    try:
+        return " ".join(Path("/proc/loadavg").read_text().split()[:3])
+    except OSError:
+        return "unknown"
+
+
 def psnr(a: np.ndarray, b: np.ndarray) -> float:
     mse = float(np.mean((a.astype(np.float64) - b.astype(np.float64)) ** 2))
     return math.inf if mse == 0 else 10.0 * math.log10(255.0**2 / mse)
@@ -72,6 +84,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--samples-per-dim", type=int, default=6, help="yaws per turn (the quickstart's 6)")
     parser.add_argument("--keep", type=Path, help="keep the stores in this folder (default: a temporary one)")
+    parser.add_argument("--rounds", type=int, default=1,
+                        help="runs per engine, alternated (cycles, mitsuba, mitsuba, cycles, …), each in a fresh store")
     args = parser.parse_args()
     from PIL import Image
 
@@ -80,17 +94,25 @@ def main() -> None:
 
     folder = args.keep or Path(tempfile.mkdtemp(prefix="engines-"))
     folder.mkdir(parents=True, exist_ok=True)
-    rows, seconds, wall = {}, {}, {}
-    for engine in ENGINES:
-        experiment = load(derived_spec(folder, engine, args.samples_per_dim))
-        started = time.perf_counter()
-        experiment.run(progress=False)
-        wall[engine] = time.perf_counter() - started
-        table = experiment.results().to_pylist()
-        rows[engine] = {tuple(r[k] for k in KEYS): r for r in table}
-        store = Store(experiment.store)
-        seconds[engine] = [r["seconds"] for r in store.table("renders").to_pylist()]
-        rows[engine]["__store__"] = store  # type: ignore[assignment]
+    rows: dict[str, dict] = {}
+    seconds: dict[str, list[float]] = defaultdict(list)
+    wall: dict[str, list[float]] = defaultdict(list)
+    print(f"load average before: {load_average()}")
+    for round_ in range(args.rounds):
+        for engine in (ENGINES if round_ % 2 == 0 else ENGINES[::-1]):
+            experiment = load(derived_spec(folder / f"round{round_}", engine, args.samples_per_dim))
+            started = time.perf_counter()
+            experiment.run(progress=False)
+            wall[engine].append(time.perf_counter() - started)
+            store = Store(experiment.store)
+            took = [r["seconds"] for r in store.table("renders").to_pylist()]
+            seconds[engine].append(statistics.median(took))
+            print(f"round {round_} {engine:8s} {seconds[engine][-1]:.3f} s per render (median of {len(took)}), "
+                  f"whole run {wall[engine][-1]:.0f} s", flush=True)
+            if engine not in rows:  # the verdicts of each engine's first run
+                rows[engine] = {tuple(r[k] for k in KEYS): r for r in experiment.results().to_pylist()}
+                rows[engine]["__store__"] = store  # type: ignore[assignment]
+    print(f"load average after: {load_average()}")
     stores = {e: rows[e].pop("__store__") for e in ENGINES}
     shared = sorted(set(rows["cycles"]) & set(rows["mitsuba"]), key=str)
     groups: dict[str, list] = defaultdict(list)
@@ -120,8 +142,10 @@ def main() -> None:
         print(f"  {key[0]:14s} {key[1]:7s} yaw {key[2]:6.0f} elevation {key[3]:3.0f}: Cycles {c['top1_label']!r} "
               f"(margin {margin(c):+.2f}), Mitsuba {m['top1_label']!r} (margin {margin(m):+.2f})")
     for engine in ENGINES:
-        print(f"{engine:8s} {statistics.median(seconds[engine]):.3f} s per render (median of {len(seconds[engine])}; "
-              f"mean {statistics.mean(seconds[engine]):.3f}); whole run {wall[engine]:.0f} s")
+        print(f"{engine:8s} {statistics.median(seconds[engine]):.3f} s per render (median over {len(seconds[engine])} "
+              f"runs of each run's median); whole runs {', '.join(f'{w:.0f}' for w in wall[engine])} s")
+    ratio = statistics.median(seconds["mitsuba"]) / statistics.median(seconds["cycles"])
+    print(f"mitsuba / cycles per render: {ratio:.2f}")
     print(f"stores: {folder}")
 
 

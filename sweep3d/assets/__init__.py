@@ -5,7 +5,7 @@ from __future__ import annotations
 
 __all__ = [
     "blender_version", "bpy_root", "check_archive", "check_file", "check_hdri", "check_materials", "check_mesh",
-    "file_names", "materialise_mesh", "mesh_digest", "mesh_files", "read_mesh_bytes", "resolve_hdri",
+    "file_names", "materialise_mesh", "mesh_digest", "mesh_files", "not_a_file", "read_mesh_bytes", "resolve_hdri",
     "resolve_mesh", "unreadable"
 ]
 
@@ -18,7 +18,7 @@ from sweep3d.core import exports as _exports  # noqa: E402
 if _TYPE_CHECKING:
     from sweep3d.assets.materials import check_materials
     from sweep3d.assets.mesh_names import file_names, read_mesh_bytes
-    from sweep3d.assets.sniff import check_file, check_hdri, check_mesh, unreadable
+    from sweep3d.assets.sniff import check_file, check_hdri, check_mesh, not_a_file, unreadable
     from sweep3d.assets.sources import (
         blender_version,
         bpy_root,
@@ -42,6 +42,7 @@ __getattr__, __dir__ = _exports(__name__, {
     "materialise_mesh": ("sweep3d.assets.sources", "materialise_mesh"),
     "mesh_digest": ("sweep3d.assets.sources", "mesh_digest"),
     "mesh_files": ("sweep3d.assets.sources", "mesh_files"),
+    "not_a_file": ("sweep3d.assets.sniff", "not_a_file"),
     "read_mesh_bytes": ("sweep3d.assets.mesh_names", "read_mesh_bytes"),
     "resolve_hdri": ("sweep3d.assets.sources", "resolve_hdri"),
     "resolve_mesh": ("sweep3d.assets.sources", "resolve_mesh"),

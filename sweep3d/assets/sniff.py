@@ -36,6 +36,17 @@ NOT_A_FILE = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO (named pipe
               (stat.S_ISBLK, "a device file"), (stat.S_ISSOCK, "a socket"))
 
 
+def not_a_file(path: str | Path) -> str | None:
+    """What ``path`` is when it is there but is not a regular file ("a FIFO (named pipe)", "a
+    directory"...), None otherwise (a file, or nothing there: the reader says so). Only ``stat``:
+    opening a FIFO to see would wait for a writer for ever."""
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return None
+    return next((name for test, name in NOT_A_FILE if test(mode)), None)
+
+
 def check_file(path: Path, what: str, missing: str) -> None:
     """Check that ``path`` is a regular file this process may read, saying what it is otherwise.
 

@@ -12,6 +12,7 @@ so a reader sees every row exactly once before, during and after them.
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import json
 import os
@@ -57,7 +58,8 @@ TEMP_PATTERN = ".*.tmp"  # how atomic_write names its temp files (a dot, the fil
 @dataclass(frozen=True)
 class Problem:
     kind: str  # "corrupt segment", "corrupt blob", "missing blob", "corrupt jobs table", "corrupt kept output",
-    # "corrupt extracted asset", "corrupt kept photo", "missing kept photo"
+    # "corrupt extracted asset", "corrupt kept photo", "missing kept photo"; "unreadable …" for a file of
+    # any of these kinds that the OS would not let this process read (see :data:`UNREADABLE`)
     table: str
     path: Path
     key: str | None = None
@@ -66,6 +68,16 @@ class Problem:
     def line(self, root: Path) -> str:
         where = self.path.relative_to(root) if self.path.is_relative_to(root) else self.path
         return f"{self.kind}: {where}" + (f" ({self.detail})" if self.detail else "")
+
+    @property
+    def repairable(self) -> bool:
+        """Whether ``--repair`` fixes it: a file whose bytes are wrong or missing. One the OS would not
+        let sweep3d read may be intact: moving it aside would throw good results away."""
+        return not self.kind.startswith(UNREADABLE)
+
+
+#: How a problem's kind begins when the file could not be read at all (permissions, an I/O error).
+UNREADABLE = "unreadable"
 
 
 @dataclass
@@ -82,6 +94,11 @@ class Verification:
     def ok(self) -> bool:
         return not self.problems
 
+    @property
+    def repairable(self) -> list[Problem]:
+        """The problems ``--repair`` fixes (see :attr:`Problem.repairable`)."""
+        return [p for p in self.problems if p.repairable]
+
 
 def verify(root: Path) -> Verification:
     """Re-read every segment (checking its columns are its table's), re-hash every blob that a
@@ -95,14 +112,14 @@ def verify(root: Path) -> Verification:
             data = store.read_segment(path)
             if data is None:
                 if path.exists():
-                    report.problems.append(Problem("corrupt segment", table, path, detail=store.unreadable.get(str(path), "")))
+                    report.problems.append(_file_problem("segment", table, path, store))
                 continue
             report.rows += data.num_rows
     for path in evaluated_columns_lacking(store):
         report.problems.append(Problem("corrupt segment", "predictions", path, detail=store.unreadable.get(str(path), "")))
     for path in jobs_files(root):
         if store.read_segment(path) is None and path.exists():
-            report.problems.append(Problem("corrupt jobs table", "jobs", path, detail=store.unreadable.get(str(path), "")))
+            report.problems.append(_file_problem("jobs table", "jobs", path, store))
     for table in BLOB_TABLES:
         for key, digests in sorted(store.digests(table).items()):
             path = store.blob_path(key)
@@ -115,7 +132,7 @@ def verify(root: Path) -> Verification:
                 report.problems.append(Problem("missing blob", table, path, key))
                 continue
             except OSError as exc:
-                report.problems.append(Problem("corrupt blob", table, path, key, exc.strerror or str(exc)))
+                report.problems.append(_read_failed("blob", table, path, key, exc))
                 continue
             if not blob_is_intact(data, digests):
                 detail = "content does not match its recorded SHA-256" if digests else "does not decode"
@@ -163,6 +180,10 @@ def _verify_kept_photos(store: Store, report: Verification) -> None:
     for sha256 in sorted(kept_photo_digests(store)):
         path = photo_path(store.root, sha256)
         report.photos += 1
+        denied = cannot_open(path)
+        if denied:
+            report.problems.append(Problem(f"{UNREADABLE} kept photo", "verdicts", path, sha256, denied))
+            continue
         try:
             with Image.open(path) as im:
                 im.load()
@@ -178,15 +199,57 @@ def _first_line(exc: BaseException) -> str:
     return (str(exc).splitlines() or [type(exc).__name__])[0]
 
 
+def _denied(exc: OSError) -> bool:
+    """Whether the OS refused to read a file (its permissions, the disk: ``errno`` says which), not
+    its bytes or its place (a folder where a file belongs is the store's damage, and is moved aside)."""
+    return exc.errno is not None and exc.errno not in (errno.ENOENT, errno.EISDIR, errno.ENOTDIR)
+
+
+def _why(exc: OSError) -> str:
+    """What the OS said, and what to do about it."""
+    fix = "fix its permissions" if isinstance(exc, PermissionError) else "check the disk"
+    return f"{exc.strerror or type(exc).__name__}; {fix}"
+
+
+def cannot_open(path: Path) -> str:
+    """Why the OS will not let this process read ``path`` ("" when it will, or the file is gone or a
+    folder: damage of another kind). Opened without blocking, so a FIFO in a file's place cannot hang."""
+    try:
+        os.close(os.open(path, os.O_RDONLY | os.O_NONBLOCK))
+    except OSError as exc:
+        return _why(exc) if _denied(exc) else ""
+    return ""
+
+
+def _read_failed(what: str, table: str, path: Path, key: str | None, exc: OSError) -> Problem:
+    """The problem of a file of ``what`` kind whose read raised ``exc``: unreadable (left as it is) when
+    the OS refused it, else corrupt (a folder in its place)."""
+    if _denied(exc):
+        return Problem(f"{UNREADABLE} {what}", table, path, key, _why(exc))
+    return Problem(f"corrupt {what}", table, path, key, exc.strerror or str(exc))
+
+
+def _file_problem(what: str, table: str, path: Path, store: Store) -> Problem:
+    """The problem of a segment or jobs table that ``store`` could not read: unreadable when the OS
+    refuses to open it, else corrupt (its bytes, its columns, a folder in its place)."""
+    denied = cannot_open(path)
+    if denied:
+        return Problem(f"{UNREADABLE} {what}", table, path, detail=denied)
+    return Problem(f"corrupt {what}", table, path, detail=store.unreadable.get(str(path), ""))
+
+
 def _verify_kept_outputs(root: Path, report: Verification) -> None:
     """Check every kept model output (``outputs/``) against the digest it was written with."""
     for entry in store_files(root / digested.OUTPUTS_FOLDER):
         if not entry.name.endswith(digested.SUFFIX) or entry.name.startswith("."):
             continue
         report.outputs += 1
-        why = digested.check_file(Path(entry.path))
+        path = Path(entry.path)
+        why = digested.check_file(path)
         if why:
-            report.problems.append(Problem("corrupt kept output", "outputs", Path(entry.path), detail=why))
+            denied = cannot_open(path)
+            report.problems.append(Problem(f"{UNREADABLE} kept output", "outputs", path, detail=denied) if denied
+                                   else Problem("corrupt kept output", "outputs", path, detail=why))
 
 
 def _verify_assets(root: Path, report: Verification) -> None:
@@ -197,7 +260,9 @@ def _verify_assets(root: Path, report: Verification) -> None:
         folder = Path(entry.path)
         report.assets += 1
         for rel, why in extracted.check_folder(folder):
-            report.problems.append(Problem("corrupt extracted asset", "assets", folder / rel, entry.name, why))
+            denied = cannot_open(folder / rel)
+            kind = f"{UNREADABLE} extracted asset" if denied else "corrupt extracted asset"
+            report.problems.append(Problem(kind, "assets", folder / rel, entry.name, denied or why))
 
 
 def _verify_truth_blobs(store: Store, report: Verification) -> None:
@@ -220,7 +285,7 @@ def _verify_truth_blobs(store: Store, report: Verification) -> None:
                 report.problems.append(Problem("missing blob", "truths", path, key))
                 continue
             except OSError as exc:
-                report.problems.append(Problem("corrupt blob", "truths", path, key, exc.strerror or str(exc)))
+                report.problems.append(_read_failed("blob", "truths", path, key, exc))
                 continue
             if not ok:
                 report.problems.append(Problem("corrupt blob", "truths", path, key,
@@ -232,16 +297,18 @@ def repair(root: Path, report: Verification) -> int:
 
     Corrupt segments and jobs tables go to ``quarantine/`` (their rows are recomputed by the
     next run); rows whose blob is missing or corrupt are dropped and the blob quarantined, so
-    the next run renders or postprocesses them again.
+    the next run renders or postprocesses them again. A file the OS would not let sweep3d read
+    (``unreadable …``) is left where it is, with its rows: it may be intact.
     """
     store = Store(root)
     fixed = 0
-    for problem in report.problems:
+    problems = report.repairable  # not a file the OS would not let us read: it may be intact
+    for problem in problems:
         if problem.kind in ("corrupt segment", "corrupt jobs table"):
             if store.quarantine(problem.path) is not None:
                 fixed += 1
     for table in BLOB_TABLES:
-        keys = {p.key for p in report.problems if p.table == table and p.key is not None}
+        keys = {p.key for p in problems if p.table == table and p.key is not None}
         if keys:
             store.drop_rows(table, keys)
             for key in keys:
@@ -249,15 +316,15 @@ def repair(root: Path, report: Verification) -> int:
                 if blob.exists():
                     store.quarantine(blob)
             fixed += len(keys)
-    for problem in report.problems:  # caches: the next run runs the model, or extracts the mesh, again
+    for problem in problems:  # caches: the next run runs the model, or extracts the mesh, again
         if problem.kind == "corrupt kept output" and store.quarantine(problem.path) is not None:
             fixed += 1
-    for problem in report.problems:  # the report's pair then shows no photo; scoring again keeps it anew
+    for problem in problems:  # the report's pair then shows no photo; scoring again keeps it anew
         if problem.kind == "corrupt kept photo" and store.quarantine(problem.path) is not None:
             fixed += 1
-    for name in {p.key for p in report.problems if p.kind == "corrupt extracted asset" and p.key is not None}:
+    for name in {p.key for p in problems if p.kind == "corrupt extracted asset" and p.key is not None}:
         fixed += store.quarantine(root / extracted.ASSETS_FOLDER / name) is not None
-    truths = {p.key for p in report.problems if p.table == "truths" and p.key is not None}
+    truths = {p.key for p in problems if p.table == "truths" and p.key is not None}
     if truths:  # the next run that needs them renders the passes again
         store.drop_rows("truths", truths)
         for key in truths:

@@ -411,7 +411,8 @@ class Store:
         except FileNotFoundError:
             return None
         except PermissionError as exc:  # pyarrow's strerror holds the path and more: the errno's words
-            self._report_bad(path, f"{os.strerror(exc.errno or errno.EACCES)}; fix its permissions", move=False)
+            self._report_bad(path, f"{os.strerror(exc.errno or errno.EACCES)}; fix its permissions", move=False,
+                             repairable=False)
             return None
         except READ_ERRORS as exc:
             self._report_bad(path, _first_line(exc), move=self.quarantine_bad)
@@ -607,7 +608,10 @@ class Store:
         """Files this store object found unreadable (path → why), each reported once."""
         return dict(self._bad)
 
-    def _report_bad(self, path: Path, why: str, move: bool) -> None:
+    def _report_bad(self, path: Path, why: str, move: bool, repairable: bool = True) -> None:
+        """Warn once that ``path`` is unreadable (``why``), moving it to ``quarantine/`` when ``move``
+        and this object holds the lock. ``repairable``: ``cache verify --repair`` would move it aside
+        (not a file the OS refused to read, which may be intact)."""
         if str(path) in self._bad:
             return
         why = re.sub(r"^(\w+: )Could not open Parquet input source '[^']*': ", r"\1", why.replace(str(path), path.name))
@@ -619,9 +623,11 @@ class Store:
         if moved:
             log.warning(f"warning: {where} is unreadable ({why}); moved it to quarantine/, its rows will be "
                         "recomputed")
-        else:
+        elif repairable:
             log.warning(f"warning: {where} is unreadable ({why}); skipping it (sweep3d cache verify --repair "
                         "moves it aside)")
+        else:
+            log.warning(f"warning: {where} is unreadable ({why}); skipping it")
 
     def quarantine(self, path: Path) -> Path | None:
         """Move a damaged file under ``quarantine/`` (same relative path); None if it could not be moved."""

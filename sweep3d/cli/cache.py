@@ -39,11 +39,11 @@ def _store_root(spec: Path) -> Path:
 def verify(
     spec: Path = SpecArg,
     repair: bool = typer.Option(False, "--repair", help="Quarantine corrupt files and drop their rows, "
-                                "so the next run recomputes them."),
+                                "so the next run recomputes them (files it cannot read stay as they are)."),
     wait: float = WaitOption,
 ) -> None:
     """Re-read every segment and re-hash every blob, kept model output and extracted mesh, decode
-    every kept photo; report corrupt or missing ones (exit 1 if any)."""
+    every kept photo; report corrupt, missing or unreadable ones (exit 2 if any)."""
     from sweep3d.cache import Store
     from sweep3d.cache import repair as repair_store
     from sweep3d.cache import verify as verify_store
@@ -54,22 +54,43 @@ def verify(
     photos = f", {report.photos} kept photos" if report.photos else ""
     console.print(f"checked {report.segments} segments ({report.rows} rows), {report.blobs} blobs{photos}, "
                   f"{report.outputs} kept model outputs and {report.assets} extracted meshes in {escape(str(root))}")
-    for problem in report.problems[:MAX_LISTED]:
-        console.print(f"[red]{escape(problem.line(root))}[/]", highlight=False)
-    if len(report.problems) > MAX_LISTED:
-        console.print(f"[red]... and {len(report.problems) - MAX_LISTED} more[/]")
+    _list(report.problems, root)
     if report.ok:
         console.print("[green]store OK[/]")
         return
+    damaged = len(report.repairable)
     if not repair:
-        console.print(f"{len(report.problems)} problems; run: sweep3d cache verify {escape(str(spec))} --repair "
-                      "(or the next run recomputes what it needs)")
-        raise typer.Exit(1)
-    with Store(root).lock(wait):
-        report = verify_store(root)  # again, holding the lock: a run may have changed things
-        fixed = repair_store(root, report)
-    console.print(f"repaired {fixed} problems: damaged files moved to quarantine/; the next run recomputes "
-                  "their rows")
+        if damaged:
+            console.print(f"{damaged} problems; run: sweep3d cache verify {escape(str(spec))} --repair "
+                          "(or the next run recomputes what it needs)")
+        _unreadable(report)
+        raise typer.Exit(2)
+    if damaged:
+        with Store(root).lock(wait):
+            report = verify_store(root)  # again, holding the lock: a run may have changed things
+            fixed = repair_store(root, report)
+        console.print(f"repaired {fixed} problems: damaged files moved to quarantine/; the next run recomputes "
+                      "their rows")
+    if _unreadable(report):
+        raise typer.Exit(2)
+
+
+def _list(problems: list, root: Path) -> None:
+    """One line per problem, the first :data:`MAX_LISTED`; the rest counted."""
+    for problem in problems[:MAX_LISTED]:
+        console.print(f"[red]{escape(problem.line(root))}[/]", highlight=False)
+    if len(problems) > MAX_LISTED:
+        console.print(f"[red]... and {len(problems) - MAX_LISTED} more[/]")
+
+
+def _unreadable(report) -> int:
+    """Say how many files the OS would not let sweep3d read (left as they are: they may be intact);
+    their number."""
+    n = len(report.problems) - len(report.repairable)
+    if n:
+        console.print(f"{n} files cannot be read (as listed: their permissions, or the disk), so they were not "
+                      "checked; --repair leaves them and their rows as they are: fix them and verify again")
+    return n
 
 
 @command

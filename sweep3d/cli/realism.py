@@ -19,7 +19,8 @@ command = registrar(realism_app)
 
 SpecArg = typer.Argument(..., help="Path to the experiment's TOML spec.", show_default=False, readable=False)
 KitOption = typer.Option(None, "--kit", help="The kit's folder (default: PHOTOS when it holds kit.json, else "
-                                              "kits/<experiment> in the store).")
+                                              "kits/<experiment> in the store).",
+                          readable=False)  # the command says why it cannot read one, in one line
 WaitOption = typer.Option(0.0, help="Seconds to wait for a run holding the store's lock.")
 
 
@@ -29,7 +30,7 @@ def pick(
     per_object: int = typer.Option(10, "--per-object", help="Results per object and model: half right, half wrong."),
     seed: Optional[int] = typer.Option(None, "--seed", help="Seed of the draw (default: the spec's seed)."),
     output: Optional[Path] = typer.Option(None, "--output", "-o", help="The kit's folder: new, empty or an earlier "
-                                          "kit (default: kits/<experiment> in the store)."),
+                                          "kit (default: kits/<experiment> in the store).", readable=False),
     near_ties: str = typer.Option("leave", "--near-ties", help="Results whose true and best other class are within "
                                   "0.05 probability: leave them out, or mark them (kept, flagged in kit.json)."),
 ) -> None:
@@ -49,9 +50,10 @@ def pick(
 def score(
     spec: Path = SpecArg,
     photos: Optional[Path] = typer.Argument(None, help="The folder of photographs, each named <job>.jpg (or "
-                                            "listed in --match). Not with --engine.", show_default=False),
+                                            "listed in --match). Not with --engine.", show_default=False,
+                                            readable=False),
     match: Optional[Path] = typer.Option(None, "--match", help="A CSV with columns photo,job (photo paths relative "
-                                         "to PHOTOS) instead of matching by file name."),
+                                         "to PHOTOS) instead of matching by file name.", readable=False),
     engine: Optional[str] = typer.Option(None, "--engine", help="Score another renderer instead of photographs: "
                                          "render the kit's design with [render] engine = NAME."),
     kit: Optional[Path] = KitOption,

@@ -19,18 +19,26 @@ from __future__ import annotations
 
 import csv
 import io
+import os
+import re
+import warnings
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable
+from typing import Iterable, Iterator
 
 import numpy as np
 
+from sweep3d.assets import not_a_file
 from sweep3d.core import UserError
 
 #: File suffixes read as photographs (any case).
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".webp", ".tif", ".tiff", ".bmp")
 #: Files of a kit that sit beside the photographs when the kit's folder is the photographs' folder.
 KIT_FILES = frozenset({"kit.json", "design.csv", "align.html"})
+#: The most pixels a photograph may have: Pillow's own guard against decompression bombs (89 megapixels),
+#: past which it warns (and at twice which it refuses). A photograph is framed to its render's size.
+MAX_PIXELS = 89_478_485
 #: What the verdicts record about how a photograph reached the model.
 PREPROCESS = ("EXIF orientation applied; resized (short side, Lanczos) and centre-cropped to the render's "
               "{width}x{height}; the job's 2D controls (blur, noise, ...) applied as to its render; then the "
@@ -64,6 +72,8 @@ def match_photos(folder: Path, jobs: Iterable[int], match: Path | None = None) -
     wanted = sorted(set(jobs))
     if not folder.is_dir():
         raise UserError(f"{folder}: is not a folder of photographs; give the folder the photographs are in")
+    if not os.access(folder, os.R_OK | os.X_OK):
+        raise UserError(f"{folder}: cannot be read (permission denied); fix its permissions")
     pairs, problems = (_listed(match, folder) if match is not None else _named(folder, wanted))
     found: dict[int, Photo] = {}
     for job, path in pairs:
@@ -76,7 +86,8 @@ def match_photos(folder: Path, jobs: Iterable[int], match: Path | None = None) -
             continue
         problem = unreadable(path)
         if problem:
-            problems.append(f"{path}: {problem}; replace it with the photograph (JPEG, PNG, WebP, TIFF or BMP) or remove it")
+            fix = "save it smaller" if problem.startswith(TOO_LARGE) else "replace it with the photograph (JPEG, PNG, WebP, TIFF or BMP) or remove it"
+            problems.append(f"{path}: {problem}; {fix}")
             continue
         found[job] = Photo(job, path)
     for job in wanted:
@@ -107,11 +118,14 @@ def _named(folder: Path, jobs: list[int]) -> tuple[list[tuple[int | None, Path]]
 
 def _listed(match: Path, folder: Path) -> tuple[list[tuple[int | None, Path]], list[str]]:
     """(job, path) for each row of the CSV ``match`` (photo paths relative to ``folder``)."""
+    kind = not_a_file(match)
+    if kind:
+        raise UserError(f"--match {match}: is {kind}, not a file; give the CSV of photos and jobs")
     try:
         with match.open(newline="", encoding="utf-8-sig") as handle:
             rows = list(csv.reader(handle))
     except (OSError, UnicodeDecodeError, csv.Error) as exc:
-        raise UserError(f"--match {match}: cannot be read ({exc})") from None
+        raise UserError(f"--match {match}: cannot be read ({getattr(exc, 'strerror', None) or exc})") from None
     header = [c.strip().lower() for c in rows[0]] if rows else []
     if "photo" not in header or "job" not in header:
         raise UserError(f"--match {match}: its first line must name the columns photo and job")
@@ -137,13 +151,26 @@ def _jobs_text(jobs: list[int]) -> str:
     return shown + (f", … ({len(jobs)} in all)" if len(jobs) > 8 else "")
 
 
+#: How :func:`unreadable` begins its answer for a photograph of more than :data:`MAX_PIXELS`.
+TOO_LARGE = "is too large"
+
+
 def unreadable(path: Path) -> str:
-    """Why ``path`` is not a readable image ("" when it is)."""
+    """Why ``path`` is not a readable image of at most :data:`MAX_PIXELS` ("" when it is). Its size
+    is judged from its header, before a pixel is decoded."""
     from PIL import Image, UnidentifiedImageError
 
+    kind = not_a_file(path)  # a FIFO's open would wait for a writer for ever
+    if kind:
+        return f"is {kind}, not an image"
     try:
-        with Image.open(path) as im:
+        with _opened(path) as im:
+            if im.width * im.height > MAX_PIXELS:
+                return _too_large(im.width * im.height, f"{im.width}×{im.height} pixels, ")
             im.load()
+    except Image.DecompressionBombError as exc:  # past twice the limit: Pillow refuses to open it
+        found = re.search(r"\((\d+) pixels\)", str(exc))
+        return _too_large(int(found.group(1)) if found else None)
     except FileNotFoundError:
         return "does not exist"
     except IsADirectoryError:
@@ -157,12 +184,40 @@ def unreadable(path: Path) -> str:
     return ""
 
 
+def _too_large(pixels: int | None, size: str = "") -> str:
+    found = f" ({size}{pixels / 1e6:.0f} megapixels)" if pixels else ""
+    return f"{TOO_LARGE}{found}: sweep3d reads photographs of at most {MAX_PIXELS / 1e6:.0f} megapixels"
+
+
+@contextmanager
+def _opened(path: Path) -> Iterator[object]:
+    """``Image.open(path)`` without Pillow's warning of a possible decompression bomb: the size is
+    judged here (:data:`MAX_PIXELS`), in the user's words."""
+    from PIL import Image
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+        with Image.open(path) as im:
+            yield im
+
+
 def upright(path: Path) -> np.ndarray:
     """The photograph at ``path`` as 8-bit RGB (H, W, 3), its EXIF orientation applied."""
-    from PIL import Image, ImageOps
+    from PIL import ImageOps
 
-    with Image.open(path) as im:
+    with _opened(path) as im:
         return np.asarray(ImageOps.exif_transpose(im).convert("RGB"), dtype=np.uint8)
+
+
+def too_small(photo: tuple[int, int], render: tuple[int, int]) -> str:
+    """Why a photograph of ``photo`` pixels (height, width; upright) cannot be framed as its render of
+    ``render`` pixels ("" when it can): framing shrinks a photograph, never enlarges it, so a model
+    never judges a photograph with less detail than its render had."""
+    (h, w), (rh, rw) = photo, render
+    if h >= rh and w >= rw:
+        return ""
+    return (f"is {w}×{h} pixels, smaller than its render ({rw}×{rh}): a photograph is shrunk to its render's size, "
+            f"never enlarged; use one of at least {rw}×{rh} pixels")
 
 
 def framed(rgb: np.ndarray, height: int, width: int) -> np.ndarray:

@@ -17,6 +17,7 @@ seed: the same bytes.
 
 from __future__ import annotations
 
+import errno
 import io
 import json
 import os
@@ -30,6 +31,7 @@ from typing import Any, Sequence
 import numpy as np
 import pyarrow as pa
 
+from sweep3d.assets import not_a_file
 from sweep3d.cache import KITS_FOLDER, safe_filename
 from sweep3d.core import UserError
 from sweep3d.spec import LoadedSpec
@@ -231,8 +233,12 @@ def check_kit_folder(folder: Path, store: Path) -> Path:
                         f"choose a folder outside it, or leave -o out for {store / KITS_FOLDER}/<experiment>")
     if folder.exists() and not folder.is_dir():
         raise UserError(f"-o {folder}: is a file; name a folder for the kit")
-    if folder.is_dir() and any(folder.iterdir()) and not (folder / KIT).is_file():
-        raise UserError(f"-o {folder}: holds other files; choose a new or empty folder for the kit")
+    try:
+        if folder.is_dir() and any(folder.iterdir()) and not (folder / KIT).is_file():
+            raise UserError(f"-o {folder}: holds other files; choose a new or empty folder for the kit")
+    except OSError as exc:
+        raise UserError(f"-o {folder}: cannot be read ({exc.strerror or exc}); fix its permissions or choose "
+                        "another folder for the kit") from None
     return folder
 
 
@@ -247,9 +253,9 @@ def _write_kit(folder: Path, spec: LoadedSpec, seed: int, per_object: int, thres
     from sweep3d.stages.plan import write_design
 
     edge_image, write_align_page, align_shot = kit_tools()
-    folder.parent.mkdir(parents=True, exist_ok=True)
     staging = folder.parent / f".{folder.name}.{uuid.uuid4().hex}.tmp"
     try:
+        folder.parent.mkdir(parents=True, exist_ok=True)
         (staging / RENDERS).mkdir(parents=True)
         (staging / EDGES).mkdir()
         write_design(design, parameters, staging / DESIGN)
@@ -272,8 +278,21 @@ def _write_kit(folder: Path, spec: LoadedSpec, seed: int, per_object: int, thres
                                               indent=1, allow_nan=False) + "\n", encoding="utf-8")
         write_align_page(staging, shots)
         _put_in_place(staging, folder)
+    except OSError as exc:
+        raise _unwritable(folder, exc) from None
     finally:
         shutil.rmtree(staging, ignore_errors=True)
+
+
+def _unwritable(folder: Path, exc: OSError) -> UserError:
+    """One line for ``exc``, met writing the kit into ``folder``: what the OS said and the fix."""
+    if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+        fix = "free some disk space, or write the kit to another disk with -o"
+    elif exc.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
+        fix = "make its folder writable, or write the kit elsewhere with -o"
+    else:
+        fix = "write the kit elsewhere with -o"
+    return UserError(f"{folder}: cannot write the kit ({exc.strerror or exc}); {fix}")
 
 
 def _put_in_place(staging: Path, folder: Path) -> None:
@@ -306,6 +325,9 @@ def read_kit(folder: Path) -> dict[str, Any]:
         UserError: the folder holds no kit, or its ``kit.json`` does not read.
     """
     path = folder / KIT
+    kind = not_a_file(path)  # a FIFO's read would wait for a writer for ever
+    if kind:
+        raise UserError(f"{path}: is {kind}, not the kit sweep3d wrote; run `sweep3d realism pick` again")
     try:
         document = json.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:

@@ -29,7 +29,7 @@ import numpy as np
 
 from sweep3d.cache import Store, atomic_write, utc_now
 from sweep3d.core import UserError
-from sweep3d.realism.photos import PREPROCESS, Photo, PhotoProblems, framed, match_photos, upright
+from sweep3d.realism.photos import PREPROCESS, Photo, PhotoProblems, framed, match_photos, too_small, upright
 from sweep3d.realism.pick import DESIGN, RENDERS, default_kit, read_kit
 from sweep3d.results import VERDICT_SCHEMA, VERDICTS, photo_path, verdict_key
 from sweep3d.spec import LoadedSpec
@@ -86,7 +86,7 @@ def score_photos(spec: LoadedSpec, photos: Path, match: Path | None = None, kit:
     jobs = [int(j) for j in document["jobs"]]
     matched = match_photos(photos, jobs, match)
     sizes = _render_sizes(folder, jobs)
-    photos = {p.job: framed(upright(p.path), *sizes[p.job]) for p in matched}
+    photos = _framed_photos(matched, sizes)
     frames = post_processed(spec, photos)  # what the model sees; the kept thumbnail is the photo as taken
     digests = {p.job: hashlib.sha256(p.path.read_bytes()).hexdigest() for p in matched}
     store = Store(spec.store)
@@ -103,6 +103,26 @@ def score_photos(spec: LoadedSpec, photos: Path, match: Path | None = None, kit:
             _keep_thumb(store, digests[job], pixels)
         store.append(VERDICTS, rows, VERDICT_SCHEMA)
     return _scored(PHOTO, spec, store, rows)
+
+
+def _framed_photos(matched: Sequence[Photo], sizes: dict[int, tuple[int, int]]) -> dict[int, np.ndarray]:
+    """Each photograph read upright and framed as its job's render (one at a time: only the framed
+    ones are kept).
+
+    Raises:
+        PhotoProblems: photographs smaller than their render (framing never enlarges one).
+    """
+    out, problems = {}, []
+    for photo in matched:
+        pixels = upright(photo.path)
+        small = too_small(pixels.shape[:2], sizes[photo.job])
+        if small:
+            problems.append(f"{photo.path}: {small}")
+            continue
+        out[photo.job] = framed(pixels, *sizes[photo.job])
+    if problems:
+        raise PhotoProblems(problems)
+    return out
 
 
 def post_processed(spec: LoadedSpec, frames: dict[int, np.ndarray]) -> dict[int, np.ndarray]:

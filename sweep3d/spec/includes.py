@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from sweep3d.assets import not_a_file
 from sweep3d.core import SpecError
 
 LISTS = ("objects", "environments", "controls", "models")
@@ -70,6 +71,9 @@ def _merge(raw: dict[str, Any], file: str, base: Path, chain: tuple[str, ...], t
             raise SpecError(file, "include", f"{name!r} includes itself (through {' → '.join(Path(c).name for c in chain)})")
         if any(str(path) == seen for seen, _ in texts):
             raise SpecError(file, "include", f"{name!r} is included twice; include it once")
+        kind = not_a_file(path)
+        if kind is not None and kind != "a directory":  # a FIFO's read would wait for a writer for ever
+            raise SpecError(file, "include", f"{name!r} is {kind}, not a TOML file; include a file")
         try:
             text = path.read_text(encoding="utf-8")
         except (OSError, UnicodeDecodeError) as exc:

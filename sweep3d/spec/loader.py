@@ -24,6 +24,7 @@ from sweep3d.assets import (
     check_hdri,
     check_materials,
     check_mesh,
+    not_a_file,
     resolve_hdri,
     resolve_mesh,
 )
@@ -259,6 +260,9 @@ def _naming(ref: str, problem: UserError | str) -> str:
 
 
 def _read_text(path: Path) -> str:
+    kind = not_a_file(path)
+    if kind is not None and kind != "a directory":  # a FIFO's read would wait for a writer for ever
+        raise SpecError(str(path), "", f"is {kind}, not a spec file; give the path of a TOML file")
     try:
         return path.read_text(encoding="utf-8")
     except FileNotFoundError:
@@ -270,11 +274,50 @@ def _read_text(path: Path) -> str:
 
 
 def parse_toml(text: str, file: str) -> dict[str, Any]:
-    """The TOML ``text`` as a dict; a syntax error is a :class:`SpecError` naming ``file``."""
+    """The TOML ``text`` as a dict; a syntax error, or values nested deeper than
+    :data:`MAX_NESTING`, is a :class:`SpecError` naming ``file``.
+
+    tomllib parses arrays and inline tables by recursion: a few kilobytes of ``[[[[…`` exceed
+    Python's recursion limit, and values nested less deeply still crash whatever walks them later.
+    """
     try:
-        return tomllib.loads(text)
+        raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise SpecError(file, "", f"not valid TOML: {exc}") from None
+    except RecursionError:
+        raise SpecError(file, "", f"values nested too deeply to read (arrays or inline tables inside one "
+                                  f"another); a spec nests them at most {MAX_NESTING} levels: flatten them") from None
+    deep = too_deep(raw)
+    if deep is not None:
+        raise SpecError(file, deep, f"values nested more than {MAX_NESTING} levels deep (arrays or tables inside one "
+                                    "another); a spec needs a few levels: flatten it")
+    return raw
+
+
+#: How deeply a spec's values may nest (arrays and tables inside one another); a spec needs about 5.
+MAX_NESTING = 32
+
+
+def too_deep(raw: dict[str, Any], limit: int = MAX_NESTING) -> str | None:
+    """The key path (its first levels, then ``…``) of a value of ``raw`` nested more than ``limit``
+    levels deep, or None. Walked with a stack of its own, never by recursion (what it guards against)."""
+    stack: list[tuple[Any, str, int]] = [(raw, "", 0)]
+    while stack:
+        value, where, depth = stack.pop()
+        if depth > limit:
+            return where
+        if isinstance(value, dict):
+            stack.extend((v, _deeper(where, f".{k}" if where else str(k), depth), depth + 1) for k, v in value.items())
+        elif isinstance(value, list):
+            stack.extend((v, _deeper(where, f"[{i}]", depth), depth + 1) for i, v in enumerate(value))
+    return None
+
+
+def _deeper(where: str, step: str, depth: int, shown: int = 4) -> str:
+    """``where`` one level deeper: its first ``shown`` levels named, the rest one ``…``."""
+    if depth < shown:
+        return where + step
+    return where if where.endswith("…") else where + "…"
 
 
 def _first_error(path: Path, exc: ValidationError) -> SpecError:

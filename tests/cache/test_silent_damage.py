@@ -318,7 +318,7 @@ def test_a_run_refuses_edited_kept_outputs_and_predicts_what_the_model_does(tiny
     for path in kept:
         edit_in_place(path, another_winner)
     code, output = verify_cli(tiny_copy)
-    assert code == 1 and output.count("corrupt kept output: outputs/") == 8, output
+    assert code == 2 and output.count("corrupt kept output: outputs/") == 8, output
 
     spec = tiny_copy / "spec.toml"
     spec.write_text(spec.read_text() + "\n[evaluator]\ntop_k = 3\n")  # new prediction keys: re-evaluated
@@ -339,7 +339,7 @@ def test_a_run_finds_a_segment_rewritten_without_an_evaluator_column_and_recompu
     for path in store.segments("predictions"):
         pq.write_table(pq.read_table(path).drop_columns(["top1_label"]).replace_schema_metadata(None), path)
     code, output = verify_cli(tiny_copy)
-    assert code == 1 and "corrupt segment: tables/predictions/" in output
+    assert code == 2 and "corrupt segment: tables/predictions/" in output
     assert "'top1_label' that every row of the classification evaluator has" in output
 
     with caplog.at_level(logging.WARNING, logger="sweep3d.store"):
@@ -366,7 +366,7 @@ def test_a_run_renders_the_archives_mesh_not_an_edited_copy(tmp_path: Path, capl
     [copy] = (tmp_path / "store" / "assets").iterdir()
     edit_in_place(copy / "box" / "box.obj", lambda data: data.replace(b"v 1 1 1", b"v 9 1 1"))
     code, output = verify_cli(tmp_path)
-    assert code == 1 and f"corrupt extracted asset: assets/{copy.name}/box/box.obj" in output, output
+    assert code == 2 and f"corrupt extracted asset: assets/{copy.name}/box/box.obj" in output, output
 
     spec.write_text(spec.read_text().replace("yaw = [0]", "yaw = [0, 45]"))
     with caplog.at_level(logging.WARNING, logger="sweep3d.store"):

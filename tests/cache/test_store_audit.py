@@ -10,12 +10,10 @@ from __future__ import annotations
 
 import logging
 import os
-import pickle
 import shutil
 import tempfile
-import time
 from pathlib import Path
-from typing import Callable, Iterator, TypeVar
+from typing import Iterator
 
 import pyarrow as pa
 import pyarrow.parquet as pq
@@ -27,9 +25,9 @@ from sweep3d.cache.maintenance import verify
 from sweep3d.cache.store import Store, StoreReadError, StoreWriteError
 from sweep3d.cli import app
 from tests.helpers import TINY_SPEC, add_render, one_line, render_row, store_tree, write_spec
+from tests.helpers.users import as_user, hand_over
 
 RESULTS = 24  # synthetic results in the stores these tests copy
-T = TypeVar("T")
 
 
 def key(prefix: str) -> str:
@@ -88,7 +86,6 @@ def damage_a_segment(root: Path) -> Path:
     return bad
 
 
-NOBODY = "nobody"
 #: Every command that reads the store (the permission tests run each one).
 READ_COMMANDS = [["plan", "SPEC"], ["run", "SPEC"], ["report", "SPEC"], ["query", "SPEC", "select 1"],
                  ["cache", "verify", "SPEC"], ["cache", "stats", "SPEC"], ["cache", "gc", "SPEC"],
@@ -119,95 +116,6 @@ def shared_dir(synthetic: Path, warmed: None) -> Iterator[Path]:
         yield folder
     finally:
         shutil.rmtree(folder.parent)  # as root, or as the owner of everything in it
-
-
-def hand_over(folder: Path) -> None:
-    """Give ``folder`` and everything in it to the user of :func:`as_user` (when this is root)."""
-    if os.geteuid() == 0:
-        owner = _user()
-        for path in [folder.parent, folder, *folder.rglob("*")]:
-            os.chown(path, owner.pw_uid, owner.pw_gid, follow_symlinks=False)
-
-
-def _user():
-    """The unprivileged user the permission tests run as (they skip where there is none)."""
-    import pwd
-
-    try:
-        return pwd.getpwnam(NOBODY)
-    except KeyError:
-        pytest.skip(f"no user {NOBODY!r} to drop privileges to")
-
-
-def as_user(call: Callable[[], T]) -> T:
-    """``call()`` as an unprivileged user: in a forked child that drops root's privileges first
-    (root ignores permissions), or here when this process has none to drop. Skips the test
-    where they cannot be dropped."""
-    if os.geteuid() != 0:
-        return call()
-    owner = _user()
-    read, write = os.pipe()
-    pid = os.fork()
-    if pid == 0:  # the child: never returns into pytest
-        try:
-            os.close(read)
-            result = _dropped(owner, call)
-            with os.fdopen(write, "wb") as fh:
-                pickle.dump(result, fh)
-        finally:
-            os._exit(0)
-    os.close(write)
-    data = _answer(read, pid)
-    if data is None:  # the child waits on a lock a thread of this process held when it forked
-        pytest.skip(f"the forked child hung for {CHILD_TIMEOUT:.0f} s on a lock this process's threads held at the "
-                    "fork (the session's Chromium, DuckDB or torch pools): a limit of forking a threaded test run")
-    result = pickle.loads(data) if data else "the child died"
-    if isinstance(result, str) and result.startswith("skip: "):
-        pytest.skip(result.removeprefix("skip: "))
-    assert not (isinstance(result, str) and result.startswith("the child")), result
-    return result
-
-
-#: Seconds a child of :func:`as_user` may take (each runs a few commands on a small store).
-CHILD_TIMEOUT = 180.0
-
-
-def _answer(read: int, pid: int) -> bytes | None:
-    """What the child wrote before it exited; None if it hung (it is killed)."""
-    import select
-    import signal
-
-    chunks, deadline = [], time.monotonic() + CHILD_TIMEOUT
-    with os.fdopen(read, "rb", buffering=0) as fh:
-        while True:
-            left = deadline - time.monotonic()
-            if left <= 0 or not select.select([fh], [], [], left)[0]:
-                os.kill(pid, signal.SIGKILL)
-                os.waitpid(pid, 0)
-                return None
-            chunk = fh.read(1 << 16)
-            if not chunk:
-                break
-            chunks.append(chunk)
-    os.waitpid(pid, 0)
-    return b"".join(chunks)
-
-
-def _dropped(owner, call: Callable[[], T]) -> T | str:
-    """In the forked child: ``call()`` once it runs as ``owner``, or why it could not."""
-    try:
-        os.setgroups([])
-        os.setgid(owner.pw_gid)
-        os.setuid(owner.pw_uid)
-    except OSError as exc:
-        return f"skip: cannot drop root's privileges here ({exc})"
-    checkout = Path(__file__).resolve().parents[2]
-    if not os.access(checkout, os.R_OK | os.X_OK):  # a clone in a private folder (mktemp's 0700)
-        return f"skip: the checkout {checkout} is private: {NOBODY!r} cannot read the code it would run"
-    try:
-        return call()
-    except BaseException as exc:  # noqa: BLE001  (reported to the parent, which fails the test)
-        return f"the child failed: {type(exc).__name__}: {exc}"
 
 
 # -- 6: gc deletes only what the store wrote, never through a symbolic link -------------------
@@ -284,7 +192,7 @@ def test_verify_reports_files_whose_columns_are_not_their_tables(run_dir: Path, 
     shutil.copy(predictions, stray)
 
     code, output = cli(run_dir, "cache", "verify", "SPEC")
-    assert code == 1, output
+    assert code == 2, output
     problems = " ".join(output.split()).split(" corrupt ")[1:]  # the lines it prints wrap on a narrow terminal
     assert problems[0] == (f"segment: tables/renders/{stray.name} (its columns are not the renders table's: it has "
                            "no render_key column)")
@@ -417,6 +325,48 @@ def test_a_blob_the_user_may_not_read_is_one_line_not_damaged_and_not_made_again
         assert line == (f"cannot read {blob} (Permission denied); fix its permissions (a blob that cannot be read is "
                         "not damaged: sweep3d leaves it, and its results, as they are)"), lines
     assert after == before  # neither quarantined nor its row dropped
+
+
+def test_verify_names_what_it_may_not_read_and_repair_moves_only_what_is_damaged(shared_dir: Path) -> None:
+    """Issue 45, item 1: ``verify`` called an intact blob the OS would not let it read corrupt and
+    advised ``--repair``, which moved it (and dropped its row) into quarantine. Run as a user the
+    permissions hold for: such a blob, and such a segment, are named unreadable and left as they
+    are, with their rows; a blob whose bytes are wrong beside them is still quarantined. Problems
+    exit 2."""
+    root = shared_dir / "store"
+    store = Store(root)
+    earlier = set(store.segments("renders"))
+    add_render(store, key("ab"))  # intact, but the user may not read it
+    [its_rows] = set(store.segments("renders")) - earlier
+    add_render(store, key("cd"))  # its bytes damaged
+    refused, damaged = store.blob_path(key("ab")), store.blob_path(key("cd"))
+    damaged.write_bytes(b"not the PNG it was")
+    segment = store.append("renders", [render_row(key("ef"))])  # a segment the user may not read
+    hand_over(shared_dir)
+    refused.chmod(0)
+    segment.chmod(0)
+    kept = [str(p.relative_to(root)) for p in (refused, its_rows, segment)]
+    before = saved(root)
+    try:
+        (code, output), (repair_code, repaired) = as_user(lambda: [
+            cli(shared_dir, "cache", "verify", "SPEC"), cli(shared_dir, "cache", "verify", "SPEC", "--repair")])
+    finally:
+        refused.chmod(0o644)
+        segment.chmod(0o644)
+    after = saved(root)
+    output, repaired = " ".join(output.split()), " ".join(repaired.split())
+
+    assert code == 2, output
+    blob, damaged_name = refused.relative_to(root), damaged.relative_to(root)
+    assert f"unreadable blob: {blob} (Permission denied; fix its permissions)" in output, output
+    assert f"unreadable segment: {segment.relative_to(root)} (Permission denied; fix its permissions)" in output
+    assert f"corrupt blob: {damaged_name} (content does not match its recorded SHA-256)" in output, output
+    assert f"corrupt blob: {blob}" not in output and "corrupt segment" not in output, output
+    assert "1 problems; run: sweep3d cache verify" in output and "2 files cannot be read" in output, output
+    assert repair_code == 2 and "repaired 1 problems" in repaired and "2 files cannot be read" in repaired, repaired
+    assert {name: after.get(name) for name in kept} == {name: before[name] for name in kept}  # in place, unchanged
+    assert sorted(after.keys() - before.keys()) == [f"quarantine/{damaged_name}"], after.keys() - before.keys()
+    assert key("ab") in Store(root).keys("renders") and key("cd") not in Store(root).keys("renders")
 
 
 # -- 10: readers read around a damaged segment; only the lock's holder repairs -----------------

@@ -77,9 +77,9 @@ def test_verdicts_and_kept_photos_are_known_to_the_store_s_housekeeping(tmp_path
 
     photo_path(store.root, kept[1]).write_bytes(b"\xff\xd8 not a whole JPEG")
     code, out = cache(spec, "verify")
-    assert code == 1 and f"corrupt kept photo: realism/photos/{kept[1]}.jpg" in flat(out), out
+    assert code == 2 and f"corrupt kept photo: realism/photos/{kept[1]}.jpg" in flat(out), out
     code, out = cache(spec, "verify", "--repair")
     assert code == 0 and "repaired 1 problems" in flat(out), out
     assert not photo_path(store.root, kept[1]).exists() and (store.root / "quarantine").is_dir()
     code, out = cache(spec, "verify")  # the photo itself is gone: scoring again keeps it anew
-    assert code == 1 and f"missing kept photo: realism/photos/{kept[1]}.jpg" in flat(out), out
+    assert code == 2 and f"missing kept photo: realism/photos/{kept[1]}.jpg" in flat(out), out

@@ -292,7 +292,9 @@ from sweep3d.plugins import ControlParams, RenderedControl
 
 class Forker(RenderedControl):
     """Leaves children running, every way an edit can: a subprocess, a bare fork, and multiprocessing
-    (fork, and spawn, which starts the worker's resource tracker). All of them hold its stderr."""
+    (fork, and spawn, which starts the worker's resource tracker). All of them hold its stderr. And
+    two that leave the worker's process group: a sleep in a session of its own, and a daemon's
+    double fork (its parent exits at once), both marked by the argument $ESCAPED."""
 
     class Params(ControlParams):
         children: int = Field(0, ge=0)
@@ -311,6 +313,8 @@ class Forker(RenderedControl):
                 child.start()
                 pids.append(child.pid)
             pids.append(multiprocessing.resource_tracker._resource_tracker._pid)
+            subprocess.Popen(["sleep", os.environ["ESCAPED"]], start_new_session=True)
+            subprocess.run(["sh", "-c", f"setsid sleep {os.environ['ESCAPED']} >/dev/null 2>&1 &"], check=True)
         with open(os.environ["FORKED"], "a") as out:
             out.write("".join(f"{pid}\\n" for pid in pids))
 '''
@@ -326,10 +330,14 @@ def test_an_edit_that_forks_leaves_no_process_behind_and_the_run_s_pipe_closes(t
     """Issue 35, item 13: an edit's children (and a resource tracker) outlived the run and held its
     output pipe, so a caller reading it hung. Each worker leads its own process group, which goes
     with it: the run (in a session of its own) exits 0, its pipe closes, and no process of its
-    session is left."""
+    session is left. Issue 45, item 2: nor is one the edit started in a session of its own, or
+    whose parent exited (each worker adopts its orphans, and ends them before it exits)."""
     import signal
 
     from tests.helpers import REPO
+    from tests.helpers.processes import marker, running
+
+    escaped = marker()
 
     (tmp_path / "forker.py").write_text(FORKING_EDIT)
     spec = write_spec(tmp_path, SPEC.replace('kind = "myeval:Strict"', 'kind = "classification"').replace(
@@ -337,15 +345,17 @@ def test_an_edit_that_forks_leaves_no_process_behind_and_the_run_s_pipe_closes(t
         '[[controls]]\ntype = "mypost:Dim"\nstrength = [0.0, 0.5]\n', ""))
     process = subprocess.Popen([sys.executable, "-m", "sweep3d", "run", str(spec), "--no-report"], cwd=tmp_path,
                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True,
-                               env={**os.environ, "PYTHONPATH": str(REPO), "FORKED": str(tmp_path / "forked")})
+                               env={**os.environ, "PYTHONPATH": str(REPO), "FORKED": str(tmp_path / "forked"),
+                                    "ESCAPED": escaped})
     try:
         output, _ = process.communicate(timeout=240)  # EOF: nothing holds the pipe any more
         assert process.returncode == 0, output
         assert not _session(process.pid), f"left running after the run: {_session(process.pid)}"
+        assert not running(escaped), f"left the worker's group and outlived the run: {running(escaped)}"
     finally:
-        for line in _session(process.pid):  # a failing test leaves no orphan either
-            try:
-                os.kill(int(line.split()[0]), signal.SIGKILL)
+        for pid in [int(line.split()[0]) for line in _session(process.pid)] + running(escaped):
+            try:  # a failing test leaves no orphan either
+                os.kill(pid, signal.SIGKILL)
             except ProcessLookupError:
                 pass
         process.kill()

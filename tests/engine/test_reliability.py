@@ -444,7 +444,7 @@ def test_a_plain_rerun_repairs_damaged_renders_whose_results_are_cached(tiny_cop
     html = write_report(load_spec(spec)).read_text(encoding="utf-8")
     problems = json.loads(re.search(r'id="thumb-problems">(.*?)</script>', html, re.S).group(1))
     assert sorted(problems.values()) == ["damaged", "damaged"] and "2 damaged" in html
-    assert CliRunner().invoke(app, ["cache", "verify", str(spec)]).exit_code == 1
+    assert CliRunner().invoke(app, ["cache", "verify", str(spec)]).exit_code == 2
 
     with caplog.at_level(logging.WARNING, logger="sweep3d.store"):
         result = run(load_spec(spec))
@@ -483,7 +483,7 @@ def test_cache_commands_on_a_real_store(tiny_copy: Path) -> None:
     blob = Store(root).blob_path(sorted(Store(root).keys("images"))[0])
     flip_bytes(blob)
     found = runner.invoke(app, ["cache", "verify", spec])
-    assert found.exit_code == 1
+    assert found.exit_code == 2
     assert "corrupt blob" in found.output and blob.name in found.output and "--repair" in found.output
     fixed = runner.invoke(app, ["cache", "verify", spec, "--repair"])
     assert fixed.exit_code == 0 and "repaired 1" in fixed.output

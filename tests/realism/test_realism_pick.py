@@ -155,3 +155,49 @@ def test_the_kit_goes_to_the_store_by_default_not_beside_the_spec(tmp_path: Path
     assert again.exit_code == 0, again.output
     result = pick(spec, tmp_path / "store" / "tables" / "kit")
     assert result.exit_code == 2 and "inside the store" in result.output and "kits" in result.output
+
+
+def test_an_output_folder_the_user_may_not_read_is_one_line(monkeypatch) -> None:
+    """Issue 45, item 8: ``-o`` a folder the user may not read was a four-line usage error (click's
+    check that a path is readable). Run as a user the permissions hold for: one line, exit 2."""
+    import shutil
+    import tempfile
+
+    from tests.helpers.users import as_user, hand_over
+
+    folder = Path(tempfile.mkdtemp(prefix="sweep3d-pick-")) / "run"
+    try:
+        folder.mkdir()
+        spec = make_run(folder)
+        stub_kit_tools(monkeypatch)
+        assert pick(spec, folder / "warm").exit_code == 0  # what the unprivileged child runs is imported here
+        denied = folder / "denied"
+        denied.mkdir()
+        (denied / "photo.jpg").write_text("a user's photograph")
+        hand_over(folder)
+        denied.chmod(0)
+        code, output = as_user(lambda: (lambda r: (r.exit_code, r.output))(pick(spec, denied)))
+        denied.chmod(0o755)
+        assert code == 2, output
+        assert output.strip() == (f"error: -o {denied}: cannot be read (Permission denied); fix its permissions or "
+                                  "choose another folder for the kit"), output
+        assert [p.name for p in denied.iterdir()] == ["photo.jpg"]
+    finally:
+        shutil.rmtree(folder.parent)
+
+
+def test_a_full_disk_while_writing_the_kit_is_one_line_and_leaves_nothing(tmp_path: Path, monkeypatch) -> None:
+    import errno
+
+    spec = make_run(tmp_path)
+    stub_kit_tools(monkeypatch)
+
+    def full(self, data):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(Path, "write_bytes", full)
+    result = pick(spec, tmp_path / "kit")
+    assert result.exit_code == 2, result.output
+    assert result.output.strip() == (f"error: {tmp_path / 'kit'}: cannot write the kit (No space left on device); "
+                                     "free some disk space, or write the kit to another disk with -o"), result.output
+    assert not (tmp_path / "kit").exists() and not list(tmp_path.glob(".kit.*"))

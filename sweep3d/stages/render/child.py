@@ -12,7 +12,10 @@ parent's ``sys.path``, then a function by name and its arguments, over one pipe.
 Each child leads its own process group, in its run's session: whatever it starts (a scene edit
 that forks, multiprocessing's resource tracker) is in that group, and goes when the child is
 ended or reaped (:meth:`Child.join`, :meth:`Child.kill`), and at the latest when its parent
-exits. A child dies with its parent (:func:`die_with_parent`).
+exits. What leaves the group (a process started in a session of its own) is still below the
+child in the process tree, which adopts its orphans: the child ends it before it exits, and
+:meth:`Child.kill` ends it with the group (:mod:`.descendants`). A child dies with its parent
+(:func:`die_with_parent`).
 """
 
 from __future__ import annotations
@@ -29,6 +32,8 @@ import traceback
 from multiprocessing import Pipe
 from multiprocessing.connection import Connection, wait
 from typing import Any, Callable
+
+from sweep3d.stages.render.descendants import adopt_orphans, end_descendants
 
 PR_SET_PDEATHSIG = 1  # from <linux/prctl.h>
 #: What the child runs: no import of sweep3d until the parent's ``sys.path`` is in place.
@@ -90,9 +95,9 @@ class Child:
         return self.exitcode is None
 
     def kill(self) -> None:
-        """SIGKILL the child and everything in its process group."""
+        """SIGKILL the child, everything in its process group, and its descendants that left the group."""
         if self.popen.returncode is None:  # else its group's id may be another's by now
-            _kill_group(self.pid)
+            _kill_tree(self.pid)
 
     def join(self, timeout: float | None = None) -> None:
         """Wait up to ``timeout`` seconds for the child to exit; once it has, end what it left
@@ -135,11 +140,19 @@ def _pidfd(pid: int, fallback: int) -> int:
     return fd
 
 
-def _kill_group(pgid: int) -> None:
+def _kill_group(pgid: int, sig: int = signal.SIGKILL) -> None:
     try:
-        os.killpg(pgid, signal.SIGKILL)
+        os.killpg(pgid, sig)
     except (ProcessLookupError, PermissionError):
         pass  # nothing left of it
+
+
+def _kill_tree(pid: int) -> None:
+    """SIGKILL the child ``pid`` with its group and every descendant outside it: the group stopped
+    first, so that nothing in it starts another process meanwhile."""
+    _kill_group(pid, signal.SIGSTOP)
+    end_descendants(pid)
+    _kill_group(pid)
 
 
 @atexit.register
@@ -159,6 +172,7 @@ def serve(conn: Connection, parent: int) -> None:
     """In the child: run the target the parent sends, then exit as Python does (Blender's exit
     handler removes its temporary folder), without waiting for what a scene edit started."""
     die_with_parent(parent)
+    adopt_orphans()  # what an edit starts in a session of its own stays below this process, to be ended
     signal.signal(signal.SIGTTOU, signal.SIG_IGN)  # its own group is not the terminal's: may still write
     code = 0
     try:
@@ -170,6 +184,7 @@ def serve(conn: Connection, parent: int) -> None:
         traceback.print_exc()
         code = 1
     _stop_multiprocessing_children()
+    end_descendants(os.getpid(), spare_group=os.getpgid(0))  # what left the group; the parent ends the group
     sys.exit(code)
 
 
