@@ -162,6 +162,17 @@ class Store:
         cost more than the ``stat`` itself."""
         return f"{self._blobs}{key[:2]}{os.sep}{key}.{ext}"
 
+    def has_blob(self, key: str, ext: str = "png") -> bool:
+        """Whether ``key``'s blob is there; a blob folder this process may not read is one line
+        (:class:`StoreReadError`), never taken for a missing blob to be made again."""
+        try:
+            os.stat(self.blob_file(key, ext))
+        except (FileNotFoundError, NotADirectoryError):
+            return False
+        except OSError as exc:
+            raise store_error(exc, "read") from None
+        return True
+
     def existing_blobs(self, keys: Iterable[str], ext: str = "png") -> set[str]:
         """The ``keys`` whose blob is there.
 
@@ -604,6 +615,28 @@ class Store:
         """Files this store object found unreadable (path → why), each reported once."""
         return dict(self._bad)
 
+    def require_readable(self, spec: str | Path) -> None:
+        """Refuse an answer that would leave out the rows of a file this store object found
+        unreadable (a reader reads around it with a warning, which a query's or a summary's
+        numbers would not show): one line naming the file, or the folder that denies it, and the fix.
+
+        Args:
+            spec: the spec's path, for the command that repairs a damaged file.
+
+        Raises:
+            StoreReadError: a file read so far could not be read.
+        """
+        if not self._bad:
+            return
+        path, why = next(iter(self._bad.items()))
+        denied = why.endswith(f"; {FIXES[errno.EACCES]}")
+        reason, fix = ((why.removesuffix(f"; {FIXES[errno.EACCES]}"), FIXES[errno.EACCES]) if denied else
+                       (why, f"run: sweep3d cache verify {_spec_arg(spec)} --repair (it moves the file aside; the next run "
+                             "computes its rows again)"))
+        others = f" (and {len(self._bad) - 1} more)" if len(self._bad) > 1 else ""
+        raise StoreReadError(f"cannot read {_blocked(Path(path)) if denied else path} ({reason}){others}: no answer "
+                             f"is given, as one without its rows would be partial; {fix}")
+
     def _report_bad(self, path: Path, why: str, move: bool) -> None:
         if str(path) in self._bad:
             return
@@ -1034,6 +1067,11 @@ def _is_segment_name(name: str) -> bool:
     """Whether ``name`` could be a segment's (a ``.parquet`` file's name, no folder, not hidden):
     a compaction record naming anything else is not followed out of the table's folder."""
     return name.endswith(".parquet") and not name.startswith(".") and name == Path(name).name
+
+
+def _spec_arg(spec: str | Path) -> str:
+    """``spec`` as a command names it: SPEC for one loaded from no file (``<dict>``, ``<string>``)."""
+    return "SPEC" if str(spec).startswith("<") else str(spec)
 
 
 def _relative(path: Path, root: Path) -> Path:

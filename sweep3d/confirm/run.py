@@ -71,10 +71,11 @@ def confirm(loaded: LoadedSpec, renders: int = DEFAULT_RENDERS, seed: int | None
     if renders < 2:
         raise UserError(f"--renders {renders}: a finding needs at least 2 fresh renders (one twin pair)")
     seed = loaded.experiment.seed if seed is None else seed
-    store = Store(loaded.store)
+    store = Store(loaded.store, warn=False)  # a file it cannot read refuses the findings, with no warning first
     discovery = plans_as_run(loaded, store)[0]
     seen = {job.image_key for job in list(discovery.jobs) + list(discovery.out_of_frame)}
     summary = stored_summary(store, loaded.name, discovery.columns, scales=numeric_scales(loaded.controls))
+    store.require_readable(loaded.path)  # findings of the rows that read would not be the run's
     if summary.accuracy is None:
         raise UserError(f"{loaded.path}: no results to confirm yet; run: sweep3d run {loaded.path}")
     space = space_of(loaded)
