@@ -277,7 +277,8 @@ class Store:
         """Create the store root or fail with a clear message (an unwritable store is a user error)."""
         try:
             self.root.mkdir(parents=True, exist_ok=True)
-            probe = self.root / f".probe-{os.getpid()}"
+            probe = self.root / f".probe-{os.getpid()}-{uuid.uuid4().hex[:8]}"  # a name of its own: two threads
+            # of one process probing at once removed each other's, and the second was told the store is not writable
             probe.write_bytes(b"")
             probe.unlink()
         except OSError as exc:
