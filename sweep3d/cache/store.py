@@ -32,6 +32,7 @@ import os
 import re
 import shutil
 import stat
+import threading
 import time
 import uuid
 from contextlib import contextmanager
@@ -108,8 +109,9 @@ TABLE_COLUMNS = {
 
 log = logging.getLogger("sweep3d.store")
 MAX_FILENAME_BYTES = 120  # of an experiment's name in file names: with suffixes, well under 255
-#: Stores whose writer lock this process holds (by real path): only their holder quarantines.
-_HELD: set[str] = set()
+#: Stores whose writer lock this process holds (by real path), and the thread that took it: only
+#: their holder quarantines, and that thread may take the lock again within (see :meth:`Store.lock`).
+_HELD: dict[str, int] = {}
 
 
 class StoreWriteError(UserError):
@@ -721,17 +723,28 @@ class Store:
     def lock(self, wait: float = 0.0) -> Iterator[None]:
         """Hold the store's writer lock; readers never take it.
 
+        A command that writes takes it before it computes anything, and holds it to its end; what
+        it runs within (``confirm``'s and ``realism score --engine``'s run) takes it again in the
+        same thread, which holds it already: that is a no-op. Another thread of this process is
+        refused as another process is.
+
         Raises:
-            StoreBusyError: if another process holds it for longer than ``wait`` seconds.
+            StoreBusyError: if another process or thread holds it for longer than ``wait`` seconds.
             StoreWriteError: the lock file cannot be opened (its permissions, a folder in its place).
         """
+        held = os.path.realpath(self.root)
+        if _HELD.get(held) == threading.get_ident():  # within the same thread's hold: already this caller's
+            try:
+                yield
+            finally:
+                self.forget_states()
+            return
         self.ensure_writable()
         path = self.root / "lock"
         try:
             fh = open(path, "a+")
         except OSError as exc:
             raise store_error(exc, "write") from None
-        held = os.path.realpath(self.root)
         deadline = time.monotonic() + wait
         try:
             while True:
@@ -750,11 +763,11 @@ class Store:
             fh.truncate()
             fh.write(f"sweep3d pid {os.getpid()}")
             fh.flush()
-            _HELD.add(held)
+            _HELD[held] = threading.get_ident()
             try:
                 yield
             finally:
-                _HELD.discard(held)
+                _HELD.pop(held, None)
                 self.forget_states()  # taken under this lock: not to be trusted after it
         finally:
             fh.close()

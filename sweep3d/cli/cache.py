@@ -6,6 +6,7 @@ without ``--repair`` and ``stats`` only read it.
 
 from __future__ import annotations
 
+from contextlib import nullcontext
 from pathlib import Path
 
 import typer
@@ -50,23 +51,23 @@ def verify(
 
     check_wait(wait)
     root = _store_root(spec)
-    report = verify_store(root)
-    photos = f", {report.photos} kept photos" if report.photos else ""
-    console.print(f"checked {report.segments} segments ({report.rows} rows), {report.blobs} blobs{photos}, "
-                  f"{report.outputs} kept model outputs and {report.assets} extracted meshes in {escape(str(root))}")
-    for problem in report.problems[:MAX_LISTED]:
-        console.print(f"[red]{escape(problem.line(root))}[/]", highlight=False)
-    if len(report.problems) > MAX_LISTED:
-        console.print(f"[red]... and {len(report.problems) - MAX_LISTED} more[/]")
-    if report.ok:
-        console.print("[green]store OK[/]")
-        return
-    if not repair:
-        console.print(f"{len(report.problems)} problems; run: sweep3d cache verify {escape(str(spec))} --repair "
-                      "(or the next run recomputes what it needs)")
-        raise typer.Exit(1)
-    with Store(root).lock(wait):
-        report = verify_store(root)  # again, holding the lock: a run may have changed things
+    with Store(root).lock(wait) if repair else nullcontext():  # a repair writes: its lock before the hashing
+        report = verify_store(root)
+        photos = f", {report.photos} kept photos" if report.photos else ""
+        console.print(f"checked {report.segments} segments ({report.rows} rows), {report.blobs} blobs{photos}, "
+                      f"{report.outputs} kept model outputs and {report.assets} extracted meshes in "
+                      f"{escape(str(root))}")
+        for problem in report.problems[:MAX_LISTED]:
+            console.print(f"[red]{escape(problem.line(root))}[/]", highlight=False)
+        if len(report.problems) > MAX_LISTED:
+            console.print(f"[red]... and {len(report.problems) - MAX_LISTED} more[/]")
+        if report.ok:
+            console.print("[green]store OK[/]")
+            return
+        if not repair:
+            console.print(f"{len(report.problems)} problems; run: sweep3d cache verify {escape(str(spec))} --repair "
+                          "(or the next run recomputes what it needs)")
+            raise typer.Exit(1)
         fixed = repair_store(root, report)
     console.print(f"repaired {fixed} problems: damaged files moved to quarantine/; the next run recomputes "
                   "their rows")
