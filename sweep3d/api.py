@@ -181,16 +181,19 @@ class Experiment:
         return export_dataset(self.spec, format, output=Path(output) if output is not None else None, where=where,
                               model=model, unevaluable=unevaluable, append=append, link=link)
 
-    def confirm(self, renders: int | None = None, seed: int | None = None, progress: bool = True) -> ConfirmResult:
+    def confirm(self, renders: int | None = None, seed: int | None = None, progress: bool = True, *,
+                wait: float = 0.0) -> ConfirmResult:
         """Test each significant finding of the last run on fresh renders, like ``sweep3d confirm``
-        (``renders`` per finding, default 64; ``seed`` default the spec's); the verdicts are kept for
-        the findings and the report."""
+        (``renders`` per finding, default 64; ``seed`` default the spec's; ``wait``: seconds to wait
+        for another command holding the store's lock); the verdicts are kept for the findings and
+        the report."""
         from rich.console import Console
 
         from sweep3d.confirm import confirm
         from sweep3d.results import DEFAULT_RENDERS
 
-        return confirm(self.spec, renders or DEFAULT_RENDERS, seed, Console() if progress else None)
+        check_wait(wait)
+        return confirm(self.spec, renders or DEFAULT_RENDERS, seed, Console() if progress else None, wait=wait)
 
     def report(self, path: str | Path | None = None, model: str | None = None) -> Path:
         """Write the HTML report (default ``<store>/reports/<experiment>.html``) and return its path."""

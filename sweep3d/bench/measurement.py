@@ -143,12 +143,13 @@ def reference_settings(samples: int, denoise: str, current: Setting, model_view:
 
 
 def measure(loaded: LoadedSpec, settings: list[Setting], reference: Setting, floor: Setting | None,
-            jobs: int | Callable[[Plan], int], progress: RunProgress) -> list[BenchRow]:
+            jobs: int | Callable[[Plan], int], progress: RunProgress, wait: float = 0.0) -> list[BenchRow]:
     """Render the sample under every setting and both references; compare each with the reference.
 
     Args:
         jobs: the sample's size, or a function choosing it from the reference's whole plan
             (``--budget``: see :mod:`sweep3d.bench.budget`), called before anything renders.
+        wait: seconds to wait for another command holding the store's lock.
     """
     plans: dict[Setting, Plan] = {}
     models: dict[Setting, ModelHandle] = {}
@@ -164,7 +165,7 @@ def measure(loaded: LoadedSpec, settings: list[Setting], reference: Setting, flo
         plans[setting] = dataclasses.replace(plan, jobs=[by_index[i] for i in indices], out_of_frame=[])
     store = Store(loaded.store)
     timings: dict[str, RenderInfo] = {}  # the renders made in this run, with their scene loads
-    with store.lock():
+    with store.lock(wait):
         for chunk in range(ROUNDS):  # settings take turns, so a machine's changing load hits all alike
             for setting, plan in plans.items():
                 n = len(plan.jobs)  # contiguous: a scene's jobs stay together, as in a run

@@ -32,6 +32,7 @@ import os
 import re
 import shutil
 import stat
+import threading
 import time
 import uuid
 from contextlib import contextmanager
@@ -111,8 +112,9 @@ TABLE_COLUMNS = {
 
 log = logging.getLogger("sweep3d.store")
 MAX_FILENAME_BYTES = 120  # of an experiment's name in file names: with suffixes, well under 255
-#: Stores whose writer lock this process holds (by real path): only their holder quarantines.
-_HELD: set[str] = set()
+#: Stores whose writer lock this process holds (by real path), and the thread that took it: only
+#: their holder quarantines, and that thread may take the lock again within (see :meth:`Store.lock`).
+_HELD: dict[str, int] = {}
 
 
 class StoreWriteError(UserError):
@@ -164,6 +166,17 @@ class Store:
         """:meth:`blob_path` as a string: a run checks every cached blob, and pathlib's joins
         cost more than the ``stat`` itself."""
         return f"{self._blobs}{key[:2]}{os.sep}{key}.{ext}"
+
+    def has_blob(self, key: str, ext: str = "png") -> bool:
+        """Whether ``key``'s blob is there; a blob folder this process may not read is one line
+        (:class:`StoreReadError`), never taken for a missing blob to be made again."""
+        try:
+            os.stat(self.blob_file(key, ext))
+        except (FileNotFoundError, NotADirectoryError):
+            return False
+        except OSError as exc:
+            raise store_error(exc, "read") from None
+        return True
 
     def existing_blobs(self, keys: Iterable[str], ext: str = "png") -> set[str]:
         """The ``keys`` whose blob is there.
@@ -269,7 +282,8 @@ class Store:
         """Create the store root or fail with a clear message (an unwritable store is a user error)."""
         try:
             self.root.mkdir(parents=True, exist_ok=True)
-            probe = self.root / f".probe-{os.getpid()}"
+            probe = self.root / f".probe-{os.getpid()}-{uuid.uuid4().hex[:8]}"  # a name of its own: two threads
+            # of one process probing at once removed each other's, and the second was told the store is not writable
             probe.write_bytes(b"")
             probe.unlink()
         except OSError as exc:
@@ -608,6 +622,28 @@ class Store:
         """Files this store object found unreadable (path → why), each reported once."""
         return dict(self._bad)
 
+    def require_readable(self, spec: str | Path) -> None:
+        """Refuse an answer that would leave out the rows of a file this store object found
+        unreadable (a reader reads around it with a warning, which a query's or a summary's
+        numbers would not show): one line naming the file, or the folder that denies it, and the fix.
+
+        Args:
+            spec: the spec's path, for the command that repairs a damaged file.
+
+        Raises:
+            StoreReadError: a file read so far could not be read.
+        """
+        if not self._bad:
+            return
+        path, why = next(iter(self._bad.items()))
+        denied = why.endswith(f"; {FIXES[errno.EACCES]}")
+        reason, fix = ((why.removesuffix(f"; {FIXES[errno.EACCES]}"), FIXES[errno.EACCES]) if denied else
+                       (why, f"run: sweep3d cache verify {_spec_arg(spec)} --repair (it moves the file aside; the next run "
+                             "computes its rows again)"))
+        others = f" (and {len(self._bad) - 1} more)" if len(self._bad) > 1 else ""
+        raise StoreReadError(f"cannot read {_blocked(Path(path)) if denied else path} ({reason}){others}: no answer "
+                             f"is given, as one without its rows would be partial; {fix}")
+
     def _report_bad(self, path: Path, why: str, move: bool, repairable: bool = True) -> None:
         """Warn once that ``path`` is unreadable (``why``), moving it to ``quarantine/`` when ``move``
         and this object holds the lock. ``repairable``: ``cache verify --repair`` would move it aside
@@ -696,17 +732,28 @@ class Store:
     def lock(self, wait: float = 0.0) -> Iterator[None]:
         """Hold the store's writer lock; readers never take it.
 
+        A command that writes takes it before it computes anything, and holds it to its end; what
+        it runs within (``confirm``'s and ``realism score --engine``'s run) takes it again in the
+        same thread, which holds it already: that is a no-op. Another thread of this process is
+        refused as another process is.
+
         Raises:
-            StoreBusyError: if another process holds it for longer than ``wait`` seconds.
+            StoreBusyError: if another process or thread holds it for longer than ``wait`` seconds.
             StoreWriteError: the lock file cannot be opened (its permissions, a folder in its place).
         """
+        held = os.path.realpath(self.root)
+        if _HELD.get(held) == threading.get_ident():  # within the same thread's hold: already this caller's
+            try:
+                yield
+            finally:
+                self.forget_states()
+            return
         self.ensure_writable()
         path = self.root / "lock"
         try:
             fh = open(path, "a+")
         except OSError as exc:
             raise store_error(exc, "write") from None
-        held = os.path.realpath(self.root)
         deadline = time.monotonic() + wait
         try:
             while True:
@@ -725,11 +772,11 @@ class Store:
             fh.truncate()
             fh.write(f"sweep3d pid {os.getpid()}")
             fh.flush()
-            _HELD.add(held)
+            _HELD[held] = threading.get_ident()
             try:
                 yield
             finally:
-                _HELD.discard(held)
+                _HELD.pop(held, None)
                 self.forget_states()  # taken under this lock: not to be trusted after it
         finally:
             fh.close()
@@ -1048,6 +1095,11 @@ def _is_segment_name(name: str) -> bool:
     """Whether ``name`` could be a segment's (a ``.parquet`` file's name, no folder, not hidden):
     a compaction record naming anything else is not followed out of the table's folder."""
     return name.endswith(".parquet") and not name.startswith(".") and name == Path(name).name
+
+
+def _spec_arg(spec: str | Path) -> str:
+    """``spec`` as a command names it: SPEC for one loaded from no file (``<dict>``, ``<string>``)."""
+    return "SPEC" if str(spec).startswith("<") else str(spec)
 
 
 def _relative(path: Path, root: Path) -> Path:

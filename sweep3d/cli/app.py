@@ -173,12 +173,14 @@ def stability(
                                                              "near-ties first."),
     seed: Optional[int] = typer.Option(None, "--seed", min=0, show_default=False,
                                        help="Seeds the sample's order and the random changes (default: the spec's)."),
+    wait: float = typer.Option(0.0, help="Seconds to wait for another command holding the store's lock."),
 ) -> None:
     """Re-infer a sample of the run's images under changes no eye sees (±1 level of noise, dither, 8-bit
     resizing): the flip rate per margin bin, and which results are fragile."""
     from sweep3d.cli.stability import run_stability
 
-    run_stability(console, spec, sample, seed)
+    check_wait(wait)
+    run_stability(console, spec, sample, seed, wait)
 
 
 @command
@@ -203,6 +205,7 @@ def bench(
     engine: list[str] = typer.Option([], "--engine", help="Also render the spec's setting with this renderer "
                                                           "(mitsuba): its time against agreement with the "
                                                           "Cycles reference (never recommended). Repeatable."),
+    wait: float = typer.Option(0.0, help="Seconds to wait for another command holding the store's lock."),
 ) -> None:
     """Render time against error: find the cheapest render setting the model cannot tell apart.
 
@@ -234,6 +237,7 @@ def bench(
     from sweep3d.stages.infer import ModelHandle
     from sweep3d.stages.render import duration
 
+    check_wait(wait)
     if budget is not None:
         check_budget(budget)
         if jobs is not None:
@@ -261,7 +265,7 @@ def bench(
                                 lambda choice: console.print(escape(choice.line()), soft_wrap=True))
     started = time.perf_counter()
     with RunProgress(console) as progress:
-        rows = measure(loaded, settings, reference, twin if floor else None, sample, progress)
+        rows = measure(loaded, settings, reference, twin if floor else None, sample, progress, wait)
     best = recommend(rows, agreement, current.engine)
     print_bench(console, rows, best, current, agreement)
     if budget is not None:
@@ -282,6 +286,7 @@ def confirm(
                                                "(default 64)."),
     seed: Optional[int] = typer.Option(None, "--seed", min=0, show_default=False,
                                        help="Seed of the fresh draws (default: the spec's)."),
+    wait: float = typer.Option(0.0, help="Seconds to wait for another command holding the store's lock."),
 ) -> None:
     """Test each significant finding of the last run on fresh renders: twins inside and outside its
     region, matched on every other parameter, never an image of the run; confirmed or not replicated."""
@@ -290,10 +295,11 @@ def confirm(
     from sweep3d.confirm import confirm as confirm_findings
     from sweep3d.results import DEFAULT_RENDERS
 
+    check_wait(wait)
     experiment = Experiment(spec)
     require_store(experiment.spec)
     signal.signal(signal.SIGTERM, _interrupt)
-    result = confirm_findings(experiment.spec, renders or DEFAULT_RENDERS, seed, console)
+    result = confirm_findings(experiment.spec, renders or DEFAULT_RENDERS, seed, console, wait=wait)
     print_confirmation(console, result)
     if result.failed:
         raise typer.Exit(1)
@@ -308,6 +314,7 @@ def sheet(
     environment: Optional[str] = typer.Option(None, "--environment", help="The environment every row shows "
                                                                           "(default: the spec's first)."),
     tiles: int = typer.Option(8, min=0, help="The most tiles a row shows, evenly spread over its values (0: all)."),
+    wait: float = typer.Option(0.0, help="Seconds to wait for another command holding the store's lock."),
 ) -> None:
     """Render a contact sheet: one row per control, showing its effect alone on one scene.
 
@@ -318,10 +325,11 @@ def sheet(
     from sweep3d.driver import RunProgress
     from sweep3d.report import contact_sheet
 
+    check_wait(wait)
     loaded = sweep3d.load(spec).spec
     target = output or Store(loaded.store).report_path(loaded.name, "-controls.png")
     with RunProgress(console) as progress:
-        sheet = contact_sheet(loaded, target, progress, object_name, environment, tiles)
+        sheet = contact_sheet(loaded, target, progress, object_name, environment, tiles, wait)
     console.print(f"contact sheet of {escape(sheet.object)} in {escape(sheet.environment)}: [bold]{escape(str(sheet.path))}[/]")
     for control, shown, total in sheet.sampled:
         console.print(f"{escape(control)}: {shown} of its {total} values shown, evenly spread (--tiles {total} shows all)")

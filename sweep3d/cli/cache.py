@@ -6,6 +6,7 @@ without ``--repair`` and ``stats`` only read it.
 
 from __future__ import annotations
 
+from contextlib import nullcontext
 from pathlib import Path
 
 import typer
@@ -50,27 +51,27 @@ def verify(
 
     check_wait(wait)
     root = _store_root(spec)
-    report = verify_store(root)
-    photos = f", {report.photos} kept photos" if report.photos else ""
-    console.print(f"checked {report.segments} segments ({report.rows} rows), {report.blobs} blobs{photos}, "
-                  f"{report.outputs} kept model outputs and {report.assets} extracted meshes in {escape(str(root))}")
-    _list(report.problems, root)
-    if report.ok:
-        console.print("[green]store OK[/]")
-        return
-    damaged = len(report.repairable)
-    if not repair:
+    with Store(root).lock(wait) if repair else nullcontext():  # a repair writes: its lock before the hashing
+        report = verify_store(root)
+        photos = f", {report.photos} kept photos" if report.photos else ""
+        console.print(f"checked {report.segments} segments ({report.rows} rows), {report.blobs} blobs{photos}, "
+                      f"{report.outputs} kept model outputs and {report.assets} extracted meshes in "
+                      f"{escape(str(root))}")
+        _list(report.problems, root)
+        if report.ok:
+            console.print("[green]store OK[/]")
+            return
+        damaged = len(report.repairable)
+        if not repair:
+            if damaged:
+                console.print(f"{damaged} problems; run: sweep3d cache verify {escape(str(spec))} --repair "
+                              "(or the next run recomputes what it needs)")
+            _unreadable(report)
+            raise typer.Exit(2)
         if damaged:
-            console.print(f"{damaged} problems; run: sweep3d cache verify {escape(str(spec))} --repair "
-                          "(or the next run recomputes what it needs)")
-        _unreadable(report)
-        raise typer.Exit(2)
-    if damaged:
-        with Store(root).lock(wait):
-            report = verify_store(root)  # again, holding the lock: a run may have changed things
             fixed = repair_store(root, report)
-        console.print(f"repaired {fixed} problems: damaged files moved to quarantine/; the next run recomputes "
-                      "their rows")
+            console.print(f"repaired {fixed} problems: damaged files moved to quarantine/; the next run recomputes "
+                          "their rows")
     if _unreadable(report):
         raise typer.Exit(2)
 

@@ -9,14 +9,15 @@ from rich.markup import escape
 from rich.table import Table
 
 
-def run_stability(console: Console, spec_path: Path, sample: int, seed: int | None) -> None:
-    """``seed``: None is the spec's ``[experiment] seed``, as ``explain`` and ``confirm`` take it."""
+def run_stability(console: Console, spec_path: Path, sample: int, seed: int | None, wait: float = 0.0) -> None:
+    """``seed``: None is the spec's ``[experiment] seed``, as ``explain`` and ``confirm`` take it;
+    ``wait``: seconds to wait for another command holding the store's lock."""
     from sweep3d.api import Experiment
     from sweep3d.stability import check_stability
 
     spec = Experiment(spec_path).spec
     seed = spec.experiment.seed if seed is None else seed
-    for found in check_stability(spec, sample, seed, console):
+    for found in check_stability(spec, sample, seed, console, wait):
         which = f"{escape(found.model)}: " if len(spec.spec.all_models) > 1 else ""
         console.print(f"{which}stability check of {found.sampled} images ({found.cached} cached, {found.computed} "
                       f"inferred now; seed {seed})")

@@ -63,19 +63,32 @@ class ConfirmResult:
 
 
 def confirm(loaded: LoadedSpec, renders: int = DEFAULT_RENDERS, seed: int | None = None,
-            console: Console | None = None, claims: list[Claim] | None = None) -> ConfirmResult:
+            console: Console | None = None, claims: list[Claim] | None = None, wait: float = 0.0) -> ConfirmResult:
     """Confirm every significant finding of ``loaded``'s last run on ``renders`` fresh renders each
     (``renders // 2`` twin pairs), drawn with ``seed`` (default: the spec's); ``claims``: these
-    instead of the run's findings."""
-    from sweep3d.engine import plans_as_run, run
+    instead of the run's findings. It holds the store's writer lock from its start to its end
+    (``wait``: seconds to wait for another command holding it), its renders' run within it."""
+    from sweep3d.results import no_results
 
     if renders < 2:
         raise UserError(f"--renders {renders}: a finding needs at least 2 fresh renders (one twin pair)")
     seed = loaded.experiment.seed if seed is None else seed
-    store = Store(loaded.store)
+    store = Store(loaded.store, warn=False)  # a file it cannot read refuses the findings, with no warning first
+    if not loaded.store.is_dir():  # before the lock would make the store's folder
+        raise no_results(store, loaded.name, loaded.path)
+    with store.lock(wait):
+        return _confirmed(loaded, store, renders, seed, console, claims)
+
+
+def _confirmed(loaded: LoadedSpec, store: Store, renders: int, seed: int, console: Console | None,
+               claims: list[Claim] | None) -> ConfirmResult:
+    """:func:`confirm`, holding the store's lock."""
+    from sweep3d.engine import plans_as_run, run
+
     discovery = plans_as_run(loaded, store)[0]
     seen = {job.image_key for job in list(discovery.jobs) + list(discovery.out_of_frame)}
     summary = stored_summary(store, loaded.name, discovery.columns, scales=numeric_scales(loaded.controls))
+    store.require_readable(loaded.path)  # findings of the rows that read would not be the run's
     if summary.accuracy is None:
         raise UserError(f"{loaded.path}: no results to confirm yet; run: sweep3d run {loaded.path}")
     space = space_of(loaded)

@@ -338,7 +338,7 @@ def write_unstored_images(spec: LoadedSpec, store: Store, keys: Iterable[str]) -
     again from its stored render, as inference made it. Keys with a blob, with no images row, or
     that no plan of ``spec`` holds (another spec's) are left alone. Returns how many were written.
     """
-    wanted = {k for k in keys if k and not store.blob_path(k).exists()} & store.key_set("images")
+    wanted = {k for k in keys if k and not store.has_blob(k)} & store.key_set("images")
     written = 0
     for plan in plans_as_run(spec, store) if wanted else ():
         made, held = write_plan_images(store, plan, wanted)

@@ -106,7 +106,7 @@ def select(spec: LoadedSpec, condition: str, model: str | None, unevaluable: str
     Raises:
         UserError: no results yet, or the condition fails to run (an unknown column, a type error).
     """
-    with results_store(spec) as store, results_connection(spec, model, store=store) as con:
+    with results_store(spec, warn=False) as store, results_connection(spec, model, store=store) as con:
         have = [name for name, *_ in con.execute("DESCRIBE results").fetchall()]
         views = {name for name, in con.execute("SELECT view_name FROM duckdb_views() WHERE NOT internal").fetchall()}
         gate = "evaluable IS FALSE" if "evaluable" in have else "false"

@@ -91,14 +91,15 @@ def score_photos(spec: LoadedSpec, photos: Path, match: Path | None = None, kit:
     digests = {p.job: hashlib.sha256(p.path.read_bytes()).hexdigest() for p in matched}
     store = Store(spec.store)
     rows: list[dict[str, Any]] = []
-    for settings in spec.models:
-        verdicts = classify(spec, settings, [frames[j] for j in jobs], _truth_rows(spec, store, jobs, settings.label))
-        for job, verdict in zip(jobs, verdicts):
-            h, w = sizes[job]
-            photo = next(p for p in matched if p.job == job)
-            rows.append(_row(PHOTO, spec.name, job, settings.label, verdict, photo=photo.path.name,
-                             photo_sha256=digests[job], preprocess=PREPROCESS.format(width=w, height=h)))
-    with store.lock(wait):
+    with store.lock(wait):  # before the models run: another command's hold is waited for or refused now, not after
+        for settings in spec.models:
+            verdicts = classify(spec, settings, [frames[j] for j in jobs],
+                                _truth_rows(spec, store, jobs, settings.label))
+            for job, verdict in zip(jobs, verdicts):
+                h, w = sizes[job]
+                photo = next(p for p in matched if p.job == job)
+                rows.append(_row(PHOTO, spec.name, job, settings.label, verdict, photo=photo.path.name,
+                                 photo_sha256=digests[job], preprocess=PREPROCESS.format(width=w, height=h)))
         for job, pixels in photos.items():
             _keep_thumb(store, digests[job], pixels)
         store.append(VERDICTS, rows, VERDICT_SCHEMA)
@@ -345,7 +346,6 @@ def score_engine(spec: LoadedSpec, engine: str, kit: Path | None = None, console
         UserError: no kit; the spec loader refusing the engine or a control it cannot express.
     """
     from sweep3d.engine import builtin_catalogue, write_unstored_images
-    from sweep3d.results import results_connection, stored_parameters
     from sweep3d.spec import ENGINES, read_spec
 
     if engine not in ENGINES:  # before anything is written into the kit
@@ -354,8 +354,23 @@ def score_engine(spec: LoadedSpec, engine: str, kit: Path | None = None, console
     document = read_kit(folder)
     jobs = [int(j) for j in document["jobs"]]
     other = read_spec(engine_spec(spec, folder, engine), builtin_catalogue(), None)
-    _run(other, console, wait)
     store = Store(spec.store)
+    with store.lock(wait):  # from the start: the run within takes it again in this thread, a no-op
+        _run(other, console, wait)
+        rows = _engine_rows(spec, other, store, engine, jobs)
+        # the other engine's images the report's pairs show: a run keeps its post-processed images
+        # in memory only ([postprocess] store = "none", the default), and the report makes again
+        # only its own experiment's, so they are written here, as `pick` writes the renders'
+        write_unstored_images(other, store, [r["image_key"] for r in rows])
+        store.append(VERDICTS, rows, VERDICT_SCHEMA)
+    return _scored(f"engine:{engine}", spec, store, rows)
+
+
+def _engine_rows(spec: LoadedSpec, other: LoadedSpec, store: Store, engine: str, jobs: Sequence[int]) -> list[dict]:
+    """The verdict rows of the kit's ``jobs`` rendered by ``engine`` (the spec ``other``'s results),
+    by model and job."""
+    from sweep3d.results import results_connection, stored_parameters
+
     parameters = stored_parameters(store.jobs_path(spec.name)) or list(spec.parameter_columns)
     source, rows = f"engine:{engine}", []
     for settings in spec.models:
@@ -373,13 +388,7 @@ def score_engine(spec: LoadedSpec, engine: str, kit: Path | None = None, console
                 rows.append(_row(source, spec.name, job, settings.label, verdict, image_key=verdict["image_key"],
                                  preprocess=f"rendered by {engine}; the model's own preprocessing, as for the render"))
     rows.sort(key=lambda r: (r["model"], r["job"]))
-    with store.lock(wait):
-        # the other engine's images the report's pairs show: a run keeps its post-processed images
-        # in memory only ([postprocess] store = "none", the default), and the report makes again
-        # only its own experiment's, so they are written here, as `pick` writes the renders'
-        write_unstored_images(other, store, [r["image_key"] for r in rows])
-        store.append(VERDICTS, rows, VERDICT_SCHEMA)
-    return _scored(source, spec, store, rows)
+    return rows
 
 
 def _configurations(con: Any, jobs: Sequence[int] | None, parameters: Sequence[str],

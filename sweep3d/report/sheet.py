@@ -43,12 +43,13 @@ class Sheet:
 
 
 def contact_sheet(loaded: LoadedSpec, output: Path, progress: RunProgress, object_name: str | None = None,
-                  environment: str | None = None, tiles: int = MAX_TILES) -> Sheet:
+                  environment: str | None = None, tiles: int = MAX_TILES, wait: float = 0.0) -> Sheet:
     """Render the sheet for ``loaded`` into the PNG ``output``.
 
     Args:
         object_name, environment: the scene every row shows (default: the spec's first of each).
         tiles: the most tiles a row shows (0: every value).
+        wait: seconds to wait for another command holding the store's lock.
     """
     if not loaded.controls:
         raise UserError(f"{loaded.path}: the spec has no [[controls]] to show")
@@ -68,7 +69,7 @@ def contact_sheet(loaded: LoadedSpec, output: Path, progress: RunProgress, objec
         jobs += distinct
     plan = Plan(loaded, jobs, model.digest, framing=model.framing, device=plan.device)
     store = Store(loaded.store)
-    with store.lock():
+    with store.lock(wait):
         run_stages((RenderStage(), PostprocessStage()), plan, store, progress, strict=True)
     width = LABEL_WIDTH + TILE * max(len(r[1]) for r in rows)
     sheet = Image.new("RGB", (width, TILE * len(rows)), "white")

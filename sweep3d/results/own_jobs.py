@@ -36,8 +36,8 @@ log = logging.getLogger("sweep3d.results")
 class PlannedStore(Store):
     """The store, with ``experiment``'s jobs file replaced by ``jobs`` (its loaded spec's own plan)."""
 
-    def __init__(self, root: Path, experiment: str, jobs: Path) -> None:
-        super().__init__(root)
+    def __init__(self, root: Path, experiment: str, jobs: Path, warn: bool = True) -> None:
+        super().__init__(root, warn=warn)
         self.experiment, self.jobs = experiment, jobs
 
     def jobs_path(self, experiment: str) -> Path:
@@ -45,18 +45,20 @@ class PlannedStore(Store):
 
 
 @contextmanager
-def results_store(spec: LoadedSpec) -> Iterator[Store]:
+def results_store(spec: LoadedSpec, warn: bool = True) -> Iterator[Store]:
     """The store whose ``jobs`` for ``spec``'s experiment are ``spec``'s own (see the module).
+    ``warn``: warn of each file it reads around (False for a reader that refuses instead: see
+    :meth:`~sweep3d.cache.store.Store.require_readable`).
 
     Raises:
         UserError: the experiment last ran another spec and none of this one's jobs has a result.
     """
-    store = Store(spec.store)
+    store = Store(spec.store, warn=warn)
     if not last_run_is_another(spec, store):
         yield store
         return
     with tempfile.TemporaryDirectory(prefix="sweep3d-jobs-") as folder:
-        planned = PlannedStore(spec.store, spec.name, Path(folder) / store.jobs_path(spec.name).name)
+        planned = PlannedStore(spec.store, spec.name, Path(folder) / store.jobs_path(spec.name).name, warn)
         write_own_jobs(spec, planned)
         check_results(spec, planned)
         yield planned

@@ -45,10 +45,11 @@ def results_connection(spec: LoadedSpec, model: str | None = None, writable: Seq
                        statement: str = "", store: Store | None = None) -> Iterator[duckdb.DuckDBPyConnection]:
     """A read-only connection over the views of ``spec``'s own results (``model``'s, default the
     first model's; ``store``: a :func:`results_store` of ``spec`` the caller holds); a DuckDB error
-    inside the block becomes one line (no results yet: how to make them). ``failure_boundaries``
+    inside the block becomes one line (no results yet: how to make them), and so does a store
+    file that cannot be read (the answer would leave out its rows: refused, never given in part). ``failure_boundaries``
     and ``rules`` (computed in Python, seconds at scale) are added only when ``statement`` names
     them, so other queries cost what they did."""
-    with nullcontext(store) if store is not None else results_store(spec) as own:
+    with nullcontext(store) if store is not None else results_store(spec, warn=False) as own:
         with _connection(spec, own, model, writable, statement) as con:
             yield con
 
@@ -58,6 +59,7 @@ def _connection(spec: LoadedSpec, store: Store, model: str | None, writable: Seq
                 statement: str) -> Iterator[duckdb.DuckDBPyConnection]:
     con = connect(store, spec.name, read_only=True, writable=writable, model=model)
     try:
+        store.require_readable(spec.path)  # rows read around a file it could not read are no answer
         if names_boundaries(statement):
             register_failure_boundaries(con, numeric_scales(spec.controls))
         if names_rules(statement):

@@ -167,7 +167,7 @@ def connect(store: Store, experiment: str | None = None, read_only: bool = False
         parameters, models, min_visible = None, [], None
         if "jobs" in files:
             register_results(con, files["jobs"][0], "truths" in files)
-        if experiment is not None and store.jobs_path(experiment).exists():
+        if "jobs" in files:  # the experiment's jobs file, when it reads (one that does not is in store.unreadable)
             parameters = stored_parameters(store.jobs_path(experiment))
             models = stored_models(store.jobs_path(experiment))
             min_visible = plan_min_visible(store.jobs_path(experiment))

@@ -122,10 +122,7 @@ def parse_space(raw: Any) -> Space:
             raise ParamSyntaxError("empty list: give at least one value")
         for item in raw:
             _check_scalar(item)
-        seen: list[Any] = []
-        for item in raw:
-            if item not in seen:
-                seen.append(item)
+        seen = list(dict.fromkeys(raw))  # first of each value, by == as `in` would (1 and 1.0 are one), in linear time
         return Choice(tuple(seen)) if len(seen) > 1 else Fixed(seen[0])
     _check_scalar(raw)
     return Fixed(raw)

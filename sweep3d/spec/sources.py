@@ -18,6 +18,7 @@ from typing import Any, Mapping
 from sweep3d.core import Registry, SpecError, UserError
 from sweep3d.spec.catalogue import Catalogue
 from sweep3d.spec.loader import LoadedSpec, parse_toml, spec_from_file, validate_spec
+from sweep3d.spec.toml_text import toml_text
 
 DICT_FILE = "<dict>"
 STRING_FILE = "<string>"
@@ -150,10 +151,9 @@ def _with(registry: Registry, extra: dict[str, Any]) -> Registry:
 
 
 def _as_text(plain: dict[str, Any]) -> str:
-    """The spec as a TOML file would say it (JSON where TOML cannot: a None value)."""
-    import tomlkit
-
+    """The spec as a TOML file would say it (JSON where TOML cannot: a None value), in time
+    linear in its size (see :mod:`sweep3d.spec.toml_text`)."""
     try:
-        return tomlkit.dumps(plain)
-    except Exception:  # noqa: BLE001  (a value TOML has no type for: the validator says which)
+        return toml_text(plain)
+    except TypeError:  # a value TOML has no type for: the validator says which
         return json.dumps(plain, default=str, indent=1)

@@ -7,7 +7,9 @@ the fragile threshold are all checked when there are few of them, and every bin 
 
 Each (image, model, change) is one row of the store's ``stability`` table under its
 ``stability_key`` (the prediction key, the change, the check's version, and the seed for a random
-change), so a second check recomputes nothing and a larger sample adds only what is new. The
+change), appended every few seconds as the check goes, so a second check recomputes nothing, a
+larger sample adds only what is new, and a killed one resumes where it was stopped. The check
+holds the store's writer lock from its start (``--wait`` waits for another command's). The
 baseline is inferred again beside the changed images, by torch with the model's own
 preprocessing, so a flip compares two answers of one computation.
 """
@@ -81,41 +83,54 @@ def stratified_sample(rows: list[tuple[str, float]], n: int, seed: int) -> list[
     return out
 
 
-def check_stability(spec: LoadedSpec, sample: int = DEFAULT_SAMPLE, seed: int = 0, console: Any = None) -> list[Checked]:
+def check_stability(spec: LoadedSpec, sample: int = DEFAULT_SAMPLE, seed: int = 0, console: Any = None,
+                    wait: float = 0.0) -> list[Checked]:
     """Run the stability check of ``spec``'s results (every model of it); returns what each found.
+
+    It holds the store's writer lock from before it computes anything (``wait``: seconds to wait
+    for another command holding it), and appends its rows every few seconds: a kill loses one
+    batch, and the next check starts from what was stored.
 
     Raises:
         UserError: no results yet, or an evaluator that does not rank classes.
+        StoreBusyError: another command held the store's lock longer than ``wait``.
     """
-    from sweep3d.engine import plan_spec
-    from sweep3d.results import results_store
-    from sweep3d.stages.infer import ModelHandle
+    from sweep3d.results import no_results
 
     if spec.evaluator.kind != "classification":
         raise UserError(f"stability: [evaluator] kind = {spec.evaluator.kind!r}; the check reads the margin of "
                         "a classification verdict (kind = \"classification\")")
-    out = []
     store = Store(spec.store)
-    for settings in spec.spec.all_models:
-        handle = ModelHandle.resolve(spec, settings)
-        with results_store(spec) as reading:
-            rows = _sampled_results(reading, spec, settings.label if len(spec.spec.all_models) > 1 else None)
-        keys = stratified_sample(rows, sample, seed)
-        plan = plan_spec(spec, handle)
-        sampled = set(keys)
-        jobs = {job.pred_key: job for job in plan.jobs if job.pred_key in sampled}
-        if len(jobs) < len(sampled):
-            raise UserError(f"{spec.path}: {len(sampled) - len(jobs)} sampled results are not in the spec's plan "
-                            "any more (the spec changed since the run): `sweep3d run` it, then check again")
-        todo_changes = _applicable(handle, plan)
-        wanted = {(key, change): stability_key(key, change, seed) for key in keys for change in todo_changes}
-        have = store.key_set("stability")
-        todo = sorted({key for (key, _), skey in wanted.items() if skey not in have}, key=keys.index)
-        computed = _compute(store, spec, plan, handle, [jobs[k] for k in todo], todo_changes, seed, wanted, console,
-                            cached=len(keys) - len(todo), batch_size=settings.batch_size)
-        skipped = [f"{c}: {why}" for c, why in _inapplicable(handle, plan).items()]
-        out.append(_found(spec, settings.label, len(keys), computed, len(keys) - len(todo), skipped))
-    return out
+    if not spec.store.is_dir():  # before the lock would make the store's folder
+        raise no_results(store, spec.name, spec.path)
+    with store.lock(wait):
+        return [_check_model(spec, store, settings, sample, seed, console) for settings in spec.spec.all_models]
+
+
+def _check_model(spec: LoadedSpec, store: Store, settings: Any, sample: int, seed: int, console: Any) -> Checked:
+    """The check of one model of ``spec`` (``settings``), holding the store's lock."""
+    from sweep3d.engine import plan_spec
+    from sweep3d.results import results_store
+    from sweep3d.stages.infer import ModelHandle
+
+    handle = ModelHandle.resolve(spec, settings)
+    with results_store(spec) as reading:
+        rows = _sampled_results(reading, spec, settings.label if len(spec.spec.all_models) > 1 else None)
+    keys = stratified_sample(rows, sample, seed)
+    plan = plan_spec(spec, handle)
+    sampled = set(keys)
+    jobs = {job.pred_key: job for job in plan.jobs if job.pred_key in sampled}
+    if len(jobs) < len(sampled):
+        raise UserError(f"{spec.path}: {len(sampled) - len(jobs)} sampled results are not in the spec's plan "
+                        "any more (the spec changed since the run): `sweep3d run` it, then check again")
+    todo_changes = _applicable(handle, plan)
+    wanted = {(key, change): stability_key(key, change, seed) for key in keys for change in todo_changes}
+    have = store.key_set("stability")
+    todo = sorted({key for (key, _), skey in wanted.items() if skey not in have}, key=keys.index)
+    computed = _compute(store, spec, plan, handle, [jobs[k] for k in todo], todo_changes, seed, wanted, console,
+                        cached=len(keys) - len(todo), batch_size=settings.batch_size)
+    skipped = [f"{c}: {why}" for c, why in _inapplicable(handle, plan).items()]
+    return _found(spec, settings.label, len(keys), computed, len(keys) - len(todo), skipped)
 
 
 def _sampled_results(store: Store, spec: LoadedSpec, model: str | None) -> list[tuple[str, float]]:
@@ -177,8 +192,8 @@ def _compute(store: Store, spec: LoadedSpec, plan: Any, handle: Any, jobs: list,
     have = store.key_set("stability")
     post = post_controls(plan)
     batch = max(1, batch_size // (1 + len(changes)))  # this model's batch, shared by the changed copies
-    rows: list[dict[str, Any]] = []
-    with RunProgress(console) as progress, progress.stage("stability", len(jobs), cached) as bar:
+    with (store.segment_writer("stability", SCHEMA) as rows,  # a segment every few seconds: a kill loses one
+          RunProgress(console) as progress, progress.stage("stability", len(jobs), cached) as bar):
         for start in range(0, len(jobs), batch):
             part = jobs[start: start + batch]
             pixels = []
@@ -202,10 +217,10 @@ def _compute(store: Store, spec: LoadedSpec, plan: Any, handle: Any, jobs: list,
                 else:
                     moved = [changed(p, change, seed, job.image_key) for p, job in zip(pixels, part)]
                     answers[change] = predict(model, from_uint8(np.stack(moved)), handle.name)
-            rows += [row for row in _rows(part, ids, base, answers, seed, wanted) if row["stability_key"] not in have]
+            for row in _rows(part, ids, base, answers, seed, wanted):
+                if row["stability_key"] not in have:
+                    rows.add(row)
             bar.advance(len(part))
-    with store.lock():
-        store.append("stability", rows, SCHEMA)
     return len(jobs)
 
 

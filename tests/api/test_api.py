@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import time
 import tomllib
 from pathlib import Path
 
@@ -84,6 +85,20 @@ def test_a_dict_nested_too_deep_is_one_line(tmp_path: Path) -> None:
         deep = deep["d"]
     with pytest.raises(SpecError, match=r"^<dict>: render\.deep(\.d)+: nests more than 64 levels deep"):
         sweep3d.load(spec, base=tmp_path)
+
+
+def test_a_dict_of_a_hundred_thousand_values_loads_and_is_refused_over_max_jobs_at_once(tmp_path: Path) -> None:
+    write_cube(tmp_path)
+    spec = tomllib.loads(TINY_SPEC)
+    spec["controls"][0]["yaw"] = [i * 360 / 100_000 for i in range(100_000)]
+    spec["controls"][1]["sigma"] = [i / 20 for i in range(40)]
+    started = time.monotonic()
+    experiment = sweep3d.load(spec, base=tmp_path)  # tomlkit's text took minutes, and the values' dedup too
+    assert len(experiment.spec.controls[0].spaces["yaw"].values()) == 100_000
+    with pytest.raises(SpecError, match=r"^<dict>: policy: the spec expands to 8,000,000 jobs, over the limit"):
+        experiment.plan()
+    assert time.monotonic() - started < 30  # seconds, on a loaded machine
+    assert not (tmp_path / "store").exists()
 
 
 class Darken(PostControl):

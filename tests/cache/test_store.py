@@ -188,6 +188,50 @@ def test_second_writer_gets_a_clear_busy_error(tmp_path):
         pass
 
 
+def test_two_threads_of_one_process_are_told_the_store_is_in_use(tmp_path):
+    """Two ``Experiment`` objects run in two threads: the second was told the store "is not
+    writable (No such file or directory)", the two threads' writability probes having one name,
+    each removing the other's (issue 45, item 8)."""
+    import threading
+
+    root = tmp_path / "store"
+    threads, start, errors = 8, threading.Barrier(8), []
+
+    def probe() -> None:
+        start.wait()
+        for _ in range(200):
+            try:
+                Store(root).ensure_writable()
+            except UserError as exc:
+                errors.append(str(exc))
+
+    workers = [threading.Thread(target=probe) for _ in range(threads)]
+    for worker in workers:
+        worker.start()
+    for worker in workers:
+        worker.join()
+    assert errors == [] and not list(root.glob(".probe-*"))
+
+    held, release, outcome = threading.Event(), threading.Event(), []
+
+    def first() -> None:
+        with Store(root).lock():
+            held.set()
+            release.wait(30)
+
+    holder = threading.Thread(target=first)
+    holder.start()
+    try:
+        assert held.wait(30)
+        with pytest.raises(StoreBusyError, match=rf"^store {root} is in use by sweep3d pid {os.getpid()}"):
+            with Store(root).lock():
+                outcome.append("entered")
+    finally:
+        release.set()
+        holder.join()
+    assert outcome == []
+
+
 def test_wait_lets_the_second_writer_in_after_release(tmp_path):
     root = tmp_path / "store"
     proc = hold_lock(root, "1.5")

@@ -43,7 +43,7 @@ from sweep3d.results.task_views import OUTCOMES
 from sweep3d.spec.columns import PARAMETERS_METADATA
 from sweep3d.spec.framing import Framing
 from sweep3d.spec.space import SearchSpace
-from sweep3d.stages.infer.prediction_keys import infer_base, pred_key
+from sweep3d.stages.infer.prediction_keys import infer_base, key_backend, pred_key
 from sweep3d.stages.plan import make_plan
 from sweep3d.stages.postprocess.image_keys import image_key
 from sweep3d.stages.render.render_keys import parts_key, render_key, scene_key
@@ -690,7 +690,8 @@ def reference_jobs(spec, *, framing: Framing, model_digest: str, blender: str) -
                       key=lambda c: (c.control.order, spec.controls.index(c)))
     post = [c for c in spec.controls if c.control.stage == "post"]
     settings_part = spec.render.key_part(framing.key_part())
-    base = infer_base(model_digest, {"kind": spec.evaluator.kind, "top_k": spec.evaluator.params.get("top_k", 5)}, spec.model.backend)
+    base = infer_base(model_digest, {"kind": spec.evaluator.kind, "top_k": spec.evaluator.params.get("top_k", 5)},
+                      key_backend(spec, spec.model))
     out = []
     for obj in spec.objects:
         object_digest = mesh_digest(spec.meshes[obj.name], spec.store)

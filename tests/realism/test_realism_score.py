@@ -209,3 +209,43 @@ def test_the_summary_without_an_agreement_view_is_one_line_not_a_failure(tmp_pat
     con.execute("CREATE VIEW results_all AS SELECT 1 AS job, 'apple' AS object, true AS correct")
     line = _no_agreement(con, spec)
     assert "lack the column(s) counted" in line and f"sweep3d run {spec.path}" in line
+
+
+def test_beside_another_command_s_hold_score_is_refused_before_the_models_run(tmp_path: Path, monkeypatch) -> None:
+    """It classified every photograph first and took the store's lock last: during another spec's
+    run its work was thrown away. Now it holds the lock before a model runs (issue 45, item 9)."""
+    import os
+    import threading
+
+    from sweep3d.realism import score as scoring
+
+    spec, jobs = kit(tmp_path, monkeypatch)
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    for job in jobs:
+        (photos / f"{job}.jpg").write_bytes(photo_like(image_of((200, 10, 10)), seed=job))
+
+    def classify(*args, **kwargs):
+        raise AssertionError("a model ran without the store's lock")
+
+    monkeypatch.setattr(scoring, "classify", classify)
+    root = tmp_path / "store"
+    ready, release = threading.Event(), threading.Event()
+
+    def hold() -> None:
+        with Store(root).lock():
+            ready.set()
+            release.wait(60)
+
+    holder = threading.Thread(target=hold)
+    holder.start()
+    try:
+        assert ready.wait(30)
+        result = score(spec, photos)
+    finally:
+        release.set()
+        holder.join()
+    assert result.exit_code == 2, result.output
+    assert result.output.strip().splitlines()[-1] == (
+        f"error: store {root} is in use by sweep3d pid {os.getpid()}; wait for it to finish or pass --wait SECONDS")
+    assert not Store(root).segments(VERDICTS) and not (root / "realism").exists()

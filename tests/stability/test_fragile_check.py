@@ -53,3 +53,34 @@ def test_the_check_stores_a_row_per_image_and_change_and_recomputes_nothing(tiny
     assert f"stability check of {images} images" in page and "Fragile: " in page  # the failures panel says it
 
 
+
+
+def test_the_check_appends_as_it_goes_and_a_stopped_one_resumes(tiny_copy: Path, monkeypatch) -> None:
+    """Its rows were appended only at its end: a kill lost every inference (the rerun started from
+    0 cached). They are appended as the check goes (every few seconds; here at once), so what was
+    inferred before a stop is kept and the next check infers only the rest (issue 45, item 9)."""
+    from sweep3d.cache.store import SegmentWriter
+    from sweep3d.stability import check
+
+    spec = str(tiny_copy / "spec.toml")
+    store = Store(tiny_copy / "store")
+    monkeypatch.setattr(Store, "segment_writer", lambda self, table, schema=None, every=3.0, max_rows=64:
+                        SegmentWriter(self, table, schema, 0.0, max_rows))  # due at every row: a kill keeps them
+    rows_of_batch = check._rows
+    batches: list[int] = []
+
+    def stopped_in_the_second(*args, **kwargs):
+        batches.append(len(batches))
+        if len(batches) == 2:  # the first batch (2 images × 3 changes) is in the store already
+            assert store.table("stability").num_rows == 6
+            raise KeyboardInterrupt
+        return rows_of_batch(*args, **kwargs)
+
+    monkeypatch.setattr(check, "_rows", stopped_in_the_second)
+    first = CliRunner().invoke(app, ["stability", spec, "--sample", "4", "--seed", "3"])
+    assert first.exit_code == 130 and "interrupted" in first.output, first.output
+    assert store.table("stability").num_rows == 6
+    monkeypatch.setattr(check, "_rows", rows_of_batch)
+    again = CliRunner().invoke(app, ["stability", spec, "--sample", "4", "--seed", "3"])
+    assert again.exit_code == 0 and "stability check of 4 images (2 cached, 2 inferred now; seed 3)" in again.output
+    assert store.table("stability").num_rows == 12

@@ -5,8 +5,8 @@ from __future__ import annotations
 __all__ = [
     "ClassificationEvaluator", "Classifier", "Detector", "EVALUATORS", "Evaluator", "EvaluatorParams",
     "IMAGENET", "ImageTensors", "InferStage", "LabelMap", "MODELS", "ModelHandle", "Normalize",
-    "Preprocess", "Roles", "Segmenter", "Truth", "builtin_labels", "builtin_model", "check_task",
-    "evaluate_checked", "evaluator_key", "first_rows", "infer_base", "load_model", "measure_of",
+    "Preprocess", "Roles", "Segmenter", "Truth", "builtin_labels", "builtin_model", "check_task", "choose_backend",
+    "evaluate_checked", "evaluator_key", "first_rows", "infer_base", "key_backend", "load_model", "measure_of",
     "model_outputs", "object_class_ids", "padded", "pending_predictions", "pred_keys", "predict"
 ]
 
@@ -35,7 +35,7 @@ if _TYPE_CHECKING:
         builtin_model,
         load_model,
     )
-    from sweep3d.stages.infer.prediction_keys import evaluator_key, infer_base, pred_keys
+    from sweep3d.stages.infer.prediction_keys import choose_backend, evaluator_key, infer_base, key_backend, pred_keys
     from sweep3d.stages.infer.task_calls import check_task, model_outputs, predict
 
 __getattr__, __dir__ = _exports(__name__, {
@@ -64,6 +64,8 @@ __getattr__, __dir__ = _exports(__name__, {
     "evaluator_key": ("sweep3d.stages.infer.prediction_keys", "evaluator_key"),
     "first_rows": ("sweep3d.stages.infer.infer_stage", "first_rows"),
     "infer_base": ("sweep3d.stages.infer.prediction_keys", "infer_base"),
+    "key_backend": ("sweep3d.stages.infer.prediction_keys", "key_backend"),
+    "choose_backend": ("sweep3d.stages.infer.prediction_keys", "choose_backend"),
     "load_model": ("sweep3d.stages.infer.models", "load_model"),
     "measure_of": ("sweep3d.stages.infer.evaluators", "measure_of"),
     "model_outputs": ("sweep3d.stages.infer.task_calls", "model_outputs"),

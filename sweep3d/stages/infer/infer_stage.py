@@ -1,8 +1,10 @@
 """The infer stage: batched forward passes over every image whose prediction is not cached.
 
-Which backend computes the predictions is :func:`choose_backend`'s choice: by default ONNX Runtime
-standing in for torch, whose answers are torch's (``onnx_backend``), so prediction keys do not
-change with it.
+Which backend computes the predictions is ``prediction_keys.choose_backend``'s choice: by default
+ONNX Runtime standing in for torch, whose ranks are torch's (``onnx_backend``); torch computing
+for the same model is named in the prediction keys (``prediction_keys.key_backend``), since the
+probabilities of the two differ in the last digits. A stand-in that cannot serve refuses the run
+rather than handing its keys to torch.
 
 An image's outputs are the same bits whatever batch it lands in (images are batched as they
 arrive, so which images share a batch changes run to run): torch's kernels sum in another order
@@ -30,7 +32,7 @@ import pyarrow as pa
 from sweep3d.cache import Store, load_pass, load_pixels, utc_now
 from sweep3d.core import SpecError, UserError, from_uint8
 from sweep3d.driver import Computed, Feed, Job, JobList, Plan, unique_jobs
-from sweep3d.spec import PREDICTION_COLUMNS, LoadedSpec, ModelSpec
+from sweep3d.spec import PREDICTION_COLUMNS
 from sweep3d.stages.infer.evaluate import evaluate_checked
 from sweep3d.stages.infer.evaluators import EVALUATORS, Evaluator, Truth
 from sweep3d.stages.infer.handle import ModelHandle, model_key_path
@@ -38,6 +40,7 @@ from sweep3d.stages.infer.kept_outputs import KeptOutputs
 from sweep3d.stages.infer.labels import LabelMap
 from sweep3d.stages.infer.models import Classifier, builtin_model
 from sweep3d.stages.infer.outputs import Localized
+from sweep3d.stages.infer.prediction_keys import STAND_IN, choose_backend
 from sweep3d.stages.infer.task_calls import check_task, model_outputs
 from sweep3d.stages.postprocess import ImageHandoff, make_image, post_controls, truth_digests
 
@@ -55,25 +58,6 @@ def predictions_schema(evaluator: Evaluator) -> pa.Schema:
     return pa.schema(BASE_COLUMNS + list(zip(evaluator.schema.names, evaluator.schema.types)))
 
 
-#: The backend name of ONNX Runtime standing in for torch (see ``onnx_backend``): torch's keys.
-STAND_IN = "onnx-as-torch"
-
-
-def choose_backend(spec: LoadedSpec, model: ModelSpec, on_ray: bool = False) -> str:
-    """What computes the run's predictions: "torch", "onnx" (ONNX Runtime's own answers, keyed
-    apart) or :data:`STAND_IN` (ONNX Runtime giving torch's answers, under torch's keys).
-
-    A backend written in the spec is used as written. Left out, the built-in model with the
-    built-in evaluator gets ONNX Runtime standing in for torch, the fastest on CPU
-    (benchmarks/RESULTS.md); a user's model, or inference on Ray (a GPU), gets torch.
-    """
-    if "backend" in model.model_fields_set or on_ray:
-        return model.backend
-    if builtin_model(model.name) is None or spec.evaluator.kind != "classification":
-        return "torch"
-    return STAND_IN
-
-
 class InferStage:
     """Predicts every image of the plan that has no prediction yet, with the run's model.
 
@@ -82,7 +66,9 @@ class InferStage:
 
     Args:
         model: the run's model (resolved once, loaded on first use).
-        on_ray: batches go to a Ray inference actor (a GPU when the cluster has one).
+        on_ray: batches that torch computes go to a Ray inference actor (a GPU when the cluster has
+            one); ONNX Runtime, standing in or asked for, infers here as in a local run, so the
+            bytes under a key are the same whichever executor made the renders.
         several: the run infers several models (each progress bar names its model).
         handoff: the post-processed images made in this process (taken before any blob is read).
         images_stored: post-processed images are written to the store (``[postprocess] store``).
@@ -140,7 +126,7 @@ class InferStage:
         """
         spec = plan.spec
         task = self._evaluator(plan).task
-        self.backend = choose_backend(spec, self.model.settings, self.on_ray)
+        self.backend = choose_backend(spec, self.model.settings)
         if self.backend == "onnx" and task != "classification":
             raise SpecError(str(spec.path), model_key_path(spec, self.model.settings).replace("name", "backend"),
                             f"the onnx backend serves classification only, not {task!r}; use backend = \"torch\"")
@@ -149,7 +135,6 @@ class InferStage:
             self._model = self.model.unloaded()
             object_class_ids(plan, self._model.label_map(), self.model.name)
             self._runner = self._runner or self._served_by_onnx(plan, store)
-            served = self._runner is not None  # else torch, which stood in for a failed stand-in
         if not served:
             import torch
 
@@ -172,9 +157,9 @@ class InferStage:
             self._runner = self._served_by_onnx(plan, store)
         self._labels = labels
 
-    def _served_by_onnx(self, plan: Plan, store: Store) -> OnnxRunner | None:
-        """The ONNX Runtime runner of the run's backend: asked for (its failure is the user's to see
-        now) or standing in (exported and checked now, while Blender starts; None: torch instead)."""
+    def _served_by_onnx(self, plan: Plan, store: Store) -> OnnxRunner:
+        """The ONNX Runtime runner of the run's backend, asked for or standing in (exported and
+        checked now, before anything renders); its failure is the user's to see now."""
         if self.backend == "onnx":
             return self._onnx(plan, store, self._threads())
         return self._stand_in(plan, store, self._threads(beside=True))
@@ -272,17 +257,24 @@ class InferStage:
         return OnnxRunner(self.model.classifier, store.root / "models", self.model.digest, threads,
                           exact_ranks, scratch=store.root / "tmp")
 
-    def _stand_in(self, plan: Plan, store: Store, threads: int) -> OnnxRunner | None:
-        """ONNX Runtime standing in for torch, or None (torch) when it cannot: its answers must be
-        torch's, so an export that fails or disagrees means torch, with a warning."""
+    def _stand_in(self, plan: Plan, store: Store, threads: int) -> OnnxRunner:
+        """ONNX Runtime standing in for torch.
+
+        Raises:
+            UserError: it cannot (a full disk, an export that fails or disagrees with torch). Torch
+                inferring instead would store its rows under the stand-in's keys, whose rows
+                elsewhere (another run, another store) are ONNX Runtime's: the same ranks, other
+                last digits. ``backend = "torch"`` has keys of its own.
+        """
         try:
             top_k = getattr(self._evaluator(plan).params, "top_k", 5)
             return self._onnx(plan, store, threads, exact_ranks=max(top_k, 5))  # and top-5
-        except Exception as exc:  # noqa: BLE001  (whatever stops ONNX Runtime, torch gives the same answers)
-            log.warning(f"warning: ONNX Runtime cannot stand in for torch ({str(exc).split(';')[0]}); "
-                        "inferring with torch")
-            self.backend = "torch"
-            return None
+        except Exception as exc:  # noqa: BLE001  (whatever stops ONNX Runtime: one line, the run stops)
+            where = model_key_path(plan.spec, self.model.settings).replace("name", "backend")
+            reason = (str(exc).strip().splitlines() or [type(exc).__name__])[0].split(";")[0]
+            raise UserError(f"ONNX Runtime cannot stand in for torch for {self.model.name} ({reason}); fix that "
+                            f"and run again, or set {where} = \"torch\" to infer with torch (its predictions are "
+                            "keyed apart: their probabilities differ from ONNX Runtime's in the last digits)") from None
 
     def _answers(self, plan: Plan) -> str:
         """Whose answers the outputs are, for keeping them: the backend, and for ONNX Runtime standing

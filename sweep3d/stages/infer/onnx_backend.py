@@ -1,11 +1,12 @@
 """ONNX Runtime for classifiers: about 4× faster than eager torch per image on this project's CPU.
 
-It serves in two ways (``stages.infer.infer_stage.choose_backend`` picks):
+It serves in two ways (``stages.infer.prediction_keys.choose_backend`` picks):
 
 - ``[model] backend = "onnx"``: ONNX Runtime's own answers, for any model torch can export; the
   backend is part of the prediction keys, so they are stored apart from torch's.
 - ``backend`` left out, for the built-in model and evaluator: ONNX Runtime *stands in* for torch
-  and its answers are torch's, so the keys are torch's. Two things make that hold. Before use, the
+  and its ranks are torch's (its probabilities differ in the last digits, so eager torch for the
+  same model is keyed apart: ``prediction_keys.key_backend``). Two things make that hold. Before use, the
   export is checked against torch on a fixed batch (top-1 equal, logits within ``TOLERANCE``).
   Then, per image, where ranking by its logits could come out differently within the error the
   check measured (times ``SAFETY``; two of the top k + 1 logits closer than twice it, or one not

@@ -28,7 +28,7 @@ from sweep3d.spec import (
     SearchSpace,
     spec_class_names,
 )
-from sweep3d.stages.infer import LabelMap, builtin_labels, evaluator_key, infer_base, pred_keys
+from sweep3d.stages.infer import LabelMap, builtin_labels, evaluator_key, infer_base, key_backend, pred_keys
 from sweep3d.stages.plan.batch import ControlBatch, control_batch, groups, keyed_texts
 from sweep3d.stages.plan.checked import policy_count
 from sweep3d.stages.plan.crossing import crossing
@@ -103,7 +103,7 @@ def make_plan(spec: LoadedSpec, *, framing: Framing, model_digest: str, blender:
                       key=lambda c: (c.control.order, spec.controls.index(c)))
     post = [c for c in spec.controls if c.control.stage == "post"]
     settings = spec.render.key_part(framing.key_part(), device)
-    base = infer_base(model_digest, evaluator_key(spec.evaluator), model.backend)
+    base = infer_base(model_digest, evaluator_key(spec.evaluator), key_backend(spec, model))
     passes = truth_passes(spec)
     keys = _Keys(parts=[] if spec.report.part_visibility else None, truth=[] if passes else None, truth_passes=passes)
     blocks: list[SceneBlock] = []

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from sweep3d.core.errors import UserError
 from sweep3d.stages.infer import IMAGENET, ClassificationEvaluator, load_model, predict
 from sweep3d.stages.infer.evaluators import Truth, log_softmax
-from sweep3d.stages.infer.infer_stage import STAND_IN
+from sweep3d.stages.infer.prediction_keys import STAND_IN
 from tests.helpers import TINY_SPEC, examples, write_spec
 from tests.helpers.models import tied_model
 
@@ -151,22 +151,69 @@ def test_the_near_tie_margin_is_the_error_the_check_measured(tmp_path) -> None:
     assert measured <= runner.error / SAFETY * 4 or runner.error == FLOOR  # the check saw errors of this size
 
 
-@pytest.mark.parametrize(("model", "on_ray", "backend"), [
-    ("", False, STAND_IN),  # left out, built-in model: ONNX Runtime standing in for torch
-    ('backend = "torch"\n', False, "torch"),  # written out: used as written
-    ('backend = "onnx"\n', False, "onnx"),
-    ("", True, "torch"),  # inference on a Ray actor (a GPU) runs torch
-    ('name = "my_models:make"\n', False, "torch"),  # a user's model: torch unless asked
+@pytest.mark.parametrize(("model", "backend", "keyed"), [
+    ("", STAND_IN, None),  # left out, built-in model: ONNX Runtime standing in, under the keys it always had
+    ('backend = "torch"\n', "torch", "torch"),  # written out: used as written, and named in the keys
+    ('backend = "onnx"\n', "onnx", "onnx"),
+    ('name = "my_models:make"\n', "torch", None),  # a user's model: torch unless asked; nothing stands in
 ])
-def test_the_backend_is_the_spec_s_or_onnx_standing_in_for_the_built_in_model(tmp_path, model, on_ray,
-                                                                                backend) -> None:
-    from sweep3d.stages.infer.infer_stage import choose_backend
+def test_the_backend_that_computes_is_named_in_the_keys_unless_it_is_the_models_default(tmp_path, model, backend,
+                                                                                       keyed) -> None:
+    from sweep3d.stages.infer import choose_backend, key_backend
     from tests.helpers import load_spec
 
     (tmp_path / "my_models.py").write_text("def make():\n    raise NotImplementedError\n")
     write_spec(tmp_path, TINY_SPEC.replace("[model]\n", "[model]\n" + model))
     loaded = load_spec(tmp_path / "spec.toml")
-    assert choose_backend(loaded, loaded.model, on_ray) == backend
+    assert choose_backend(loaded, loaded.model) == backend and key_backend(loaded, loaded.model) == keyed
+
+
+def test_torch_and_onnx_runtime_standing_in_never_share_a_prediction_key(tmp_path) -> None:
+    """The two give the same ranks but probabilities apart in the 6th digit: a row one computed
+    was served to a run of the other under the same key (after a full disk stopped the stand-in,
+    or with renders on Ray, whose actor ran torch). Now each backend has keys of its own, and the
+    stand-in's are the keys a default run always had (a store's predictions stay cached)."""
+    from sweep3d.stages.infer import evaluator_key
+    from sweep3d.stages.infer.prediction_keys import INFER_STAGE_VERSION, pred_key
+    from tests.helpers import load_spec, plan_for
+
+    plans = {}
+    for name, model in (("default", ""), ("torch", 'backend = "torch"\n'), ("onnx", 'backend = "onnx"\n')):
+        (tmp_path / name).mkdir()
+        write_spec(tmp_path / name, TINY_SPEC.replace("[model]\n", "[model]\n" + model))
+        plans[name] = plan_for(load_spec(tmp_path / name / "spec.toml"), "m")
+    images = {name: [j.image_key for j in plan.jobs] for name, plan in plans.items()}
+    assert images["default"] == images["torch"] == images["onnx"] and len(images["default"]) == 8
+    preds = {name: {j.pred_key for j in plan.jobs} for name, plan in plans.items()}
+    assert len(preds["default"] | preds["torch"] | preds["onnx"]) == 3 * len(preds["default"])
+    spec = load_spec(tmp_path / "default" / "spec.toml")
+    unnamed = {"stage": "infer", "v": INFER_STAGE_VERSION, "model": "m", "evaluator": evaluator_key(spec.evaluator)}
+    assert [j.pred_key for j in plans["default"].jobs] == [
+        pred_key(unnamed, j.image_key, list(spec.labels[j.object])) for j in plans["default"].jobs]
+
+
+def test_a_stand_in_that_cannot_serve_refuses_instead_of_keying_torch_s_rows_as_its_own(tmp_path, monkeypatch) -> None:
+    """A full disk stopped the export: the run inferred with torch under the stand-in's keys."""
+    import errno
+
+    from sweep3d.cache import Store
+    from sweep3d.engine.pipeline import plan_spec
+    from sweep3d.stages.infer import InferStage, ModelHandle
+    from tests.helpers import load_spec
+
+    def full_disk(*args, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(InferStage, "_onnx", full_disk)
+    loaded = load_spec(write_spec(tmp_path, TINY_SPEC))
+    handle = ModelHandle.resolve(loaded)
+    plan, store = plan_spec(loaded, handle), Store(loaded.store)
+    with pytest.raises(UserError) as caught:
+        InferStage(handle).prepare(plan, store)
+    assert str(caught.value) == (
+        "ONNX Runtime cannot stand in for torch for efficientnet-lite0 ([Errno 28] No space left on device); fix "
+        "that and run again, or set model.backend = \"torch\" to infer with torch (its predictions are keyed "
+        "apart: their probabilities differ from ONNX Runtime's in the last digits)")
 
 
 def test_top5_and_label_ids_whatever_top_k() -> None:
