@@ -46,6 +46,7 @@ def derived_spec(folder: Path, engine: str, samples_per_dim: int) -> Path:
             kept.append(control)
     doc["controls"] = kept
     doc["policy"]["samples_per_dim"] = samples_per_dim
+    folder.mkdir(parents=True, exist_ok=True)
     path = folder / f"quickstart-{engine}.toml"
     path.write_text(tomlkit.dumps(doc))
     return path

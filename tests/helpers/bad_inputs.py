@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Iterator
 
-from tests.helpers import TINY_SPEC
+from tests.helpers import CUBE_OBJ, TINY_SPEC
 
 #: A FIFO's reader waits for a writer for ever: past this many seconds, :func:`fifo_watch` calls that a hang.
 FIFO_SECONDS = 1.0
@@ -87,9 +87,25 @@ ASSETS: list[BadSpec] = [
             edit=('hdri = "builtin:studio"', 'hdri = "pipe.exr"'), fifos=("pipe.exr",)),
 ]
 
-#: Bad materials (``.mtl`` files an OBJ names, written in ``files``): add them here as the material
-#: checks come (issue 45, item 5); each runs against every command as the other specs do.
-MATERIALS: list[BadSpec] = []
+def _material(id_: str, mtl: str | None, expect: tuple[str, ...], extra: dict[str, bytes] | None = None) -> BadSpec:
+    """The spec's cube as ``m.obj`` naming ``m.mtl`` (absent when ``mtl`` is None) with material ``m``."""
+    files = {"m.obj": ("mtllib m.mtl\nusemtl m\n" + CUBE_OBJ).encode(), **(extra or {})}
+    if mtl is not None:
+        files["m.mtl"] = mtl.encode()
+    return BadSpec(id_, expect, edit=('mesh = "cube.obj"', 'mesh = "m.obj"'), files=files)
+
+
+#: Bad materials (``.mtl`` files an OBJ names, written in ``files``); each runs against every
+#: command as the other specs do (tests/assets/test_materials.py has the whole table).
+MATERIALS: list[BadSpec] = [
+    _material("mtl-missing", None, ("m.mtl",)),
+    _material("mtl-kd-huge-negative", "newmtl m\nKd 1e300 1e300 -5\n", ("m.mtl line 2", "too large")),
+    _material("mtl-kd-nan", "newmtl m\nKd 1 nan 0\n", ("m.mtl line 2", "not a finite number")),
+    _material("mtl-ns-word", "newmtl m\nNs abc\n", ("m.mtl line 2", "'abc' is not a number")),
+    _material("mtl-texture-missing", "newmtl m\nmap_Kd wood.png\n", ("wood.png does not exist",)),
+    _material("mtl-texture-not-an-image", "newmtl m\nmap_Kd tex.png\n", ("tex.png is not a readable image",),
+              {"tex.png": b"not an image\n"}),
+]
 
 #: Every spec case: what ``plan``, ``run`` and ``realism score`` are each given.
 SPEC_CASES: list[BadSpec] = [*SPECS, *ASSETS, *MATERIALS]
