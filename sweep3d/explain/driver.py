@@ -278,8 +278,8 @@ def _further(fixes: list[Fix], axes: dict[tuple[str, str], list[Axis]], stages: 
         return fixes
     if console is not None:
         console.print(f"[bold]explain[/] {fragile} of {sum(f.fix is not None for f in fixes)} fixes are fragile "
-                      f"(|margin| < {rule.threshold:.3g}, the stability check's threshold): searching further along "
-                      "their changes", highlight=False, soft_wrap=True)
+                      f"(|margin| < {rule.threshold:.3g}, the stability check's threshold, or flipped in the check): "
+                      "searching further along their changes", highlight=False, soft_wrap=True)
     left = None if budget is None else max(budget - state.charged, 0)
     done = search_further(fixes, axes.__getitem__, stages.judged(rule), budget=left,
                           free=lambda c: c in own or c in stages.seen, resolution=resolution)
@@ -473,7 +473,8 @@ def explained_lines(rows: Sequence[dict[str, Any]], threshold: float | None, res
         return lines
     fragile = sum(r.get("fix_fragile") is True for r in found)
     sturdier = sum(r.get("nearest_distance") is not None for r in found)
+    past = (f"; {sturdier} fragile nearest {'fix was' if sturdier == 1 else 'fixes were'} replaced by a sturdier "
+            "one further along the same change" if sturdier else "")
     lines.append(f"fragile: {fragile} of {len(found)} fixes (|margin| < {threshold:.3g}, the stability check's "
-                 f"threshold, or flipped in the check), after searching past the fragile nearest fixes: "
-                 f"{sturdier} found a sturdier fix further along the same change")
+                 f"threshold, or flipped in the check){past}")
     return lines

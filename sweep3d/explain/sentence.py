@@ -55,18 +55,19 @@ def trust_words(row: Mapping[str, Any]) -> str:
     ``margin +0.31, not fragile``; ``fragile: margin +0.012, below the stability check's 0.05, and
     none of 6 probes further along the change clears it``; or, where a sturdier fix replaced the
     nearest, ``margin +0.21, not fragile; the nearest fix, +14 orientation_yaw at distance 0.039, is
-    fragile: margin +0.012, below the stability check's 0.05; this is the first sturdy one of 3
-    probes past it, 1/64 of the range and doubling``. Without a stability check, the margin alone."""
+    fragile: margin +0.012, below the stability check's 0.05; this is the first not fragile of 3
+    probes past it (1/64 of the range, then doubling)``. Without a stability check, the margin alone."""
     threshold = row.get("fragile_threshold")
     said = _margin(row.get("fix_margin"))
     nearest = row.get("nearest_distance")
     if nearest is not None:  # a sturdier fix further along replaced the fragile nearest one
         probes = row.get("further_probes") or 0
         step = share_words(row["resolution"]) if row.get("resolution") is not None else "a search step"
+        where = (f"this is one search step ({step} of the range) past it" if probes == 1 else
+                 f"this is the first not fragile of {probes} probes past it ({step} of the range, then doubling)")
         return (f"{said}, not fragile; the nearest fix, {row.get('nearest_change') or 'unknown'} at distance "
                 f"{nearest:.3g}, is fragile: {_margin(row.get('nearest_margin'))}, "
-                f"{_why(row.get('nearest_margin'), threshold)}; this is the first sturdy one of {probes} "
-                f"{'probe' if probes == 1 else 'probes'} past it, {step} of the range and doubling")
+                f"{_why(row.get('nearest_margin'), threshold)}; {where}")
     if row.get("fix_fragile") is True:
         probes = row.get("further_probes") or 0
         stopped = row.get("complete", True) is False

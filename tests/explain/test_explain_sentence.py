@@ -64,8 +64,10 @@ def test_a_sturdier_fix_past_the_nearest_names_the_nearest_and_its_margin() -> N
                nearest_distance=0.039, nearest_margin=0.012, nearest_change="+14 orientation_yaw")
     assert fix_sentence(past) == (
         "+20 orientation_yaw makes it a toaster (margin +0.21, not fragile; the nearest fix, +14 orientation_yaw "
-        "at distance 0.039, is fragile: margin +0.012, below the stability check's 0.05; this is the first sturdy "
-        "one of 3 probes past it, 1/64 of the range and doubling)")
+        "at distance 0.039, is fragile: margin +0.012, below the stability check's 0.05; this is the first not "
+        "fragile of 3 probes past it (1/64 of the range, then doubling))")
+    assert fix_sentence({**past, "further_probes": 1}).endswith("; this is one search step (1/64 of the range) "
+                                                                "past it)")
 
 
 @settings(max_examples=examples(100), deadline=None)
