@@ -281,9 +281,10 @@ def _further(fixes: list[Fix], axes: dict[tuple[str, str], list[Axis]], stages: 
                       f"(|margin| < {rule.threshold:.3g}, the stability check's threshold, or flipped in the check): "
                       "searching further along their changes", highlight=False, soft_wrap=True)
     left = None if budget is None else max(budget - state.charged, 0)
+    asked = len(stages.seen)
     done = search_further(fixes, axes.__getitem__, stages.judged(rule), budget=left,
                           free=lambda c: c in own or c in stages.seen, resolution=resolution)
-    state.probes += done.probes
+    state.probes += len(stages.seen) - asked  # those the search had not asked already
     state.charged += done.charged
     return done.fixes
 

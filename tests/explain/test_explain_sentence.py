@@ -91,6 +91,14 @@ def test_the_resolution_is_in_each_parameters_own_units(tmp_path: Path) -> None:
     changes = _changes(space, fix)
     assert [c[0] for c in changes] == ["orientation_yaw", "blur_sigma"]
     assert _resolutions(space, fix, changes, 1 / 64) == pytest.approx([360 / 64, 1.5 / 64])
+    logged = load_spec(write_spec(tmp_path, body.replace("sigma = { range = [0.0, 1.5] }",
+                                                         "sigma = { range = [0.1, 10.0], log = true }")))
+    space, _ = scene_axes(logged, ("box", "white"))
+    sigma = space.continuous[1].space
+    # on a log range, the step at the fix: from 1/64 before it (the side it came from) to it
+    expected = abs(sigma.at(0.3) - sigma.at(0.3 + 1 / 64))
+    assert _resolutions(space, fix, _changes(space, fix), 1 / 64) == pytest.approx([360 / 64, expected])
+    assert expected != pytest.approx(9.9 / 64)
 
 
 def rows(n: int, threshold: float | None) -> list[dict[str, Any]]:
