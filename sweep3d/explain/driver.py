@@ -17,7 +17,7 @@ import dataclasses
 import math
 import shlex
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Callable, Sequence
 
 import numpy as np
@@ -29,7 +29,10 @@ from sweep3d.cache import Store
 from sweep3d.core import UserError
 from sweep3d.driver import Job, Plan, RunProgress, run_stages
 from sweep3d.engine import plan_spec, plans_as_run, remove_leftovers
+from sweep3d.explain.fragility import Rule, read_rule
+from sweep3d.explain.further import Judged, needs_further, search_further
 from sweep3d.explain.search import Axis, Config, Fix, Progress, explain
+from sweep3d.explain.sentence import fix_sentence, move_words, share_words
 from sweep3d.results import SCHEMA, counterfactuals_path, create_margin_macro, margin_sql, no_results
 from sweep3d.spec import LoadedSpec, Point, Range, SearchSpace
 from sweep3d.stages.infer import InferStage, ModelHandle, pending_predictions
@@ -38,6 +41,7 @@ from sweep3d.stages.postprocess import ImageHandoff, PostprocessStage
 from sweep3d.stages.render import LOCAL, RenderStage
 
 CONCURRENT = 16  # failures searched together when the budget allows
+SHOWN = 10  # sentences the console prints, nearest first (the rest: the report and the query)
 
 
 @dataclass(frozen=True)
@@ -57,7 +61,8 @@ class Verdict:
 @dataclass
 class ExplainResult:
     """What ``explain`` did: the fixes (one per failure searched), how many failures the run had,
-    the probes asked and renders made, and the seconds it took."""
+    the probes asked and renders made, and the seconds it took; the rows written (each with its
+    ``sentence``), the stability check's threshold (None: no check) and the search's resolution."""
 
     fixes: list[Fix]
     failures: int
@@ -66,6 +71,9 @@ class ExplainResult:
     rendered: int
     seconds: float
     path: Any = None
+    rows: list[dict[str, Any]] = field(default_factory=list)
+    threshold: float | None = None
+    resolution: float = 1 / 64
 
     @property
     def found(self) -> int:
@@ -114,6 +122,7 @@ class _Stages:
         self.rendered = 0
         self.plans: list[Plan] = []
         self.fix_plan: Plan | None = None  # the fixes, planned together once the search ends
+        self.seen: dict[Config, tuple[Verdict, str | None]] = {}  # every probe's verdict and prediction key
 
     def plan(self, configs: Sequence[Config]) -> Plan:
         return plan_spec(dataclasses.replace(self.spec, policy=_Listing(configs)), self.model)
@@ -127,9 +136,22 @@ class _Stages:
         self.rendered += next((o.computed for o in outcomes if o.stage == "render"), 0)
         self.plans.append(plan)
         found = read_verdicts(plan, self.store)
-        by_config = {Config(job.scene, job.point): found.get(job.pred_key, Verdict(False))
+        by_config = {Config(job.scene, job.point): (found.get(job.pred_key, Verdict(False)), job.pred_key)
                      for job in plan.jobs}  # out of frame: not a fix
-        return [by_config.get(c, Verdict(False)).right for c in configs]
+        for config in configs:
+            self.seen[config] = by_config.get(config, (Verdict(False), None))
+        return [self.seen[c][0].right for c in configs]
+
+    def judged(self, rule: Rule) -> Callable[[list[Config]], list[Judged]]:
+        """The further search's judge: right, the margin, and whether the rule calls it fragile."""
+        def judge(configs: list[Config]) -> list[Judged]:
+            self.verdicts(configs)
+            return [self.judge(config, rule) for config in configs]
+        return judge
+
+    def judge(self, config: Config, rule: Rule) -> Judged:
+        verdict, key = self.seen.get(config, (Verdict(False), None))
+        return Judged(verdict.right, verdict.margin, rule.fragile(verdict.margin, key) if verdict.right else None)
 
     def close(self) -> None:
         self.render.close()
@@ -214,6 +236,7 @@ def explain_spec(spec: LoadedSpec, *, budget: int | None = None, seed: int | Non
         started = time.perf_counter()
         remove_leftovers(store)
         plan, failures = run_failures(spec, store)
+        rule = read_rule(spec) if failures else Rule()
         model = ModelHandle.resolve(spec)
         axes = {scene: scene_axes(spec, scene)[1] for scene in plan.jobs.scenes()} if failures else {}
         own = {Config(job.scene, job.point) for job in plan.jobs + plan.out_of_frame}
@@ -225,14 +248,45 @@ def explain_spec(spec: LoadedSpec, *, budget: int | None = None, seed: int | Non
                 fixes = explain(list(by_config), axes.__getitem__, stages.verdicts, budget=budget, seed=seed,
                                 free=own.__contains__, resolution=resolution, concurrent=_together(budget, axes),
                                 on_round=_reporter(console, budget, started, state, lambda: stages.rendered))
+                fixes = [_marked(fix, stages, rule) for fix in fixes]
+                fixes = _further(fixes, axes, stages, rule, own, budget, state, resolution, console)
             finally:
                 stages.close()
-            rows = _rows(spec, plan, stages, fixes, by_config, seed, budget)
+            rows = _rows(spec, plan, stages, fixes, by_config, seed, budget, rule, resolution)
         path = counterfactuals_path(store, spec.name)
         store.write_table_file(path, pa.Table.from_pylist(rows, schema=SCHEMA))
         _write_images(spec, store, stages, [by_config[f.failure].image_key for f in fixes])
         return ExplainResult(fixes, len(failures), state.probes, state.charged, stages.rendered,
-                             time.perf_counter() - started, path)
+                             time.perf_counter() - started, path, rows, rule.threshold, resolution)
+
+
+def _marked(fix: Fix, stages: _Stages, rule: Rule) -> Fix:
+    """A fix with its margin and whether the stability check's rule calls it fragile."""
+    if fix.fix is None:
+        return fix
+    judged = stages.judge(fix.fix, rule)
+    return dataclasses.replace(fix, margin=judged.margin, fragile=judged.fragile)
+
+
+def _further(fixes: list[Fix], axes: dict[tuple[str, str], list[Axis]], stages: _Stages, rule: Rule,
+             own: set[Config], budget: int | None, state: Progress, resolution: float,
+             console: Console | None) -> list[Fix]:
+    """Search past each fragile fix (:mod:`.further`) within what the budget has left; a probe the
+    run or the search already made costs nothing."""
+    fragile = sum(needs_further(f) for f in fixes)
+    if not fragile:
+        return fixes
+    if console is not None:
+        console.print(f"[bold]explain[/] {fragile} of {sum(f.fix is not None for f in fixes)} fixes are fragile "
+                      f"(|margin| < {rule.threshold:.3g}, the stability check's threshold, or flipped in the check): "
+                      "searching further along their changes", highlight=False, soft_wrap=True)
+    left = None if budget is None else max(budget - state.charged, 0)
+    asked = len(stages.seen)
+    done = search_further(fixes, axes.__getitem__, stages.judged(rule), budget=left,
+                          free=lambda c: c in own or c in stages.seen, resolution=resolution)
+    state.probes += len(stages.seen) - asked  # those the search had not asked already
+    state.charged += done.charged
+    return done.fixes
 
 
 def _together(budget: int | None, axes: dict[tuple[str, str], list[Axis]]) -> int:
@@ -263,8 +317,8 @@ def _reporter(console: Console | None, budget: int | None, started: float, state
 
 
 def _rows(spec: LoadedSpec, plan: Plan, stages: _Stages, fixes: list[Fix], by_config: dict[Config, Job],
-          seed: int, budget: int | None) -> list[dict[str, Any]]:
-    """One counterfactuals row per failure searched."""
+          seed: int, budget: int | None, rule: Rule, resolution: float) -> list[dict[str, Any]]:
+    """One counterfactuals row per failure searched, with its sentence."""
     fix_jobs = _fix_jobs(stages, fixes)
     failure_verdicts = read_verdicts(plan, stages.store, [by_config[f.failure] for f in fixes])
     fix_verdicts = read_verdicts(stages.fix_plan or plan, stages.store, list(fix_jobs.values()))
@@ -276,7 +330,8 @@ def _rows(spec: LoadedSpec, plan: Plan, stages: _Stages, fixes: list[Fix], by_co
         fixed = fix_jobs.get(fix.fix) if fix.fix is not None else None
         after = _verdict_columns("fix", fix_verdicts.get(fixed.pred_key) if fixed else None)
         changes = _changes(space, fix) if fix.fix is not None else []
-        rows.append({
+        nearest = _changes(space, fix.nearest) if fix.nearest is not None else []
+        row = {
             "experiment": spec.name, "model": plan.model or spec.model.label, "failure_job": job.index,
             "object": job.object, "environment": job.environment,
             "true_labels": ", ".join(map(str, spec.labels.get(job.object, ()))),
@@ -290,7 +345,14 @@ def _rows(spec: LoadedSpec, plan: Plan, stages: _Stages, fixes: list[Fix], by_co
             "distance": fix.distance if fix.fix is not None else None,
             "change": "; ".join(_written(c) for c in changes) if changes else None,
             "seed": seed, "budget": budget,
-        })
+            "fix_fragile": fix.fragile, "fragile_threshold": rule.threshold, "further_probes": fix.further,
+            "nearest_distance": fix.nearest.distance if fix.nearest else None,
+            "nearest_margin": fix.nearest.margin if fix.nearest else None,
+            "nearest_change": " and ".join(move_words(*c[:4]) for c in nearest) if nearest else None,
+            "resolution": resolution, "resolutions": _resolutions(space, fix, changes, resolution),
+        }
+        row["sentence"] = fix_sentence(row)
+        rows.append(row)
     return rows
 
 
@@ -327,6 +389,27 @@ def _changes(space: SearchSpace, fix: Fix) -> list[tuple[str, str, str, float | 
     return out
 
 
+def _resolutions(space: SearchSpace, fix: Fix, changes: list[tuple[str, str, str, float | None, float]],
+                 resolution: float) -> list[float | None]:
+    """Per parameter changed, the search's resolution in its own units: how far the fix may lie
+    past where the model's answer changes (the last wrong probe is within ``resolution`` of the
+    range before it); on a log range, that step at the fix; None for a list option."""
+    ranges = {dim.column: (i, dim) for i, dim in enumerate(space.continuous)}
+    out: list[float | None] = []
+    for column, *_, share in changes:
+        if column not in ranges:
+            out.append(None)
+            continue
+        i, dim = ranges[column]
+        if not dim.space.log:
+            out.append(resolution * (dim.space.high - dim.space.low))
+            continue
+        u = fix.fix.point.unit[i]
+        back = min(max(u - math.copysign(resolution, share), 0.0), 1.0)
+        out.append(abs(float(dim.space.at(u)) - float(dim.space.at(back))))
+    return out
+
+
 def _number(value: Any) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
 
@@ -356,11 +439,43 @@ def _write_images(spec: LoadedSpec, store: Store, stages: _Stages, failure_keys:
 
 
 def print_explained(console: Console, result: ExplainResult, spec: Any = "SPEC") -> None:
-    """The end of ``sweep3d explain``: what was found, and where to read it (``spec``: its path)."""
+    """The end of ``sweep3d explain``: what was found, the sentences of the nearest fixes (the first
+    :data:`SHOWN`, and how many more), which are fragile, and where to read them (``spec``: its path)."""
     searched = len(result.fixes)
     complete = sum(f.complete for f in result.fixes)
     console.print(f"{result.found} of {searched} failures searched have a nearest fix ({result.failures} failures "
                   f"in the run; {complete} of them searched to the end); {result.probes} configurations probed, "
                   f"{result.rendered} rendered now, in {result.seconds:.1f} s", highlight=False, soft_wrap=True)
+    for line in explained_lines(result.rows, result.threshold, result.resolution, spec):
+        console.print(line, highlight=False, soft_wrap=True)
     console.print(f"[dim]read them: sweep3d query {escape(shlex.quote(str(spec)))} \"SELECT * FROM counterfactuals\" "
                   f"({escape(str(result.path))})[/]", highlight=False, soft_wrap=True)
+
+
+def explained_lines(rows: Sequence[dict[str, Any]], threshold: float | None, resolution: float,
+                    spec: Any = "SPEC", shown: int = SHOWN) -> list[str]:
+    """The console's lines (rich markup, the data escaped) for the fixes of ``rows``: a sentence
+    each for the nearest ``shown``, how many more and where, and how many are fragile."""
+    found = sorted((r for r in rows if r.get("found")), key=lambda r: (r["distance"], r["failure_job"]))
+    if not found:
+        return []
+    lines = [f"nearest fixes, nearest first (nearest to within {share_words(resolution)} of each range changed, "
+             "the search's resolution):"]
+    lines += [f"  {escape(str(r['object']))} · {escape(str(r['environment']))} · job {r['failure_job']}: "
+              f"{escape(r.get('sentence') or fix_sentence(r) or '')}" for r in found[:shown]]
+    if len(found) > shown:
+        query = f"sweep3d query {shlex.quote(str(spec))} \"SELECT failure_job, sentence FROM counterfactuals WHERE found " \
+                "ORDER BY distance\""
+        lines.append(f"  … and {len(found) - shown} more: the report's Nearest fixes panel, or {escape(query)}")
+    if threshold is None:
+        lines.append("fragile: unknown, no stability check of the model yet (run `sweep3d stability "
+                     f"{escape(shlex.quote(str(spec)))}`, then explain again: it marks the fragile fixes and "
+                     "searches past them, re-rendering nothing it has)")
+        return lines
+    fragile = sum(r.get("fix_fragile") is True for r in found)
+    sturdier = sum(r.get("nearest_distance") is not None for r in found)
+    past = (f"; {sturdier} fragile nearest {'fix was' if sturdier == 1 else 'fixes were'} replaced by a sturdier "
+            "one further along the same change" if sturdier else "")
+    lines.append(f"fragile: {fragile} of {len(found)} fixes (|margin| < {threshold:.3g}, the stability check's "
+                 f"threshold, or flipped in the check){past}")
+    return lines

@@ -78,7 +78,12 @@ class Move:
 class Fix:
     """What the search found for one failure: the nearest right configuration (None if no ray
     reached one), the moves that make it, their distance, how many probes it asked for, and
-    whether it ran to the end (false: the budget stopped it)."""
+    whether it ran to the end (false: the budget stopped it).
+
+    The rest is filled in once the verdicts' margins are read (:mod:`.further`): the margin at
+    the fix, whether the stability check's rule calls it fragile (None: no check, or no margin),
+    how many probes went past a fragile fix along its change, and ``nearest``, the fragile
+    nearest fix that a sturdier one further along replaced."""
 
     failure: Config
     fix: Config | None
@@ -86,6 +91,10 @@ class Fix:
     distance: float
     probes: int
     complete: bool
+    margin: float | None = None
+    fragile: bool | None = None
+    further: int = 0
+    nearest: Fix | None = None
 
 
 @dataclass

@@ -14,7 +14,13 @@ Views (only once ``explain`` has run):
     the fixing configuration's keys and verdict (``fix_*``, the same measures), the parameters
     changed (``parameters``, ``from_values``, ``to_values``, ``deltas`` in the parameter's own
     units, NULL for a text option; ``shares``, signed shares of the range), their normalised
-    ``distance`` (Euclidean over the shares) and ``change``, the move written out.
+    ``distance`` (Euclidean over the shares) and ``change``, the move written out; whether the fix
+    is fragile by the stability check's rule (``fix_fragile``, NULL before a check; the check's
+    ``fragile_threshold``), the probes past a fragile nearest fix (``further_probes``) and, where
+    a sturdier fix further along replaced it, that nearest fix (``nearest_distance``,
+    ``nearest_margin``, ``nearest_change``); the search's ``resolution`` (a share of each range)
+    and ``resolutions`` (in each changed parameter's units, NULL for an option); and the
+    ``sentence`` the console and the report print.
 ``counterfactual_parameters``
     per parameter: ``cheapest`` (how many found fixes change it), ``alone`` (of which change
     nothing else), ``share`` (of the found fixes), and the median absolute share it moves.
@@ -49,7 +55,16 @@ SCHEMA = pa.schema([
     ("to_values", pa.list_(pa.string())), ("deltas", pa.list_(pa.float64())), ("shares", pa.list_(pa.float64())),
     ("n_changed", pa.int64()), ("distance", pa.float64()), ("change", pa.string()),
     ("seed", pa.int64()), ("budget", pa.int64()),
+    # what a user needs to trust the fix (added later: older files lack them, and read as before)
+    ("fix_fragile", pa.bool_()), ("fragile_threshold", pa.float64()), ("further_probes", pa.int64()),
+    ("nearest_distance", pa.float64()), ("nearest_margin", pa.float64()), ("nearest_change", pa.string()),
+    ("resolution", pa.float64()), ("resolutions", pa.list_(pa.float64())), ("sentence", pa.string()),
 ])
+
+
+#: The SQL type of each Arrow type of :data:`SCHEMA`, for a column an older file lacks.
+_SQL_TYPES = {"string": "VARCHAR", "bool": "BOOLEAN", "int64": "BIGINT", "double": "DOUBLE",
+              "list<item: double>": "DOUBLE[]", "list<item: string>": "VARCHAR[]"}
 
 
 def counterfactuals_path(store: Store, experiment: str) -> Path:
@@ -63,7 +78,8 @@ def register_counterfactual_views(con: duckdb.DuckDBPyConnection, store: Store, 
         return []
     path = counterfactuals_path(store, experiment)
     try:
-        if "failure_job" not in pq.read_schema(path).names:
+        names = pq.read_schema(path).names
+        if "failure_job" not in names:
             return []
     except OSError as exc:
         if isinstance(exc, PermissionError) or exc.errno in (errno.EACCES, errno.EPERM):
@@ -73,7 +89,9 @@ def register_counterfactual_views(con: duckdb.DuckDBPyConnection, store: Store, 
     except (ValueError, pa.ArrowException):  # not a table explain wrote: no views
         return []
     own = "WHERE failure_pred_key IN (SELECT pred_key FROM jobs) " if _has(con, "jobs") else ""
-    con.execute(f"CREATE OR REPLACE VIEW counterfactuals AS SELECT * FROM read_parquet('{_quoted(path)}') "
+    # a file from before a column was added reads that column as NULL
+    later = "".join(f", NULL::{_SQL_TYPES[str(f.type)]} AS {f.name}" for f in SCHEMA if f.name not in names)
+    con.execute(f"CREATE OR REPLACE VIEW counterfactuals AS SELECT *{later} FROM read_parquet('{_quoted(path)}') "
                 f"{own}ORDER BY failure_job")  # a failure the spec no longer plans is not shown
     con.execute("""CREATE OR REPLACE VIEW counterfactual_parameters AS
         WITH moves AS (

@@ -6,6 +6,7 @@ side by side (in Chromium)."""
 
 from __future__ import annotations
 
+import shutil
 import sys
 from pathlib import Path
 
@@ -149,3 +150,49 @@ def test_the_nearest_fixes_panel_shows_each_failure_beside_its_fix(explained: Pa
         ARTIFACTS.mkdir(exist_ok=True)
         page.locator("#nearest-fixes").screenshot(path=str(ARTIFACTS / "nearest-fixes.png"))
         assert_clean(report, events)
+
+
+def test_after_a_stability_check_fragile_fixes_are_marked_or_searched_past(explained: Path, tmp_path: Path) -> None:
+    """The check's rows are written here (every run image flipped, at margins just below a bin edge
+    that some nearest fix falls under), so its threshold is that edge; explain again (on a copy of
+    the store) marks each fix by the rule, goes past the fragile ones, and prints the sentences."""
+    from datetime import datetime, timezone
+
+    from sweep3d.results.fragile import MARGIN_EDGES
+    from sweep3d.stability.check import SCHEMA, stability_key
+
+    folder = tmp_path / "copy"
+    shutil.copytree(explained, folder)
+    experiment = Experiment(folder / "spec.toml")
+    before = {r["failure_job"]: r for r in experiment.counterfactuals().to_pylist()}
+    lowest = min(r["fix_margin"] for r in before.values())
+    edge = next(i for i, e in enumerate(MARGIN_EDGES) if e > lowest)
+    middle = ((MARGIN_EDGES[edge - 1] if edge else 0.0) + MARGIN_EDGES[edge]) / 2
+    keys = experiment.sql("SELECT pred_key FROM results").column("pred_key").to_pylist()
+    now = datetime.now(timezone.utc)
+    Store(experiment.store).append("stability", [
+        {"stability_key": stability_key(k, "noise", 0), "pred_key": k, "image_key": k, "change": "noise", "seed": 0,
+         "base_correct": True, "base_margin": middle, "correct": False, "margin": -middle, "flipped": True,
+         "created_at": now} for k in keys], SCHEMA)
+    threshold = experiment.sql("SELECT threshold FROM fragile_threshold").column("threshold").to_pylist()[0]
+    assert threshold == MARGIN_EDGES[edge]
+    result = CliRunner().invoke(app, ["explain", str(folder / "spec.toml"), "--no-report"], env={"COLUMNS": "400"})
+    assert result.exit_code == 0, result.output
+    rows = experiment.counterfactuals().to_pylist()
+    assert [r["failure_job"] for r in rows] == sorted(before)
+    for row in rows:
+        assert row["found"] and row["fragile_threshold"] == threshold and row["resolution"] == pytest.approx(1 / 64)
+        assert row["fix_fragile"] == (row["fix_margin"] < threshold or row["fix_pred_key"] in keys), row
+        nearest = before[row["failure_job"]]
+        if row["nearest_distance"] is not None:  # a sturdier fix further along the same change
+            assert not row["fix_fragile"] and row["nearest_margin"] < threshold <= row["fix_margin"]
+            assert row["nearest_distance"] == pytest.approx(nearest["distance"])
+            assert row["distance"] > nearest["distance"]
+            assert row["parameters"] == nearest["parameters"] and row["further_probes"] >= 1
+        else:
+            assert row["fix_pred_key"] == nearest["fix_pred_key"]  # the nearest fix, marked
+        if row["fix_fragile"]:
+            assert row["sentence"].split("(", 1)[1].startswith("fragile: ")
+        assert row["sentence"] in " ".join(result.output.split())
+    assert any(r["further_probes"] for r in rows)  # some nearest fix was fragile and searched past
+    assert f"fragile: {sum(r['fix_fragile'] for r in rows)} of {len(rows)} fixes" in result.output

@@ -41,10 +41,12 @@ def failures(spec: Path) -> list[dict]:
         con.close()
 
 
-def write_counterfactuals(spec: Path, rows: list[dict], budget: int | None) -> None:
+def write_counterfactuals(spec: Path, rows: list[dict], budget: int | None, old: bool = False, **more) -> None:
+    """One found fix per row; ``more``: further columns, a list (one value per row) or one value for
+    all; ``old``: a file written before ``fix_fragile`` and the columns after it were added."""
     loaded = load_spec(spec)
     out = []
-    for r in rows:
+    for i, r in enumerate(rows):
         row = {name: None for name in SCHEMA.names}
         row.update(experiment=loaded.name, model=loaded.model.label, failure_job=r["job"], object=r["object"],
                    environment=r["environment"], true_labels=f"{r['object']}-label", failure_pred_key=r["pred_key"],
@@ -54,10 +56,12 @@ def write_counterfactuals(spec: Path, rows: list[dict], budget: int | None) -> N
                    fix_probability=0.62, parameters=["blur_sigma"], from_values=[str(r["blur_sigma"])],
                    to_values=["0"], deltas=[-r["blur_sigma"]], shares=[-0.5], n_changed=1, distance=0.5,
                    change="blur_sigma -1", seed=0, budget=budget)
+        row.update({k: v[i] if isinstance(v, list) else v for k, v in more.items()})
         out.append(row)
     path = counterfactuals_path(Store(loaded.store), loaded.name)
     path.parent.mkdir(exist_ok=True)
-    pq.write_table(pa.Table.from_pylist(out, schema=SCHEMA), path)
+    schema = pa.schema(list(SCHEMA)[:SCHEMA.get_field_index("fix_fragile")]) if old else SCHEMA
+    pq.write_table(pa.Table.from_pylist([{k: row[k] for k in schema.names} for row in out], schema=schema), path)
 
 
 def panel_html(spec: Path) -> str:
@@ -105,3 +109,41 @@ def test_each_caption_says_whose_probability_and_each_image_names_its_job_and_co
         assert failure_title.startswith(configuration) and "blur_sigma = " in failure_title, failure_title
         assert fix_title.startswith(f"nearest fix of {configuration}") and "blur_sigma" in fix_title, fix_title
         assert f"with blur_sigma {r['blur_sigma']} → 0" in fix_title
+
+
+def test_each_pair_says_its_margin_whether_it_is_fragile_and_the_searchs_resolution(spec: Path) -> None:
+    wrong = failures(spec)[:3]
+    write_counterfactuals(spec, wrong, None, fix_margin=[0.012, 0.3, 0.21], fix_fragile=[True, False, False],
+                          fragile_threshold=0.05, further_probes=[6, 0, 3], resolution=1 / 64,
+                          resolutions=[[3 / 64]] * 3, nearest_distance=[None, None, 0.4],
+                          nearest_margin=[None, None, 0.02], nearest_change=[None, None, "-0.9 blur_sigma"])
+    found = panel_html(spec)
+    note = text(found.split('<div class="gallery', 1)[0])
+    assert "\"nearest\" is to within 1/64 of each range" in note
+    assert "Fragile: 1 of 3 fixes are right by a margin below the stability check's threshold (0.05)" in note
+    assert "1 found a sturdier fix there, shown instead" in note
+    pairs = {int(job): (classes, body) for classes, job, body in
+             re.findall(r'<div class="fix-pair([^"]*)" data-job="(\d+)">(.*?)</div>\s*</div>', found, re.S)}
+    trust = {job: text(re.search(r'<div class="trust">(.*?)</div>', body, re.S).group(1))
+             for job, (_, body) in pairs.items()}
+    first, second, third = (r["job"] for r in wrong)
+    assert pairs[first][0] == " fragile" and pairs[second][0] == pairs[third][0] == ""
+    assert trust[first] == ("fragile: margin +0.012, below the stability check's 0.05, and none of 6 probes further "
+                            "along the change clears it; nearest to within 1/64 of the range: blur_sigma 0.0469")
+    assert trust[second] == "margin +0.3, not fragile; nearest to within 1/64 of the range: blur_sigma 0.0469"
+    assert trust[third].startswith("margin +0.21, not fragile; the nearest fix, -0.9 blur_sigma at distance 0.4, "
+                                   "is fragile: margin +0.02")
+
+
+def test_a_file_from_before_the_trust_columns_reads_them_as_null(spec: Path) -> None:
+    wrong = failures(spec)[:2]
+    write_counterfactuals(spec, wrong, None, old=True)
+    note = text(panel_html(spec))
+    assert "Whether a fix is fragile is unknown until sweep3d stability has checked the run" in note
+    loaded = load_spec(spec)
+    con = connect(Store(loaded.store), loaded.name)
+    try:
+        assert con.execute("SELECT count(*), count(sentence), count(fix_fragile) FROM counterfactuals").fetchone() \
+            == (2, 0, 0)
+    finally:
+        con.close()

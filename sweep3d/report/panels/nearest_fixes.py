@@ -1,6 +1,7 @@
 """Nearest fixes: each failure beside the nearest configuration where the model is right, as
 ``sweep3d explain`` found it, with the change written out ("orientation_yaw +14 makes it a
-toaster"), and per parameter how often it is part of the cheapest fix. Shown only once
+toaster"), the margin at the fix, whether it is fragile (the stability check's rule) and the
+search's resolution, and per parameter how often it is part of the cheapest fix. Shown only once
 ``explain`` has run (its ``counterfactuals`` views; see
 :mod:`sweep3d.results.counterfactuals`)."""
 
@@ -8,6 +9,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from sweep3d.explain import change_words, resolution_words, share_words, trust_words
 from sweep3d.report.figures import pct
 from sweep3d.report.panel import PanelInputs
 from sweep3d.results import has_view
@@ -21,7 +23,10 @@ def build(inputs: PanelInputs) -> dict[str, Any] | None:
         return None
     model = inputs.loaded.model.label
     totals = inputs.rows("SELECT count(*) AS searched, count(*) FILTER (WHERE found) AS found, "
-                         "count(*) FILTER (WHERE NOT complete) AS cut, any_value(budget) AS budget "
+                         "count(*) FILTER (WHERE NOT complete) AS cut, any_value(budget) AS budget, "
+                         "count(*) FILTER (WHERE found AND fix_fragile) AS fragile, "
+                         "count(*) FILTER (WHERE found AND nearest_distance IS NOT NULL) AS sturdier, "
+                         "any_value(fragile_threshold) AS threshold, any_value(resolution) AS resolution "
                          "FROM counterfactuals")[0]
     if not totals["searched"]:
         return None
@@ -34,6 +39,8 @@ def build(inputs: PanelInputs) -> dict[str, Any] | None:
                    "share": pct(p["share"], 0), "width": round(100 * (p["share"] or 0)),
                    "median": pct(p["median_share"], 1)}
                   for p in inputs.rows("SELECT * FROM counterfactual_parameters")]
+    totals["resolution"] = share_words(totals["resolution"]) if totals["resolution"] is not None else None
+    totals["threshold"] = f"{totals['threshold']:.3g}" if totals["threshold"] is not None else None
     return {"cards": cards, "parameters": parameters, "model": model, **totals}
 
 
@@ -42,8 +49,6 @@ def _card(inputs: PanelInputs, row: dict[str, Any], described: str) -> dict[str,
     gave the true class, named as such (``balloon · p(basketball) 19.6 %``); each image's hover
     text names the job and its configuration (``described``: ``job 3 · object = mug · …``), the
     fix's as the failure's with the change."""
-    moves = [_move(p, a, b, d) for p, a, b, d in zip(row["parameters"], row["from_values"], row["to_values"],
-                                                        row["deltas"])]
     fixed_as = row["fix_label"] or row["true_labels"]
     true = f"p({row['true_labels'] or fixed_as})"
     said = row["failure_label"] or "no prediction"
@@ -58,17 +63,13 @@ def _card(inputs: PanelInputs, row: dict[str, Any], described: str) -> dict[str,
         "said": said, "fix_label": fixed_as, "true": true,
         "failure_title": f"{described} · predicted {failure_caption} (wrong)",
         "fix_title": f"nearest fix of {described}, with {moved} · predicted {fix_caption} (right)",
-        "sentence": f"{' and '.join(moves)} makes it a {fixed_as}",
+        "sentence": f"{change_words(row)} makes it a {fixed_as}",
+        "trust": trust_words(row), "fragile": row.get("fix_fragile") is True,
+        "resolution": (resolution_words(row.get("resolution"), row["parameters"], row.get("resolutions"))
+                       if row.get("nearest_distance") is None else None),
         "failure_probability": failure_probability, "fix_probability": fix_probability,
         "distance": f"{row['distance']:.3f}", "moved": moved,
     }
-
-
-def _move(parameter: str, before: str, after: str, delta: float | None) -> str:
-    """``+14 orientation_yaw`` for a number, ``camera_lens wide → tele`` for an option."""
-    if delta is None:
-        return f"{parameter} {before} → {after}"
-    return f"{delta:+.3g} {parameter}"
 
 
 def _pct(value: float | None) -> str | None:
