@@ -4,7 +4,7 @@ digests, the names a mesh holds, and the cheap checks a file passes before Blend
 from __future__ import annotations
 
 __all__ = [
-    "blender_version", "bpy_root", "check_archive", "check_file", "check_hdri", "check_materials", "check_mesh",
+    "MITSUBA_FORMATS", "blender_version", "bpy_root", "check_archive", "check_file", "check_hdri", "check_materials", "check_mesh",
     "file_names", "materialise_mesh", "mesh_digest", "mesh_files", "not_a_file", "read_mesh_bytes", "resolve_hdri",
     "resolve_mesh", "unreadable"
 ]
@@ -29,8 +29,10 @@ if _TYPE_CHECKING:
         resolve_hdri,
         resolve_mesh,
     )
+    from sweep3d.assets.texture_images import MITSUBA_FORMATS
 
 __getattr__, __dir__ = _exports(__name__, {
+    "MITSUBA_FORMATS": ("sweep3d.assets.texture_images", "MITSUBA_FORMATS"),
     "blender_version": ("sweep3d.assets.sources", "blender_version"),
     "bpy_root": ("sweep3d.assets.sources", "bpy_root"),
     "check_archive": ("sweep3d.assets.sources", "check_archive"),
