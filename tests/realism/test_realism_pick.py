@@ -62,7 +62,7 @@ def test_pick_writes_a_deterministic_kit_half_right_half_wrong(tmp_path: Path, m
         assert len({p["environment"] for p in mine}) == 2  # spread: both environments
         assert len({jobs[p["job"]]["orientation_yaw"] for p in mine}) == 3  # and every yaw
     assert kit["jobs"] == sorted({p["job"] for p in kit["picks"]})
-    for job in kit["jobs"]:  # the render is the image the model saw, byte for byte; edges beside it
+    for job in kit["jobs"]:  # the raw render, byte for byte (no 2D controls here: the image the model saw); edges beside it
         key = f"{job:04x}" + "ab" * 30
         assert (tmp_path / "kit" / "renders" / f"{job}.png").read_bytes() == store.blob_path(key).read_bytes()
         with Image.open(tmp_path / "kit" / "edges" / f"{job}.png") as im:
