@@ -42,7 +42,7 @@ MAX_PIXELS = 89_478_485
 #: What the verdicts record about how a photograph reached the model.
 PREPROCESS = ("EXIF orientation applied; resized (short side, Lanczos) and centre-cropped to the render's "
               "{width}x{height}; the job's 2D controls (blur, noise, ...) applied as to its render; then the "
-              "model's own preprocessing, as for the render")
+              "model's own preprocessing, as for the render: {model}")
 
 
 class PhotoProblems(UserError):

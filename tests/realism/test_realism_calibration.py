@@ -72,6 +72,8 @@ def test_the_kit_s_own_renders_as_photographs_agree_everywhere_despite_blur_and_
         assert row["n_sim_right"] > 0 and row["n_sim_wrong"] > 0, row  # PPV and NPV both measured
         assert (row["agreement"], row["ppv"], row["npv"], row["kappa"]) == (1.0, 1.0, 1.0, 1.0), row
     assert next(r for r in rows if r["overall"])["n"] == len(jobs)
+    said = {r["preprocess"] for r in store.table("verdicts").to_pylist()}  # the model's numbers, in words
+    assert len(said) == 1 and said.pop().endswith("mean = (0.0, 0.0, 0.0), std = (1.0, 1.0, 1.0)")
 
 
 
