@@ -217,12 +217,12 @@ def classify(spec: LoadedSpec, settings: Any, images: Sequence[np.ndarray], trut
 def model_preprocess(handle: Any) -> str:
     """What the model ``handle`` resolves does to an image, in words with its normalisation's
     numbers (:meth:`Preprocess.describe`), as the infer stage applies it in the run's framing."""
-    from sweep3d.stages.infer.models import Preprocess, for_model_framing
+    from sweep3d.stages.infer import Preprocess
 
-    own = handle.preprocess
-    if not isinstance(own, Preprocess):
-        return f"a {type(own).__name__} of the model's factory, whose normalisation sweep3d cannot read"
-    return (for_model_framing(own, handle.name) if handle.framing.model else own).describe()
+    applied = handle.applied
+    if not isinstance(applied, Preprocess):
+        return f"a {type(applied).__name__} of the model's factory, whose normalisation sweep3d cannot read"
+    return applied.describe()
 
 
 def _render_sizes(folder: Path, jobs: Sequence[int]) -> dict[int, tuple[int, int]]:

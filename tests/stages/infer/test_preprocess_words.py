@@ -7,13 +7,13 @@ from __future__ import annotations
 
 import ast
 import re
-import types
 
 from hypothesis import given
 from hypothesis import strategies as st
 
 from sweep3d.realism.score import model_preprocess
 from sweep3d.spec.framing import Framing
+from sweep3d.stages.infer import ModelHandle
 from sweep3d.stages.infer.models import IMAGENET_MEAN, LITE_PREPROCESS, Preprocess, builtin_model
 
 
@@ -33,8 +33,7 @@ def test_the_built_in_models_say_mean_and_std_one_half() -> None:
 
 
 def test_a_model_framed_handle_describes_the_preprocessing_inference_applies() -> None:
-    handle = types.SimpleNamespace(name="efficientnet-lite0", preprocess=LITE_PREPROCESS[0],
-                                   framing=Framing.of_model(256, 224))
+    handle = ModelHandle("efficientnet-lite0", None, Framing.of_model(256, 224), "", LITE_PREPROCESS[0])
     assert "short side resized to 224 " in model_preprocess(handle)
     handle.framing = Framing.full(224)
     assert model_preprocess(handle) == LITE_PREPROCESS[0].describe()
