@@ -1,5 +1,8 @@
 """The alignment page of a realism kit: ``align.html``, the render laid over the live camera view.
 
+The render is the kit's ``renders/<job>.png``: the job's raw render, before its 2D controls (blur,
+noise, ...), as the scene a camera sees; ``sweep3d realism score`` applies those to the photograph.
+
 To photograph the scene of a render, a user stands in the real room with a phone, opens the page,
 and moves the object (or the phone) until the camera view matches the render or its edges laid
 translucently over it; the capture button saves the camera frame as ``<job_id>.jpg`` for

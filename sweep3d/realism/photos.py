@@ -8,8 +8,9 @@ photograph, a file that is not a readable image each make one line, and nothing 
 A photograph is read upright (its EXIF orientation applied: Pillow's ``ImageOps.exif_transpose``),
 then framed as the render it was aligned with: resized so its short side fits the render's
 (Lanczos, keeping its aspect) and centre-cropped to the render's size. From there it takes the
-path a render takes: 8-bit pixels to floats and the model's own preprocessing. A photograph of
-exactly the render's pixels is therefore the render, to the bit.
+path a render takes: its job's 2D controls (``score``), 8-bit pixels to floats and the model's own
+preprocessing. A photograph of exactly the kit's raw render is therefore, once its job's controls
+are applied, the image the model saw, to the bit.
 
 :func:`photo_like` is the documented transformation that makes a stand-in photograph from a
 render (tests, and a dry run of the workflow).
@@ -42,7 +43,7 @@ MAX_PIXELS = 89_478_485
 #: What the verdicts record about how a photograph reached the model.
 PREPROCESS = ("EXIF orientation applied; resized (short side, Lanczos) and centre-cropped to the render's "
               "{width}x{height}; the job's 2D controls (blur, noise, ...) applied as to its render; then the "
-              "model's own preprocessing, as for the render")
+              "model's own preprocessing, as for the render: {model}")
 
 
 class PhotoProblems(UserError):

@@ -9,10 +9,12 @@ far). Near ties — the true class and the best other class within :data:`NEAR_T
 
 The kit folder (default ``kits/<experiment>`` in the store) holds ``design.csv`` (the picked
 jobs' configurations; a spec whose ``[policy]`` is ``type = "table"``, ``file = "design.csv"``
-renders them again), ``renders/<job>.png`` (the image the model saw), ``edges/<job>.png`` (its
-edges, to lay over the live camera view), ``align.html`` (the page that does so and saves each
-photograph as ``<job>.jpg``) and ``kit.json`` (what was picked and why). Same store, spec and
-seed: the same bytes.
+renders them again), ``renders/<job>.png`` (the job's raw render, byte for byte: what a camera
+in the room sees, before the job's 2D controls — blur, noise, ... — which ``score`` applies to
+the photograph exactly once, as the postprocess stage applied them to the render),
+``edges/<job>.png`` (its edges, to lay over the live camera view), ``align.html`` (the page that
+does so and saves each photograph as ``<job>.jpg``) and ``kit.json`` (what was picked and why).
+Same store, spec and seed: the same bytes.
 """
 
 from __future__ import annotations
@@ -32,7 +34,7 @@ import numpy as np
 import pyarrow as pa
 
 from sweep3d.assets import not_a_file
-from sweep3d.cache import KITS_FOLDER, safe_filename
+from sweep3d.cache import KITS_FOLDER, Store, safe_filename
 from sweep3d.core import UserError
 from sweep3d.spec import LoadedSpec
 
@@ -42,7 +44,7 @@ KIT = "kit.json"
 DESIGN = "design.csv"
 RENDERS, EDGES = "renders", "edges"
 ALIGN = "align.html"
-KIT_VERSION = 1
+KIT_VERSION = 2  # 2: renders/ holds raw renders (1 held them after the 2D controls, which score applied again)
 NEAR_TIES = ("leave", "mark")
 
 
@@ -150,8 +152,6 @@ def pick(spec: LoadedSpec, output: Path | None = None, per_object: int = 10, see
     Raises:
         UserError: a bad option, an output folder holding other files, no results, a damaged blob.
     """
-    from sweep3d.engine import write_unstored_images
-    from sweep3d.export import image_bytes
     from sweep3d.results import arrow, results_connection, results_store, stored_parameters
 
     if per_object < 1:
@@ -188,23 +188,50 @@ def pick(spec: LoadedSpec, output: Path | None = None, per_object: int = 10, see
         if not picked:
             raise UserError(f"no counted results of {spec.name} to pick from: run `sweep3d run {spec.path}` first")
         first = _first_per_job(picked)
-        write_unstored_images(spec, store, [r["image_key"] for r in first.values()])
-        images = {job: image_bytes(store, r) for job, r in first.items()}
+        images = {job: render_bytes(store, r, spec) for job, r in first.items()}
         design = _design_table(list(first.values()), parameters)
     _write_kit(folder, spec, seed, per_object, threshold, near_ties, [p for _, p in picked], images, design,
                parameters)
     return Kit(folder, [p for _, p in picked], sorted(images), short, left_out)
 
 
-def _selection_sql(con) -> str:
-    """Every counted result with its image's recorded digest (as ``export`` checks it)."""
-    from sweep3d.export import IMAGE_DIGEST
+#: The column :func:`_selection_sql` adds: the recorded digest of the result's raw render.
+RENDER_DIGEST = "_kit_render_sha256"
 
+
+def _selection_sql(con) -> str:
+    """Every counted result with its raw render's recorded digest (checked when the kit copies it)."""
     views = {name for name, in con.execute("SELECT view_name FROM duckdb_views() WHERE NOT internal").fetchall()}
-    image = [f"(SELECT v.sha256 FROM {view} v WHERE v.{key} = r.image_key LIMIT 1)"
-             for view, key in (("images", "image_key"), ("renders", "render_key")) if view in views]
-    digest = f"coalesce({', '.join(image)}, NULL)" if image else "NULL"
-    return f"SELECT r.*, {digest} AS {IMAGE_DIGEST} FROM results r WHERE r.counted ORDER BY r.job"
+    digest = ("(SELECT v.sha256 FROM renders v WHERE v.render_key = r.render_key LIMIT 1)"
+              if "renders" in views else "NULL")
+    return f"SELECT r.*, {digest} AS {RENDER_DIGEST} FROM results r WHERE r.counted ORDER BY r.job"
+
+
+def render_bytes(store: Store, row: dict[str, Any], spec: LoadedSpec) -> bytes:
+    """The raw render of ``row``'s job (its PNG blob, before the job's 2D controls), checked
+    against its recorded digest: what a photograph of the scene should match.
+
+    Raises:
+        UserError: the result names no render, or its blob is missing, unreadable or damaged.
+    """
+    from sweep3d.cache import sha256_bytes
+
+    key = row.get("render_key")
+    if not key:
+        raise UserError(f"job {row['job']} of {spec.name} names no render: run `sweep3d run {spec.path}` again, "
+                        "then pick")
+    path = store.blob_path(key)
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        damaged = "is missing" if isinstance(exc, FileNotFoundError) else f"cannot be read ({exc.strerror})"
+    else:
+        digest = row.get(RENDER_DIGEST)
+        damaged = "no longer matches its recorded digest" if digest and sha256_bytes(data) != digest else ""
+    if damaged:
+        raise UserError(f"the render of job {row['job']} ({path}) {damaged}: run `sweep3d run {spec.path}` again "
+                        "to render it anew, then pick")
+    return data
 
 
 def _first_per_job(picked: list[tuple[dict[str, Any], Pick]]) -> dict[int, dict[str, Any]]:

@@ -78,6 +78,8 @@ def score_photos(spec: LoadedSpec, photos: Path, match: Path | None = None, kit:
             (every such line at once; nothing is stored).
         UserError: no kit, no results of the run.
     """
+    from sweep3d.stages.infer import ModelHandle
+
     folder = find_kit(spec, photos, kit)
     document = read_kit(folder)
     if document.get("experiment") != spec.name:
@@ -93,13 +95,16 @@ def score_photos(spec: LoadedSpec, photos: Path, match: Path | None = None, kit:
     rows: list[dict[str, Any]] = []
     with store.lock(wait):  # before the models run: another command's hold is waited for or refused now, not after
         for settings in spec.models:
+            handle = ModelHandle.resolve(spec, settings)
             verdicts = classify(spec, settings, [frames[j] for j in jobs],
-                                _truth_rows(spec, store, jobs, settings.label))
+                                _truth_rows(spec, store, jobs, settings.label), handle)
+            words = model_preprocess(handle)
             for job, verdict in zip(jobs, verdicts):
                 h, w = sizes[job]
                 photo = next(p for p in matched if p.job == job)
                 rows.append(_row(PHOTO, spec.name, job, settings.label, verdict, photo=photo.path.name,
-                                 photo_sha256=digests[job], preprocess=PREPROCESS.format(width=w, height=h)))
+                                 photo_sha256=digests[job], preprocess=PREPROCESS.format(width=w, height=h,
+                                                                                         model=words)))
         for job, pixels in photos.items():
             _keep_thumb(store, digests[job], pixels)
         store.append(VERDICTS, rows, VERDICT_SCHEMA)
@@ -161,11 +166,12 @@ def post_processed(spec: LoadedSpec, frames: dict[int, np.ndarray]) -> dict[int,
     return out
 
 
-def classify(spec: LoadedSpec, settings: Any, images: Sequence[np.ndarray], truths: Sequence[dict[str, Any]]
-             ) -> list[dict[str, Any]]:
+def classify(spec: LoadedSpec, settings: Any, images: Sequence[np.ndarray], truths: Sequence[dict[str, Any]],
+             handle: Any = None) -> list[dict[str, Any]]:
     """The spec's evaluator's rows for 8-bit ``images`` (each the size of its job's render), by
     the model ``settings`` names, through the infer stage's own code (its handle, task call,
-    evaluator and batch padding). ``truths``: per image its ``object`` and ``truth_key``."""
+    evaluator and batch padding). ``truths``: per image its ``object`` and ``truth_key``;
+    ``handle``: the model's, when the caller resolved it already (a user's factory runs once)."""
     from sweep3d.cache import load_pass
     from sweep3d.core import from_uint8
     from sweep3d.stages.infer import (
@@ -180,7 +186,7 @@ def classify(spec: LoadedSpec, settings: Any, images: Sequence[np.ndarray], trut
         padded,
     )
 
-    handle = ModelHandle.resolve(spec, settings)
+    handle = handle if handle is not None else ModelHandle.resolve(spec, settings)
     model = handle.classifier()
     labels = model.label_map()
     evaluator = EVALUATORS.get(spec.evaluator.kind).from_settings(spec.evaluator)
@@ -206,6 +212,17 @@ def classify(spec: LoadedSpec, settings: Any, images: Sequence[np.ndarray], trut
             for i, row in zip(chosen, evaluate_checked(evaluator, spec.evaluator.kind, outputs, truth, labels)):
                 out[i] = row
     return [row for row in out if row is not None]
+
+
+def model_preprocess(handle: Any) -> str:
+    """What the model ``handle`` resolves does to an image, in words with its normalisation's
+    numbers (:meth:`Preprocess.describe`), as the infer stage applies it in the run's framing."""
+    from sweep3d.stages.infer import Preprocess
+
+    applied = handle.applied
+    if not isinstance(applied, Preprocess):
+        return f"a {type(applied).__name__} of the model's factory, whose normalisation sweep3d cannot read"
+    return applied.describe()
 
 
 def _render_sizes(folder: Path, jobs: Sequence[int]) -> dict[int, tuple[int, int]]:
@@ -370,10 +387,12 @@ def _engine_rows(spec: LoadedSpec, other: LoadedSpec, store: Store, engine: str,
     """The verdict rows of the kit's ``jobs`` rendered by ``engine`` (the spec ``other``'s results),
     by model and job."""
     from sweep3d.results import results_connection, stored_parameters
+    from sweep3d.stages.infer import ModelHandle
 
     parameters = stored_parameters(store.jobs_path(spec.name)) or list(spec.parameter_columns)
     source, rows = f"engine:{engine}", []
     for settings in spec.models:
+        words = model_preprocess(ModelHandle.resolve(other, settings))
         several = len(spec.models) > 1
         with results_connection(spec, settings.label if several else None) as con:
             wanted = _configurations(con, jobs, parameters)
@@ -386,7 +405,8 @@ def _engine_rows(spec: LoadedSpec, other: LoadedSpec, store: Store, engine: str,
                                 f"realism score --engine {engine}` again")
             for job, verdict in zip(same, made):
                 rows.append(_row(source, spec.name, job, settings.label, verdict, image_key=verdict["image_key"],
-                                 preprocess=f"rendered by {engine}; the model's own preprocessing, as for the render"))
+                                 preprocess=f"rendered by {engine}; the model's own preprocessing, as for the "
+                                            f"render: {words}"))
     rows.sort(key=lambda r: (r["model"], r["job"]))
     return rows
 

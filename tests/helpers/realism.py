@@ -133,6 +133,84 @@ def make_run(folder: Path, jobs: list[dict[str, Any]] | None = None,
     return spec
 
 
+
+# -- a run with 2D controls, its renders planted and the rest computed by sweep3d's own stages ---
+POST_YAWS = tuple(range(0, 360, 30))
+POST_SPEC = spec_toml("realism", seed=5, model={"name": "sharp_model:sharp", "batch_size": 8},
+                      objects=(("apple", "cube.obj", ["red"]), ("plum", "cube.obj", ["blue"])),
+                      environments=("white", "grey"), body=f"""\
+[[controls]]
+type = "orientation"
+yaw = {list(POST_YAWS)}
+
+[[controls]]
+type = "blur"
+sigma = [0.0, 1.5]
+
+[[controls]]
+type = "noise"
+std = [0.0, 0.05]
+
+[policy]
+type = "grid"
+
+[postprocess]
+store = "all"
+""")
+
+#: "red" when the image is sharp: the mean squared step between neighbouring pixels of its red
+#: channel above 0.006 (a log-odds of 10 per e-fold). Blur lowers that energy and noise raises
+#: it, so a 2D control applied twice moves verdicts that applying it once did not.
+SHARP_MODEL = '''
+import torch
+from sweep3d.stages.infer import Classifier, Preprocess
+
+
+class Sharp(torch.nn.Module):
+    def forward(self, x):
+        energy = (x[:, 0, :, 1:] - x[:, 0, :, :-1]).pow(2).mean(dim=(1, 2))
+        d = 10 * (torch.log(energy + 1e-6) - torch.log(torch.tensor(0.006)))
+        return torch.stack([d, -d], dim=1)
+
+
+def sharp():
+    return Classifier(Sharp().eval(), Preprocess(resize=32, crop=32, mean=(0.0, 0.0, 0.0), std=(1.0, 1.0, 1.0)),
+                      labels=["red", "blue"])
+'''
+
+
+def stripes(amplitude: int) -> np.ndarray:
+    """A render: red stripes four pixels wide, ``amplitude`` levels over a level of 100, on grey."""
+    pixels = np.full((SIDE, SIDE, 3), 100, np.uint8)
+    pixels[..., 0] += ((np.arange(SIDE) // 4 % 2) * amplitude).astype(np.uint8)
+    return pixels
+
+
+def make_post_run(folder: Path) -> Path:
+    """A finished run of :data:`POST_SPEC` (blur and noise as 2D controls) without Blender: each
+    planned render is planted in the store (stripes of amplitudes spread geometrically from 10 to
+    150 levels), then ``sweep3d run`` post-processes, stores the images and classifies them with
+    :data:`SHARP_MODEL` through its own stages. Apple and plum share every render (one mesh), so
+    each image is right for one of them. Returns the spec's path."""
+    from sweep3d.engine import plan_spec
+    from tests.helpers import load_spec
+
+    (folder / "sharp_model.py").write_text(SHARP_MODEL)
+    spec = write_spec(folder, POST_SPEC)
+    keys = list(dict.fromkeys(job.render_key for job in plan_spec(load_spec(spec)).jobs))
+    store = Store(folder / "store")
+    rows = []
+    for i, key in enumerate(keys):
+        data = encode_png8(stripes(round(10 * 15 ** (i / (len(keys) - 1)))))
+        store.blob_path(key).parent.mkdir(parents=True, exist_ok=True)
+        store.blob_path(key).write_bytes(data)
+        rows.append({"render_key": key, "width": SIDE, "height": SIDE, "valid": True, "seconds": 0.1,
+                     "created_at": T0, "sha256": sha256_bytes(data)})
+    store.append("renders", rows)
+    result = CliRunner().invoke(app, ["run", str(spec), "--no-report"])
+    assert result.exit_code == 0, result.output
+    return spec
+
 @dataclasses.dataclass(frozen=True)
 class StubShot:
     job_id: str

@@ -1,6 +1,8 @@
 """The report's Realism panel: absent without another source's verdicts; with them, the agreement
-table (per object and over all objects) and render | photo pairs with both verdicts, the
-disagreements first, every image drawn (checked in headless Chromium)."""
+table (per object and over all objects) and every render | photo pair with both verdicts, the
+disagreements first, then the objects in turn, every image drawn (checked in headless Chromium);
+past a page of pairs, the rest in pages a click away, each saying which pairs it holds; and
+another renderer as the source says what it shares with Cycles."""
 
 from __future__ import annotations
 
@@ -42,6 +44,16 @@ def scored_run(folder: Path) -> tuple[Path, dict[int, bool]]:
     return spec, photos
 
 
+def panel_order(jobs, sim: dict[int, bool], other: dict[int, bool]) -> list[int]:
+    """The pairs' order: disagreements first; then each object's first job, its second, ..."""
+    objects = {i: j["object"] for i, j in enumerate(job_colours())}
+    rank = {}
+    for job in sorted(jobs):
+        group = (sim[job] == other[job], objects[job])
+        rank[job] = sum(1 for j in rank if (sim[j] == other[j], objects[j]) == group)
+    return sorted(jobs, key=lambda j: (sim[j] == other[j], rank[j], objects[j], j))
+
+
 def test_no_verdicts_no_realism_panel(tmp_path: Path) -> None:
     html = write_report(load_spec(make_run(tmp_path))).read_text()
     assert 'id="realism"' not in html
@@ -63,7 +75,7 @@ def test_the_realism_panel_draws_the_table_and_the_pairs(tmp_path: Path, chromiu
         pairs = page.evaluate("Array.from(document.querySelectorAll('#realism .realism-pair'))"
                               ".map(p => [Number(p.dataset.job), p.classList.contains('disagree'), "
                               "p.querySelectorAll('figure.tile').length])")
-        assert [job for job, _, _ in pairs] == sorted(photos, key=lambda j: (photos[j] == sim[j], j))
+        assert [job for job, _, _ in pairs] == panel_order(photos, dict(enumerate(sim)), photos)
         assert all(disagree == (photos[job] != sim[job]) and tiles == 2 for job, disagree, tiles in pairs)
         images = page.evaluate("Array.from(document.querySelectorAll('#realism .realism-pair img'))"
                                ".map(i => i.naturalWidth)")
@@ -90,3 +102,43 @@ def test_each_image_of_a_pair_names_its_job_and_configuration_on_hover(tmp_path:
         assert render.startswith(scene) and " · orientation_yaw = " in render and " · render: " in render, render
         assert photo.startswith(scene) and f" · photo {job}.jpg: " in photo, photo
         assert render.split(" · render: ")[0] == photo.split(" · photo ")[0]  # the same configuration on both
+
+
+def test_every_pair_is_on_a_page_and_another_renderer_says_what_it_shares(tmp_path: Path) -> None:
+    """Verdicts of every job from a photo source and from another engine: each source's pairs are
+    all there once each, the first page open and the rest behind one click that says which pairs
+    it holds; only the engine source carries the sentence on what it shares with Cycles."""
+    import html
+    import re
+
+    from sweep3d.report.panels.realism import PAIRS
+
+    spec = make_run(tmp_path)
+    sim = dict(enumerate(sim_verdicts()))
+    assert len(sim) > PAIRS
+    photo = {job: sim[job] != (job % 5 == 0) for job in sim}
+    engine = {job: sim[job] != (job % 7 == 0) for job in sim}
+    rows = [verdict(job, photo[job], at=T2) for job in sim]
+    rows += [verdict(job, engine[job], source="engine:mitsuba", at=T2) for job in sim]
+    Store(tmp_path / "store").append(VERDICTS, rows, VERDICT_SCHEMA)
+    page = write_report(load_spec(spec)).read_text()
+    section = re.search(r'<section id="realism">(.*?)</section>', page, re.S).group(1)
+    for source, other in (("photo", photo), ("engine:mitsuba", engine)):
+        blocks = re.findall(rf'<div class="tiles realism-pairs" data-source="{source}"[^>]*>(.*?)\n</div>', section,
+                            re.S)
+        pages = [[int(j) for j in re.findall(r'data-job="(\d+)"', block)] for block in blocks]
+        assert [job for jobs in pages for job in jobs] == panel_order(sim, sim, other)  # every pair, once
+        assert [len(jobs) for jobs in pages] == [PAIRS, len(sim) - PAIRS]
+        summaries = re.findall(rf'<details class="realism-page" data-source="{re.escape(source)}"><summary>(.*?)'
+                               '</summary>', section)
+        disagree = sum(sim[j] != other[j] for j in pages[1])
+        assert [html.unescape(t) for t in summaries] == [
+            f"pairs {PAIRS + 1}–{len(sim)} of {len(sim)}" + (f" ({disagree} disagree)" if disagree else "")]
+    more = [html.unescape(t) for t in re.findall(r'<p class="note realism-more">(.*?)</p>', section)]
+    assert more == [f"pairs 1–{PAIRS} of {len(sim)} above; the other {len(sim) - PAIRS} below, 1 click away."] * 2
+    shares = re.findall(r'<p class="note realism-shares" data-source="([^"]*)">(.*?)</p>', section, re.S)
+    assert [source for source, _ in shares] == ["engine:mitsuba"]
+    text = html.unescape(re.sub(r"<[^>]+>", "", shares[0][1]))
+    for said in ("not independent", "OBJ and MTL", "key light", "denoiser", "change of path tracer",
+                 "does not show that the scene is realistic"):
+        assert said in text, text

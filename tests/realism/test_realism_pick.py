@@ -62,7 +62,7 @@ def test_pick_writes_a_deterministic_kit_half_right_half_wrong(tmp_path: Path, m
         assert len({p["environment"] for p in mine}) == 2  # spread: both environments
         assert len({jobs[p["job"]]["orientation_yaw"] for p in mine}) == 3  # and every yaw
     assert kit["jobs"] == sorted({p["job"] for p in kit["picks"]})
-    for job in kit["jobs"]:  # the render is the image the model saw, byte for byte; edges beside it
+    for job in kit["jobs"]:  # the raw render, byte for byte (no 2D controls here: the image the model saw); edges beside it
         key = f"{job:04x}" + "ab" * 30
         assert (tmp_path / "kit" / "renders" / f"{job}.png").read_bytes() == store.blob_path(key).read_bytes()
         with Image.open(tmp_path / "kit" / "edges" / f"{job}.png") as im:
@@ -200,4 +200,32 @@ def test_a_full_disk_while_writing_the_kit_is_one_line_and_leaves_nothing(tmp_pa
     assert result.exit_code == 2, result.output
     assert result.output.strip() == (f"error: {tmp_path / 'kit'}: cannot write the kit (No space left on device); "
                                      "free some disk space, or write the kit to another disk with -o"), result.output
+    assert not (tmp_path / "kit").exists() and not list(tmp_path.glob(".kit.*"))
+
+
+def test_a_missing_or_damaged_render_is_one_line_and_writes_no_kit(tmp_path: Path, monkeypatch) -> None:
+    """The kit copies each picked job's raw render, checked against the digest its ``renders`` row
+    recorded: a blob gone or changed since is one line naming it and the fix, and no kit."""
+    from datetime import datetime, timezone
+
+    from sweep3d.cache.blobs import sha256_bytes
+
+    spec = make_run(tmp_path)
+    stub_kit_tools(monkeypatch)
+    store = Store(tmp_path / "store")
+    keys = [r["image_key"] for r in store.table("images").to_pylist()]  # make_run: each render is its image
+    store.append("renders", [{"render_key": k, "width": SIDE, "height": SIDE, "valid": True, "seconds": 0.1,
+                              "created_at": datetime(2024, 1, 1, tzinfo=timezone.utc),
+                              "sha256": sha256_bytes(store.blob_path(k).read_bytes())} for k in keys])
+    assert pick(spec, tmp_path / "fine").exit_code == 0  # recorded digests that hold
+    for key in keys:
+        store.blob_path(key).write_bytes(store.blob_path(key).read_bytes() + b"changed")
+    damaged = pick(spec, tmp_path / "kit")
+    assert damaged.exit_code == 2 and len(damaged.output.strip().splitlines()) == 1, damaged.output
+    assert "no longer matches its recorded digest" in damaged.output and f"sweep3d run {spec}" in damaged.output
+    for key in keys:
+        store.blob_path(key).unlink()
+    missing = pick(spec, tmp_path / "kit")
+    assert missing.exit_code == 2 and len(missing.output.strip().splitlines()) == 1, missing.output
+    assert "is missing" in missing.output and "then pick" in missing.output
     assert not (tmp_path / "kit").exists() and not list(tmp_path.glob(".kit.*"))

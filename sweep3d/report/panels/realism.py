@@ -6,7 +6,11 @@ score``). Per source, model and object (and over all objects): the share of jobs
 source's verdict is the render's, with its 95 % Wilson interval; PPV (of the jobs the model got
 right in simulation, the share it got right in the source too), NPV (of those it got wrong, the
 share it got wrong there too) and Cohen's κ (agreement beyond what the two verdicts' rates give by
-chance). Then render | photo pairs with both verdicts, the disagreements first.
+chance). Then every render | photo pair with both verdicts, in pages of :data:`PAIRS` (the first
+open, the others a click away, each saying which pairs it holds): the disagreements first, then
+the objects in turn, so the first page shows every object it can. Another renderer as the source
+says what it shares with Cycles (:data:`ENGINE_SHARES`): agreement with it is a test of the path
+tracer, not of realism.
 """
 
 from __future__ import annotations
@@ -19,8 +23,17 @@ from sweep3d.report.figures import interval, pct
 from sweep3d.report.panel import PanelInputs
 from sweep3d.results import has_view, photo_path
 
-PAIRS = 24  # render | photo pairs shown per source
+PAIRS = 24  # render | photo pairs per page (every pair is on a page)
 JPEG_QUALITY = 80
+#: What a renderer as the source shares with the run's Cycles renders: sweep3d replays the same
+#: scene description through it, so only the path tracer changes.
+ENGINE_SHARES = (
+    "{engine} is not independent of the renders: it draws the same configurations through sweep3d's own scene "
+    "path, so it shares with Cycles the reading of the OBJ and MTL files (sweep3d reads them as Blender's importer "
+    "does), the framing and camera, the pose, the key light and lights, the denoiser (OpenImageDenoise) and the "
+    "view transform; what changes is the path tracer (light transport, shading models, sampling, pixel filter). "
+    "A verdict that survives it survives a change of path tracer; it does not show that the scene is realistic "
+    "(photographs of it do)")
 
 
 def build(inputs: PanelInputs) -> dict[str, Any] | None:
@@ -48,10 +61,12 @@ def _ratio(value: float | None, n: int) -> str:
 
 
 def _pairs(inputs: PanelInputs, source: str) -> dict[str, Any]:
-    """Up to :data:`PAIRS` jobs of ``source`` (first model's verdicts), disagreements first."""
+    """Every job of ``source`` (first model's verdicts) in pages of :data:`PAIRS`: disagreements
+    first, then each object's first job, each object's second, ... (job order within an object)."""
     rows = inputs.rows(
         "SELECT * FROM source_verdicts WHERE source = ? AND model = (SELECT min(model) FROM source_verdicts "
-        "WHERE source = ?) ORDER BY sim_correct = source_correct, job LIMIT ?", [source, source, PAIRS])
+        "WHERE source = ?) ORDER BY sim_correct = source_correct, row_number() OVER (PARTITION BY "
+        "sim_correct = source_correct, object ORDER BY job), object, job", [source, source])
     pairs = []
     # each image's hover text names its job and configuration (``job 3 · object = mug · …``)
     described = {row.job: inputs.results.describe(row) for row in inputs.results.rows([r["job"] for r in rows])}
@@ -69,8 +84,17 @@ def _pairs(inputs: PanelInputs, source: str) -> dict[str, Any]:
         else:
             other["uri"] = _photo_uri(inputs, r["photo_sha256"])
         pairs.append({"job": r["job"], "agree": agree, "render": render, "other": other})
-    return {"source": source, "model": rows[0]["model"] if rows else "", "pairs": pairs,
-            "preprocess": rows[0]["preprocess"] if rows else ""}
+    return {"source": source, "model": rows[0]["model"] if rows else "", "n": len(pairs), "pages": _paged(pairs),
+            "disagree": sum(not p["agree"] for p in pairs), "preprocess": rows[0]["preprocess"] if rows else "",
+            "shares": ENGINE_SHARES.format(engine=_short(source)) if source.startswith("engine:") else ""}
+
+
+def _paged(pairs: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """``pairs`` in pages of :data:`PAIRS`, each with its first and last pair's place (from 1) and
+    how many of its pairs disagree."""
+    return [{"first": start + 1, "last": start + len(page), "pairs": page,
+             "disagree": sum(not p["agree"] for p in page)}
+            for start in range(0, len(pairs), PAIRS) for page in [pairs[start:start + PAIRS]]]
 
 
 def _outcome(correct: bool) -> str:

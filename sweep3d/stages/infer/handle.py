@@ -96,6 +96,14 @@ class ModelHandle:
         return self.settings.label
 
     @property
+    def applied(self) -> Any:
+        """The preprocessing inference applies in this framing: the model's own, less the resize
+        where the render is the model's input already (``resolution = "model"``)."""
+        if self.framing.model and isinstance(self.preprocess, Preprocess):
+            return for_model_framing(self.preprocess, self.name)
+        return self.preprocess
+
+    @property
     def view(self) -> Preprocess | None:
         """The model's resize and crop when they are known (a :class:`Preprocess`), else None."""
         return self.preprocess if isinstance(self.preprocess, Preprocess) else None

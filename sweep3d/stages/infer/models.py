@@ -83,6 +83,14 @@ class Preprocess:
             part["arithmetic"] = self.arithmetic
         return part
 
+    def describe(self) -> str:
+        """The transform in words, its normalisation's numbers included: what another tool must do
+        to give the model the same input (recorded with verdicts: ``verdicts.preprocess``)."""
+        arithmetic = ", on 8-bit pixels" if self.arithmetic == "uint8" else ""
+        return (f"short side resized to {self.resize} (bilinear, antialiased{arithmetic}; none where it is "
+                f"{self.resize} already), centre crop {self.crop}x{self.crop}; pixels in [0, 1] normalised per "
+                f"channel as (x - mean) / std with mean = {_numbers(self.mean)}, std = {_numbers(self.std)}")
+
     def to_image(self, boxes: np.ndarray, height: int, width: int) -> np.ndarray:
         """Boxes (N, 4) in the model's input pixels (the crop) as pixels of the (height, width)
         image it was made from: the crop's offset added back, the resize undone."""
@@ -93,6 +101,12 @@ class Preprocess:
         out[:, [0, 2]] = (out[:, [0, 2]] + left) * (width / cols)
         out[:, [1, 3]] = (out[:, [1, 3]] + top) * (height / rows)
         return out
+
+
+def _numbers(values: tuple[float, ...]) -> str:
+    """``(0.5, 0.5, 0.5)``: a channel triple as :meth:`Preprocess.describe` writes it, each number
+    the shortest text that reads back as the same float (another tool copies it exactly)."""
+    return "(" + ", ".join(repr(float(v)) for v in values) + ")"
 
 
 _CHANNEL_OFFSETS = np.array([0, 256, 512], np.uint16)
