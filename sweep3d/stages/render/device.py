@@ -23,7 +23,7 @@ from typing import Any
 
 from sweep3d.core import UserError
 from sweep3d.spec import RenderSpec
-from sweep3d.stages.render import gpus as gpus_module
+from sweep3d.stages.render.cycles import gpus as gpus_module
 
 PROBE_TIMEOUT = 120.0  # seconds the probe may take to import bpy and list Cycles' devices
 #: What shows an NVIDIA driver: its /proc entry and device node (Linux), or WSL's GPU node.

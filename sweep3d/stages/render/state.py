@@ -1,6 +1,6 @@
 """The scene as plain Python: what rendered controls change and what Blender draws.
 
-Rendered controls edit a :class:`SceneState`; :mod:`sweep3d.stages.render.scene` turns a state
+Rendered controls edit a :class:`SceneState`; :mod:`sweep3d.stages.render.cycles.scene` turns a state
 into Blender objects. Keeping the state free of bpy makes controls testable without Blender
 and lets the planner reason about geometry (for example, whether an object is in frame).
 """

@@ -42,7 +42,7 @@ from sweep3d.stages.render.worker_protocol import (
 )
 
 if TYPE_CHECKING:
-    from sweep3d.stages.render.scene_edit import OnEdit
+    from sweep3d.stages.render.cycles.scene_edit import OnEdit
 
 
 def worker_main(conn: Connection, settings: RenderSettings, scratch: str, limits: WorkerLimits = NO_LIMITS,
@@ -95,7 +95,7 @@ def make_scene(settings: RenderSettings, scratch: Path, log=None, gpu: int | Non
         from sweep3d.stages.render.mitsuba.scene import MitsubaScene
 
         return MitsubaScene(settings, scratch, log, gpu)
-    from sweep3d.stages.render.scene import BlenderScene
+    from sweep3d.stages.render.cycles.scene import BlenderScene
 
     return BlenderScene(settings, scratch, log, gpu)
 
@@ -149,7 +149,7 @@ def render_job(scene, job: RenderJob, keep_pixels: bool = False, on_edit: OnEdit
     """
     from sweep3d.cache import atomic_write
     from sweep3d.core import PluginError, encode_png, png_size
-    from sweep3d.stages.render.scene_edit import EditedRenderError, render_edited
+    from sweep3d.stages.render.cycles.scene_edit import EditedRenderError, render_edited
 
     key = job.render_key
     started = time.perf_counter()

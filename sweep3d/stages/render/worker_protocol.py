@@ -72,7 +72,7 @@ class RenderSettings:
         The frame replaces ``resolution`` because the spec's may be "model", resolved elsewhere;
         the device replaces ``device``, which may be "auto".
         """
-        from sweep3d.stages.render.engines import mitsuba_variant
+        from sweep3d.stages.render.mitsuba.backend import mitsuba_variant
 
         shared = {f.name: getattr(spec, f.name) for f in fields(cls) if f.name in RenderSpec.model_fields}
         variant = mitsuba_variant() if spec.engine == "mitsuba" else ""  # the key's, wherever the worker runs

@@ -25,8 +25,8 @@ import numpy as np
 
 from sweep3d.core import TRUTH_PASSES, UserError, encode_png
 from sweep3d.spec import unknown_name
-from sweep3d.stages.render import engines
 from sweep3d.stages.render.lights import WHITE, SunLight
+from sweep3d.stages.render.mitsuba import backend as engines
 from sweep3d.stages.render.mitsuba import translate
 from sweep3d.stages.render.mitsuba.hdri import load_bitmap
 from sweep3d.stages.render.mitsuba.kept import KeptScene

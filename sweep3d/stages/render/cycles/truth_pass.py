@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from sweep3d.core import encode_depth, encode_mask, ground_truth
-from sweep3d.stages.render.compositor import pass_outputs
+from sweep3d.stages.render.cycles.compositor import pass_outputs
 
 SLOTS = ("index", "depth")
 #: Pixels of the enlarged silhouette render above which it is rendered at a coarser pitch.
