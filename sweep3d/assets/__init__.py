@@ -4,7 +4,7 @@ digests, the names a mesh holds, and the cheap checks a file passes before Blend
 from __future__ import annotations
 
 __all__ = [
-    "blender_version", "bpy_root", "check_archive", "check_file", "check_hdri", "check_materials", "check_mesh",
+    "MITSUBA_FORMATS", "blender_version", "bpy_root", "check_archive", "check_file", "check_hdri", "check_materials", "check_mesh",
     "file_names", "materialise_mesh", "mesh_digest", "mesh_files", "not_a_file", "read_mesh_bytes", "resolve_hdri",
     "resolve_mesh", "unreadable"
 ]
@@ -29,6 +29,7 @@ if _TYPE_CHECKING:
         resolve_hdri,
         resolve_mesh,
     )
+    from sweep3d.assets.texture_images import MITSUBA_FORMATS
 
 __getattr__, __dir__ = _exports(__name__, {
     "blender_version": ("sweep3d.assets.sources", "blender_version"),
@@ -37,6 +38,7 @@ __getattr__, __dir__ = _exports(__name__, {
     "check_file": ("sweep3d.assets.sniff", "check_file"),
     "check_hdri": ("sweep3d.assets.sniff", "check_hdri"),
     "check_materials": ("sweep3d.assets.materials", "check_materials"),
+    "MITSUBA_FORMATS": ("sweep3d.assets.texture_images", "MITSUBA_FORMATS"),
     "check_mesh": ("sweep3d.assets.sniff", "check_mesh"),
     "file_names": ("sweep3d.assets.mesh_names", "file_names"),
     "materialise_mesh": ("sweep3d.assets.sources", "materialise_mesh"),

@@ -20,6 +20,7 @@ SENSOR_WIDTH_MM = 36.0
 FRAME_FILL = 0.8  # distance = 1 / (zoom · FRAME_FILL · sin(half fov)): the sphere spans ~78 % at 50 mm (docs/how-to/camera.md)
 #: The :class:`SceneState` fields :func:`in_frame` reads.
 FRAME_FIELDS = ("scale", "azimuth", "elevation", "zoom", "fill", "focal_length", "frame_x", "frame_y")
+OCCLUDER_DEPTH = 0.5  # an occluder plate sits at this fraction of the way from camera to object
 EDGE_TOLERANCE = 1e-9  # relative: states this close to the frame's edge are tested one by one
 
 

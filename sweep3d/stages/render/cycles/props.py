@@ -8,9 +8,7 @@ from typing import Any
 import numpy as np
 
 from sweep3d.stages.render.cycles._rna import assign
-from sweep3d.stages.render.state import SceneState
-
-OCCLUDER_DEPTH = 0.5  # the plate sits at this fraction of the way from camera to object
+from sweep3d.stages.render.state import OCCLUDER_DEPTH, SceneState
 
 
 class Props:

@@ -15,8 +15,7 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-from sweep3d.assets import check_materials
-from sweep3d.assets.texture_images import MITSUBA_FORMATS
+from sweep3d.assets import MITSUBA_FORMATS, check_materials
 from sweep3d.core import SpecError
 from sweep3d.spec import LoadedSpec
 

@@ -23,9 +23,8 @@ from typing import Any
 
 import numpy as np
 
-from sweep3d.stages.render.cycles.props import OCCLUDER_DEPTH
 from sweep3d.stages.render.lights import AreaLight, SunLight, direction, facing
-from sweep3d.stages.render.state import SENSOR_WIDTH_MM, PointLight, SceneState
+from sweep3d.stages.render.state import OCCLUDER_DEPTH, SENSOR_WIDTH_MM, PointLight, SceneState
 
 #: The least ``specular`` given to Mitsuba's principled BSDF (Blender's IOR 1 reflects nothing; Mitsuba's
 #: needs an index of refraction above 1).
