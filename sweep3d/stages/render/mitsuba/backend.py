@@ -1,25 +1,28 @@
-"""Which renderer makes a spec's images (``[render] engine``), what it adds to the render key, and
-what a second renderer cannot express (refused at ``plan``, before anything renders).
+"""The Mitsuba 3 engine's :class:`~..backend.Backend`: its part of the render key, and what it
+cannot express (refused at ``plan``, before anything renders).
 
-Cycles is the default and adds nothing to the key, so its keys are those from before the choice
-existed. Mitsuba 3 (``sweep3d.stages.render.mitsuba``) renders the same plain-Python scene
-(:class:`~.state.SceneState`); its key names the engine, Mitsuba's version and the variant in
-place of Blender's version, which then changes none of its pixels. Nothing here imports
-Mitsuba: the version comes from the package's metadata.
+Mitsuba renders the same plain-Python scene (:class:`~..state.SceneState`) as Cycles; its key
+names the engine, Mitsuba's version and the variant in place of Blender's version, which then
+changes none of its pixels. Nothing here imports Mitsuba: the version comes from the package's
+metadata.
 """
 
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from importlib import metadata
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sweep3d.assets import MITSUBA_FORMATS, check_materials
 from sweep3d.core import SpecError
-from sweep3d.spec import LoadedSpec
+from sweep3d.stages.render.backend import Backend, can_be, refuse_when
 
-ENGINES = ("cycles", "mitsuba")
+if TYPE_CHECKING:
+    from sweep3d.spec import LoadedSpec
+    from sweep3d.stages.render.mitsuba.scene import MitsubaScene
+
 #: Mitsuba's variant when set (benchmarks); None: :func:`mitsuba_variant` picks it by what this machine has.
 MITSUBA_VARIANT: str | None = None
 #: LLVM libraries Dr.Jit's ``llvm_ad_rgb`` runs on (Debian's ``libllvm19``); Debian 12's default
@@ -42,19 +45,9 @@ CYCLES_ONLY = {
 }
 
 
-def cycles_only_defaults(engine: str) -> dict[str, Any]:
-    """The Cycles-only settings at their defaults, for a spec rendering with ``engine`` that
-    includes a Cycles spec (``realism score --engine``): nothing for Cycles itself."""
-    if engine == "cycles":
-        return {}
-    from sweep3d.spec import RenderSpec
-
-    return {name: RenderSpec.model_fields[name].default for name in CYCLES_ONLY}
-
-
 def mitsuba_version() -> str:
     """The installed Mitsuba's version (a :class:`SpecError`-free empty string when it is missing:
-    :func:`check_engine` refuses such a spec first)."""
+    :meth:`MitsubaBackend.check_setup` refuses such a spec first)."""
     try:
         return metadata.version("mitsuba")
     except metadata.PackageNotFoundError:
@@ -79,93 +72,81 @@ def mitsuba_variant() -> str:
     return "llvm_ad_rgb" if llvm_library() else "scalar_rgb"
 
 
-def variant_note(engine: str) -> str | None:
-    """The line a Mitsuba run says once when it renders with the slower ``scalar_rgb``."""
-    if engine != "mitsuba" or mitsuba_variant() != "scalar_rgb":
-        return None
-    return ("the mitsuba engine renders with its scalar_rgb variant (no LLVM 19 library found): llvm_ad_rgb renders "
-            "about 2.5x faster; install it with apt-get install libllvm19 (or set DRJIT_LIBLLVM_PATH)")
-
-
-def engine_key(engine: str) -> dict[str, Any] | None:
-    """The engine's part of every render key: None for Cycles (its keys stay as they were)."""
-    if engine == "cycles":
-        return None
-    return {"name": engine, "version": mitsuba_version(), "variant": mitsuba_variant(),
-            "translation": MITSUBA_TRANSLATION}
-
-
-def plan_device(engine: str, device: str) -> str:
-    """The device renders are keyed and made on: Mitsuba renders on the CPU whatever ``auto``
-    finds (an explicit GPU is refused by :func:`check_engine`)."""
-    return "cpu" if engine == "mitsuba" else device
-
-
-def check_engine(spec: LoadedSpec) -> None:
-    """Refuse, in one line naming the key and the engine, what the spec's engine cannot render.
-
-    Raises:
-        SpecError: Mitsuba is not installed, or the spec asks it for a GPU device, a mesh format
-            it does not read (or a texture format), smoothing, part visibility, a Cycles-only
-            setting (:data:`CYCLES_ONLY`) away from its default, or a control it cannot express.
-    """
-    engine = spec.render.engine
-    if engine == "cycles":
-        return
-    path = str(spec.path)
-    if not mitsuba_version():
-        raise SpecError(path, "render.engine", "engine \"mitsuba\" needs the mitsuba package: pip install mitsuba")
-    if spec.render.device in ("cuda", "optix"):
-        raise SpecError(path, "render.device", f"device {spec.render.device!r} is Cycles'; the mitsuba engine "
-                                               "renders on the CPU (use \"auto\" or \"cpu\")")
-    if spec.report.part_visibility:
-        raise SpecError(path, "report.part_visibility", "part visibility needs Cycles' UV pass; the mitsuba "
-                                                        "engine cannot render it (set it false)")
-    for name, what in CYCLES_ONLY.items():
-        value = getattr(spec.render, name)
-        if value != type(spec.render).model_fields[name].default:
-            raise SpecError(path, f"render.{name}", f"{name} = {value!r} is a Cycles setting ({what}), so it "
-                                                    f"would change nothing with engine \"mitsuba\"; remove it")
-    for i, obj in enumerate(spec.objects):
-        mesh = spec.meshes[obj.name]
-        suffix = Path(str(mesh).partition("#")[2] or str(mesh)).suffix.lower()
-        if suffix not in MITSUBA_MESHES:
-            raise SpecError(path, f"objects[{i}].mesh", f"the mitsuba engine reads only .obj meshes (with their "
-                                                        f"MTL), not {suffix or 'this file'}")
-        for where, fmt in check_materials(mesh).base_textures:
-            if fmt not in MITSUBA_FORMATS:
-                raise SpecError(path, f"objects[{i}].mesh", f"{where}: a {fmt} texture, which the mitsuba engine "
-                                                            f"cannot read (it reads {', '.join(sorted(MITSUBA_FORMATS))}); "
-                                                            "save it as PNG and name that in the MTL")
-        if obj.auto_smooth is not None:
-            raise SpecError(path, f"objects[{i}].auto_smooth", "the mitsuba engine cannot smooth by angle; "
-                                                               "remove auto_smooth")
-    for index, inst in enumerate(spec.controls):
-        if inst.control.stage != "render":
-            continue
-        problem = refused(inst.control, inst.spaces)
-        if problem:
-            raise SpecError(path, f"controls[{index}]", f"control {inst.control.type_name!r} (id "
-                                                        f"{inst.control.id!r}): {problem} with engine \"mitsuba\"")
-
-
-def refused(control: Any, spaces: dict[str, Any]) -> str | None:
-    """Why the Mitsuba engine cannot render a rendered control with these parameter spaces (None: it can)."""
-    name = control.type_name
-
-    def can_be(param: str, test) -> bool:
-        space = spaces.get(param)
-        return space is not None and any(test(v) for v in space.values())
-
-    if control.edits_scene:
-        return "its edit() changes Blender's scene, which Mitsuba does not have"
-    if name == "sky" and can_be("enabled", bool):
-        return "Blender's procedural sky cannot be rendered"
-    if name == "pin_to_ground" and can_be("enabled", bool):
-        return "the ground is a Cycles shadow catcher, which cannot be rendered"
-    if name == "material":
-        if can_be("skin", lambda v: v != "original"):
-            return "skins are Blender shader nodes and cannot be rendered"
-        if can_be("emission", lambda v: v not in (None, 0, 0.0)):
-            return "emission cannot be rendered"
+def _material(spaces: Mapping[str, Any]) -> str | None:
+    if can_be(spaces, "skin", lambda v: v != "original"):
+        return "skins are Blender shader nodes and cannot be rendered"
+    if can_be(spaces, "emission", lambda v: v not in (None, 0, 0.0)):
+        return "emission cannot be rendered"
     return None
+
+
+#: What the Mitsuba engine cannot render of the built-in controls, once per control type.
+SUPPORT = {
+    "sky": refuse_when("enabled", bool, "Blender's procedural sky cannot be rendered"),
+    "pin_to_ground": refuse_when("enabled", bool, "the ground is a Cycles shadow catcher, which cannot be rendered"),
+    "material": _material,
+}
+
+
+class MitsubaBackend(Backend):
+    """Mitsuba 3 on the CPU: its own OBJ/MTL reader, no UV pass, no scene edits, Cycles' settings ignored."""
+
+    name = "mitsuba"
+    title = "Mitsuba"
+    passes = frozenset({"mask", "depth"})
+    ignored_settings = CYCLES_ONLY
+    support = SUPPORT
+    #: Mitsuba's (issue 45): the same tiny spec (2 objects × white and studio × 6 yaws, 224² of
+    #: 256², denoised) run with each engine at 4 and 16 samples; the runs' CPU seconds, steadier
+    #: than their wall time on a shared machine, gave Mitsuba 2.2× Cycles' CPU per sample and
+    #: 0.17 s more per render (its scene is translated per job, its denoiser's albedo and normals
+    #: rendered), put on Cycles' basis: about 2.5× Cycles' estimate at 4–16 samples
+    #: (benchmarks/RESULTS.md, "The Mitsuba engine's cost in plan's estimate").
+    seconds_224 = (0.075, 0.19)
+
+    def scene(self, settings, scratch, log=None, gpu=None) -> MitsubaScene:
+        """A ``MitsubaScene`` (imported only now: Cycles' workers never load Mitsuba)."""
+        from sweep3d.stages.render.mitsuba.scene import MitsubaScene
+
+        return MitsubaScene(settings, scratch, log, gpu)
+
+    def key(self) -> dict[str, Any]:
+        return {"name": self.name, "version": mitsuba_version(), "variant": mitsuba_variant(),
+                "translation": MITSUBA_TRANSLATION}
+
+    def variant(self) -> str:
+        return mitsuba_variant()
+
+    def note(self) -> str | None:
+        """The line a run says once when it renders with the slower ``scalar_rgb``."""
+        if mitsuba_variant() != "scalar_rgb":
+            return None
+        return ("the mitsuba engine renders with its scalar_rgb variant (no LLVM 19 library found): llvm_ad_rgb "
+                "renders about 2.5x faster; install it with apt-get install libllvm19 (or set DRJIT_LIBLLVM_PATH)")
+
+    def check_setup(self, spec: LoadedSpec) -> None:
+        """Mitsuba must be installed, and renders on the CPU."""
+        path = str(spec.path)
+        if not mitsuba_version():
+            raise SpecError(path, "render.engine", "engine \"mitsuba\" needs the mitsuba package: pip install mitsuba")
+        if spec.render.device in ("cuda", "optix"):
+            raise SpecError(path, "render.device", f"device {spec.render.device!r} is Cycles'; the mitsuba engine "
+                                                   "renders on the CPU (use \"auto\" or \"cpu\")")
+
+    def check_objects(self, spec: LoadedSpec) -> None:
+        """Only OBJ meshes (with their MTL), textures Mitsuba reads, and no smoothing by angle."""
+        path = str(spec.path)
+        for i, obj in enumerate(spec.objects):
+            mesh = spec.meshes[obj.name]
+            suffix = Path(str(mesh).partition("#")[2] or str(mesh)).suffix.lower()
+            if suffix not in MITSUBA_MESHES:
+                raise SpecError(path, f"objects[{i}].mesh", f"the mitsuba engine reads only .obj meshes (with their "
+                                                            f"MTL), not {suffix or 'this file'}")
+            for where, fmt in check_materials(mesh).base_textures:
+                if fmt not in MITSUBA_FORMATS:
+                    raise SpecError(path, f"objects[{i}].mesh",
+                                    f"{where}: a {fmt} texture, which the mitsuba engine cannot read (it reads "
+                                    f"{', '.join(sorted(MITSUBA_FORMATS))}); save it as PNG and name that in the MTL")
+            if obj.auto_smooth is not None:
+                raise SpecError(path, f"objects[{i}].auto_smooth", "the mitsuba engine cannot smooth by angle; "
+                                                                   "remove auto_smooth")
