@@ -82,8 +82,9 @@ class RenderSpec(StrictModel):
                                       description="The world's importance map side with world_sampling = 'manual' "
                                                   "(Blender's sample_map_resolution).")
     engine: str = Field(
-        "cycles", description="The renderer: \"cycles\" (Blender's Cycles), or \"mitsuba\" (Mitsuba 3 (a second renderer, to tell a model's "
-                              "failure from a simulator artifact; docs/how-to/second-renderer.md). Keyed apart.")
+        "cycles", description="The renderer: \"cycles\" (Blender's Cycles), or \"mitsuba\" (Mitsuba 3: a second "
+                              "renderer, to tell a model's failure from a simulator artifact; "
+                              "docs/how-to/second-renderer.md). Keyed apart.")
 
     @field_validator("resolution", mode="before")
     @classmethod
