@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from sweep3d.core import Registry
+from sweep3d.core import Registry, UserError
 from sweep3d.spec import RenderSpec
 from sweep3d.stages.render.backend import Backend
 from sweep3d.stages.render.cycles.backend import CyclesBackend
@@ -29,8 +29,10 @@ def backend(engine: str) -> Backend:
     """The backend registered as ``engine`` (a spec's was checked when it was loaded).
 
     Raises:
-        UserError: no engine of that name (with the valid ones).
+        UserError: no engine of that name (with the valid ones); a ``module:Name`` is none either.
     """
+    if engine not in BACKENDS:
+        raise UserError(f"unknown engine {engine!r}; use one of {', '.join(BACKENDS.names())}")
     return BACKENDS.get(engine)
 
 
