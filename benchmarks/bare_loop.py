@@ -5,7 +5,7 @@ Every mesh is imported once under its own empty (shown with hide_render), one wo
 environment (scene.world), jobs world by world, object by object; render settings and framing
 are sweep3d's, so both render the same pictures. It needs bpy and numpy alone (no sweep3d
 install): the GPU benchmark runs it where only Blender is. A GPU is enabled by sweep3d's own
-:func:`sweep3d.stages.render.gpus.enable`, loaded from this checkout by its path.
+:func:`sweep3d.stages.render.cycles.gpus.enable`, loaded from this checkout by its path.
 
     python benchmarks/bare_loop.py JOBS.json FRAMES/ [--device cpu|cuda|optix]
 
@@ -24,7 +24,7 @@ import sys
 import time
 from pathlib import Path
 
-GPUS = Path(__file__).resolve().parents[1] / "sweep3d" / "stages" / "render" / "gpus.py"
+GPUS = Path(__file__).resolve().parents[1] / "sweep3d" / "stages" / "render" / "cycles" / "gpus.py"
 
 
 def use_gpu(bpy, scene, device: str) -> None:

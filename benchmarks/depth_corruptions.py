@@ -117,7 +117,7 @@ def _render(mesh_by_object: dict[str, str], size: int, samples: int, physical: b
     from sweep3d.core.truth import decode_depth
     from sweep3d.stages.postprocess.frame import frame_from_state
     from sweep3d.stages.render.controls import RENDERED_CONTROLS
-    from sweep3d.stages.render.scene import BlenderScene
+    from sweep3d.stages.render.cycles.scene import BlenderScene
     from sweep3d.stages.render.worker import posed_state, render_job
     from sweep3d.stages.render.worker_protocol import EnvironmentRef, RenderJob, RenderSettings
 

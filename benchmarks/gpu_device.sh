@@ -29,7 +29,7 @@ export LD_LIBRARY_PATH=$work/py/lib:$work/libs PYTHONPATH=$work/site PYTHONNOUSE
 export CUDA_CACHE_PATH=${CUDA_CACHE_PATH:-$work/nvcache} CUDA_CACHE_MAXSIZE=${CUDA_CACHE_MAXSIZE:-4294967296}
 python=$work/py/bin/python3.11
 command -v nvidia-smi >/dev/null && nvidia-smi -L
-timeout 120 "$python" "$repo/sweep3d/stages/render/gpus.py" 2>&1 | tail -1 | tee "$results/probe.txt"
+timeout 120 "$python" "$repo/sweep3d/stages/render/cycles/gpus.py" 2>&1 | tail -1 | tee "$results/probe.txt"
 [ $# -gt 0 ] || set -- cpu-1 cuda-1 optix-1 cuda-2 optix-2
 for run in "$@"; do
   left=$(( ${LIMIT:-520} - ($(date +%s) - started) ))

@@ -23,7 +23,7 @@ VARIANTS = ("scalar_rgb", "llvm_ad_rgb")
 
 def _measure(variant: str, jobs: int, passes: tuple[str, ...], out) -> None:
     import sweep3d
-    import sweep3d.stages.render.engines as engines
+    import sweep3d.stages.render.mitsuba.backend as engines
     from sweep3d.assets.sources import builtin_hdris, materialise_mesh
     from sweep3d.spec.models import KeyLightSpec
     from sweep3d.stages.render.controls import RENDERED_CONTROLS

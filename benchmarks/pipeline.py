@@ -304,7 +304,7 @@ def bare_jobs(folder: Path) -> tuple[Path, int]:
 def key_light(spec, job) -> dict | None:
     """The sun sweep3d lights a plain colour with for ``job`` (its energy, angle and column-major
     world matrix, by rows), from sweep3d's own light code; None for an HDRI."""
-    from sweep3d.stages.render.lamps import blender_light
+    from sweep3d.stages.render.cycles.lamps import blender_light
     from sweep3d.stages.render.lights import SunLight
     from sweep3d.stages.render.state import SceneState
 

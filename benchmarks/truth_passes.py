@@ -38,7 +38,7 @@ CONFIGS = [  # (name, passes, occlusion coverage, position x)
 def _measure(mesh: str, passes: tuple[str, ...], coverage: float, x: float, jobs: int, out) -> None:
     from sweep3d.assets.sources import builtin_hdris
     from sweep3d.stages.render.controls import RENDERED_CONTROLS
-    from sweep3d.stages.render.scene import BlenderScene
+    from sweep3d.stages.render.cycles.scene import BlenderScene
     from sweep3d.stages.render.worker import render_job
     from sweep3d.stages.render.worker_protocol import EnvironmentRef, RenderJob, RenderSettings
 

@@ -51,7 +51,7 @@ def write_object(folder: Path) -> Path:
 def render_tiles(mesh: Path, scratch: Path) -> dict[tuple[float, float], Image.Image]:
     """Each (azimuth, elevation)'s render on a light grey plain background with its key light."""
     from sweep3d.spec.models import KeyLightSpec
-    from sweep3d.stages.render.scene import BlenderScene
+    from sweep3d.stages.render.cycles.scene import BlenderScene
     from sweep3d.stages.render.state import SceneState
     from sweep3d.stages.render.worker_protocol import EnvironmentRef, RenderSettings
 

@@ -55,7 +55,7 @@ __getattr__, __dir__ = _exports(__name__, {
     'RenderFrame': ('sweep3d.stages.postprocess.frame', 'RenderFrame'),
     'RenderedControl': ('sweep3d.stages.render.controls', 'RenderedControl'),
     'Roles': ('sweep3d.stages.infer', 'Roles'),
-    'SceneEdit': ('sweep3d.stages.render.scene_edit', 'SceneEdit'),
+    'SceneEdit': ('sweep3d.stages.render.cycles.scene_edit', 'SceneEdit'),
     'SceneState': ('sweep3d.stages.render.state', 'SceneState'),
     'Segmenter': ('sweep3d.stages.infer', 'Segmenter'),
     'SpaceShape': ('sweep3d.spec.space', 'SpaceShape'),

@@ -285,7 +285,7 @@ def tiny_copy(tiny_run: Path, tmp_path: Path) -> Path:
 def blender_scene(tmp_path_factory):
     """One Blender scene per test session (bpy holds one scene per process), 32×32, 1 sample,
     with ``.cube`` the path of a cube mesh. Tests call ``prepare`` for the object they need."""
-    from sweep3d.stages.render.scene import BlenderScene
+    from sweep3d.stages.render.cycles.scene import BlenderScene
     from sweep3d.stages.render.worker_protocol import RenderSettings
 
     folder = tmp_path_factory.mktemp("scene")

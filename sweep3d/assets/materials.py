@@ -38,7 +38,7 @@ TEXTURE_OPTIONS = {"-o": 3, "-s": 3, "-t": 3, "-mm": 2, "-bm": 1, "-boost": 1, "
 @dataclass
 class MaterialAudit:
     """What the check found: warnings to print, and each base-colour texture (``map_Kd``) with its
-    format, for an engine that reads only some formats (``stages.render.engines``)."""
+    format, for an engine that reads only some formats (``stages.render.mitsuba.backend``)."""
 
     warnings: list[str] = field(default_factory=list)
     base_textures: list[tuple[str, str]] = field(default_factory=list)  # (where: "cube.mtl line 4", format)

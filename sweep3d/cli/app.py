@@ -252,11 +252,11 @@ def bench(
     current = Setting(r.samples, r.denoise_prefilter if r.denoise else "off", r.max_bounces,
                       "model" if r.resolution == "model" else None, r.adaptive_threshold, engine=r.engine)
     reference, twin = reference_settings(reference_samples, reference_denoise, current, model_view)
-    from sweep3d.spec import ENGINES
+    from sweep3d.stages.render import BACKENDS
 
-    unknown = [e for e in engine if e not in ENGINES]
+    unknown = [e for e in engine if e not in BACKENDS]
     if unknown:
-        raise UserError(f"--engine {unknown[0]!r}: use one of {', '.join(ENGINES)}")
+        raise UserError(f"--engine {unknown[0]!r}: use one of {', '.join(BACKENDS.names())}")
     settings = default_settings(current, model_view, full_frame, engine)
     references = [reference] + ([twin] if floor else [])
     sample = 100 if jobs is None else jobs

@@ -1,6 +1,6 @@
 """``sweep3d plan --materials``: the Principled BSDF values each object's materials render with.
 
-Read from a real import in a Blender child process (``stages/render/describe.py``), so the
+Read from a real import in a Blender child process (``stages/render/cycles/describe.py``), so the
 importer's own mapping of the file (an MTL's ``d``, ``Tf``, ``Pc``, ``illum``) shows as rendered.
 """
 

@@ -235,6 +235,10 @@ class Registry(Generic[T]):
 
         return decorator
 
+    def unregister(self, name: str) -> None:
+        """Take back the plug-in registered as ``name`` (a test's, or a host's temporary one); none: nothing."""
+        self._items.pop(name, None)
+
     def names(self) -> list[str]:
         return sorted(self._items)
 

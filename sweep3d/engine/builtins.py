@@ -12,12 +12,13 @@ from sweep3d.spec import Catalogue
 from sweep3d.stages.infer import EVALUATORS, MODELS, builtin_labels
 from sweep3d.stages.plan import POLICIES
 from sweep3d.stages.postprocess import POST_CONTROLS
-from sweep3d.stages.render import RENDERED_CONTROLS
+from sweep3d.stages.render import BACKENDS, RENDERED_CONTROLS
 
 
 @lru_cache(maxsize=1)
 def builtin_catalogue() -> Catalogue:
-    """The built-in controls, policies, models and evaluators (users' own come by ``module:Name``)."""
+    """The built-in controls, policies, models and evaluators (users' own come by ``module:Name``),
+    and the registered engines."""
     controls = Registry.union("control", RENDERED_CONTROLS, POST_CONTROLS)
-    return Catalogue(controls, POLICIES, MODELS, EVALUATORS, builtin_labels)
+    return Catalogue(controls, POLICIES, MODELS, EVALUATORS, builtin_labels, BACKENDS)
 

@@ -1,6 +1,6 @@
 """What a spec may name, handed to the loader by the layer that owns the plug-ins.
 
-The spec layer knows no stage: the render and postprocess stages own the controls, the plan
+The spec layer knows no stage: the render stage owns the engines, the render and postprocess stages own the controls, the plan
 stage the policies, the infer stage the models, evaluators and class names. A :class:`Catalogue`
 bundles their registries so the loader can check names (with "did you mean") without importing
 a stage; ``sweep3d.engine.builtins()`` builds the built-in one.
@@ -31,6 +31,7 @@ class Catalogue:
         evaluators: evaluators, each declaring its output columns as a pyarrow ``schema``.
         labels: the class names of a built-in model, or None for a user's model (whose classes
             are known only once it is loaded, at run time).
+        engines: the renderers ``[render] engine`` may name (the render stage's backends).
     """
 
     controls: Registry[type[Control]]
@@ -38,3 +39,4 @@ class Catalogue:
     models: Registry[Any]
     evaluators: Registry[Any]
     labels: Callable[[str], LabelSpace | None]
+    engines: Registry[Any]

@@ -196,6 +196,7 @@ def _validated(raw: dict[str, Any], catalogue: Catalogue, *, path: Path, base: P
     except ValidationError as exc:
         raise _first_error(path, exc) from None
     fail = lambda key, problem: SpecError(str(path), key, problem)  # noqa: E731
+    _check_engine(spec, fail, catalogue)
 
     meshes = {}
     for i, obj in enumerate(spec.objects):
@@ -362,6 +363,15 @@ def _key_path(loc: tuple[Any, ...]) -> str:
         else:
             out += f".{part}" if out else str(part)
     return out
+
+
+def _check_engine(spec: Spec, fail, catalogue: Catalogue) -> None:
+    """``[render] engine`` must name a registered engine (what it can render is the planner's check)."""
+    engine = spec.render.engine
+    if engine not in catalogue.engines:
+        close = difflib.get_close_matches(engine, catalogue.engines.names(), n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise fail("render.engine", f"unknown engine {engine!r}{hint}; use one of {', '.join(catalogue.engines.names())}")
 
 
 def _check_model(spec: Spec, fail, catalogue: Catalogue) -> None:

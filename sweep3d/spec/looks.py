@@ -2,7 +2,7 @@
 
 Names are read without Blender (:mod:`sweep3d.assets.mesh_names`) for OBJ and glTF; a typo is one line
 with "did you mean" and the file's names. Other formats are checked by the render worker that
-imports them (``stages/render/blender_looks.py``), with the same wording.
+imports them (``stages/render/cycles/blender_looks.py``), with the same wording.
 """
 
 from __future__ import annotations

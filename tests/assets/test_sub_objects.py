@@ -315,7 +315,7 @@ def test_plan_materials_prints_what_blender_renders_and_a_render_time_mistake_is
 @pytest.mark.blender
 def test_the_part_visibility_paint_shows_only_the_parts(meshes: Path) -> None:
     from sweep3d.core.uv_cells import PARTS
-    from sweep3d.stages.render.paint import paint_objects
+    from sweep3d.stages.render.cycles.paint import paint_objects
     from sweep3d.stages.render.worker_protocol import Look
 
     blue = np.tile([[0.1, 0.1, 0.9]], (PARTS, 1))

@@ -150,7 +150,7 @@ from pathlib import Path
 import numpy as np
 
 from sweep3d.stages.render.worker_protocol import EnvironmentRef, RenderSettings
-from sweep3d.stages.render.scene import BlenderScene
+from sweep3d.stages.render.cycles.scene import BlenderScene
 from sweep3d.stages.render.state import SceneState
 
 folder, hdri, mesh = Path(sys.argv[1]), sys.argv[2], sys.argv[3]

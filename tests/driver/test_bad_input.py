@@ -245,7 +245,7 @@ def test_a_worker_that_dies_in_a_users_edit_is_named_for_its_control() -> None:
 def test_an_edit_that_leaves_no_camera_is_named() -> None:
     from types import SimpleNamespace
 
-    from sweep3d.stages.render.scene_edit import camera_problem
+    from sweep3d.stages.render.cycles.scene_edit import camera_problem
 
     camera = SimpleNamespace(name="Camera")
     assert camera_problem(SimpleNamespace(camera=camera, objects={"Camera": camera})) is None

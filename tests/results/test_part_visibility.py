@@ -122,7 +122,7 @@ def test_switching_the_panel_on_renders_the_pass_only(parts_run: Path, tmp_path:
 
 @pytest.mark.blender
 def test_painted_object_takes_the_colour_of_each_side(tmp_path: Path) -> None:
-    from sweep3d.stages.render.paint import SIDES, paint_objects
+    from sweep3d.stages.render.cycles.paint import SIDES, paint_objects
     from tests.helpers import write_cube
 
     colours = np.tile([[0.9, 0.1, 0.1]], (PARTS, 1))  # red all round ...

@@ -61,7 +61,7 @@ class RenderFrame:
 def frame_from_state(state: SceneState, size: int, crop: int | None, depth: np.ndarray | None,
                      mask: np.ndarray | None) -> RenderFrame:
     """The frame of a render of ``state`` on a ``size``-pixel square frame whose centre ``crop``
-    (None: all of it) is stored, as ``stages/render/scene.py`` sets Blender's camera up."""
+    (None: all of it) is stored, as ``stages/render/cycles/scene.py`` sets Blender's camera up."""
     from sweep3d.stages.render import SENSOR_WIDTH_MM
 
     left = (size - (crop or size)) // 2  # where the stored crop starts, from the top and left

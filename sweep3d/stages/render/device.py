@@ -23,7 +23,8 @@ from typing import Any
 
 from sweep3d.core import UserError
 from sweep3d.spec import RenderSpec
-from sweep3d.stages.render import gpus as gpus_module
+from sweep3d.stages.render.backends import backend
+from sweep3d.stages.render.cycles import gpus as gpus_module
 
 PROBE_TIMEOUT = 120.0  # seconds the probe may take to import bpy and list Cycles' devices
 #: What shows an NVIDIA driver: its /proc entry and device node (Linux), or WSL's GPU node.
@@ -89,7 +90,7 @@ def device_note(spec: RenderSpec, device: str) -> str | None:
     """The line a run that renders says first about its device: that auto found no GPU, or that
     the driver must first compile Cycles' kernels for this GPU (None: nothing to say, as for
     another engine: Mitsuba renders on the CPU whatever ``device`` says)."""
-    if spec.engine != "cycles":
+    if set(backend(spec.engine).devices) == {"cpu"}:
         return None
     if spec.device == "auto" and device == "cpu":
         return ('render.device = "auto" found no NVIDIA GPU that Cycles can use (OptiX or CUDA): rendering on '

@@ -4,18 +4,11 @@ would run for hours (``samples = 65536``, ``resolution = 4096``) before ``run`` 
 from __future__ import annotations
 
 from sweep3d.spec import RenderSpec
+from sweep3d.stages.render.backends import backend
 
-# Fallback per-image costs on a 2-core CPU (measured with bench), when the store has no history.
-SECONDS_PER_SAMPLE_224 = 0.034
+# Fallback per-image costs on a 2-core CPU (measured with bench), when the store has no history;
+# each engine's own per sample and per render are its backend's ``seconds_224``.
 DENOISE_SECONDS_224 = {"fast": 0.04, "accurate": 0.3, "none": 0.02}
-#: Each engine's (seconds per sample, seconds per render besides samples and the denoiser) at 224².
-#: Cycles': measured with bench. Mitsuba's (issue 45): the same tiny spec (2 objects × white and
-#: studio × 6 yaws, 224² of 256², denoised) run with each engine at 4 and 16 samples; the runs' CPU
-#: seconds, steadier than their wall time on a shared machine, gave Mitsuba 2.2× Cycles' CPU per
-#: sample and 0.17 s more per render (its scene is translated per job, its denoiser's albedo and
-#: normals rendered), put on Cycles' basis: about 2.5× Cycles' estimate at 4–16 samples
-#: (benchmarks/RESULTS.md, "The Mitsuba engine's cost in plan's estimate").
-ENGINE_SECONDS_224 = {"cycles": (SECONDS_PER_SAMPLE_224, 0.02), "mitsuba": (0.075, 0.19)}
 #: Estimated render time past which ``plan`` and ``run`` warn.
 LONG_RENDERING_SECONDS = 3600.0
 
@@ -40,7 +33,7 @@ def estimate_render_seconds(render: RenderSpec, pixels: int, truth_passes: bool 
     scale = (pixels / 224) ** 2
     denoise = DENOISE_SECONDS_224[render.denoise_prefilter] if render.denoise else 0.0
     passes = (TRUTH_SECONDS_224 + (SECOND_RENDER_SECONDS_224 if hidden else 0.0)) if truth_passes else 0.0
-    per_sample, per_render = ENGINE_SECONDS_224[render.engine]
+    per_sample, per_render = backend(render.engine).seconds_224
     return (per_sample * render.samples + denoise + per_render + passes) * scale
 
 

@@ -26,7 +26,7 @@ def scene_key(blender: str, settings: dict[str, Any], object_digest: str, enviro
     Args:
         look: the object's ``parts``, material overrides and ``auto_smooth``
             (``ObjectSpec.look_key``); None leaves the key as it was before they existed.
-        engine: a renderer other than Cycles (``engines.engine_key``: its name, version and
+        engine: a renderer other than Cycles (``Backend.key``: its name, version and
             variant), which then stands in for Blender's version; None: Cycles, keyed as before.
     """
     value = {"stage": "render", "v": RENDER_STAGE_VERSION, "blender": blender, "settings": settings,

@@ -352,7 +352,7 @@ def _user_error(plan: Plan, job: Job, message: str) -> UserError:
 
 def object_error(spec: LoadedSpec, name: str, message: str, context: str = "") -> SpecError:
     """A worker's user error about object ``name`` as one line naming the key to fix: its ``parts``
-    or material overrides (stages/render/blender_looks.py says the fix), else its mesh."""
+    or material overrides (stages/render/cycles/blender_looks.py says the fix), else its mesh."""
     problem = " ".join(message.split())
     index = [o.name for o in spec.objects].index(name)
     if problem.startswith(("no object ", "the parts ")):

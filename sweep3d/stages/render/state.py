@@ -1,6 +1,6 @@
 """The scene as plain Python: what rendered controls change and what Blender draws.
 
-Rendered controls edit a :class:`SceneState`; :mod:`sweep3d.stages.render.scene` turns a state
+Rendered controls edit a :class:`SceneState`; :mod:`sweep3d.stages.render.cycles.scene` turns a state
 into Blender objects. Keeping the state free of bpy makes controls testable without Blender
 and lets the planner reason about geometry (for example, whether an object is in frame).
 """
@@ -20,6 +20,7 @@ SENSOR_WIDTH_MM = 36.0
 FRAME_FILL = 0.8  # distance = 1 / (zoom · FRAME_FILL · sin(half fov)): the sphere spans ~78 % at 50 mm (docs/how-to/camera.md)
 #: The :class:`SceneState` fields :func:`in_frame` reads.
 FRAME_FIELDS = ("scale", "azimuth", "elevation", "zoom", "fill", "focal_length", "frame_x", "frame_y")
+OCCLUDER_DEPTH = 0.5  # an occluder plate sits at this fraction of the way from camera to object
 EDGE_TOLERANCE = 1e-9  # relative: states this close to the frame's edge are tested one by one
 
 

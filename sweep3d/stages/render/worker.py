@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from sweep3d.core import UserError
+from sweep3d.stages.render.backends import backend
 from sweep3d.stages.render.child import orphaned
 from sweep3d.stages.render.worker_protocol import (
     NO_LIMITS,
@@ -42,7 +43,8 @@ from sweep3d.stages.render.worker_protocol import (
 )
 
 if TYPE_CHECKING:
-    from sweep3d.stages.render.scene_edit import OnEdit
+    from sweep3d.stages.render.backend import RenderScene
+    from sweep3d.stages.render.cycles.scene_edit import OnEdit
 
 
 def worker_main(conn: Connection, settings: RenderSettings, scratch: str, limits: WorkerLimits = NO_LIMITS,
@@ -88,16 +90,10 @@ def _serve(conn: Connection, settings: RenderSettings, scratch: str, limits: Wor
         conn.send(Idle())
 
 
-def make_scene(settings: RenderSettings, scratch: Path, log=None, gpu: int | None = None):
-    """The worker's scene for ``settings.engine``: a ``BlenderScene`` (Cycles), or a ``MitsubaScene``
-    (imported only then: Cycles' workers never load Mitsuba, nor Mitsuba's Blender)."""
-    if settings.engine == "mitsuba":
-        from sweep3d.stages.render.mitsuba.scene import MitsubaScene
-
-        return MitsubaScene(settings, scratch, log, gpu)
-    from sweep3d.stages.render.scene import BlenderScene
-
-    return BlenderScene(settings, scratch, log, gpu)
+def make_scene(settings: RenderSettings, scratch: Path, log=None, gpu: int | None = None) -> RenderScene:
+    """The worker's scene for ``settings.engine``, built by its backend (which imports its
+    renderer only then: Cycles' workers never load Mitsuba, nor Mitsuba's Blender)."""
+    return backend(settings.engine).scene(settings, scratch, log, gpu)
 
 
 def _telling(conn: Connection, render_key: str) -> OnEdit:
@@ -131,8 +127,8 @@ def posed_state(job: RenderJob):
     return state
 
 
-def render_job(scene, job: RenderJob, keep_pixels: bool = False, on_edit: OnEdit | None = None) -> RenderReply:
-    """Render one job in ``scene`` (a BlenderScene); shared by process workers and Ray actors
+def render_job(scene: RenderScene, job: RenderJob, keep_pixels: bool = False, on_edit: OnEdit | None = None) -> RenderReply:
+    """Render one job in ``scene`` (its engine's: see ``backend.RenderScene``); shared by process workers and Ray actors
     (``on_edit``: see :func:`~.scene_edit.render_edited`).
 
     Returns:
@@ -149,7 +145,7 @@ def render_job(scene, job: RenderJob, keep_pixels: bool = False, on_edit: OnEdit
     """
     from sweep3d.cache import atomic_write
     from sweep3d.core import PluginError, encode_png, png_size
-    from sweep3d.stages.render.scene_edit import EditedRenderError, render_edited
+    from sweep3d.stages.render.cycles.scene_edit import EditedRenderError, render_edited
 
     key = job.render_key
     started = time.perf_counter()

@@ -20,6 +20,7 @@ from dataclasses import dataclass, fields
 from typing import TYPE_CHECKING, Any, Literal, Protocol, Self
 
 from sweep3d.spec import KeyLightSpec, MaterialSpec, ObjectSpec, RenderSpec
+from sweep3d.stages.render.backends import backend
 
 if TYPE_CHECKING:
     from pydantic import BaseModel
@@ -42,8 +43,8 @@ class RenderSettings:
         threads: Cycles threads per worker; 0 = all cores.
         device: what renders: "cpu", "cuda" or "optix" (``[render] device`` resolved: never
             "auto", see ``stages.render.device``).
-        engine: the renderer (``[render] engine``): the worker builds a ``BlenderScene`` or a
-            ``MitsubaScene`` (``stages.render.mitsuba``), which render the same jobs.
+        engine: the renderer (``[render] engine``): the worker builds its backend's scene
+            (``stages.render.backends``); every engine renders the same jobs.
     """
 
     resolution: int
@@ -60,8 +61,8 @@ class RenderSettings:
     dither: float = _SPEC.dither
     world_sampling: Literal["automatic", "manual", "none"] = _SPEC.world_sampling
     world_map_resolution: int = _SPEC.world_map_resolution
-    engine: str = _SPEC.engine  # "cycles" or "mitsuba": which scene the worker builds
-    variant: str = ""  # Mitsuba's variant, as its render keys name it ("" for Cycles)
+    engine: str = _SPEC.engine  # a registered backend's name: which scene the worker builds
+    variant: str = ""  # the engine's variant, as its render keys name it (Mitsuba's; "" for Cycles)
 
     @classmethod
     def from_spec(cls, spec: RenderSpec, framing: Framing, passes: Iterable[str] = (),
@@ -72,10 +73,8 @@ class RenderSettings:
         The frame replaces ``resolution`` because the spec's may be "model", resolved elsewhere;
         the device replaces ``device``, which may be "auto".
         """
-        from sweep3d.stages.render.engines import mitsuba_variant
-
         shared = {f.name: getattr(spec, f.name) for f in fields(cls) if f.name in RenderSpec.model_fields}
-        variant = mitsuba_variant() if spec.engine == "mitsuba" else ""  # the key's, wherever the worker runs
+        variant = backend(spec.engine).variant()  # the key's, wherever the worker runs
         return cls(**{**shared, "resolution": framing.size, "crop": framing.crop, "passes": tuple(passes),
                       "device": device, "variant": variant})
 

@@ -187,7 +187,7 @@ def test_a_gpu_blender_ships_no_kernel_for_is_said_before_rendering(tmp_path, gp
 
 
 def test_capabilities_without_a_shipped_cubin_are_the_ones_the_driver_compiles(tmp_path) -> None:
-    from sweep3d.stages.render.gpus import uncompiled
+    from sweep3d.stages.render.cycles.gpus import uncompiled
 
     for name in ("kernel_sm_86.cubin.zst", "kernel_sm_120.cubin.zst", "kernel_compute_75.ptx.zst",
                  "kernel_optix.ptx.zst"):

@@ -1,5 +1,5 @@
 """``plan``'s render estimate is each engine's own (issue 45, item 6): Mitsuba's measured cost per
-sample and per render, not Cycles' (``stages/render/estimate.py`` says where each figure comes from)."""
+sample and per render, not Cycles' (each backend says where its figures come from)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,8 @@ from pathlib import Path
 import pytest
 
 from sweep3d.spec import RenderSpec
-from sweep3d.stages.render.estimate import ENGINE_SECONDS_224, estimate_render_seconds
+from sweep3d.stages.render import BACKENDS
+from sweep3d.stages.render.estimate import estimate_render_seconds
 from tests.helpers import TINY_SPEC, write_spec
 
 
@@ -19,10 +20,11 @@ def test_mitsuba_is_estimated_from_its_own_costs(samples: int, side: int) -> Non
     mitsuba = RenderSpec(samples=samples, engine="mitsuba")
     for truth, hidden in ((False, False), (True, True)):
         c, m = (estimate_render_seconds(r, side, truth, hidden) for r in (cycles, mitsuba))
-        per_sample, per_render = ENGINE_SECONDS_224["mitsuba"]
+        per_sample, per_render = BACKENDS.get("mitsuba").seconds_224
+        cycles_sample, cycles_render = BACKENDS.get("cycles").seconds_224
         assert m > c
-        assert m - c == pytest.approx((side / 224) ** 2 * ((per_sample - ENGINE_SECONDS_224["cycles"][0]) * samples
-                                                           + per_render - ENGINE_SECONDS_224["cycles"][1]))
+        assert m - c == pytest.approx((side / 224) ** 2 * ((per_sample - cycles_sample) * samples
+                                                           + per_render - cycles_render))
 
 
 def test_plan_estimates_a_mitsuba_spec_apart_from_the_same_cycles_spec(tmp_path: Path) -> None:

@@ -17,7 +17,8 @@ from sweep3d.cli import app
 from sweep3d.core.truth import decode_mask
 from sweep3d.engine import builtin_catalogue
 from sweep3d.spec.models import KeyLightSpec
-from sweep3d.stages.render.engines import engine_key, mitsuba_version
+from sweep3d.stages.render import engine_key
+from sweep3d.stages.render.mitsuba.backend import mitsuba_version
 from sweep3d.stages.render.render_keys import scene_key
 from sweep3d.stages.render.worker_protocol import EnvironmentRef, RenderJob, RenderSettings
 from tests.helpers import TINY_SPEC, load_spec, plan_for, scene_render_keys, write_cube, write_spec

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from sweep3d.spec.models import KeyLightSpec
-from sweep3d.stages.render.engines import llvm_library
 from sweep3d.stages.render.lights import AreaLight, SunLight
+from sweep3d.stages.render.mitsuba.backend import llvm_library
 from sweep3d.stages.render.state import Occluder, PointLight, SceneState
 from sweep3d.stages.render.worker_protocol import EnvironmentRef, RenderSettings
 from tests.helpers import write_cube

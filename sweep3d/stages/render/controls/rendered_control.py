@@ -8,7 +8,7 @@ from sweep3d.core import Control, ControlParams, Registry
 from sweep3d.stages.render.state import SceneState
 
 if TYPE_CHECKING:
-    from sweep3d.stages.render.scene_edit import SceneEdit
+    from sweep3d.stages.render.cycles.scene_edit import SceneEdit
 
 
 class RenderedControl(Control):
@@ -19,7 +19,7 @@ class RenderedControl(Control):
     from a fresh state, so it needs no undo. ``edit`` runs in the render worker only, after the
     state is posed in Blender, and gets the live scene (:class:`~.scene_edit.SceneEdit`): it may
     add or change anything Blender can. Whatever it creates or changes is gone before the next
-    job (see :mod:`sweep3d.stages.render.sandbox`); it need not clean up. ``order`` sorts
+    job (see :mod:`sweep3d.stages.render.cycles.sandbox`); it need not clean up. ``order`` sorts
     application (object pose, then camera, then in-frame placement, which needs the final camera).
     """
 

@@ -1,7 +1,8 @@
 """The Mitsuba 3 engine (``[render] engine = "mitsuba"``): a second renderer for the same scenes.
 
 It renders the plain-Python :class:`~sweep3d.stages.render.state.SceneState` the controls set,
-as Cycles' workers do, in the same worker processes (:func:`~..worker.make_scene`):
+as Cycles' workers do, in the same worker processes; :mod:`.backend` is what the rest of sweep3d
+knows of it (its key, what it refuses at plan, its scene: :class:`~..backend.Backend`):
 
 - :mod:`.objfile` reads an OBJ and its MTL as Blender's importer would (axes, smoothing,
   Principled BSDF values);
@@ -9,5 +10,6 @@ as Cycles' workers do, in the same worker processes (:func:`~..worker.make_scene
 - :mod:`.scene` renders it (denoised with OpenImageDenoise like Cycles), writes the same PNG
   blobs, and :mod:`.passes` the same mask and depth passes and truth numbers.
 
-Imported only when the engine is Mitsuba: nothing else in sweep3d loads ``mitsuba``.
+The ``mitsuba`` package itself is imported only by :mod:`.scene`, in a worker whose engine is
+Mitsuba: nothing else in sweep3d loads it.
 """

@@ -20,7 +20,7 @@ import numpy as np
 
 from sweep3d.core import encode_depth, encode_mask, ground_truth
 from sweep3d.stages.render.mitsuba import translate
-from sweep3d.stages.render.truth_pass import MAX_SILHOUETTE_PIXELS, framed_count
+from sweep3d.stages.render.silhouette import MAX_SILHOUETTE_PIXELS, framed_count
 
 if TYPE_CHECKING:
     from sweep3d.stages.render.mitsuba.scene import MitsubaScene

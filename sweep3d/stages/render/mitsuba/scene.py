@@ -1,8 +1,8 @@
 """Mitsuba's copy of a job: what a render worker keeps and renders when the engine is Mitsuba.
 
-:class:`MitsubaScene` has the interface :func:`~sweep3d.stages.render.worker.render_job` uses of
-a ``BlenderScene`` (``prepare``, ``pose_scene``, ``render_png``, ``truth_pass``, ``parts``,
-``load_seconds``, ``rebuild_if_stale``), so the stage, the pool, the blobs and the rows are the
+:class:`MitsubaScene` is a :class:`~sweep3d.stages.render.backend.RenderScene`, as a ``BlenderScene``
+is (``prepare``, ``pose_scene``, ``render_png``, ``truth_pass``, ``parts``, ``load_seconds``,
+``rebuild_if_stale``), so the stage, the pool, the blobs and the rows are the
 same for both engines. An object is read once per (mesh, look) into triangle meshes per material
 (PLY files in the worker's scratch folder); each job then describes the whole scene, and
 :mod:`.kept` updates the worker's loaded scene in place when only values changed (a fresh
@@ -25,9 +25,9 @@ import numpy as np
 
 from sweep3d.core import TRUTH_PASSES, UserError, encode_png
 from sweep3d.spec import unknown_name
-from sweep3d.stages.render import engines
 from sweep3d.stages.render.lights import WHITE, SunLight
 from sweep3d.stages.render.mitsuba import translate
+from sweep3d.stages.render.mitsuba.backend import llvm_library, mitsuba_variant
 from sweep3d.stages.render.mitsuba.hdri import load_bitmap
 from sweep3d.stages.render.mitsuba.kept import KeptScene
 from sweep3d.stages.render.mitsuba.objfile import MtlMaterial, ObjMesh, read_obj
@@ -41,15 +41,15 @@ MAX_KEPT_OBJECTS = 16
 
 
 def load_mitsuba(variant: str | None = None) -> Any:
-    """``mitsuba`` with ``variant`` (default: ``engines.mitsuba_variant()``) set, an llvm variant on
-    ``engines.llvm_library()`` (Dr.Jit's own search could find Debian's LLVM 14, which fails),
+    """``mitsuba`` with ``variant`` (default: ``backend.mitsuba_variant()``) set, an llvm variant on
+    ``backend.llvm_library()`` (Dr.Jit's own search could find Debian's LLVM 14, which fails),
     errors only in the log.
 
     Raises:
         UserError: mitsuba is not installed, or the variant cannot run here.
     """
-    variant = variant or engines.mitsuba_variant()
-    library = engines.llvm_library()
+    variant = variant or mitsuba_variant()
+    library = llvm_library()
     if variant.startswith("llvm") and library:
         os.environ["DRJIT_LIBLLVM_PATH"] = library
     try:

@@ -24,8 +24,7 @@ from typing import Any
 import numpy as np
 
 from sweep3d.stages.render.lights import AreaLight, SunLight, direction, facing
-from sweep3d.stages.render.props import OCCLUDER_DEPTH
-from sweep3d.stages.render.state import SENSOR_WIDTH_MM, PointLight, SceneState
+from sweep3d.stages.render.state import OCCLUDER_DEPTH, SENSOR_WIDTH_MM, PointLight, SceneState
 
 #: The least ``specular`` given to Mitsuba's principled BSDF (Blender's IOR 1 reflects nothing; Mitsuba's
 #: needs an index of refraction above 1).
@@ -138,7 +137,7 @@ def area_light(light: AreaLight, state: SceneState) -> dict[str, Any]:
 
 
 def occluder(state: SceneState) -> dict[str, Any] | None:
-    """The grey plate of :class:`~sweep3d.stages.render.props.Props`, placed the same way."""
+    """The grey plate of :class:`~sweep3d.stages.render.cycles.props.Props`, placed the same way."""
     occ = state.occluder
     if occ is None:
         return None

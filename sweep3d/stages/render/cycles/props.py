@@ -1,5 +1,5 @@
 """Objects a job adds around the subject: an occluding plate and a shadow-catching ground (lights:
-:mod:`sweep3d.stages.render.lamps`). Each is moved, not rebuilt, when its part of the state changes."""
+:mod:`sweep3d.stages.render.cycles.lamps`). Each is moved, not rebuilt, when its part of the state changes."""
 
 from __future__ import annotations
 
@@ -7,10 +7,8 @@ from typing import Any
 
 import numpy as np
 
-from sweep3d.stages.render._rna import assign
-from sweep3d.stages.render.state import SceneState
-
-OCCLUDER_DEPTH = 0.5  # the plate sits at this fraction of the way from camera to object
+from sweep3d.stages.render.cycles._rna import assign
+from sweep3d.stages.render.state import OCCLUDER_DEPTH, SceneState
 
 
 class Props:

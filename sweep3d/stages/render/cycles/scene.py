@@ -27,22 +27,22 @@ from typing import Any
 import numpy as np
 
 from sweep3d.core import TRUTH_PASSES, UserError, encode_png
-from sweep3d.stages.render._bpy import import_bpy
-from sweep3d.stages.render._rna import assign
-from sweep3d.stages.render.blender_looks import FileNames, apply_look, rename_imported, select_parts
+from sweep3d.stages.render.cycles._bpy import import_bpy
+from sweep3d.stages.render.cycles._rna import assign
+from sweep3d.stages.render.cycles.blender_looks import FileNames, apply_look, rename_imported, select_parts
+from sweep3d.stages.render.cycles.lamps import Lamps
+from sweep3d.stages.render.cycles.material_edits import MaterialEdits
+from sweep3d.stages.render.cycles.props import Props
+from sweep3d.stages.render.cycles.skins import SkinMaterials
+from sweep3d.stages.render.cycles.truth_pass import TruthPass
+from sweep3d.stages.render.cycles.uv_pass import UVPass
+from sweep3d.stages.render.cycles.world import WorldNodes
 from sweep3d.stages.render.device import use_device
 from sweep3d.stages.render.kept import Kept
-from sweep3d.stages.render.lamps import Lamps
 from sweep3d.stages.render.lights import WHITE, SunLight
-from sweep3d.stages.render.material_edits import MaterialEdits
-from sweep3d.stages.render.props import Props
 from sweep3d.stages.render.render_log import RenderLog
-from sweep3d.stages.render.skins import SkinMaterials
 from sweep3d.stages.render.state import SENSOR_WIDTH_MM, SceneState
-from sweep3d.stages.render.truth_pass import TruthPass
-from sweep3d.stages.render.uv_pass import UVPass
 from sweep3d.stages.render.worker_protocol import EnvironmentRef, Look, RenderSettings
-from sweep3d.stages.render.world import WorldNodes
 
 IMPORTERS = {
     ".obj": ("wm.obj_import", {}),

@@ -12,7 +12,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from sweep3d.stages.render._rna import assign, same
+from sweep3d.stages.render.cycles._rna import assign, same
 from sweep3d.stages.render.lights import AreaLight, SunLight
 from sweep3d.stages.render.state import PointLight, SceneState
 

@@ -32,11 +32,11 @@ from typing import Any
 import numpy as np
 
 from sweep3d.core import encode_depth, encode_mask, ground_truth
-from sweep3d.stages.render.compositor import pass_outputs
+from sweep3d.stages.render.cycles.compositor import pass_outputs
+from sweep3d.stages.render.silhouette import MAX_SILHOUETTE_PIXELS, framed_count
 
 SLOTS = ("index", "depth")
 #: Pixels of the enlarged silhouette render above which it is rendered at a coarser pitch.
-MAX_SILHOUETTE_PIXELS = 512 * 512
 NO_SURFACE = 1e9  # Cycles writes 1e10 in the depth pass where a ray hits nothing
 #: Object types that show no surface of their own (an empty that instances a collection does).
 NO_SURFACE_TYPES = frozenset({"CAMERA", "LIGHT", "LIGHT_PROBE", "LIGHTPROBE", "SPEAKER", "ARMATURE", "LATTICE",
@@ -196,15 +196,3 @@ class TruthPass:
 
     def _discard(self, name: str) -> None:
         (self.folder / f"{name}_{self.frame:04d}.exr").unlink(missing_ok=True)
-
-
-def framed_count(silhouette: np.ndarray, origin: tuple[int, int], image: tuple[float, float]) -> int:
-    """Pixels of a bordered ``silhouette`` render (its top-left pixel at ``origin``, x and y from
-    the top left of the enlarged frame) whose centres lie in the stored image, ``image`` = [lo, hi)
-    on both axes in the same pixels: what the frame's edge leaves of the unoccluded object."""
-    h, w = silhouette.shape
-    lo, hi = image
-    cols = np.arange(w) + origin[0] + 0.5
-    rows = np.arange(h) + origin[1] + 0.5
-    inside = ((rows >= lo) & (rows < hi))[:, None] & ((cols >= lo) & (cols < hi))[None, :]
-    return int(np.count_nonzero(silhouette & inside))

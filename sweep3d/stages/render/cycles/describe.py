@@ -32,8 +32,8 @@ def describe_materials(items: list[tuple[str, Look | None]]) -> list[list[dict[s
 def _describe_in_this_process(items: list[tuple[str, Look | None]]) -> list[list[dict[str, Any]] | str]:
     os.dup2(os.open(os.devnull, os.O_WRONLY), 1)  # Blender prints progress straight to fd 1
     from sweep3d.core import UserError
-    from sweep3d.stages.render.blender_looks import effective_materials
-    from sweep3d.stages.render.scene import BlenderScene
+    from sweep3d.stages.render.cycles.blender_looks import effective_materials
+    from sweep3d.stages.render.cycles.scene import BlenderScene
     from sweep3d.stages.render.worker_protocol import EnvironmentRef, RenderSettings
 
     out: list[list[dict[str, Any]] | str] = []

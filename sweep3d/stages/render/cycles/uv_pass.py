@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from sweep3d.core import UV_MAP, UserError, loop_uvs, part_counts
-from sweep3d.stages.render.compositor import pass_outputs
+from sweep3d.stages.render.cycles.compositor import pass_outputs
 
 CHANNELS = ("u", "v", "mask")
 

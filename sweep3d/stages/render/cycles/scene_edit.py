@@ -16,13 +16,13 @@ from typing import TYPE_CHECKING, Any, Callable
 import numpy as np
 
 from sweep3d.core import PluginError, blamed, control_label, is_user_plugin
-from sweep3d.stages.render.sandbox import clean_up, snapshot
+from sweep3d.stages.render.cycles.sandbox import clean_up, snapshot
 
 if TYPE_CHECKING:
     from pydantic import BaseModel
 
     from sweep3d.stages.render.controls.rendered_control import RenderedControl
-    from sweep3d.stages.render.scene import BlenderScene
+    from sweep3d.stages.render.cycles.scene import BlenderScene
 
 
 @dataclass(frozen=True)

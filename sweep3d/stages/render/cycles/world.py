@@ -13,7 +13,7 @@ import math
 from typing import Any
 
 from sweep3d.core import UserError
-from sweep3d.stages.render._rna import assign
+from sweep3d.stages.render.cycles._rna import assign
 from sweep3d.stages.render.state import SceneState
 from sweep3d.stages.render.worker_protocol import EnvironmentRef
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 from typing import Any
 
 from sweep3d.core import UserError
-from sweep3d.stages.render.blender_looks import INPUTS, FileNames, set_inputs
+from sweep3d.stages.render.cycles.blender_looks import INPUTS, FileNames, set_inputs
 
 #: The inputs a job may edit: the look overrides' and the emission strength.
 EDITABLE = {**INPUTS, "emission": "Emission Strength"}

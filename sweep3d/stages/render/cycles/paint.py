@@ -45,7 +45,7 @@ def _paint_in_this_process(items: list[tuple[str, np.ndarray, Look | None]], res
                            samples: int) -> list[list[bytes]]:
     os.dup2(os.open(os.devnull, os.O_WRONLY), 1)  # Blender prints progress straight to fd 1
     from sweep3d.core import encode_png
-    from sweep3d.stages.render.scene import BlenderScene
+    from sweep3d.stages.render.cycles.scene import BlenderScene
     from sweep3d.stages.render.state import SceneState
     from sweep3d.stages.render.worker_protocol import EnvironmentRef, RenderSettings
 
