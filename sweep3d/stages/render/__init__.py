@@ -6,9 +6,9 @@ This package's public API never imports bpy; only :mod:`.worker` (in child proce
 from __future__ import annotations
 
 __all__ = [
-    "COLUMNS", "Executor", "LOCAL", "Look", "RENDERED_CONTROLS", "RenderInfo", "RenderStage",
+    "COLUMNS", "Child", "Executor", "LOCAL", "Look", "RENDERED_CONTROLS", "RenderInfo", "RenderStage",
     "RenderedControl", "SENSOR_WIDTH_MM", "SIDES", "SceneEdit", "SceneState", "check_engine",
-    "connect", "describe_materials", "device_note", "duration", "engine_key",
+    "connect", "death_cause", "describe_materials", "device_note", "duration", "engine_key",
     "estimate_render_seconds", "frame_fields", "in_frame", "in_frame_many", "missing_gpu_warning",
     "object_error", "paint_objects", "parts_keys", "plan_device", "remove_stale_scratch",
     "render_settings", "render_template", "resolve_device", "scene_key", "scratch_root",
@@ -22,13 +22,14 @@ from typing import TYPE_CHECKING as _TYPE_CHECKING  # noqa: E402
 from sweep3d.core import exports as _exports  # noqa: E402
 
 if _TYPE_CHECKING:
+    from sweep3d.stages.render.child import Child
     from sweep3d.stages.render.controls.rendered_control import RENDERED_CONTROLS, RenderedControl, frame_fields
     from sweep3d.stages.render.describe import COLUMNS, describe_materials
     from sweep3d.stages.render.device import device_note, missing_gpu_warning, resolve_device
     from sweep3d.stages.render.engines import check_engine, engine_key, plan_device
     from sweep3d.stages.render.estimate import duration, estimate_render_seconds, slow_render_warning
     from sweep3d.stages.render.paint import SIDES, paint_objects
-    from sweep3d.stages.render.pool import remove_stale_scratch, scratch_root
+    from sweep3d.stages.render.pool import death_cause, remove_stale_scratch, scratch_root
     from sweep3d.stages.render.ray_pool import connect
     from sweep3d.stages.render.render_keys import parts_keys, render_template, scene_key, truth_keys
     from sweep3d.stages.render.render_stage import LOCAL, Executor, RenderStage, object_error, render_settings
@@ -38,6 +39,7 @@ if _TYPE_CHECKING:
 
 __getattr__, __dir__ = _exports(__name__, {
     "COLUMNS": ("sweep3d.stages.render.describe", "COLUMNS"),
+    "Child": ("sweep3d.stages.render.child", "Child"),
     "Executor": ("sweep3d.stages.render.render_stage", "Executor"),
     "LOCAL": ("sweep3d.stages.render.render_stage", "LOCAL"),
     "Look": ("sweep3d.stages.render.worker_protocol", "Look"),
@@ -51,6 +53,7 @@ __getattr__, __dir__ = _exports(__name__, {
     "SceneState": ("sweep3d.stages.render.state", "SceneState"),
     "check_engine": ("sweep3d.stages.render.engines", "check_engine"),
     "connect": ("sweep3d.stages.render.ray_pool", "connect"),
+    "death_cause": ("sweep3d.stages.render.pool", "death_cause"),
     "describe_materials": ("sweep3d.stages.render.describe", "describe_materials"),
     "device_note": ("sweep3d.stages.render.device", "device_note"),
     "duration": ("sweep3d.stages.render.estimate", "duration"),
