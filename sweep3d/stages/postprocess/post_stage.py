@@ -123,6 +123,7 @@ class PostprocessStage:
                 atomic_write(store.blob_path(job.image_key), made.png)
                 digest = sha256_bytes(made.png)
             if valid and self.handoff is not None:
+                self.handoff.wait_for_room()  # inference behind: no image made only to be forgotten
                 self.handoff.put(job.image_key, made.pixels)
             yield Computed(job.image_key, {"image_key": job.image_key, "render_key": job.render_key, "valid": valid,
                                            "seconds": task.seconds + made.seconds, "created_at": utc_now(),

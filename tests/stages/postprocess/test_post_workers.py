@@ -83,6 +83,26 @@ def test_workers_start_only_for_a_backlog_worth_their_start(monkeypatch) -> None
     assert live_children() == []
 
 
+def test_no_worker_outlives_a_pass_stopped_midway() -> None:
+    post = [instance("corruption", "c"), instance("blur", "b")]
+    stopped = iter(InOrder(tasks(), post, workers=2, encode=False, start_seconds=0))
+    next(stopped)
+    assert live_children(), "the workers made the first image"
+    stopped.close()  # the consumer went away (the pass failed elsewhere)
+    assert live_children() == []
+
+    class Cancelled(Exception):
+        pass
+
+    def cancelled_after_five():
+        yield from tasks()[:5]
+        raise Cancelled  # as the feed does when the pass stops (a stage failed, Ctrl-C)
+
+    with pytest.raises(Cancelled):
+        list(InOrder(cancelled_after_five(), post, workers=2, encode=False, start_seconds=0))
+    assert live_children() == []
+
+
 # -- the stage, with stand-in renders and a user's control beside the spec -----------------------
 USER_CONTROL = '''
 import numpy as np
