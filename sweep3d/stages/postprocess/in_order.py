@@ -145,8 +145,10 @@ class InOrder:
         try:
             while True:
                 self._take(reader, slots)
-                while slots and slots[0].done:
-                    yield self._out(slots.popleft())
+                if slots and slots[0].done:
+                    while slots and slots[0].done:
+                        yield self._out(slots.popleft())
+                    continue  # take what was read meanwhile before waiting (its wake-up may be spent)
                 if not slots and reader.ended:
                     finished = True
                     return

@@ -92,8 +92,11 @@ class Applier:
 
 
 def shippable(post: Sequence[ControlInstance]) -> bytes | None:
-    """The post controls pickled for the workers; None when one does not pickle (a class defined in
-    a script's ``__main__`` or in a function, an instance holding a lock): they stay here."""
+    """The post controls pickled for the workers; None when a worker could not load one (a class
+    defined in a script's or a notebook's ``__main__``, or in a function; an instance holding a
+    lock): they stay here, where they always could run."""
+    if any(type(inst.control).__module__ in ("__main__", "__mp_main__") for inst in post):
+        return None  # it pickles by reference, but a worker runs no one's __main__
     try:
         return pickle.dumps(list(post))
     except Exception:  # noqa: BLE001  (any failure: the run's process applies them, as it always could)

@@ -83,6 +83,38 @@ def test_workers_start_only_for_a_backlog_worth_their_start(monkeypatch) -> None
     assert live_children() == []
 
 
+def test_a_control_a_worker_could_not_import_keeps_the_images_here() -> None:
+    from sweep3d.stages.postprocess import PostControl
+
+    class Inverted(PostControl):  # as if written in a notebook: a worker runs no one's __main__
+        def apply(self, image, params, rng):
+            return 1.0 - image
+
+    Inverted.__module__ = "__main__"
+    post = [instance("blur", "b"), ControlInstance(Inverted("inv", "Inverted"), {})]
+    todo = [Task(str(i), "r", texture(0), {"b": {"sigma": 1.0}, "inv": {}}, f"{i:040x}") for i in range(8)]
+    here = InOrder(todo, post, workers=2, encode=False, start_seconds=0)
+    assert len(list(here)) == 8 and here.pids == {os.getpid()} and here.pool is None
+
+
+def test_a_slow_image_ahead_of_a_full_window_and_a_full_queue_stalls_nothing() -> None:
+    """Every 48th image is slow: while a worker makes it, the other makes the rest of the window,
+    and the reader's queue fills behind it; all of the window then goes at once."""
+    import threading
+
+    post = [instance("corruption", "c")]
+    slow, fast = texture(1, 160), texture(2, 32)
+    todo = [Task(i, "slow", slow, {"c": {"name": "zoom_blur", "severity": 5}}, f"{i:040x}") if i % 48 == 0 else
+            Task(i, "fast", fast, {"c": {"name": "contrast", "severity": 1}}, f"{i:040x}") for i in range(800)]
+    spread = InOrder(todo, post, workers=2, encode=False, start_seconds=0)
+    out: list = []
+    consumer = threading.Thread(target=lambda: out.extend(t.job for t, _ in spread), daemon=True)
+    consumer.start()
+    consumer.join(120)
+    assert not consumer.is_alive(), f"stalled after {len(out)} of {len(todo)} images"
+    assert out == list(range(800)) and os.getpid() not in spread.pids and live_children() == []
+
+
 def test_no_worker_outlives_a_pass_stopped_midway() -> None:
     post = [instance("corruption", "c"), instance("blur", "b")]
     stopped = iter(InOrder(tasks(), post, workers=2, encode=False, start_seconds=0))
