@@ -61,7 +61,9 @@ class _Reader:
         self.queue: queue.Queue = queue.Queue(maxsize=AHEAD)
         self.wake, self._signal = os.pipe()
         os.set_blocking(self.wake, False)
+        os.set_blocking(self._signal, False)  # a full pipe already wakes the consumer
         self._stop = threading.Event()
+        self._closing = threading.Lock()  # the pipe is never written once closed (its number may be reused)
         self.ended = False  # the consumer has taken the end (or the error)
         self._thread = threading.Thread(target=self._read, args=(iter(items),), name="sweep3d-post-read", daemon=True)
         self._thread.start()
@@ -82,10 +84,12 @@ class _Reader:
                 self.queue.put(entry, timeout=0.25)
             except queue.Full:
                 continue
-            try:
-                os.write(self._signal, b"x")
-            except OSError:
-                pass  # the consumer has gone (it closed the pipe)
+            with self._closing:
+                if not self._stop.is_set():
+                    try:
+                        os.write(self._signal, b"x")
+                    except BlockingIOError:
+                        pass
             return True
         return False
 
@@ -107,10 +111,11 @@ class _Reader:
             pass
 
     def close(self) -> None:
-        self._stop.set()
+        with self._closing:
+            self._stop.set()
+            os.close(self.wake)
+            os.close(self._signal)
         self._thread.join(0.5)  # it may wait on the feed until the pass cancels it: it is a daemon
-        os.close(self.wake)
-        os.close(self._signal)
 
 
 class InOrder:
