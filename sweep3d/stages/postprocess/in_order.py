@@ -141,6 +141,7 @@ class InOrder:
         self.made_here: list[float] = []  # seconds of each image made in this process
         self.pids: set[int] = set()  # the processes that made the images handed on
         self._sent: dict[int, _Slot] = {}  # sequence number -> slot, for the workers' answers
+        self._unsent: deque[_Slot] = deque()  # the slots whose image nobody makes yet, in order
         self._seq = 0
 
     def __iter__(self) -> Iterator[Any]:
@@ -158,18 +159,19 @@ class InOrder:
                     finished = True
                     return
                 if self.pool is not None:
-                    self._send(slots)
+                    self._send()
                 head = slots[0] if slots else None
                 if head is None or head.sent:  # its image is being made: wait for it (or for more items)
                     self._answers(reader, None)
                     continue
                 if self.start_seconds == 0:
-                    self._maybe_start(reader, slots)
+                    self._maybe_start(reader)
                 if self.pool is not None and self.pool.live and self.start_seconds == 0:
                     self._answers(reader, None)  # the workers are starting: they make it
                     continue
-                head.made = self._here(head.task)  # no worker ready (yet): made here meanwhile
-                self._maybe_start(reader, slots)
+                assert self._unsent[0] is head
+                head.made = self._here(self._unsent.popleft().task)  # no worker ready (yet): made here meanwhile
+                self._maybe_start(reader)
                 self._answers(reader, 0)
         finally:
             if self.pool is not None:
@@ -191,6 +193,8 @@ class InOrder:
                 reader.ended = True
                 return
             slots.append(_Slot(value, value if isinstance(value, Task) else None))
+            if isinstance(value, Task):
+                self._unsent.append(slots[-1])
 
     def _out(self, slot: _Slot) -> Any:
         if slot.task is None:
@@ -210,17 +214,16 @@ class InOrder:
         self.made_here.append(made.seconds)
         return made
 
-    def _send(self, slots: deque[_Slot]) -> None:
+    def _send(self) -> None:
         """Give the workers that can take one the next images not yet sent, in order."""
         assert self.pool is not None
-        for slot in slots:
-            if not self.pool.idle():
-                return
-            if slot.task is not None and not slot.sent and slot.made is None:
-                self._seq += 1
-                self.pool.send(self._seq, slot.task)
-                self._sent[self._seq] = slot
-                slot.sent = True
+        while self._unsent and self.pool.idle():
+            slot = self._unsent.popleft()
+            assert slot.task is not None
+            self._seq += 1
+            self.pool.send(self._seq, slot.task)
+            self._sent[self._seq] = slot
+            slot.sent = True
 
     def _answers(self, reader: _Reader, timeout: float | None) -> None:
         """Wait up to ``timeout`` seconds (None: until something comes) for workers' answers or
@@ -234,11 +237,11 @@ class InOrder:
                 self._sent.pop(seq).made = made
         reader.drain_wake()
 
-    def _maybe_start(self, reader: _Reader, slots: deque[_Slot]) -> None:
+    def _maybe_start(self, reader: _Reader) -> None:
         """Start the workers when the images waiting would take more than :attr:`start_seconds` here."""
         if self.started or self.count <= 1:
             return
-        waiting = reader.waiting() + sum(1 for s in slots if s.task is not None and s.made is None)
+        waiting = reader.waiting() + len(self._unsent)
         if self.start_seconds > 0:
             if len(self.made_here) < 2:
                 return
