@@ -725,12 +725,13 @@ def post_heavy_cores(rounds: int, objects: int, cores: list[int], console: Conso
     one = float(np.median([images / t["seconds"] for t in took[min(cores)]]))
     table = Table(title=f"post-heavy post-processing alone: {images:,} images ({outcome.total} renders × "
                         f"{len(HEAVY_CORRUPTIONS)} corruptions × 5 severities), rounds: {rounds}, interleaved")
-    for column in ("cores ([postprocess] workers)", "seconds", "images/s (median)", "processes that made images",
-                   f"× {min(cores)} core", "of linear"):
+    for column in ("cores ([postprocess] workers)", "seconds", "CPU seconds", "images/s (median)",
+                   "processes that made images", f"× {min(cores)} core", "of linear"):
         table.add_column(column, justify="right")
     for k in cores:
         rate = float(np.median([images / t["seconds"] for t in took[k]]))
-        table.add_row(str(k), " / ".join(f"{t['seconds']:.1f}" for t in took[k]), f"{rate:.1f}",
+        table.add_row(str(k), " / ".join(f"{t['seconds']:.1f}" for t in took[k]),
+                      " / ".join(f"{t['cpu']:.1f}" for t in took[k]), f"{rate:.1f}",
                       " / ".join(str(t["processes"]) for t in took[k]), f"{rate / one:.2f}",
                       f"{rate / one / (k / min(cores)):.2f}")
     console.print(table)
@@ -749,11 +750,19 @@ def post_alone(folder: Path, workers: int) -> dict:
 
     plan = plan_spec(sweep3d.load(folder / "spec.toml").spec)
     stage = PostprocessStage(store_images=False, workers=workers)
-    started = time.perf_counter()
+    started, cpu = time.perf_counter(), _cpu()
     outcome = run_stage(stage, plan, Store(folder / "store"), RunProgress(None))
-    seconds = time.perf_counter() - started
+    seconds, cpu = time.perf_counter() - started, _cpu() - cpu
     assert outcome.failed == 0 and outcome.computed == outcome.total, outcome
-    return {"seconds": seconds, "images": outcome.computed, "processes": len(stage.spread.pids)}
+    return {"seconds": seconds, "cpu": cpu, "images": outcome.computed, "processes": len(stage.spread.pids)}
+
+
+def _cpu() -> float:
+    """CPU seconds of this process and of its children that have ended (the post workers)."""
+    import resource
+
+    return sum(u.ru_utime + u.ru_stime for u in (resource.getrusage(resource.RUSAGE_SELF),
+                                                 resource.getrusage(resource.RUSAGE_CHILDREN)))
 
 
 def main() -> None:
