@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import os
 import pickle
+import socket
 import time
 import traceback
 from dataclasses import dataclass
@@ -30,8 +31,11 @@ from sweep3d.stages.postprocess.apply import post_image
 from sweep3d.stages.postprocess.frame import RenderFrame
 from sweep3d.stages.render import Child, death_cause
 
-#: Images sent to a worker before it answers the first: one being made, one waiting in its pipe.
-DEPTH = 2
+#: Images sent to a worker ahead of its answers: it has the next at hand while this process, busy
+#: or not scheduled on a loaded machine, has yet to read what it made.
+DEPTH = 4
+#: Bytes a worker's answers may wait in its pipe (a 224² image is 150 kB) before sending blocks it.
+PIPE_BYTES = 4 << 20
 #: Seconds a worker is given to exit by itself when the stage is done, before it is killed.
 GRACE = 5.0
 
@@ -219,6 +223,7 @@ def serve(conn: Connection, blob: bytes, encode: bool) -> None:
         conn.send(("broken", f"{type(exc).__name__}: {exc}"))
         return
     apply = Applier(post, encode)
+    widen(conn)
     conn.send(("ready",))
     while (task := conn.recv()) is not None:
         seq, *args = task
@@ -227,6 +232,21 @@ def serve(conn: Connection, blob: bytes, encode: bool) -> None:
         except Exception as exc:  # noqa: BLE001  (raised again in the run's process, in its turn)
             answer = _sendable(exc)
         conn.send(("done", seq, answer))
+
+
+def widen(conn: Connection) -> None:
+    """Let ``conn`` hold :data:`PIPE_BYTES` unread (as far as the system allows), so that a worker
+    goes on to its next image instead of waiting for this process to read its last answer."""
+    try:
+        sock = socket.fromfd(conn.fileno(), socket.AF_UNIX, socket.SOCK_STREAM)  # a duplicate: closed below
+    except OSError:
+        return
+    with sock:
+        for option in (socket.SO_SNDBUF, socket.SO_RCVBUF):
+            try:
+                sock.setsockopt(socket.SOL_SOCKET, option, PIPE_BYTES)
+            except OSError:
+                pass  # the system's limit stands
 
 
 def _sendable(exc: Exception) -> BaseException:
