@@ -28,6 +28,12 @@ earlier run), with nothing kept (`SWEEP3D_CACHE=off`), and optionally as another
 
     .venv/bin/python benchmarks/pipeline.py --image-path [--rounds 2] [--old ../other-checkout]
 
+`--post-heavy --cores 1,2` instead times the post-heavy spec's post-processing alone (its renders
+made once; then the postprocess stage in a fresh process per side, `[postprocess] workers` = 1, 2,
+interleaved round by round), in images/s against linear scaling:
+
+    .venv/bin/python benchmarks/pipeline.py --post-heavy --objects 1 --cores 1,2 [--rounds 2]
+
 `--image-path-paired` runs both sides in this one process instead, alternated run by run (ABBA),
 at 960 images, torch imported first (its import is reported apart): on a machine whose speed
 drifts, the tightest comparison.
@@ -684,6 +690,81 @@ def post_heavy(rounds: int, objects: int, old: Path | None, console: Console) ->
     console.print(table)
 
 
+def post_heavy_cores(rounds: int, objects: int, cores: list[int], console: Console) -> None:
+    """The post-heavy spec's post-processing alone on each of ``cores`` (``[postprocess] workers``):
+    its renders made once by the render stage, then, interleaved round by round, the postprocess
+    stage in a fresh process over a copy of that store (its images made in memory, as a run's are,
+    and dropped: no inference), timed from the stage's start to its end."""
+    import sweep3d
+    from sweep3d.cache.store import Store
+    from sweep3d.driver.loop import run_stage
+    from sweep3d.driver.progress import RunProgress
+    from sweep3d.engine.pipeline import plan_spec
+    from sweep3d.stages.render import RenderStage
+
+    took: dict[int, list[dict]] = {k: [] for k in cores}
+    loads = [os.getloadavg()]
+    with tempfile.TemporaryDirectory(prefix="sweep3d-cores-") as tmp:
+        renders = Path(tmp) / "renders"
+        plan = plan_spec(sweep3d.load(post_heavy_spec(renders, objects)).spec)
+        console.print(f"the post-heavy spec's {objects} object(s): its renders, once ...")
+        outcome = run_stage(RenderStage(), plan, Store(renders / "store"), RunProgress(None))
+        assert outcome.failed == 0, outcome
+        for i in range(rounds):
+            for k in cores if i % 2 == 0 else cores[::-1]:
+                console.print(f"round {i + 1}: {k} core(s) ...")
+                side = Path(tmp) / "side"
+                shutil.copytree(renders, side)
+                done = subprocess.run([sys.executable, __file__, "--post-alone", str(side), "--workers", str(k)],
+                                      capture_output=True, text=True)
+                assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+                took[k].append(json.loads(done.stdout.strip().splitlines()[-1]))
+                shutil.rmtree(side)
+                loads.append(os.getloadavg())
+    images = took[cores[0]][0]["images"]
+    one = float(np.median([images / t["seconds"] for t in took[min(cores)]]))
+    table = Table(title=f"post-heavy post-processing alone: {images:,} images ({outcome.total} renders × "
+                        f"{len(HEAVY_CORRUPTIONS)} corruptions × 5 severities), rounds: {rounds}, interleaved")
+    for column in ("cores ([postprocess] workers)", "seconds", "CPU seconds", "images/s (median)",
+                   "processes that made images", f"× {min(cores)} core", "of linear"):
+        table.add_column(column, justify="right")
+    for k in cores:
+        rate = float(np.median([images / t["seconds"] for t in took[k]]))
+        table.add_row(str(k), " / ".join(f"{t['seconds']:.1f}" for t in took[k]),
+                      " / ".join(f"{t['cpu']:.1f}" for t in took[k]), f"{rate:.1f}",
+                      " / ".join(str(t["processes"]) for t in took[k]), f"{rate / one:.2f}",
+                      f"{rate / one / (k / min(cores)):.2f}")
+    console.print(table)
+    console.print("load averages (1, 5, 15 min) before and after each side: "
+                  + "; ".join(" ".join(f"{x:.2f}" for x in load) for load in loads))
+
+
+def post_alone(folder: Path, workers: int) -> dict:
+    """Seconds of the postprocess stage alone over the renders in ``folder``'s store, with ``workers``."""
+    import sweep3d
+    from sweep3d.cache.store import Store
+    from sweep3d.driver.loop import run_stage
+    from sweep3d.driver.progress import RunProgress
+    from sweep3d.engine.pipeline import plan_spec
+    from sweep3d.stages.postprocess import PostprocessStage
+
+    plan = plan_spec(sweep3d.load(folder / "spec.toml").spec)
+    stage = PostprocessStage(store_images=False, workers=workers)
+    started, cpu = time.perf_counter(), _cpu()
+    outcome = run_stage(stage, plan, Store(folder / "store"), RunProgress(None))
+    seconds, cpu = time.perf_counter() - started, _cpu() - cpu
+    assert outcome.failed == 0 and outcome.computed == outcome.total, outcome
+    return {"seconds": seconds, "cpu": cpu, "images": outcome.computed, "processes": len(stage.spread.pids)}
+
+
+def _cpu() -> float:
+    """CPU seconds of this process and of its children that have ended (the post workers)."""
+    import resource
+
+    return sum(u.ru_utime + u.ru_stime for u in (resource.getrusage(resource.RUSAGE_SELF),
+                                                 resource.getrusage(resource.RUSAGE_CHILDREN)))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--renders", type=int, default=40, help="renders in the throughput comparison")
@@ -695,6 +776,10 @@ def main() -> None:
     parser.add_argument("--post-heavy", action="store_true",
                         help="only the post-heavy spec: the quickstart's renders × 18 corruptions × 5 severities")
     parser.add_argument("--objects", type=int, default=5, help="with --post-heavy: the quickstart's first N objects")
+    parser.add_argument("--cores", type=str, help="with --post-heavy: time its post-processing alone on these "
+                        "core counts ([postprocess] workers), e.g. 1,2, instead of whole runs")
+    parser.add_argument("--post-alone", type=Path, help=argparse.SUPPRESS)  # one side of --post-heavy --cores
+    parser.add_argument("--workers", type=int, default=1, help=argparse.SUPPRESS)
     parser.add_argument("--old", type=Path, help="with --post-heavy or --image-path: another checkout to time beside this one")
     parser.add_argument("--image-path", action="store_true",
                         help="only the image path, per image: sweep3d's stages against the bare process")
@@ -716,6 +801,12 @@ def main() -> None:
         return
     if args.image_path_paired:
         image_path_paired(args.rounds, console)
+        return
+    if args.post_alone:
+        print(json.dumps(post_alone(args.post_alone, args.workers)))
+        return
+    if args.post_heavy and args.cores:
+        post_heavy_cores(args.rounds, args.objects, [int(k) for k in args.cores.split(",")], console)
         return
     if args.post_heavy:
         post_heavy(args.rounds, args.objects, args.old, console)

@@ -119,11 +119,14 @@ def _short(filename: str) -> str:
 
 
 def _refuse_workers(guard: _LaneGuard) -> None:
-    """Starting a render worker (which imports bpy in a child process) fails the test in the lane."""
+    """Starting a render worker (which imports bpy in a child process) fails the test in the lane;
+    a post-processing worker (a :class:`Child` running ``stages.postprocess``' code) is allowed."""
     import multiprocessing.context
 
-    def refuse(what: str):
+    def refuse(what: str, allowed=None):
         def start(*args, **kwargs):
+            if allowed is not None and _post_worker(*args, **kwargs):
+                return allowed(*args, **kwargs)
             guard.record(f"started {what}", _chain(traceback.extract_stack()[:-1]))
             pytest.fail(f"the fast lane starts no {what}: render workers import bpy (mark the test blender)",
                         pytrace=False)
@@ -136,7 +139,12 @@ def _refuse_workers(guard: _LaneGuard) -> None:
             target = getattr(__import__(module, fromlist=[cls]), cls)
         except (ImportError, AttributeError):
             continue  # moved: the guards left still cover local workers
-        target.__init__ = refuse(cls)
+        target.__init__ = refuse(cls, target.__init__ if cls == "Child" else None)
+
+
+def _post_worker(child, target=None, *args, **kwargs) -> bool:
+    """Whether a :class:`Child` is to run a post-processing worker (numpy and the post controls, no bpy)."""
+    return getattr(target, "__module__", "").startswith("sweep3d.stages.postprocess.")
 
 
 _GUARD = pytest.StashKey[_LaneGuard]()

@@ -347,6 +347,10 @@ class PostprocessSpec(StrictModel):
                             "memory for inference and writes it only where it is looked at (the report, "
                             "export), made again from its render; 'all' writes every one as it is made. "
                             "Keys and answers are the same either way.")
+    workers: int = Field(0, ge=0, le=1024, description="Post-processing worker processes at most; 0 = one per core "
+                         "(os.cpu_count()), 1 = none (the run's own process makes every image). Workers start only "
+                         "when the images waiting would take more than about a second here; in no key: an image's "
+                         "bytes are the same wherever it is made.")
 
 
 class PolicySpec(Typed):

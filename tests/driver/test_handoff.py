@@ -26,6 +26,30 @@ def test_each_image_is_taken_once_and_the_oldest_goes_when_full() -> None:
     assert np.array_equal(handoff.take("c"), pixels[2]) and len(handoff) == 0
 
 
+def test_a_full_handoff_holds_the_stage_back_only_while_something_takes_images(monkeypatch) -> None:
+    import threading
+    import time
+
+    from sweep3d.stages.postprocess import handoff as module
+
+    handoff = ImageHandoff(limit=2)
+    for key in "ab":
+        handoff.put(key, np.zeros((2, 2, 3), np.uint8))
+    started = time.monotonic()
+    handoff.wait_for_room()  # full, but nothing has taken an image yet (a pass without inference)
+    assert time.monotonic() - started < 0.5
+    assert handoff.take("x") is None  # inference is taking images
+    threading.Timer(0.3, handoff.take, ("a",)).start()
+    started = time.monotonic()
+    handoff.wait_for_room()
+    assert time.monotonic() - started >= 0.25 and len(handoff) == 1
+    monkeypatch.setattr(module, "STALL", 0.2)
+    handoff.put("c", np.zeros((2, 2, 3), np.uint8))  # full again, and nothing takes any more
+    started = time.monotonic()
+    handoff.wait_for_room()
+    assert 0.0 < time.monotonic() - started < 0.5 and len(handoff) == 2
+
+
 def test_the_store_setting_decides_whether_the_stage_owns_blobs(tmp_path: Path) -> None:
     from tests.helpers import load_spec
 

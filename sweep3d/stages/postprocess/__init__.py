@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING as _TYPE_CHECKING  # noqa: E402
 from sweep3d.core import exports as _exports  # noqa: E402
 
 if _TYPE_CHECKING:
+    from sweep3d.stages.postprocess.apply import apply_post
     from sweep3d.stages.postprocess.controls.post_control import POST_CONTROLS, PostControl
     from sweep3d.stages.postprocess.frame import RenderFrame
     from sweep3d.stages.postprocess.handoff import ImageHandoff
@@ -21,7 +22,6 @@ if _TYPE_CHECKING:
     from sweep3d.stages.postprocess.post_stage import (
         Made,
         PostprocessStage,
-        apply_post,
         make_image,
         post_controls,
         truth_digests,
@@ -34,7 +34,7 @@ __getattr__, __dir__ = _exports(__name__, {
     "PostControl": ("sweep3d.stages.postprocess.controls.post_control", "PostControl"),
     "PostprocessStage": ("sweep3d.stages.postprocess.post_stage", "PostprocessStage"),
     "RenderFrame": ("sweep3d.stages.postprocess.frame", "RenderFrame"),
-    "apply_post": ("sweep3d.stages.postprocess.post_stage", "apply_post"),
+    "apply_post": ("sweep3d.stages.postprocess.apply", "apply_post"),
     "image_template": ("sweep3d.stages.postprocess.image_keys", "image_template"),
     "make_image": ("sweep3d.stages.postprocess.post_stage", "make_image"),
     "post_controls": ("sweep3d.stages.postprocess.post_stage", "post_controls"),

@@ -15,10 +15,8 @@ passes again (the RGB render is kept).
 
 from __future__ import annotations
 
-import inspect
 import time
 from dataclasses import dataclass
-from functools import lru_cache
 from typing import Any, Iterator, Sequence
 
 import numpy as np
@@ -35,107 +33,19 @@ from sweep3d.cache import (
     sha256_bytes,
     utc_now,
 )
-from sweep3d.core import (
-    BLOB_SUFFIX,
-    TRUTH_PASSES,
-    PluginError,
-    blamed,
-    encode_png8,
-    from_uint8,
-    is_user_plugin,
-    to_uint8,
-)
+from sweep3d.core import BLOB_SUFFIX, TRUTH_PASSES, blamed
 from sweep3d.driver import Computed, Feed, Job, JobList, Plan
 from sweep3d.spec import ControlInstance, LoadedSpec
+from sweep3d.stages.postprocess.apply import post_image, reads_passes
 from sweep3d.stages.postprocess.frame import RenderFrame, frame_from_state
 from sweep3d.stages.postprocess.handoff import ImageHandoff
+from sweep3d.stages.postprocess.in_order import InOrder, worker_count
+from sweep3d.stages.postprocess.post_workers import Task
 
 IMAGES_SCHEMA = pa.schema([
     ("image_key", pa.string()), ("render_key", pa.string()), ("valid", pa.bool_()),
     ("seconds", pa.float64()), ("created_at", pa.timestamp("us")), (DIGEST_COLUMN, pa.string()),
 ])
-
-
-def apply_post(image: np.ndarray, controls: Sequence[ControlInstance], values: dict[str, dict[str, Any]],
-               seed_key: str, frame: RenderFrame | None = None) -> np.ndarray:
-    """Apply the post controls that this job has, in spec order.
-
-    Args:
-        image: float32 (H, W, 3) in [0, 1].
-        seed_key: the job's image key; seeds the random generator so results are reproducible.
-        frame: the job's render passes and camera, for the controls that declare ``passes``.
-    """
-    rng = np.random.default_rng(int(seed_key[:16], 16))
-    out = image
-    for inst in controls:
-        if inst.id in values and not inst.control.is_identity(values[inst.id]):
-            out = _applied(inst, out, inst.control.params(values[inst.id]), rng, frame)
-    return np.asarray(out, dtype=np.float32)
-
-
-def reads_passes(inst: ControlInstance, values: dict[str, dict[str, Any]]) -> tuple[str, ...]:
-    """The truth passes ``inst`` reads for a job with ``values`` (none when it is neutral there)."""
-    passes = tuple(p for p in getattr(inst.control, "passes", ()) if p in TRUTH_PASSES)
-    if not passes or inst.id not in values or inst.control.is_identity(values[inst.id]):
-        return ()
-    return passes
-
-
-@lru_cache(maxsize=None)
-def takes_frame(cls: type) -> bool:
-    """Whether ``cls.apply`` accepts a fourth argument (the frame): older controls take three."""
-    try:
-        parameters = list(inspect.signature(cls.apply).parameters.values())[1:]  # after self
-    except (TypeError, ValueError):
-        return False
-    if any(p.kind is inspect.Parameter.VAR_POSITIONAL for p in parameters):
-        return True
-    positional = [p for p in parameters if p.kind in (inspect.Parameter.POSITIONAL_ONLY,
-                                                      inspect.Parameter.POSITIONAL_OR_KEYWORD)]
-    return len(positional) >= 4
-
-
-def _applied(inst: ControlInstance, image: np.ndarray, params: Any, rng: np.random.Generator,
-             frame: RenderFrame | None = None) -> np.ndarray:
-    """One control's ``apply`` (with the frame when it declares passes and takes one); a user's
-    control that raises or returns no image of ``image``'s shape is a :class:`PluginError` naming
-    it (sweep3d's own controls' failures are bugs: raised)."""
-    control = inst.control
-    with blamed(control, "apply()"):
-        if getattr(control, "passes", ()) and takes_frame(type(control)):
-            out = control.apply(image, params, rng, frame)
-        else:
-            out = control.apply(image, params, rng)
-    try:
-        array = np.asarray(out, dtype=np.float32)
-    except (TypeError, ValueError):
-        array = None
-    if array is None or array.shape != image.shape:
-        what = f"an array of shape {array.shape}" if array is not None else f"a {type(out).__name__}"
-        raise PluginError(f"control {control.type_name!r} (id {inst.id!r}) returned {what} from apply(); return the image as a float array of shape "
-                          f"{image.shape} (H, W, 3), values in [0, 1]")
-    return in_range(inst, array) if is_user_plugin(control.type_name) else array
-
-
-#: How far outside [0, 1] a user's post control may go (float rounding), clipped; beyond it is refused.
-RANGE_TOLERANCE = 1e-3
-
-
-def in_range(inst: ControlInstance, array: np.ndarray) -> np.ndarray:
-    """A user's control's image, its finite values in [0, 1]: a float overshoot within
-    :data:`RANGE_TOLERANCE` is clipped; further out (an 8-bit image, 1e30) is a :class:`PluginError`
-    naming the control, or the model would be tested on pixels no image has. NaN and infinity
-    are left as they are: they make the image invalid, counted apart (see :class:`Made`)."""
-    finite = np.isfinite(array)
-    low = float(np.min(array, initial=np.inf, where=finite))  # no finite pixel: inf and -inf, nothing to refuse
-    high = float(np.max(array, initial=-np.inf, where=finite))
-    if low >= 0.0 and high <= 1.0:
-        return array
-    if low < -RANGE_TOLERANCE or high > 1.0 + RANGE_TOLERANCE:
-        hint = " (divide an 8-bit image by 255)" if 1.5 < high <= 255.0 and low >= 0.0 else ""
-        raise PluginError(f"control {inst.control.type_name!r} (id {inst.id!r}) returned values from {low:g} to "
-                          f"{high:g} from apply(); return the image with values in [0, 1]{hint}")
-    return np.clip(array, 0.0, 1.0, out=array.copy(), where=finite)
 
 
 def job_frame(plan: Plan, job: Job, arrays: dict[str, np.ndarray]) -> RenderFrame:
@@ -165,14 +75,17 @@ class PostprocessStage:
     table = "images"
     side_tables: dict[str, pa.Schema] = {}
 
-    def __init__(self, store_images: bool = True, handoff: ImageHandoff | None = None) -> None:
+    def __init__(self, store_images: bool = True, handoff: ImageHandoff | None = None, workers: int = 1) -> None:
         self.store_images = store_images
         self.handoff = handoff
+        self.workers = workers
+        self.spread: InOrder | None = None  # the last pass's: which processes made its images
 
     @classmethod
     def for_spec(cls, spec: LoadedSpec, handoff: ImageHandoff | None = None) -> PostprocessStage:
-        """The stage as ``spec``'s ``[postprocess] store`` asks."""
-        return cls(store_images=spec.postprocess.store == "all", handoff=handoff)
+        """The stage as ``spec``'s ``[postprocess]`` asks: ``store``, and ``workers`` (0: one per core)."""
+        return cls(store_images=spec.postprocess.store == "all", handoff=handoff,
+                   workers=worker_count(spec.postprocess.workers))
 
     @property
     def owns_blobs(self) -> bool:  # type: ignore[override]  (a run that stores no image owns no blob)
@@ -197,33 +110,45 @@ class PostprocessStage:
     def compute(self, todo: Feed, plan: Plan, store: Store) -> Iterator[Computed]:
         post = post_controls(plan)
         render_valid = todo.column("renders", "valid")  # live: renders of this pass arrive with their jobs
+        self.spread = InOrder(self._inputs(todo, plan, store, post), post, self.workers, self.store_images)
+        for item in self.spread:
+            if isinstance(item, Computed):
+                yield item
+                continue
+            task, made = item
+            job = task.job
+            valid = render_valid.get(job.render_key) is not False and made.finite
+            digest = None
+            if made.png is not None:
+                atomic_write(store.blob_path(job.image_key), made.png)
+                digest = sha256_bytes(made.png)
+            if valid and self.handoff is not None:
+                self.handoff.wait_for_room()  # inference behind: no image made only to be forgotten
+                self.handoff.put(job.image_key, made.pixels)
+            yield Computed(job.image_key, {"image_key": job.image_key, "render_key": job.render_key, "valid": valid,
+                                           "seconds": task.seconds + made.seconds, "created_at": utc_now(),
+                                           DIGEST_COLUMN: digest})
+
+    def _inputs(self, todo: Feed, plan: Plan, store: Store, post: list[ControlInstance]) -> Iterator[Computed | Task]:
+        """Each job of ``todo`` with what its image is made from (its render, its passes), or why
+        it cannot be made (a damaged render or pass: reported, made again by the next pass)."""
         render_digests = todo.digests("renders")
         pass_digests = truth_digests(todo)
         damaged: set[str] = set()
         seen = _SeenRenders(plan, self.handoff)
         for job in todo:
             t0 = time.perf_counter()
-            if job.render_key in damaged:
+            pixels = None if job.render_key in damaged else seen.pixels(store, job.render_key,
+                                                                        render_digests.get(job.render_key))
+            if pixels is None:
+                damaged.add(job.render_key)
                 yield Computed(job.image_key, damaged=("renders", job.render_key))
                 continue
-            render = seen.render(store, job.render_key, render_digests.get(job.render_key))
-            made = make_image(store, plan, job, post, render_digests.get(job.render_key), pass_digests, render)
-            if made.pixels is None:
-                if made.damaged is not None and made.damaged[0] == "renders":
-                    damaged.add(job.render_key)
-                yield Computed(job.image_key, damaged=made.damaged, error=made.error)
+            frame, failed = image_inputs(store, plan, job, post, pass_digests, pixels.shape[:2])
+            if failed is not None:
+                yield Computed(job.image_key, damaged=failed.damaged, error=failed.error)
                 continue
-            valid = render_valid.get(job.render_key) is not False and made.finite
-            digest = None
-            if self.store_images:
-                data = encode_png8(made.pixels)
-                atomic_write(store.blob_path(job.image_key), data)
-                digest = sha256_bytes(data)
-            if valid and self.handoff is not None:
-                self.handoff.put(job.image_key, made.pixels)
-            yield Computed(job.image_key, {"image_key": job.image_key, "render_key": job.render_key, "valid": valid,
-                                           "seconds": time.perf_counter() - t0, "created_at": utc_now(),
-                                           DIGEST_COLUMN: digest})
+            yield Task(job, job.render_key, pixels, job.values, job.image_key, frame, time.perf_counter() - t0)
 
 
 class _SeenRenders:
@@ -237,14 +162,14 @@ class _SeenRenders:
         self._as_images: set[str] | None = None
         self._plan = plan
 
-    def render(self, store: Store, key: str, digests: set[str] | None) -> np.ndarray | None:
-        """The render ``key``, decoded (a copy: a control may change its input in place)."""
+    def pixels(self, store: Store, key: str, digests: set[str] | None) -> np.ndarray | None:
+        """The render ``key``'s uint8 pixels (None: missing or damaged), read and checked once."""
         if self.last is None or self.last[0] != key:
             pixels = load_pixels(store, key, digests)
-            self.last = (key, from_uint8(pixels)) if pixels is not None else None
+            self.last = (key, pixels) if pixels is not None else None
             if pixels is not None and self.handoff is not None and key in self.as_images():
                 self.handoff.put(key, pixels)
-        return self.last[1].copy() if self.last is not None else None
+        return self.last[1] if self.last is not None else None
 
     def as_images(self) -> set[str]:
         """Render keys that are also some job's image key (no post control changes that job's)."""
@@ -283,25 +208,32 @@ def truth_digests(source: Feed | Store) -> dict[str, Any]:
 
 
 def make_image(store: Store, plan: Plan, job: Job, post: Sequence[ControlInstance], render_digests: set[str] | None,
-               pass_digests: dict[str, Any], render: np.ndarray | None = None) -> Made:
-    """The job's post-processed image from its stored render (``render``: decoded already; and
-    passes, for the controls that read them): what the stage computes, and what inference and the
-    report make again for an image that was not stored."""
-    render = render if render is not None else load_image(store, job.render_key, render_digests)
+               pass_digests: dict[str, Any]) -> Made:
+    """The job's post-processed image from its stored render (and passes, for the controls that
+    read them), as the stage makes it: what inference and the report make again for an image that
+    was not stored."""
+    render = load_image(store, job.render_key, render_digests)
     if render is None:
         return Made(None, damaged=("renders", job.render_key))
-    frame = None
+    frame, failed = image_inputs(store, plan, job, post, pass_digests, render.shape[:2])
+    if failed is not None:
+        return failed
+    return Made(*post_image(render, post, job.values, job.image_key, frame))
+
+
+def image_inputs(store: Store, plan: Plan, job: Job, post: Sequence[ControlInstance], pass_digests: dict[str, Any],
+                 shape: tuple[int, ...]) -> tuple[RenderFrame | None, Made | None]:
+    """(the frame the job's post controls read, None when none reads a pass; or, second, a
+    :class:`Made` saying why its image cannot be made: a pass missing or damaged)."""
     wanted = sorted({p for inst in post for p in reads_passes(inst, job.values)})
-    if wanted and job.truth_key is None:
-        return Made(None, error="a post control reads render passes the plan did not ask for")
-    if wanted:
-        arrays = {name: _pass(store, job, name, pass_digests[name], render.shape[:2]) for name in wanted}
-        if any(a is None for a in arrays.values()):  # its truth row goes: the passes are rendered again
-            assert job.truth_key is not None
-            return Made(None, damaged=("truths", job.truth_key))
-        frame = job_frame(plan, job, arrays)
-    image = apply_post(render, post, job.values, job.image_key, frame)
-    return Made(to_uint8(image), bool(np.isfinite(image).all()))
+    if not wanted:
+        return None, None
+    if job.truth_key is None:
+        return None, Made(None, error="a post control reads render passes the plan did not ask for")
+    arrays = {name: _pass(store, job, name, pass_digests[name], shape) for name in wanted}
+    if any(a is None for a in arrays.values()):  # its truth row goes: the passes are rendered again
+        return None, Made(None, damaged=("truths", job.truth_key))
+    return job_frame(plan, job, arrays), None
 
 
 def _pass(store: Store, job: Job, name: str, digests: Any, shape: tuple[int, ...]) -> np.ndarray | None:

@@ -8,9 +8,9 @@ This package's public API never imports bpy or mitsuba; only the workers (child 
 from __future__ import annotations
 
 __all__ = [
-    "BACKENDS", "Backend", "COLUMNS", "Executor", "LOCAL", "Look", "RENDERED_CONTROLS", "RenderInfo", "RenderScene", "RenderStage",
+    "BACKENDS", "Backend", "COLUMNS", "Child", "Executor", "LOCAL", "Look", "RENDERED_CONTROLS", "RenderInfo", "RenderScene", "RenderStage",
     "RenderedControl", "SENSOR_WIDTH_MM", "SIDES", "SceneEdit", "SceneState", "check_engine",
-    "connect", "cycles_only_defaults", "describe_materials", "device_note", "duration", "engine_key",
+    "connect", "cycles_only_defaults", "death_cause", "describe_materials", "device_note", "duration", "engine_key",
     "join_ray", "ray_session", "variant_note",
     "estimate_render_seconds", "frame_fields", "in_frame", "in_frame_many", "missing_gpu_warning",
     "object_error", "paint_objects", "parts_keys", "plan_device", "remove_stale_scratch",
@@ -34,13 +34,14 @@ if _TYPE_CHECKING:
         plan_device,
         variant_note,
     )
+    from sweep3d.stages.render.child import Child
     from sweep3d.stages.render.controls.rendered_control import RENDERED_CONTROLS, RenderedControl, frame_fields
     from sweep3d.stages.render.cycles.describe import COLUMNS, describe_materials
     from sweep3d.stages.render.cycles.paint import SIDES, paint_objects
     from sweep3d.stages.render.cycles.scene_edit import SceneEdit
     from sweep3d.stages.render.device import device_note, missing_gpu_warning, resolve_device
     from sweep3d.stages.render.estimate import duration, estimate_render_seconds, slow_render_warning
-    from sweep3d.stages.render.pool import remove_stale_scratch, scratch_root
+    from sweep3d.stages.render.pool import death_cause, remove_stale_scratch, scratch_root
     from sweep3d.stages.render.ray_pool import connect, ray_session
     from sweep3d.stages.render.ray_pool import join as join_ray
     from sweep3d.stages.render.render_keys import parts_keys, render_template, scene_key, truth_keys
@@ -53,6 +54,7 @@ __getattr__, __dir__ = _exports(__name__, {
     "Backend": ("sweep3d.stages.render.backend", "Backend"),
     "RenderScene": ("sweep3d.stages.render.backend", "RenderScene"),
     "COLUMNS": ("sweep3d.stages.render.cycles.describe", "COLUMNS"),
+    "Child": ("sweep3d.stages.render.child", "Child"),
     "Executor": ("sweep3d.stages.render.render_stage", "Executor"),
     "LOCAL": ("sweep3d.stages.render.render_stage", "LOCAL"),
     "Look": ("sweep3d.stages.render.worker_protocol", "Look"),
@@ -70,6 +72,7 @@ __getattr__, __dir__ = _exports(__name__, {
     "ray_session": ("sweep3d.stages.render.ray_pool", "ray_session"),
     "join_ray": ("sweep3d.stages.render.ray_pool", "join"),
     "describe_materials": ("sweep3d.stages.render.cycles.describe", "describe_materials"),
+    "death_cause": ("sweep3d.stages.render.pool", "death_cause"),
     "device_note": ("sweep3d.stages.render.device", "device_note"),
     "duration": ("sweep3d.stages.render.estimate", "duration"),
     "engine_key": ("sweep3d.stages.render.backends", "engine_key"),

@@ -16,9 +16,9 @@ from sweep3d.core.control import ControlParams
 from sweep3d.core.pixels import linear_to_srgb, srgb_to_linear
 from sweep3d.engine import builtin_catalogue as catalogue
 from sweep3d.stages.postprocess import PostControl, apply_post
+from sweep3d.stages.postprocess.apply import takes_frame
 from sweep3d.stages.postprocess.depth_effects import disk_kernel, signed_coc
 from sweep3d.stages.postprocess.frame import RenderFrame, frame_from_state
-from sweep3d.stages.postprocess.post_stage import takes_frame
 from tests.helpers import TINY_SPEC, examples, load_spec, plan_for, spec_toml, write_spec
 
 CONTROLS = catalogue().controls
