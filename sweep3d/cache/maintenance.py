@@ -27,30 +27,19 @@ import pyarrow.compute as pc
 
 from sweep3d.cache import digested, extracted
 from sweep3d.cache.blobs import blob_is_intact
-from sweep3d.cache.store import (
-    BLOB_TABLES,
-    KEY_COLUMN,
-    NEWEST_WINS,
-    PHOTOS_FOLDER,
-    TABLE_COLUMNS,
-    TABLES,
-    TRUTH_BLOBS,
-    Store,
-    StoreReadError,
-    atomic_write,
-    blob_key,
-    photo_path,
-    scan,
-    segment_name,
-    with_column_list,
-)
+from sweep3d.cache.columns import with_column_list
+from sweep3d.cache.contracts import KeptFiles, TableContract, contract_of, table_contracts, table_names
+from sweep3d.cache.files import StoreReadError, atomic_write, scan, segment_name
+from sweep3d.cache.store import Store
+from sweep3d.cache.store_blobs import BLOB_TABLES, TRUTH_BLOBS, blob_key
 from sweep3d.core import read_record
 
 TEMP_AGE = 3600.0  # seconds after which gc removes temp files (a live run's are younger)
 #: Folders that only the writer lock's holder writes (``reports/`` and ``cache/`` are not:
-#: ``sweep3d report`` writes them without the lock).
-LOCKED_FOLDERS = ("tables", "blobs", "jobs", "models", "outputs", "realism")
-_HEX_NAME = re.compile(r"[0-9a-f]{64}")  # a kept photo's name: its photograph's SHA-256
+#: ``sweep3d report`` writes them without the lock), besides the folders of the declared tables'
+#: kept files (see :func:`locked_folders`).
+LOCKED_FOLDERS = ("tables", "blobs", "jobs", "models", "outputs")
+_HEX_NAME = re.compile(r"[0-9a-f]{64}")  # a kept file's name, less its suffix: the SHA-256 its row records
 TEMP_PATTERN = ".*.tmp"  # how atomic_write names its temp files (a dot, the file's name, a tag, .tmp)
 
 
@@ -58,8 +47,9 @@ TEMP_PATTERN = ".*.tmp"  # how atomic_write names its temp files (a dot, the fil
 @dataclass(frozen=True)
 class Problem:
     kind: str  # "corrupt segment", "corrupt blob", "missing blob", "corrupt jobs table", "corrupt kept output",
-    # "corrupt extracted asset", "corrupt kept photo", "missing kept photo"; "unreadable …" for a file of
-    # any of these kinds that the OS would not let this process read (see :data:`UNREADABLE`)
+    # "corrupt extracted asset", and for a table's kept files "corrupt kept <noun>", "missing kept <noun>";
+    # "unreadable …" for a file of any of these kinds that the OS would not let this process read (see
+    # :data:`UNREADABLE`)
     table: str
     path: Path
     key: str | None = None
@@ -86,8 +76,8 @@ class Verification:
     rows: int = 0
     blobs: int = 0
     outputs: int = 0  # kept model outputs
-    photos: int = 0  # kept photographs (``realism score``)
     assets: int = 0  # folders extracted from mesh archives
+    kept: dict[KeptFiles, int] = field(default_factory=dict)  # a table's kept files -> how many were checked
     problems: list[Problem] = field(default_factory=list)
 
     @property
@@ -102,11 +92,11 @@ class Verification:
 
 def verify(root: Path) -> Verification:
     """Re-read every segment (checking its columns are its table's), re-hash every blob that a
-    row references, every kept model output and every extracted mesh, decode every kept
-    photograph a verdict names; change nothing."""
+    row references, every kept model output and every extracted mesh, check every kept file a
+    declared table's rows name (its contract's check); change nothing."""
     store = Store(root, quarantine=False, warn=False)
     report = Verification()
-    for table in TABLES:
+    for table in table_names():
         for path in store.segments(table):
             report.segments += 1
             data = store.read_segment(path)
@@ -138,7 +128,9 @@ def verify(root: Path) -> Verification:
                 detail = "content does not match its recorded SHA-256" if digests else "does not decode"
                 report.problems.append(Problem("corrupt blob", table, path, key, detail))
     _verify_truth_blobs(store, report)
-    _verify_kept_photos(store, report)
+    for contract in table_contracts():
+        if contract.kept is not None:
+            _verify_kept_files(store, contract, contract.kept, report)
     _verify_kept_outputs(root, report)
     _verify_assets(root, report)
     return report
@@ -158,45 +150,43 @@ def evaluated_columns_lacking(store: Store) -> list[Path]:
         if record is None or jobs is None:
             continue
         keys = set(jobs.column(0).to_pylist())
-        columns = (*TABLE_COLUMNS["predictions"], *record.columns)
+        columns = (*contract_of("predictions").columns, *record.columns)
         found += store.require_columns("predictions", columns, keys, f"every row of the {record.kind} evaluator has")
     return found
 
 
-def kept_photo_digests(store: Store) -> set[str]:
-    """The photographs the ``verdicts`` rows name (their ``photo_sha256``): the kept photos in use."""
-    data = store.table("verdicts", ["photo_sha256"])
-    if data is None or "photo_sha256" not in data.column_names:
+def kept_names(store: Store, contract: TableContract) -> set[str]:
+    """The kept files ``contract``'s rows name (the values of its kept files' column): those in use."""
+    kept = contract.kept
+    if kept is None:
         return set()
-    return {d for d in data.column("photo_sha256").to_pylist() if d}
+    data = store.table(contract.name, [kept.column])
+    if data is None or kept.column not in data.column_names:
+        return set()
+    return {d for d in data.column(kept.column).to_pylist() if d}
 
 
-def _verify_kept_photos(store: Store, report: Verification) -> None:
-    """Check that every kept photograph a verdict names is there and decodes (``realism score``
-    keeps them for the report's render | photo pairs; their bytes are a re-encoded thumbnail, so
-    no digest of them is recorded)."""
-    from PIL import Image
-
-    for sha256 in sorted(kept_photo_digests(store)):
-        path = photo_path(store.root, sha256)
-        report.photos += 1
+def _verify_kept_files(store: Store, contract: TableContract, kept: KeptFiles, report: Verification) -> None:
+    """Check that every kept file ``contract``'s rows name is there and whole, by its contract's
+    check (their bytes may be re-encoded, so no digest of them need be recorded)."""
+    report.kept.setdefault(kept, 0)
+    for name in sorted(kept_names(store, contract)):
+        path = kept.path(store.root, name)
+        report.kept[kept] += 1
         denied = cannot_open(path)
         if denied:
-            report.problems.append(Problem(f"{UNREADABLE} kept photo", "verdicts", path, sha256, denied))
+            report.problems.append(Problem(f"{UNREADABLE} kept {kept.noun}", contract.name, path, name, denied))
             continue
         try:
-            with Image.open(path) as im:
-                im.load()
+            why = kept.check(path)
         except FileNotFoundError:
-            report.problems.append(Problem("missing kept photo", "verdicts", path, sha256,
-                                           "run sweep3d realism score again to keep it"))
-        except (OSError, ValueError, Image.DecompressionBombError) as exc:
-            why = _first_line(exc).replace(f"'{path}'", "").replace(str(path), path.name).strip()
-            report.problems.append(Problem("corrupt kept photo", "verdicts", path, sha256, why))
-
-
-def _first_line(exc: BaseException) -> str:
-    return (str(exc).splitlines() or [type(exc).__name__])[0]
+            report.problems.append(Problem(f"missing kept {kept.noun}", contract.name, path, name, kept.missing_fix))
+            continue
+        except OSError as exc:
+            report.problems.append(_read_failed(f"kept {kept.noun}", contract.name, path, name, exc))
+            continue
+        if why:
+            report.problems.append(Problem(f"corrupt kept {kept.noun}", contract.name, path, name, why))
 
 
 def _denied(exc: OSError) -> bool:
@@ -316,11 +306,9 @@ def repair(root: Path, report: Verification) -> int:
                 if blob.exists():
                     store.quarantine(blob)
             fixed += len(keys)
-    for problem in problems:  # caches: the next run runs the model, or extracts the mesh, again
-        if problem.kind == "corrupt kept output" and store.quarantine(problem.path) is not None:
-            fixed += 1
-    for problem in problems:  # the report's pair then shows no photo; scoring again keeps it anew
-        if problem.kind == "corrupt kept photo" and store.quarantine(problem.path) is not None:
+    for problem in problems:  # a kept model output (the next run runs the model again) or a table's kept
+        # file (its row then names none: its writer keeps it anew when it writes the row again)
+        if problem.kind.startswith("corrupt kept ") and store.quarantine(problem.path) is not None:
             fixed += 1
     for name in {p.key for p in problems if p.kind == "corrupt extracted asset" and p.key is not None}:
         fixed += store.quarantine(root / extracted.ASSETS_FOLDER / name) is not None
@@ -340,15 +328,15 @@ def repair(root: Path, report: Verification) -> int:
 @dataclass
 class Collected:
     blobs: int = 0
-    photos: int = 0  # kept photographs no verdict names any more
     temp_files: int = 0
     quarantined: int = 0
     bytes: int = 0
+    kept: dict[KeptFiles, int] = field(default_factory=dict)  # a table's kept files -> how many no row names
 
 
 def collect_garbage(root: Path, older_than: float = TEMP_AGE, purge_quarantine: bool = False) -> Collected:
-    """Remove blobs that no row references, kept photographs that no verdict names, and temp
-    files and segments a compaction replaced that are older than ``older_than`` seconds.
+    """Remove blobs that no row references, a table's kept files that none of its rows names, and
+    temp files and segments a compaction replaced that are older than ``older_than`` seconds.
 
     Only what the store wrote goes: files named as it names blobs (:func:`blob_key`) and temp
     files (:data:`TEMP_PATTERN`); anything else put in its folders stays, and symbolic links are
@@ -363,7 +351,7 @@ def collect_garbage(root: Path, older_than: float = TEMP_AGE, purge_quarantine: 
     referenced: set[str] = set()
     for table in (*BLOB_TABLES, "truths"):  # a truth key owns its mask and depth blobs
         referenced |= store.keys(table)
-    photos_kept = kept_photo_digests(store)
+    in_use = [(contract.kept, kept_names(store, contract)) for contract in table_contracts() if contract.kept is not None]
     _refuse_unread(store)
     out = Collected()
     now = time.time()
@@ -389,12 +377,15 @@ def collect_garbage(root: Path, older_than: float = TEMP_AGE, purge_quarantine: 
             out.temp_files += old(entry) and remove(entry)
         elif (key := blob_key(entry.name, folder)) is not None and key not in referenced:
             out.blobs += remove(entry)
-    for entry in store_files(root.joinpath(*PHOTOS_FOLDER)):  # kept photos of no verdict (the user's own stay)
-        if _is_temp(entry.name):
-            out.temp_files += old(entry) and remove(entry)
-        elif entry.name.endswith(".jpg") and _HEX_NAME.fullmatch(entry.name[:-4]) and entry.name[:-4] not in photos_kept:
-            out.photos += remove(entry)
-    for table in TABLES:
+    for kept, names in in_use:  # kept files no row names (files of other names are the user's, and stay)
+        out.kept[kept] = 0
+        for entry in store_files(root.joinpath(*kept.folder)):
+            name = entry.name.removesuffix(kept.suffix)
+            if _is_temp(entry.name):
+                out.temp_files += old(entry) and remove(entry)
+            elif entry.name.endswith(kept.suffix) and _HEX_NAME.fullmatch(name) and name not in names:
+                out.kept[kept] += remove(entry)
+    for table in table_names():
         out.temp_files += store.sweep_superseded(table, older_than)
     for folder in (root / "tables", root / "jobs", root / "reports"):
         out.temp_files += sum(old(e) and remove(e) for e in store_files(folder) if _is_temp(e.name))
@@ -403,7 +394,7 @@ def collect_garbage(root: Path, older_than: float = TEMP_AGE, purge_quarantine: 
     quarantine = root / "quarantine"
     if purge_quarantine:
         out.quarantined += sum(remove(e) for e in store_files(quarantine))
-    for folder in (blobs, scratch, quarantine, root.joinpath(*PHOTOS_FOLDER)):
+    for folder in (blobs, scratch, quarantine, *(root.joinpath(*kept.folder) for kept, _ in in_use)):
         _remove_empty_dirs(folder)
     return out
 
@@ -457,7 +448,7 @@ def remove_killed_writers_temp_files(root: Path, store: Store | None = None) -> 
     """
     store = store if store is not None else Store(root)
     removed = 0
-    for name in LOCKED_FOLDERS:
+    for name in locked_folders():
         folder = root / name
         found = _blob_temp_files(store) if name == "blobs" else (Path(e.path) for e in store_files(folder)
                                                                    if _is_temp(e.name))
@@ -468,6 +459,13 @@ def remove_killed_writers_temp_files(root: Path, store: Store | None = None) -> 
                 continue
             removed += 1
     return removed
+
+
+def locked_folders() -> tuple[str, ...]:
+    """The top-level folders only the writer lock's holder writes: :data:`LOCKED_FOLDERS` and
+    those of the declared tables' kept files."""
+    kept = (c.kept.folder[0] for c in table_contracts() if c.kept is not None)
+    return tuple(dict.fromkeys((*LOCKED_FOLDERS, *kept)))
 
 
 def _is_temp(name: str) -> bool:
@@ -523,8 +521,8 @@ class Compacted:
 
 def compact_table(store: Store, table: str) -> Compacted | None:
     """Merge every readable segment of ``table`` into one, dropping duplicate rows of a key
-    (keeping the row the views show: the earliest ``created_at``, or the latest in a table of
-    ``NEWEST_WINS``: a verdict scored again). Call it holding the lock.
+    (keeping the row the views show: the earliest ``created_at``, or the latest where the table's
+    contract says the newest row counts). Call it holding the lock.
 
     The merged segment is written (atomically) first, then a record of the segments it replaces
     (from then on they are no longer listed); the replaced files stay on disk for
@@ -542,9 +540,10 @@ def compact_table(store: Store, table: str) -> Compacted | None:
         return None
     merged = pa.concat_tables([t for _, t in parts], promote_options="permissive")
     rows_before = merged.num_rows
-    key = KEY_COLUMN[table]
-    if "created_at" in merged.column_names:  # the row that counts first (NEWEST_WINS: the latest)
-        order = "descending" if table in NEWEST_WINS else "ascending"
+    contract = contract_of(table)
+    key = contract.key
+    if "created_at" in merged.column_names:  # the row that counts first (merge "newest": the latest)
+        order = "descending" if contract.merge == "newest" else "ascending"
         merged = merged.take(pc.sort_indices(merged, sort_keys=[("created_at", order)]))
     seen: set[str] = set()
     first = [i for i, k in enumerate(merged.column(key).to_pylist()) if not (k in seen or seen.add(k))]
@@ -569,13 +568,13 @@ class TableStats:
 
 
 def store_stats(root: Path) -> list[TableStats]:
-    """Files, rows, distinct keys and bytes per table, then blobs, kept photographs (keys: those
-    a verdict names), temp files and quarantine."""
+    """Files, rows, distinct keys and bytes per table, then blobs, each table's kept files (keys:
+    those its rows name), temp files and quarantine."""
     store = Store(root, quarantine=False, warn=False)
     out = []
-    for table in TABLES:
+    for table in table_names():
         paths = store.segments(table)
-        data = store.table(table, [KEY_COLUMN[table]])
+        data = store.table(table, [contract_of(table).key])
         rows = data.num_rows if data is not None else 0
         keys = len(set(data.column(0).to_pylist())) if data is not None else 0
         out.append(TableStats(table, len(paths), rows, keys, sum(_size(p) for p in paths)))
@@ -583,12 +582,14 @@ def store_stats(root: Path) -> list[TableStats]:
     out.append(TableStats("jobs", len(jobs), sum(_rows(store, p) for p in jobs), len(jobs), sum(_size(p) for p in jobs)))
     blobs = [Path(e.path) for folder, e in _blob_files(root / "blobs") if blob_key(e.name, folder) is not None]
     out.append(TableStats("blobs", len(blobs), len(blobs), len(blobs), sum(_size(p) for p in blobs)))
-    replaced = [store.table_dir(t) / n for t in TABLES for _, names, _ in store.superseded(t) for n in names]
+    replaced = [store.table_dir(t) / n for t in table_names() for _, names, _ in store.superseded(t) for n in names]
     replaced = [p for p in replaced if p.is_file()]
     out.append(TableStats("compacted away", len(replaced), 0, 0, sum(_size(p) for p in replaced)))
-    photos = [Path(e.path) for e in store_files(root.joinpath(*PHOTOS_FOLDER)) if not _is_temp(e.name)]
-    out.append(TableStats("kept photos", len(photos), len(photos), len(kept_photo_digests(store)),
-                          sum(_size(p) for p in photos)))
+    for contract in table_contracts():
+        if contract.kept is not None:
+            files = [Path(e.path) for e in store_files(root.joinpath(*contract.kept.folder)) if not _is_temp(e.name)]
+            out.append(TableStats(f"kept {contract.kept.noun}s", len(files), len(files),
+                                  len(kept_names(store, contract)), sum(_size(p) for p in files)))
     temp = [p for p in root.rglob(".*.tmp")] if root.is_dir() else []
     out.append(TableStats("temp files", len(temp), 0, 0, sum(_size(p) for p in temp)))
     quarantine = [p for p in (root / "quarantine").rglob("*") if p.is_file()] if (root / "quarantine").is_dir() else []
