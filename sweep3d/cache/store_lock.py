@@ -34,9 +34,9 @@ class WriterLock:
     def lock(self, wait: float = 0.0) -> Iterator[None]:
         """Hold the store's writer lock; readers never take it.
 
-        A command that writes takes it before it computes anything, and holds it to its end; what
-        it runs within (``confirm``'s and ``realism score --engine``'s run) takes it again in the
-        same thread, which holds it already: that is a no-op. Another thread of this process is
+        A command that writes takes it before it computes anything, and holds it to its end; a run
+        it starts within (a follow-up that renders fresh jobs) takes it again in the same thread,
+        which holds it already: that is a no-op. Another thread of this process is
         refused as another process is.
 
         Raises:

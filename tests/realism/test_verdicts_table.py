@@ -83,3 +83,18 @@ def test_verdicts_and_kept_photos_are_known_to_the_store_s_housekeeping(tmp_path
     assert not photo_path(store, kept[1]).exists() and (store.root / "quarantine").is_dir()
     code, out = cache(spec, "verify")  # the photo itself is gone: scoring again keeps it anew
     assert code == 2 and f"missing kept photo: realism/photos/{kept[1]}.jpg" in flat(out), out
+
+
+def test_the_verdicts_contract_is_realism_s_and_matches_the_rows_it_writes() -> None:
+    """Scoring again writes a newer row of the same key: the newest counts; the photos a verdict
+    names are the table's kept files, under the folder the report reads them from."""
+    from sweep3d.cache import contract_of
+    from sweep3d.results import PHOTOS_FOLDER
+
+    contract = contract_of(VERDICTS)
+    assert contract.key == "verdict_key" and contract.merge == "newest"
+    assert set(contract.columns) <= set(VERDICT_SCHEMA.names)
+    assert contract.kept is not None and contract.kept.folder == PHOTOS_FOLDER
+    assert contract.kept.column in VERDICT_SCHEMA.names
+    assert contract.kept.path(Path("/s"), "ab") == photo_path(Store(Path("/s")), "ab")
+
