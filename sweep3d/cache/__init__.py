@@ -22,6 +22,7 @@ from sweep3d.core import exports as _exports  # noqa: E402
 
 if _TYPE_CHECKING:
     from sweep3d.cache.blobs import damaged_blobs, load_image, load_pass, load_pixels, sha256_bytes
+    from sweep3d.cache.compaction import compact_table
     from sweep3d.cache.contracts import (
         KEY_COLUMN,
         TABLES,
@@ -48,6 +49,7 @@ if _TYPE_CHECKING:
         store_error,
         utc_now,
     )
+    from sweep3d.cache.garbage import collect_garbage, remove_killed_writers_temp_files
     from sweep3d.cache.hashing import (
         Hole,
         Template,
@@ -59,21 +61,16 @@ if _TYPE_CHECKING:
         files_digest,
         float_texts,
     )
-    from sweep3d.cache.maintenance import (
-        collect_garbage,
-        compact_table,
-        remove_killed_writers_temp_files,
-        repair,
-        store_stats,
-        verify,
-    )
     from sweep3d.cache.pandas_probe import skip_pandas_probe
     from sweep3d.cache.query import is_select, lock_down
+    from sweep3d.cache.repairs import repair
     from sweep3d.cache.snapshot import MIN_JOBS
+    from sweep3d.cache.stats import store_stats
     from sweep3d.cache.store import Store
     from sweep3d.cache.store_blobs import BLOB_TABLES, DIGEST_COLUMN, TRUTH_BLOBS
     from sweep3d.cache.store_folder import store_folder_problem
     from sweep3d.cache.store_write import SegmentWriter
+    from sweep3d.cache.verification import verify
     from sweep3d.cache.written import remember_written, written_from
 
 __getattr__, __dir__ = _exports(__name__, {
@@ -107,8 +104,8 @@ __getattr__, __dir__ = _exports(__name__, {
     "atomic_write": ("sweep3d.cache.files", "atomic_write"),
     "canonical": ("sweep3d.cache.hashing", "canonical"),
     "canonical_pieces": ("sweep3d.cache.hashing", "canonical_pieces"),
-    "collect_garbage": ("sweep3d.cache.maintenance", "collect_garbage"),
-    "compact_table": ("sweep3d.cache.maintenance", "compact_table"),
+    "collect_garbage": ("sweep3d.cache.garbage", "collect_garbage"),
+    "compact_table": ("sweep3d.cache.compaction", "compact_table"),
     "damaged_blobs": ("sweep3d.cache.blobs", "damaged_blobs"),
     "digest": ("sweep3d.cache.hashing", "digest"),
     "digests": ("sweep3d.cache.hashing", "digests"),
@@ -127,16 +124,16 @@ __getattr__, __dir__ = _exports(__name__, {
     "read_manifest": ("sweep3d.cache.extracted", "read_manifest"),
     "record": ("sweep3d.cache.extracted", "record"),
     "remember_written": ("sweep3d.cache.written", "remember_written"),
-    "remove_killed_writers_temp_files": ("sweep3d.cache.maintenance", "remove_killed_writers_temp_files"),
-    "repair": ("sweep3d.cache.maintenance", "repair"),
+    "remove_killed_writers_temp_files": ("sweep3d.cache.garbage", "remove_killed_writers_temp_files"),
+    "repair": ("sweep3d.cache.repairs", "repair"),
     "safe_filename": ("sweep3d.cache.files", "safe_filename"),
     "sha256_bytes": ("sweep3d.cache.blobs", "sha256_bytes"),
     "skip_pandas_probe": ("sweep3d.cache.pandas_probe", "skip_pandas_probe"),
     "stale": ("sweep3d.cache.extracted", "stale"),
     "store_folder_problem": ("sweep3d.cache.store_folder", "store_folder_problem"),
-    "store_stats": ("sweep3d.cache.maintenance", "store_stats"),
+    "store_stats": ("sweep3d.cache.stats", "store_stats"),
     "unpack": ("sweep3d.cache.digested", "unpack"),
     "utc_now": ("sweep3d.cache.files", "utc_now"),
-    "verify": ("sweep3d.cache.maintenance", "verify"),
+    "verify": ("sweep3d.cache.verification", "verify"),
     "written_from": ("sweep3d.cache.written", "written_from"),
 })

@@ -15,6 +15,7 @@ import time
 import uuid
 from datetime import datetime, timezone
 from pathlib import Path
+from typing import Iterator
 
 import pyarrow as pa
 import pyarrow.parquet as pq
@@ -240,3 +241,15 @@ def _relative(path: Path, root: Path) -> Path:
 def _first_line(exc: BaseException) -> str:
     text = str(exc).strip().splitlines()
     return f"{type(exc).__name__}: {text[0] if text else ''}"
+
+
+def store_files(folder: Path) -> Iterator[os.DirEntry]:
+    """The files under ``folder`` at any depth, as the store wrote them: symbolic links (to a
+    file or a folder, or ``folder`` itself one) are not the store's and are skipped, never followed."""
+    if folder.is_symlink():
+        return
+    for entry in scan(folder):
+        if entry.is_dir(follow_symlinks=False):
+            yield from store_files(Path(entry.path))
+        elif entry.is_file(follow_symlinks=False):
+            yield entry

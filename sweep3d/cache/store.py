@@ -16,8 +16,9 @@ contract (key, columns, which row of a key counts). :class:`Store` is split by r
 module of its own: :mod:`~sweep3d.cache.store_blobs` (the blobs and their listings),
 :mod:`~sweep3d.cache.store_write` (atomic segment writes), :mod:`~sweep3d.cache.store_read`
 (segments checked once, keys, the views), :mod:`~sweep3d.cache.store_repair` (damage control)
-and :mod:`~sweep3d.cache.store_lock` (the writer lock); whole-store checks (verify, repair, gc,
-compact, stats) are :mod:`~sweep3d.cache.maintenance`'s.
+and :mod:`~sweep3d.cache.store_lock` (the writer lock); the whole-store commands are one module
+each: :mod:`~sweep3d.cache.verification`, :mod:`~sweep3d.cache.repairs`,
+:mod:`~sweep3d.cache.garbage`, :mod:`~sweep3d.cache.compaction` and :mod:`~sweep3d.cache.stats`.
 
 Every write is a temp file plus an atomic rename, so a killed run leaves either a whole file
 or none: rerunning recomputes only what no complete row records. Segments carry Parquet page
