@@ -29,7 +29,6 @@ if _TYPE_CHECKING:
         KeptFiles,
         TableContract,
         contract_of,
-        declare_table_modules,
         register_store_folder,
         register_table,
         table_contract,
@@ -37,6 +36,7 @@ if _TYPE_CHECKING:
         table_names,
         unregister_table,
     )
+    from sweep3d.cache.declared import declare_table_modules
     from sweep3d.cache.digested import OUTPUTS_FOLDER, SUFFIX, pack, unpack
     from sweep3d.cache.extracted import ASSETS_FOLDER, MANIFEST, members, read_manifest, record, stale
     from sweep3d.cache.files import (
@@ -78,7 +78,7 @@ __getattr__, __dir__ = _exports(__name__, {
     "TableContract": ("sweep3d.cache.contracts", "TableContract"),
     "contract_of": ("sweep3d.cache.contracts", "contract_of"),
     "table_contracts": ("sweep3d.cache.contracts", "table_contracts"),
-    "declare_table_modules": ("sweep3d.cache.contracts", "declare_table_modules"),
+    "declare_table_modules": ("sweep3d.cache.declared", "declare_table_modules"),
     "register_store_folder": ("sweep3d.cache.contracts", "register_store_folder"),
     "register_table": ("sweep3d.cache.contracts", "register_table"),
     "table_contract": ("sweep3d.cache.contracts", "table_contract"),

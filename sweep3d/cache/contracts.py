@@ -10,19 +10,20 @@ The pipeline's tables (renders, images, predictions, runs, parts, truths) are th
 declared below. A package above the pipeline declares its table in its own package and registers
 it (:func:`register_table`). So that every command sees every table, whichever packages it
 happened to import, the package root names the modules that declare them
-(:func:`declare_table_modules`, a list of module names, no import): the registry imports them the
+(:func:`~sweep3d.cache.declared.declare_table_modules`, a list of module names, no import): the registry imports them the
 first time it is asked for every table, or for one it does not know. The cache layer thus names
 no package above it, and imports none until a table of one is needed.
 """
 
 from __future__ import annotations
 
-import importlib
 import re
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Literal
+
+from sweep3d.cache.declared import load_declared
 
 #: Which of a key's rows counts: the first written (a key names its inputs, so its rows are alike)
 #: or the newest (a row written again replaces the earlier one).
@@ -103,7 +104,6 @@ CORE_TABLES = (
 
 _tables: dict[str, TableContract] = {contract.name: contract for contract in CORE_TABLES}
 _folders: list[str] = []  # top-level folders of the store that registered packages write
-_declared: list[str] = []  # modules that declare tables, not imported yet
 
 
 def register_table(contract: TableContract) -> TableContract:
@@ -133,21 +133,10 @@ def register_store_folder(name: str) -> None:
         _folders.append(name)
 
 
-def declare_table_modules(*modules: str) -> None:
-    """Name modules that register tables (by :func:`register_table`) when imported; each is imported
-    the first time the registry is asked for every table, or for one it does not know."""
-    _declared.extend(m for m in modules if m not in _declared)
-
-
-def _load_declared() -> None:
-    while _declared:
-        importlib.import_module(_declared.pop(0))  # taken off first: one that asks the registry sees no loop
-
-
 def table_contract(name: str) -> TableContract | None:
     """The contract of the table ``name``; None when no package declares one."""
     if name not in _tables:
-        _load_declared()
+        load_declared()
     return _tables.get(name)
 
 
@@ -165,19 +154,19 @@ def contract_of(name: str) -> TableContract:
 
 def table_names() -> tuple[str, ...]:
     """Every declared table, the store's own first, then in the order they were registered."""
-    _load_declared()
+    load_declared()
     return tuple(_tables)
 
 
 def table_contracts() -> tuple[TableContract, ...]:
     """Every declared table's contract (see :func:`table_names`)."""
-    _load_declared()
+    load_declared()
     return tuple(_tables.values())
 
 
 def store_folders() -> tuple[str, ...]:
     """Top-level folders of the store that registered packages write (their kept files' and others)."""
-    _load_declared()
+    load_declared()
     return tuple(_folders)
 
 
@@ -185,7 +174,7 @@ def known_folder(name: str) -> bool:
     """Whether ``name`` is a top-level folder that a registered package writes (its modules are
     imported only when ``name`` is none that is registered already)."""
     if name not in _folders:
-        _load_declared()
+        load_declared()
     return name in _folders
 
 
