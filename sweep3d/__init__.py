@@ -12,6 +12,7 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
+from sweep3d.cache import declare_table_modules
 from sweep3d.core import PluginError, SpecError, UserError
 
 __version__ = "0.1.0"
@@ -22,6 +23,12 @@ if TYPE_CHECKING:
     from sweep3d.api import Experiment, load
 
 _LAZY = {"Experiment": "sweep3d.api", "load": "sweep3d.api"}
+
+#: The modules declaring what the follow-ups keep in the store (their tables' contracts, their
+#: folders). Named here, at the top, because the store must know every table whichever packages a
+#: command imported (``cache verify`` or ``gc`` that did not know a table would skip its files);
+#: the store imports them the first time it needs every table or meets one it does not know.
+declare_table_modules("sweep3d.stability.stored", "sweep3d.realism.stored", "sweep3d.explain.stored")
 
 
 def __getattr__(name: str) -> Any:

@@ -170,11 +170,11 @@ def damaged_blobs(store: Store, table: str, keys: Iterable[str]) -> set[str]:
     again = keys.filter(pa.array(~trusted & (states[:, 0] != MISSING))).to_pylist()  # changed, new
     digests = _digests_of(rows, table, again)
     for key in again:
-        verdict = check_blob(store.blob_file(key), digests.get(key, set()), None)
-        if verdict == "damaged":
+        outcome = check_blob(store.blob_file(key), digests.get(key, set()), None)
+        if outcome == "damaged":
             damaged.add(key)
-        elif isinstance(verdict, Verified):
-            fresh[key] = verdict
+        elif isinstance(outcome, Verified):
+            fresh[key] = outcome
     if not fresh and not damaged and (in_rows >= 0).all() and np.count_nonzero(in_memo >= 0) == memo.num_rows:
         return damaged  # nothing hashed again, every memo entry a recorded key's: no entry to add or drop
     kept = memo.filter(pc.and_(pc.is_in(memo.column("key"), value_set=recorded["keys"]),

@@ -7,7 +7,7 @@ A rerun checks each cached blob's file state against the memo of verified blobs
 other core, and :func:`~sweep3d.cache.blobs.file_states` reads them from it. The child lists every
 blob folder to do so, and that listing serves the run's other looks at the folders as well: which
 blobs exist (:meth:`Store.existing_blobs`) and which temp files killed writers left
-(:func:`~sweep3d.cache.maintenance.remove_killed_writers_temp_files`), so the parent lists none.
+(:func:`~sweep3d.cache.garbage.remove_killed_writers_temp_files`), so the parent lists none.
 A run whose plan is small (:data:`MIN_JOBS`) stops the child once it has planned: it would wait
 for a look at every blob of a large store to check a few of them.
 

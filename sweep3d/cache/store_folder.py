@@ -15,16 +15,19 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from sweep3d.cache.contracts import known_folder
+
 #: Folders that hold the system: a store may be neither one of them nor inside one.
 SYSTEM_FOLDERS = tuple(Path(p) for p in ("/bin", "/boot", "/dev", "/etc", "/lib", "/lib32", "/lib64", "/libx32",
                                          "/proc", "/sbin", "/sys", "/usr"))
 #: What a store makes in its folder first (``Store.lock``, ``Store.append``, the blobs): one of
 #: them there says the folder is a store's, whatever else a user put beside them.
 STORE_ENTRIES = ("lock", "tables", "blobs", "jobs")
-#: Everything else a store makes at its top (``plan`` extracts a zipped mesh into ``assets/``
-#: before any lock): a folder holding only these is a store's too.
-STORE_MADE = frozenset({*STORE_ENTRIES, "assets", "cache", "explain", "models", "outputs", "quarantine", "realism",
-                        "reports", "tmp", "verified"})
+#: Everything else the store itself makes at its top (``plan`` extracts a zipped mesh into
+#: ``assets/`` before any lock): a folder holding only these, or folders that packages writing the
+#: store declare (:func:`~sweep3d.cache.contracts.register_store_folder`), is a store's too.
+STORE_MADE = frozenset({*STORE_ENTRIES, "assets", "cache", "models", "outputs", "quarantine", "reports", "tmp",
+                        "verified"})
 FIX = "set experiment.store to a new or empty folder (relative to the spec), e.g. \".sweep3d\""
 
 
@@ -45,13 +48,18 @@ def store_folder_problem(path: Path) -> str | None:
             names = sorted(entry.name for _, entry in zip(range(64), entries))
     except OSError:  # a folder this user cannot list: the store's own errors name it when it is used
         return None
-    if all(name in STORE_MADE or name.startswith(".probe-") for name in names) or any(
-            (path / name).exists() for name in STORE_ENTRIES):
+    if all(_store_made(name) for name in names) or any((path / name).exists() for name in STORE_ENTRIES):
         return None
-    names = [name for name in names if name not in STORE_MADE]
+    names = [name for name in names if not _store_made(name)]
     shown = ", ".join(names[:3]) + (", …" if len(names) > 3 else "")
     return (f"{str(path)!r} already holds other files ({shown}) and no sweep3d store (a store's folder has "
             f"{', '.join(STORE_ENTRIES)}), so its files would be mixed with the store's; {FIX}")
+
+
+def _store_made(name: str) -> bool:
+    """Whether a store makes an entry of this ``name`` at its top (the registry's declared folders
+    are looked up only for a name that is none of the store's own)."""
+    return name in STORE_MADE or name.startswith(".probe-") or known_folder(name)
 
 
 def _home() -> Path | None:

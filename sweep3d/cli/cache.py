@@ -43,8 +43,9 @@ def verify(
                                 "so the next run recomputes them (files it cannot read stay as they are)."),
     wait: float = WaitOption,
 ) -> None:
-    """Re-read every segment and re-hash every blob, kept model output and extracted mesh, decode
-    every kept photo; report corrupt, missing or unreadable ones (exit 2 if any)."""
+    """Re-read every segment and re-hash every blob, kept model output and extracted mesh, check
+    every file a table's rows keep (decode every kept photo); report corrupt, missing or unreadable
+    ones (exit 2 if any)."""
     from sweep3d.cache import Store
     from sweep3d.cache import repair as repair_store
     from sweep3d.cache import verify as verify_store
@@ -53,8 +54,8 @@ def verify(
     root = _store_root(spec)
     with Store(root).lock(wait) if repair else nullcontext():  # a repair writes: its lock before the hashing
         report = verify_store(root)
-        photos = f", {report.photos} kept photos" if report.photos else ""
-        console.print(f"checked {report.segments} segments ({report.rows} rows), {report.blobs} blobs{photos}, "
+        kept = "".join(f", {n} kept {files.noun}s" for files, n in report.kept.items() if n)
+        console.print(f"checked {report.segments} segments ({report.rows} rows), {report.blobs} blobs{kept}, "
                       f"{report.outputs} kept model outputs and {report.assets} extracted meshes in "
                       f"{escape(str(root))}")
         _list(report.problems, root)
@@ -110,7 +111,7 @@ def gc(
     with Store(root).lock(wait):
         out = collect_garbage(root, older_than, purge_quarantine)
     console.print(f"removed {out.blobs} unreferenced blobs, "
-                  + (f"{out.photos} kept photos no verdict names, " if out.photos else "")
+                  + "".join(f"{n} kept {files.noun}s {files.unnamed}, " for files, n in out.kept.items() if n)
                   + f"{out.temp_files} temp or compacted-away files"
                   + (f", {out.quarantined} quarantined files" if purge_quarantine else "")
                   + f" ({_bytes(out.bytes)})")
@@ -119,13 +120,13 @@ def gc(
 @command
 def compact(spec: Path = SpecArg, wait: float = WaitOption) -> None:
     """Merge each table's segments into one (dropping duplicate rows); readers see no gap."""
-    from sweep3d.cache import TABLES, Store, compact_table
+    from sweep3d.cache import Store, compact_table, table_names
 
     check_wait(wait)
     root = _store_root(spec)
     store = Store(root)
     with store.lock(wait):
-        done = [c for c in (compact_table(store, t) for t in TABLES) if c is not None]
+        done = [c for c in (compact_table(store, t) for t in table_names()) if c is not None]
     if not done:
         console.print("nothing to compact")
     for c in done:

@@ -34,8 +34,9 @@ import numpy as np
 import pyarrow as pa
 
 from sweep3d.assets import not_a_file
-from sweep3d.cache import KITS_FOLDER, Store, safe_filename
+from sweep3d.cache import Store, safe_filename
 from sweep3d.core import UserError
+from sweep3d.realism.stored import KITS_FOLDER
 from sweep3d.spec import LoadedSpec
 
 #: |p(true) − p(best other)| below this is a near tie: a verdict an imperceptible change flips.

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 __all__ = [
     "ALPHA", "CONFIRMED", "create_margin_macro", "margin_sql", "pairs_needed", "renders_for", "COUNTERFACTUAL_VIEWS", "ControlEffect", "DEFAULT_RENDERS", "HIDDEN",
-    "MACROS", "MARGIN_EDGES", "MEASURES", "OCCLUDED", "OUTCOMES", "OUT_OF_FRAME", "PlannedStore",
+    "MACROS", "MARGIN_EDGES", "MEASURES", "OCCLUDED", "OUTCOMES", "OUT_OF_FRAME", "PHOTOS_FOLDER", "PlannedStore",
     "Region", "SCENE_COLUMNS", "SCHEMA", "Scale", "Summary", "UNCONFIRMED", "VERDICTS",
     "VERDICT_SCHEMA", "VIEW", "VIEWS", "Verdict", "arrow", "boundary_phrase", "connect",
     "control_effects", "control_number", "counterfactuals_path", "fragile_sentence", "has_view",
@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING as _TYPE_CHECKING  # noqa: E402
 from sweep3d.core import exports as _exports  # noqa: E402
 
 if _TYPE_CHECKING:
-    from sweep3d.results.agreement import VERDICT_SCHEMA, VERDICTS, photo_path, verdict_key
+    from sweep3d.results.agreement import PHOTOS_FOLDER, VERDICT_SCHEMA, VERDICTS, photo_path, verdict_key
     from sweep3d.results.boundaries import (
         VIEW,
         Scale,
@@ -105,6 +105,7 @@ __getattr__, __dir__ = _exports(__name__, {
     "Summary": ("sweep3d.results.summary", "Summary"),
     "UNCONFIRMED": ("sweep3d.results.confirmation", "UNCONFIRMED"),
     "VERDICTS": ("sweep3d.results.agreement", "VERDICTS"),
+    "PHOTOS_FOLDER": ("sweep3d.results.agreement", "PHOTOS_FOLDER"),
     "VERDICT_SCHEMA": ("sweep3d.results.agreement", "VERDICT_SCHEMA"),
     "VIEW": ("sweep3d.results.boundaries", "VIEW"),
     "VIEWS": ("sweep3d.results.views", "VIEWS"),

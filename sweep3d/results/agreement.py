@@ -35,11 +35,14 @@ import duckdb
 import pyarrow as pa
 
 from sweep3d.cache import Store
-from sweep3d.cache import photo_path as kept_photo_path
 from sweep3d.results.quoting import literal
 
-#: The store's table of other sources' verdicts (``tables/verdicts``).
+#: The store's table of other sources' verdicts (``tables/verdicts``; its contract is declared
+#: by :mod:`sweep3d.realism.stored`, which writes it).
 VERDICTS = "verdicts"
+#: Where ``realism score`` keeps each photograph it scored (framed as its render, a small JPEG
+#: named by the SHA-256 of the photograph's file, recorded in its verdicts' ``photo_sha256``).
+PHOTOS_FOLDER = ("realism", "photos")
 AGREEMENT_VIEWS = ("source_verdicts", "agreement")
 #: One source's verdict on one job for one model.
 VERDICT_SCHEMA = pa.schema([
@@ -65,15 +68,16 @@ VERDICT_SCHEMA = pa.schema([
 def verdict_key(source: str, experiment: str, job: int, model: str) -> str:
     """The ``verdicts`` table's key: what the verdict is of (a source's view of one job for one
     model), so the store's housekeeping (``cache compact``, ``stats``) keeps one per key, the
-    newest (the table is one of the store's ``NEWEST_WINS``): scoring again replaces a verdict."""
+    newest (the table's contract merges by "newest"): scoring again replaces a verdict."""
     return hashlib.sha256(json.dumps([source, experiment, int(job), model]).encode()).hexdigest()
 
 
 def photo_path(store: Store, sha256: str) -> Path:
     """The kept copy of the photograph whose file has the SHA-256 ``sha256``: as the model saw it
     (framed as its render, a small JPEG), for the report's render | photo pairs; under the
-    store's ``realism/photos/``, which ``cache verify``, ``gc`` and ``stats`` know."""
-    return kept_photo_path(store.root, sha256)
+    store's ``realism/photos/``, which ``cache verify``, ``gc`` and ``stats`` know (the verdicts
+    table's kept files)."""
+    return store.root.joinpath(*PHOTOS_FOLDER, f"{sha256}.jpg")
 
 
 def verdict_files(store: Store) -> list[Path]:

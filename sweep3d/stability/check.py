@@ -22,20 +22,16 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import pyarrow as pa
 
 from sweep3d.cache import Store, digest, utc_now
 from sweep3d.core import UserError
 from sweep3d.spec import LoadedSpec
 from sweep3d.stability.changes import CHANGES, RANDOM_CHANGES, changed, margins
+from sweep3d.stability.stored import SCHEMA  # the table's columns, declared once
 
 #: Bumped when the check gives other rows for the same inputs.
 STABILITY_VERSION = 1
 DEFAULT_SAMPLE = 64
-SCHEMA = pa.schema([("stability_key", pa.string()), ("pred_key", pa.string()), ("image_key", pa.string()),
-                    ("change", pa.string()), ("seed", pa.int64()),
-                    ("base_correct", pa.bool_()), ("base_margin", pa.float64()), ("correct", pa.bool_()),
-                    ("margin", pa.float64()), ("flipped", pa.bool_()), ("created_at", pa.timestamp("us", tz="UTC"))])
 
 
 @dataclass

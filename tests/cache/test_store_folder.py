@@ -79,11 +79,18 @@ def test_a_new_empty_or_stores_folder_is_taken(tmp_path: Path) -> None:
 
 
 def test_every_name_a_store_makes_at_its_top_is_known(tmp_path: Path) -> None:
-    """What a run, a report, an export of results and ``realism`` leave at the store's top: a
-    store made by sweep3d itself is never refused (the set is what the code writes there)."""
-    from sweep3d.cache import ASSETS_FOLDER, OUTPUTS_FOLDER, PHOTOS_FOLDER
+    """What a run, a report, an export of results and the follow-ups leave at the store's top: a
+    store made by sweep3d itself is never refused (the set is what the code writes there, and the
+    folders of every declared table's kept files)."""
+    from sweep3d.cache import ASSETS_FOLDER, OUTPUTS_FOLDER, table_contracts
 
-    assert {ASSETS_FOLDER, OUTPUTS_FOLDER, PHOTOS_FOLDER[0]} <= STORE_MADE
+    assert {ASSETS_FOLDER, OUTPUTS_FOLDER} <= STORE_MADE
+    kept = [c.kept.folder for c in table_contracts() if c.kept is not None]
+    assert kept  # the follow-ups' tables are declared without importing their packages
+    for folder in kept:
+        only = tmp_path / f"only-{folder[0]}"
+        (only.joinpath(*folder)).mkdir(parents=True)
+        assert store_folder_problem(only) is None, folder
     store = Store(tmp_path / "s")
     store.tmp_dir()
     store.report_path("x").parent.mkdir(parents=True)

@@ -12,7 +12,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import sweep3d.cache.store as store_module
+import sweep3d.cache.store_blobs as store_module  # the blobs and their listings
 from sweep3d.cache.blobs import damaged_blobs, sha256_bytes
 from sweep3d.cache.store import Store, atomic_write
 from sweep3d.core.pixels import encode_png
