@@ -31,7 +31,7 @@ LLVM_LIBRARIES = ("/usr/lib/x86_64-linux-gnu/libLLVM-19.so", "/usr/lib/llvm-19/l
                   "/usr/lib/aarch64-linux-gnu/libLLVM-19.so")
 #: Bump when sweep3d's own translation of a scene into Mitsuba's (the OBJ/MTL reader, materials,
 #: lights, the world, the filter) changes its pixels: part of every Mitsuba render key.
-MITSUBA_TRANSLATION = 2  # 2: poses applied to the vertices, suns by their to_world (mitsuba/kept.py)
+MITSUBA_TRANSLATION = 3  # 2: poses on the vertices, suns by to_world (kept.py); 3: the denoiser's aux pass apart
 #: Mesh files the Mitsuba engine reads (its own OBJ/MTL reader: ``mitsuba/objfile.py``).
 MITSUBA_MESHES = (".obj",)
 

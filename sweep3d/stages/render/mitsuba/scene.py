@@ -104,6 +104,7 @@ class MitsubaScene:
         self.textures: dict[str, Any] = {}  # texture path → loaded bitmap, shared by jobs
         self.hdris: dict[str, Any] = {}  # HDRI path → its bitmap as Blender reads it (hdri.py)
         self.loaded: Any = None  # the latest job's loaded Mitsuba scene
+        self.aux_integrator: Any = None  # _aux()
         self.kept = KeptScene(self.mi, self.converted)  # loaded once per structure, updated per job (kept.py)
         self.serial = 0  # names each read object's PLY files
         self.stale = False
@@ -150,17 +151,19 @@ class MitsubaScene:
         denoise = s.denoise if state.denoise is None else state.denoise
         background = self.background()
         path = {"type": "path", "max_depth": s.max_bounces + 1, "hide_emitters": background is not None}
-        integrator = ({"type": "aov", "aovs": "albedo:albedo,normal:sh_normal", "integrator": path}
-                      if denoise else path)
-        scene = self.describe(integrator, translate.camera(state, s.resolution, s.crop, FILTER_STDDEV))
+        scene = self.describe(path, translate.camera(state, s.resolution, s.crop, FILTER_STDDEV))
         self.loaded = self.kept.scene_for(scene)  # the truth passes look at the same scene
         image = np.asarray(mi.render(self.loaded, spp=s.samples, seed=s.seed), dtype=np.float32)
         rgb, alpha = np.maximum(image[..., :3], 0.0), np.clip(image[..., 3:4], 0.0, 1.0)
         if denoise:
             import pyoidn
 
-            albedo = np.clip(image[..., 4:7], 0.0, 1.0)
-            normal = np.clip(image[..., 7:10], -1.0, 1.0)
+            # the denoiser's albedo and normals from a first-hit pass over the same samples: the
+            # path tracer nested in an ``aov`` integrator took twice as long for the same pixels
+            aux = np.asarray(mi.render(self.loaded, integrator=self._aux(), spp=s.samples, seed=s.seed),
+                             dtype=np.float32)
+            albedo = np.clip(aux[..., -6:-3], 0.0, 1.0)
+            normal = np.clip(aux[..., -3:], -1.0, 1.0)
             rgb = np.maximum(pyoidn.denoise(np.ascontiguousarray(rgb), np.ascontiguousarray(albedo),
                                             np.ascontiguousarray(normal), hdr=True,
                                             clean_aux=s.denoise_prefilter != "accurate"), 0.0)  # as Cycles
@@ -168,6 +171,13 @@ class MitsubaScene:
             return srgb(rgb)
         straight = srgb(rgb / np.maximum(alpha, 1e-6))  # Blender's transparent film: straight alpha
         return straight * alpha + np.asarray(background, dtype=np.float32) * (1.0 - alpha)
+
+    def _aux(self) -> Any:
+        """The first-hit integrator of the denoiser's albedo and normals, loaded once per worker
+        (a new one per job would compile its kernels again)."""
+        if self.aux_integrator is None:
+            self.aux_integrator = self.mi.load_dict({"type": "aov", "aovs": "albedo:albedo,normal:sh_normal"})
+        return self.aux_integrator
 
     def background(self) -> tuple[float, float, float] | None:
         """The plain colour composited behind the object (None: the world is seen)."""
