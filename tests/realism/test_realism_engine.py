@@ -16,6 +16,7 @@ import tomllib
 from pathlib import Path
 
 import pyarrow as pa
+import pytest
 from typer.testing import CliRunner
 
 from sweep3d.cache.store import Store
@@ -34,6 +35,7 @@ from tests.helpers.realism import (
 )
 
 
+@pytest.mark.torch  # its model module (tests/helpers/realism.py) is a torch module
 def test_another_engine_is_a_source_matched_by_configuration(tmp_path: Path, monkeypatch) -> None:
     import sweep3d.realism.score as score
 

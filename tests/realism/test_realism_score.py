@@ -211,6 +211,7 @@ def test_the_summary_without_an_agreement_view_is_one_line_not_a_failure(tmp_pat
     assert "lack the column(s) counted" in line and f"sweep3d run {spec.path}" in line
 
 
+@pytest.mark.torch  # its model module (tests/helpers/realism.py) is a torch module
 def test_beside_another_command_s_hold_score_is_refused_before_the_models_run(tmp_path: Path, monkeypatch) -> None:
     """It classified every photograph first and took the store's lock last: during another spec's
     run its work was thrown away. Now it holds the lock before a model runs (issue 45, item 9)."""

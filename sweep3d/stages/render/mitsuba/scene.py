@@ -36,6 +36,11 @@ from sweep3d.stages.render.worker_protocol import EnvironmentRef, Look, RenderSe
 
 #: The pixel filter's standard deviation in pixels: close to Cycles' 1.5 px Blackman-Harris.
 FILTER_STDDEV = 0.3
+#: OpenImageDenoise's quality for Mitsuba's renders, chosen by measurement against Mitsuba's own
+#: 512-sample renders of the quickstart's scenes (benchmarks/RESULTS.md, "Mitsuba at half Cycles'
+#: cost"): at 4 samples "fast" is 36.7 dB from them against 38.0 dB for "high" (Cycles' own), in
+#: half the time; the denoiser is most of a render's cost.
+DENOISE_QUALITY = "fast"
 #: Objects (mesh, look) a worker keeps read, least recently used first out (as Cycles' workers keep 16).
 MAX_KEPT_OBJECTS = 16
 
@@ -166,7 +171,8 @@ class MitsubaScene:
             normal = np.clip(aux[..., -3:], -1.0, 1.0)
             rgb = np.maximum(pyoidn.denoise(np.ascontiguousarray(rgb), np.ascontiguousarray(albedo),
                                             np.ascontiguousarray(normal), hdr=True,
-                                            clean_aux=s.denoise_prefilter != "accurate"), 0.0)  # as Cycles
+                                            clean_aux=s.denoise_prefilter != "accurate",  # as Cycles
+                                            quality=DENOISE_QUALITY), 0.0)
         if background is None:
             return srgb(rgb)
         straight = srgb(rgb / np.maximum(alpha, 1e-6))  # Blender's transparent film: straight alpha
