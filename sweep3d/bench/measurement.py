@@ -27,8 +27,8 @@ import numpy as np
 from sweep3d.cache import Store
 from sweep3d.core import UserError, decode_png
 from sweep3d.driver import Plan, RunProgress, run_stages
-from sweep3d.engine import plan_spec
 from sweep3d.results import wilson_interval
+from sweep3d.runner import plan_spec
 from sweep3d.spec import LoadedSpec
 from sweep3d.stages.infer import InferStage, ModelHandle, Preprocess
 from sweep3d.stages.postprocess import PostprocessStage

@@ -1,7 +1,7 @@
 """``sweep3d confirm``: draw, render and judge fresh twins for each significant finding of a run.
 
 The fresh configurations are explicit jobs of a second experiment, ``<name>-confirm``, planned
-through the ``table`` policy (its rows given in memory) and run by :func:`sweep3d.engine.pipeline.run`:
+through the ``table`` policy (its rows given in memory) and run by :func:`sweep3d.runner.pipeline.run`:
 the same stages, keys and cache as any run, so a second ``confirm`` with the same spec, findings,
 ``--renders`` and ``--seed`` draws the same pairs and renders nothing. A candidate pair is kept
 only when both twins are in frame and neither image is one the discovery run made (nor one an
@@ -83,7 +83,7 @@ def confirm(loaded: LoadedSpec, renders: int = DEFAULT_RENDERS, seed: int | None
 def _confirmed(loaded: LoadedSpec, store: Store, renders: int, seed: int, console: Console | None,
                claims: list[Claim] | None) -> ConfirmResult:
     """:func:`confirm`, holding the store's lock."""
-    from sweep3d.engine import plans_as_run, run
+    from sweep3d.runner import plans_as_run, run
 
     discovery = plans_as_run(loaded, store)[0]
     seen = {job.image_key for job in list(discovery.jobs) + list(discovery.out_of_frame)}

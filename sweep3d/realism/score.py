@@ -140,7 +140,7 @@ def post_processed(spec: LoadedSpec, frames: dict[int, np.ndarray]) -> dict[int,
         PhotoProblems: a job's control reads the render's passes (depth, mask), which a photograph has not.
     """
     from sweep3d.core import from_uint8, to_uint8
-    from sweep3d.engine import plan_spec
+    from sweep3d.runner import plan_spec
     from sweep3d.stages.postprocess import apply_post, post_controls
 
     plan = plan_spec(spec)
@@ -349,7 +349,7 @@ def engine_spec(spec: LoadedSpec, kit: Path, engine: str) -> Path:
 
 def _run(spec: LoadedSpec, console: Any, wait: float) -> None:
     """Run ``spec`` like ``sweep3d run`` (what renders the other engine's images)."""
-    from sweep3d.engine import run
+    from sweep3d.runner import run
 
     run(spec, console, wait=wait)
 
@@ -362,7 +362,7 @@ def score_engine(spec: LoadedSpec, engine: str, kit: Path | None = None, console
     Raises:
         UserError: no kit; the spec loader refusing the engine or a control it cannot express.
     """
-    from sweep3d.engine import builtin_catalogue, write_unstored_images
+    from sweep3d.runner import builtin_catalogue, write_unstored_images
     from sweep3d.spec import ENGINES, read_spec
 
     if engine not in ENGINES:  # before anything is written into the kit

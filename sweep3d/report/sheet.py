@@ -18,7 +18,7 @@ from PIL import Image, ImageDraw
 from sweep3d.cache import Store
 from sweep3d.core import UserError
 from sweep3d.driver import Job, Plan, RunProgress, run_stages
-from sweep3d.engine import plan_spec
+from sweep3d.runner import plan_spec
 from sweep3d.spec import LoadedSpec
 from sweep3d.stages.infer import ModelHandle
 from sweep3d.stages.plan import GridPolicy

@@ -109,8 +109,8 @@ def check_stability(spec: LoadedSpec, sample: int = DEFAULT_SAMPLE, seed: int = 
 
 def _check_model(spec: LoadedSpec, store: Store, settings: Any, sample: int, seed: int, console: Any) -> Checked:
     """The check of one model of ``spec`` (``settings``), holding the store's lock."""
-    from sweep3d.engine import plan_spec
     from sweep3d.results import results_store
+    from sweep3d.runner import plan_spec
     from sweep3d.stages.infer import ModelHandle
 
     handle = ModelHandle.resolve(spec, settings)

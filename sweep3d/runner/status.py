@@ -2,7 +2,7 @@
 cached, those to compute and an estimate of the time, for every model of the spec.
 
 ``Experiment.plan()`` returns it and ``sweep3d plan`` prints it (``cli/output.py``): the numbers are
-the engine's, the command line only draws them.
+the runner's, the command line only draws them.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from typing import Any
 
 from sweep3d.cache import Store
 from sweep3d.driver import Plan, explain, stage_counts, truth_passes
-from sweep3d.engine.pipeline import plan_spec
+from sweep3d.runner.pipeline import plan_spec
 from sweep3d.spec import LoadedSpec
 from sweep3d.stages.infer import InferStage, ModelHandle
 from sweep3d.stages.postprocess import PostprocessStage

@@ -15,8 +15,8 @@ from typing import TYPE_CHECKING as _TYPE_CHECKING  # noqa: E402
 from sweep3d.core import exports as _exports  # noqa: E402
 
 if _TYPE_CHECKING:
-    from sweep3d.engine.builtins import builtin_catalogue
-    from sweep3d.engine.pipeline import (
+    from sweep3d.runner.builtins import builtin_catalogue
+    from sweep3d.runner.pipeline import (
         RunResult,
         jobs_table,
         plan_spec,
@@ -26,18 +26,18 @@ if _TYPE_CHECKING:
         write_plan_images,
         write_unstored_images,
     )
-    from sweep3d.engine.status import PlanStatus, plan_status
+    from sweep3d.runner.status import PlanStatus, plan_status
 
 __getattr__, __dir__ = _exports(__name__, {
-    "PlanStatus": ("sweep3d.engine.status", "PlanStatus"),
-    "RunResult": ("sweep3d.engine.pipeline", "RunResult"),
-    "builtin_catalogue": ("sweep3d.engine.builtins", "builtin_catalogue"),
-    "jobs_table": ("sweep3d.engine.pipeline", "jobs_table"),
-    "plan_spec": ("sweep3d.engine.pipeline", "plan_spec"),
-    "plan_status": ("sweep3d.engine.status", "plan_status"),
-    "plans_as_run": ("sweep3d.engine.pipeline", "plans_as_run"),
-    "remove_leftovers": ("sweep3d.engine.pipeline", "remove_leftovers"),
-    "run": ("sweep3d.engine.pipeline", "run"),
-    "write_plan_images": ("sweep3d.engine.pipeline", "write_plan_images"),
-    "write_unstored_images": ("sweep3d.engine.pipeline", "write_unstored_images"),
+    "PlanStatus": ("sweep3d.runner.status", "PlanStatus"),
+    "RunResult": ("sweep3d.runner.pipeline", "RunResult"),
+    "builtin_catalogue": ("sweep3d.runner.builtins", "builtin_catalogue"),
+    "jobs_table": ("sweep3d.runner.pipeline", "jobs_table"),
+    "plan_spec": ("sweep3d.runner.pipeline", "plan_spec"),
+    "plan_status": ("sweep3d.runner.status", "plan_status"),
+    "plans_as_run": ("sweep3d.runner.pipeline", "plans_as_run"),
+    "remove_leftovers": ("sweep3d.runner.pipeline", "remove_leftovers"),
+    "run": ("sweep3d.runner.pipeline", "run"),
+    "write_plan_images": ("sweep3d.runner.pipeline", "write_plan_images"),
+    "write_unstored_images": ("sweep3d.runner.pipeline", "write_unstored_images"),
 })

@@ -28,12 +28,12 @@ from rich.markup import escape
 from sweep3d.cache import Store
 from sweep3d.core import UserError
 from sweep3d.driver import Job, Plan, RunProgress, run_stages
-from sweep3d.engine import plan_spec, plans_as_run, remove_leftovers
 from sweep3d.explain.fragility import Rule, read_rule
 from sweep3d.explain.further import Judged, needs_further, search_further
 from sweep3d.explain.search import Axis, Config, Fix, Progress, explain
 from sweep3d.explain.sentence import fix_sentence, move_words, share_words
 from sweep3d.results import SCHEMA, counterfactuals_path, create_margin_macro, margin_sql, no_results
+from sweep3d.runner import plan_spec, plans_as_run, remove_leftovers
 from sweep3d.spec import LoadedSpec, Point, Range, SearchSpace
 from sweep3d.stages.infer import InferStage, ModelHandle, pending_predictions
 from sweep3d.stages.plan import Listed, Policy, PolicyParams
@@ -429,7 +429,7 @@ def _written(change: tuple[str, str, str, float | None, float]) -> str:
 def _write_images(spec: LoadedSpec, store: Store, stages: _Stages, failure_keys: list[str]) -> None:
     """The failures' and fixes' images as blobs (the report shows them side by side), where the
     run made them in memory only (``[postprocess] store = "none"``)."""
-    from sweep3d.engine import write_plan_images, write_unstored_images
+    from sweep3d.runner import write_plan_images, write_unstored_images
 
     if stages.post.store_images or not failure_keys:
         return
