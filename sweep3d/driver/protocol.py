@@ -30,10 +30,13 @@ class Computed:
         error: why the key failed (then nothing is recorded).
         damaged: the upstream blob found damaged, as (table, key): the job is skipped, the blob
             discarded after the pass, and recomputed by the run's next pass.
+        rows: the stage table's rows when it records several per job, each under its own key
+            (the stability check: one per change); ``key`` is then the job's first row's.
     """
 
     key: str
     row: dict[str, Any] | None = None
+    rows: list[dict[str, Any]] = field(default_factory=list)
     side: dict[str, dict[str, Any]] = field(default_factory=dict)
     error: str | None = None
     damaged: tuple[str, str] | None = None
