@@ -36,10 +36,10 @@ class Computed:
 
     key: str
     row: dict[str, Any] | None = None
-    rows: list[dict[str, Any]] = field(default_factory=list)
     side: dict[str, dict[str, Any]] = field(default_factory=dict)
     error: str | None = None
     damaged: tuple[str, str] | None = None
+    rows: list[dict[str, Any]] = field(default_factory=list)  # last: callers build the others by position
 
 
 class Cancelled(Exception):

@@ -137,7 +137,9 @@ def _check_model(spec: LoadedSpec, runner: Any, settings: Any, sample: int, seed
     have = runner.store.key_set("stability")
     todo = [jobs[k] for k in keys if stage.todo(jobs[k], have)]
     checked = dataclasses.replace(plan, jobs=[jobs[k] for k in keys], out_of_frame=[])  # in sample order
-    runner.run(checked, stages=("postprocess",), extra=(stage,))
+    # one stage after the other: the check infers in this thread, as it always did (torch's
+    # answers depend on its threads), and a stop keeps every batch recorded before it
+    runner.run(checked, stages=("postprocess",), extra=(stage,), overlap=False)
     left = [job for job in todo if stage.key(job) not in stage.done]
     if left:  # its input is not stored: nothing to re-infer
         stage.missing(left[0])
