@@ -1,5 +1,5 @@
 """A hand-written bpy render loop over a list of jobs: what a careful user would write without
-sweep3d, the baseline that `engine/pipeline.py --multi-scene` and `gpu.py` measure against.
+sweep3d, the baseline that `benchmarks/pipeline.py --multi-scene` and `gpu.py` measure against.
 
 Every mesh is imported once under its own empty (shown with hide_render), one world per
 environment (scene.world), jobs world by world, object by object; render settings and framing

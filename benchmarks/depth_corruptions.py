@@ -163,7 +163,7 @@ def main() -> None:
     args = parser.parse_args()
     import sweep3d
     from sweep3d.assets.sources import materialise_mesh
-    from sweep3d.engine import builtin_catalogue as catalogue
+    from sweep3d.runner import builtin_catalogue as catalogue
 
     folder = Path(tempfile.mkdtemp(prefix="depth-bench-"))
     spec = sweep3d.load(REPO / "specs" / "quickstart.toml").spec

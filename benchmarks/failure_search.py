@@ -19,8 +19,8 @@ from rich.table import Table
 
 import sweep3d
 from sweep3d.cache.store import Store
-from sweep3d.engine.pipeline import run
 from sweep3d.results import connect
+from sweep3d.runner.pipeline import run
 from sweep3d.stages.plan.policies import POLICIES
 
 SPEC = Path(__file__).resolve().parents[1] / "specs" / "failure_search.toml"

@@ -129,8 +129,8 @@ def quickstart(folder: Path, config: str, objects: int) -> dict:
     """One cold-store run of the quickstart (cut to its first ``objects`` objects) under ``config``."""
     import sweep3d
     from sweep3d.cache.store import Store
-    from sweep3d.engine.pipeline import run
     from sweep3d.results import connect
+    from sweep3d.runner.pipeline import run
     from sweep3d.stages.infer import onnx_backend
 
     overlap, model_lines = CONFIGS[config]

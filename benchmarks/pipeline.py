@@ -199,7 +199,7 @@ def pipeline(n: int, folder: Path) -> dict:
 
     import sweep3d
     from sweep3d.cache import store as store_module
-    from sweep3d.engine.pipeline import run
+    from sweep3d.runner.pipeline import run
 
     io = {"seconds": 0.0}
 
@@ -234,7 +234,7 @@ def noop_rerun(n: int, folder: Path) -> dict:
     import sweep3d
     from sweep3d.cache.store import Store, atomic_write, utc_now
     from sweep3d.core.pixels import encode_png
-    from sweep3d.engine.pipeline import plan_spec
+    from sweep3d.runner.pipeline import plan_spec
     from sweep3d.stages.infer import ClassificationEvaluator
     from sweep3d.stages.infer.infer_stage import predictions_schema
 
@@ -282,7 +282,7 @@ def bare_jobs(folder: Path) -> tuple[Path, int]:
     """The quickstart's distinct renders as the bare loop's input (world, object, pose order)."""
     import sweep3d
     from sweep3d.assets.sources import materialise_mesh
-    from sweep3d.engine.pipeline import plan_spec
+    from sweep3d.runner.pipeline import plan_spec
     from sweep3d.stages.render import render_settings
 
     plan = plan_spec(sweep3d.load(quickstart_spec(folder)).spec)
@@ -347,7 +347,7 @@ def stage_multi(folder: Path) -> dict:
     from sweep3d.cache.store import Store
     from sweep3d.driver.loop import run_stage
     from sweep3d.driver.progress import RunProgress
-    from sweep3d.engine.pipeline import plan_spec
+    from sweep3d.runner.pipeline import plan_spec
     from sweep3d.stages.render import RenderStage
 
     plan = plan_spec(sweep3d.load(quickstart_spec(folder)).spec)
@@ -392,7 +392,7 @@ def infer_alone(stage: dict, folder: Path, sigmas: list[float] | None = None, cp
     import sweep3d
     from sweep3d.driver.loop import run_stages
     from sweep3d.driver.progress import RunProgress
-    from sweep3d.engine.pipeline import plan_spec
+    from sweep3d.runner.pipeline import plan_spec
     from sweep3d.stages.infer import InferStage, ModelHandle
     from sweep3d.stages.postprocess import ImageHandoff, PostprocessStage
 

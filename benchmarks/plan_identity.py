@@ -22,7 +22,7 @@ DUMP = """
 import json, sys
 from pathlib import Path
 import sweep3d
-from sweep3d.engine.pipeline import plan_spec
+from sweep3d.runner.pipeline import plan_spec
 import sweep3d
 root = Path(sys.argv[1]).resolve()
 assert Path(sweep3d.__file__).resolve().is_relative_to(root), sweep3d.__file__

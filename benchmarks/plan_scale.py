@@ -93,7 +93,7 @@ print("MAXRSS", usage.ru_maxrss, code, usage.ru_utime + usage.ru_stime, file=sys
 #: Times make_plan (and the jobs table it writes) in a fresh child, apart from start-up.
 IN_PROCESS = """
 import json, resource, sys, time
-from sweep3d.engine.pipeline import plan_spec
+from sweep3d.runner.pipeline import plan_spec
 import sweep3d
 spec = sweep3d.load(sys.argv[1]).spec
 t, c = time.perf_counter(), time.process_time()
@@ -158,7 +158,7 @@ def synthesise_store(folder: Path, jobs: int) -> None:
     from sweep3d.cache.blobs import sha256_bytes
     from sweep3d.cache.store import DIGEST_COLUMN, Store, utc_now
     from sweep3d.core.pixels import encode_png
-    from sweep3d.engine.pipeline import plan_spec
+    from sweep3d.runner.pipeline import plan_spec
     from sweep3d.stages.infer import ClassificationEvaluator
     from sweep3d.stages.infer.infer_stage import predictions_schema
     from sweep3d.stages.render.render_stage import RENDERS_SCHEMA

@@ -55,7 +55,7 @@ samples_per_dim = {per_scene}
 
 def render_rate(folder: Path, renders: int, executor, workers: int) -> float:
     import sweep3d
-    from sweep3d.engine.pipeline import run
+    from sweep3d.runner.pipeline import run
 
     folder.mkdir(parents=True)
     (folder / "spec.toml").write_text(SPEC.replace("{per_scene}", str(renders // 2)))

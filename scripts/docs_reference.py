@@ -59,8 +59,8 @@ def sources() -> Sources:
     import typer
 
     from sweep3d.cli import app
-    from sweep3d.engine import builtin_catalogue
     from sweep3d.plugins import Evaluator, Policy, PostControl, RenderedControl
+    from sweep3d.runner import builtin_catalogue
     from sweep3d.spec import Spec
     from sweep3d.stages.infer import builtin_model
 

@@ -32,9 +32,9 @@ if TYPE_CHECKING:
     from rich.console import Console
 
     from sweep3d.confirm import ConfirmResult
-    from sweep3d.engine import PlanStatus, RunResult
     from sweep3d.explain import ExplainResult
     from sweep3d.export import ExportResult
+    from sweep3d.runner import PlanStatus, RunResult
     from sweep3d.spec import LoadedSpec
 
 #: A spec: a file's path, TOML text (a string holding a newline or starting with ``[``) or a dict.
@@ -85,7 +85,7 @@ class Experiment:
         """The plans of the spec's models and, per stage, the keys needed, cached and to compute with
         an estimate of the time (what ``sweep3d plan`` prints); ``.jobs`` and ``.table()`` are the
         first model's jobs (``.plans`` has every model's). Nothing is rendered."""
-        from sweep3d.engine import plan_status
+        from sweep3d.runner import plan_status
 
         return plan_status(self.spec)
 
@@ -94,7 +94,7 @@ class Experiment:
         """Render, postprocess and infer what the store lacks; resumable, like ``sweep3d run``.
 
         Args:
-            progress: show progress bars (the returned :class:`~sweep3d.engine.pipeline.RunResult` holds the
+            progress: show progress bars (the returned :class:`~sweep3d.runner.pipeline.RunResult` holds the
                 stages' outcomes; ``sweep3d run`` prints them).
             wait: seconds to wait for another run holding the store's lock.
             executor: where renders run, ``local`` worker processes or ``ray``.
@@ -103,7 +103,7 @@ class Experiment:
         """
         from rich.console import Console
 
-        from sweep3d.engine import run as run_pipeline
+        from sweep3d.runner import run as run_pipeline
         from sweep3d.stages.render import Executor
 
         check_wait(wait)
@@ -262,7 +262,7 @@ def check_wait(seconds: float) -> float:
 
 def _load_spec(spec: SpecSource, base: str | Path | None) -> LoadedSpec:
     """Load ``spec`` from wherever it comes, against the built-in plug-ins."""
-    from sweep3d.engine import builtin_catalogue
+    from sweep3d.runner import builtin_catalogue
     from sweep3d.spec import read_spec
 
     return read_spec(spec, builtin_catalogue(), base)

@@ -44,6 +44,7 @@ HEAVY = ("blender", "browser", "slow", "torch")
 FIXTURE_MARKERS = {
     "tiny_run": ("slow", "blender", "torch"),  # a real `sweep3d run`: renders and classifies
     "tiny_copy": ("slow", "blender", "torch"),
+    "ray_cluster": ("slow",),  # a follow-up on --executor ray: a one-node Ray cluster on loopback
     "blender_scene": ("blender",),
     "parts_run": ("slow", "blender", "torch"),  # test_part_visibility: a real run with the UV pass
     "truth_run": ("slow", "blender", "torch"),  # test_truth: a real run with the mask and depth passes
@@ -302,3 +303,13 @@ def blender_scene(tmp_path_factory):
     return scene
 
 
+
+
+@pytest.fixture(scope="module")
+def ray_cluster():
+    """A one-node Ray cluster bound to 127.0.0.1, for a module's tests (they never talk to another
+    address); skipped where Ray is not installed."""
+    ray = pytest.importorskip("ray")
+    ray.init(_node_ip_address="127.0.0.1", include_dashboard=False, num_cpus=2, log_to_driver=False)
+    yield
+    ray.shutdown()

@@ -28,7 +28,7 @@ UNITS = (
     "sweep3d.stages.postprocess",
     "sweep3d.stages.infer",
     "sweep3d.stages.plan",
-    "sweep3d.engine",              # one run: pipeline, plan status, the built-in catalogue
+    "sweep3d.runner",              # one run: pipeline, plan status, the built-in catalogue
     "sweep3d.results",             # SQL views over a store
     "sweep3d.export",
     "sweep3d.bench",

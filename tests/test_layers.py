@@ -34,7 +34,7 @@ def test_spec_and_cache_import_no_stage_module() -> None:
 def test_loading_and_planning_import_neither_blender_nor_torch(tmp_path: Path) -> None:
     spec = write_spec(tmp_path, TINY_SPEC)
     loaded = _modules_after(f"""
-        from sweep3d.engine.pipeline import plan_spec
+        from sweep3d.runner.pipeline import plan_spec
         from tests.helpers import load_spec
         plan = plan_spec(load_spec({str(spec)!r}))
         assert len(plan.jobs) == 8

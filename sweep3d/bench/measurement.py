@@ -26,9 +26,9 @@ import numpy as np
 
 from sweep3d.cache import Store
 from sweep3d.core import UserError, decode_png
-from sweep3d.driver import Plan, RunProgress, run_stages
-from sweep3d.engine import plan_spec
+from sweep3d.driver import Plan, RunProgress
 from sweep3d.results import wilson_interval
+from sweep3d.runner import plan_spec, running
 from sweep3d.spec import LoadedSpec
 from sweep3d.stages.infer import InferStage, ModelHandle, Preprocess
 from sweep3d.stages.postprocess import PostprocessStage
@@ -165,14 +165,15 @@ def measure(loaded: LoadedSpec, settings: list[Setting], reference: Setting, flo
         plans[setting] = dataclasses.replace(plan, jobs=[by_index[i] for i in indices], out_of_frame=[])
     store = Store(loaded.store)
     timings: dict[str, RenderInfo] = {}  # the renders made in this run, with their scene loads
-    with store.lock(wait):
+    with running(loaded, wait=wait, progress=progress, store=store) as runner:
         for chunk in range(ROUNDS):  # settings take turns, so a machine's changing load hits all alike
             for setting, plan in plans.items():
                 n = len(plan.jobs)  # contiguous: a scene's jobs stay together, as in a run
                 part = dataclasses.replace(plan, jobs=plan.jobs[chunk * n // ROUNDS : (chunk + 1) * n // ROUNDS])
-                stages = (RenderStage(timings=timings), PostprocessStage(), InferStage(models[setting]))
+                # its own stages: a timed render stage per turn (a worker start each), every image stored
+                stages = (RenderStage(runner.executor, timings=timings), PostprocessStage(), InferStage(models[setting]))
                 try:
-                    run_stages(stages, part, store, progress, strict=True)
+                    runner.run(part, stages=stages, strict=True, overlap=False)
                 except UserError as exc:
                     raise UserError(f"bench at {setting.label()}: {exc}") from None
     con = store.connect()

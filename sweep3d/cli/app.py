@@ -61,7 +61,7 @@ def plan(
     """Count the jobs a spec expands to, what is already cached, and an estimated time."""
     import sweep3d
     from sweep3d.cli.output import print_plan
-    from sweep3d.engine import plan_status
+    from sweep3d.runner import plan_status
 
     if design is not None:
         from sweep3d.stages.plan import check_output

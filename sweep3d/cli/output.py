@@ -12,7 +12,6 @@ from rich.table import Table
 from sweep3d.cache import Store
 from sweep3d.core import UserError
 from sweep3d.driver import JobList, Plan
-from sweep3d.engine import PlanStatus, RunResult
 from sweep3d.results import (
     HIDDEN,
     Region,
@@ -29,13 +28,14 @@ from sweep3d.results import (
     weakest_regions,
     wilson_interval,
 )
+from sweep3d.runner import PlanStatus, RunResult
 from sweep3d.spec import LoadedSpec
 from sweep3d.stages.infer import ModelHandle, measure_of
 from sweep3d.stages.render import duration, missing_gpu_warning, slow_render_warning
 
 
 def print_plan(console: Console, status: PlanStatus, jobs: int = 0) -> None:
-    """What ``sweep3d plan`` prints of ``status`` (the engine's :func:`~sweep3d.engine.status.plan_status`):
+    """What ``sweep3d plan`` prints of ``status`` (the runner's :func:`~sweep3d.runner.status.plan_status`):
     the counts per stage, cached and to compute, the estimate, and with ``jobs`` the first that many
     jobs of the first model's plan."""
     spec, plans, plan = status.spec, status.plans, status.plan

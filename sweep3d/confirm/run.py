@@ -1,7 +1,7 @@
 """``sweep3d confirm``: draw, render and judge fresh twins for each significant finding of a run.
 
 The fresh configurations are explicit jobs of a second experiment, ``<name>-confirm``, planned
-through the ``table`` policy (its rows given in memory) and run by :func:`sweep3d.engine.pipeline.run`:
+through the ``table`` policy (its rows given in memory) and run by :func:`sweep3d.runner.pipeline.run`:
 the same stages, keys and cache as any run, so a second ``confirm`` with the same spec, findings,
 ``--renders`` and ``--seed`` draws the same pairs and renders nothing. A candidate pair is kept
 only when both twins are in frame and neither image is one the discovery run made (nor one an
@@ -36,6 +36,7 @@ from sweep3d.results import (
     tally,
 )
 from sweep3d.spec import LoadedSpec, PolicySpec
+from sweep3d.stages.render import LOCAL, Executor
 
 #: Candidate pairs drawn per pair wanted: room for those dropped (out of frame, a discovery image).
 OVERDRAW = 3
@@ -63,11 +64,13 @@ class ConfirmResult:
 
 
 def confirm(loaded: LoadedSpec, renders: int = DEFAULT_RENDERS, seed: int | None = None,
-            console: Console | None = None, claims: list[Claim] | None = None, wait: float = 0.0) -> ConfirmResult:
+            console: Console | None = None, claims: list[Claim] | None = None, wait: float = 0.0,
+            executor: Executor = LOCAL) -> ConfirmResult:
     """Confirm every significant finding of ``loaded``'s last run on ``renders`` fresh renders each
     (``renders // 2`` twin pairs), drawn with ``seed`` (default: the spec's); ``claims``: these
     instead of the run's findings. It holds the store's writer lock from its start to its end
-    (``wait``: seconds to wait for another command holding it), its renders' run within it."""
+    (``wait``: seconds to wait for another command holding it), its renders' run within it, by
+    the runner on ``executor``."""
     from sweep3d.results import no_results
 
     if renders < 2:
@@ -77,13 +80,13 @@ def confirm(loaded: LoadedSpec, renders: int = DEFAULT_RENDERS, seed: int | None
     if not loaded.store.is_dir():  # before the lock would make the store's folder
         raise no_results(store, loaded.name, loaded.path)
     with store.lock(wait):
-        return _confirmed(loaded, store, renders, seed, console, claims)
+        return _confirmed(loaded, store, renders, seed, console, claims, executor)
 
 
 def _confirmed(loaded: LoadedSpec, store: Store, renders: int, seed: int, console: Console | None,
-               claims: list[Claim] | None) -> ConfirmResult:
+               claims: list[Claim] | None, executor: Executor = LOCAL) -> ConfirmResult:
     """:func:`confirm`, holding the store's lock."""
-    from sweep3d.engine import plans_as_run, run
+    from sweep3d.runner import plans_as_run, run
 
     discovery = plans_as_run(loaded, store)[0]
     seen = {job.image_key for job in list(discovery.jobs) + list(discovery.out_of_frame)}
@@ -115,7 +118,7 @@ def _confirmed(loaded: LoadedSpec, store: Store, renders: int, seed: int, consol
     rendered = cached = failed = 0
     if fresh:
         variant = _variant(loaded, space, fresh)
-        result = run(variant, console)
+        result = run(variant, console, executor=executor)
         render = next((o for o in result.outcomes if o.stage == "render"), None)
         rendered, cached = (render.computed, render.cached) if render else (0, 0)
         failed = result.failed

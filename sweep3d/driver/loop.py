@@ -332,6 +332,9 @@ class _Pass:
             if item.row is not None:
                 self.recorded[stage.table][item.key] = item.row
                 self.writers.add(stage.table, item.row)
+            for row in item.rows:
+                self.recorded[stage.table][row[KEY_COLUMN[stage.table]]] = row
+                self.writers.add(stage.table, row)
             for table, row in item.side.items():
                 self.recorded.setdefault(table, {})[row[KEY_COLUMN[table]]] = row
                 self.writers.add(table, row)

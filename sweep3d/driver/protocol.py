@@ -30,6 +30,8 @@ class Computed:
         error: why the key failed (then nothing is recorded).
         damaged: the upstream blob found damaged, as (table, key): the job is skipped, the blob
             discarded after the pass, and recomputed by the run's next pass.
+        rows: the stage table's rows when it records several per job, each under its own key
+            (the stability check: one per change); ``key`` is then the job's first row's.
     """
 
     key: str
@@ -37,6 +39,7 @@ class Computed:
     side: dict[str, dict[str, Any]] = field(default_factory=dict)
     error: str | None = None
     damaged: tuple[str, str] | None = None
+    rows: list[dict[str, Any]] = field(default_factory=list)  # last: callers build the others by position
 
 
 class Cancelled(Exception):

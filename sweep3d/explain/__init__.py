@@ -1,5 +1,5 @@
 """``sweep3d explain``: the nearest change that fixes each failure (see :mod:`.search`, the pure
-search, :mod:`.further`, which goes past a fragile fix, :mod:`.driver`, which answers their probes
+search, :mod:`.further`, which goes past a fragile fix, :mod:`.run`, which answers their probes
 through the stages, and :mod:`.sentence`, the words a user reads of each fix)."""
 
 from __future__ import annotations
@@ -14,13 +14,13 @@ from typing import TYPE_CHECKING as _TYPE_CHECKING  # noqa: E402
 from sweep3d.core import exports as _exports  # noqa: E402
 
 if _TYPE_CHECKING:
-    from sweep3d.explain.driver import ExplainResult, explain_spec, print_explained
+    from sweep3d.explain.run import ExplainResult, explain_spec, print_explained
     from sweep3d.explain.sentence import change_words, fix_sentence, resolution_words, share_words, trust_words
 
 __getattr__, __dir__ = _exports(__name__, {
-    "ExplainResult": ("sweep3d.explain.driver", "ExplainResult"),
-    "explain_spec": ("sweep3d.explain.driver", "explain_spec"),
-    "print_explained": ("sweep3d.explain.driver", "print_explained"),
+    "ExplainResult": ("sweep3d.explain.run", "ExplainResult"),
+    "explain_spec": ("sweep3d.explain.run", "explain_spec"),
+    "print_explained": ("sweep3d.explain.run", "print_explained"),
     "change_words": ("sweep3d.explain.sentence", "change_words"),
     "fix_sentence": ("sweep3d.explain.sentence", "fix_sentence"),
     "resolution_words": ("sweep3d.explain.sentence", "resolution_words"),

@@ -2,7 +2,7 @@
 
 It knows nothing of rendering: configurations are points of a scene's unit cube
 (:class:`~sweep3d.spec.space.Point`), and an *oracle* answers, for a batch of them, whether the
-model is right there. The driver (:mod:`sweep3d.explain.driver`) answers through the stages, so
+model is right there. Its runner (:mod:`sweep3d.explain.run`) answers through the stages, so
 every probe is cached like any other job; tests answer with a synthetic function.
 
 For each failure the search walks *rays* out of its point and keeps the nearest right one:

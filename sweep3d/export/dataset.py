@@ -19,7 +19,6 @@ from typing import TYPE_CHECKING, Any
 from sweep3d.cache import Store, safe_filename
 from sweep3d.core import UserError
 from sweep3d.driver import RunProgress
-from sweep3d.engine import write_unstored_images
 from sweep3d.export.coco import CocoWriter
 from sweep3d.export.formats import Batch, DatasetWriter, Item
 from sweep3d.export.imagefolder import ImageFolderWriter
@@ -27,6 +26,7 @@ from sweep3d.export.parquet import ParquetWriter
 from sweep3d.export.selection import DEFAULT_WHERE, UNEVALUABLE, Selection, check_where, select
 from sweep3d.export.target import DESIGN, MANIFEST, SCENE, ExportFolder, Staging, design_table, identity, open_folder
 from sweep3d.results import no_results
+from sweep3d.runner import write_unstored_images
 from sweep3d.spec import LoadedSpec
 
 if TYPE_CHECKING:

@@ -140,7 +140,7 @@ def post_processed(spec: LoadedSpec, frames: dict[int, np.ndarray]) -> dict[int,
         PhotoProblems: a job's control reads the render's passes (depth, mask), which a photograph has not.
     """
     from sweep3d.core import from_uint8, to_uint8
-    from sweep3d.engine import plan_spec
+    from sweep3d.runner import plan_spec
     from sweep3d.stages.postprocess import apply_post, post_controls
 
     plan = plan_spec(spec)
@@ -347,22 +347,24 @@ def engine_spec(spec: LoadedSpec, kit: Path, engine: str) -> Path:
     return path
 
 
-def _run(spec: LoadedSpec, console: Any, wait: float) -> None:
-    """Run ``spec`` like ``sweep3d run`` (what renders the other engine's images)."""
-    from sweep3d.engine import run
+def _run(spec: LoadedSpec, console: Any, wait: float, executor: Any = None) -> None:
+    """Run ``spec`` like ``sweep3d run`` (what renders the other engine's images), on ``executor``
+    (default: local workers)."""
+    from sweep3d.runner import run
+    from sweep3d.stages.render import LOCAL
 
-    run(spec, console, wait=wait)
+    run(spec, console, wait=wait, executor=executor or LOCAL)
 
 
 def score_engine(spec: LoadedSpec, engine: str, kit: Path | None = None, console: Any = None,
-                 wait: float = 0.0) -> Scored:
+                 wait: float = 0.0, executor: Any = None) -> Scored:
     """Render the kit's picked configurations with ``engine`` (through the whole pipeline, cached
     like any run) and store the verdicts as source ``engine:<engine>``.
 
     Raises:
         UserError: no kit; the spec loader refusing the engine or a control it cannot express.
     """
-    from sweep3d.engine import builtin_catalogue, write_unstored_images
+    from sweep3d.runner import builtin_catalogue, write_unstored_images
     from sweep3d.spec import ENGINES, read_spec
 
     if engine not in ENGINES:  # before anything is written into the kit
@@ -373,7 +375,7 @@ def score_engine(spec: LoadedSpec, engine: str, kit: Path | None = None, console
     other = read_spec(engine_spec(spec, folder, engine), builtin_catalogue(), None)
     store = Store(spec.store)
     with store.lock(wait):  # from the start: the run within takes it again in this thread, a no-op
-        _run(other, console, wait)
+        _run(other, console, wait, executor)
         rows = _engine_rows(spec, other, store, engine, jobs)
         # the other engine's images the report's pairs show: a run keeps its post-processed images
         # in memory only ([postprocess] store = "none", the default), and the report makes again

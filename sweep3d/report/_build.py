@@ -19,7 +19,6 @@ import duckdb
 
 from sweep3d.cache import STORE_FIX, Store, atomic_write
 from sweep3d.core import UserError
-from sweep3d.engine import write_unstored_images
 from sweep3d.report.figures import pct
 from sweep3d.report.overlays import read_overlays
 from sweep3d.report.page import render_page
@@ -45,6 +44,7 @@ from sweep3d.results import (
     summarise,
 )
 from sweep3d.results import VIEW as BOUNDARIES_VIEW
+from sweep3d.runner import write_unstored_images
 from sweep3d.spec import LoadedSpec
 from sweep3d.stages.infer import measure_of
 

@@ -17,13 +17,12 @@ from PIL import Image, ImageDraw
 
 from sweep3d.cache import Store
 from sweep3d.core import UserError
-from sweep3d.driver import Job, Plan, RunProgress, run_stages
-from sweep3d.engine import plan_spec
+from sweep3d.driver import Job, Plan, RunProgress
+from sweep3d.runner import plan_spec, running
 from sweep3d.spec import LoadedSpec
 from sweep3d.stages.infer import ModelHandle
 from sweep3d.stages.plan import GridPolicy
 from sweep3d.stages.postprocess import PostprocessStage
-from sweep3d.stages.render import RenderStage
 
 TILE = 128
 LABEL_WIDTH = 170
@@ -69,8 +68,8 @@ def contact_sheet(loaded: LoadedSpec, output: Path, progress: RunProgress, objec
         jobs += distinct
     plan = Plan(loaded, jobs, model.digest, framing=model.framing, device=plan.device)
     store = Store(loaded.store)
-    with store.lock(wait):
-        run_stages((RenderStage(), PostprocessStage()), plan, store, progress, strict=True)
+    with running(loaded, wait=wait, progress=progress, store=store) as runner:  # every image stored: the tiles read them
+        runner.run(plan, stages=(runner.render, PostprocessStage()), strict=True, overlap=False)
     width = LABEL_WIDTH + TILE * max(len(r[1]) for r in rows)
     sheet = Image.new("RGB", (width, TILE * len(rows)), "white")
     draw = ImageDraw.Draw(sheet)

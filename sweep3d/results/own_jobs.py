@@ -72,7 +72,7 @@ def last_run_is_another(spec: LoadedSpec, store: Store) -> bool:
 
 def write_own_jobs(spec: LoadedSpec, planned: PlannedStore) -> None:
     """Write ``spec``'s plans, as a run would record them, to ``planned``'s jobs file."""
-    from sweep3d.engine import jobs_table, plans_as_run  # planning: only for another spec's store
+    from sweep3d.runner import jobs_table, plans_as_run  # planning: only for another spec's store
 
     planned.write_table_file(planned.jobs, jobs_table(plans_as_run(spec, planned)))
 

@@ -3,7 +3,7 @@
 The spec layer knows no stage: the render stage owns the engines, the render and postprocess stages own the controls, the plan
 stage the policies, the infer stage the models, evaluators and class names. A :class:`Catalogue`
 bundles their registries so the loader can check names (with "did you mean") without importing
-a stage; ``sweep3d.engine.builtins()`` builds the built-in one.
+a stage; ``sweep3d.runner.builtins()`` builds the built-in one.
 """
 
 from __future__ import annotations

@@ -12,6 +12,11 @@ larger sample adds only what is new, and a killed one resumes where it was stopp
 holds the store's writer lock from its start (``--wait`` waits for another command's). The
 baseline is inferred again beside the changed images, by torch with the model's own
 preprocessing, so a flip compares two answers of one computation.
+
+The check hands the runner (:mod:`sweep3d.runner`) a plan of the sampled jobs, in sample order,
+through the postprocess stage and its own :class:`StabilityStage`: the runner holds the lock,
+shows progress and writes the rows, and the stage takes each image where inference takes it
+(made in this process, else its blob, else made again from its render).
 """
 
 from __future__ import annotations
@@ -80,18 +85,21 @@ def stratified_sample(rows: list[tuple[str, float]], n: int, seed: int) -> list[
 
 
 def check_stability(spec: LoadedSpec, sample: int = DEFAULT_SAMPLE, seed: int = 0, console: Any = None,
-                    wait: float = 0.0) -> list[Checked]:
+                    wait: float = 0.0, executor: Any = None) -> list[Checked]:
     """Run the stability check of ``spec``'s results (every model of it); returns what each found.
 
     It holds the store's writer lock from before it computes anything (``wait``: seconds to wait
     for another command holding it), and appends its rows every few seconds: a kill loses one
-    batch, and the next check starts from what was stored.
+    batch, and the next check starts from what was stored. ``executor``: the runner's (local
+    by default; on Ray, in its session).
 
     Raises:
         UserError: no results yet, or an evaluator that does not rank classes.
         StoreBusyError: another command held the store's lock longer than ``wait``.
     """
     from sweep3d.results import no_results
+    from sweep3d.runner import running
+    from sweep3d.stages.render import LOCAL
 
     if spec.evaluator.kind != "classification":
         raise UserError(f"stability: [evaluator] kind = {spec.evaluator.kind!r}; the check reads the margin of "
@@ -99,14 +107,14 @@ def check_stability(spec: LoadedSpec, sample: int = DEFAULT_SAMPLE, seed: int = 
     store = Store(spec.store)
     if not spec.store.is_dir():  # before the lock would make the store's folder
         raise no_results(store, spec.name, spec.path)
-    with store.lock(wait):
-        return [_check_model(spec, store, settings, sample, seed, console) for settings in spec.spec.all_models]
+    with running(spec, executor=executor or LOCAL, wait=wait, console=console, store=store, leftovers=False) as runner:
+        return [_check_model(spec, runner, settings, sample, seed) for settings in spec.spec.all_models]
 
 
-def _check_model(spec: LoadedSpec, store: Store, settings: Any, sample: int, seed: int, console: Any) -> Checked:
-    """The check of one model of ``spec`` (``settings``), holding the store's lock."""
-    from sweep3d.engine import plan_spec
+def _check_model(spec: LoadedSpec, runner: Any, settings: Any, sample: int, seed: int) -> Checked:
+    """The check of one model of ``spec`` (``settings``), the runner holding the store's lock."""
     from sweep3d.results import results_store
+    from sweep3d.runner import plan_spec
     from sweep3d.stages.infer import ModelHandle
 
     handle = ModelHandle.resolve(spec, settings)
@@ -121,12 +129,18 @@ def _check_model(spec: LoadedSpec, store: Store, settings: Any, sample: int, see
                         "any more (the spec changed since the run): `sweep3d run` it, then check again")
     todo_changes = _applicable(handle, plan)
     wanted = {(key, change): stability_key(key, change, seed) for key in keys for change in todo_changes}
-    have = store.key_set("stability")
-    todo = sorted({key for (key, _), skey in wanted.items() if skey not in have}, key=keys.index)
-    computed = _compute(store, spec, plan, handle, [jobs[k] for k in todo], todo_changes, seed, wanted, console,
-                        cached=len(keys) - len(todo), batch_size=settings.batch_size)
+    stage = StabilityStage(handle, todo_changes, seed, wanted, runner.post, settings.batch_size, spec.path)
+    have = runner.store.key_set("stability")
+    todo = [jobs[k] for k in keys if stage.todo(jobs[k], have)]
+    checked = dataclasses.replace(plan, jobs=[jobs[k] for k in keys], out_of_frame=[])  # in sample order
+    # one stage after the other: the check infers in this thread, as it always did (torch's
+    # answers depend on its threads), and a stop keeps every batch recorded before it
+    runner.run(checked, stages=("postprocess",), extra=(stage,), overlap=False)
+    left = [job for job in todo if stage.key(job) not in stage.done]
+    if left:  # its input is not stored: nothing to re-infer
+        stage.missing(left[0])
     skipped = [f"{c}: {why}" for c, why in _inapplicable(handle, plan).items()]
-    return _found(spec, settings.label, len(keys), computed, len(keys) - len(todo), skipped)
+    return _found(spec, settings.label, len(keys), len(stage.done), len(keys) - len(todo), skipped)
 
 
 def _sampled_results(store: Store, spec: LoadedSpec, model: str | None) -> list[tuple[str, float]]:
@@ -169,55 +183,95 @@ def _applicable(handle: Any, plan: Any) -> list[str]:
     return [c for c in CHANGES if c not in skip]
 
 
-def _compute(store: Store, spec: LoadedSpec, plan: Any, handle: Any, jobs: list, changes: list[str], seed: int,
-             wanted: dict[tuple[str, str], str], console: Any, cached: int = 0, batch_size: int = 32) -> int:
-    """Infer the baseline and each change of ``jobs``' images and append their rows; returns how many images."""
-    if not jobs:
-        return 0
-    from sweep3d.cache import load_image
-    from sweep3d.core import from_uint8, to_uint8
-    from sweep3d.driver import RunProgress
-    from sweep3d.stages.infer import object_class_ids, predict
-    from sweep3d.stages.postprocess import make_image, post_controls, truth_digests
+class StabilityStage:
+    """The check's own stage, after postprocess: it re-infers each sampled image, and its changed
+    copies, and records one row per change (:attr:`Computed.rows`). A job's key is its first
+    change's row's; a job with that row but not every other is computed again (:meth:`incomplete`),
+    its stored rows left as they are."""
 
-    model = handle.classifier()
-    other = _other_arithmetic(model)
-    truths = object_class_ids(plan, model.label_map(), handle.name)
-    digests = {t: store.digests(t) for t in ("renders", "images")}
-    passes = truth_digests(store)
-    have = store.key_set("stability")
-    post = post_controls(plan)
-    batch = max(1, batch_size // (1 + len(changes)))  # this model's batch, shared by the changed copies
-    with (store.segment_writer("stability", SCHEMA) as rows,  # a segment every few seconds: a kill loses one
-          RunProgress(console) as progress, progress.stage("stability", len(jobs), cached) as bar):
-        for start in range(0, len(jobs), batch):
-            part = jobs[start: start + batch]
-            pixels = []
-            for job in part:
-                image = load_image(store, job.image_key, digests["images"].get(job.image_key)) \
-                    if digests["images"].get(job.image_key) else None
-                if image is None:
-                    made = make_image(store, plan, job, post, digests["renders"].get(job.render_key), passes)
-                    if made.pixels is None:
-                        raise UserError(f"stability: the image of job {job.index} is missing from the store "
-                                        f"(render key {job.render_key}); run `sweep3d run {spec.path}` first")
-                    pixels.append(made.pixels)
-                else:
-                    pixels.append(to_uint8(image))
-            ids = [truths[job.object] for job in part]
-            base = predict(model, from_uint8(np.stack(pixels)), handle.name)
-            answers = {}
-            for change in [c for c in changes if any(wanted[(job.pred_key, c)] not in have for job in part)]:
-                if change == "resize":
-                    answers[change] = predict(other, from_uint8(np.stack(pixels)), handle.name)
-                else:
-                    moved = [changed(p, change, seed, job.image_key) for p, job in zip(pixels, part)]
-                    answers[change] = predict(model, from_uint8(np.stack(moved)), handle.name)
-            for row in _rows(part, ids, base, answers, seed, wanted):
-                if row["stability_key"] not in have:
-                    rows.add(row)
-            bar.advance(len(part))
-    return len(jobs)
+    name = "stability"
+    table = "stability"
+    owns_blobs = False
+    side_tables: dict[str, pa.Schema] = {}
+
+    def __init__(self, handle: Any, changes: list[str], seed: int, wanted: dict[tuple[str, str], str],
+                 post: Any, batch_size: int = 32, spec_path: Any = "SPEC") -> None:
+        self.handle, self.changes, self.seed, self.wanted = handle, changes, seed, wanted
+        self.spec_path = spec_path
+        self.handoff = post.handoff
+        #: as the infer stage's: an image that is not stored is made again from its render
+        self.blob_inputs = ("renders", "images") if post.store_images else ("renders",)
+        self.batch = max(1, batch_size // (1 + len(changes)))  # this model's batch, shared by the changed copies
+        self.done: set[str] = set()  # the keys computed
+
+    def schema(self, plan: Any) -> pa.Schema:
+        return SCHEMA
+
+    def key(self, job: Any) -> str:
+        return self.wanted[(job.pred_key, self.changes[0])]
+
+    def upstream(self, job: Any) -> tuple[str, str]:
+        return ("renders" if job.image_key == job.render_key else "images", job.image_key)
+
+    def todo(self, job: Any, have: set[str]) -> bool:
+        """Whether a row of ``job``'s changes is missing from ``have`` (the stored keys)."""
+        return any(self.wanted[(job.pred_key, c)] not in have for c in self.changes)
+
+    def incomplete(self, plan: Any, store: Store, cached: set[str]) -> set[str]:
+        have = store.key_set("stability")
+        return {self.key(job) for job in plan.jobs if self.key(job) in cached and self.todo(job, have)}
+
+    def missing(self, job: Any) -> None:
+        """Raise: ``job``'s image can be neither read nor made again."""
+        raise UserError(f"stability: the image of job {job.index} is missing from the store "
+                        f"(render key {job.render_key}); run `sweep3d run {self.spec_path}` first")
+
+    def compute(self, todo: Any, plan: Any, store: Store) -> Any:
+        """Infer the baseline and each change of ``todo``'s images, batch by batch."""
+        from sweep3d.stages.infer import ModelInputs, object_class_ids
+
+        model = self.handle.classifier()
+        other = _other_arithmetic(model)
+        truths = object_class_ids(plan, model.label_map(), self.handle.name)
+        images = ModelInputs(store, plan, todo, self.handoff)
+        have = store.key_set("stability")
+        name, changes, seed, wanted = self.handle.name, self.changes, self.seed, self.wanted
+        part: list = []
+        for job in todo:
+            part.append(job)
+            if len(part) < self.batch:
+                continue
+            yield from self._batch(part, images, model, other, truths, have, name, changes, seed, wanted)
+            part = []
+        if part:
+            yield from self._batch(part, images, model, other, truths, have, name, changes, seed, wanted)
+
+    def _batch(self, part: list, images: Any, model: Any, other: Any, truths: dict, have: set[str], name: str,
+               changes: list[str], seed: int, wanted: dict[tuple[str, str], str]) -> Any:
+        from sweep3d.core import from_uint8
+        from sweep3d.driver import Computed
+        from sweep3d.stages.infer import predict
+
+        pixels = [images.pixels(job) for job in part]
+        for job, image in zip(part, pixels):
+            if isinstance(image, tuple):
+                self.missing(job)
+        ids = [truths[job.object] for job in part]
+        base = predict(model, from_uint8(np.stack(pixels)), name)
+        answers = {}
+        for change in [c for c in changes if any(wanted[(job.pred_key, c)] not in have for job in part)]:
+            if change == "resize":
+                answers[change] = predict(other, from_uint8(np.stack(pixels)), name)
+            else:
+                moved = [changed(p, change, seed, job.image_key) for p, job in zip(pixels, part)]
+                answers[change] = predict(model, from_uint8(np.stack(moved)), name)
+        by_job: dict[str, list[dict[str, Any]]] = {job.pred_key: [] for job in part}
+        for row in _rows(part, ids, base, answers, seed, wanted):
+            if row["stability_key"] not in have:
+                by_job[row["pred_key"]].append(row)
+        for job in part:
+            self.done.add(self.key(job))
+            yield Computed(self.key(job), rows=by_job[job.pred_key])
 
 
 def _other_arithmetic(model: Any) -> Any:

@@ -32,8 +32,8 @@ from sweep3d.cache.store import DIGEST_COLUMN, Store, atomic_write, segment_name
 from sweep3d.cli import app
 from sweep3d.core.evaluation import EVALUATOR_METADATA, EvaluatorRecord, Roles
 from sweep3d.core.pixels import encode_png
-from sweep3d.engine.pipeline import run
 from sweep3d.results import connect as connect_results
+from sweep3d.runner.pipeline import run
 from sweep3d.stages.infer.kept_outputs import KeptOutputs
 from tests.helpers import CUBE_OBJ, T0, TINY_SPEC, load_spec, plan_for, render_row, write_spec
 

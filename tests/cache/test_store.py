@@ -342,7 +342,7 @@ def test_query_output_files_hold_every_row(tiny_run, tmp_path, suffix):
 
 
 def test_a_run_merges_a_table_grown_past_the_segment_limit(tmp_path: Path) -> None:
-    from sweep3d.engine.pipeline import compact_crowded_tables
+    from sweep3d.runner.pipeline import compact_crowded_tables
 
     store = Store(tmp_path / "store")
     for i in range(7):

@@ -13,7 +13,7 @@ from sweep3d.api import Experiment
 from sweep3d.cache.store import Store, utc_now
 from sweep3d.cli import app
 from sweep3d.driver.outcome import StageOutcome
-from sweep3d.engine.pipeline import RunResult, write_jobs
+from sweep3d.runner.pipeline import RunResult, write_jobs
 from tests.helpers import TINY_SPEC, load_spec, plan_for, write_spec
 
 FIRST_ERROR = ("RuntimeError: [parser.cpp:1718] At dictionary node \"root\": failed to instantiate texture plugin of "
@@ -22,7 +22,7 @@ FIRST_ERROR = ("RuntimeError: [parser.cpp:1718] At dictionary node \"root\": fai
 
 def _failed_everywhere(spec: Path) -> RunResult:
     """What a run of ``spec`` returns and stores when every render failed: its jobs file and a runs
-    row (as ``engine.pipeline`` writes them), no prediction."""
+    row (as ``runner.pipeline`` writes them), no prediction."""
     plan = plan_for(load_spec(spec), "0" * 64)
     store = Store(plan.spec.store)
     n = len(plan.jobs)

@@ -26,7 +26,7 @@ from tests.helpers import build_store, one_line, store_tree
 WRITERS = [
     (["stability", "SPEC"], "sweep3d.stability.check._check_model"),
     (["confirm", "SPEC"], "sweep3d.confirm.run._confirmed"),
-    (["sheet", "SPEC"], "sweep3d.report.sheet.run_stages"),
+    (["sheet", "SPEC"], "sweep3d.runner.runner.run_stages"),  # the runner runs its stages
     (["cache", "verify", "SPEC", "--repair"], "sweep3d.cache.verify"),
 ]
 

@@ -18,8 +18,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from sweep3d.cache.store import Store
-from sweep3d.engine.pipeline import run
 from sweep3d.results import connect, summarise
+from sweep3d.runner.pipeline import run
 from sweep3d.spec.params import Range
 from sweep3d.stages.infer import ClassificationEvaluator, LabelMap
 from sweep3d.stages.infer.evaluators import Truth, log_softmax

@@ -11,7 +11,7 @@ import pytest
 
 from sweep3d.core.errors import UserError
 from sweep3d.core.registry import Registry, code_identity, local_imports
-from sweep3d.engine import builtin_catalogue as catalogue
+from sweep3d.runner import builtin_catalogue as catalogue
 from tests.helpers import TINY_SPEC, load_spec, plan_for, write_spec
 
 CONTROLS = catalogue().controls

@@ -45,7 +45,7 @@ def run_cli(spec: Path) -> None:
 
 
 def stage_counts(spec: Path) -> dict[str, int]:
-    from sweep3d.engine.pipeline import run
+    from sweep3d.runner.pipeline import run
 
     outcome = run(load_spec(spec))
     return {s: outcome.outcome(s).computed for s in ("render", "infer")}
@@ -282,7 +282,7 @@ def test_zoom_frames_the_bounding_sphere_as_the_readme_says(tmp_path: Path) -> N
 
 
 def test_adaptive_search_does_not_count_a_hidden_object_as_a_failure(truth_run: Path) -> None:
-    from sweep3d.engine.pipeline import outcomes_by_scene
+    from sweep3d.runner.pipeline import outcomes_by_scene
 
     spec = load_spec(truth_run / "spec.toml")
     plan = plan_for(spec)

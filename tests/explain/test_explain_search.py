@@ -146,7 +146,7 @@ def test_the_oracle_is_asked_each_configuration_once() -> None:
 
 def test_a_change_across_a_whole_turn_is_written_the_short_way_round(tmp_path) -> None:
     """Yaw over −180..180 wraps: from 172.8° to −172.8° is +14.4°, 4 % of the range, not −345.6°."""
-    from sweep3d.explain.driver import _changes, _written, scene_axes
+    from sweep3d.explain.run import _changes, _written, scene_axes
     from sweep3d.explain.search import Fix, Move
     from tests.helpers import TINY_SPEC, load_spec, write_spec
 

@@ -17,7 +17,7 @@ from rich.console import Console
 from typer.testing import CliRunner
 
 from sweep3d.cli import app
-from sweep3d.explain.driver import SHOWN, ExplainResult, _changes, _resolutions, explained_lines, scene_axes
+from sweep3d.explain.run import SHOWN, ExplainResult, _changes, _resolutions, explained_lines, scene_axes
 from sweep3d.explain.search import Config, Fix, Move
 from sweep3d.explain.sentence import fix_sentence, share_words
 from sweep3d.spec.space import Point

@@ -340,7 +340,7 @@ def test_the_default_exports_the_evaluable_failures_with_their_design_table(expo
 def test_the_design_table_replays_as_the_same_jobs_under_the_table_policy(export_run: Path, tmp_path: Path) -> None:
     """The loop closes: a spec whose ``table`` policy reads an export's ``design.csv`` plans the
     exported jobs again, in order, with the same keys (for a retrained model, say)."""
-    from sweep3d.engine.pipeline import plan_spec
+    from sweep3d.runner.pipeline import plan_spec
     from tests.helpers import load_spec
 
     out = exported(export_run, tmp_path / "failures", "--format", "imagefolder", "--unevaluable", "flag")

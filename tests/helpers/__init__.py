@@ -34,12 +34,12 @@ from sweep3d.cache.store import DIGEST_COLUMN, Store, atomic_write, segment_name
 from sweep3d.core.pixels import encode_png
 from sweep3d.core.truth import encode_mask
 from sweep3d.driver import Plan
-from sweep3d.engine import builtin_catalogue
-from sweep3d.engine.pipeline import plan_spec, plans_as_run, write_jobs
 from sweep3d.report import image_keys
 from sweep3d.report.panels import CORE_PANELS
 from sweep3d.results import connect
 from sweep3d.results.task_views import OUTCOMES
+from sweep3d.runner import builtin_catalogue
+from sweep3d.runner.pipeline import plan_spec, plans_as_run, write_jobs
 from sweep3d.spec.columns import PARAMETERS_METADATA
 from sweep3d.spec.framing import Framing
 from sweep3d.spec.space import SearchSpace
@@ -56,7 +56,7 @@ from sweep3d.stages.render.worker_protocol import EnvironmentRef
 def load_spec(source, plugins=None):
     """The :class:`~sweep3d.spec.LoadedSpec` of ``source`` (a path, TOML text or a dict) against
     the built-in plug-ins (or the catalogue ``plugins``): what ``sweep3d.load(source).spec`` is."""
-    from sweep3d.engine import builtin_catalogue
+    from sweep3d.runner import builtin_catalogue
     from sweep3d.spec import read_spec
 
     return read_spec(source, plugins or builtin_catalogue())

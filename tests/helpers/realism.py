@@ -192,7 +192,7 @@ def make_post_run(folder: Path) -> Path:
     150 levels), then ``sweep3d run`` post-processes, stores the images and classifies them with
     :data:`SHARP_MODEL` through its own stages. Apple and plum share every render (one mesh), so
     each image is right for one of them. Returns the spec's path."""
-    from sweep3d.engine import plan_spec
+    from sweep3d.runner import plan_spec
     from tests.helpers import load_spec
 
     (folder / "sharp_model.py").write_text(SHARP_MODEL)

@@ -21,8 +21,8 @@ from typer.testing import CliRunner
 
 from sweep3d.cache.store import Store
 from sweep3d.cli import app
-from sweep3d.engine import plan_spec
 from sweep3d.results import connect
+from sweep3d.runner import plan_spec
 from tests.helpers import load_spec
 from tests.helpers.realism import agreement_rows, make_post_run, pick, stub_kit_tools
 

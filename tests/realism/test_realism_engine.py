@@ -49,7 +49,7 @@ def test_another_engine_is_a_source_matched_by_configuration(tmp_path: Path, mon
     flipped = set(picked[::3])  # the other engine disagrees on these
     written = {}
 
-    def run(spec, console, wait):
+    def run(spec, console, wait, executor=None):
         """The replaying spec's run: one result per design row, numbered backwards."""
         written["spec"] = spec.path.read_text()
         assert spec.name == "realism.engine-mitsuba" and spec.spec.policy.type == "table"

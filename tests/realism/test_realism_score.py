@@ -172,9 +172,9 @@ def test_a_photo_gets_its_job_s_2d_controls_as_the_render_did(tmp_path) -> None:
     a job at σ = 0 on the photo as taken; a control that reads the render's depth cannot apply."""
     import numpy as np
 
-    from sweep3d.engine import plan_spec
     from sweep3d.realism.photos import PhotoProblems
     from sweep3d.realism.score import post_processed
+    from sweep3d.runner import plan_spec
     from tests.helpers import TINY_SPEC, load_spec, write_spec
 
     spec = load_spec(write_spec(tmp_path, TINY_SPEC))

@@ -168,7 +168,7 @@ def test_models_framed_apart_get_renders_of_their_own(tmp_path: Path) -> None:
 
 
 def test_adding_a_model_renders_nothing_and_infers_only_it(tiny_copy: Path) -> None:
-    from sweep3d.engine.pipeline import run
+    from sweep3d.runner.pipeline import run
     from tests.helpers import load_spec
 
     spec = tiny_copy / "spec.toml"

@@ -96,7 +96,7 @@ def test_a_rerun_renders_nothing(parts_run: Path) -> None:
 
 
 def run_stage_counts(folder: Path) -> dict[str, int]:
-    from sweep3d.engine.pipeline import run
+    from sweep3d.runner.pipeline import run
 
     outcome = run(load_spec(folder / "spec.toml"))
     return {s: outcome.outcome(s).computed for s in ("render", "infer")}

@@ -2,7 +2,7 @@
 message, never a traceback (issue 35, items 7, 8, 12 and 14): numpy values in a dict spec, a
 misspelt table, a multi-model run's stages, an export folder that holds files, an export that
 selects nothing or meets a full disk, pandas types, a post control's pixel range, a policy that
-is not a Policy. Runs are faked without Blender or a model (see tests/engine/test_own_jobs.py)."""
+is not a Policy. Runs are faked without Blender or a model (see tests/runner/test_own_jobs.py)."""
 
 from __future__ import annotations
 
@@ -22,8 +22,8 @@ from sweep3d.cli import app
 from sweep3d.core.control import ControlParams
 from sweep3d.core.errors import PluginError, SpecError, UserError
 from sweep3d.driver.outcome import StageOutcome
-from sweep3d.engine.pipeline import RunResult
 from sweep3d.export.target import Staging
+from sweep3d.runner.pipeline import RunResult
 from sweep3d.spec.loader import ControlInstance
 from sweep3d.stages.plan.policies import GridPolicy
 from sweep3d.stages.postprocess import PostControl, apply_post

@@ -331,7 +331,7 @@ def _check(case: Case, folder: Path, tmp_path: Path, monkeypatch,
 def test_a_non_manifold_mesh_is_not_an_error_it_renders(tmp_path: Path) -> None:
     """Two triangles touching at one vertex (non-manifold, open): legal, and most real meshes are
     open somewhere, so sweep3d renders it rather than refusing it."""
-    from sweep3d.engine.pipeline import run
+    from sweep3d.runner.pipeline import run
     from tests.helpers import load_spec
 
     (tmp_path / "bowtie.obj").write_bytes(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv -1 0 0\nv 0 -1 0\nf 1 2 3\nf 1 4 5\n")

@@ -578,7 +578,7 @@ def test_run_warns_before_hours_of_rendering_but_not_before_minutes(tmp_path):
     from rich.console import Console
 
     from sweep3d.cache.store import Store
-    from sweep3d.engine.pipeline import _warn_if_slow
+    from sweep3d.runner.pipeline import _warn_if_slow
     from sweep3d.stages.render import LOCAL
     from tests.helpers import plan_for
 

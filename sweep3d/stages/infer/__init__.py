@@ -4,7 +4,7 @@ from __future__ import annotations
 
 __all__ = [
     "ClassificationEvaluator", "Classifier", "Detector", "EVALUATORS", "Evaluator", "EvaluatorParams",
-    "IMAGENET", "ImageTensors", "InferStage", "LabelMap", "MODELS", "ModelHandle", "Normalize",
+    "IMAGENET", "ImageTensors", "InferStage", "LabelMap", "MODELS", "ModelHandle", "ModelInputs", "Normalize",
     "Preprocess", "Roles", "Segmenter", "Truth", "builtin_labels", "builtin_model", "check_task", "choose_backend",
     "evaluate_checked", "evaluator_key", "first_rows", "infer_base", "key_backend", "load_model", "measure_of",
     "model_outputs", "object_class_ids", "padded", "pending_predictions", "pred_keys", "predict"
@@ -21,7 +21,14 @@ if _TYPE_CHECKING:
     from sweep3d.stages.infer.evaluators import ClassificationEvaluator, measure_of
     from sweep3d.stages.infer.evaluators.evaluator import EVALUATORS, Evaluator, EvaluatorParams, Roles, Truth
     from sweep3d.stages.infer.handle import ModelHandle
-    from sweep3d.stages.infer.infer_stage import InferStage, first_rows, object_class_ids, padded, pending_predictions
+    from sweep3d.stages.infer.infer_stage import (
+        InferStage,
+        ModelInputs,
+        first_rows,
+        object_class_ids,
+        padded,
+        pending_predictions,
+    )
     from sweep3d.stages.infer.labels import IMAGENET, LabelMap
     from sweep3d.stages.infer.models import (
         MODELS,
@@ -51,6 +58,7 @@ __getattr__, __dir__ = _exports(__name__, {
     "LabelMap": ("sweep3d.stages.infer.labels", "LabelMap"),
     "MODELS": ("sweep3d.stages.infer.models", "MODELS"),
     "ModelHandle": ("sweep3d.stages.infer.handle", "ModelHandle"),
+    "ModelInputs": ("sweep3d.stages.infer.infer_stage", "ModelInputs"),
     "object_class_ids": ("sweep3d.stages.infer.infer_stage", "object_class_ids"),
     "Normalize": ("sweep3d.stages.infer.models", "Normalize"),
     "Preprocess": ("sweep3d.stages.infer.models", "Preprocess"),

@@ -17,10 +17,10 @@ from sweep3d.assets.sources import blender_version
 from sweep3d.cache.store import Store, segment_name, utc_now
 from sweep3d.cli import app
 from sweep3d.core.errors import SpecError
-from sweep3d.engine.pipeline import write_jobs
 from sweep3d.report import write_report
 from sweep3d.results import connect
 from sweep3d.results.class_name_views import named_columns
+from sweep3d.runner.pipeline import write_jobs
 from sweep3d.spec.framing import Framing
 from sweep3d.stages.infer.evaluators import ClassificationEvaluator
 from sweep3d.stages.infer.evaluators.classification import ranked_rows

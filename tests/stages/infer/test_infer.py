@@ -197,7 +197,7 @@ def test_a_stand_in_that_cannot_serve_refuses_instead_of_keying_torch_s_rows_as_
     import errno
 
     from sweep3d.cache import Store
-    from sweep3d.engine.pipeline import plan_spec
+    from sweep3d.runner.pipeline import plan_spec
     from sweep3d.stages.infer import InferStage, ModelHandle
     from tests.helpers import load_spec
 
@@ -233,7 +233,7 @@ def _infer_in_batches(folder, orders: list[list[int]], images: np.ndarray, model
     from sweep3d.core.pixels import encode_png
     from sweep3d.driver.jobs import Job
     from sweep3d.driver.loop import Feed
-    from sweep3d.engine.pipeline import plan_spec
+    from sweep3d.runner.pipeline import plan_spec
     from sweep3d.stages.infer import InferStage, ModelHandle
     from tests.helpers import load_spec
 

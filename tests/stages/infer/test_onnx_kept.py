@@ -114,7 +114,7 @@ _PREPARE = """
 import sys
 from sweep3d import load
 from sweep3d.cache import Store
-from sweep3d.engine.pipeline import plan_spec
+from sweep3d.runner.pipeline import plan_spec
 from sweep3d.stages.infer import InferStage, ModelHandle
 
 spec = load(sys.argv[1]).spec

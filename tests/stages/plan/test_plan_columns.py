@@ -292,7 +292,7 @@ yaw = {{ range = [-180, 180] }}
 def test_an_unchanged_plan_is_not_written_again_and_a_changed_one_is(tmp_path: Path, monkeypatch) -> None:
     from sweep3d.cache.store import Store
     from sweep3d.driver.jobs import Plan
-    from sweep3d.engine.pipeline import write_jobs
+    from sweep3d.runner.pipeline import write_jobs
 
     spec = load_spec(write_spec(tmp_path, specs_example('type = "random"\nsamples = 9')))
     store = Store(tmp_path / "store")

@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 
 from sweep3d.core.control import ControlParams
 from sweep3d.core.pixels import linear_to_srgb, srgb_to_linear
-from sweep3d.engine import builtin_catalogue as catalogue
+from sweep3d.runner import builtin_catalogue as catalogue
 from sweep3d.stages.postprocess import PostControl, apply_post
 from sweep3d.stages.postprocess.apply import takes_frame
 from sweep3d.stages.postprocess.depth_effects import disk_kernel, signed_coc

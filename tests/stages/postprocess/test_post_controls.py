@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sweep3d.core.control import ControlParams
-from sweep3d.engine import builtin_catalogue as catalogue
+from sweep3d.runner import builtin_catalogue as catalogue
 from sweep3d.stages.postprocess import PostControl, apply_post
 from sweep3d.stages.postprocess.controls import CORRUPTIONS
 from tests.helpers import examples

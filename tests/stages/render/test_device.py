@@ -132,7 +132,7 @@ def test_the_probe_reads_the_childs_gpu_counts_and_the_capabilities_it_must_comp
 
 
 def test_a_run_says_once_that_auto_renders_on_the_cpu_and_only_when_it_renders(tmp_path, gpus) -> None:
-    from sweep3d.engine.pipeline import _note_device
+    from sweep3d.runner.pipeline import _note_device
 
     auto, cpu = plan_with(tmp_path), plan_with(tmp_path, 'device = "cpu"')
     console = Console(record=True, width=400)
@@ -169,7 +169,7 @@ def test_plan_says_in_one_line_that_a_gpu_named_outright_is_not_here(tmp_path, g
 
 
 def test_a_gpu_blender_ships_no_kernel_for_is_said_before_rendering(tmp_path, gpus) -> None:
-    from sweep3d.engine.pipeline import _note_device
+    from sweep3d.runner.pipeline import _note_device
 
     optix = plan_with(tmp_path, 'device = "optix"')
     console = Console(record=True, width=400)

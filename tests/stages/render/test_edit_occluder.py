@@ -19,8 +19,8 @@ from sweep3d.cache.hashing import digest
 from sweep3d.cache.store import Store
 from sweep3d.driver.loop import run_stage
 from sweep3d.driver.progress import RunProgress
-from sweep3d.engine.pipeline import write_jobs
 from sweep3d.results import connect as connect_results
+from sweep3d.runner.pipeline import write_jobs
 from sweep3d.stages.render import RenderStage
 from sweep3d.stages.render.render_keys import truth_keys
 from tests.helpers import load_spec, plan_for, spec_toml, write_spec

@@ -21,8 +21,8 @@ from sweep3d.cache.store import Store, utc_now
 from sweep3d.cli import app
 from sweep3d.cli.output import print_run
 from sweep3d.driver.outcome import StageOutcome
-from sweep3d.engine.pipeline import RunResult, write_jobs
 from sweep3d.results import connect as connect_results
+from sweep3d.runner.pipeline import RunResult, write_jobs
 from sweep3d.stages.render.render_stage import no_truth_error
 from sweep3d.stages.render.worker_protocol import RenderInfo, RenderReply
 from tests.helpers import CUBE_OBJ, TINY_SPEC, load_spec, plan_for, write_spec

@@ -15,7 +15,7 @@ from typer.testing import CliRunner
 
 from sweep3d.cli import app
 from sweep3d.core.truth import decode_mask
-from sweep3d.engine import builtin_catalogue
+from sweep3d.runner import builtin_catalogue
 from sweep3d.spec.models import KeyLightSpec
 from sweep3d.stages.render import engine_key
 from sweep3d.stages.render.mitsuba.backend import mitsuba_version

@@ -89,7 +89,7 @@ def test_a_session_joins_only_when_used_and_stops_only_what_it_started(monkeypat
 @pytest.mark.blender
 def test_a_fully_cached_rerun_on_ray_never_joins_ray(tiny_copy: Path, monkeypatch) -> None:
     """9.0 s against 2.6 s: the rerun started Ray to compute nothing."""
-    from sweep3d.engine.pipeline import run
+    from sweep3d.runner.pipeline import run
     from sweep3d.stages.render.render_stage import Executor
     from tests.helpers import load_spec
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from sweep3d.assets.sources import builtin_hdris
-from sweep3d.engine import builtin_catalogue as catalogue
+from sweep3d.runner import builtin_catalogue as catalogue
 from sweep3d.stages.render.controls import RenderedControl
 from sweep3d.stages.render.state import SceneState
 from sweep3d.stages.render.worker_protocol import EnvironmentRef

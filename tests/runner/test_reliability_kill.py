@@ -31,8 +31,8 @@ import pytest
 
 from sweep3d.cache.maintenance import collect_garbage, verify
 from sweep3d.cache.store import KEY_COLUMN, Store
-from sweep3d.engine.pipeline import run
 from sweep3d.results import connect as connect_results
+from sweep3d.runner.pipeline import run
 from tests.helpers import REPO, TINY_SPEC, load_spec, write_spec
 
 pytestmark = pytest.mark.slow

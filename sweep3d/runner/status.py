@@ -2,7 +2,7 @@
 cached, those to compute and an estimate of the time, for every model of the spec.
 
 ``Experiment.plan()`` returns it and ``sweep3d plan`` prints it (``cli/output.py``): the numbers are
-the engine's, the command line only draws them.
+the runner's, the command line only draws them.
 """
 
 from __future__ import annotations
@@ -12,11 +12,11 @@ from typing import Any
 
 from sweep3d.cache import Store
 from sweep3d.driver import Plan, explain, stage_counts, truth_passes
-from sweep3d.engine.pipeline import plan_spec
+from sweep3d.runner.pipeline import plan_spec
+from sweep3d.runner.runner import Runner
 from sweep3d.spec import LoadedSpec
-from sweep3d.stages.infer import InferStage, ModelHandle
-from sweep3d.stages.postprocess import PostprocessStage
-from sweep3d.stages.render import RenderStage, estimate_render_seconds
+from sweep3d.stages.infer import ModelHandle
+from sweep3d.stages.render import estimate_render_seconds
 
 #: Rendered controls that may hide part of the object (its mask pass then renders twice).
 HIDING_CONTROLS = {"occlusion", "position", "camera", "scale"}
@@ -102,10 +102,10 @@ def plan_status(spec: LoadedSpec, store: Store | None = None) -> PlanStatus:
 
 
 def cache_status(plan: Plan, store: Store, model: ModelHandle, several: bool = False) -> list[tuple[str, int, int]]:
-    """(stage, distinct keys needed, keys already stored) for render, postprocess and infer."""
-    post = PostprocessStage.for_spec(plan.spec)
+    """(stage, distinct keys needed, keys already stored) for render, postprocess and infer (the
+    runner's stages, counted: nothing runs)."""
     return [(getattr(stage, "title", stage.name), *stage_counts(stage, plan, store))
-            for stage in (RenderStage(), post, InferStage(model, several=several, images_stored=post.store_images))]
+            for stage in Runner(plan.spec, store).stages(model, several=several)]
 
 
 def _models_status(plans: list[Plan], models: list[ModelHandle], store: Store) -> list[tuple[str, int, int, int]]:

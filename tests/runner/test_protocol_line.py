@@ -11,8 +11,8 @@ from typer.testing import CliRunner
 
 from sweep3d.cache.store import Store
 from sweep3d.cli import app
-from sweep3d.engine.pipeline import plan_spec, write_jobs
 from sweep3d.results.results import plan_protocol
+from sweep3d.runner.pipeline import plan_spec, write_jobs
 from sweep3d.spec.framing import Framing
 from tests.helpers import TINY_SPEC, load_spec, write_spec
 

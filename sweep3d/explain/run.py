@@ -27,18 +27,17 @@ from rich.markup import escape
 
 from sweep3d.cache import Store
 from sweep3d.core import UserError
-from sweep3d.driver import Job, Plan, RunProgress, run_stages
-from sweep3d.engine import plan_spec, plans_as_run, remove_leftovers
+from sweep3d.driver import Job, Plan
 from sweep3d.explain.fragility import Rule, read_rule
 from sweep3d.explain.further import Judged, needs_further, search_further
 from sweep3d.explain.search import Axis, Config, Fix, Progress, explain
 from sweep3d.explain.sentence import fix_sentence, move_words, share_words
 from sweep3d.results import SCHEMA, counterfactuals_path, create_margin_macro, margin_sql, no_results
+from sweep3d.runner import Runner, plan_spec, plans_as_run, running
 from sweep3d.spec import LoadedSpec, Point, Range, SearchSpace
-from sweep3d.stages.infer import InferStage, ModelHandle, pending_predictions
+from sweep3d.stages.infer import ModelHandle
 from sweep3d.stages.plan import Listed, Policy, PolicyParams
-from sweep3d.stages.postprocess import ImageHandoff, PostprocessStage
-from sweep3d.stages.render import LOCAL, RenderStage
+from sweep3d.stages.render import LOCAL, Executor
 
 CONCURRENT = 16  # failures searched together when the budget allows
 SHOWN = 10  # sentences the console prints, nearest first (the rest: the report and the query)
@@ -110,15 +109,11 @@ def scene_axes(spec: LoadedSpec, scene: tuple[str, str]) -> tuple[SearchSpace, l
 
 
 class _Stages:
-    """The stages a round's plan goes through, kept open (Blender workers stay warm) for the search."""
+    """The runner's stages a round's plan goes through, kept open (Blender workers stay warm) for the search."""
 
-    def __init__(self, spec: LoadedSpec, store: Store, model: ModelHandle, progress: RunProgress) -> None:
-        self.spec, self.store, self.model, self.progress = spec, store, model, progress
-        self.render = RenderStage(LOCAL, keep_open=True)
-        self.post = PostprocessStage.for_spec(spec, ImageHandoff())
-        self.infer = InferStage(model, on_ray=False, several=False, handoff=self.post.handoff,
-                                images_stored=self.post.store_images)
-        self.prepared = False
+    def __init__(self, spec: LoadedSpec, runner: Runner, model: ModelHandle) -> None:
+        self.spec, self.runner, self.model = spec, runner, model
+        self.store, self.post = runner.store, runner.post
         self.rendered = 0
         self.plans: list[Plan] = []
         self.fix_plan: Plan | None = None  # the fixes, planned together once the search ends
@@ -129,10 +124,7 @@ class _Stages:
 
     def verdicts(self, configs: list[Config]) -> list[bool]:
         plan = self.plan(configs)
-        if not self.prepared and pending_predictions(plan, self.store, self.infer):
-            self.infer.prepare(plan, self.store)  # a broken model fails before anything renders
-            self.prepared = True
-        outcomes = run_stages((self.render, self.post, self.infer), plan, self.store, self.progress, overlap=True)
+        outcomes = self.runner.run(plan, self.model)  # the model tried first: a broken one fails before a render
         self.rendered += next((o.computed for o in outcomes if o.stage == "render"), 0)
         self.plans.append(plan)
         found = read_verdicts(plan, self.store)
@@ -152,9 +144,6 @@ class _Stages:
     def judge(self, config: Config, rule: Rule) -> Judged:
         verdict, key = self.seen.get(config, (Verdict(False), None))
         return Judged(verdict.right, verdict.margin, rule.fragile(verdict.margin, key) if verdict.right else None)
-
-    def close(self) -> None:
-        self.render.close()
 
 
 def read_verdicts(plan: Plan, store: Store, jobs: Sequence[Job] | None = None) -> dict[str, Verdict]:
@@ -217,7 +206,8 @@ def run_failures(spec: LoadedSpec, store: Store) -> tuple[Plan, list[Job]]:
 
 
 def explain_spec(spec: LoadedSpec, *, budget: int | None = None, seed: int | None = None,
-                 console: Console | None = None, wait: float = 0.0, resolution: float = 1 / 64) -> ExplainResult:
+                 console: Console | None = None, wait: float = 0.0, resolution: float = 1 / 64,
+                 executor: Executor = LOCAL) -> ExplainResult:
     """Search the nearest fix of the run's failures (a seeded sample within ``budget`` renders)
     and write the counterfactuals; resumable, its probes cached like any job.
 
@@ -232,9 +222,8 @@ def explain_spec(spec: LoadedSpec, *, budget: int | None = None, seed: int | Non
     if not spec.store.is_dir():  # before the lock would make the store's folder
         raise no_results(store, spec.name, spec.path)
     store.ensure_writable()
-    with store.lock(wait):
+    with running(spec, executor=executor, wait=wait, console=console, store=store, keep_open=True) as runner:
         started = time.perf_counter()
-        remove_leftovers(store)
         plan, failures = run_failures(spec, store)
         rule = read_rule(spec) if failures else Rule()
         model = ModelHandle.resolve(spec)
@@ -242,17 +231,13 @@ def explain_spec(spec: LoadedSpec, *, budget: int | None = None, seed: int | Non
         own = {Config(job.scene, job.point) for job in plan.jobs + plan.out_of_frame}
         by_config = {Config(job.scene, job.point): job for job in failures}
         state = Progress(len(failures))
-        with RunProgress(console) as progress:
-            stages = _Stages(spec, store, model, progress)
-            try:
-                fixes = explain(list(by_config), axes.__getitem__, stages.verdicts, budget=budget, seed=seed,
-                                free=own.__contains__, resolution=resolution, concurrent=_together(budget, axes),
-                                on_round=_reporter(console, budget, started, state, lambda: stages.rendered))
-                fixes = [_marked(fix, stages, rule) for fix in fixes]
-                fixes = _further(fixes, axes, stages, rule, own, budget, state, resolution, console)
-            finally:
-                stages.close()
-            rows = _rows(spec, plan, stages, fixes, by_config, seed, budget, rule, resolution)
+        stages = _Stages(spec, runner, model)
+        fixes = explain(list(by_config), axes.__getitem__, stages.verdicts, budget=budget, seed=seed,
+                        free=own.__contains__, resolution=resolution, concurrent=_together(budget, axes),
+                        on_round=_reporter(console, budget, started, state, lambda: stages.rendered))
+        fixes = [_marked(fix, stages, rule) for fix in fixes]
+        fixes = _further(fixes, axes, stages, rule, own, budget, state, resolution, console)
+        rows = _rows(spec, plan, stages, fixes, by_config, seed, budget, rule, resolution)
         path = counterfactuals_path(store, spec.name)
         store.write_table_file(path, pa.Table.from_pylist(rows, schema=SCHEMA))
         _write_images(spec, store, stages, [by_config[f.failure].image_key for f in fixes])
@@ -429,7 +414,7 @@ def _written(change: tuple[str, str, str, float | None, float]) -> str:
 def _write_images(spec: LoadedSpec, store: Store, stages: _Stages, failure_keys: list[str]) -> None:
     """The failures' and fixes' images as blobs (the report shows them side by side), where the
     run made them in memory only (``[postprocess] store = "none"``)."""
-    from sweep3d.engine import write_plan_images, write_unstored_images
+    from sweep3d.runner import write_plan_images, write_unstored_images
 
     if stages.post.store_images or not failure_keys:
         return

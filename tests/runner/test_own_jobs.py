@@ -1,7 +1,7 @@
 """Results read through a spec are that spec's own jobs, whatever last ran under its experiment's
 name (issue 35): another version of the spec, a notebook cell edited and not run, a spec file
 edited after it was loaded. Runs are made here without Blender or a model: the plans a run would
-record (:func:`sweep3d.engine.pipeline.plans_as_run`), written as a run writes them, and a synthetic
+record (:func:`sweep3d.runner.pipeline.plans_as_run`), written as a run writes them, and a synthetic
 prediction and image for each job."""
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from sweep3d.cache.store import Store
 from sweep3d.cli import app
 from sweep3d.core.errors import UserError
 from sweep3d.driver.plugin_code import SPEC_METADATA
-from sweep3d.engine.pipeline import outcomes_by_scene, plan_spec, write_jobs
+from sweep3d.runner.pipeline import outcomes_by_scene, plan_spec, write_jobs
 from tests.helpers import SPEC_02, SPEC_03, fake_run, predict, write_cube
 
 #: Another version sharing no job with those (other yaws).

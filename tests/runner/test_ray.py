@@ -8,8 +8,8 @@ from pathlib import Path
 import pytest
 
 from sweep3d.cache.store import Store
-from sweep3d.engine.pipeline import run
 from sweep3d.results import connect as connect_results
+from sweep3d.runner.pipeline import run
 from sweep3d.stages.render.render_stage import Executor
 from tests.helpers import TINY_SPEC, load_spec, write_spec
 

@@ -31,8 +31,8 @@ from sweep3d.cache.maintenance import (
 from sweep3d.cache.store import Store, StoreWriteError, atomic_write
 from sweep3d.cli import app
 from sweep3d.core.errors import UserError
-from sweep3d.engine.pipeline import run
 from sweep3d.results import connect as connect_results
+from sweep3d.runner.pipeline import run
 from tests.helpers import REPO, T0, TINY_SPEC, HashCounter, add_render, load_spec, render_row, write_spec
 
 
@@ -198,7 +198,7 @@ def test_blob_states_taken_ahead_by_a_child_are_the_states_and_damage_is_still_f
 def test_a_run_forgets_its_snapshot_of_blob_states_before_it_computes(tiny_copy, monkeypatch) -> None:
     from sweep3d.cache import snapshot
     from sweep3d.driver import loop as driver
-    from sweep3d.engine import pipeline
+    from sweep3d.runner import pipeline
 
     monkeypatch.setattr(snapshot, "MIN_BLOBS", 0)
     monkeypatch.setattr(pipeline, "SNAPSHOT_MIN_JOBS", 0)  # the threshold as the pipeline reads it

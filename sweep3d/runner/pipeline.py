@@ -44,21 +44,20 @@ from sweep3d.driver import (
     SPEC_METADATA,
     Found,
     Plan,
-    RunProgress,
     StageOutcome,
     add_outcomes,
     merge_outcomes,
     rows_and_cached,
-    run_stages,
     spec_identity,
     stage_counts,
     unique_jobs,
 )
 from sweep3d.driver import metadata as plugins_metadata
+from sweep3d.runner.runner import Runner, running
 from sweep3d.spec import CLASS_NAMES_METADATA, MODELS_METADATA, PROTOCOL_METADATA, LoadedSpec
-from sweep3d.stages.infer import InferStage, ModelHandle, pending_predictions
+from sweep3d.stages.infer import ModelHandle
 from sweep3d.stages.plan import History, Outcome, make_plan
-from sweep3d.stages.postprocess import ImageHandoff, PostprocessStage, make_image, post_controls, truth_digests
+from sweep3d.stages.postprocess import PostprocessStage, make_image, post_controls, truth_digests
 from sweep3d.stages.render import (
     LOCAL,
     Executor,
@@ -249,87 +248,74 @@ def run(spec: LoadedSpec, console: Console | None = None, wait: float = 0.0, exe
     """
     store = Store(spec.store)
     _writable(spec, store)
-    if executor.kind != "ray":
-        return _run_locked(spec, store, console, wait, executor, overlap)
-    from sweep3d.stages.render import ray_session
-
-    with ray_session(executor.address):  # joined when something renders or infers: not for a cached rerun
-        return _run_locked(spec, store, console, wait, executor, overlap)
+    # the runner holds the lock and the executor's session; planning comes before the leftovers' removal
+    with running(spec, executor=executor, wait=wait, console=console, store=store, leftovers=False) as runner:
+        return _run_locked(spec, store, console, runner, overlap)
 
 
-def _run_locked(spec: LoadedSpec, store: Store, console: Console | None, wait: float, executor: Executor,
-                overlap: bool) -> RunResult:
-    with store.lock(wait):
-        started = time.perf_counter()  # time spent waiting for the lock is not the run's
-        started_at = utc_now()
-        store.snapshot_states()  # every blob's listing and state, taken on the other core while this one plans
-        models = [ModelHandle.resolve(spec, settings) for settings in spec.models]
-        plans = [plan_spec(spec, model) for model in models]
-        if max(len(plan.jobs) for plan in plans) < SNAPSHOT_MIN_JOBS:
-            store.forget_states()  # few blobs to check: waiting for the child's look at every blob costs more
-        remove_leftovers(store)  # before anything is written (planning reads no blob folder)
-        result = RunResult(uuid.uuid4().hex[:12], plans[0], plans=plans, store=store)
-        missing, found = _missing_renders(plans, store, executor)
-        _note_device(plans, missing, console)
-        _warn_if_slow(plans, store, executor, console, missing)
-        render = RenderStage(executor)
-        post = PostprocessStage.for_spec(spec, ImageHandoff())
-        try:
-            if any(missing.values()):
-                render.warm_up(plans[0])  # Blender starts while the model is checked (both take seconds)
-            _run_passes(spec, store, console, overlap, models, render, post, result, found)
-        finally:
-            render.close()  # a worker started ahead that nothing rendered with (a broken model)
-        result.seconds = time.perf_counter() - started
-        store.append("runs", [{
-            "run_id": result.run_id, "experiment": spec.name, "spec_path": str(spec.path),
-            "spec": spec.text(), "jobs": len(result.plan.jobs),
-            "started_at": started_at, "created_at": utc_now(), "seconds": result.seconds,
-            **{f"{o.stage}_{k}": v for o in result.outcomes for k, v in o.as_row().items() if k != "stage"},
-        }])
-        compact_crowded_tables(store)
+def _run_locked(spec: LoadedSpec, store: Store, console: Console | None, runner: Runner, overlap: bool) -> RunResult:
+    started = time.perf_counter()  # time spent waiting for the lock is not the run's
+    started_at = utc_now()
+    store.snapshot_states()  # every blob's listing and state, taken on the other core while this one plans
+    models = [ModelHandle.resolve(spec, settings) for settings in spec.models]
+    plans = [plan_spec(spec, model) for model in models]
+    if max(len(plan.jobs) for plan in plans) < SNAPSHOT_MIN_JOBS:
+        store.forget_states()  # few blobs to check: waiting for the child's look at every blob costs more
+    remove_leftovers(store)  # before anything is written (planning reads no blob folder)
+    result = RunResult(uuid.uuid4().hex[:12], plans[0], plans=plans, store=store)
+    missing, found = _missing_renders(plans, store, runner.executor)
+    _note_device(plans, missing, console)
+    _warn_if_slow(plans, store, runner.executor, console, missing)
+    if any(missing.values()):
+        runner.render.warm_up(plans[0])  # Blender starts while the model is checked (both take seconds)
+    _run_passes(spec, store, overlap, models, runner, result, found)
+    result.seconds = time.perf_counter() - started
+    store.append("runs", [{
+        "run_id": result.run_id, "experiment": spec.name, "spec_path": str(spec.path),
+        "spec": spec.text(), "jobs": len(result.plan.jobs),
+        "started_at": started_at, "created_at": utc_now(), "seconds": result.seconds,
+        **{f"{o.stage}_{k}": v for o in result.outcomes for k, v in o.as_row().items() if k != "stage"},
+    }])
+    compact_crowded_tables(store)
     return result
 
 
-def _run_passes(spec: LoadedSpec, store: Store, console: Console | None, overlap: bool, models: list[ModelHandle],
-                render: RenderStage, post: PostprocessStage, result: RunResult, found: list[Found]) -> None:
+def _run_passes(spec: LoadedSpec, store: Store, overlap: bool, models: list[ModelHandle], runner: Runner,
+                result: RunResult, found: list[Found]) -> None:
     """Check the models, then run the stages pass after pass (one per round for adaptive
     policies) into ``result``, starting from its plans (``found``: what their render stage found
     stored, one per plan, for the first round)."""
     plans = result.plans
-    infers = [InferStage(model, on_ray=render.executor.kind == "ray", several=len(models) > 1, handoff=post.handoff,
-                         images_stored=post.store_images) for model in models]
-    for plan, infer in zip(plans, infers):
-        if pending_predictions(plan, store, infer):
-            infer.prepare(plan, store)  # a broken model fails now, before anything renders
-    with RunProgress(console) as progress:
-        history: History = {}
-        while True:  # one pass for fixed policies; one per round for adaptive ones
-            if history:
-                plans = [plan_spec(spec, model, history) for model in models]
-            try:
-                # Models share renders (same framing: the later passes find them cached) and
-                # the first model's outcomes steer adaptive policies.
-                outcomes: list[StageOutcome] = []
-                for i, (plan, infer) in enumerate(zip(plans, infers)):
-                    first = {render.table: found[i]} if not history and i == 0 else None  # later: written since
-                    now = run_stages((render, post, infer), plan, store, progress, overlap=overlap, found=first)
-                    shared = any(p.framing == plan.framing for p in plans[:i])  # the same renders again
-                    both = merge_outcomes if shared else add_outcomes
-                    outcomes = both(outcomes[:2], now[:2]) + outcomes[2:] + now[2:]
-            except KeyboardInterrupt:
-                write_jobs(plans, store)  # what finished is stored: let query and report show it
-                raise
-            except RenderError as exc:  # a worker died while starting: Blender or the machine
-                write_jobs(plans, store)
-                raise RenderError(f"{exc}; what finished is stored: run again to resume") from None
+    several = len(models) > 1
+    for plan, model in zip(plans, models):
+        runner.prepare(plan, runner.stages(model, ("infer",), several=several))  # a broken model fails now
+    history: History = {}
+    while True:  # one pass for fixed policies; one per round for adaptive ones
+        if history:
+            plans = [plan_spec(spec, model, history) for model in models]
+        try:
+            # Models share renders (same framing: the later passes find them cached) and
+            # the first model's outcomes steer adaptive policies.
+            outcomes: list[StageOutcome] = []
+            for i, (plan, model) in enumerate(zip(plans, models)):
+                first = {runner.render.table: found[i]} if not history and i == 0 else None  # later: written since
+                now = runner.run(plan, model, several=several, overlap=overlap, found=first)
+                shared = any(p.framing == plan.framing for p in plans[:i])  # the same renders again
+                both = merge_outcomes if shared else add_outcomes
+                outcomes = both(outcomes[:2], now[:2]) + outcomes[2:] + now[2:]
+        except KeyboardInterrupt:
+            write_jobs(plans, store)  # what finished is stored: let query and report show it
+            raise
+        except RenderError as exc:  # a worker died while starting: Blender or the machine
             write_jobs(plans, store)
-            result.outcomes = merge_outcomes(result.outcomes, outcomes)
-            grown = len(plans[0].jobs) > len(result.plan.jobs) or not history
-            result.plan, result.plans = plans[0], plans
-            if not spec.policy.adaptive or not grown:
-                break
-            history = outcomes_by_scene(plans[0], store)
+            raise RenderError(f"{exc}; what finished is stored: run again to resume") from None
+        write_jobs(plans, store)
+        result.outcomes = merge_outcomes(result.outcomes, outcomes)
+        grown = len(plans[0].jobs) > len(result.plan.jobs) or not history
+        result.plan, result.plans = plans[0], plans
+        if not spec.policy.adaptive or not grown:
+            break
+        history = outcomes_by_scene(plans[0], store)
 
 
 def write_unstored_images(spec: LoadedSpec, store: Store, keys: Iterable[str]) -> int:

@@ -12,8 +12,8 @@ from typer.testing import CliRunner
 
 from sweep3d.cache.store import Store
 from sweep3d.cli import app
-from sweep3d.engine.pipeline import run
 from sweep3d.results import connect as connect_results
+from sweep3d.runner.pipeline import run
 from tests.helpers import REPO, TINY_SPEC, load_spec, write_cube, write_spec
 
 pytestmark = pytest.mark.slow
@@ -173,7 +173,7 @@ def test_adaptive_policy_runs_rounds_and_resumes_from_the_cache(tmp_path: Path) 
 
 
 def test_the_all_controls_spec_renders_every_control_without_error(tmp_path: Path) -> None:
-    from sweep3d.engine import builtin_catalogue as catalogue
+    from sweep3d.runner import builtin_catalogue as catalogue
 
     CONTROLS = catalogue().controls
 

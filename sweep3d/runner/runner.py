@@ -1,0 +1,139 @@
+"""The runner: the one place that wires stages, for every computation.
+
+A computation (a run, the bench, the contact sheet, a follow-up) hands the runner plans: the jobs
+(a :class:`~sweep3d.driver.Plan`, as its listing policy gave them), which of the standard stages
+they go through (render → postprocess → infer), its own extra stages after them (the stability
+check's), and it reads what they recorded. The runner does the rest the same way for each: the
+store's writer lock, what killed commands left, the executor (a Ray session when it is Ray's: so
+every computation runs on ``--executor ray`` with no code of its own), the progress bars, the
+model tried before anything renders, and resuming (each stage computes only the keys the store
+lacks: :mod:`sweep3d.driver.loop`). Its stages stay open between plans, so a search that asks
+round after round keeps its Blender workers warm.
+"""
+
+from __future__ import annotations
+
+from contextlib import ExitStack, contextmanager
+from typing import Iterator, Mapping, Sequence
+
+from rich.console import Console
+
+from sweep3d.cache import Store
+from sweep3d.driver import Found, Plan, RunProgress, StageOutcome, run_stages
+from sweep3d.spec import LoadedSpec
+from sweep3d.stages.infer import InferStage, ModelHandle, pending_predictions
+from sweep3d.stages.postprocess import ImageHandoff, PostprocessStage
+from sweep3d.stages.render import LOCAL, Executor, RenderStage
+
+#: The standard stages, in order: what a run computes of each job.
+STANDARD = ("render", "postprocess", "infer")
+
+
+class Runner:
+    """The stages of one computation over one store, and how they are run (see the module).
+
+    Made by :func:`running`, which holds the lock and the executor's session; made alone, it
+    only says which stages a plan would go through (``sweep3d plan`` counts them).
+    """
+
+    def __init__(self, spec: LoadedSpec, store: Store, executor: Executor = LOCAL,
+                 progress: RunProgress | None = None, keep_open: bool = False, console: Console | None = None) -> None:
+        self.spec, self.store, self.executor = spec, store, executor
+        self.post = PostprocessStage.for_spec(spec, ImageHandoff())
+        self._progress, self._console = progress, console
+        self._keep_open = keep_open
+        self._render: RenderStage | None = None
+        self._infers: dict[int, InferStage] = {}
+        self._prepared: set[int] = set()
+        self._stack = ExitStack()
+
+    @property
+    def render(self) -> RenderStage:
+        """The render stage on the runner's executor (made on first use)."""
+        if self._render is None:
+            self._render = RenderStage(self.executor, keep_open=self._keep_open)
+        return self._render
+
+    @property
+    def progress(self) -> RunProgress:
+        """The progress bars every plan's stages share (started on first use)."""
+        if self._progress is None:
+            self._progress = self._stack.enter_context(RunProgress(self._console))
+        return self._progress
+
+    def infer(self, model: ModelHandle, several: bool = False) -> InferStage:
+        """The infer stage of ``model`` (one per model, kept: the model loads once)."""
+        stage = self._infers.get(id(model))
+        if stage is None:
+            stage = self._infers[id(model)] = InferStage(
+                model, on_ray=self.executor.kind == "ray", several=several, handoff=self.post.handoff,
+                images_stored=self.post.store_images)
+        return stage
+
+    def stages(self, model: ModelHandle | None = None, names: Sequence[str] = STANDARD, extra: Sequence = (),
+               several: bool = False) -> tuple:
+        """The standard stages ``names`` (in their order), then the computation's ``extra`` ones."""
+        unknown = [n for n in names if n not in STANDARD]
+        if unknown or ("infer" in names and model is None):
+            raise ValueError(f"stages {list(names)}: name some of {list(STANDARD)} (infer needs a model)")
+        made = {"render": lambda: self.render, "postprocess": lambda: self.post,
+                "infer": lambda: self.infer(model, several)}  # type: ignore[arg-type]
+        return tuple(made[n]() for n in STANDARD if n in names) + tuple(extra)
+
+    def prepare(self, plan: Plan, stages: Sequence) -> None:
+        """Load each infer stage's model and try it, once, where ``plan`` has something to infer:
+        a broken model fails in seconds, before anything renders."""
+        for stage in stages:
+            if isinstance(stage, InferStage) and id(stage) not in self._prepared \
+                    and pending_predictions(plan, self.store, stage):
+                stage.prepare(plan, self.store)
+                self._prepared.add(id(stage))
+
+    def run(self, plan: Plan, model: ModelHandle | None = None, *, stages: Sequence = STANDARD,
+            extra: Sequence = (), several: bool = False, strict: bool = False, overlap: bool = True,
+            found: Mapping[str, Found] | None = None) -> list[StageOutcome]:
+        """Run ``plan`` through ``stages`` (standard names, or stage objects of the caller's own
+        making, such as the bench's timed render stage), then ``extra``; returns each one's outcome.
+
+        Args:
+            strict: a failed key raises (see :func:`~sweep3d.driver.run_stages`).
+            overlap: the stages run together, each on what the ones before have stored so far.
+            found: what the caller already looked up, by table (see ``run_stages``).
+        """
+        names = [s for s in stages if isinstance(s, str)]
+        own = [s for s in stages if not isinstance(s, str)]
+        chosen = (*self.stages(model, names, several=several), *own, *extra) if names else (*own, *extra)
+        self.prepare(plan, chosen)
+        return run_stages(chosen, plan, self.store, self.progress, strict=strict, overlap=overlap, found=found)
+
+    def close(self) -> None:
+        """Stop what the stages keep open (workers started ahead), and the progress bars."""
+        try:
+            if self._render is not None:
+                self._render.close()
+        finally:
+            self._stack.close()
+
+
+@contextmanager
+def running(spec: LoadedSpec, *, executor: Executor = LOCAL, wait: float = 0.0, console: Console | None = None,
+            progress: RunProgress | None = None, store: Store | None = None, keep_open: bool = False,
+            leftovers: bool = True) -> Iterator[Runner]:
+    """A :class:`Runner` for ``spec``'s store, holding its writer lock (``wait``: seconds to wait
+    for another command's) within the executor's session, what killed commands left removed first
+    (``leftovers``). ``progress``: bars the caller shows already (else the runner's own, on
+    ``console``)."""
+    from sweep3d.runner.pipeline import remove_leftovers
+
+    store = store or Store(spec.store)
+    with ExitStack() as stack:
+        if executor.kind == "ray":
+            from sweep3d.stages.render import ray_session
+
+            stack.enter_context(ray_session(executor.address))  # joined when something renders or infers
+        stack.enter_context(store.lock(wait))
+        if leftovers:
+            remove_leftovers(store)  # before anything is written
+        runner = Runner(spec, store, executor, progress, keep_open, console)
+        stack.callback(runner.close)
+        yield runner
