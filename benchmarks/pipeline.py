@@ -699,7 +699,7 @@ def post_heavy_cores(rounds: int, objects: int, cores: list[int], console: Conso
     from sweep3d.cache.store import Store
     from sweep3d.driver.loop import run_stage
     from sweep3d.driver.progress import RunProgress
-    from sweep3d.engine.pipeline import plan_spec
+    from sweep3d.runner.pipeline import plan_spec
     from sweep3d.stages.render import RenderStage
 
     took: dict[int, list[dict]] = {k: [] for k in cores}
@@ -745,7 +745,7 @@ def post_alone(folder: Path, workers: int) -> dict:
     from sweep3d.cache.store import Store
     from sweep3d.driver.loop import run_stage
     from sweep3d.driver.progress import RunProgress
-    from sweep3d.engine.pipeline import plan_spec
+    from sweep3d.runner.pipeline import plan_spec
     from sweep3d.stages.postprocess import PostprocessStage
 
     plan = plan_spec(sweep3d.load(folder / "spec.toml").spec)

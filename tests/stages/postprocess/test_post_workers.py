@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from sweep3d.core import PluginError, from_uint8
-from sweep3d.engine import builtin_catalogue
+from sweep3d.runner import builtin_catalogue
 from sweep3d.spec import ControlInstance
 from sweep3d.stages.postprocess import in_order
 from sweep3d.stages.postprocess.apply import post_image
