@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import pyarrow as pa
 
 from sweep3d.cache import Store, digest, utc_now
 from sweep3d.core import UserError
