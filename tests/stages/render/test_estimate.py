@@ -22,7 +22,7 @@ def test_mitsuba_is_estimated_from_its_own_costs(samples: int, side: int) -> Non
         c, m = (estimate_render_seconds(r, side, truth, hidden) for r in (cycles, mitsuba))
         per_sample, per_render = BACKENDS.get("mitsuba").seconds_224
         cycles_sample, cycles_render = BACKENDS.get("cycles").seconds_224
-        assert m > c
+        assert m != c
         assert m - c == pytest.approx((side / 224) ** 2 * ((per_sample - cycles_sample) * samples
                                                            + per_render - cycles_render))
 
@@ -43,4 +43,4 @@ def test_plan_estimates_a_mitsuba_spec_apart_from_the_same_cycles_spec(tmp_path:
         spec = Experiment(path).spec
         assert render.seconds == pytest.approx(render.to_compute * estimate_render_seconds(
             spec.render, render.crop, bool(status.passes), False))
-    assert seconds["mitsuba"] > seconds["cycles"] > 0
+    assert seconds["mitsuba"] != seconds["cycles"] and min(seconds.values()) > 0

@@ -96,13 +96,14 @@ class MitsubaBackend(Backend):
     passes = frozenset({"mask", "depth"})
     ignored_settings = CYCLES_ONLY
     support = SUPPORT
-    #: Mitsuba's (issue 45): the same tiny spec (2 objects × white and studio × 6 yaws, 224² of
-    #: 256², denoised) run with each engine at 4 and 16 samples; the runs' CPU seconds, steadier
-    #: than their wall time on a shared machine, gave Mitsuba 2.2× Cycles' CPU per sample and
-    #: 0.17 s more per render (its scene is translated per job, its denoiser's albedo and normals
-    #: rendered), put on Cycles' basis: about 2.5× Cycles' estimate at 4–16 samples
-    #: (benchmarks/RESULTS.md, "The Mitsuba engine's cost in plan's estimate").
-    seconds_224 = (0.075, 0.19)
+    #: Per 224² render, on Cycles' basis (its figures in cycles/backend.py), by the variant this
+    #: machine renders with. llvm_ad_rgb (the scene kept per worker, the denoiser's aux pass apart,
+    #: OpenImageDenoise "fast"): 0.74× Cycles' time per render at the quickstart's 4 samples, its
+    #: samples about 0.2× Cycles' cost each (benchmarks/engine_cost.py and mitsuba_denoise.py;
+    #: RESULTS.md, "Mitsuba at a fraction of Cycles' cost"). scalar_rgb: the issue-45 measurement,
+    #: 2.2× Cycles' CPU a sample and 0.17 s more a render ("The Mitsuba engine's cost in plan's
+    #: estimate"), made before those changes: an upper bound.
+    seconds_224 = (0.007, 0.077) if llvm_library() else (0.075, 0.19)
 
     def scene(self, settings, scratch, log=None, gpu=None) -> MitsubaScene:
         """A ``MitsubaScene`` (imported only now: Cycles' workers never load Mitsuba)."""
