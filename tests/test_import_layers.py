@@ -43,10 +43,7 @@ UNITS = (
 
 #: Imports that point up a layer, made inside a function (so at call time, never at import time),
 #: each to look a plug-in up in a registry its layer cannot own. Adding one needs a reason here.
-UPWARD_AT_CALL_TIME = {
-    ("sweep3d.driver.jobs", "sweep3d.stages.infer"): "a plan records its evaluator's roles",
-    ("sweep3d.driver.passes", "sweep3d.stages.infer"): "the passes an evaluator declares",
-    ("sweep3d.driver.plugin_code", "sweep3d.stages.infer"): "the code identity of a user's evaluator or model",
+UPWARD_AT_CALL_TIME = {  # none from the driver into the stages: it reads evaluators and models from the spec's catalogue
     ("sweep3d.spec.loader", "sweep3d.stages.plan"): "a [policy] type must name a Policy subclass",
 }
 

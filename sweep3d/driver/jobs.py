@@ -460,10 +460,9 @@ class Plan:
 
     def evaluator_record(self) -> EvaluatorRecord:
         """The experiment's evaluator as the jobs file records it, for the views to follow."""
-        from sweep3d.stages.infer import EVALUATORS  # the infer stage plans on this module
-
         kind = self.spec.evaluator.kind
-        return EVALUATORS.get(kind).record(kind)
+        assert self.spec.catalogue is not None, "a spec from the loader carries its catalogue"
+        return self.spec.catalogue.evaluators.get(kind).record(kind)
 
     def table(self) -> pa.Table:
         """:meth:`rows` as a table whose metadata lists the parameter columns (see spec.columns).

@@ -18,11 +18,8 @@ def needed_passes(spec: LoadedSpec) -> tuple[str, ...]:
 
     Any truth pass brings the mask: the ground-truth columns (box, visible fraction) come from it.
     """
-    from sweep3d.stages.infer import EVALUATORS
-
     wanted = set(spec.evaluator.passes)
-    kind = spec.evaluator.kind
-    evaluator = EVALUATORS.get(kind)
+    evaluator = _evaluator(spec)
     wanted.update(getattr(evaluator, "passes", ()))
     for inst in spec.controls:
         wanted.update(getattr(inst.control, "passes", ()))
@@ -45,7 +42,11 @@ def visibility_gated(spec: LoadedSpec) -> bool:
     """Whether ``evaluable`` is decided by ``[evaluator] min_visible``: when the evaluation asked
     for a truth pass (``[evaluator] passes`` or the evaluator's own), not when only a control did
     (fog reads the depth pass: adding it must not change which results are counted)."""
-    from sweep3d.stages.infer import EVALUATORS
-
-    asked = set(spec.evaluator.passes) | set(getattr(EVALUATORS.get(spec.evaluator.kind), "passes", ()))
+    asked = set(spec.evaluator.passes) | set(getattr(_evaluator(spec), "passes", ()))
     return bool(asked & set(TRUTH_PASSES))
+
+
+def _evaluator(spec: LoadedSpec):
+    """The evaluator class ``[evaluator] kind`` names, from the registries the spec was loaded with."""
+    assert spec.catalogue is not None, "a spec from the loader carries its catalogue"
+    return spec.catalogue.evaluators.get(spec.evaluator.kind)

@@ -43,8 +43,8 @@ class PluginCode:
 
 def user_plugins(spec: LoadedSpec) -> dict[str, PluginCode]:
     """The spec's user plug-ins by name."""
-    from sweep3d.stages.infer import EVALUATORS, MODELS
-
+    assert spec.catalogue is not None, "a spec from the loader carries its catalogue"
+    evaluators, models = spec.catalogue.evaluators, spec.catalogue.models
     out: dict[str, PluginCode] = {}
     for inst in spec.controls:
         name = inst.control.type_name
@@ -53,10 +53,10 @@ def user_plugins(spec: LoadedSpec) -> dict[str, PluginCode]:
             ids = out[name].ids if name in out else ()
             out[name] = PluginCode(name, stage, code_identity(type(inst.control)), (*ids, inst.id))
     if is_user_plugin(spec.evaluator.kind):
-        out[spec.evaluator.kind] = PluginCode(spec.evaluator.kind, "infer", code_identity(EVALUATORS.get(spec.evaluator.kind)))
+        out[spec.evaluator.kind] = PluginCode(spec.evaluator.kind, "infer", code_identity(evaluators.get(spec.evaluator.kind)))
     for model in spec.models:
         if is_user_plugin(model.name):
-            out[model.name] = PluginCode(model.name, "infer", code_identity(MODELS.get(model.name)))
+            out[model.name] = PluginCode(model.name, "infer", code_identity(models.get(model.name)))
     return out
 
 

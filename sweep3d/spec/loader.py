@@ -95,6 +95,9 @@ class LoadedSpec:
     controls: list[ControlInstance] = field(default_factory=list)
     policy: Any = None
     source: str | None = None  # the spec's text as loaded (a dict's as TOML), its included files' after it
+    #: the registries its names resolved in: what the driver looks evaluators and models up in
+    #: (without importing the stages that declare them)
+    catalogue: Catalogue | None = field(default=None, compare=False, repr=False)
 
     def text(self) -> str:
         """The spec as written when it was loaded (what the runs table records)."""
@@ -235,7 +238,7 @@ def _validated(raw: dict[str, Any], catalogue: Catalogue, *, path: Path, base: P
     problem = store_folder_problem(store)
     if problem:
         raise fail("experiment.store", problem)
-    return LoadedSpec(path, spec, store, meshes, hdris, labels, controls, policy, source)
+    return LoadedSpec(path, spec, store, meshes, hdris, labels, controls, policy, source, catalogue)
 
 
 def plugin_folder(folder: Path) -> None:
