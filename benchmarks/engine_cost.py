@@ -26,25 +26,10 @@ import tempfile
 import time
 from pathlib import Path
 
-import tomlkit
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from engines import derived_spec  # noqa: E402  (the quickstart with an engine and no blur, as there)
 
-REPO = Path(__file__).resolve().parents[1]
 ENGINES = ("cycles", "mitsuba")
-
-
-def derived_spec(folder: Path, engine: str) -> Path:
-    """The quickstart with ``engine``, no post-processing and a store in ``folder``."""
-    doc = tomlkit.parse((REPO / "specs" / "quickstart.toml").read_text())
-    doc["experiment"]["store"] = str(folder / "store")
-    doc["render"]["engine"] = engine
-    kept = tomlkit.aot()
-    for control in doc["controls"]:
-        if control["type"] != "blur":
-            kept.append(control)
-    doc["controls"] = kept
-    path = folder / "spec.toml"
-    path.write_text(tomlkit.dumps(doc))
-    return path
 
 
 def child(engine: str, every: int) -> None:
@@ -56,7 +41,7 @@ def child(engine: str, every: int) -> None:
     from sweep3d.stages.render.worker_protocol import RenderSettings
 
     folder = Path(tempfile.mkdtemp(prefix=f"engine-cost-{engine}-"))
-    experiment = sweep3d.load(derived_spec(folder, engine))
+    experiment = sweep3d.load(derived_spec(folder, engine, samples_per_dim=6))  # the quickstart's 6 yaws
     status = experiment.plan()
     plan = status.plan
     unique = list({job.render_key: job for job in plan.jobs}.values())
