@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any
 
 from sweep3d.cache import Store, safe_filename
 from sweep3d.core import PLUGIN_FAILURES, UserError, is_user_plugin, plugin_failure
-from sweep3d.driver import RunProgress
+from sweep3d.driver import RunProgress, StageProgress
 from sweep3d.export import coco, imagefolder, parquet  # noqa: F401  (the built-ins register in EXPORT_FORMATS)
 from sweep3d.export.formats import EXPORT_FORMATS, Batch, DatasetWriter, Item
 from sweep3d.export.selection import DEFAULT_WHERE, UNEVALUABLE, Selection, check_where, select
@@ -181,7 +181,7 @@ def _write(writer: DatasetWriter, fmt: str, batch: Batch, folder: ExportFolder, 
 
 
 def _run_writer(writer: DatasetWriter, fmt: str, batch: Batch, folder: ExportFolder, staging: Staging,
-                bar: Any) -> None:
+                bar: StageProgress) -> None:
     """``writer.write``; a user's writer that fails (an exception, ``sys.exit``) is one line naming
     it and where in its code, as other plug-ins' failures are; a full disk stays the folder's problem."""
     try:
