@@ -175,7 +175,8 @@ class Experiment:
                model: str | None = None, unevaluable: str = "skip", append: bool = False,
                link: bool = False) -> ExportResult:
         """Write the results ``where`` chooses (default: the failures) as a ``coco``,
-        ``imagefolder`` or ``parquet`` dataset with ``design.csv``, as ``sweep3d export`` does."""
+        ``imagefolder`` or ``parquet`` dataset, or your own (``"module:Name"``, a
+        ``sweep3d.plugins.DatasetWriter``), with ``design.csv``, as ``sweep3d export`` does."""
         from sweep3d.export import export_dataset
 
         return export_dataset(self.spec, format, output=Path(output) if output is not None else None, where=where,

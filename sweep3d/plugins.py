@@ -3,17 +3,18 @@
 Controls (rendered: set the :class:`SceneState` Blender draws and/or edit the live scene through a
 :class:`SceneEdit`; post: map one image to another),
 policies (turn a :class:`SpaceShape` into :class:`Point` objects), models (a factory returning a
-:class:`Classifier`, :class:`Detector` or :class:`Segmenter`, with its :class:`Preprocess`) and
-evaluators. None of these imports torch or bpy: a model's factory imports torch itself. Each name
+:class:`Classifier`, :class:`Detector` or :class:`Segmenter`, with its :class:`Preprocess`),
+evaluators and export formats (a :class:`DatasetWriter`, named by ``sweep3d export --format
+module:Name``). None of these imports torch or bpy: a model's factory imports torch itself. Each name
 is imported on first use (PEP 562), so a render worker importing a user's control module loads the
 control classes it names and neither DuckDB nor pyarrow.
 """
 
 from __future__ import annotations
 
-__all__ = ["Classifier", "ControlParams", "Detector", "Evaluator", "EvaluatorParams", "Normalize", "Outcome", "Point",
-           "Policy", "PolicyParams", "PostControl", "Preprocess", "RenderFrame", "RenderedControl", "Roles", "SceneEdit", "SceneState",
-           "Segmenter", "SpaceShape", "SpecPath", "Truth"]
+__all__ = ["Classifier", "ControlParams", "DatasetWriter", "Detector", "Evaluator", "EvaluatorParams", "Normalize",
+           "Outcome", "Point", "Policy", "PolicyParams", "PostControl", "Preprocess", "RenderFrame", "RenderedControl",
+           "Roles", "SceneEdit", "SceneState", "Segmenter", "SpaceShape", "SpecPath", "Truth"]
 
 # Lazy exports (PEP 562): a name's module is imported when first used, so importing this package
 # stays light and free of cycles.
@@ -23,6 +24,7 @@ from sweep3d.core import exports as _exports  # noqa: E402
 
 if _TYPE_CHECKING:
     from sweep3d.core import ControlParams, SpecPath
+    from sweep3d.export import DatasetWriter
     from sweep3d.spec import Point, SpaceShape
     from sweep3d.stages.infer import (
         Classifier,
@@ -42,6 +44,7 @@ if _TYPE_CHECKING:
 __getattr__, __dir__ = _exports(__name__, {
     'Classifier': ('sweep3d.stages.infer', 'Classifier'),
     'ControlParams': ('sweep3d.core.control', 'ControlParams'),
+    'DatasetWriter': ('sweep3d.export.formats', 'DatasetWriter'),
     'Detector': ('sweep3d.stages.infer', 'Detector'),
     'Evaluator': ('sweep3d.stages.infer', 'Evaluator'),
     'EvaluatorParams': ('sweep3d.stages.infer', 'EvaluatorParams'),

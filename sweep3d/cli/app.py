@@ -369,7 +369,8 @@ def export(
     spec: Path = SpecArg,
     form: str = typer.Option(..., "--format", show_default=False,
                              help="coco (images, boxes and masks from the mask pass), imagefolder (a folder per "
-                                  "class) or parquet (Hugging Face's layout: image bytes and every column of results)."),
+                                  "class), parquet (Hugging Face's layout: image bytes and every column of results), "
+                                  "or module:Name, your own DatasetWriter in module.py beside the spec."),
     where: Optional[str] = typer.Option(None, "--where", show_default=False,
                                         help="Which results: a condition over the columns of results, e.g. "
                                              "\"NOT correct AND object = 'mug'\" (default: NOT correct, the failures)."),

@@ -17,7 +17,7 @@ import numpy as np
 
 from sweep3d.core import UserError, box
 from sweep3d.driver import StageProgress
-from sweep3d.export.formats import Batch, DatasetWriter, Item
+from sweep3d.export.formats import EXPORT_FORMATS, Batch, DatasetWriter, Item
 from sweep3d.export.selection import image_bytes, mask_of
 from sweep3d.export.target import ExportFolder, Staging, json_bytes
 
@@ -25,10 +25,10 @@ ANNOTATIONS = "annotations.json"
 IMAGES = "images"
 
 
+@EXPORT_FORMATS.register("coco")
 class CocoWriter(DatasetWriter):
     """``images/<id>.png`` and ``annotations.json`` (``file_name`` relative to ``images/``)."""
 
-    name = "coco"
     needs_mask = True
 
     def file_of(self, item: Item) -> str:

@@ -1,5 +1,6 @@
 """``sweep3d export``: the chosen results of a run (by default its failures) as a dataset to train
-or test on, in one of :data:`FORMATS`, with ``design.csv`` beside it: the configurations that
+or test on, in one of :data:`EXPORT_FORMATS` (a built-in, or ``module:Name``: a user's
+:class:`DatasetWriter` beside the spec), with ``design.csv`` beside it: the configurations that
 made them, so the same scenes can be rendered again later (for a retrained model, say).
 
 Every check a user's input can fail (the format, ``--where``, the folder) runs before anything is
@@ -17,23 +18,21 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from sweep3d.cache import Store, safe_filename
-from sweep3d.core import UserError
-from sweep3d.driver import RunProgress
-from sweep3d.export.coco import CocoWriter
-from sweep3d.export.formats import Batch, DatasetWriter, Item
-from sweep3d.export.imagefolder import ImageFolderWriter
-from sweep3d.export.parquet import ParquetWriter
+from sweep3d.core import PLUGIN_FAILURES, UserError, is_user_plugin, plugin_failure
+from sweep3d.driver import RunProgress, StageProgress
+from sweep3d.export import coco, imagefolder, parquet  # noqa: F401  (the built-ins register in EXPORT_FORMATS)
+from sweep3d.export.formats import EXPORT_FORMATS, Batch, DatasetWriter, Item
 from sweep3d.export.selection import DEFAULT_WHERE, UNEVALUABLE, Selection, check_where, select
 from sweep3d.export.target import DESIGN, MANIFEST, SCENE, ExportFolder, Staging, design_table, identity, open_folder
 from sweep3d.results import no_results
 from sweep3d.runner import write_unstored_images
-from sweep3d.spec import LoadedSpec
+from sweep3d.spec import LoadedSpec, plugin_folder
 
 if TYPE_CHECKING:
     from rich.console import Console
 
-#: ``--format`` → the writer of that format.
-FORMATS: dict[str, type[DatasetWriter]] = {w.name: w for w in (CocoWriter, ImageFolderWriter, ParquetWriter)}
+#: The registry's name before there was one (``name in FORMATS``, ``FORMATS.get(name)``, iteration still work).
+FORMATS = EXPORT_FORMATS
 #: The errors of a disk that has no room left (for the export, or for the user's quota).
 DISK_FULL = (errno.ENOSPC, errno.EDQUOT)
 #: Columns of ``results`` an image's attributes carry besides its scene and control values, where they exist.
@@ -85,20 +84,36 @@ class ExportResult:
         return f"nothing to export: no result meets --where {self.where!r}{left}; nothing written to {self.folder}"
 
 
-def writer_for(fmt: str) -> DatasetWriter:
-    """The writer of ``--format fmt``.
+def writer_for(fmt: str, spec: LoadedSpec | None = None) -> DatasetWriter:
+    """The writer of ``--format fmt``: a built-in's name, or ``module:Name`` (a
+    :class:`DatasetWriter` subclass; ``module.py`` beside ``spec`` is found wherever the command runs).
 
     Raises:
-        UserError: ``fmt`` is not a format we write.
+        UserError: ``fmt`` names no format, a module that does not import, something that is not a
+            ``DatasetWriter`` subclass, or one whose construction fails (a ``PluginError`` naming it).
     """
-    if fmt not in FORMATS:
-        raise UserError(f"--format {fmt!r}: unknown; use {', '.join(FORMATS)}")
-    return FORMATS[fmt]()
+    if is_user_plugin(fmt) and spec is not None:
+        plugin_folder(spec.path.parent)
+    try:
+        cls = EXPORT_FORMATS.get(fmt)
+    except UserError as exc:  # unknown, or a user's module that does not import (its details kept for --debug)
+        exc.args = (f"--format {fmt!r}: {exc}",)
+        raise
+    if not (isinstance(cls, type) and issubclass(cls, DatasetWriter)):
+        what = f"a {type(cls).__name__}" if not isinstance(cls, type) else f"class {cls.__qualname__}"
+        raise UserError(f"--format {fmt!r}: is {what}, not a sweep3d DatasetWriter subclass; an export format "
+                        "subclasses sweep3d.plugins.DatasetWriter and writes its files in write()")
+    try:
+        return cls()
+    except UserError:
+        raise
+    except PLUGIN_FAILURES as exc:
+        raise plugin_failure(f"export format {fmt!r}", exc, "failed to start") from None
 
 
 def default_output(spec: LoadedSpec, fmt: str) -> Path:
-    """``exports/<experiment>-<format>`` beside the spec."""
-    return spec.path.parent / "exports" / f"{safe_filename(spec.name)}-{fmt}"
+    """``exports/<experiment>-<format>`` beside the spec (a user's ``module:Name`` as a safe file name)."""
+    return spec.path.parent / "exports" / f"{safe_filename(spec.name)}-{safe_filename(fmt)}"
 
 
 def export_dataset(spec: LoadedSpec, fmt: str, *, output: Path | None = None, where: str | None = None,
@@ -120,7 +135,7 @@ def export_dataset(spec: LoadedSpec, fmt: str, *, output: Path | None = None, wh
             an output folder that holds other files, no results, a damaged blob. Nothing is
             written then.
     """
-    writer = writer_for(fmt)
+    writer = writer_for(fmt, spec)
     if unevaluable not in UNEVALUABLE:
         raise UserError(f"--unevaluable {unevaluable!r}: use {' or '.join(UNEVALUABLE)}")
     if link and not writer.files:
@@ -140,17 +155,18 @@ def export_dataset(spec: LoadedSpec, fmt: str, *, output: Path | None = None, wh
         return result  # nothing selected, or nothing new: the folder stays as it is (or is not made)
     store = Store(spec.store)
     write_unstored_images(spec, store, [item.row["image_key"] for item in items])  # made in memory by the run
-    _write(writer, Batch(items, store, selection.table, selection.columns, link), folder, already, console)
+    _write(writer, fmt, Batch(items, store, selection.table, selection.columns, link), folder, already, console)
     return result
 
 
-def _write(writer: DatasetWriter, batch: Batch, folder: ExportFolder, already: int, console: Console | None) -> None:
+def _write(writer: DatasetWriter, fmt: str, batch: Batch, folder: ExportFolder, already: int,
+           console: Console | None) -> None:
     """Write ``batch`` through a staging folder, moved into place at the end; a write the disk
     refuses (full, read-only) is one line naming the folder, and leaves it as it was."""
     staging = Staging(folder)
     try:
         with RunProgress(console) as progress, progress.stage("export", len(batch.items), already) as bar:
-            writer.write(batch, folder, staging, bar)
+            _run_writer(writer, fmt, batch, folder, staging, bar)
         staging.write(DESIGN, design_table(folder.items))
         staging.write(MANIFEST, folder.manifest())
         staging.commit()
@@ -162,6 +178,20 @@ def _write(writer: DatasetWriter, batch: Batch, folder: ExportFolder, already: i
     except BaseException:
         staging.discard()
         raise
+
+
+def _run_writer(writer: DatasetWriter, fmt: str, batch: Batch, folder: ExportFolder, staging: Staging,
+                bar: StageProgress) -> None:
+    """``writer.write``; a user's writer that fails (an exception, ``sys.exit``) is one line naming
+    it and where in its code, as other plug-ins' failures are; a full disk stays the folder's problem."""
+    try:
+        writer.write(batch, folder, staging, bar)
+    except UserError:
+        raise
+    except PLUGIN_FAILURES as exc:
+        if not is_user_plugin(fmt) or isinstance(exc, OSError) and exc.errno in DISK_FULL:
+            raise
+        raise plugin_failure(f"export format {fmt!r}", exc, "failed in write()") from None
 
 
 def _reason(exc: OSError) -> str:

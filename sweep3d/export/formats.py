@@ -1,5 +1,6 @@
-"""What every export format is handed (the new images, each with its id, label and attributes) and
-the base class a format implements."""
+"""What every export format is handed (the new images, each with its id, label and attributes),
+the base class a format implements, and :data:`EXPORT_FORMATS`, the registry ``--format`` names
+one in (a built-in's short name, or ``module:Name`` for a user's writer beside the spec)."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ from typing import Any, ClassVar
 import pyarrow as pa
 
 from sweep3d.cache import Store
+from sweep3d.core import Registry
 from sweep3d.driver import StageProgress
 from sweep3d.export.target import ExportFolder, Staging
 
@@ -59,10 +61,13 @@ class Batch:
 
 class DatasetWriter:
     """One export format: writes a batch's files into the staging folder, appending to what
-    ``folder`` already holds (:attr:`ExportFolder.fresh` is False when appending)."""
+    ``folder`` already holds (:attr:`ExportFolder.fresh` is False when appending).
 
-    #: The ``--format`` that names it.
-    name: ClassVar[str] = ""
+    A built-in registers in :data:`EXPORT_FORMATS` under its ``--format`` name; a user's own is
+    named ``--format module:Name`` (``module.py`` beside the spec) and needs no registration. It
+    is made with no arguments, once per export.
+    """
+
     #: It needs the mask pass (``[evaluator] passes = ["mask"]``).
     needs_mask: ClassVar[bool] = False
     #: It writes image files (``--link`` applies).
@@ -76,3 +81,7 @@ class DatasetWriter:
     def file_of(self, item: Item) -> str | None:
         """Where ``item``'s image file lies in the export (None: no file of its own)."""
         return None
+
+
+#: ``--format`` → the writer of that format (``sweep3d.export`` registers the built-ins).
+EXPORT_FORMATS: Registry[type[DatasetWriter]] = Registry("export format")

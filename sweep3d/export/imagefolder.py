@@ -5,17 +5,16 @@
 from __future__ import annotations
 
 from sweep3d.driver import StageProgress
-from sweep3d.export.formats import Batch, DatasetWriter, Item
+from sweep3d.export.formats import EXPORT_FORMATS, Batch, DatasetWriter, Item
 from sweep3d.export.selection import image_bytes
 from sweep3d.export.target import ExportFolder, Staging, class_folder, csv_bytes
 
 METADATA = "metadata.csv"
 
 
+@EXPORT_FORMATS.register("imagefolder")
 class ImageFolderWriter(DatasetWriter):
     """``<label>/<id>.png`` and ``metadata.csv``."""
-
-    name = "imagefolder"
 
     def file_of(self, item: Item) -> str:
         return f"{class_folder(item.label)}/{item.stem}"

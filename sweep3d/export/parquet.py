@@ -18,7 +18,7 @@ import pyarrow.parquet as pq
 
 from sweep3d.core import UserError
 from sweep3d.driver import StageProgress
-from sweep3d.export.formats import Batch, DatasetWriter
+from sweep3d.export.formats import EXPORT_FORMATS, Batch, DatasetWriter
 from sweep3d.export.selection import image_bytes
 from sweep3d.export.target import ExportFolder, Staging
 
@@ -30,10 +30,10 @@ OWN = ("image", "id", "label")
 ROW_GROUP = 100  # rows per row group: images are large, a reader holds one group at a time
 
 
+@EXPORT_FORMATS.register("parquet")
 class ParquetWriter(DatasetWriter):
     """``data/train-00000.parquet``, then ``train-00001.parquet`` for the first append, …"""
 
-    name = "parquet"
     files = False
 
     def write(self, batch: Batch, folder: ExportFolder, staging: Staging, progress: StageProgress) -> None:

@@ -12,7 +12,7 @@ __all__ = [
     "ModelSpec", "NameClash", "ObjectSpec", "PARAMETERS_METADATA", "PREDICTION_COLUMNS",
     "PROTOCOL_METADATA", "Point", "PointError", "PolicySpec", "Range", "RenderSpec", "SearchSpace",
     "Space", "SpaceShape", "Spec", "as_arrays", "as_points", "contract", "normal_name",
-    "parameter_column", "read_spec", "spec_class_names", "unknown_name"
+    "parameter_column", "plugin_folder", "read_spec", "spec_class_names", "unknown_name"
 ]
 
 # Lazy exports (PEP 562): a name's module is imported when first used, so importing this package
@@ -38,7 +38,7 @@ if _TYPE_CHECKING:
         parameter_column,
     )
     from sweep3d.spec.framing import Framing
-    from sweep3d.spec.loader import ControlInstance, LoadedSpec
+    from sweep3d.spec.loader import ControlInstance, LoadedSpec, plugin_folder
     from sweep3d.spec.looks import unknown_name
     from sweep3d.spec.models import (
         ENGINES,
@@ -92,6 +92,7 @@ __getattr__, __dir__ = _exports(__name__, {
     "contract": ("sweep3d.spec.space", "contract"),
     "normal_name": ("sweep3d.spec.class_names", "normal_name"),
     "parameter_column": ("sweep3d.spec.columns", "parameter_column"),
+    "plugin_folder": ("sweep3d.spec.loader", "plugin_folder"),
     "read_spec": ("sweep3d.spec.sources", "read_spec"),
     "spec_class_names": ("sweep3d.spec.class_names", "spec_class_names"),
     "unknown_name": ("sweep3d.spec.looks", "unknown_name"),

@@ -384,7 +384,8 @@ def one_line_error(folder: Path, *args: str) -> str:
 
 
 @pytest.mark.parametrize("args, text", [
-    (("--format", "yolo"), "--format 'yolo': unknown; use coco, imagefolder, parquet"),
+    (("--format", "yolo"), "--format 'yolo': unknown export format 'yolo'; valid: coco, imagefolder, parquet, or "),
+    (("--format", "coc"), "(did you mean 'coco'?)"),
     (("--format", "coco", "--where", "NOT correct; DROP TABLE results"), "holds a ';'"),
     (("--format", "coco", "--where", "true) UNION ALL (SELECT * FROM results"), "is not only a condition"),
     (("--format", "coco", "--where", "true) ORDER BY (job"), "is not only a condition"),
@@ -409,15 +410,15 @@ def test_an_output_folder_with_other_files_is_refused(tmp_path: Path) -> None:
     assert [p.name for p in out.iterdir()] == ["notes.txt"] and not (tmp_path / "store").exists()
 
 
-def test_a_run_without_the_mask_pass_exports_folders_but_not_coco(tmp_path: Path) -> None:
-    """A classification store (made by hand: no truth passes) exports its failures as an ImageFolder;
-    COCO, which needs the masks, is refused in one line before anything is written."""
+def classification_store(folder: Path) -> None:
+    """TINY_SPEC in ``folder`` and a store of its three results made by hand (no render, no truth
+    passes): jobs 0 and 2 failed, job 1 is right; job ``i``'s image is a (4 + i)×4 PNG."""
     from datetime import datetime
 
     from sweep3d.spec.columns import PARAMETERS_METADATA
 
-    write_spec(tmp_path, TINY_SPEC)
-    store = Store(tmp_path / "store")
+    write_spec(folder, TINY_SPEC)
+    store = Store(folder / "store")
     jobs = [{"experiment": "tiny", "job": i, "object": "box", "environment": "white", "orientation_yaw": 45.0 * i,
              "render_key": f"ab{i}", "image_key": f"ab{i}", "pred_key": f"p{i}", "in_frame": True, "model": "m"}
             for i in range(3)]
@@ -428,6 +429,12 @@ def test_a_run_without_the_mask_pass_exports_folders_but_not_coco(tmp_path: Path
     for i in range(3):
         store.blob_path(f"ab{i}").parent.mkdir(parents=True, exist_ok=True)
         store.blob_path(f"ab{i}").write_bytes(_png(4 + i, 4))
+
+
+def test_a_run_without_the_mask_pass_exports_folders_but_not_coco(tmp_path: Path) -> None:
+    """A classification store (made by hand: no truth passes) exports its failures as an ImageFolder;
+    COCO, which needs the masks, is refused in one line before anything is written."""
+    classification_store(tmp_path)
     assert "mask pass" in one_line_error(tmp_path, "--format", "coco", "-o", str(tmp_path / "coco"))
     assert not (tmp_path / "coco").exists() and not list(tmp_path.glob(".coco*"))
     out = exported(tmp_path, tmp_path / "folder", "--format", "imagefolder")
@@ -468,3 +475,87 @@ def test_bad_where_and_a_damaged_blob_on_a_real_run_write_nothing(export_run: Pa
     assert code == 2 and "no longer matches its recorded digest" in lines[-1] and "Traceback" not in output, output
     assert not out.exists() and not list(tmp_path.glob(".out*"))
     assert filecmp.cmp(copy / "spec.toml", export_run / "spec.toml")
+
+
+# -- a user's own format: --format module:Name, a DatasetWriter beside the spec -----------------
+#: A format of one JSON line per image and its PNG, read through the public plug-in API only.
+JSONL_WRITER = '''
+import json
+
+from sweep3d.plugins import DatasetWriter
+
+
+class Jsonl(DatasetWriter):
+    def file_of(self, item):
+        return f"png/{item.stem}"
+
+    def write(self, batch, folder, staging, progress):
+        lines = []
+        for item in batch.items:
+            staging.write(self.file_of(item), batch.store.blob_path(item.row["image_key"]).read_bytes())
+            lines.append(json.dumps({"id": item.id, "label": item.label, "job": item.attributes["job"]}))
+            progress.advance()
+        old = (folder.root / "labels.jsonl").read_text() if not folder.fresh else ""
+        staging.write("labels.jsonl", (old + "".join(line + "\\n" for line in lines)).encode())
+'''
+
+
+@pytest.fixture
+def user_module(monkeypatch):
+    """Write a plug-in module beside the spec in a folder; sys.path and the module forgotten afterwards."""
+    import sys
+
+    monkeypatch.setattr(sys, "path", [*sys.path])  # the export puts the spec's folder first on it
+    written: list[str] = []
+
+    def write(folder: Path, name: str, source: str) -> None:
+        (folder / f"{name}.py").write_text(source)
+        written.append(name)
+
+    yield write
+    for name in written:
+        sys.modules.pop(name, None)
+
+
+def test_a_user_s_writer_beside_the_spec_exports_and_appends_through_the_command_line(tmp_path: Path,
+                                                                                      user_module) -> None:
+    classification_store(tmp_path)
+    user_module(tmp_path, "jsonl_format", JSONL_WRITER)
+    out = exported(tmp_path, tmp_path / "out", "--format", "jsonl_format:Jsonl")
+    lines = [json.loads(line) for line in (out / "labels.jsonl").read_text().splitlines()]
+    assert lines == [{"id": 1, "label": "carton", "job": 0}, {"id": 2, "label": "carton", "job": 2}]  # the failures
+    assert (out / "png" / "000002.png").read_bytes() == _png(6, 4)
+    assert manifest(out)["format"] == "jsonl_format:Jsonl" and [e["file"] for e in manifest(out)["items"]] == [
+        "png/000001.png", "png/000002.png"]
+    assert (out / "design.csv").read_text().splitlines()[1:] == ["box,white,0.0", "box,white,90.0"]
+    exported(tmp_path, out, "--format", "jsonl_format:Jsonl", "--where", "true", "--append")
+    assert [json.loads(line)["job"] for line in (out / "labels.jsonl").read_text().splitlines()] == [0, 2, 1]
+    other = one_line_error(tmp_path, "-o", str(out), "--format", "imagefolder", "--append")
+    assert "it is a jsonl_format:Jsonl export, not imagefolder" in other
+
+
+@pytest.mark.parametrize("source, text", [
+    ("raise RuntimeError('no licence')\n", "--format 'broken_format:Bad': export format module 'broken_format' "
+                                           "(broken_format.py:1) failed to import: RuntimeError: no licence"),
+    ("class Bad:\n    pass\n", "--format 'broken_format:Bad': is class Bad, not a sweep3d DatasetWriter subclass"),
+    ("def Bad():\n    pass\n", "--format 'broken_format:Bad': is a function, not a sweep3d DatasetWriter subclass"),
+    ("Good = 1\n", "module 'broken_format' has no export format named 'Bad'"),
+    ("from sweep3d.plugins import DatasetWriter\nclass Bad(DatasetWriter):\n    def __init__(self):\n"
+     "        raise ValueError('needs a path')\n",
+     "export format 'broken_format:Bad' (broken_format.py:4) failed to start: ValueError: needs a path"),
+    ("from sweep3d.plugins import DatasetWriter\nclass Bad(DatasetWriter):\n    def write(self, batch, folder, "
+     "staging, progress):\n        staging.write('half.txt', b'x')\n        raise KeyError('label')\n",
+     "export format 'broken_format:Bad' (broken_format.py:5) failed in write(): KeyError: 'label'"),
+    ("import sys\nfrom sweep3d.plugins import DatasetWriter\nclass Bad(DatasetWriter):\n    def write(self, *args):\n"
+     "        sys.exit(0)\n", "export format 'broken_format:Bad' (broken_format.py:5) called sys.exit(0)"),
+])
+def test_a_broken_user_writer_is_one_line_naming_it_and_writes_nothing(tmp_path: Path, user_module, source: str,
+                                                                       text: str) -> None:
+    classification_store(tmp_path)
+    user_module(tmp_path, "broken_format", source)
+    code, output = export(tmp_path, "--format", "broken_format:Bad", "-o", str(tmp_path / "out"))
+    lines = output.strip().splitlines()  # a failure inside write() follows the progress bar's last line
+    errors = [line for line in lines if line.startswith("error:")]
+    assert code == 2 and errors == lines[-1:] and len(lines) <= 2 and "Traceback" not in output, output
+    assert text in errors[0]
+    assert not (tmp_path / "out").exists() and not list(tmp_path.glob(".out*"))
