@@ -28,7 +28,8 @@ _LAZY = {"Experiment": "sweep3d.api", "load": "sweep3d.api"}
 #: folders). Named here, at the top, because the store must know every table whichever packages a
 #: command imported (``cache verify`` or ``gc`` that did not know a table would skip its files);
 #: the store imports them the first time it needs every table or meets one it does not know.
-declare_table_modules("sweep3d.stability.stored", "sweep3d.realism.stored", "sweep3d.explain.stored")
+declare_table_modules("sweep3d.followups.stability.stored", "sweep3d.followups.realism.stored",
+                      "sweep3d.followups.explain.stored")
 
 
 def __getattr__(name: str) -> Any:

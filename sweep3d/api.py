@@ -31,9 +31,9 @@ if TYPE_CHECKING:
     import pyarrow as pa
     from rich.console import Console
 
-    from sweep3d.confirm import ConfirmResult
-    from sweep3d.explain import ExplainResult
     from sweep3d.export import ExportResult
+    from sweep3d.followups.confirm import ConfirmResult
+    from sweep3d.followups.explain import ExplainResult
     from sweep3d.runner import PlanStatus, RunResult
     from sweep3d.spec import LoadedSpec
 
@@ -119,7 +119,7 @@ class Experiment:
         renders cached, the results in the ``counterfactuals`` view (:meth:`counterfactuals`)."""
         from rich.console import Console
 
-        from sweep3d.explain import explain_spec, print_explained
+        from sweep3d.followups.explain import explain_spec, print_explained
 
         check_wait(wait)
         console = console or (Console() if progress else None)
@@ -190,7 +190,7 @@ class Experiment:
         the report."""
         from rich.console import Console
 
-        from sweep3d.confirm import confirm
+        from sweep3d.followups.confirm import confirm
         from sweep3d.results import DEFAULT_RENDERS
 
         check_wait(wait)

@@ -32,14 +32,17 @@ UNITS = (
     "sweep3d.results",             # SQL views over a store
     "sweep3d.export",
     "sweep3d.bench",
-    "sweep3d.stability",           # follow-ups of a finished run: which verdicts are fragile,
-    "sweep3d.explain",             # the nearest fix of each failure,
-    "sweep3d.confirm",             # findings confirmed on fresh renders,
-    "sweep3d.report",
-    "sweep3d.realism",             # agreement with photographs and another renderer
+    "sweep3d.followups.stability", # follow-ups of a finished run, side by side: which verdicts are fragile,
+    "sweep3d.followups.explain",   # the nearest fix of each failure,
+    "sweep3d.followups.confirm",   # findings confirmed on fresh renders,
+    "sweep3d.followups.realism",   # agreement with photographs and another renderer
+    "sweep3d.report",              # the HTML report (its panels read the follow-ups' results)
     "sweep3d",                     # the public API: sweep3d.load, Experiment, plugins
     "sweep3d.cli",                 # the command line, over the API (and ``python -m sweep3d``)
 )
+
+#: Packages that only group units (their ``__init__`` a docstring): each member is a unit of its own.
+GROUPS = ("sweep3d.stages", "sweep3d.followups")
 
 #: Imports that point up a layer, made inside a function (so at call time, never at import time),
 #: each to look a plug-in up in a registry its layer cannot own. Adding one needs a reason here.
@@ -123,9 +126,11 @@ def test_every_module_belongs_to_a_unit_of_the_layer_order() -> None:
     assert loose == ["sweep3d.__main__", "sweep3d.api", "sweep3d.plugins"], (
         "a module at the root: put it in the package of its role (the root is the public API)")
     packages = sorted(m for m, p in MODULES.items() if m.count(".") == 1 and p.name == "__init__.py")
-    assert set(packages) <= {*UNITS, "sweep3d.stages"}, "a package that is in no layer: add it to UNITS"
-    unplaced = [m for m in MODULES if m.startswith("sweep3d.stages.") and unit_of(m) == "sweep3d"]
-    assert not unplaced, f"a stage package without a layer: {unplaced}"
+    assert set(packages) <= {*UNITS, *GROUPS}, "a package that is in no layer: add it to UNITS"
+    unplaced = [m for m in MODULES if m.startswith(tuple(g + "." for g in GROUPS)) and unit_of(m) == "sweep3d"]
+    assert not unplaced, f"a stage or follow-up package without a layer: {unplaced}"
+    importing = [g for g in GROUPS if imports(MODULES[g])]
+    assert not importing, f"a group's __init__ imports (each member is reached through its own): {importing}"
 
 
 def test_no_import_points_up_a_layer() -> None:

@@ -292,7 +292,7 @@ def confirm(
     region, matched on every other parameter, never an image of the run; confirmed or not replicated."""
     from sweep3d.api import Experiment
     from sweep3d.cli.confirming import print_confirmation
-    from sweep3d.confirm import confirm as confirm_findings
+    from sweep3d.followups.confirm import confirm as confirm_findings
     from sweep3d.results import DEFAULT_RENDERS
 
     check_wait(wait)

@@ -5,7 +5,7 @@ from __future__ import annotations
 from rich.console import Console
 from rich.markup import escape
 
-from sweep3d.confirm import ConfirmResult
+from sweep3d.followups.confirm import ConfirmResult
 from sweep3d.results import ALPHA, CONFIRMED, pairs_needed, renders_for
 
 

@@ -267,8 +267,8 @@ UNCONFIRMED_MARK = " [unconfirmed]"
 def confirmation_marks(store: Store, experiment: str, regions: list[Region], boundaries: list[dict],
                        rules: list[dict] = ()) -> list[str]:
     """What follows each finding (regions, boundaries, then rules): its verdict on fresh renders, as
-    ``sweep3d confirm`` recorded it (see :mod:`sweep3d.confirm.record`), or `` [unconfirmed]``."""
-    from sweep3d.confirm import boundary_key, mark, read_verdicts, region_key, rule_key
+    ``sweep3d confirm`` recorded it (see :mod:`sweep3d.followups.confirm.record`), or `` [unconfirmed]``."""
+    from sweep3d.followups.confirm import boundary_key, mark, read_verdicts, region_key, rule_key
 
     verdicts = read_verdicts(store, experiment)
     keys = ([region_key(r.column, r.label) for r in regions] + [boundary_key(b) for b in boundaries]

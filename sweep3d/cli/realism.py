@@ -36,7 +36,7 @@ def pick(
 ) -> None:
     """Choose results worth photographing and write the kit: design.csv, renders, edges, align.html."""
     import sweep3d
-    from sweep3d.realism import pick_kit
+    from sweep3d.followups.realism import pick_kit
 
     loaded = sweep3d.load(spec).spec
     require_store(loaded)
@@ -63,7 +63,7 @@ def score(
     store their verdicts; the agreement view and the report's Realism panel read them."""
     import sweep3d
     from sweep3d.core import UserError
-    from sweep3d.realism import score_engine, score_photos
+    from sweep3d.followups.realism import score_engine, score_photos
 
     check_wait(wait)
     loaded = sweep3d.load(spec).spec

@@ -1,4 +1,4 @@
-"""``sweep3d stability``: run the check and print what it found (see :mod:`sweep3d.stability`)."""
+"""``sweep3d stability``: run the check and print what it found (see :mod:`sweep3d.followups.stability`)."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ def run_stability(console: Console, spec_path: Path, sample: int, seed: int | No
     """``seed``: None is the spec's ``[experiment] seed``, as ``explain`` and ``confirm`` take it;
     ``wait``: seconds to wait for another command holding the store's lock."""
     from sweep3d.api import Experiment
-    from sweep3d.stability import check_stability
+    from sweep3d.followups.stability import check_stability
 
     spec = Experiment(spec_path).spec
     seed = spec.experiment.seed if seed is None else seed

@@ -38,7 +38,7 @@ from sweep3d.cache import Store
 from sweep3d.results.quoting import literal
 
 #: The store's table of other sources' verdicts (``tables/verdicts``; its contract is declared
-#: by :mod:`sweep3d.realism.stored`, which writes it).
+#: by :mod:`sweep3d.followups.realism.stored`, which writes it).
 VERDICTS = "verdicts"
 #: Where ``realism score`` keeps each photograph it scored (framed as its render, a small JPEG
 #: named by the SHA-256 of the photograph's file, recorded in its verdicts' ``photo_sha256``).

@@ -3,7 +3,7 @@
 A finding (a failure mode ``occluder = half``, a boundary ``camera_elevation fails below 12``)
 names a *region* of the parameters where the model does worse than outside it. ``confirm``
 draws fresh configurations in **twins**: one inside the region and one outside, with the same
-object, environment and value of every other parameter (see :mod:`sweep3d.confirm.draw`), none
+object, environment and value of every other parameter (see :mod:`sweep3d.followups.confirm.draw`), none
 of them a job the finding was discovered on. Each twin pair ends in one of four cells; only the
 discordant ones carry evidence (the pair's other parameters, shared, cancel out):
 

@@ -31,7 +31,7 @@ from tests.helpers import REPO
 CACHE = REPO / "sweep3d" / "cache"
 #: What the packages above the store are called: the store's code names none of them, in code,
 #: strings, comments or docstrings.
-ABOVE = ("stability", "explain", "confirm", "realism", "verdict")
+ABOVE = ("followups", "stability", "explain", "confirm", "realism", "verdict")
 T0 = datetime(2024, 1, 1)
 
 
@@ -46,7 +46,7 @@ def test_every_declared_table_is_known_without_importing_its_package() -> None:
     """``cache verify`` run first in a process (nothing imported but the cache) sees the follow-ups'
     tables: the package root names their modules, imported when every table is asked for."""
     probe = ("import json, sys\nfrom sweep3d.cache import table_names\n"
-             "before = sorted(m for m in sys.modules if m.startswith(('sweep3d.stability', 'sweep3d.realism')))\n"
+             "before = sorted(m for m in sys.modules if m.startswith('sweep3d.followups.'))\n"
              "print(json.dumps([before, list(table_names())]))")
     out = subprocess.run([sys.executable, "-c", probe], cwd=REPO, capture_output=True, text=True, check=True)
     before, names = json.loads(out.stdout.splitlines()[-1])

@@ -95,7 +95,7 @@ def test_a_bad_photograph_is_one_line_exit_2_and_stores_nothing(folder: Path, ca
 def test_the_renders_as_photographs_pass_the_checks_the_corpus_fails(folder: Path, monkeypatch) -> None:
     """The corpus's photographs fail for what they are: the same folder with the kit's own renders
     (exactly their size, the smallest allowed) passes every check, to the framed photographs."""
-    import sweep3d.realism.score as score
+    import sweep3d.followups.realism.score as score
     from sweep3d.core import UserError
 
     def reached(spec, frames):

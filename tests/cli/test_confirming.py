@@ -8,8 +8,8 @@ import io
 from rich.console import Console
 
 from sweep3d.cli.confirming import print_confirmation
-from sweep3d.confirm.claims import boundary_claim
-from sweep3d.confirm.run import Confirmation, ConfirmResult
+from sweep3d.followups.confirm.claims import boundary_claim
+from sweep3d.followups.confirm.run import Confirmation, ConfirmResult
 from sweep3d.results.confirmation import Pairs, judge, pairs_needed
 from sweep3d.spec.params import Range
 

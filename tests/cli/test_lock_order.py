@@ -24,8 +24,8 @@ from tests.helpers import build_store, one_line, store_tree
 
 #: Each writer, and what it computes once it holds the lock (made to fail loudly if reached).
 WRITERS = [
-    (["stability", "SPEC"], "sweep3d.stability.check._check_model"),
-    (["confirm", "SPEC"], "sweep3d.confirm.run._confirmed"),
+    (["stability", "SPEC"], "sweep3d.followups.stability.check._check_model"),
+    (["confirm", "SPEC"], "sweep3d.followups.confirm.run._confirmed"),
     (["sheet", "SPEC"], "sweep3d.runner.runner.run_stages"),  # the runner runs its stages
     (["cache", "verify", "SPEC", "--repair"], "sweep3d.cache.verify"),
 ]

@@ -220,7 +220,7 @@ class StubShot:
 
 
 def stub_kit_tools(monkeypatch: pytest.MonkeyPatch) -> list[list[StubShot]]:
-    """Stand-ins for ``sweep3d.realism.edges`` and ``.align`` (built elsewhere); returns the
+    """Stand-ins for ``sweep3d.followups.realism.edges`` and ``.align`` (built elsewhere); returns the
     shots each ``write_align_page`` call got."""
     calls: list[list[StubShot]] = []
 
@@ -237,8 +237,8 @@ def stub_kit_tools(monkeypatch: pytest.MonkeyPatch) -> list[list[StubShot]]:
         page.write_text("".join(f"<img src='{s.render}'><img src='{s.edges}'>{s.job_id}\n" for s in shots))
         return page
 
-    monkeypatch.setitem(sys.modules, "sweep3d.realism.edges", types.SimpleNamespace(edge_image=edge_image))
-    monkeypatch.setitem(sys.modules, "sweep3d.realism.align",
+    monkeypatch.setitem(sys.modules, "sweep3d.followups.realism.edges", types.SimpleNamespace(edge_image=edge_image))
+    monkeypatch.setitem(sys.modules, "sweep3d.followups.realism.align",
                         types.SimpleNamespace(AlignShot=StubShot, write_align_page=write_align_page))
     return calls
 

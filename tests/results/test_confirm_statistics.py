@@ -12,8 +12,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 from scipy.stats import hypergeom
 
-from sweep3d.confirm.claims import boundary_claim, value_claim
-from sweep3d.confirm.draw import Parameter, Space, draw_pairs
+from sweep3d.followups.confirm.claims import boundary_claim, value_claim
+from sweep3d.followups.confirm.draw import Parameter, Space, draw_pairs
 from sweep3d.results.confirmation import (
     ALPHA,
     CONFIRMED,
@@ -199,8 +199,8 @@ def test_the_report_panel_marks_each_finding_by_its_recorded_verdict(tmp_path) -
 
     from sweep3d.cache.store import Store
     from sweep3d.cli.output import UNCONFIRMED_MARK, confirmation_marks
-    from sweep3d.confirm.claims import boundary_key, region_key
-    from sweep3d.confirm.record import write_verdicts
+    from sweep3d.followups.confirm.claims import boundary_key, region_key
+    from sweep3d.followups.confirm.record import write_verdicts
     from sweep3d.report.panels import confirmations
     from sweep3d.results.summary import Region
 

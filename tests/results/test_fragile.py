@@ -15,11 +15,11 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from sweep3d.cache.store import Store
+from sweep3d.followups.stability.changes import changed, level_noise, margins, toggled_dither
+from sweep3d.followups.stability.check import SCHEMA, stability_key, stratified_sample
 from sweep3d.results import connect, summarise
 from sweep3d.results.fragile import MARGIN_EDGES, create_margin_macro
 from sweep3d.spec.columns import DROP_FRAGILE_METADATA
-from sweep3d.stability.changes import changed, level_noise, margins, toggled_dither
-from sweep3d.stability.check import SCHEMA, stability_key, stratified_sample
 from sweep3d.stages.infer.evaluators.classification import ranked_rows
 from sweep3d.stages.infer.evaluators.evaluator import Truth
 from sweep3d.stages.infer.labels import LabelMap

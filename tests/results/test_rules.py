@@ -7,8 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-from sweep3d.confirm.claims import rule_claim
-from sweep3d.confirm.draw import Parameter, Space, draw_pairs
+from sweep3d.followups.confirm.claims import rule_claim
+from sweep3d.followups.confirm.draw import Parameter, Space, draw_pairs
 from sweep3d.results.confirmation import CONFIRMED, judge, tally
 from sweep3d.results.rules import find_rules, rule_dict, rules_of
 from sweep3d.results.summary import named_rules, summarise

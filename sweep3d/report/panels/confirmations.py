@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from sweep3d.confirm import boundary_key, read_verdicts, region_key, rule_key
+from sweep3d.followups.confirm import boundary_key, read_verdicts, region_key, rule_key
 from sweep3d.report.figures import p_text, pct
 from sweep3d.report.panel import PanelInputs
 from sweep3d.results import UNCONFIRMED, boundary_phrase, named_rules

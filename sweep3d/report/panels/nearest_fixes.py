@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from sweep3d.explain import change_words, resolution_words, share_words, trust_words
+from sweep3d.followups.explain import change_words, resolution_words, share_words, trust_words
 from sweep3d.report.figures import pct
 from sweep3d.report.panel import PanelInputs
 from sweep3d.results import has_view

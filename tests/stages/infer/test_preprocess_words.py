@@ -11,7 +11,7 @@ import re
 from hypothesis import given
 from hypothesis import strategies as st
 
-from sweep3d.realism.score import model_preprocess
+from sweep3d.followups.realism.score import model_preprocess
 from sweep3d.spec.framing import Framing
 from sweep3d.stages.infer import ModelHandle
 from sweep3d.stages.infer.models import IMAGENET_MEAN, LITE_PREPROCESS, Preprocess, builtin_model

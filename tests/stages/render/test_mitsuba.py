@@ -111,7 +111,7 @@ def test_a_cycles_only_setting_at_its_default_is_no_setting_for_mitsuba(tmp_path
 def test_the_engine_spec_of_realism_score_sets_cycles_only_settings_back(tmp_path: Path) -> None:
     """``realism score --engine mitsuba`` renders a Cycles spec's picked configurations: the spec it
     writes includes the Cycles spec, whose Cycles-only settings it sets back to their defaults."""
-    from sweep3d.realism.score import engine_spec
+    from sweep3d.followups.realism.score import engine_spec
 
     base = load_spec(spec_with(tmp_path, 'dither = 0.5\nworld_sampling = "manual"\nadaptive_threshold = 0.02\n'))
     kit = tmp_path / "kit"

@@ -1,0 +1,208 @@
+"""Fresh twin configurations for a claim: inside and outside its region, matched on the rest.
+
+Each pair shares its object, environment and the value of every parameter but the claim's; the
+claim's parameter is drawn inside the region for one twin and outside it for the other. Every
+value is drawn at random (seeded) from the spec's own space: a range uniformly (a log range
+uniformly in its log, an integer range over its whole numbers), a list uniformly over its
+values, the region's side uniformly over its part. For an object or environment claim the twins
+differ in their scene; a control that applies in one of the two scenes only has its value there.
+
+Pure: the space is plain data (:func:`space_of` reads it from a spec), so tests draw thousands of
+pairs with a synthetic oracle and no rendering.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from dataclasses import dataclass
+from typing import Any, Sequence
+
+import numpy as np
+
+from sweep3d.followups.confirm.claims import Claim, Side
+from sweep3d.spec import Choice, Range
+
+#: A configuration: ``object``, ``environment`` and each applying parameter's column → value.
+Row = dict[str, Any]
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One parameter the spec varies, with the scenes its control applies in."""
+
+    column: str
+    control_id: str
+    param: str
+    space: Choice | Range
+    scenes: frozenset[tuple[str, str]]
+
+
+@dataclass(frozen=True)
+class Space:
+    """What a fresh configuration is drawn from."""
+
+    objects: tuple[str, ...]
+    environments: tuple[str, ...]
+    parameters: tuple[Parameter, ...]
+
+    def parameter(self, column: str) -> Parameter | None:
+        return next((p for p in self.parameters if p.column == column), None)
+
+
+def space_of(loaded: Any) -> Space:
+    """The :class:`Space` of a loaded spec (ranges and lists of its controls; fixed values are the
+    controls' own and are left out)."""
+    objects = tuple(o.name for o in loaded.objects)
+    environments = tuple(e.name for e in loaded.environments)
+    parameters = []
+    for inst in loaded.controls:
+        scenes = frozenset((o, e) for o in objects for e in environments if inst.applies_to(o, e))
+        for param, space in inst.spaces.items():
+            if isinstance(space, (Choice, Range)):
+                parameters.append(Parameter(f"{inst.id}_{param}", inst.id, param, space, scenes))
+    return Space(objects, environments, tuple(parameters))
+
+
+def claim_seed(seed: int, claim: Claim) -> list[int]:
+    """The seed of a claim's draws: the confirmation's seed and the claim's key, so each claim's
+    pairs do not depend on which other claims are confirmed with it."""
+    return [seed, int.from_bytes(hashlib.sha256(claim.key.encode()).digest()[:8], "little")]
+
+
+def draw_pairs(space: Space, claim: Claim, count: int, seed: int) -> list[tuple[Row, Row]]:
+    """``count`` twin pairs (inside, outside) for ``claim``; fewer (none) when no scene has the
+    claim's parameter within its scope."""
+    rng = np.random.default_rng(claim_seed(seed, claim))
+    scenes = _scenes(space, claim)
+    if not scenes:
+        return []
+    target = space.parameter(claim.parameter)
+    pairs = []
+    for _ in range(count):
+        base: Row = {p.column: _value(rng, p.space) for p in space.parameters}
+        if claim.parameter in ("object", "environment"):
+            obj, env = scenes[int(rng.integers(len(scenes)))]
+            a, b = _pick(rng, claim.inside), _pick(rng, claim.outside)
+            inside_scene = (a, env) if claim.parameter == "object" else (obj, a)
+            outside_scene = (b, env) if claim.parameter == "object" else (obj, b)
+            pairs.append((_row(space, inside_scene, base), _row(space, outside_scene, base)))
+            continue
+        scene = scenes[int(rng.integers(len(scenes)))]
+        if claim.box:
+            pairs.append((_row(space, scene, {**base, **_box_inside(rng, space, claim)}),
+                          _row(space, scene, {**base, **_box_outside(rng, space, claim)})))
+            continue
+        inside = _row(space, scene, {**base, claim.parameter: _side_value(rng, target.space, claim.inside, None)})
+        outside = _row(space, scene, {**base, claim.parameter: _side_value(rng, target.space, claim.outside,
+                                                                             claim.inside)})
+        pairs.append((inside, outside))
+    return pairs
+
+
+def _scenes(space: Space, claim: Claim) -> list[tuple[str, str]]:
+    """The scenes a pair may be drawn in: for an object (environment) claim, the environments
+    (objects) it is drawn in, as (object, environment) with the varied one left as given; else the
+    scenes where the claim's parameter applies, within its scope."""
+    scope = dict(claim.scope)
+    if claim.parameter in ("object", "environment"):
+        return [(o, e) for o in space.objects[:1] for e in space.environments
+                if e == scope.get("environment", e)] if claim.parameter == "object" else \
+               [(o, space.environments[0]) for o in space.objects if o == scope.get("object", o)]
+    targets = [space.parameter(column) for column in ([c for c, _ in claim.box] or [claim.parameter])]
+    if None in targets:
+        return []
+    return [(o, e) for o in space.objects for e in space.environments if all((o, e) in t.scenes for t in targets)
+            and o == scope.get("object", o) and e == scope.get("environment", e)]
+
+
+def _box_inside(rng: np.random.Generator, space: Space, claim: Claim) -> Row:
+    """Every box parameter drawn within its side."""
+    return {column: _side_value(rng, space.parameter(column).space, side, None) for column, side in claim.box}
+
+
+def _box_outside(rng: np.random.Generator, space: Space, claim: Claim) -> Row:
+    """The box parameters drawn from their whole spaces until they fall outside the box (uniformly
+    over the rest of their joint space)."""
+    for _ in range(10_000):
+        values = {column: _value(rng, space.parameter(column).space) for column, _ in claim.box}
+        if not all(_within(values[column], side) for column, side in claim.box):
+            return values
+    raise ValueError(f"no configuration outside the box of {claim.text!r}")
+
+
+def _row(space: Space, scene: tuple[str, str], values: Row) -> Row:
+    row: Row = {"object": scene[0], "environment": scene[1]}
+    row.update({p.column: values[p.column] for p in space.parameters if scene in p.scenes})
+    return row
+
+
+def _pick(rng: np.random.Generator, side: Side) -> Any:
+    return side.options[int(rng.integers(len(side.options)))]
+
+
+def _value(rng: np.random.Generator, space: Choice | Range) -> Any:
+    """A value drawn from a whole space."""
+    if isinstance(space, Choice):
+        return space.options[int(rng.integers(len(space.options)))]
+    return _in_interval(rng, space, space.low, space.high)
+
+
+def _side_value(rng: np.random.Generator, space: Choice | Range, side: Side, avoid: Side | None) -> Any:
+    """A value drawn from one side of a claim: its options uniformly, or its intervals uniformly
+    by length (in log for a log range, by whole numbers for an integer one), never a value of
+    ``avoid`` (the inside, for the outside twin)."""
+    if side.options:
+        return _pick(rng, side)
+    assert isinstance(space, Range)
+    pieces = [(lo, hi) for lo, hi in side.intervals if hi >= lo]
+    weights = np.array([_measure(space, lo, hi) for lo, hi in pieces], dtype=np.float64)
+    weights = weights / weights.sum() if weights.sum() > 0 else np.full(len(pieces), 1 / len(pieces))
+    for _ in range(1000):
+        lo, hi = pieces[int(rng.choice(len(pieces), p=weights))]
+        value = _in_interval(rng, space, lo, hi)
+        if avoid is None or not _within(value, avoid):
+            return value
+    return value  # a side that is all but the avoided values (never in practice: the sides are disjoint)
+
+
+def _measure(space: Range, lo: float, hi: float) -> float:
+    if space.integer:
+        return float(max(0, math.floor(hi) - math.ceil(lo) + 1))
+    if space.log:
+        return math.log(hi) - math.log(lo)
+    return hi - lo
+
+
+def _in_interval(rng: np.random.Generator, space: Range, lo: float, hi: float) -> float | int:
+    if space.integer:
+        first, last = math.ceil(lo), math.floor(hi)
+        return int(rng.integers(first, last + 1)) if last >= first else int(round(lo))
+    if space.log:
+        return float(math.exp(rng.uniform(math.log(lo), math.log(hi))))
+    return float(rng.uniform(lo, hi))
+
+
+def _within(value: Any, side: Side) -> bool:
+    """Whether ``value`` lies on ``side``."""
+    if side.options:
+        return any(value == option for option in side.options)
+    return any(lo <= value <= hi for lo, hi in side.intervals)
+
+
+def scene_order(space: Space, rows: Sequence[Row]) -> list[int]:
+    """Each row's index among the jobs a plan of ``rows`` makes: scenes in spec order (objects,
+    then environments), rows of a scene in the order given."""
+    counts: dict[tuple[str, str], int] = {}
+    position = []
+    for row in rows:
+        scene = (row["object"], row["environment"])
+        position.append((scene, counts.get(scene, 0)))
+        counts[scene] = counts.get(scene, 0) + 1
+    offsets, total = {}, 0
+    for o in space.objects:
+        for e in space.environments:
+            if (o, e) in counts:
+                offsets[(o, e)] = total
+                total += counts[(o, e)]
+    return [offsets[scene] + k for scene, k in position]

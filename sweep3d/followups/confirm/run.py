@@ -1,0 +1,229 @@
+"""``sweep3d confirm``: draw, render and judge fresh twins for each significant finding of a run.
+
+The fresh configurations are explicit jobs of a second experiment, ``<name>-confirm``, planned
+through the ``table`` policy (its rows given in memory) and run by :func:`sweep3d.runner.pipeline.run`:
+the same stages, keys and cache as any run, so a second ``confirm`` with the same spec, findings,
+``--renders`` and ``--seed`` draws the same pairs and renders nothing. A candidate pair is kept
+only when both twins are in frame and neither image is one the discovery run made (nor one an
+earlier pair of the confirmation made): a finding is never confirmed on the images it was found
+on. Twins whose prediction is invalid or whose object is hidden are dropped with their pair.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any
+
+from rich.console import Console
+
+from sweep3d.cache import Store
+from sweep3d.core import UserError
+from sweep3d.followups.confirm.claims import Claim, boundary_claim, rule_claim, value_claim
+from sweep3d.followups.confirm.draw import Row, Space, draw_pairs, scene_order, space_of
+from sweep3d.followups.confirm.record import write_verdicts
+from sweep3d.results import (
+    DEFAULT_RENDERS,
+    Summary,
+    Verdict,
+    boundary_phrase,
+    connect,
+    has_view,
+    judge,
+    named_rules,
+    numeric_scales,
+    stored_summary,
+    tally,
+)
+from sweep3d.spec import LoadedSpec, PolicySpec
+from sweep3d.stages.render import LOCAL, Executor
+
+#: Candidate pairs drawn per pair wanted: room for those dropped (out of frame, a discovery image).
+OVERDRAW = 3
+SUFFIX = "-confirm"
+
+
+@dataclass
+class Confirmation:
+    """One finding's claim, its fresh pairs and its verdict."""
+
+    claim: Claim
+    drawn: int  # pairs kept for rendering
+    verdict: Verdict
+
+
+@dataclass
+class ConfirmResult:
+    experiment: str  # the fresh jobs' experiment
+    confirmations: list[Confirmation]
+    jobs: int  # fresh jobs (two per pair; twins that differ only in a post control share a render)
+    rendered: int  # renders this call made
+    cached: int  # renders it found in the store
+    failed: int
+    renders: int = DEFAULT_RENDERS  # fresh renders asked for per finding (--renders)
+
+
+def confirm(loaded: LoadedSpec, renders: int = DEFAULT_RENDERS, seed: int | None = None,
+            console: Console | None = None, claims: list[Claim] | None = None, wait: float = 0.0,
+            executor: Executor = LOCAL) -> ConfirmResult:
+    """Confirm every significant finding of ``loaded``'s last run on ``renders`` fresh renders each
+    (``renders // 2`` twin pairs), drawn with ``seed`` (default: the spec's); ``claims``: these
+    instead of the run's findings. It holds the store's writer lock from its start to its end
+    (``wait``: seconds to wait for another command holding it), its renders' run within it, by
+    the runner on ``executor``."""
+    from sweep3d.results import no_results
+
+    if renders < 2:
+        raise UserError(f"--renders {renders}: a finding needs at least 2 fresh renders (one twin pair)")
+    seed = loaded.experiment.seed if seed is None else seed
+    store = Store(loaded.store, warn=False)  # a file it cannot read refuses the findings, with no warning first
+    if not loaded.store.is_dir():  # before the lock would make the store's folder
+        raise no_results(store, loaded.name, loaded.path)
+    with store.lock(wait):
+        return _confirmed(loaded, store, renders, seed, console, claims, executor)
+
+
+def _confirmed(loaded: LoadedSpec, store: Store, renders: int, seed: int, console: Console | None,
+               claims: list[Claim] | None, executor: Executor = LOCAL) -> ConfirmResult:
+    """:func:`confirm`, holding the store's lock."""
+    from sweep3d.runner import plans_as_run, run
+
+    discovery = plans_as_run(loaded, store)[0]
+    seen = {job.image_key for job in list(discovery.jobs) + list(discovery.out_of_frame)}
+    summary = stored_summary(store, loaded.name, discovery.columns, scales=numeric_scales(loaded.controls))
+    store.require_readable(loaded.path)  # findings of the rows that read would not be the run's
+    if summary.accuracy is None:
+        raise UserError(f"{loaded.path}: no results to confirm yet; run: sweep3d run {loaded.path}")
+    space = space_of(loaded)
+    if claims is None:
+        claims = findings_claims(loaded, store, summary, space)
+    wanted = max(1, renders // 2)
+    candidates = {c.key: draw_pairs(space, c, OVERDRAW * wanted, seed) for c in claims}
+    rows = [row for c in claims for pair in candidates[c.key] for row in pair]
+    chosen: dict[str, list[tuple[Row, Row]]] = {c.key: [] for c in claims}
+    if rows:
+        probe = _variant(loaded, space, rows)
+        jobs = _jobs_by_index(plans_as_run(probe, store)[0])
+        order = iter(scene_order(space, rows))
+        for c in claims:
+            used = set(seen)  # the run's images and this claim's own twins: never another claim's choice,
+            for pair in candidates[c.key]:  # so a claim's pairs do not depend on the claims beside it
+                twins = [jobs.get(next(order)), jobs.get(next(order))]
+                keys = [j.image_key if j is not None and j.in_frame else None for j in twins]
+                if len(chosen[c.key]) < wanted and None not in keys and not (set(keys) & used) and keys[0] != keys[1]:
+                    chosen[c.key].append(pair)
+                    used.update(keys)
+    fresh = [row for c in claims for pair in chosen[c.key] for row in pair]
+    outcomes: dict[int, tuple[bool, bool]] = {}
+    rendered = cached = failed = 0
+    if fresh:
+        variant = _variant(loaded, space, fresh)
+        result = run(variant, console, executor=executor)
+        render = next((o for o in result.outcomes if o.stage == "render"), None)
+        rendered, cached = (render.computed, render.cached) if render else (0, 0)
+        failed = result.failed
+        outcomes = _outcomes(store, variant.name)
+    index = iter(scene_order(space, fresh))
+    per_claim = []
+    for c in claims:
+        twins = [(outcomes.get(next(index)), outcomes.get(next(index))) for _ in chosen[c.key]]
+        per_claim.append(tally((a[1], b[1]) for a, b in twins if a and b and a[0] and b[0]))
+    verdicts = judge(per_claim)
+    confirmations = [Confirmation(c, len(chosen[c.key]), v) for c, v in zip(claims, verdicts)]
+    write_verdicts(store, loaded.name, {
+        x.claim.key: {"text": x.claim.text, "verdict": x.verdict.as_dict(), "renders": renders, "seed": seed,
+                      "drawn": x.drawn, "experiment": loaded.name + SUFFIX} for x in confirmations})
+    return ConfirmResult(loaded.name + SUFFIX, confirmations, len(fresh), rendered, cached, failed, renders)
+
+
+def findings_claims(loaded: LoadedSpec, store: Store, summary: Summary, space: Space) -> list[Claim]:
+    """The claims of the findings ``run`` prints: each significant failure mode (single values,
+    at most three), each significant boundary and each rule over several parameters it names."""
+    claims: list[Claim] = []
+    names = {"object": [o.name for o in loaded.objects], "environment": [e.name for e in loaded.environments]}
+    levels = _levels(store, loaded.name) if summary.regions else {}
+    for region in summary.regions:
+        column, label = region["column"], region["label"]
+        parameter = space.parameter(column)
+        value, width = levels.get((column, label), (None, None))
+        text = f"{column} = {label}"
+        claim = value_claim(column, label, text, None if parameter is None else parameter.space,
+                            names.get(column, ()), value, width)
+        if claim is not None and (parameter is not None or column in names):
+            claims.append(claim)
+    for row in summary.boundaries:
+        parameter = space.parameter(row["parameter"])
+        if parameter is None:
+            continue
+        who = "" if row["scope"] == "all" else f"{row[row['scope']]}: "
+        claim = boundary_claim(row, f"{who}{row['parameter']} {boundary_phrase(row)}", parameter.space)
+        if claim is not None:
+            claims.append(claim)
+    spaces = {p.column: p.space for p in space.parameters}
+    for rule in named_rules(summary):
+        claim = rule_claim(rule, spaces)
+        if claim is not None:
+            claims.append(claim)
+    return claims
+
+
+def _levels(store: Store, experiment: str) -> dict[tuple[str, str], tuple[float | None, float | None]]:
+    """(parameter, label) → (the level's number or bin centre, the bin's width when binned)."""
+    con = connect(store, experiment)
+    try:
+        if not has_view(con, "control_accuracy"):
+            return {}
+        rows = con.execute("SELECT a.parameter, a.label, a.value, CASE WHEN s.binned THEN s.width END "
+                           "FROM control_accuracy a JOIN control_stats s USING (parameter, position) "
+                           "WHERE NOT a.absent").fetchall()
+    finally:
+        con.close()
+    return {(p, label): (value, width) for p, label, value, width in rows}
+
+
+def _variant(loaded: LoadedSpec, space: Space, rows: list[Row]) -> LoadedSpec:
+    """``loaded`` as the experiment ``<name>-confirm`` whose jobs are ``rows`` (first model only)."""
+    from sweep3d.stages.plan import SceneRows, TablePolicy
+
+    scenes: dict[tuple[str, str], SceneRows] = {}
+    columns = {p.column: (p.control_id, p.param) for p in space.parameters}
+    for row in rows:
+        scene = scenes.setdefault((row["object"], row["environment"]), SceneRows(0, {}))
+        for column, value in row.items():
+            if column in columns:
+                scene.values.setdefault(columns[column], []).append(value)
+        scene.count += 1
+    policy = TablePolicy(TablePolicy.Params(file="(drawn by sweep3d confirm)"))
+    policy.rows = scenes
+    experiment = loaded.spec.experiment.model_copy(update={"name": loaded.name + SUFFIX})
+    spec = loaded.spec.model_copy(update={
+        "experiment": experiment, "policy": PolicySpec(type="table", file="(drawn by sweep3d confirm)"),
+        "models": [loaded.models[0]] if len(loaded.models) > 1 else loaded.spec.models})
+    return dataclasses.replace(loaded, spec=spec, policy=policy)
+
+
+def _jobs_by_index(plan: Any) -> dict[int, Any]:
+    jobs = {}
+    for job in plan.jobs:
+        jobs[job.index] = _Placed(job.image_key, True)
+    for job in plan.out_of_frame:
+        jobs[job.index] = _Placed(job.image_key, False)
+    return jobs
+
+
+@dataclass(frozen=True)
+class _Placed:
+    image_key: str
+    in_frame: bool
+
+
+def _outcomes(store: Store, experiment: str) -> dict[int, tuple[bool, bool]]:
+    """Job → (counted, correct) of the fresh jobs' results."""
+    con = connect(store, experiment)
+    try:
+        if not has_view(con, "results"):
+            return {}
+        return {int(job): (bool(counted), bool(correct)) for job, counted, correct in
+                con.execute("SELECT job, counted, coalesce(correct, false) FROM results").fetchall()}
+    finally:
+        con.close()

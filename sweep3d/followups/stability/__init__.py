@@ -1,0 +1,21 @@
+"""The stability check (``sweep3d stability``): which verdicts changes no eye sees can flip.
+
+:mod:`~sweep3d.followups.stability.changes` makes the changes and computes margins from logits;
+:mod:`~sweep3d.followups.stability.check` samples a run's results, re-infers and stores the rows. The views that
+turn the rows into flip rates and the ``fragile`` column are :mod:`sweep3d.results.fragile`.
+"""
+
+from __future__ import annotations
+
+__all__ = ["check_stability"]
+
+from typing import TYPE_CHECKING as _TYPE_CHECKING  # noqa: E402
+
+from sweep3d.core import exports as _exports  # noqa: E402
+
+if _TYPE_CHECKING:
+    from sweep3d.followups.stability.check import check_stability
+
+__getattr__, __dir__ = _exports(__name__, {
+    "check_stability": ("sweep3d.followups.stability.check", "check_stability"),
+})
