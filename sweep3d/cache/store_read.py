@@ -273,7 +273,7 @@ class SegmentReads:
         its newest where the contract says so), and when ``experiment`` has a plan, ``jobs`` (its
         latest plan). Storage only: how
         they join into ``results``, and what counts, is the aggregate stage's
-        (``sweep3d.results.results``), which adds its views on top
+        (``sweep3d.results.base_views``), which adds its views on top
         (``sweep3d.results.connect``).
         Unreadable segments are left out (and quarantined). The views read the segments listed
         now; a compaction keeps the files it replaced for ``SUPERSEDED_GRACE`` seconds, so a

@@ -6,7 +6,7 @@ from __future__ import annotations
 __all__ = [
     "Computed", "ControlValues", "Feed", "Found", "Job", "JobList", "PLUGINS_METADATA", "Plan",
     "PlanColumns", "RunProgress", "SPEC_METADATA", "SceneBlock", "StageOutcome", "StageProgress",
-    "add_outcomes", "explain", "merge_outcomes", "metadata", "needed_passes", "recorded_identity",
+    "add_outcomes", "merge_outcomes", "metadata", "needed_passes", "plugin_changes", "recorded_identity",
     "rows_and_cached", "run_stages", "spec_identity", "stage_counts", "truth_passes", "unique_jobs"
 ]
 
@@ -32,8 +32,8 @@ if _TYPE_CHECKING:
     from sweep3d.driver.plugin_code import (
         PLUGINS_METADATA,
         SPEC_METADATA,
-        explain,
         metadata,
+        plugin_changes,
         recorded_identity,
         spec_identity,
     )
@@ -56,7 +56,7 @@ __getattr__, __dir__ = _exports(__name__, {
     "StageOutcome": ("sweep3d.driver.outcome", "StageOutcome"),
     "StageProgress": ("sweep3d.driver.progress", "StageProgress"),
     "add_outcomes": ("sweep3d.driver.loop", "add_outcomes"),
-    "explain": ("sweep3d.driver.plugin_code", "explain"),
+    "plugin_changes": ("sweep3d.driver.plugin_code", "plugin_changes"),
     "merge_outcomes": ("sweep3d.driver.loop", "merge_outcomes"),
     "metadata": ("sweep3d.driver.plugin_code", "metadata"),
     "needed_passes": ("sweep3d.driver.passes", "needed_passes"),

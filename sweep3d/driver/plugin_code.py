@@ -118,7 +118,7 @@ def redone(plan: Plan, store: Store, plugin: PluginCode) -> int:
     return len(keys - store.keys(table))
 
 
-def explain(plan: Plan, store: Store) -> list[str]:
+def plugin_changes(plan: Plan, store: Store) -> list[str]:
     """One line per changed plug-in: ``"mycontrols:Liquid changed since the last run: 120 to render"``."""
     return [f"{p.name} changed since the last run: {redone(plan, store, p)} to {VERBS[p.stage]}"
             for p in changed_since_last_run(plan.spec, store)]

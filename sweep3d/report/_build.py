@@ -24,7 +24,7 @@ from sweep3d.report.overlays import read_overlays
 from sweep3d.report.page import render_page
 from sweep3d.report.panel import BuiltPanel, Panel, PanelInputs, build_panels
 from sweep3d.report.panels import PANELS
-from sweep3d.report.results import Results, materialise_views
+from sweep3d.report.reading import Results, materialise_views
 from sweep3d.report.thumbs import Thumbnails
 from sweep3d.results import (
     COUNTERFACTUAL_VIEWS,
@@ -97,7 +97,7 @@ def build_context(loaded: LoadedSpec, con: duckdb.DuckDBPyConnection, store: Sto
     Args:
         loaded: the experiment's spec.
         con: a connection from ``results.connect`` for this experiment (the views the report
-            reads often are computed once on it: see :func:`~sweep3d.report.results.materialise_views`).
+            reads often are computed once on it: see :func:`~sweep3d.report.reading.materialise_views`).
         store: the store holding the image blobs.
         panels: the panels to build, in page order (those whose data is absent are left out).
         model: the model ``con`` shows (default: the spec's first).

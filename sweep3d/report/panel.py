@@ -16,7 +16,7 @@ from typing import Any, Callable
 import duckdb
 
 from sweep3d.cache import Store
-from sweep3d.report.results import OUTCOME_NAMES, Parameter, ResultRow, Results
+from sweep3d.report.reading import OUTCOME_NAMES, Parameter, ResultRow, Results
 from sweep3d.report.thumbs import Thumbnails
 from sweep3d.results import Summary
 from sweep3d.spec import LoadedSpec

@@ -28,6 +28,7 @@ from sweep3d.core import exports as _exports  # noqa: E402
 
 if _TYPE_CHECKING:
     from sweep3d.results.agreement import PHOTOS_FOLDER, VERDICT_SCHEMA, VERDICTS, photo_path, verdict_key
+    from sweep3d.results.base_views import plan_protocol, results_roles
     from sweep3d.results.boundaries import (
         VIEW,
         Scale,
@@ -52,7 +53,6 @@ if _TYPE_CHECKING:
     from sweep3d.results.measures import MEASURES
     from sweep3d.results.own_jobs import PlannedStore, results_store
     from sweep3d.results.quoting import identifier, literal
-    from sweep3d.results.results import plan_protocol, results_roles
     from sweep3d.results.sql import arrow, results_connection, select_only
     from sweep3d.results.summary import (
         ControlEffect,
@@ -128,12 +128,12 @@ __getattr__, __dir__ = _exports(__name__, {
     "numeric_scales": ("sweep3d.results.boundaries", "numeric_scales"),
     "photo_path": ("sweep3d.results.agreement", "photo_path"),
     "verdict_key": ("sweep3d.results.agreement", "verdict_key"),
-    "plan_protocol": ("sweep3d.results.results", "plan_protocol"),
+    "plan_protocol": ("sweep3d.results.base_views", "plan_protocol"),
     "region_min_count": ("sweep3d.results.summary", "region_min_count"),
     "register_failure_boundaries": ("sweep3d.results.boundaries", "register_failure_boundaries"),
     "register_views": ("sweep3d.results.views", "register_views"),
     "results_connection": ("sweep3d.results.sql", "results_connection"),
-    "results_roles": ("sweep3d.results.results", "results_roles"),
+    "results_roles": ("sweep3d.results.base_views", "results_roles"),
     "results_store": ("sweep3d.results.own_jobs", "results_store"),
     "select_only": ("sweep3d.results.sql", "select_only"),
     "stored_parameters": ("sweep3d.results.views", "stored_parameters"),

@@ -23,8 +23,8 @@ import duckdb
 
 from sweep3d.cache import Store, atomic_write, safe_filename
 from sweep3d.core import UserError
+from sweep3d.results.base_views import results_roles
 from sweep3d.results.boundaries import Scale, boundary_rows
-from sweep3d.results.results import results_roles
 from sweep3d.results.rules import SUMMARY_LIMIT as RULES_LIMIT
 from sweep3d.results.rules import rule_dict, rules_of
 from sweep3d.results.views import connect, has_view, materialise, register_views

@@ -59,7 +59,7 @@ Views:
     :mod:`sweep3d.results.detection`).
 
 Which of these exist follows the experiment's evaluator (its roles, as the plan recorded them:
-:mod:`sweep3d.results.results`), never the columns another experiment left in a shared
+:mod:`sweep3d.results.base_views`), never the columns another experiment left in a shared
 store.
 ``paired_jobs``, ``paired_values``, ``paired_environments``
     two values of one parameter on the same configurations (environment A against B on the
@@ -104,6 +104,7 @@ import pyarrow.parquet as pq
 from sweep3d.cache import Store, lock_down
 from sweep3d.core import Roles, UserError
 from sweep3d.results.agreement import register_agreement_views, verdict_files
+from sweep3d.results.base_views import plan_min_visible, register_results, results_roles
 from sweep3d.results.compare import COMPARE_MACROS, COMPARE_VIEWS, register_compare_views
 from sweep3d.results.counterfactuals import register_counterfactual_views
 from sweep3d.results.detection import DETECTION_VIEWS, detection_views
@@ -113,7 +114,6 @@ from sweep3d.results.measures import NOT_A_MEASURE
 from sweep3d.results.paired import PAIRED_VIEWS, register_paired_views
 from sweep3d.results.part_views import register_part_views
 from sweep3d.results.quoting import identifier, literal
-from sweep3d.results.results import plan_min_visible, register_results, results_roles
 from sweep3d.results.task_views import TASK_VIEWS, register_task_views
 from sweep3d.spec import JOB_COLUMNS, MODELS_METADATA, PARAMETERS_METADATA
 

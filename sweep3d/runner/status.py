@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from sweep3d.cache import Store
-from sweep3d.driver import Plan, explain, stage_counts, truth_passes
+from sweep3d.driver import Plan, plugin_changes, stage_counts, truth_passes
 from sweep3d.runner.pipeline import plan_spec
 from sweep3d.runner.runner import Runner
 from sweep3d.spec import LoadedSpec
@@ -98,7 +98,7 @@ def plan_status(spec: LoadedSpec, store: Store | None = None) -> PlanStatus:
         per_item = {"render": estimate_render_seconds(spec.render, crop, bool(passes), hidden),
                     "postprocess": POST_SECONDS}.get(stage.split(" ")[0], INFER_SECONDS)
         stages.append(StageStatus(stage, needed, cached, crop, (needed - cached) * per_item))
-    return PlanStatus(spec, plans, models, stages, explain(plans[0], store), list(passes))
+    return PlanStatus(spec, plans, models, stages, plugin_changes(plans[0], store), list(passes))
 
 
 def cache_status(plan: Plan, store: Store, model: ModelHandle, several: bool = False) -> list[tuple[str, int, int]]:

@@ -22,7 +22,7 @@ import pytest
 from sweep3d.cache.store import Store
 from sweep3d.report import build_context, render_html, write_report
 from sweep3d.report.panels import PANELS, explorer
-from sweep3d.report.results import WRONG, Results, materialise_views
+from sweep3d.report.reading import WRONG, Results, materialise_views
 from sweep3d.results import connect
 from sweep3d.results.measures import MEASURES
 from tests.helpers import ARTIFACTS, assert_clean, build_store, cell_centre, load_spec, open_page

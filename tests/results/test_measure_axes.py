@@ -11,7 +11,7 @@ import numpy as np
 import pyarrow as pa
 
 from sweep3d.cache.store import Store
-from sweep3d.report.results import Results, materialise_views
+from sweep3d.report.reading import Results, materialise_views
 from sweep3d.results import connect
 from sweep3d.results.measures import MEASURES
 from sweep3d.results.rules import rules_of

@@ -26,7 +26,7 @@ from sweep3d.core.truth import encode_mask
 from sweep3d.report import build_context, render_html, write_report
 from sweep3d.report.overlays import PRED_COLOR, TRUE_COLOR, Overlay, read_overlays
 from sweep3d.report.panels import CORE_PANELS, PANELS
-from sweep3d.report.results import CORRECT, NOT_EVALUABLE, WRONG, Results, materialise_views
+from sweep3d.report.reading import CORRECT, NOT_EVALUABLE, WRONG, Results, materialise_views
 from sweep3d.report.thumbs import encode_thumbnail
 from sweep3d.results import connect, stored_summary, summarise
 from sweep3d.results.measures import MEASURES

@@ -11,7 +11,7 @@ from typer.testing import CliRunner
 
 from sweep3d.cache.store import Store
 from sweep3d.cli import app
-from sweep3d.results.results import plan_protocol
+from sweep3d.results.base_views import plan_protocol
 from sweep3d.runner.pipeline import plan_spec, write_jobs
 from sweep3d.spec.framing import Framing
 from tests.helpers import TINY_SPEC, load_spec, write_spec

@@ -8,7 +8,7 @@ from typing import Any
 
 from sweep3d.report.figures import ACCURACY_AXIS, COLORS, Figure, layout, make_figure, plot_text, title
 from sweep3d.report.panel import PanelInputs
-from sweep3d.report.results import Parameter
+from sweep3d.report.reading import Parameter
 
 EFFECTS = 16  # bars in the variance chart
 

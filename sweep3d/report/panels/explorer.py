@@ -14,7 +14,7 @@ the results. Where that table would pass :data:`MAX_CELLS` cells (many parameter
 levels), the page carries one table per pair of parameters instead: any two as axes stay exact,
 sliders are switched off (the others are pooled), and the panel says so.
 
-Images are a sample (:meth:`~sweep3d.report.results.Results.sample`) filling what the other
+Images are a sample (:meth:`~sweep3d.report.reading.Results.sample`) filling what the other
 panels leave of the page's image budget: :data:`FIRST_VIEW_IMAGES` per cell of the first view,
 then rounds of one per cell (of the joint table, or of every pair's), failures first. A clicked
 cell shows its sampled images, says how many it holds beyond them, and gives the ``sweep3d
@@ -29,7 +29,7 @@ from typing import Any
 
 from sweep3d.report.figures import ACCURACY_COLORSCALE, layout_json
 from sweep3d.report.panel import PanelInputs
-from sweep3d.report.results import Parameter, ResultRow
+from sweep3d.report.reading import Parameter, ResultRow
 from sweep3d.results import SCENE_COLUMNS
 
 GALLERY_LIMIT = 60  # tiles shown for a clicked cell (wrong ones first)
@@ -51,7 +51,7 @@ def payload(inputs: PanelInputs, max_cells: int = MAX_CELLS) -> dict[str, Any]:
     Keys: ``params`` (name, level labels, binned) of the parameters shown; ``mode`` (``joint``:
     one table over all of them; ``pairs``: one per pair, no sliders); ``cells`` (non-empty cells
     of the joint table); ``tables`` (each: ``params``, indices into ``params``, and the columns
-    of :meth:`~sweep3d.report.results.Results.counts`); ``sample`` (the results whose images the
+    of :meth:`~sweep3d.report.reading.Results.counts`); ``sample`` (the results whose images the
     page embeds, most telling first: ``level`` per parameter, ``outcome``, ``pred`` (index into
     ``preds``, -1 for none), ``why`` (index into ``whys``: a box or mask task's reason for a
     failure, ``wrong box · IoU 0.32``; -1 for none), ``thumb`` (index into the page's thumbnails), ``job``); ``defaults``

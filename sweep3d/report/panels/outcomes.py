@@ -13,7 +13,7 @@ from typing import Any
 
 from sweep3d.report.figures import COLORS, Figure, layout, make_figure, plot_text, title
 from sweep3d.report.panel import PanelInputs
-from sweep3d.report.results import Parameter
+from sweep3d.report.reading import Parameter
 from sweep3d.results import OUTCOMES, has_view
 
 OUTCOME_STYLE = {"correct": ("correct", COLORS["correct"]), "wrong_class": ("wrong class", COLORS["wrong"]),

@@ -399,7 +399,7 @@ def test_a_control_s_passes_do_not_change_which_results_are_counted(tmp_path: Pa
     """Fog brings the depth (and mask) pass, but only the evaluation's own passes switch
     ``evaluable`` to the visibility gate: adding fog keeps the counted results of the spec without it."""
     from sweep3d.driver.passes import visibility_gated
-    from sweep3d.results.results import plan_min_visible
+    from sweep3d.results.base_views import plan_min_visible
     from sweep3d.spec.columns import MIN_VISIBLE_METADATA, MIN_VISIBLE_OFF
 
     fog = TINY_SPEC.replace('type = "blur"\nsigma = [0.0, 1.5]', 'type = "fog"\ndensity = [0.0, 0.3]')
