@@ -4,13 +4,22 @@ worker) loads only the modules whose names are used, and no import cycle runs th
 
 from __future__ import annotations
 
+import ast
 import importlib
 from typing import Any, Callable
 
 
-def exports(package: str, names: dict[str, tuple[str, str]]) -> tuple[Callable[[str], Any], Callable[[], list[str]]]:
-    """``(__getattr__, __dir__)`` for ``package``: ``names`` maps an exported name to (module, name there)."""
+def exports(package: str,
+            names: dict[str, tuple[str, str]] | None = None) -> tuple[Callable[[str], Any], Callable[[], list[str]]]:
+    """``(__getattr__, __dir__)`` for ``package``: ``names`` maps an exported name to (module, name there).
+
+    Without ``names`` the package's one listing is its ``if TYPE_CHECKING:`` block of imports
+    (what a type checker and an editor read too): the names and their modules are read from it
+    (:func:`listed`), and ``__all__`` is set from it."""
     module = importlib.import_module(package)
+    if names is None:
+        names = listed(module.__file__)
+        module.__all__ = list(names)
 
     def __getattr__(name: str) -> Any:
         if name not in names:
@@ -24,3 +33,18 @@ def exports(package: str, names: dict[str, tuple[str, str]]) -> tuple[Callable[[
         return sorted({*names, *vars(module)})
 
     return __getattr__, __dir__
+
+
+def listed(path: str) -> dict[str, tuple[str, str]]:
+    """The names a package ``__init__`` at ``path`` imports under ``if TYPE_CHECKING:`` (or
+    ``_TYPE_CHECKING``), each → (its module, its name there), in the order written."""
+    with open(path, encoding="utf-8") as file:
+        tree = ast.parse(file.read(), path)
+    names: dict[str, tuple[str, str]] = {}
+    for node in tree.body:
+        if isinstance(node, ast.If) and isinstance(node.test, ast.Name) and node.test.id.endswith("TYPE_CHECKING"):
+            for statement in node.body:
+                if isinstance(statement, ast.ImportFrom) and statement.module and not statement.level:
+                    for alias in statement.names:
+                        names[alias.asname or alias.name] = (statement.module, alias.name)
+    return names

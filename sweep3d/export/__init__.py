@@ -11,10 +11,8 @@ Usage::
 
 from __future__ import annotations
 
-__all__ = ["Batch", "DatasetWriter", "EXPORT_FORMATS", "ExportResult", "FORMATS", "Item", "IMAGE_DIGEST", "default_output", "export_dataset", "image_bytes"]
-
-# Lazy exports (PEP 562): a name's module is imported when first used, so importing this package
-# stays light and free of cycles.
+# Lazy exports (PEP 562): the block under TYPE_CHECKING is this package's one listing (its names, their
+# modules, __all__); a name's module is imported when first used.
 from typing import TYPE_CHECKING as _TYPE_CHECKING  # noqa: E402
 
 from sweep3d.core import exports as _exports  # noqa: E402
@@ -24,15 +22,4 @@ if _TYPE_CHECKING:
     from sweep3d.export.formats import Batch, DatasetWriter, Item
     from sweep3d.export.selection import IMAGE_DIGEST, image_bytes
 
-__getattr__, __dir__ = _exports(__name__, {
-    "Batch": ("sweep3d.export.formats", "Batch"),
-    "DatasetWriter": ("sweep3d.export.formats", "DatasetWriter"),
-    "EXPORT_FORMATS": ("sweep3d.export.dataset", "EXPORT_FORMATS"),  # there, the built-ins have registered
-    "ExportResult": ("sweep3d.export.dataset", "ExportResult"),
-    "FORMATS": ("sweep3d.export.dataset", "FORMATS"),
-    "Item": ("sweep3d.export.formats", "Item"),
-    "IMAGE_DIGEST": ("sweep3d.export.selection", "IMAGE_DIGEST"),
-    "default_output": ("sweep3d.export.dataset", "default_output"),
-    "export_dataset": ("sweep3d.export.dataset", "export_dataset"),
-    "image_bytes": ("sweep3d.export.selection", "image_bytes"),
-})
+__getattr__, __dir__ = _exports(__name__)  # names, modules and __all__ from the block above

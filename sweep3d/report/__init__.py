@@ -17,10 +17,8 @@ Usage::
 
 from __future__ import annotations
 
-__all__ = ["build_context", "contact_sheet", "image_keys", "render_html", "write_report"]
-
-# Lazy exports (PEP 562): a name's module is imported when first used, so importing this package
-# stays light and free of cycles.
+# Lazy exports (PEP 562): the block under TYPE_CHECKING is this package's one listing (its names, their
+# modules, __all__); a name's module is imported when first used.
 from typing import TYPE_CHECKING as _TYPE_CHECKING  # noqa: E402
 
 from sweep3d.core import exports as _exports  # noqa: E402
@@ -29,10 +27,4 @@ if _TYPE_CHECKING:
     from sweep3d.report._build import build_context, image_keys, render_html, write_report
     from sweep3d.report.sheet import contact_sheet
 
-__getattr__, __dir__ = _exports(__name__, {
-    "build_context": ("sweep3d.report._build", "build_context"),
-    "contact_sheet": ("sweep3d.report.sheet", "contact_sheet"),
-    "image_keys": ("sweep3d.report._build", "image_keys"),
-    "render_html": ("sweep3d.report._build", "render_html"),
-    "write_report": ("sweep3d.report._build", "write_report"),
-})
+__getattr__, __dir__ = _exports(__name__)  # names, modules and __all__ from the block above

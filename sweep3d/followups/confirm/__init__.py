@@ -9,10 +9,8 @@ for ``run``'s findings and the report.
 
 from __future__ import annotations
 
-__all__ = ["ConfirmResult", "boundary_key", "confirm", "mark", "read_verdicts", "region_key", "rule_key"]
-
-# Lazy exports (PEP 562): a name's module is imported when first used, so importing this package
-# stays light and free of cycles; from outside the package, import through here.
+# Lazy exports (PEP 562): the block under TYPE_CHECKING is this package's one listing (its names, their
+# modules, __all__); a name's module is imported when first used. From outside, import through here.
 from typing import TYPE_CHECKING as _TYPE_CHECKING  # noqa: E402
 
 from sweep3d.core import exports as _exports  # noqa: E402
@@ -22,12 +20,4 @@ if _TYPE_CHECKING:
     from sweep3d.followups.confirm.record import mark, read_verdicts
     from sweep3d.followups.confirm.run import ConfirmResult, confirm
 
-__getattr__, __dir__ = _exports(__name__, {
-    "ConfirmResult": ("sweep3d.followups.confirm.run", "ConfirmResult"),
-    "boundary_key": ("sweep3d.followups.confirm.claims", "boundary_key"),
-    "confirm": ("sweep3d.followups.confirm.run", "confirm"),
-    "mark": ("sweep3d.followups.confirm.record", "mark"),
-    "read_verdicts": ("sweep3d.followups.confirm.record", "read_verdicts"),
-    "region_key": ("sweep3d.followups.confirm.claims", "region_key"),
-    "rule_key": ("sweep3d.followups.confirm.claims", "rule_key"),
-})
+__getattr__, __dir__ = _exports(__name__)  # names, modules and __all__ from the block above

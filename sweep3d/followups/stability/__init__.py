@@ -7,8 +7,6 @@ turn the rows into flip rates and the ``fragile`` column are :mod:`sweep3d.resul
 
 from __future__ import annotations
 
-__all__ = ["check_stability"]
-
 from typing import TYPE_CHECKING as _TYPE_CHECKING  # noqa: E402
 
 from sweep3d.core import exports as _exports  # noqa: E402
@@ -16,6 +14,4 @@ from sweep3d.core import exports as _exports  # noqa: E402
 if _TYPE_CHECKING:
     from sweep3d.followups.stability.check import check_stability
 
-__getattr__, __dir__ = _exports(__name__, {
-    "check_stability": ("sweep3d.followups.stability.check", "check_stability"),
-})
+__getattr__, __dir__ = _exports(__name__)  # names, modules and __all__ from the block above

@@ -2,13 +2,8 @@
 
 from __future__ import annotations
 
-__all__ = [
-    "ImageHandoff", "Made", "POST_CONTROLS", "PostControl", "PostprocessStage", "RenderFrame",
-    "apply_post", "image_template", "make_image", "post_controls", "truth_digests"
-]
-
-# Lazy exports (PEP 562): a name's module is imported when first used, so importing this package
-# stays light and free of cycles.
+# Lazy exports (PEP 562): the block under TYPE_CHECKING is this package's one listing (its names, their
+# modules, __all__); a name's module is imported when first used.
 from typing import TYPE_CHECKING as _TYPE_CHECKING  # noqa: E402
 
 from sweep3d.core import exports as _exports  # noqa: E402
@@ -27,16 +22,4 @@ if _TYPE_CHECKING:
         truth_digests,
     )
 
-__getattr__, __dir__ = _exports(__name__, {
-    "ImageHandoff": ("sweep3d.stages.postprocess.handoff", "ImageHandoff"),
-    "Made": ("sweep3d.stages.postprocess.post_stage", "Made"),
-    "POST_CONTROLS": ("sweep3d.stages.postprocess.controls.post_control", "POST_CONTROLS"),
-    "PostControl": ("sweep3d.stages.postprocess.controls.post_control", "PostControl"),
-    "PostprocessStage": ("sweep3d.stages.postprocess.post_stage", "PostprocessStage"),
-    "RenderFrame": ("sweep3d.stages.postprocess.frame", "RenderFrame"),
-    "apply_post": ("sweep3d.stages.postprocess.apply", "apply_post"),
-    "image_template": ("sweep3d.stages.postprocess.image_keys", "image_template"),
-    "make_image": ("sweep3d.stages.postprocess.post_stage", "make_image"),
-    "post_controls": ("sweep3d.stages.postprocess.post_stage", "post_controls"),
-    "truth_digests": ("sweep3d.stages.postprocess.post_stage", "truth_digests"),
-})
+__getattr__, __dir__ = _exports(__name__)  # names, modules and __all__ from the block above
