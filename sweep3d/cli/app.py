@@ -169,8 +169,11 @@ def compare(spec: Path = SpecArg) -> None:
 @command
 def stability(
     spec: Path = SpecArg,
-    sample: int = typer.Option(64, "--sample", min=1, help="Images to re-infer (per model), spread over margin bins, "
-                                                             "near-ties first."),
+    sample: int = typer.Option(64, "--sample", min=1, help="Images to re-infer first (per model), spread over margin "
+                                                             "bins, near-ties first."),
+    max_sample: int = typer.Option(1024, "--max-sample", min=1,
+                                   help="Most images per model: rounds doubling the sample give the margin bins not "
+                                        "yet decided against the fragile rule more images, up to this many."),
     seed: Optional[int] = typer.Option(None, "--seed", min=0, show_default=False,
                                        help="Seeds the sample's order and the random changes (default: the spec's)."),
     wait: float = typer.Option(0.0, help="Seconds to wait for another command holding the store's lock."),
@@ -180,7 +183,7 @@ def stability(
     from sweep3d.cli.stability import run_stability
 
     check_wait(wait)
-    run_stability(console, spec, sample, seed, wait)
+    run_stability(console, spec, sample, seed, wait, max_sample)
 
 
 @command
