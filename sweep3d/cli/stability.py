@@ -52,7 +52,7 @@ def stop_sentence(found: Any, max_sample: int | None) -> str:
     rounds = found.rounds
     why = {"decided": "every margin bin decided against the rule",
            "exhausted": "no undecided margin bin has images left in the run",
-           "cap": f"the cap (--max-sample {max_sample}) reached with {len(rounds.undecided())} margin bins undecided"}
+           "cap": f"the cap (--max-sample {max_sample}) reached with {_bins(len(rounds.undecided()))} undecided"}
     level = 1 - ALPHA / rounds.looks
     return (f"stopped at {rounds.sample} images after {rounds.rounds} of at most {rounds.looks} rounds: "
             f"{why[rounds.stopped]} (each bin decided by its Wilson interval at {level:.2%} (z = "
@@ -88,6 +88,10 @@ def fragile_count_sentence(found: Any) -> str:
         return f"fragile: {rule}, or flipped in the check: {found.fragile_failures} of {found.failures} failures{decided}"
     least, most = found.fragile_range
     low, high = found.threshold_range
-    return (f"fragile: at least {least} of {found.failures} failures, a lower bound: {least} to {most} as the "
-            f"{len(found.rounds.undecided())} undecided margin bins fall (|margin| < {low:.3g} to < {high:.3g}, or "
+    return (f"fragile: at least {least} of {found.failures} failures, a lower bound: {least} to {most} depending on "
+            f"{_bins(len(found.rounds.undecided()))} still undecided (|margin| < {low:.3g} to < {high:.3g}, or "
             f"flipped in the check); {found.fragile_failures} by the rule as it reads now ({rule})")
+
+
+def _bins(n: int) -> str:
+    return f"{n} margin bin" if n == 1 else f"{n} margin bins"

@@ -9,8 +9,19 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from sweep3d.followups.stability.sequential import (
-    ALPHA, FRAGILE, ROBUST, UNCHECKED, UNDECIDED, allot, decide, needed, planned_looks, round_sizes, run_rounds,
-    threshold_range)
+    ALPHA,
+    FRAGILE,
+    ROBUST,
+    UNCHECKED,
+    UNDECIDED,
+    allot,
+    decide,
+    needed,
+    planned_looks,
+    round_sizes,
+    run_rounds,
+    threshold_range,
+)
 from sweep3d.results.confirmation import wilson
 from sweep3d.results.fragile import FLIP_RATE, MARGIN_EDGES
 
