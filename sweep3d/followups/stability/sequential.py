@@ -23,10 +23,13 @@ bin: the seven bins are not corrected against each other.)
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
-from statistics import NormalDist
 from typing import Callable, Sequence
+
+from sweep3d.results import confirmation
+from sweep3d.results.confirmation import look_z, planned_looks
+
+__all__ = ["look_z", "planned_looks"]  # the looks as confirm counts them, for the check and its tests
 
 #: The error rate of one bin's decision over all of its looks (split evenly over the planned looks).
 ALPHA = 0.05
@@ -38,15 +41,6 @@ MOST_NEEDED = 10_000_000
 FRAGILE, ROBUST, UNDECIDED, UNCHECKED = "fragile", "not fragile", "undecided", "not checked"
 
 
-def planned_looks(first: int, cap: int) -> int:
-    """How many rounds at most: the cumulative sample doubles from ``first`` until it reaches ``cap``."""
-    looks, size = 1, max(1, first)
-    while size < cap:
-        size *= 2
-        looks += 1
-    return looks
-
-
 def round_sizes(first: int, cap: int) -> list[int]:
     """The cumulative sample each round aims at: ``first``, doubling, the last ``cap``."""
     sizes, size = [], max(1, first)
@@ -56,19 +50,9 @@ def round_sizes(first: int, cap: int) -> list[int]:
     return [*sizes, max(cap, first)]
 
 
-def look_z(looks: int, alpha: float = ALPHA) -> float:
-    """The normal quantile of a two-sided interval at ``1 - alpha / looks`` (Bonferroni)."""
-    return NormalDist().inv_cdf(1 - alpha / (2 * max(1, looks)))
-
-
 def wilson(flips: int, n: int, z: float) -> tuple[float, float]:
     """The Wilson score interval of ``flips`` of ``n`` at normal quantile ``z``; (0, 1) without images."""
-    if n <= 0:
-        return 0.0, 1.0
-    p, z2 = flips / n, z * z
-    centre = (p + z2 / (2 * n)) / (1 + z2 / n)
-    half = z * math.sqrt(max(p * (1 - p) / n + z2 / (4 * n * n), 0.0)) / (1 + z2 / n)
-    return min(p, max(0.0, centre - half)), max(p, min(1.0, centre + half))
+    return confirmation.wilson(flips, n, z) if n > 0 else (0.0, 1.0)
 
 
 def decide(flips: int, n: int, looks: int, rate: float | None = None) -> tuple[str, float, float]:
