@@ -71,8 +71,12 @@ def decision_cell(found: Any, index: int) -> str:
         return decision
     row = found.bins[index]
     more = needed(int(row["flips"]), int(row["n"]), found.rounds.looks)
-    return (f"undecided: about {more} images of the bin would decide it at its flip rate" if more
-            else "undecided: its flip rate is too near 1 in 10 for any sample to decide")
+    if not more:
+        return "undecided: its flip rate is too near 1 in 10 for any sample to decide"
+    pools = found.rounds.pools
+    have = pools[index] if index < len(pools) else None
+    short = f"; the run has {have}: a larger sweep would" if have is not None and more > have else ""
+    return f"undecided: about {more} images of the bin would decide it at its flip rate{short}"
 
 
 def fragile_count_sentence(found: Any) -> str:

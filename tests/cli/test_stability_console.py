@@ -24,7 +24,8 @@ def test_undecided_bins_make_the_count_a_lower_bound_with_its_range() -> None:
     assert sentence.startswith("fragile: at least 68 of 335 failures, a lower bound: 68 to 152 depending on 1 margin bin still undecided")
     assert "68 by the rule as it reads now" in sentence
     cell = decision_cell(found, 0)
-    assert cell == f"undecided: about {needed(2, 9, found.rounds.looks)} images of the bin would decide it at its flip rate"
+    assert cell == (f"undecided: about {needed(2, 9, found.rounds.looks)} images of the bin would decide it at its "
+                    "flip rate; the run has 9: a larger sweep would")
     assert decision_cell(found, 1) == "fragile"
     stop = stop_sentence(found, 1024)
     assert stop.startswith("stopped at 64 images after 1 of at most 5 rounds: no undecided margin bin has images left")

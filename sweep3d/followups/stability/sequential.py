@@ -124,6 +124,7 @@ class Rounds:
     counts: list[tuple[int, int]]  # (n, flips) per bin at the last look
     decisions: list[tuple[str, float, float]] = field(default_factory=list)
     stopped: str = ""  # "decided", "cap" or "exhausted"
+    pools: list[int] = field(default_factory=list)  # the run's images per bin (by its stored margin)
 
     @property
     def sample(self) -> int:
@@ -143,7 +144,7 @@ def run_rounds(pools: Sequence[int], first: int, cap: int,
     looks = len(sizes)
     taken = [0] * len(pools)
     open_bins = set(range(len(pools)))
-    state = Rounds(looks, 0, taken, [])
+    state = Rounds(looks, 0, taken, [], pools=list(pools))
     for size in sizes:
         grown = allot(taken, pools, open_bins, size - sum(taken))
         if state.rounds and grown == taken:
