@@ -169,8 +169,11 @@ def compare(spec: Path = SpecArg) -> None:
 @command
 def stability(
     spec: Path = SpecArg,
-    sample: int = typer.Option(64, "--sample", min=1, help="Images to re-infer (per model), spread over margin bins, "
-                                                             "near-ties first."),
+    sample: int = typer.Option(64, "--sample", min=1, help="Images to re-infer first (per model), spread over margin "
+                                                             "bins, near-ties first."),
+    max_sample: int = typer.Option(1024, "--max-sample", min=1,
+                                   help="Most images per model: rounds doubling the sample give the margin bins not "
+                                        "yet decided against the fragile rule more images, up to this many."),
     seed: Optional[int] = typer.Option(None, "--seed", min=0, show_default=False,
                                        help="Seeds the sample's order and the random changes (default: the spec's)."),
     wait: float = typer.Option(0.0, help="Seconds to wait for another command holding the store's lock."),
@@ -180,7 +183,7 @@ def stability(
     from sweep3d.cli.stability import run_stability
 
     check_wait(wait)
-    run_stability(console, spec, sample, seed, wait)
+    run_stability(console, spec, sample, seed, wait, max_sample)
 
 
 @command
@@ -284,12 +287,16 @@ def confirm(
     renders: Optional[int] = typer.Option(None, "--renders", min=2, show_default=False,
                                           help="Fresh renders per finding, half inside its region and half outside "
                                                "(default 64)."),
+    max_renders: int = typer.Option(1024, "--max-renders", min=2,
+                                    help="Most fresh renders per finding: looks doubling the pairs give the findings "
+                                         "neither confirmed nor bounded below 10 points more, up to this many."),
     seed: Optional[int] = typer.Option(None, "--seed", min=0, show_default=False,
                                        help="Seed of the fresh draws (default: the spec's)."),
     wait: float = typer.Option(0.0, help="Seconds to wait for another command holding the store's lock."),
 ) -> None:
     """Test each significant finding of the last run on fresh renders: twins inside and outside its
-    region, matched on every other parameter, never an image of the run; confirmed or not replicated."""
+    region, matched on every other parameter, never an image of the run; confirmed, not replicated (the effect
+    bounded below 10 points) or inconclusive."""
     from sweep3d.api import Experiment
     from sweep3d.cli.confirming import print_confirmation
     from sweep3d.followups.confirm import confirm as confirm_findings
@@ -299,7 +306,8 @@ def confirm(
     experiment = Experiment(spec)
     require_store(experiment.spec)
     signal.signal(signal.SIGTERM, _interrupt)
-    result = confirm_findings(experiment.spec, renders or DEFAULT_RENDERS, seed, console, wait=wait)
+    result = confirm_findings(experiment.spec, renders or DEFAULT_RENDERS, seed, console, wait=wait,
+                              max_renders=max_renders)
     print_confirmation(console, result)
     if result.failed:
         raise typer.Exit(1)

@@ -7,6 +7,7 @@ from rich.markup import escape
 
 from sweep3d.followups.confirm import ConfirmResult
 from sweep3d.results import ALPHA, CONFIRMED, pairs_needed, renders_for
+from sweep3d.results.confirmation import FUTILITY, INCONCLUSIVE, UNCONFIRMED, Verdict
 
 
 def print_confirmation(console: Console, result: ConfirmResult) -> None:
@@ -14,11 +15,12 @@ def print_confirmation(console: Console, result: ConfirmResult) -> None:
         console.print("no significant finding to confirm: the run names no failure mode and no boundary")
         return
     tested = sum(x.verdict.pairs > 0 for x in result.confirmations)
-    needed = pairs_needed(tested)
+    looks = max((x.verdict.looks for x in result.confirmations), default=1)
+    needed = pairs_needed(tested, ALPHA / looks)
     for x in result.confirmations:
         v = x.verdict
         style = "green" if v.status == CONFIRMED else "yellow"
-        if 0 < v.pairs < needed:  # the advice counts the pairs kept of those --renders drew (some are dropped)
+        if v.pairs and v.status == UNCONFIRMED:  # too few; the advice counts the pairs kept of those drawn
             console.print(f"[{style}]{v.status}[/]: {escape(x.claim.text)}: {v.pairs} fresh pairs are too few for any "
                           f"outcome to confirm it among {tested} findings ({needed} at least; --renders "
                           f"{renders_for(needed, v.pairs, result.renders)} or more)", soft_wrap=True)
@@ -28,23 +30,39 @@ def print_confirmation(console: Console, result: ConfirmResult) -> None:
                           "predicted (every configuration of its region is a discovery job, out of frame or "
                           "not evaluable)", soft_wrap=True)
             continue
-        console.print(
-            f"[{style}]{v.status}[/]: {escape(x.claim.text)}: fresh accuracy {v.accuracy_inside:.0%} inside against "
-            f"{v.accuracy_outside:.0%} outside on {v.pairs} twin pairs ({100 * v.difference:+.1f} pts, 95% CI "
-            f"{100 * v.difference_low:+.1f} to {100 * v.difference_high:+.1f}); {v.inside_wrong} pairs wrong only "
-            f"inside, {v.inside_right} only outside; p = {v.p_value:.2g}, Holm p = {v.p_holm:.2g}", soft_wrap=True)
+        console.print(f"[{style}]{v.status}[/]: {escape(confirmation_line(x.claim.text, v))}", soft_wrap=True)
     n = len(result.confirmations)
-    fewest = min((x.verdict.pairs for x in result.confirmations if x.verdict.pairs), default=0)
-    if 0 < fewest < 2 * needed:
-        console.print(f"[dim]few pairs: with {fewest} pairs a finding is confirmed only if nearly all of its "
-                      f"discordant pairs go its way, so 'not replicated' says little; --renders "
-                      f"{renders_for(2 * needed, fewest, result.renders)} "
-                      "or more for power[/]", soft_wrap=True)
     console.print(
         f"fresh jobs: {result.jobs}, renders {result.rendered} made and {result.cached} cached (experiment "
         f"{escape(result.experiment)}); "
         "twins matched on every other parameter, none an image of the run; test: McNemar's exact, one-sided, on the "
-        f"fresh pairs only, Holm-adjusted over the {n} finding{'s' * (n != 1)}: at most a {ALPHA:.0%} chance that "
-        "any finding without a real effect is called confirmed", soft_wrap=True)
+        f"fresh pairs only, Holm-adjusted over the {n} finding{'s' * (n != 1)}; {looks_sentence(looks)}",
+        soft_wrap=True)
     if result.failed:
         console.print(f"[red]{result.failed} fresh jobs failed[/]; their pairs are left out")
+
+
+def confirmation_line(text: str, v: Verdict) -> str:
+    """One finding's verdict with its effect and interval; an inconclusive one says what was not shown."""
+    level = 1 - ALPHA / v.looks
+    line = (f"{text}: fresh accuracy {v.accuracy_inside:.0%} inside against {v.accuracy_outside:.0%} outside on "
+            f"{v.pairs} twin pairs ({100 * v.difference:+.1f} pts, {level:.1%} CI {100 * v.difference_low:+.1f} to "
+            f"{100 * v.difference_high:+.1f}); {v.inside_wrong} pairs wrong only inside, {v.inside_right} only "
+            f"outside; p = {v.p_value:.2g}, Holm p = {v.p_holm:.2g} (look {v.look} of at most {v.looks})")
+    if v.status == INCONCLUSIVE:
+        line += (f": neither confirmed nor bounded: the effect may be {100 * v.futility:.0f} points or more "
+                 "(--max-renders for more pairs)")
+    elif v.status != CONFIRMED and v.difference_low is not None and v.difference_low > -v.futility:
+        line += f": the region costs less than {100 * v.futility:.0f} points of accuracy, beyond doubt"
+    return line
+
+
+def looks_sentence(looks: int) -> str:
+    """The error control over the looks."""
+    if looks <= 1:
+        share = f"at most a {ALPHA:.0%} chance that any finding without a real effect is called confirmed"
+    else:
+        share = (f"{ALPHA:.0%} spent evenly over at most {looks} looks (Bonferroni: {ALPHA / looks:.2%} each), so at "
+                 f"most a {ALPHA:.0%} chance over all looks that any finding without a real effect is called confirmed")
+    return (f"{share}; not replicated only when the effect is bounded below {100 * FUTILITY:.0f} points, "
+            "otherwise inconclusive")

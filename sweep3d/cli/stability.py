@@ -3,41 +3,99 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
 
-def run_stability(console: Console, spec_path: Path, sample: int, seed: int | None, wait: float = 0.0) -> None:
+def run_stability(console: Console, spec_path: Path, sample: int, seed: int | None, wait: float = 0.0,
+                  max_sample: int | None = None) -> None:
     """``seed``: None is the spec's ``[experiment] seed``, as ``explain`` and ``confirm`` take it;
-    ``wait``: seconds to wait for another command holding the store's lock."""
+    ``wait``: seconds to wait for another command holding the store's lock; ``max_sample``: the
+    sequential design's cap (None: one round of ``sample``)."""
     from sweep3d.api import Experiment
     from sweep3d.followups.stability import check_stability
 
     spec = Experiment(spec_path).spec
     seed = spec.experiment.seed if seed is None else seed
-    for found in check_stability(spec, sample, seed, console, wait):
+    for found in check_stability(spec, sample, seed, console, wait, max_sample=max_sample):
         which = f"{escape(found.model)}: " if len(spec.spec.all_models) > 1 else ""
         console.print(f"{which}stability check of {found.sampled} images ({found.cached} cached, {found.computed} "
                       f"inferred now; seed {seed})")
+        if found.rounds is not None:
+            console.print(escape(stop_sentence(found, max_sample)))
         for line in found.skipped:
             console.print(f"  not applied: {escape(line)}")
-        table = Table("|margin|", "images", "flipped", "flip rate", "95% Wilson interval")
-        for row in found.bins:
+        table = Table("|margin|", "images", "flipped", "flip rate", "95% Wilson interval", "decided")
+        for index, row in enumerate(found.bins):
             if not row["n"]:
                 continue
             close = "]" if row["upper"] >= 1.0 else ")"  # the last bin holds 1
             table.add_row(f"[{row['lower']:g}, {row['upper']:g}{close}", str(row["n"]), str(row["flips"]),
-                          f"{row['flip_rate']:.0%}", f"{row['wilson_low']:.0%}–{row['wilson_high']:.0%}")
+                          f"{row['flip_rate']:.0%}", f"{row['wilson_low']:.0%}–{row['wilson_high']:.0%}",
+                          escape(decision_cell(found, index)))
         console.print(table)
         by_change: dict[str, tuple[int, int]] = {}
         for row in found.changes:
             n, flips = by_change.get(row["change"], (0, 0))
             by_change[row["change"]] = (n + row["n"], flips + row["flips"])
         console.print("flips per change: " + ", ".join(f"{c} {f} of {n}" for c, (n, f) in by_change.items()))
-        rule = (f"|margin| < {found.threshold:.3g} (bins where 1 in 10 checked images or more flip, beyond doubt: "
-                "the lower end of the Wilson interval)" if found.threshold
-                else "no margin bin where 1 in 10 checked images or more flip beyond doubt")
-        console.print(f"{which}fragile: {rule}, or flipped in the check: {found.fragile_failures} of "
-                      f"{found.failures} failures")
+        console.print(f"{which}{escape(fragile_count_sentence(found))}")
+
+
+def stop_sentence(found: Any, max_sample: int | None) -> str:
+    """Where the sequential check stopped, and the error control over its looks."""
+    from sweep3d.followups.stability.sequential import ALPHA, look_z
+
+    rounds = found.rounds
+    why = {"decided": "every margin bin decided against the rule",
+           "exhausted": "no undecided margin bin has images left in the run",
+           "cap": f"the cap (--max-sample {max_sample}) reached with {_bins(len(rounds.undecided()))} undecided"}
+    level = 1 - ALPHA / rounds.looks
+    return (f"stopped at {rounds.sample} images after {rounds.rounds} of at most {rounds.looks} rounds: "
+            f"{why[rounds.stopped]} (each bin decided by its Wilson interval at {level:.2%} (z = "
+            f"{look_z(rounds.looks):.2f}): {ALPHA:.0%} split over the {rounds.looks} planned looks, Bonferroni, so "
+            f"a bin is decided the wrong way with probability at most {ALPHA:.0%})")
+
+
+def decision_cell(found: Any, index: int) -> str:
+    """A bin's decision, and for an undecided one the sample that would decide it."""
+    from sweep3d.followups.stability.sequential import UNDECIDED, needed
+
+    if found.rounds is None or index >= len(found.rounds.decisions):
+        return ""
+    decision = found.rounds.decisions[index][0]
+    if decision != UNDECIDED:
+        return decision
+    row = found.bins[index]
+    more = needed(int(row["flips"]), int(row["n"]), found.rounds.looks)
+    if not more:
+        return "undecided: its flip rate is too near 1 in 10 for any sample to decide"
+    pools = found.rounds.pools
+    have = pools[index] if index < len(pools) else None
+    short = f"; the run has {have}: a larger sweep would" if have is not None and more > have else ""
+    return f"undecided: about {more} images of the bin would decide it at its flip rate{short}"
+
+
+def fragile_count_sentence(found: Any) -> str:
+    """The fragile count, with its interval: a lower bound when bins remain undecided."""
+    from sweep3d.results.fragile import FLIP_RATE
+
+    share = f"1 in {round(1 / FLIP_RATE)}"
+    rule = (f"|margin| < {found.threshold:.3g} (bins where {share} checked images or more flip, beyond doubt: "
+            "the lower end of the Wilson interval)" if found.threshold
+            else f"no margin bin where {share} checked images or more flip beyond doubt")
+    if found.rounds is None or not found.rounds.undecided():
+        decided = "" if found.rounds is None else "; every margin bin decided"
+        return f"fragile: {rule}, or flipped in the check: {found.fragile_failures} of {found.failures} failures{decided}"
+    least, most = found.fragile_range
+    low, high = found.threshold_range
+    return (f"fragile: at least {least} of {found.failures} failures, a lower bound: {least} to {most} depending on "
+            f"{_bins(len(found.rounds.undecided()))} still undecided (|margin| < {low:.3g} to < {high:.3g}, or "
+            f"flipped in the check); {found.fragile_failures} by the rule as it reads now ({rule})")
+
+
+def _bins(n: int) -> str:
+    return f"{n} margin bin" if n == 1 else f"{n} margin bins"

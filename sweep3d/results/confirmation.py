@@ -14,24 +14,35 @@ discordant ones carry evidence (the pair's other parameters, shared, cancel out)
 with probability 1/2, so the p-value is P(X >= inside_wrong), X ~ Binomial(discordant, 1/2).
 Fresh data only: nothing the discovery saw enters it, so it is not biased by having picked the
 finding as the worst of many. The p-values of the findings confirmed together are adjusted by
-Holm's method, and a finding is **confirmed** when its adjusted p < :data:`ALPHA`: the chance that
-*any* finding without a real effect is called confirmed in one ``confirm`` is at most 5 % (the
-exact test is conservative: below 5 % in practice). Otherwise it is **not replicated** (which does
-not prove there is no effect: a small one needs more pairs) — unless its pairs were too few for
-any outcome to confirm it (even every discordant pair its way: 2^-n times the findings tested
-together is not below :data:`ALPHA`); it then stays **unconfirmed**, and :func:`pairs_needed` says
-how many would do.
+Holm's method, and a finding is **confirmed** when its adjusted p < the look's share of
+:data:`ALPHA`.
+
+**Sized to decide** (issue 43): ``confirm`` may look at a finding's pairs several times, adding
+fresh pairs between looks (the pairs doubling, :func:`planned_looks`). Error control over the
+repeated looks: Bonferroni alpha spending, :data:`ALPHA` split evenly over the ``K`` planned looks.
+Each look confirms by Holm at ``ALPHA / K`` over the findings still open, so the chance that *any*
+finding without a real effect is called confirmed, over all looks, is at most 5 % (the exact test
+is conservative: below 5 % in practice). A finding is **not replicated** only when its effect is
+bounded: the look's ``1 - ALPHA / K`` interval of the difference lies above ``-FUTILITY`` (the
+region costs less than :data:`FUTILITY`, 10 points, of accuracy; a real effect that large is called
+not replicated with probability at most 2.5 %). Otherwise it stays open for the next look, and
+after the last it is **inconclusive**: neither an effect nor its absence was shown. With too few
+pairs for any outcome to confirm it (even every discordant pair its way: 2^-n times the findings
+tested together is not below the look's alpha) it stays **unconfirmed**, and :func:`pairs_needed`
+says how many would do.
 
 **Effect**: the fresh accuracy inside less outside, ``(inside_right - inside_wrong) / pairs``, with
 Newcombe's hybrid score interval for paired proportions (his method 10, from the two Wilson
-intervals and the pairs' correlation), 95 %, unadjusted.
+intervals and the pairs' correlation), at the look's ``1 - ALPHA / K`` (95 % with one look).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import asdict, dataclass
-from typing import Iterable, Sequence
+from statistics import NormalDist
+from typing import Callable, Iterable, Mapping, Sequence
 
 #: The family-wise error rate of one confirmation (Holm over its findings), one-sided.
 ALPHA = 0.05
@@ -40,8 +51,16 @@ ALPHA = 0.05
 DEFAULT_RENDERS = 64
 Z95 = 1.959963984540054
 
+#: The effect below which a finding does not matter: "not replicated" says the region costs less
+#: than this share of accuracy (10 points), beyond doubt.
+FUTILITY = 0.10
+#: ``--max-renders``'s default: the most fresh renders per finding over all looks.
+DEFAULT_MAX_RENDERS = 256
+
 CONFIRMED = "confirmed"
 NOT_REPLICATED = "not replicated"
+INCONCLUSIVE = "inconclusive"  # the last look came and neither the effect nor its absence was shown
+OPEN = "open"  # an earlier look that decided nothing: more pairs come
 UNCONFIRMED = "unconfirmed"  # not tested (yet), or no fresh pair could be drawn
 
 
@@ -85,25 +104,27 @@ def mcnemar_one_sided(worse: int, better: int) -> float:
     return min(1.0, sum(math.comb(n, k) for k in range(worse, n + 1)) / 2 ** n)
 
 
-def wilson(k: int, n: int) -> tuple[float, float]:
-    """The 95 % Wilson score interval of k/n (n > 0), clamped as the views' ``wilson_low``/``_high``."""
+def wilson(k: int, n: int, z: float = Z95) -> tuple[float, float]:
+    """The Wilson score interval of k/n (n > 0) at normal quantile ``z`` (95 % by default), clamped
+    as the views' ``wilson_low``/``_high``."""
     p = k / n
-    z2 = Z95 * Z95
+    z2 = z * z
     centre = (p + z2 / (2 * n)) / (1 + z2 / n)
-    half = Z95 * math.sqrt(max(p * (1 - p) / n + z2 / (4 * n * n), 0.0)) / (1 + z2 / n)
+    half = z * math.sqrt(max(p * (1 - p) / n + z2 / (4 * n * n), 0.0)) / (1 + z2 / n)
     return min(p, max(0.0, centre - half)), max(p, min(1.0, centre + half))
 
 
-def paired_difference_interval(pairs: Pairs) -> tuple[float, float] | None:
-    """Newcombe's (1998) method-10 95 % interval of accuracy inside less outside on paired data;
-    None without pairs. Always within [-1, 1] and around the difference."""
+def paired_difference_interval(pairs: Pairs, z: float = Z95) -> tuple[float, float] | None:
+    """Newcombe's (1998) method-10 interval (95 % by default; ``z`` its normal quantile) of accuracy
+    inside less outside on paired data; None without pairs. Always within [-1, 1] and around the
+    difference."""
     n = pairs.n
     if n == 0:
         return None
     a, b, c, d = pairs.both_right, pairs.inside_right, pairs.inside_wrong, pairs.both_wrong
     p1, p2 = (a + b) / n, (a + c) / n
-    l1, u1 = wilson(a + b, n)
-    l2, u2 = wilson(a + c, n)
+    l1, u1 = wilson(a + b, n, z)
+    l2, u2 = wilson(a + c, n, z)
     denominator = (a + b) * (c + d) * (a + c) * (b + d)
     phi = (a * d - b * c) / math.sqrt(denominator) if denominator > 0 else 0.0
     difference = p1 - p2
@@ -116,7 +137,7 @@ def paired_difference_interval(pairs: Pairs) -> tuple[float, float] | None:
 class Verdict:
     """What the fresh pairs of one finding say (see the module)."""
 
-    status: str  # CONFIRMED, NOT_REPLICATED or UNCONFIRMED (no pair)
+    status: str  # CONFIRMED, NOT_REPLICATED, INCONCLUSIVE, OPEN (a look before the last) or UNCONFIRMED
     pairs: int
     both_right: int
     inside_wrong: int
@@ -130,6 +151,14 @@ class Verdict:
     p_value: float  # McNemar's exact one-sided
     p_holm: float  # adjusted over the findings confirmed together
     findings: int  # how many were confirmed together (Holm's family)
+    look: int = 1  # the look that gave this verdict
+    looks: int = 1  # the planned looks (alpha split evenly over them)
+    futility: float = FUTILITY  # the effect bounded below for "not replicated"
+
+    @property
+    def decided(self) -> bool:
+        """Whether more pairs would change nothing (confirmed, or its effect bounded)."""
+        return self.status in (CONFIRMED, NOT_REPLICATED)
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -147,6 +176,20 @@ def holm(p_values: Sequence[float]) -> list[float]:
     return out
 
 
+def planned_looks(first: int, cap: int) -> int:
+    """How many looks at most: the pairs double from ``first`` until they reach ``cap``."""
+    looks, size = 1, max(1, first)
+    while size < cap:
+        size *= 2
+        looks += 1
+    return looks
+
+
+def look_z(looks: int, alpha: float = ALPHA) -> float:
+    """The normal quantile of a two-sided interval at ``1 - alpha / looks`` (Bonferroni)."""
+    return NormalDist().inv_cdf(1 - alpha / (2 * max(1, looks)))
+
+
 def pairs_needed(findings: int, alpha: float = ALPHA) -> int:
     """The fewest twin pairs with which a finding tested among ``findings`` can be confirmed at
     all: every pair discordant its way gives p = 2^-n, which Holm multiplies by up to ``findings``."""
@@ -161,8 +204,13 @@ def renders_for(want: int, got: int, renders: int) -> int:
     return wanted + wanted % 2
 
 
-def judge(findings: Sequence[Pairs], alpha: float = ALPHA) -> list[Verdict]:
-    """One :class:`Verdict` per finding's fresh pairs, tested together (Holm over those with pairs)."""
+def judge(findings: Sequence[Pairs], alpha: float = ALPHA, look: int = 1, looks: int = 1,
+          futility: float = FUTILITY) -> list[Verdict]:
+    """One :class:`Verdict` per finding's fresh pairs at look ``look`` of ``looks``, tested together
+    (Holm at ``alpha / looks`` over those with pairs): confirmed, not replicated (the effect bounded
+    below ``futility``), and otherwise open, or inconclusive at the last look."""
+    share = alpha / max(1, looks)
+    z = look_z(looks, alpha)
     tested = [i for i, pairs in enumerate(findings) if pairs.n]
     raw = [mcnemar_one_sided(findings[i].inside_wrong, findings[i].inside_right) for i in tested]
     adjusted = dict(zip(tested, holm(raw)))
@@ -170,12 +218,52 @@ def judge(findings: Sequence[Pairs], alpha: float = ALPHA) -> list[Verdict]:
     for i, pairs in enumerate(findings):
         p = raw[tested.index(i)] if i in adjusted else 1.0
         q = adjusted.get(i, 1.0)
-        interval = paired_difference_interval(pairs)
-        too_few = pairs.n < pairs_needed(len(tested), alpha)  # no outcome of so few pairs could confirm it
-        status = UNCONFIRMED if not pairs.n or too_few else CONFIRMED if q < alpha else NOT_REPLICATED
+        interval = paired_difference_interval(pairs, z)
+        too_few = pairs.n < pairs_needed(len(tested), share)  # no outcome of so few pairs could confirm it
+        if not pairs.n:
+            status = UNCONFIRMED
+        elif q < share:
+            status = CONFIRMED
+        elif interval is not None and interval[0] > -futility:
+            status = NOT_REPLICATED
+        elif too_few and look >= looks:
+            status = UNCONFIRMED
+        else:
+            status = INCONCLUSIVE if look >= looks else OPEN
         inside, outside = pairs.accuracy_inside, pairs.accuracy_outside
         verdicts.append(Verdict(
             status, pairs.n, pairs.both_right, pairs.inside_wrong, pairs.inside_right, pairs.both_wrong, inside,
             outside, None if inside is None or outside is None else inside - outside,
-            None if interval is None else interval[0], None if interval is None else interval[1], p, q, len(tested)))
+            None if interval is None else interval[0], None if interval is None else interval[1], p, q, len(tested),
+            look, looks, futility))
     return verdicts
+
+
+def sequential(findings: int, first: int, cap: int, observe: Callable[[Mapping[int, int]], Mapping[int, Pairs]],
+               alpha: float = ALPHA, futility: float = FUTILITY) -> list[Verdict]:
+    """Judge ``findings`` in looks: ``observe({finding: pairs wanted})`` gives each open finding's
+    fresh pairs so far (cumulative; fewer when no more can be drawn), the pairs doubling from
+    ``first`` to ``cap``. A finding leaves once decided (confirmed, or its effect bounded), or when
+    no more pairs come; the rest are inconclusive after the last look."""
+    sizes, size = [], max(1, first)
+    while size < max(cap, first):
+        sizes.append(size)
+        size *= 2
+    sizes.append(max(cap, first))
+    looks = len(sizes)
+    final: dict[int, Verdict] = {}
+    seen: dict[int, int] = {}
+    for look, size in enumerate(sizes, 1):
+        open_ = [i for i in range(findings) if i not in final]
+        if not open_:
+            break
+        got = observe({i: size for i in open_})
+        verdicts = judge([got[i] for i in open_], alpha, look, looks, futility)
+        for i, verdict in zip(open_, verdicts):
+            stalled = look > 1 and verdict.pairs <= seen.get(i, 0)  # no more pairs could be drawn
+            seen[i] = verdict.pairs
+            if verdict.status == OPEN and stalled:
+                verdict = dataclasses.replace(verdict, status=INCONCLUSIVE)
+            if verdict.status != OPEN:
+                final[i] = verdict
+    return [final[i] for i in range(findings)]

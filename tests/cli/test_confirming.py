@@ -27,6 +27,4 @@ def test_confirm_advises_more_renders_than_were_given_when_pairs_were_dropped() 
     print_confirmation(Console(file=out, width=400), result)
     advice = [line for line in out.getvalue().splitlines() if "too few" in line]
     assert len(advice) == 5 and all("(7 at least; --renders 20 or more)" in line for line in advice), advice
-    few = [line for line in out.getvalue().splitlines() if line.startswith("few pairs")]
-    assert few == ["few pairs: with 6 pairs a finding is confirmed only if nearly all of its discordant pairs go its "
-                   "way, so 'not replicated' says little; --renders 38 or more for power"]  # 14 pairs at 6 per 16
+    assert not [line for line in out.getvalue().splitlines() if line.startswith("few pairs")]

@@ -18,6 +18,7 @@ from sweep3d.results.confirmation import (
     ALPHA,
     CONFIRMED,
     DEFAULT_RENDERS,
+    INCONCLUSIVE,
     NOT_REPLICATED,
     UNCONFIRMED,
     Pairs,
@@ -186,7 +187,7 @@ def test_a_chance_region_significant_in_a_small_discovery_set_is_not_replicated_
     for seed, label in enumerate(planted):
         claim = value_claim("occluder_coverage", label, "", Choice(options))
         verdict = verdict_of(claim, null, 1000 + seed)
-        assert verdict.status in (CONFIRMED, NOT_REPLICATED)
+        assert verdict.status in (CONFIRMED, NOT_REPLICATED, INCONCLUSIVE)  # one look of 32 pairs bounds little
         confirmed += verdict.status == CONFIRMED
     # exact McNemar is conservative: about 3 % expected; ALPHA + 2.5 standard errors of 300 draws
     assert confirmed / len(planted) <= ALPHA + 2.5 * (ALPHA * (1 - ALPHA) / len(planted)) ** 0.5

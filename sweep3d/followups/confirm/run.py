@@ -29,12 +29,12 @@ from sweep3d.results import (
     boundary_phrase,
     connect,
     has_view,
-    judge,
     named_rules,
     numeric_scales,
     stored_summary,
     tally,
 )
+from sweep3d.results.confirmation import sequential
 from sweep3d.spec import LoadedSpec, PolicySpec
 from sweep3d.stages.render import LOCAL, Executor
 
@@ -65,10 +65,12 @@ class ConfirmResult:
 
 def confirm(loaded: LoadedSpec, renders: int = DEFAULT_RENDERS, seed: int | None = None,
             console: Console | None = None, claims: list[Claim] | None = None, wait: float = 0.0,
-            executor: Executor = LOCAL) -> ConfirmResult:
+            executor: Executor = LOCAL, max_renders: int | None = None) -> ConfirmResult:
     """Confirm every significant finding of ``loaded``'s last run on ``renders`` fresh renders each
     (``renders // 2`` twin pairs), drawn with ``seed`` (default: the spec's); ``claims``: these
-    instead of the run's findings. It holds the store's writer lock from its start to its end
+    instead of the run's findings. With ``max_renders`` above ``renders``, the findings neither
+    confirmed nor bounded get more pairs in looks, doubling up to ``max_renders // 2``
+    (:func:`sweep3d.results.confirmation.sequential`; None: one look). It holds the store's writer lock from its start to its end
     (``wait``: seconds to wait for another command holding it), its renders' run within it, by
     the runner on ``executor``."""
     from sweep3d.results import no_results
@@ -79,12 +81,13 @@ def confirm(loaded: LoadedSpec, renders: int = DEFAULT_RENDERS, seed: int | None
     store = Store(loaded.store, warn=False)  # a file it cannot read refuses the findings, with no warning first
     if not loaded.store.is_dir():  # before the lock would make the store's folder
         raise no_results(store, loaded.name, loaded.path)
+    cap = renders if max_renders is None else max(renders, max_renders)
     with store.lock(wait):
-        return _confirmed(loaded, store, renders, seed, console, claims, executor)
+        return _confirmed(loaded, store, renders, seed, console, claims, executor, cap)
 
 
 def _confirmed(loaded: LoadedSpec, store: Store, renders: int, seed: int, console: Console | None,
-               claims: list[Claim] | None, executor: Executor = LOCAL) -> ConfirmResult:
+               claims: list[Claim] | None, executor: Executor = LOCAL, cap: int | None = None) -> ConfirmResult:
     """:func:`confirm`, holding the store's lock."""
     from sweep3d.runner import plans_as_run, run
 
@@ -97,7 +100,8 @@ def _confirmed(loaded: LoadedSpec, store: Store, renders: int, seed: int, consol
     space = space_of(loaded)
     if claims is None:
         claims = findings_claims(loaded, store, summary, space)
-    wanted = max(1, renders // 2)
+    first = max(1, renders // 2)
+    wanted = max(first, (renders if cap is None else cap) // 2)
     candidates = {c.key: draw_pairs(space, c, OVERDRAW * wanted, seed) for c in claims}
     rows = [row for c in claims for pair in candidates[c.key] for row in pair]
     chosen: dict[str, list[tuple[Row, Row]]] = {c.key: [] for c in claims}
@@ -113,27 +117,40 @@ def _confirmed(loaded: LoadedSpec, store: Store, renders: int, seed: int, consol
                 if len(chosen[c.key]) < wanted and None not in keys and not (set(keys) & used) and keys[0] != keys[1]:
                     chosen[c.key].append(pair)
                     used.update(keys)
-    fresh = [row for c in claims for pair in chosen[c.key] for row in pair]
-    outcomes: dict[int, tuple[bool, bool]] = {}
-    rendered = cached = failed = 0
-    if fresh:
-        variant = _variant(loaded, space, fresh)
-        result = run(variant, console, executor=executor)
-        render = next((o for o in result.outcomes if o.stage == "render"), None)
-        rendered, cached = (render.computed, render.cached) if render else (0, 0)
-        failed = result.failed
-        outcomes = _outcomes(store, variant.name)
-    index = iter(scene_order(space, fresh))
-    per_claim = []
-    for c in claims:
-        twins = [(outcomes.get(next(index)), outcomes.get(next(index))) for _ in chosen[c.key]]
-        per_claim.append(tally((a[1], b[1]) for a, b in twins if a and b and a[0] and b[0]))
-    verdicts = judge(per_claim)
-    confirmations = [Confirmation(c, len(chosen[c.key]), v) for c, v in zip(claims, verdicts)]
+    taken = {c.key: 0 for c in claims}
+    totals = {"rendered": 0, "cached": 0, "failed": 0, "jobs": 0}
+
+    def observe(asked: Any) -> dict[int, Any]:
+        """Render and judge the first ``asked[i]`` pairs of each open claim (the others keep theirs)."""
+        for i, n in asked.items():
+            taken[claims[i].key] = min(n, len(chosen[claims[i].key]))
+        fresh = [row for c in claims for pair in chosen[c.key][:taken[c.key]] for row in pair]
+        outcomes: dict[int, tuple[bool, bool]] = {}
+        if fresh:
+            variant = _variant(loaded, space, fresh)
+            result = run(variant, console, executor=executor)
+            render = next((o for o in result.outcomes if o.stage == "render"), None)
+            before = totals["rendered"]  # made by an earlier look of this call: not found in the store
+            totals["rendered"] += render.computed if render else 0
+            totals["cached"] = max(0, (render.cached if render else 0) - before)
+            totals["failed"] = result.failed
+            totals["jobs"] = len(fresh)
+            outcomes = _outcomes(store, variant.name)
+        index = iter(scene_order(space, fresh))
+        out = {}
+        for i, c in enumerate(claims):
+            twins = [(outcomes.get(next(index)), outcomes.get(next(index))) for _ in chosen[c.key][:taken[c.key]]]
+            out[i] = tally((a[1], b[1]) for a, b in twins if a and b and a[0] and b[0])
+        return out
+
+    verdicts = sequential(len(claims), first, wanted, observe)
+    confirmations = [Confirmation(c, taken[c.key], v) for c, v in zip(claims, verdicts)]
+    rendered, cached, failed = totals["rendered"], totals["cached"], totals["failed"]
+    fresh_jobs = totals["jobs"]
     write_verdicts(store, loaded.name, {
         x.claim.key: {"text": x.claim.text, "verdict": x.verdict.as_dict(), "renders": renders, "seed": seed,
                       "drawn": x.drawn, "experiment": loaded.name + SUFFIX} for x in confirmations})
-    return ConfirmResult(loaded.name + SUFFIX, confirmations, len(fresh), rendered, cached, failed, renders)
+    return ConfirmResult(loaded.name + SUFFIX, confirmations, fresh_jobs, rendered, cached, failed, renders)
 
 
 def findings_claims(loaded: LoadedSpec, store: Store, summary: Summary, space: Space) -> list[Claim]:

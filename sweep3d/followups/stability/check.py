@@ -32,6 +32,7 @@ import pyarrow as pa
 from sweep3d.cache import Store, digest, utc_now
 from sweep3d.core import UserError
 from sweep3d.followups.stability.changes import CHANGES, RANDOM_CHANGES, changed, margins
+from sweep3d.followups.stability.sequential import Rounds, allot, run_rounds, threshold_range
 from sweep3d.followups.stability.stored import SCHEMA  # the table's columns, declared once
 from sweep3d.spec import LoadedSpec
 
@@ -54,6 +55,9 @@ class Checked:
     threshold: float
     failures: int
     fragile_failures: int
+    rounds: Rounds | None = None  # the sequential design's looks and decisions
+    fragile_range: tuple[int, int] = (0, 0)  # fragile failures as the undecided bins may yet fall
+    threshold_range: tuple[float, float] = (0.0, 0.0)  # the threshold likewise
 
 
 def stability_key(pred_key: str, change: str, seed: int) -> str:
@@ -64,9 +68,9 @@ def stability_key(pred_key: str, change: str, seed: int) -> str:
     return digest(value)
 
 
-def stratified_sample(rows: list[tuple[str, float]], n: int, seed: int) -> list[str]:
-    """``n`` prediction keys of ``rows`` ((pred_key, margin), distinct keys): bins of ``|margin|``
-    take turns, lowest first, each giving its next key in an order seeded by ``seed``."""
+def ordered_bins(rows: list[tuple[str, float]], seed: int) -> list[list[str]]:
+    """The prediction keys of ``rows`` ((pred_key, margin), distinct keys) per bin of ``|margin|``,
+    each bin in an order seeded by ``seed``."""
     from sweep3d.results import MARGIN_EDGES
 
     bins: list[list[str]] = [[] for _ in MARGIN_EDGES]
@@ -75,19 +79,33 @@ def stratified_sample(rows: list[tuple[str, float]], n: int, seed: int) -> list[
         bins[index].append(key)
     for keys in bins:
         keys.sort(key=lambda k: hashlib.sha256(f"{seed}\0{k}".encode()).digest())
+    return bins
+
+
+def interleaved(bins: list[list[str]], start: list[int], stop: list[int]) -> list[str]:
+    """The keys ``bins[b][start[b]:stop[b]]`` of every bin, the bins taking turns, lowest first."""
     out: list[str] = []
     depth = 0
-    while len(out) < n and any(depth < len(keys) for keys in bins):
-        for keys in bins:
-            if depth < len(keys) and len(out) < n:
-                out.append(keys[depth])
+    while any(start[b] + depth < stop[b] for b in range(len(bins))):
+        out += [bins[b][start[b] + depth] for b in range(len(bins)) if start[b] + depth < stop[b]]
         depth += 1
     return out
 
 
+def stratified_sample(rows: list[tuple[str, float]], n: int, seed: int) -> list[str]:
+    """``n`` prediction keys of ``rows`` ((pred_key, margin), distinct keys): bins of ``|margin|``
+    take turns, lowest first, each giving its next key in an order seeded by ``seed``."""
+    bins = ordered_bins(rows, seed)
+    return interleaved(bins, [0] * len(bins), allot([0] * len(bins), [len(b) for b in bins], set(range(len(bins))), n))
+
+
 def check_stability(spec: LoadedSpec, sample: int = DEFAULT_SAMPLE, seed: int = 0, console: Any = None,
-                    wait: float = 0.0, executor: Any = None) -> list[Checked]:
+                    wait: float = 0.0, executor: Any = None, max_sample: int | None = None) -> list[Checked]:
     """Run the stability check of ``spec``'s results (every model of it); returns what each found.
+
+    ``sample`` images first; with ``max_sample`` above it, rounds follow that give the margin bins
+    still undecided against the fragile rule more images, the sample doubling up to ``max_sample``
+    (:mod:`~sweep3d.followups.stability.sequential`). None: one round of ``sample``.
 
     It holds the store's writer lock from before it computes anything (``wait``: seconds to wait
     for another command holding it), and appends its rows every few seconds: a kill loses one
@@ -108,40 +126,56 @@ def check_stability(spec: LoadedSpec, sample: int = DEFAULT_SAMPLE, seed: int = 
     store = Store(spec.store)
     if not spec.store.is_dir():  # before the lock would make the store's folder
         raise no_results(store, spec.name, spec.path)
+    cap = sample if max_sample is None else max(sample, max_sample)
     with running(spec, executor=executor or LOCAL, wait=wait, console=console, store=store, leftovers=False) as runner:
-        return [_check_model(spec, runner, settings, sample, seed) for settings in spec.spec.all_models]
+        return [_check_model(spec, runner, settings, sample, seed, cap) for settings in spec.spec.all_models]
 
 
-def _check_model(spec: LoadedSpec, runner: Any, settings: Any, sample: int, seed: int) -> Checked:
-    """The check of one model of ``spec`` (``settings``), the runner holding the store's lock."""
+def _check_model(spec: LoadedSpec, runner: Any, settings: Any, sample: int, seed: int, cap: int) -> Checked:
+    """The check of one model of ``spec`` (``settings``), the runner holding the store's lock: rounds
+    of images until every margin bin is decided or ``cap`` images are checked."""
     from sweep3d.results import results_store
     from sweep3d.runner import plan_spec
     from sweep3d.stages.infer import ModelHandle
 
     handle = ModelHandle.resolve(spec, settings)
+    model = settings.label if len(spec.spec.all_models) > 1 else None
     with results_store(spec) as reading:
-        rows = _sampled_results(reading, spec, settings.label if len(spec.spec.all_models) > 1 else None)
-    keys = stratified_sample(rows, sample, seed)
+        rows = _sampled_results(reading, spec, model)
+    bins = ordered_bins(rows, seed)
     plan = plan_spec(spec, handle)
-    sampled = set(keys)
-    jobs = {job.pred_key: job for job in plan.jobs if job.pred_key in sampled}
-    if len(jobs) < len(sampled):
-        raise UserError(f"{spec.path}: {len(sampled) - len(jobs)} sampled results are not in the spec's plan "
-                        "any more (the spec changed since the run): `sweep3d run` it, then check again")
+    by_key = {job.pred_key: job for job in plan.jobs}
     todo_changes = _applicable(handle, plan)
-    wanted = {(key, change): stability_key(key, change, seed) for key in keys for change in todo_changes}
+    wanted: dict[tuple[str, str], str] = {}
     stage = StabilityStage(handle, todo_changes, seed, wanted, runner.post, settings.batch_size, spec.path)
-    have = runner.store.key_set("stability")
-    todo = [jobs[k] for k in keys if stage.todo(jobs[k], have)]
-    checked = dataclasses.replace(plan, jobs=[jobs[k] for k in keys], out_of_frame=[])  # in sample order
-    # one stage after the other: the check infers in this thread, as it always did (torch's
-    # answers depend on its threads), and a stop keeps every batch recorded before it
-    runner.run(checked, stages=("postprocess",), extra=(stage,), overlap=False)
-    left = [job for job in todo if stage.key(job) not in stage.done]
-    if left:  # its input is not stored: nothing to re-infer
-        stage.missing(left[0])
+    taken = [0] * len(bins)
+    cached = 0
+
+    def observe(now: list[int]) -> list[tuple[int, int]]:
+        nonlocal taken, cached
+        keys = interleaved(bins, taken, now)
+        missing = [k for k in keys if k not in by_key]
+        if missing:
+            raise UserError(f"{spec.path}: {len(missing)} sampled results are not in the spec's plan any more (the "
+                            "spec changed since the run): `sweep3d run` it, then check again")
+        wanted.update({(key, change): stability_key(key, change, seed) for key in keys for change in todo_changes})
+        have = runner.store.key_set("stability")
+        jobs = [by_key[k] for k in keys]
+        todo = [job for job in jobs if stage.todo(job, have)]
+        cached += len(jobs) - len(todo)
+        # one stage after the other: the check infers in this thread, as it always did (torch's
+        # answers depend on its threads), and a stop keeps every batch recorded before it
+        runner.run(dataclasses.replace(plan, jobs=jobs, out_of_frame=[]), stages=("postprocess",), extra=(stage,),
+                   overlap=False)  # in sample order
+        left = [job for job in todo if stage.key(job) not in stage.done]
+        if left:  # its input is not stored: nothing to re-infer
+            stage.missing(left[0])
+        taken = list(now)
+        return [(int(row["n"]), int(row["flips"])) for row in _read(spec, settings.label)[0]]
+
+    rounds = run_rounds([len(b) for b in bins], sample, cap, observe)
     skipped = [f"{c}: {why}" for c, why in _inapplicable(handle, plan).items()]
-    return _found(spec, settings.label, len(keys), len(stage.done), len(keys) - len(todo), skipped)
+    return _found(spec, settings.label, rounds, len(stage.done), cached, skipped)
 
 
 def _sampled_results(store: Store, spec: LoadedSpec, model: str | None) -> list[tuple[str, float]]:
@@ -307,14 +341,26 @@ def _rows(jobs: list, ids: list, base: np.ndarray, answers: dict[str, np.ndarray
     return out
 
 
-def _found(spec: LoadedSpec, model: str, sampled: int, computed: int, cached: int, skipped: list[str]) -> Checked:
-    """What the views say of ``model`` once its rows are stored."""
-    from sweep3d.results import results_store
+def _found(spec: LoadedSpec, model: str, rounds: Rounds, computed: int, cached: int, skipped: list[str]) -> Checked:
+    """What the views say of ``model`` once its rows are stored, with the fragile count as the
+    undecided bins may yet fall."""
+    from sweep3d.results import MARGIN_EDGES
+
+    decisions = rounds.decisions
+    low, high = threshold_range(MARGIN_EDGES, decisions) if decisions else (0.0, 0.0)
+    bins, changes, threshold, failures, fragile, (at_least, at_most) = _read(spec, model, (low, high))
+    return Checked(model, rounds.sample, computed, cached, skipped, bins, changes, threshold, failures, fragile,
+                   rounds=rounds, fragile_range=(at_least, at_most), threshold_range=(low, high))
+
+
+def _read(spec: LoadedSpec, model: str, thresholds: tuple[float, ...] = ()) -> tuple:
+    """``model``'s stability_bins rows, stability_changes rows, threshold, failures, fragile
+    failures, and the fragile failures under each of ``thresholds`` (``|margin|`` below it, or
+    flipped in the check)."""
+    from sweep3d.results import connect, literal, results_store
 
     several = len(spec.spec.all_models) > 1
     with results_store(spec) as reading:
-        from sweep3d.results import connect, literal
-
         con = connect(reading, spec.name, model=model if several else None)
         try:
             have = {row[0] for row in con.execute("DESCRIBE results").fetchall()}
@@ -326,10 +372,15 @@ def _found(spec: LoadedSpec, model: str, sampled: int, computed: int, cached: in
             counted = "coalesce(counted_with_fragile, counted)" if "counted_with_fragile" in have else "counted"
             failures, fragile = con.execute(f"SELECT count(*) FILTER (WHERE {counted} AND NOT correct), count(*) "
                                             f"FILTER (WHERE {counted} AND NOT correct AND fragile) FROM results").fetchone()
+            under = [con.execute(
+                f"SELECT count(*) FROM results r LEFT JOIN (SELECT pred_key, flipped FROM stability_images WHERE {where}) "
+                f"i USING (pred_key) WHERE {counted} AND NOT r.correct AND r.margin IS NOT NULL "
+                f"AND (abs(r.margin) < {float(t)!r}::DOUBLE OR coalesce(i.flipped, false))").fetchone()[0]
+                for t in thresholds]
         finally:
             con.close()
-    return Checked(model, sampled, computed, cached, skipped, bins, changes,
-                   float(threshold[0]) if threshold else 0.0, int(failures), int(fragile or 0))
+    return (bins, changes, float(threshold[0]) if threshold else 0.0, int(failures), int(fragile or 0),
+            tuple(int(u) for u in under))
 
 
 def _dicts(con: Any, sql: str) -> list[dict[str, Any]]:

@@ -59,7 +59,7 @@ def test_confirm_renders_fresh_matched_twins_once_and_records_the_verdict(tmp_pa
     assert again.rendered == 0 and again.cached == 4
     assert again.confirmations[0].verdict == made.verdict
 
-    printed = CliRunner().invoke(app, ["confirm", str(spec), "--renders", "4"])
+    printed = CliRunner().invoke(app, ["confirm", str(spec), "--renders", "4", "--max-renders", "4"])
     assert printed.exit_code == 0, printed.output
     assert "no significant finding to confirm" in printed.output or "fresh renders:" in printed.output
 
@@ -101,11 +101,11 @@ def test_a_real_boundary_is_confirmed_and_run_marks_it(tmp_path: Path) -> None:
     first = runner.invoke(app, ["run", str(spec), "--no-report"])
     assert first.exit_code == 0, first.output
     assert "brightness_contrast_brightness fails below" in first.output and "[unconfirmed]" in first.output
-    confirmed = runner.invoke(app, ["confirm", str(spec), "--renders", "24"])
+    confirmed = runner.invoke(app, ["confirm", str(spec), "--renders", "24", "--max-renders", "24"])  # one look
     assert confirmed.exit_code == 0, confirmed.output
     assert "confirmed: brightness_contrast_brightness fails below" in confirmed.output
     assert "fresh jobs: 24, renders 12 made" in confirmed.output  # twins differ in a post control: one render
-    again = runner.invoke(app, ["confirm", str(spec), "--renders", "24"])
+    again = runner.invoke(app, ["confirm", str(spec), "--renders", "24", "--max-renders", "24"])
     assert "renders 0 made and 12 cached" in again.output
     marked = runner.invoke(app, ["run", str(spec)])
     assert "[confirmed on 12 fresh pairs" in " ".join(marked.output.split())

@@ -85,3 +85,25 @@ def _sample_order(spec, keys: list[str]) -> list[str]:
     order = check.stratified_sample(rows, len(keys), 5)
     assert set(order) == set(keys)
     return order
+
+
+def test_the_rounds_add_images_only_while_bins_are_undecided_and_reuse_what_is_stored(tiny_copy: Path) -> None:
+    """With a cap above the first sample, undecided bins get more images (a tiny run decides
+    little, so the check goes on while images are left); a second check infers nothing."""
+    from sweep3d.followups.stability import check_stability
+    from sweep3d.followups.stability.sequential import UNDECIDED
+
+    spec = load_spec(tiny_copy / "spec.toml")
+    (first,) = check_stability(spec, sample=2, seed=5, max_sample=8)
+    rounds = first.rounds
+    assert rounds is not None and 2 <= rounds.sample <= 8 and rounds.rounds >= 1
+    assert first.computed == rounds.sample and len(rounds.decisions) == len(first.bins)
+    assert rounds.stopped in ("decided", "exhausted", "cap")
+    if rounds.stopped == "decided":
+        assert not rounds.undecided()
+    else:
+        assert any(d == UNDECIDED for d, _, _ in rounds.decisions)
+    least, most = first.fragile_range
+    assert least <= first.fragile_failures <= most <= first.failures
+    (again,) = check_stability(spec, sample=2, seed=5, max_sample=8)
+    assert again.computed == 0 and again.cached == again.sampled == rounds.sample
