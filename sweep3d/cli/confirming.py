@@ -6,8 +6,7 @@ from rich.console import Console
 from rich.markup import escape
 
 from sweep3d.followups.confirm import ConfirmResult
-from sweep3d.results import ALPHA, CONFIRMED, pairs_needed, renders_for
-from sweep3d.results.confirmation import FUTILITY, INCONCLUSIVE, UNCONFIRMED, Verdict
+from sweep3d.results import ALPHA, CONFIRMED, FUTILITY, INCONCLUSIVE, UNCONFIRMED, Verdict, pairs_needed, renders_for
 
 
 def print_confirmation(console: Console, result: ConfirmResult) -> None:

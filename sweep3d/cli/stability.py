@@ -47,7 +47,7 @@ def run_stability(console: Console, spec_path: Path, sample: int, seed: int | No
 
 def stop_sentence(found: Any, max_sample: int | None) -> str:
     """Where the sequential check stopped, and the error control over its looks."""
-    from sweep3d.followups.stability.sequential import ALPHA, look_z
+    from sweep3d.followups.stability import ALPHA, look_z
 
     rounds = found.rounds
     why = {"decided": "every margin bin decided against the rule",
@@ -62,7 +62,7 @@ def stop_sentence(found: Any, max_sample: int | None) -> str:
 
 def decision_cell(found: Any, index: int) -> str:
     """A bin's decision, and for an undecided one the sample that would decide it."""
-    from sweep3d.followups.stability.sequential import UNDECIDED, needed
+    from sweep3d.followups.stability import UNDECIDED, needed
 
     if found.rounds is None or index >= len(found.rounds.decisions):
         return ""
@@ -81,7 +81,7 @@ def decision_cell(found: Any, index: int) -> str:
 
 def fragile_count_sentence(found: Any) -> str:
     """The fragile count, with its interval: a lower bound when bins remain undecided."""
-    from sweep3d.results.fragile import FLIP_RATE
+    from sweep3d.results import FLIP_RATE
 
     share = f"1 in {round(1 / FLIP_RATE)}"
     rule = (f"|margin| < {found.threshold:.3g} (bins where {share} checked images or more flip, beyond doubt: "

@@ -28,15 +28,21 @@ if _TYPE_CHECKING:
         ALPHA,
         CONFIRMED,
         DEFAULT_RENDERS,
+        FUTILITY,
+        INCONCLUSIVE,
         UNCONFIRMED,
         Verdict,
         judge,
+        look_z,
         pairs_needed,
+        planned_looks,
         renders_for,
+        sequential,
         tally,
     )
+    from sweep3d.results.confirmation import wilson as confirmation_wilson
     from sweep3d.results.counterfactuals import COUNTERFACTUAL_VIEWS, SCHEMA, counterfactuals_path
-    from sweep3d.results.fragile import MARGIN_EDGES, create_margin_macro, fragile_sentence, margin_sql
+    from sweep3d.results.fragile import FLIP_RATE, MARGIN_EDGES, create_margin_macro, fragile_sentence, margin_sql
     from sweep3d.results.measures import MEASURES
     from sweep3d.results.own_jobs import PlannedStore, results_store
     from sweep3d.results.quoting import identifier, literal

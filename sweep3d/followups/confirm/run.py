@@ -31,10 +31,10 @@ from sweep3d.results import (
     has_view,
     named_rules,
     numeric_scales,
+    sequential,
     stored_summary,
     tally,
 )
-from sweep3d.results.confirmation import sequential
 from sweep3d.spec import LoadedSpec, PolicySpec
 from sweep3d.stages.render import LOCAL, Executor
 

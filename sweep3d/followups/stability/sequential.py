@@ -26,8 +26,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
-from sweep3d.results import confirmation
-from sweep3d.results.confirmation import look_z, planned_looks
+from sweep3d.results import confirmation_wilson, look_z, planned_looks
 
 __all__ = ["look_z", "planned_looks"]  # the looks as confirm counts them, for the check and its tests
 
@@ -52,14 +51,14 @@ def round_sizes(first: int, cap: int) -> list[int]:
 
 def wilson(flips: int, n: int, z: float) -> tuple[float, float]:
     """The Wilson score interval of ``flips`` of ``n`` at normal quantile ``z``; (0, 1) without images."""
-    return confirmation.wilson(flips, n, z) if n > 0 else (0.0, 1.0)
+    return confirmation_wilson(flips, n, z) if n > 0 else (0.0, 1.0)
 
 
 def decide(flips: int, n: int, looks: int, rate: float | None = None) -> tuple[str, float, float]:
     """A bin's decision against the rule after ``flips`` of ``n``: (decision, low, high), the
     interval at ``1 - ALPHA / looks``. Fragile needs a flip (as the rule does); a bin without
     images is not checked (it cannot set the threshold)."""
-    from sweep3d.results.fragile import FLIP_RATE
+    from sweep3d.results import FLIP_RATE
 
     rate = FLIP_RATE if rate is None else rate
     low, high = wilson(flips, n, look_z(looks))
