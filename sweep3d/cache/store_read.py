@@ -154,11 +154,7 @@ class SegmentReads:
     def _unlisted_segments(self, table: str) -> list[tuple[Path, tuple[str, int, int]]]:
         """(segment, its identity) for each readable segment of ``table`` that lists no columns."""
         out = []
-        for path in self.segments(table):
-            try:
-                st = path.stat()
-            except OSError:
-                continue
+        for path, st in self._stats(table):
             ident = (str(path), st.st_size, st.st_mtime_ns)
             if ident not in self._checked:
                 self.read_segment(path, [contract_of(table).key])  # checks it whole, once per store object
@@ -221,14 +217,17 @@ class SegmentReads:
     def _segment_state(self, table: str) -> tuple[tuple[str, int, int, int], ...]:
         """Which files ``table``'s segments are now (path, size, mtime, inode): segments are only
         ever added, replaced or removed whole, so equal states hold equal rows."""
+        return tuple((str(path), st.st_size, st.st_mtime_ns, st.st_ino) for path, st in self._stats(table))
+
+    def _stats(self, table: str) -> list[tuple[Path, os.stat_result]]:
+        """Each segment of ``table`` with its ``stat``; one gone meanwhile (compacted away) is left out."""
         out = []
         for path in self.segments(table):
             try:
-                st = path.stat()
+                out.append((path, path.stat()))
             except OSError:
                 continue
-            out.append((str(path), st.st_size, st.st_mtime_ns, st.st_ino))
-        return tuple(out)
+        return out
 
     def column_map(self, table: str, column: str) -> dict[str, Any]:
         """Key → ``column`` of its first row (the row the views show), for keys that have one."""

@@ -7,10 +7,10 @@ Why: describing a job afresh to ``load_dict`` costs tens of milliseconds, and un
 material values, the occluder's place) is rendered by the kept scene with those parameters
 updated (``mitsuba.traverse``), so its kernels are reused.
 
-Determinism: every job's values, fresh load or not, go through the same parameter update, and the
-object's pose is applied to its vertices here (the mesh is loaded untransformed), so a render's
-pixels depend on the job alone, never on the job the worker rendered before it
-(tests/stages/render/test_mitsuba_kept.py renders a sequence both ways).
+Determinism: a freshly loaded scene takes every value through the parameter update, a kept one
+the values that changed since, and the object's pose is applied to its vertices here (the mesh is
+loaded untransformed), so a render's pixels depend on the job alone, never on the job the worker
+rendered before it (tests/stages/render/test_mitsuba_kept.py renders a sequence both ways).
 
 A value with no parameter to update (a description key Mitsuba does not expose) is part of the
 structure: changing it loads the scene afresh.
@@ -109,6 +109,7 @@ class KeptScene:
         self.params: Any = None
         self.base: dict[str, tuple[np.ndarray, np.ndarray | None]] = {}  # shape → (positions, normals)
         self.loads = 0  # fresh loads so far (the rest were updates)
+        self.applied: dict[str, Any] = {}  # parameter or shape → the value or pose it last took
 
     def scene_for(self, description: dict[str, Any]) -> Any:
         """The description's scene: the kept one updated when only values changed, else loaded afresh."""
@@ -138,12 +139,12 @@ class KeptScene:
     def clear(self) -> None:
         """Forget the kept scene (the next job loads afresh)."""
         self.key = self.scene = self.params = None
-        self.base = {}
+        self.base, self.applied = {}, {}
 
     def _load(self, description: dict[str, Any], parts: Split) -> None:
         self.scene = self.mi.load_dict(self.converted(without_poses(description, parts.poses)), optimize=False)
         self.params = self.mi.traverse(self.scene)
-        self.base = {}
+        self.base, self.applied = {}, {}  # the first update sets every value, as later ones set what changed
         for shape in parts.poses:
             positions = np.array(self.params[f"{shape}.vertex_positions"], dtype=np.float32)
             normals_key = f"{shape}.vertex_normals"
@@ -152,11 +153,14 @@ class KeptScene:
         self.loads += 1
 
     def _update(self, parts: Split) -> None:
-        params = self.params
+        """Set the values and poses that differ from those the kept scene last took (all of them
+        after a load), then let Mitsuba recompute what depends on them."""
+        params, applied = self.params, self.applied
         for name, value in parts.values.items():
             target = self._parameter(name)
-            if target is None:
-                continue  # part of the key: the scene was loaded with it
+            frozen = _frozen(value)
+            if target is None or applied.get(target) == frozen:
+                continue  # part of the key (the scene was loaded with it), or as the last job left it
             kind = type(params[target])
             if isinstance(value, np.ndarray):
                 params[target] = kind(value.tolist())
@@ -164,15 +168,22 @@ class KeptScene:
                 params[target] = kind(*value) if len(value) > 1 else kind(value[0])
             else:
                 params[target] = kind(value)
+            applied[target] = frozen
+        turned_by: dict[bytes, np.ndarray] = {}  # the objects' pieces share one pose: its inverse once
         for shape, matrix in parts.poses.items():
+            pose = matrix.tobytes()
+            if applied.get(shape) == pose:
+                continue  # not moved: its vertices and bounding volumes stand
             positions, normals = self.base[shape]
             linear = matrix[:3, :3]
             moved = positions.reshape(-1, 3).astype(np.float64) @ linear.T + matrix[:3, 3]
             key = f"{shape}.vertex_positions"
             params[key] = type(params[key])(moved.astype(np.float32).ravel())  # the variant's float array
             if normals is not None:
-                turned = normals.reshape(-1, 3).astype(np.float64) @ np.linalg.inv(linear)
+                inverse = turned_by.setdefault(pose, np.linalg.inv(linear))
+                turned = normals.reshape(-1, 3).astype(np.float64) @ inverse
                 turned /= np.maximum(np.linalg.norm(turned, axis=1, keepdims=True), 1e-30)
                 key = f"{shape}.vertex_normals"
                 params[key] = type(params[key])(turned.astype(np.float32).ravel())
+            applied[shape] = pose
         params.update()
