@@ -35,7 +35,8 @@ UNITS = (
     "sweep3d.followups.stability", # follow-ups of a finished run, side by side: which verdicts are fragile,
     "sweep3d.followups.explain",   # the nearest fix of each failure,
     "sweep3d.followups.confirm",   # findings confirmed on fresh renders,
-    "sweep3d.followups.realism",   # agreement with photographs and another renderer
+    "sweep3d.followups.realism",   # agreement with photographs and another renderer,
+    "sweep3d.followups.grade",     # one grade per finding from the checks above, under one budget
     "sweep3d.report",              # the HTML report (its panels read the follow-ups' results)
     "sweep3d",                     # the public API: sweep3d.load, Experiment, plugins
     "sweep3d.cli",                 # the command line, over the API (and ``python -m sweep3d``)

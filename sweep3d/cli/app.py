@@ -282,6 +282,30 @@ def bench(
 
 
 @command
+def grade(
+    spec: Path = SpecArg,
+    budget: int = typer.Option(1024, "--budget", min=0,
+                               help="Most fresh jobs the checks may use, cached ones included (the same budget "
+                                    "and seed give the same grades and render nothing the second time)."),
+    seed: Optional[int] = typer.Option(None, "--seed", min=0, show_default=False,
+                                       help="Seed of the checks' draws (default: the spec's)."),
+    wait: float = typer.Option(0.0, help="Seconds to wait for another command holding the store's lock."),
+) -> None:
+    """Grade every finding of the last run: replicated on fresh renders, reproduced by the second renderer, not
+    fragile (solid), or renderer-sensitive, fragile, not replicated, inconclusive or untested, with its evidence."""
+    from sweep3d.api import Experiment
+    from sweep3d.cli.grading import print_grades
+    from sweep3d.followups.grade import grade_findings
+
+    check_wait(wait)
+    experiment = Experiment(spec)
+    require_store(experiment.spec)
+    signal.signal(signal.SIGTERM, _interrupt)
+    graded = grade_findings(experiment.spec, budget, seed, console, wait=wait)
+    print_grades(console, graded, spec)
+
+
+@command
 def confirm(
     spec: Path = SpecArg,
     renders: Optional[int] = typer.Option(None, "--renders", min=2, show_default=False,

@@ -230,8 +230,13 @@ def print_findings(console: Console, plan: Plan, store: Store | None = None, fai
         console.print(escape(line), highlight=False, soft_wrap=True)
     regions = weakest_regions(summary)
     rules = named_rules(summary)
+    graded = grade_marks(store, plan, summary)
     marks = confirmation_marks(store, plan.spec.name, regions, summary.boundaries, rules)
-    unconfirmed = UNCONFIRMED_MARK in marks
+    if graded is not None:  # a grade where one was given, else the confirmation's verdict, else untested
+        keys = _printed_keys(regions, summary.boundaries, rules)
+        marks = [graded[k] if graded.get(k, UNTESTED_MARK) != UNTESTED_MARK or m == UNCONFIRMED_MARK and k in graded
+                 else m for k, m in zip(keys, marks)]
+    unconfirmed = graded is None and UNCONFIRMED_MARK in marks
     if regions:
         console.print("fails most at: " + "; ".join(describe_region(r) + escape(marks.pop(0)) for r in regions)
                       + " (each against the rest of its parameter; false discovery rate 5%)")
@@ -259,6 +264,35 @@ def print_findings(console: Console, plan: Plan, store: Store | None = None, fai
     if unconfirmed:
         console.print(f"unconfirmed: not yet tested on fresh renders (sweep3d confirm {escape(str(plan.spec.path))})",
                       soft_wrap=True)
+    if graded is not None and UNTESTED_MARK in marks:
+        console.print(f"untested: sweep3d grade {escape(str(plan.spec.path))} grades every finding (fresh renders, "
+                      "the second renderer, fragility)", soft_wrap=True)
+
+
+UNTESTED_MARK = " [untested]"
+
+
+def grade_marks(store: Store, plan: Plan, summary: Summary) -> dict[str, str] | None:
+    """Record the summary's findings as the latest listing (``run`` lists them untested; a grading
+    of the same findings keeps its grades) and return each finding's key → its mark (`` [solid]``);
+    None when the store cannot keep the listing."""
+    from sweep3d.results import UNTESTED, listed_findings, record_listing, stored_rows
+
+    findings = listed_findings(summary)
+    try:
+        listing = record_listing(store, plan.spec.name, plan.model, findings, plan.spec.path)
+    except (OSError, UserError):
+        return None
+    rows = {r["finding"]: r["grade"] for r in stored_rows(store, plan.spec.name, plan.model) if r["listing"] == listing}
+    return {f.key: UNTESTED_MARK if rows.get(f.key, UNTESTED) == UNTESTED else f" [{rows[f.key]}]" for f in findings}
+
+
+def _printed_keys(regions: list[Region], boundaries: list[dict], rules: list[dict]) -> list[str]:
+    """The keys of the findings printed, in the order they are."""
+    from sweep3d.results import boundary_key, region_key, rule_key
+
+    return ([region_key(r.column, r.label) for r in regions] + [boundary_key(b) for b in boundaries]
+            + [rule_key(r["key"]) for r in rules])
 
 
 UNCONFIRMED_MARK = " [unconfirmed]"

@@ -11,6 +11,11 @@ results under a contract the store knows only by declaration (docs/architecture/
 - ``realism``: agreement with photographs or another engine. Plan: ``score --engine``, the kit's
   jobs as a run of that engine. Keeps: the ``verdicts`` table and kept photos
   (``realism/stored.py``).
+- ``grade``: one grade per finding (solid, renderer-sensitive, fragile, not replicated,
+  inconclusive, untested) from the stability check, ``confirm``'s twins and the same twins
+  rendered by the second renderer, under one budget. Keeps: the ``finding_grades`` table
+  (declared in ``sweep3d.results.findings``; ``run`` writes its untested listing), read as the
+  ``findings`` view.
 
 This package imports nothing: each follow-up is its own unit of the layers
 (tests/test_import_layers.py), reached through its own ``__init__``.

@@ -30,6 +30,7 @@ if _TYPE_CHECKING:
         DEFAULT_RENDERS,
         FUTILITY,
         INCONCLUSIVE,
+        NOT_REPLICATED,
         UNCONFIRMED,
         Verdict,
         judge,
@@ -42,6 +43,33 @@ if _TYPE_CHECKING:
     )
     from sweep3d.results.confirmation import wilson as confirmation_wilson
     from sweep3d.results.counterfactuals import COUNTERFACTUAL_VIEWS, SCHEMA, counterfactuals_path
+    from sweep3d.results.findings import (
+        BOUNDARY,
+        BOX,
+        FAILURE_MODE,
+        FINDINGS_TABLE,
+        FRAGILE,
+        GRADES,
+        INCONCLUSIVE_GRADE,
+        NOT_REPLICATED_GRADE,
+        RENDERER_SENSITIVE,
+        SOLID,
+        UNTESTED,
+        Finding,
+        boundary_key,
+        grade_row,
+        latest_listing,
+        listed_findings,
+        listing_of,
+        not_graded,
+        record_listing,
+        region_key,
+        rule_key,
+        stored_rows,
+    )
+    from sweep3d.results.findings import (
+        SCHEMA as FINDINGS_SCHEMA,
+    )
     from sweep3d.results.fragile import FLIP_RATE, MARGIN_EDGES, create_margin_macro, fragile_sentence, margin_sql
     from sweep3d.results.measures import MEASURES
     from sweep3d.results.own_jobs import PlannedStore, results_store

@@ -85,6 +85,8 @@ class Summary:
     no_boundaries: list[dict[str, Any]] = field(default_factory=list)
     #: significant boundaries of single objects or environments beyond the ones named
     boundaries_left_out: int = 0
+    #: those boundaries themselves (as ``boundaries``), in the same order: the findings list has them all
+    boundaries_more: list[dict[str, Any]] = field(default_factory=list)
     #: failures whose verdict the stability check says changes no eye sees could flip (None: no check
     #: yet, or an evaluator without a margin); see ``results.fragile``
     fragile_failures: int | None = None
@@ -165,11 +167,11 @@ def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit:
     ]
     min_count = region_min_count(counted)
     regions, gap = value_findings(con, columns, min_count)
-    boundaries, no_boundaries, left_out = boundary_findings(con, scales)
+    boundaries, no_boundaries, more = boundary_findings(con, scales)
     rules = [rule_dict(rule) for rule in rules_of(con)] if counted <= RULES_LIMIT else []
     return Summary(jobs, evaluated, invalid, correct, accuracy, objects, environments, scene_accuracy,
                    scene_count, effects, failures, per_object, counted, sum(reasons.values()), reasons, min_visible,
-                   regions, gap, boundaries, no_boundaries, left_out, *fragile_findings(con, have), rules)
+                   regions, gap, boundaries, no_boundaries, len(more), more, *fragile_findings(con, have), rules)
 
 
 def fragile_findings(con: duckdb.DuckDBPyConnection, have: set[str]) -> tuple[int | None, float | None, int, int]:
@@ -196,11 +198,12 @@ _BOUNDARY_FIELDS = ("parameter", "scope", "object", "environment", "n", "values"
 
 
 def boundary_findings(con: duckdb.DuckDBPyConnection, scales: dict[str, Scale] | None,
-                      limit: int = BOUNDARY_LIMIT) -> tuple[list[dict[str, Any]], list[dict[str, Any]], int]:
+                      limit: int = BOUNDARY_LIMIT) -> tuple[list[dict[str, Any]], list[dict[str, Any]],
+                                                            list[dict[str, Any]]]:
     """The significant failure boundaries: each parameter's over all results (spec order), then
     at most ``limit`` of single objects or environments, most certain first (smallest q-value,
     then the narrowest interval relative to the parameter's overall span); the fits without one,
-    in the view's order; and how many significant ones of single groups were left out."""
+    in the view's order; and the significant ones of single groups left out (same order)."""
     fits = boundary_rows(con, scales)
     rows = [row for row in fits if row["significant"]]
     overall = [row for row in rows if row["scope"] == "all"]
@@ -208,7 +211,8 @@ def boundary_findings(con: duckdb.DuckDBPyConnection, scales: dict[str, Scale] |
                     key=lambda r: (r["q_value"], r["boundary_high"] - r["boundary_low"], r["position"]))
     flat = [row for row in fits if not row["significant"]]
     return ([{k: row[k] for k in _BOUNDARY_FIELDS} for row in overall + groups[:limit]],
-            [{k: row[k] for k in _BOUNDARY_FIELDS} for row in flat], max(0, len(groups) - limit))
+            [{k: row[k] for k in _BOUNDARY_FIELDS} for row in flat],
+            [{k: row[k] for k in _BOUNDARY_FIELDS} for row in groups[limit:]])
 
 
 RULE_LIMIT = 2  # rules over several parameters a summary names

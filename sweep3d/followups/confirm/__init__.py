@@ -16,8 +16,9 @@ from typing import TYPE_CHECKING as _TYPE_CHECKING  # noqa: E402
 from sweep3d.core import exports as _exports  # noqa: E402
 
 if _TYPE_CHECKING:
-    from sweep3d.followups.confirm.claims import boundary_key, region_key, rule_key
+    from sweep3d.followups.confirm.claims import Claim, boundary_key, region_key, rule_key
+    from sweep3d.followups.confirm.draw import Space, space_of
     from sweep3d.followups.confirm.record import mark, read_verdicts
-    from sweep3d.followups.confirm.run import ConfirmResult, confirm
+    from sweep3d.followups.confirm.run import ConfirmResult, Twin, claims_of, confirm, render_twins
 
 __getattr__, __dir__ = _exports(__name__)  # names, modules and __all__ from the block above

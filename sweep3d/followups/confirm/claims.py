@@ -13,6 +13,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
 
+from sweep3d.results import boundary_key, region_key, rule_key  # the findings' keys, named once
 from sweep3d.spec import Choice, Range
 
 
@@ -44,16 +45,6 @@ class Claim:
     box: tuple[tuple[str, Side], ...] = ()
 
 
-def region_key(column: str, label: str) -> str:
-    """The key of the failure mode ``column = label``."""
-    return f"value {column} = {label}"
-
-
-def boundary_key(row: Mapping[str, Any]) -> str:
-    """The key of a significant boundary (a ``failure_boundaries`` row): its parameter, group, side
-    and place (to 6 digits: a boundary that moved is another claim)."""
-    who = "" if row["scope"] == "all" else f" {row['scope']} {row[row['scope']]}"
-    return f"boundary {row['parameter']}{who} fails {row['fails']} {row['boundary']:.6g}"
 
 
 def value_claim(column: str, label: str, text: str, space: Choice | Range | None, names: Sequence[str] = (),
@@ -110,10 +101,6 @@ def boundary_claim(row: Mapping[str, Any], text: str, space: Choice | Range) -> 
     scope = () if row["scope"] == "all" else ((row["scope"], row[row["scope"]]),)
     return Claim(boundary_key(row), text, row["parameter"], *claim_sides, scope=scope)
 
-
-def rule_key(key: str) -> str:
-    """The key of a rule (its conditions as ``rules`` writes them)."""
-    return f"rule {key}"
 
 
 def rule_claim(rule: Mapping[str, Any], spaces: Mapping[str, Choice | Range]) -> Claim | None:

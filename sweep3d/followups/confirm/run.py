@@ -26,10 +26,8 @@ from sweep3d.results import (
     DEFAULT_RENDERS,
     Summary,
     Verdict,
-    boundary_phrase,
     connect,
     has_view,
-    named_rules,
     numeric_scales,
     sequential,
     stored_summary,
@@ -41,6 +39,10 @@ from sweep3d.stages.render import LOCAL, Executor
 #: Candidate pairs drawn per pair wanted: room for those dropped (out of frame, a discovery image).
 OVERDRAW = 3
 SUFFIX = "-confirm"
+
+
+#: One twin's result: counted, correct, and its margin (None without one).
+Twin = tuple[bool, bool, "float | None"]
 
 
 @dataclass
@@ -61,6 +63,9 @@ class ConfirmResult:
     cached: int  # renders it found in the store
     failed: int
     renders: int = DEFAULT_RENDERS  # fresh renders asked for per finding (--renders)
+    #: claim key → its judged twin pairs (rows as drawn) and each twin's (counted, correct, margin)
+    pairs: dict[str, list[tuple[Row, Row]]] = dataclasses.field(default_factory=dict)
+    outcomes: dict[str, list[tuple[Twin, Twin]]] = dataclasses.field(default_factory=dict)
 
 
 def confirm(loaded: LoadedSpec, renders: int = DEFAULT_RENDERS, seed: int | None = None,
@@ -119,13 +124,14 @@ def _confirmed(loaded: LoadedSpec, store: Store, renders: int, seed: int, consol
                     used.update(keys)
     taken = {c.key: 0 for c in claims}
     totals = {"rendered": 0, "cached": 0, "failed": 0, "jobs": 0}
+    judged: dict[str, list[tuple[Twin, Twin]]] = {}
 
     def observe(asked: Any) -> dict[int, Any]:
         """Render and judge the first ``asked[i]`` pairs of each open claim (the others keep theirs)."""
         for i, n in asked.items():
             taken[claims[i].key] = min(n, len(chosen[claims[i].key]))
         fresh = [row for c in claims for pair in chosen[c.key][:taken[c.key]] for row in pair]
-        outcomes: dict[int, tuple[bool, bool]] = {}
+        outcomes: dict[int, Twin] = {}
         if fresh:
             variant = _variant(loaded, space, fresh)
             result = run(variant, console, executor=executor)
@@ -136,11 +142,12 @@ def _confirmed(loaded: LoadedSpec, store: Store, renders: int, seed: int, consol
             totals["failed"] = result.failed
             totals["jobs"] = len(fresh)
             outcomes = _outcomes(store, variant.name)
-        index = iter(scene_order(space, fresh))
         out = {}
-        for i, c in enumerate(claims):
-            twins = [(outcomes.get(next(index)), outcomes.get(next(index))) for _ in chosen[c.key][:taken[c.key]]]
-            out[i] = tally((a[1], b[1]) for a, b in twins if a and b and a[0] and b[0])
+        for (i, c), twins in zip(enumerate(claims), twin_outcomes(space, fresh, outcomes,
+                                                                 [chosen[c.key][:taken[c.key]] for c in claims])):
+            kept = [(a, b) for a, b in twins if a and b and a[0] and b[0]]
+            judged[c.key] = kept
+            out[i] = tally((a[1], b[1]) for a, b in kept)
         return out
 
     verdicts = sequential(len(claims), first, wanted, observe)
@@ -150,38 +157,75 @@ def _confirmed(loaded: LoadedSpec, store: Store, renders: int, seed: int, consol
     write_verdicts(store, loaded.name, {
         x.claim.key: {"text": x.claim.text, "verdict": x.verdict.as_dict(), "renders": renders, "seed": seed,
                       "drawn": x.drawn, "experiment": loaded.name + SUFFIX} for x in confirmations})
-    return ConfirmResult(loaded.name + SUFFIX, confirmations, fresh_jobs, rendered, cached, failed, renders)
+    return ConfirmResult(loaded.name + SUFFIX, confirmations, fresh_jobs, rendered, cached, failed, renders,
+                         {c.key: chosen[c.key][:taken[c.key]] for c in claims}, judged)
+
+
+def twin_outcomes(space: Space, fresh: list[Row], outcomes: dict[int, Twin],
+                  pairs: list[list[tuple[Row, Row]]]) -> list[list[tuple[Twin | None, Twin | None]]]:
+    """Each group of ``pairs`` (whose rows, in order, are ``fresh``) as the results of its twins
+    (``outcomes``: job → twin, the jobs of a plan of ``fresh``; None where a twin has none)."""
+    index = iter(scene_order(space, fresh))
+    return [[(outcomes.get(next(index)), outcomes.get(next(index))) for _ in group] for group in pairs]
+
+
+def render_twins(loaded: LoadedSpec, space: Space, store: Store, pairs: list[list[tuple[Row, Row]]],
+                 console: Console | None, executor: Executor, suffix: str,
+                 render: dict[str, Any] | None = None) -> tuple[Any, list[list[tuple[Twin | None, Twin | None]]]]:
+    """Render and judge ``pairs`` (groups of twin pairs) as the experiment ``<name><suffix>``, with
+    ``render`` over the spec's ``[render]`` settings (another engine); returns the run's result and
+    each group's twins' results (:func:`twin_outcomes`)."""
+    from sweep3d.runner import run
+
+    fresh = [row for group in pairs for pair in group for row in pair]
+    if not fresh:
+        return None, [[] for _ in pairs]
+    variant = _variant(loaded, space, fresh, suffix, render)
+    result = run(variant, console, executor=executor)
+    return result, twin_outcomes(space, fresh, _outcomes(store, variant.name), pairs)
 
 
 def findings_claims(loaded: LoadedSpec, store: Store, summary: Summary, space: Space) -> list[Claim]:
-    """The claims of the findings ``run`` prints: each significant failure mode (single values,
-    at most three), each significant boundary and each rule over several parameters it names."""
-    claims: list[Claim] = []
+    """The claims of the findings the summary names (:func:`sweep3d.results.listed_findings`) that
+    fresh twins can test; :func:`claims_of` says why each other one cannot."""
+    return [c for c in claims_of(loaded, store, summary, space).values() if isinstance(c, Claim)]
+
+
+def claims_of(loaded: LoadedSpec, store: Store, summary: Summary, space: Space) -> dict[str, Claim | str]:
+    """Each listed finding's key → its claim, or why fresh twins cannot test it (never left out)."""
+    from sweep3d.results import BOUNDARY, FAILURE_MODE, listed_findings
+
     names = {"object": [o.name for o in loaded.objects], "environment": [e.name for e in loaded.environments]}
-    levels = _levels(store, loaded.name) if summary.regions else {}
-    for region in summary.regions:
-        column, label = region["column"], region["label"]
-        parameter = space.parameter(column)
-        value, width = levels.get((column, label), (None, None))
-        text = f"{column} = {label}"
-        claim = value_claim(column, label, text, None if parameter is None else parameter.space,
-                            names.get(column, ()), value, width)
-        if claim is not None and (parameter is not None or column in names):
-            claims.append(claim)
-    for row in summary.boundaries:
-        parameter = space.parameter(row["parameter"])
-        if parameter is None:
-            continue
-        who = "" if row["scope"] == "all" else f"{row[row['scope']]}: "
-        claim = boundary_claim(row, f"{who}{row['parameter']} {boundary_phrase(row)}", parameter.space)
-        if claim is not None:
-            claims.append(claim)
+    findings = listed_findings(summary)
+    levels = _levels(store, loaded.name) if any(f.kind == FAILURE_MODE for f in findings) else {}
     spaces = {p.column: p.space for p in space.parameters}
-    for rule in named_rules(summary):
-        claim = rule_claim(rule, spaces)
-        if claim is not None:
-            claims.append(claim)
-    return claims
+    out: dict[str, Claim | str] = {}
+    for finding in findings:
+        row = finding.source
+        claim: Claim | None
+        if finding.kind == FAILURE_MODE:
+            column, label = row["column"], row["label"]
+            parameter = space.parameter(column)
+            if parameter is None and column not in names:
+                out[finding.key] = f"{column} is not a parameter the spec varies now"
+                continue
+            value, width = levels.get((column, label), (None, None))
+            claim = value_claim(column, label, finding.text, None if parameter is None else parameter.space,
+                                names.get(column, ()), value, width)
+            why = f"{column} has no other value to compare {label} with"
+        elif finding.kind == BOUNDARY:
+            parameter = space.parameter(row["parameter"])
+            if parameter is None:
+                out[finding.key] = f"{row['parameter']} is not a parameter the spec varies now"
+                continue
+            claim = boundary_claim(row, finding.text, parameter.space)
+            why = "the spec's range has no value on one side of the boundary"
+        else:
+            claim = rule_claim(row, spaces)
+            why = ("its conditions name no control parameter the spec varies (a box of objects and environments "
+                   "alone is tested as their failure modes)")
+        out[finding.key] = claim if claim is not None else why
+    return out
 
 
 def _levels(store: Store, experiment: str) -> dict[tuple[str, str], tuple[float | None, float | None]]:
@@ -198,8 +242,10 @@ def _levels(store: Store, experiment: str) -> dict[tuple[str, str], tuple[float 
     return {(p, label): (value, width) for p, label, value, width in rows}
 
 
-def _variant(loaded: LoadedSpec, space: Space, rows: list[Row]) -> LoadedSpec:
-    """``loaded`` as the experiment ``<name>-confirm`` whose jobs are ``rows`` (first model only)."""
+def _variant(loaded: LoadedSpec, space: Space, rows: list[Row], suffix: str = SUFFIX,
+             render: dict[str, Any] | None = None) -> LoadedSpec:
+    """``loaded`` as the experiment ``<name><suffix>`` whose jobs are ``rows`` (first model only),
+    with ``render`` over its ``[render]`` settings."""
     from sweep3d.stages.plan import SceneRows, TablePolicy
 
     scenes: dict[tuple[str, str], SceneRows] = {}
@@ -212,10 +258,13 @@ def _variant(loaded: LoadedSpec, space: Space, rows: list[Row]) -> LoadedSpec:
         scene.count += 1
     policy = TablePolicy(TablePolicy.Params(file="(drawn by sweep3d confirm)"))
     policy.rows = scenes
-    experiment = loaded.spec.experiment.model_copy(update={"name": loaded.name + SUFFIX})
-    spec = loaded.spec.model_copy(update={
+    experiment = loaded.spec.experiment.model_copy(update={"name": loaded.name + suffix})
+    update: dict[str, Any] = {
         "experiment": experiment, "policy": PolicySpec(type="table", file="(drawn by sweep3d confirm)"),
-        "models": [loaded.models[0]] if len(loaded.models) > 1 else loaded.spec.models})
+        "models": [loaded.models[0]] if len(loaded.models) > 1 else loaded.spec.models}
+    if render:
+        update["render"] = loaded.spec.render.model_copy(update=render)
+    spec = loaded.spec.model_copy(update=update)
     return dataclasses.replace(loaded, spec=spec, policy=policy)
 
 
@@ -234,13 +283,15 @@ class _Placed:
     in_frame: bool
 
 
-def _outcomes(store: Store, experiment: str) -> dict[int, tuple[bool, bool]]:
-    """Job → (counted, correct) of the fresh jobs' results."""
+def _outcomes(store: Store, experiment: str) -> dict[int, Twin]:
+    """Job → (counted, correct, margin) of the fresh jobs' results."""
     con = connect(store, experiment)
     try:
         if not has_view(con, "results"):
             return {}
-        return {int(job): (bool(counted), bool(correct)) for job, counted, correct in
-                con.execute("SELECT job, counted, coalesce(correct, false) FROM results").fetchall()}
+        have = {row[0] for row in con.execute("DESCRIBE results").fetchall()}
+        margin = "margin" if "margin" in have else "NULL::DOUBLE"
+        return {int(job): (bool(counted), bool(correct), None if m is None else float(m)) for job, counted, correct, m
+                in con.execute(f"SELECT job, counted, coalesce(correct, false), {margin} FROM results").fetchall()}
     finally:
         con.close()

@@ -100,7 +100,7 @@ def test_a_real_boundary_is_confirmed_and_run_marks_it(tmp_path: Path) -> None:
     runner = CliRunner()
     first = runner.invoke(app, ["run", str(spec), "--no-report"])
     assert first.exit_code == 0, first.output
-    assert "brightness_contrast_brightness fails below" in first.output and "[unconfirmed]" in first.output
+    assert "brightness_contrast_brightness fails below" in first.output and "[untested]" in first.output
     confirmed = runner.invoke(app, ["confirm", str(spec), "--renders", "24", "--max-renders", "24"])  # one look
     assert confirmed.exit_code == 0, confirmed.output
     assert "confirmed: brightness_contrast_brightness fails below" in confirmed.output

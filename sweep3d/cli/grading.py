@@ -1,0 +1,37 @@
+"""What ``sweep3d grade`` prints: each finding's grade and its evidence, then what the checks cost."""
+
+from __future__ import annotations
+
+from collections import Counter
+
+from rich.console import Console
+from rich.markup import escape
+
+from sweep3d.followups.grade import Graded
+from sweep3d.results import GRADES
+
+#: Each grade's colour in the console (the report uses the same order).
+GRADE_STYLE = {"solid": "green", "renderer-sensitive": "magenta", "fragile": "yellow", "not replicated": "red",
+               "inconclusive": "cyan", "untested": "dim"}
+
+
+def print_grades(console: Console, graded: Graded, spec_path: object) -> None:
+    if not graded.findings:
+        console.print("no finding to grade: the run names no failure mode, boundary or box")
+        return
+    for finding, (grade, evidence) in zip(graded.findings, graded.grades):
+        console.print(f"[{GRADE_STYLE[grade]}]{grade}[/]: {escape(finding.text)} ({finding.kind}): {escape(evidence)}",
+                      soft_wrap=True, highlight=False)
+    counts = Counter(g for g, _ in graded.grades)
+    console.print("grades: " + ", ".join(f"{counts[g]} {g}" for g in GRADES if counts[g]), highlight=False)
+    checked = graded.stability
+    if checked is not None:
+        low, high = checked.fragile_range
+        fragile = (f"{checked.fragile_failures} of {checked.failures} failures fragile" +
+                   (f" (between {low} and {high} as the undecided margin bins fall)" if high > low else ""))
+        console.print(f"stability: {checked.sampled} images checked; {fragile}; threshold |margin| < "
+                      f"{checked.threshold:.3g}", highlight=False, soft_wrap=True)
+    console.print(f"{graded.used} fresh jobs of the budget's {graded.budget} used ({graded.rendered} rendered now); "
+                  f"second renderer {graded.engine}; {graded.seconds:.0f} s. The grades are the `findings` view "
+                  f"(sweep3d query {escape(str(spec_path))} \"SELECT * FROM findings\") and lead the report",
+                  soft_wrap=True, highlight=False)

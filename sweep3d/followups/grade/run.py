@@ -1,0 +1,196 @@
+"""``sweep3d grade``: every finding of a run graded by checks sized to decide, under one budget.
+
+The grading is three plans for the one runner, in order, each through the same cached stages:
+
+1. the stability check (:mod:`sweep3d.followups.stability`), sequential over margin bins: the
+   fragile threshold the fragility check reads (classification only);
+2. ``confirm``'s sequential twins for every finding fresh twins can test, the pairs per finding
+   sized from the budget;
+3. the replicated findings' twins again with the second renderer (Mitsuba under a Cycles spec,
+   Cycles under a Mitsuba one), as many pairs as the budget has left.
+
+Then :mod:`.decide` grades each finding and the grades become the listing's rows of the
+``finding_grades`` table (the ``findings`` view). The budget counts the fresh jobs the checks use,
+cached or not, so a second call with the same budget and seed renders nothing and writes the same
+grades; a larger budget goes on from where a smaller one stopped.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import dataclass
+from typing import Any
+
+from rich.console import Console
+
+from sweep3d.cache import Store
+from sweep3d.core import UserError
+from sweep3d.followups.grade.decide import Evidence, evidence_of, grade
+from sweep3d.results import (
+    CONFIRMED,
+    DEFAULT_RENDERS,
+    Finding,
+    grade_row,
+    listed_findings,
+    numeric_scales,
+    record_listing,
+    stored_summary,
+)
+from sweep3d.spec import LoadedSpec
+from sweep3d.stages.render import LOCAL, Executor
+
+#: Fresh jobs the checks may use by default (cached ones included): about four quickstart runs.
+DEFAULT_BUDGET = 1024
+#: The share of the budget the replication may take; the second renderer gets what it leaves.
+REPLICATION_SHARE = 0.75
+MAX_PAIRS = 128  # a finding's twin pairs at most, however large the budget
+ENGINE_SUFFIX = "-confirm-"  # the second renderer's experiment: <name>-confirm-<engine>
+
+
+@dataclass
+class Graded:
+    """What one grading did and decided."""
+
+    findings: list[Finding]
+    grades: list[tuple[str, str]]  # (grade, evidence) per finding
+    budget: int
+    used: int  # fresh jobs the checks used (cached or not)
+    rendered: int  # renders this call made
+    seconds: float
+    engine: str
+    stability: Any = None  # the stability check's Checked (first model), None when not made
+    listing: str = ""
+
+
+def grade_findings(loaded: LoadedSpec, budget: int = DEFAULT_BUDGET, seed: int | None = None,
+                   console: Console | None = None, wait: float = 0.0, executor: Executor = LOCAL) -> Graded:
+    """Grade every finding of ``loaded``'s last run (its first model) within ``budget`` fresh jobs."""
+    from sweep3d.results import no_results
+
+    if budget < 0:
+        raise UserError(f"--budget {budget}: the fresh jobs the checks may use is 0 or more")
+    started = time.perf_counter()
+    seed = loaded.experiment.seed if seed is None else seed
+    store = Store(loaded.store, warn=False)
+    if not loaded.store.is_dir():
+        raise no_results(store, loaded.name, loaded.path)
+    with store.lock(wait):
+        return _graded(loaded, store, budget, seed, console, executor, started)
+
+
+def _graded(loaded: LoadedSpec, store: Store, budget: int, seed: int, console: Console | None, executor: Executor,
+            started: float) -> Graded:
+    from sweep3d.followups.confirm import claims_of, confirm, space_of
+    from sweep3d.runner import plans_as_run
+
+    plan = plans_as_run(loaded, store)[0]
+    summary = stored_summary(store, loaded.name, plan.columns, scales=numeric_scales(loaded.controls))
+    if summary.accuracy is None:
+        raise UserError(f"{loaded.path}: no results to grade yet; run: sweep3d run {loaded.path}")
+    findings = listed_findings(summary)
+    model = plan.model
+    listing = record_listing(store, loaded.name, model, findings, loaded.path)
+    space = space_of(loaded)
+    claims = claims_of(loaded, store, summary, space)
+    testable = [c for c in claims.values() if not isinstance(c, str)]
+    checked = _stability(loaded, seed, console, executor)
+    threshold = checked.threshold if checked is not None else None
+    rendered = 0
+    evidence: dict[str, Evidence] = {}
+    engine = other_engine(loaded)
+    used = 0
+    if testable and budget >= 2:
+        cap = min(2 * MAX_PAIRS, max(2, int(budget * REPLICATION_SHARE) // len(testable) // 2 * 2))
+        result = confirm(loaded, min(DEFAULT_RENDERS, cap), seed, console, claims=testable, executor=executor,
+                         max_renders=cap)
+        rendered += result.rendered
+        used = result.jobs
+        verdicts = {x.claim.key: x.verdict for x in result.confirmations}
+        replicated = [k for k, v in verdicts.items() if v.status == CONFIRMED]
+        engine_pairs, engine_rendered, engine_used = _second_renderer(
+            loaded, store, space, result, replicated, budget - used, engine, console, executor)
+        rendered += engine_rendered
+        used += engine_used
+        for key, verdict in verdicts.items():
+            evidence[key] = evidence_of(verdict, result.outcomes.get(key, []), engine_pairs.get(key), engine,
+                                        threshold)
+    grades = []
+    for finding in findings:
+        claim = claims.get(finding.key)
+        if isinstance(claim, str):
+            grades.append(grade(Evidence(untested=f"fresh twins cannot test it: {claim}")))
+        elif finding.key in evidence:
+            grades.append(grade(evidence[finding.key]))
+        elif budget < 2:
+            grades.append(grade(Evidence(untested=f"--budget {budget} gives no fresh pair")))
+        else:
+            grades.append(grade(Evidence()))
+    _record(store, loaded, model, listing, findings, grades, evidence)
+    return Graded(findings, grades, budget, used, rendered, time.perf_counter() - started, engine, checked, listing)
+
+
+def other_engine(loaded: LoadedSpec) -> str:
+    """The second renderer of ``loaded``: Mitsuba under Cycles, Cycles under anything else."""
+    return "mitsuba" if loaded.spec.render.engine == "cycles" else "cycles"
+
+
+def _stability(loaded: LoadedSpec, seed: int, console: Console | None, executor: Executor) -> Any:
+    """The stability check of the first model (sequential), or None where it does not apply."""
+    from sweep3d.followups.stability import DEFAULT_SAMPLE, check_stability
+
+    if loaded.evaluator.kind != "classification":
+        return None
+    return check_stability(loaded, DEFAULT_SAMPLE, seed, console, executor=executor, max_sample=4 * DEFAULT_SAMPLE)[0]
+
+
+def _second_renderer(loaded: LoadedSpec, store: Store, space: Any, result: Any, replicated: list[str], left: int,
+                     engine: str, console: Console | None, executor: Executor) -> tuple[dict, int, int]:
+    """The replicated findings' twins rendered by ``engine`` (as many pairs each as ``left`` fresh
+    jobs allow, the same for each): (key → its pairs' verdicts, renders made, jobs used)."""
+    from sweep3d.followups.confirm import render_twins
+    from sweep3d.stages.render import cycles_only_defaults
+
+    if not replicated or left < 2:
+        return {}, 0, 0
+    each = left // (2 * len(replicated))
+    groups = [result.pairs[k][:each] for k in replicated]
+    if each < 1 or not any(groups):
+        return {}, 0, 0
+    settings = {"engine": engine, **cycles_only_defaults(engine)}
+    run_result, outcomes = render_twins(loaded, store=store, space=space, pairs=groups, console=console,
+                                        executor=executor, suffix=ENGINE_SUFFIX + engine, render=settings)
+    pairs = {key: [(a[1], b[1]) for a, b in twins if a and b and a[0] and b[0]]
+             for key, twins in zip(replicated, outcomes)}
+    render = next((o for o in run_result.outcomes if o.stage == "render"), None) if run_result else None
+    return pairs, render.computed if render else 0, 2 * sum(len(g) for g in groups)
+
+
+def _record(store: Store, loaded: LoadedSpec, model: str, listing: str, findings: list[Finding],
+            grades: list[tuple[str, str]], evidence: dict[str, Evidence]) -> None:
+    """The listing's rows with their grades (newer than its untested ones)."""
+    from sweep3d.cache import utc_now
+    from sweep3d.results import FINDINGS_SCHEMA, FINDINGS_TABLE
+
+    now = utc_now()
+    rows = []
+    for finding, (grade_name, sentence) in zip(findings, grades):
+        e = evidence.get(finding.key)
+        r, g = (e.replication, e.engine) if e else (None, None)
+        details = {"replication": r.as_dict() if r else None, "engine": g.as_dict() if g else None,
+                   "steady": e.steady.as_dict() if e and e.steady else None,
+                   "threshold": e.threshold if e else None}
+        rows.append(grade_row(
+            loaded.name, model, listing, now, finding, grade_name, sentence,
+            pairs=r.pairs if r else None, effect=_finite(r.difference) if r else None,
+            effect_low=_finite(r.difference_low) if r else None, effect_high=_finite(r.difference_high) if r else None,
+            engine=e.engine_name if g else None, engine_pairs=g.pairs if g else None,
+            engine_effect=_finite(g.difference) if g else None, fragile_set_aside=e.set_aside if e and e.steady else None,
+            details=json.dumps(details, sort_keys=True, allow_nan=False, default=str)))
+    if rows:
+        store.append(FINDINGS_TABLE, rows, FINDINGS_SCHEMA)
+
+
+def _finite(value: float | None) -> float | None:
+    return value if value is not None and math.isfinite(value) else None

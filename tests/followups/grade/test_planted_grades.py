@@ -1,0 +1,141 @@
+"""The grades of a planted true failure region and a planted chance region, over many seeds, made
+by the grading's own code (the sequential replication, the second renderer's pairs, fragility,
+the decision) with a synthetic model in place of renders: nothing is rendered.
+
+The true region fails 65 % of the time against 20 % elsewhere; the chance region was picked as a
+finding but the model fails it no more than elsewhere (30 %). The second renderer agrees with the
+first on 94 % of verdicts (the quickstart's measured agreement); a wrong verdict's margin is
+uniform in (-1, 0), so some are within the fragile threshold of a tie.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sweep3d.followups.grade import evidence_of, grade, single, steady_pairs
+from sweep3d.followups.grade.run import DEFAULT_BUDGET, MAX_PAIRS, REPLICATION_SHARE
+from sweep3d.results import (
+    ALPHA,
+    CONFIRMED,
+    DEFAULT_RENDERS,
+    FRAGILE,
+    INCONCLUSIVE_GRADE,
+    NOT_REPLICATED,
+    NOT_REPLICATED_GRADE,
+    RENDERER_SENSITIVE,
+    SOLID,
+    UNTESTED,
+    Verdict,
+    sequential,
+)
+
+SEEDS = 200
+THRESHOLD = 0.05  # a fragile threshold of |margin|, as the stability check gives
+AGREEMENT = 0.94
+
+
+def twin(rng: np.random.Generator, fails: float) -> tuple[bool, bool, float]:
+    correct = bool(rng.random() >= fails)
+    return True, correct, float(rng.uniform(0.0, 1.0) if correct else -rng.uniform(0.0, 1.0))
+
+
+def grades_of(seed: int, regions: list[tuple[float, float]], engine_fails: list[tuple[float, float]] | None = None,
+              budget: int = DEFAULT_BUDGET) -> list[tuple[str, Verdict]]:
+    """Grade findings whose twins fail at (inside, outside) rates ``regions``, as ``grade`` sizes
+    them from ``budget``; the second renderer follows the first at AGREEMENT, or fails at its own
+    rates ``engine_fails``."""
+    rng = np.random.default_rng([seed, 43])
+    cap = min(2 * MAX_PAIRS, int(budget * REPLICATION_SHARE) // len(regions) // 2 * 2)
+    drawn: list[list[tuple]] = [[] for _ in regions]
+
+    def observe(asked):
+        out = {}
+        for i, n in asked.items():
+            while len(drawn[i]) < n:
+                drawn[i].append((twin(rng, regions[i][0]), twin(rng, regions[i][1])))
+            from sweep3d.results import tally
+            out[i] = tally((a[1], b[1]) for a, b in drawn[i][:n])
+        return out
+
+    verdicts = sequential(len(regions), min(DEFAULT_RENDERS, cap) // 2, cap // 2, observe)
+    out = []
+    for i, verdict in enumerate(verdicts):
+        twins = drawn[i][:verdict.pairs]
+        if engine_fails is None:
+            engine = [tuple(t[1] if rng.random() < AGREEMENT else not t[1] for t in pair) for pair in twins]
+        else:
+            engine = [(rng.random() >= engine_fails[i][0], rng.random() >= engine_fails[i][1]) for _ in twins]
+        evidence = evidence_of(verdict, twins, engine if verdict.status == CONFIRMED else None, "mitsuba", THRESHOLD)
+        out.append((grade(evidence)[0], verdict))
+    return out
+
+
+@pytest.fixture(scope="module")
+def planted() -> list[list[tuple[str, Verdict]]]:
+    return [grades_of(seed, [(0.65, 0.20), (0.30, 0.30)]) for seed in range(SEEDS)]
+
+
+def test_the_true_region_is_graded_solid_in_at_least_90_percent_of_seeds(planted) -> None:
+    solid = sum(g[0][0] == SOLID for g in planted)
+    assert solid >= 0.90 * SEEDS, f"true region solid in {solid} of {SEEDS} seeds"
+
+
+def test_the_chance_region_is_graded_solid_in_at_most_5_percent_of_seeds(planted) -> None:
+    solid = sum(g[1][0] == SOLID for g in planted)
+    assert solid <= 0.05 * SEEDS, f"chance region solid in {solid} of {SEEDS} seeds"
+
+
+def test_the_replications_error_rates_are_within_their_stated_bounds(planted) -> None:
+    """A region without an effect is confirmed with probability at most ALPHA (over every look);
+    a real effect larger than the futility size is called not replicated at most 2.5 % of the time."""
+    chance_confirmed = sum(g[1][1].status == CONFIRMED for g in planted) / SEEDS
+    true_refuted = sum(g[0][1].status == NOT_REPLICATED for g in planted) / SEEDS
+    slack = 2.5 * (ALPHA * (1 - ALPHA) / SEEDS) ** 0.5
+    assert chance_confirmed <= ALPHA + slack
+    assert true_refuted <= 0.025 + slack
+    assert {g[1][0] for g in planted} <= {SOLID, NOT_REPLICATED_GRADE, INCONCLUSIVE_GRADE, FRAGILE,
+                                           RENDERER_SENSITIVE}
+
+
+def test_a_region_the_second_renderer_does_not_show_is_renderer_sensitive() -> None:
+    """The first renderer fails the region (65 % against 20 %), the second fails it no more than
+    elsewhere: the finding replicates but is never solid; where the second renderer's pairs bound
+    its effect below what matters it is renderer-sensitive, else inconclusive (its pairs are the
+    replication's, often too few to bound an effect)."""
+    graded = [grades_of(seed, [(0.65, 0.20)], engine_fails=[(0.2, 0.2)])[0][0] for seed in range(40)]
+    assert set(graded) <= {RENDERER_SENSITIVE, INCONCLUSIVE_GRADE} and RENDERER_SENSITIVE in graded
+    twins = [((True, False, -0.6), (True, True, 0.6))] * 30 + [((True, True, 0.6), (True, True, 0.6))] * 98
+    replication = single([(a[1], b[1]) for a, b in twins])
+    flat = [(True, True)] * 128  # the second renderer gets every twin right: no effect, bounded
+    assert grade(evidence_of(replication, twins, flat, "mitsuba", THRESHOLD))[0] == RENDERER_SENSITIVE
+
+
+def test_a_region_whose_failures_are_all_near_ties_is_fragile() -> None:
+    """Every wrong verdict inside within the threshold of a tie: set aside, nothing is left."""
+    twins = [((True, False, -0.01), (True, True, 0.6))] * 30 + [((True, True, 0.5), (True, True, 0.4))] * 10
+    replication = single([(a[1], b[1]) for a, b in twins])
+    assert replication.status == CONFIRMED
+    engine = [(a[1], b[1]) for a, b in twins]
+    assert grade(evidence_of(replication, twins, engine, "mitsuba", THRESHOLD))[0] == FRAGILE
+    pairs, set_aside = steady_pairs((((a[1], a[2]), (b[1], b[2])) for a, b in twins), THRESHOLD)
+    assert set_aside == 30 and all(p == (True, True) for p in pairs)
+    # the same failures far from a tie hold
+    firm = [((True, False, -0.6), b) if not a[1] else (a, b) for a, b in twins]
+    assert grade(evidence_of(replication, firm, engine, "mitsuba", THRESHOLD))[0] == SOLID
+
+
+def test_no_budget_or_no_pair_leaves_a_finding_untested_with_the_reason() -> None:
+    from sweep3d.followups.grade import Evidence
+
+    assert grade(Evidence()) == (UNTESTED, "the budget gave it no fresh renders")
+    assert grade(Evidence(untested="fresh twins cannot test it: x"))[1].startswith("fresh twins cannot")
+    none = single([])
+    assert grade(Evidence(replication=none))[0] == UNTESTED
+
+
+def test_a_replicated_finding_without_a_second_renderer_check_is_inconclusive_not_solid() -> None:
+    twins = [((True, False, -0.6), (True, True, 0.6))] * 30
+    replication = single([(a[1], b[1]) for a, b in twins])
+    graded, sentence = grade(evidence_of(replication, twins, None, "mitsuba", THRESHOLD))
+    assert graded == INCONCLUSIVE_GRADE and "mitsuba was not checked" in sentence
