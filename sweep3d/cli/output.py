@@ -13,6 +13,7 @@ from sweep3d.cache import Store
 from sweep3d.core import UserError
 from sweep3d.driver import JobList, Plan
 from sweep3d.results import (
+    GRADES,
     HIDDEN,
     Region,
     Summary,
@@ -238,7 +239,7 @@ def print_findings(console: Console, plan: Plan, store: Store | None = None, fai
                  else m for k, m in zip(keys, marks)]
     unconfirmed = graded is None and UNCONFIRMED_MARK in marks
     if regions:
-        console.print("fails most at: " + "; ".join(describe_region(r) + escape(marks.pop(0)) for r in regions)
+        console.print("fails most at: " + "; ".join(_marked(describe_region(r), marks.pop(0)) for r in regions)
                       + " (each against the rest of its parameter; false discovery rate 5%)")
     elif summary.wrong and summary.effects:
         gap = nearest_miss_region(summary)
@@ -250,7 +251,7 @@ def print_findings(console: Console, plan: Plan, store: Store | None = None, fai
                           "does not rule out chance")
     if summary.boundaries:
         more = summary.boundaries_left_out
-        console.print("fails beyond a boundary: " + "; ".join(describe_boundary(b) + escape(marks.pop(0))
+        console.print("fails beyond a boundary: " + "; ".join(_marked(describe_boundary(b), marks.pop(0))
                                                               for b in summary.boundaries)
                       + (f"; {more} more of single objects or environments in the report" if more else "")
                       + " (step fits with 95% profile-likelihood intervals; false discovery rate 5%)")
@@ -258,7 +259,7 @@ def print_findings(console: Console, plan: Plan, store: Store | None = None, fai
         console.print("no significant boundary (q ≥ 0.05): "
                       + "; ".join(describe_flat(rows) for rows in by_parameter(summary.no_boundaries)))
     if rules:
-        console.print("fails more in a box: " + "; ".join(escape(r["text"] + marks.pop(0)) for r in rules)
+        console.print("fails more in a box: " + "; ".join(_marked(escape(r["text"]), marks.pop(0)) for r in rules)
                       + " (subgroup discovery over intervals; best of many boxes, so optimistic until confirmed)",
                       soft_wrap=True)
     if unconfirmed:
@@ -270,6 +271,14 @@ def print_findings(console: Console, plan: Plan, store: Store | None = None, fai
 
 
 UNTESTED_MARK = " [untested]"
+
+
+def _marked(text: str, mark: str) -> str:
+    """A finding (markup) with its mark: a grade leads it (``[solid] object = toaster: …``), a
+    confirmation's verdict follows it."""
+    if mark in GRADE_MARKS or mark == UNCONFIRMED_MARK:
+        return f"{escape(mark.strip())} {text}"
+    return text + escape(mark)
 
 
 def grade_marks(store: Store, plan: Plan, summary: Summary) -> dict[str, str] | None:
@@ -285,6 +294,10 @@ def grade_marks(store: Store, plan: Plan, summary: Summary) -> dict[str, str] | 
         return None
     rows = {r["finding"]: r["grade"] for r in stored_rows(store, plan.spec.name, plan.model) if r["listing"] == listing}
     return {f.key: UNTESTED_MARK if rows.get(f.key, UNTESTED) == UNTESTED else f" [{rows[f.key]}]" for f in findings}
+
+
+#: The marks of the grades.
+GRADE_MARKS = frozenset(f" [{g}]" for g in GRADES)
 
 
 def _printed_keys(regions: list[Region], boundaries: list[dict], rules: list[dict]) -> list[str]:

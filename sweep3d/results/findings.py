@@ -238,10 +238,52 @@ def register_findings_view(con: duckdb.DuckDBPyConnection, experiment: str | Non
     return True
 
 
+# -- failure images ---------------------------------------------------------------------------------
+
+#: The store's table of graded failure images: one row per (experiment, model, prediction).
+IMAGES_TABLE = "image_grades"
+IMAGE_SCHEMA = pa.schema([
+    ("image_grade_key", pa.string()), ("experiment", pa.string()), ("model", pa.string()),
+    ("pred_key", pa.string()), ("grade", pa.string()), ("evidence", pa.string()),
+    ("created_at", pa.timestamp("us", tz="UTC")),
+])
+
+
+def image_grade_row(experiment: str, model: str, pred_key: str, grade: str, evidence: str) -> dict[str, Any]:
+    """One ``image_grades`` row: a failure image's grade and why."""
+    from sweep3d.cache import utc_now
+
+    if grade not in GRADES:
+        raise ValueError(f"not a grade: {grade!r}")
+    key = hashlib.sha256("\0".join((experiment, model, pred_key)).encode()).hexdigest()
+    return {"image_grade_key": key, "experiment": experiment, "model": model, "pred_key": pred_key, "grade": grade,
+            "evidence": evidence, "created_at": utc_now()}
+
+
+def register_failure_grades_view(con: duckdb.DuckDBPyConnection, experiment: str | None) -> bool:
+    """Create ``failure_grades``: every counted failure of ``results`` with its grade (``untested``
+    where no grading checked it); False (nothing made) without results."""
+    have = {r[0] for r in con.execute("SELECT view_name FROM duckdb_views()").fetchall()}
+    if experiment is None or "results" not in have:
+        return False
+    graded = (f"(SELECT pred_key, grade, evidence FROM {IMAGES_TABLE} WHERE experiment = {literal(experiment)})"
+              if IMAGES_TABLE in have else "(SELECT NULL::VARCHAR AS pred_key, NULL::VARCHAR AS grade, "
+                                            "NULL::VARCHAR AS evidence WHERE false)")
+    con.execute(f"""CREATE OR REPLACE VIEW failure_grades AS
+        SELECT r.job, r.object, r.environment, r.pred_key, r.image_key,
+               coalesce(g.grade, {literal(UNTESTED)}) AS grade,
+               coalesce(g.evidence, 'not in a graded sample: sweep3d grade checks a sample of the failures') AS evidence
+        FROM results r LEFT JOIN {graded} g USING (pred_key)
+        WHERE r.counted AND NOT r.correct ORDER BY r.job""")
+    return True
+
+
 def _declare() -> None:
     from sweep3d.cache import TableContract, register_table
 
     register_table(TableContract(FINDINGS_TABLE, key="finding_grade_key", columns=tuple(SCHEMA.names),
+                                 merge="newest"))
+    register_table(TableContract(IMAGES_TABLE, key="image_grade_key", columns=tuple(IMAGE_SCHEMA.names),
                                  merge="newest"))
 
 

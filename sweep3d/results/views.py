@@ -109,7 +109,7 @@ from sweep3d.results.compare import COMPARE_MACROS, COMPARE_VIEWS, register_comp
 from sweep3d.results.counterfactuals import register_counterfactual_views
 from sweep3d.results.detection import DETECTION_VIEWS, detection_views
 from sweep3d.results.failure_modes import create_failure_modes
-from sweep3d.results.findings import register_findings_view
+from sweep3d.results.findings import register_failure_grades_view, register_findings_view
 from sweep3d.results.fragile import plan_drops_fragile, register_fragile
 from sweep3d.results.measures import NOT_A_MEASURE
 from sweep3d.results.paired import PAIRED_VIEWS, register_paired_views
@@ -185,6 +185,7 @@ def connect(store: Store, experiment: str | None = None, read_only: bool = False
         register_agreement_views(con, verdicts, experiment)
         explained = register_counterfactual_views(con, store, experiment)  # once `sweep3d explain` ran
         register_findings_view(con, experiment)  # once `run` listed its findings
+        register_failure_grades_view(con, experiment)
         if read_only:
             lock_down(con, [path for paths in files.values() for path in paths] + verdicts + explained, writable)
     except BaseException:

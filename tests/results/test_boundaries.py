@@ -148,8 +148,10 @@ def test_the_findings_name_the_boundaries_and_nothing_for_a_control_that_does_no
     passing = f"{toaster['accuracy_above']:.0%} of {toaster['n_above']}"
     assert f"(95% interval {toaster['boundary_low']:.3g}–{toaster['boundary_high']:.3g}), {passing} → " in line
     groups = [r for r in failure_boundaries(con, SCALES).to_pylist() if r["significant"] and r["scope"] != "all"]
-    named, _, left_out = boundary_findings(con, SCALES, limit=1)  # the rest are counted for the findings line
-    assert len(groups) >= 2 and left_out == len(groups) - 1 and sum(r["scope"] != "all" for r in named) == 1
+    named, _, more = boundary_findings(con, SCALES, limit=1)  # the rest are kept for the findings list
+    assert len(groups) >= 2 and len(more) == len(groups) - 1 and sum(r["scope"] != "all" for r in named) == 1
+    assert {(r["scope"], r[r["scope"]]) for r in named + more if r["scope"] != "all"} == \
+        {(g["scope"], g[g["scope"]]) for g in groups}  # none lost
 
     rng = np.random.default_rng(1)
     null = [{"camera_elevation": float(rng.uniform(0, 60)), "correct": bool(rng.random() < 0.7)} for _ in range(80)]

@@ -19,6 +19,6 @@ if _TYPE_CHECKING:
     from sweep3d.followups.confirm.claims import Claim, boundary_key, region_key, rule_key
     from sweep3d.followups.confirm.draw import Space, space_of
     from sweep3d.followups.confirm.record import mark, read_verdicts
-    from sweep3d.followups.confirm.run import ConfirmResult, Twin, claims_of, confirm, render_twins
+    from sweep3d.followups.confirm.run import ConfirmResult, Twin, claims_of, confirm, render_rows, render_twins
 
 __getattr__, __dir__ = _exports(__name__)  # names, modules and __all__ from the block above

@@ -175,14 +175,25 @@ def render_twins(loaded: LoadedSpec, space: Space, store: Store, pairs: list[lis
     """Render and judge ``pairs`` (groups of twin pairs) as the experiment ``<name><suffix>``, with
     ``render`` over the spec's ``[render]`` settings (another engine); returns the run's result and
     each group's twins' results (:func:`twin_outcomes`)."""
+    fresh = [row for group in pairs for pair in group for row in pair]
+    result, outcomes = render_rows(loaded, space, store, fresh, console, executor, suffix, render)
+    found = iter(outcomes)
+    return result, [[(next(found), next(found)) for _ in group] for group in pairs]
+
+
+def render_rows(loaded: LoadedSpec, space: Space, store: Store, rows: list[Row], console: Console | None,
+                executor: Executor, suffix: str, render: dict[str, Any] | None = None) -> tuple[Any, list[Twin | None]]:
+    """Render and judge ``rows`` (configurations) as the experiment ``<name><suffix>``, with ``render``
+    over the spec's ``[render]`` settings; returns the run's result (None without rows) and each
+    row's result, in order (None where a job has none: out of frame, failed)."""
     from sweep3d.runner import run
 
-    fresh = [row for group in pairs for pair in group for row in pair]
-    if not fresh:
-        return None, [[] for _ in pairs]
-    variant = _variant(loaded, space, fresh, suffix, render)
+    if not rows:
+        return None, []
+    variant = _variant(loaded, space, rows, suffix, render)
     result = run(variant, console, executor=executor)
-    return result, twin_outcomes(space, fresh, _outcomes(store, variant.name), pairs)
+    outcomes = _outcomes(store, variant.name)
+    return result, [outcomes.get(i) for i in scene_order(space, rows)]
 
 
 def findings_claims(loaded: LoadedSpec, store: Store, summary: Summary, space: Space) -> list[Claim]:

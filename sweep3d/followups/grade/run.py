@@ -46,6 +46,7 @@ DEFAULT_BUDGET = 1024
 #: The share of the budget the replication may take; the second renderer gets what it leaves.
 REPLICATION_SHARE = 0.75
 MAX_PAIRS = 128  # a finding's twin pairs at most, however large the budget
+IMAGE_SHARE = 8  # 1/8 of the budget is kept for the sampled failure images on the second renderer
 ENGINE_SUFFIX = "-confirm-"  # the second renderer's experiment: <name>-confirm-<engine>
 
 
@@ -110,12 +111,17 @@ def _graded(loaded: LoadedSpec, store: Store, budget: int, seed: int, console: C
         verdicts = {x.claim.key: x.verdict for x in result.confirmations}
         replicated = [k for k, v in verdicts.items() if v.status == CONFIRMED]
         engine_pairs, engine_rendered, engine_used = _second_renderer(
-            loaded, store, space, result, replicated, budget - used, engine, console, executor)
+            loaded, store, space, result, replicated, budget - used - budget // IMAGE_SHARE, engine, console,
+            executor)
         rendered += engine_rendered
         used += engine_used
         for key, verdict in verdicts.items():
             evidence[key] = evidence_of(verdict, result.outcomes.get(key, []), engine_pairs.get(key), engine,
                                         threshold)
+    images, image_rendered = _image_grades(loaded, store, space, model, checked, max(0, budget - used), engine,
+                                           console, executor)
+    used += images
+    rendered += image_rendered
     grades = []
     for finding in findings:
         claim = claims.get(finding.key)
@@ -165,6 +171,61 @@ def _second_renderer(loaded: LoadedSpec, store: Store, space: Any, result: Any, 
              for key, twins in zip(replicated, outcomes)}
     render = next((o for o in run_result.outcomes if o.stage == "render"), None) if run_result else None
     return pairs, render.computed if render else 0, 2 * sum(len(g) for g in groups)
+
+
+def _image_grades(loaded: LoadedSpec, store: Store, space: Any, model: str, checked: Any, left: int, engine: str,
+                  console: Console | None, executor: Executor) -> tuple[int, int]:
+    """Grade the failure images the stability check sampled: fragile where a change no eye sees
+    flipped it or its margin is within the threshold of a tie; else rendered again by ``engine``
+    (as many as ``left`` allows, in job order): renderer-sensitive where that gets it right, solid
+    where it fails too, inconclusive where the budget left it unrendered. Returns (jobs used, renders made)."""
+    from sweep3d.followups.confirm import render_rows
+    from sweep3d.results import IMAGE_SCHEMA, IMAGES_TABLE, connect, image_grade_row, literal
+    from sweep3d.stages.render import cycles_only_defaults
+
+    if checked is None:
+        return 0, 0
+    columns = [p.column for p in space.parameters]
+    con = connect(store, loaded.name)
+    try:
+        select = ", ".join(f"r.{c}" for c in ["object", "environment", *columns])
+        found = con.execute(
+            f"SELECT r.pred_key, r.margin, i.flipped, {select} FROM results r JOIN stability_images i "
+            f"ON i.pred_key = r.pred_key AND i.model IS NOT DISTINCT FROM {literal(checked.model)} "
+            "WHERE r.counted AND NOT r.correct ORDER BY r.job").fetchall()
+    finally:
+        con.close()
+    threshold = checked.threshold
+    rows, fragile = [], {}
+    for pred_key, margin, flipped, *values in found:
+        if flipped:
+            fragile[pred_key] = "a change no eye sees flips it (stability check)"
+        elif margin is not None and abs(margin) < threshold:
+            fragile[pred_key] = f"|margin| {abs(margin):.3g} is within the fragile threshold {threshold:.3g} of a tie"
+        else:
+            rows.append((pred_key, dict(zip(["object", "environment", *columns], values))))
+    taken = rows[:left]
+    settings = {"engine": engine, **cycles_only_defaults(engine)}
+    result, outcomes = render_rows(loaded, space, store, [r for _, r in taken], console, executor,
+                                   f"-grade-{engine}", settings)
+    out = [image_grade_row(loaded.name, model, k, "fragile", why) for k, why in fragile.items()]
+    for (pred_key, _), outcome in zip(taken, outcomes):
+        if outcome is None or not outcome[0]:
+            out.append(image_grade_row(loaded.name, model, pred_key, "inconclusive",
+                                       f"{engine} gave no counted verdict of it (out of frame or invalid)"))
+        elif outcome[1]:
+            out.append(image_grade_row(loaded.name, model, pred_key, "renderer-sensitive",
+                                       f"steady under changes no eye sees, but {engine} gets it right"))
+        else:
+            out.append(image_grade_row(loaded.name, model, pred_key, "solid",
+                                       f"steady under changes no eye sees, and {engine} fails it too"))
+    for pred_key, _ in rows[len(taken):]:
+        out.append(image_grade_row(loaded.name, model, pred_key, "inconclusive",
+                                   f"steady under changes no eye sees; the budget ended before {engine} rendered it"))
+    if out:
+        store.append(IMAGES_TABLE, out, IMAGE_SCHEMA)
+    render = next((o for o in result.outcomes if o.stage == "render"), None) if result else None
+    return len(taken), render.computed if render else 0
 
 
 def _record(store: Store, loaded: LoadedSpec, model: str, listing: str, findings: list[Finding],

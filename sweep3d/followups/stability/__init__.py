@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING as _TYPE_CHECKING  # noqa: E402
 from sweep3d.core import exports as _exports  # noqa: E402
 
 if _TYPE_CHECKING:
-    from sweep3d.followups.stability.check import check_stability
+    from sweep3d.followups.stability.check import DEFAULT_SAMPLE, check_stability
     from sweep3d.followups.stability.sequential import ALPHA, UNDECIDED, look_z, needed
 
 __getattr__, __dir__ = _exports(__name__)  # names, modules and __all__ from the block above
