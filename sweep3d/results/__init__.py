@@ -41,7 +41,12 @@ if _TYPE_CHECKING:
         tally,
     )
     from sweep3d.results.confirmation import wilson as confirmation_wilson
-    from sweep3d.results.counterfactuals import COUNTERFACTUAL_VIEWS, SCHEMA, counterfactuals_path
+    from sweep3d.results.counterfactuals import (
+        COUNTERFACTUAL_VIEWS,
+        COUNTERFACTUALS,
+        SCHEMA,
+        legacy_counterfactuals_path,
+    )
     from sweep3d.results.fragile import FLIP_RATE, MARGIN_EDGES, create_margin_macro, fragile_sentence, margin_sql
     from sweep3d.results.measures import MEASURES
     from sweep3d.results.own_jobs import PlannedStore, results_store

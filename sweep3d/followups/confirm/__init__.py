@@ -3,8 +3,8 @@
 :mod:`.claims` turns the findings ``run`` prints into regions of the parameters, :mod:`.draw`
 draws fresh twin configurations inside and outside each, :mod:`.confirm` renders them through
 the normal cached stages and judges them (statistics in
-:mod:`sweep3d.results.confirmation`), and :mod:`.record` keeps the verdicts in the store
-for ``run``'s findings and the report.
+:mod:`sweep3d.results.confirmation`), and :mod:`.record` keeps the verdicts in the store's
+``confirmations`` table (declared in :mod:`.stored`) for ``run``'s findings and the report.
 """
 
 from __future__ import annotations
@@ -17,7 +17,8 @@ from sweep3d.core import exports as _exports  # noqa: E402
 
 if _TYPE_CHECKING:
     from sweep3d.followups.confirm.claims import boundary_key, region_key, rule_key
-    from sweep3d.followups.confirm.record import mark, read_verdicts
+    from sweep3d.followups.confirm.record import mark, read_verdicts, status, write_verdicts
+    from sweep3d.followups.confirm.stored import CONFIRMATIONS, confirmation_key
     from sweep3d.followups.confirm.run import ConfirmResult, confirm
 
 __getattr__, __dir__ = _exports(__name__)  # names, modules and __all__ from the block above
