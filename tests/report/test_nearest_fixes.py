@@ -19,11 +19,10 @@ import pyarrow.parquet as pq
 import pytest
 
 from sweep3d.cache.store import Store
+from sweep3d.followups import explain
 from sweep3d.report import build_context, render_html
 from sweep3d.report.panels import PANELS
-from sweep3d.results import connect
-from sweep3d.followups import explain
-from sweep3d.results import SCHEMA, legacy_counterfactuals_path
+from sweep3d.results import SCHEMA, connect, legacy_counterfactuals_path
 from tests.helpers import build_store, load_spec
 
 NEAREST = tuple(p for p in PANELS if p.id == "nearest-fixes")

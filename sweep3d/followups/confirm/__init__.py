@@ -18,7 +18,7 @@ from sweep3d.core import exports as _exports  # noqa: E402
 if _TYPE_CHECKING:
     from sweep3d.followups.confirm.claims import boundary_key, region_key, rule_key
     from sweep3d.followups.confirm.record import mark, read_verdicts, status, write_verdicts
-    from sweep3d.followups.confirm.stored import CONFIRMATIONS, confirmation_key
     from sweep3d.followups.confirm.run import ConfirmResult, confirm
+    from sweep3d.followups.confirm.stored import CONFIRMATIONS, confirmation_key
 
 __getattr__, __dir__ = _exports(__name__)  # names, modules and __all__ from the block above
