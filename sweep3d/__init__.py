@@ -29,7 +29,8 @@ _LAZY = {"Experiment": "sweep3d.api", "load": "sweep3d.api"}
 #: command imported (``cache verify`` or ``gc`` that did not know a table would skip its files);
 #: the store imports them the first time it needs every table or meets one it does not know.
 declare_table_modules("sweep3d.followups.stability.stored", "sweep3d.followups.realism.stored",
-                      "sweep3d.followups.explain.stored", "sweep3d.results.findings")
+                      "sweep3d.followups.explain.stored", "sweep3d.followups.confirm.stored",
+                      "sweep3d.results.findings")
 
 
 def __getattr__(name: str) -> Any:

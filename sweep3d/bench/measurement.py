@@ -30,9 +30,8 @@ from sweep3d.driver import Plan, RunProgress
 from sweep3d.results import wilson_interval
 from sweep3d.runner import plan_spec, running
 from sweep3d.spec import LoadedSpec
-from sweep3d.stages.infer import InferStage, ModelHandle, Preprocess
-from sweep3d.stages.postprocess import PostprocessStage
-from sweep3d.stages.render import RenderInfo, RenderStage
+from sweep3d.stages.infer import ModelHandle, Preprocess
+from sweep3d.stages.render import RenderInfo
 
 #: The sample is rendered in this many rounds, every setting taking its turn in each, so that
 #: timings taken on a shared machine whose load changes are comparable (a worker start per turn).
@@ -170,10 +169,9 @@ def measure(loaded: LoadedSpec, settings: list[Setting], reference: Setting, flo
             for setting, plan in plans.items():
                 n = len(plan.jobs)  # contiguous: a scene's jobs stay together, as in a run
                 part = dataclasses.replace(plan, jobs=plan.jobs[chunk * n // ROUNDS : (chunk + 1) * n // ROUNDS])
-                # its own stages: a timed render stage per turn (a worker start each), every image stored
-                stages = (RenderStage(runner.executor, timings=timings), PostprocessStage(), InferStage(models[setting]))
+                # a timed render stage per turn (a worker start each), every image stored
                 try:
-                    runner.run(part, stages=stages, strict=True, overlap=False)
+                    runner.run(part, models[setting], every_image=True, timings=timings, strict=True, overlap=False)
                 except UserError as exc:
                     raise UserError(f"bench at {setting.label()}: {exc}") from None
     con = store.connect()

@@ -5,9 +5,9 @@ results under a contract the store knows only by declaration (docs/architecture/
 - ``stability``: which verdicts a change no eye sees flips. Plan: the sampled jobs; postprocess,
   then its own ``StabilityStage``. Keeps: the ``stability`` table (``stability/stored.py``).
 - ``explain``: the nearest change that fixes each failure. Plan: one per search round (its
-  probes). Keeps: ``explain/<experiment>.parquet`` (the folder declared in ``explain/stored.py``).
+  probes). Keeps: the ``counterfactuals`` table (``explain/stored.py``).
 - ``confirm``: each finding tested on fresh twin renders. Plan: the twins as the explicit jobs of
-  ``<name>-confirm``. Keeps: ``cache/confirm/<experiment>.json``.
+  ``<name>-confirm``. Keeps: the ``confirmations`` table (``confirm/stored.py``).
 - ``realism``: agreement with photographs or another engine. Plan: ``score --engine``, the kit's
   jobs as a run of that engine. Keeps: the ``verdicts`` table and kept photos
   (``realism/stored.py``).

@@ -22,7 +22,6 @@ from sweep3d.runner import plan_spec, running
 from sweep3d.spec import LoadedSpec
 from sweep3d.stages.infer import ModelHandle
 from sweep3d.stages.plan import GridPolicy
-from sweep3d.stages.postprocess import PostprocessStage
 
 TILE = 128
 LABEL_WIDTH = 170
@@ -69,7 +68,7 @@ def contact_sheet(loaded: LoadedSpec, output: Path, progress: RunProgress, objec
     plan = Plan(loaded, jobs, model.digest, framing=model.framing, device=plan.device)
     store = Store(loaded.store)
     with running(loaded, wait=wait, progress=progress, store=store) as runner:  # every image stored: the tiles read them
-        runner.run(plan, stages=(runner.render, PostprocessStage()), strict=True, overlap=False)
+        runner.run(plan, stages=("render", "postprocess"), every_image=True, strict=True, overlap=False)
     width = LABEL_WIDTH + TILE * max(len(r[1]) for r in rows)
     sheet = Image.new("RGB", (width, TILE * len(rows)), "white")
     draw = ImageDraw.Draw(sheet)

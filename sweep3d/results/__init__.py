@@ -42,7 +42,12 @@ if _TYPE_CHECKING:
         tally,
     )
     from sweep3d.results.confirmation import wilson as confirmation_wilson
-    from sweep3d.results.counterfactuals import COUNTERFACTUAL_VIEWS, SCHEMA, counterfactuals_path
+    from sweep3d.results.counterfactuals import (
+        COUNTERFACTUAL_VIEWS,
+        COUNTERFACTUALS,
+        SCHEMA,
+        legacy_counterfactuals_path,
+    )
     from sweep3d.results.findings import (
         BOUNDARY,
         BOX,

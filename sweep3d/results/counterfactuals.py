@@ -1,8 +1,11 @@
 """The ``counterfactuals`` views: what ``sweep3d explain`` found, queryable like the results.
 
-``explain`` writes one row per failure it searched to ``<store>/explain/<experiment>.parquet``
-(:func:`counterfactuals_path`); its fixing jobs are not the experiment's jobs (they would tilt
-every accuracy towards right answers), so they live here and in the keyed stage tables only.
+``explain`` keeps one row per failure it searched in the store's ``counterfactuals`` table
+(:data:`COUNTERFACTUALS`, declared by :mod:`sweep3d.followups.explain.stored`, which writes it);
+its fixing jobs are not the experiment's jobs (they would tilt every accuracy towards right
+answers), so they live there and in the keyed stage tables only. A store written before the table
+kept them in ``<store>/explain/<experiment>.parquet`` (:func:`legacy_counterfactuals_path`): the
+views read that file while the table holds no row of the experiment.
 
 Views (only once ``explain`` has run):
 
@@ -31,14 +34,19 @@ from __future__ import annotations
 import errno
 import os
 from pathlib import Path
+from typing import Sequence
 
 import duckdb
 import pyarrow as pa
 import pyarrow.parquet as pq
 
 from sweep3d.cache import Store, safe_filename, store_error
+from sweep3d.results.quoting import literal
 
 COUNTERFACTUAL_VIEWS = ("counterfactuals", "counterfactual_parameters")
+
+#: The store's table of what ``explain`` found, one row per (experiment, failure).
+COUNTERFACTUALS = "counterfactuals"
 
 _MEASURES = [("label", pa.string()), ("correct", pa.bool_()), ("loss", pa.float64()),
              ("probability", pa.float64()), ("margin", pa.float64())]
@@ -67,19 +75,28 @@ _SQL_TYPES = {"string": "VARCHAR", "bool": "BOOLEAN", "int64": "BIGINT", "double
               "list<item: double>": "DOUBLE[]", "list<item: string>": "VARCHAR[]"}
 
 
-def counterfactuals_path(store: Store, experiment: str) -> Path:
-    """Where ``explain`` keeps an experiment's counterfactuals."""
+def legacy_counterfactuals_path(store: Store, experiment: str) -> Path:
+    """Where ``explain`` kept an experiment's counterfactuals before the ``counterfactuals`` table."""
     return store.root / "explain" / f"{safe_filename(experiment)}.parquet"
 
 
-def register_counterfactual_views(con: duckdb.DuckDBPyConnection, store: Store, experiment: str | None) -> list[Path]:
-    """Create the views when ``explain`` has run for ``experiment``; returns the files they read."""
+def register_counterfactual_views(con: duckdb.DuckDBPyConnection, store: Store, experiment: str | None,
+                                  segments: Sequence[Path] = ()) -> list[Path]:
+    """Create the views over ``experiment``'s rows of the ``counterfactuals`` table (its readable
+    ``segments``), or of a store's older file while the table holds none of them; no views when
+    ``explain`` has not run for it (the store's view over other experiments' rows is dropped).
+    Returns the files the views read beyond the table's segments (the older file, when read)."""
     if experiment is None:
         return []
-    path = counterfactuals_path(store, experiment)
+    where = f"experiment = {literal(experiment)}"
+    source = f"read_parquet([{', '.join(literal(str(p)) for p in segments)}], union_by_name = true)"
+    if segments and con.execute(f"SELECT count(*) FROM {source} WHERE {where}").fetchone()[0]:
+        _create(con, source, where, dedupe=True)
+        return []
+    con.execute(f"DROP VIEW IF EXISTS {COUNTERFACTUALS}")  # the table's rows are other experiments'
+    path = legacy_counterfactuals_path(store, experiment)
     try:
-        names = pq.read_schema(path).names
-        if "failure_job" not in names:
+        if "failure_job" not in pq.read_schema(path).names:
             return []
     except OSError as exc:
         if isinstance(exc, PermissionError) or exc.errno in (errno.EACCES, errno.EPERM):
@@ -88,11 +105,20 @@ def register_counterfactual_views(con: duckdb.DuckDBPyConnection, store: Store, 
         return []  # none yet
     except (ValueError, pa.ArrowException):  # not a table explain wrote: no views
         return []
-    own = "WHERE failure_pred_key IN (SELECT pred_key FROM jobs) " if _has(con, "jobs") else ""
-    # a file from before a column was added reads that column as NULL
+    _create(con, f"read_parquet({literal(str(path))})", "true", dedupe=False)
+    return [path]
+
+
+def _create(con: duckdb.DuckDBPyConnection, source: str, where: str, dedupe: bool) -> None:
+    """The two views over ``source``'s rows that ``where`` keeps (``dedupe``: a key's newest row)."""
+    names = {row[0] for row in con.execute(f"DESCRIBE SELECT * FROM {source}").fetchall()}
+    own = " AND failure_pred_key IN (SELECT pred_key FROM jobs)" if _has(con, "jobs") else ""
+    newest = " QUALIFY row_number() OVER (PARTITION BY counterfactual_key ORDER BY created_at DESC) = 1" if dedupe \
+        else ""
+    # a file or segment from before a column was added reads that column as NULL
     later = "".join(f", NULL::{_SQL_TYPES[str(f.type)]} AS {f.name}" for f in SCHEMA if f.name not in names)
-    con.execute(f"CREATE OR REPLACE VIEW counterfactuals AS SELECT *{later} FROM read_parquet('{_quoted(path)}') "
-                f"{own}ORDER BY failure_job")  # a failure the spec no longer plans is not shown
+    con.execute(f"CREATE OR REPLACE VIEW {COUNTERFACTUALS} AS SELECT *{later} FROM {source} "
+                f"WHERE {where}{own}{newest} ORDER BY failure_job")  # a failure the spec no longer plans is not shown
     con.execute("""CREATE OR REPLACE VIEW counterfactual_parameters AS
         WITH moves AS (
             SELECT failure_job, n_changed, unnest(parameters) AS parameter, unnest(shares) AS share
@@ -101,12 +127,9 @@ def register_counterfactual_views(con: duckdb.DuckDBPyConnection, store: Store, 
         SELECT parameter, count(*) AS cheapest, count(*) FILTER (WHERE n_changed = 1) AS alone,
                count(*) / (SELECT n FROM fixes) AS share, median(abs(share)) AS median_share
         FROM moves GROUP BY parameter ORDER BY cheapest DESC, parameter""")
-    return [path]
 
 
 def _has(con: duckdb.DuckDBPyConnection, view: str) -> bool:
     return bool(con.execute("SELECT count(*) FROM duckdb_views() WHERE view_name = ?", [view]).fetchone()[0])
 
 
-def _quoted(path: Path) -> str:
-    return str(path).replace("'", "''")

@@ -106,7 +106,7 @@ from sweep3d.core import Roles, UserError
 from sweep3d.results.agreement import register_agreement_views, verdict_files
 from sweep3d.results.base_views import plan_min_visible, register_results, results_roles
 from sweep3d.results.compare import COMPARE_MACROS, COMPARE_VIEWS, register_compare_views
-from sweep3d.results.counterfactuals import register_counterfactual_views
+from sweep3d.results.counterfactuals import COUNTERFACTUALS, register_counterfactual_views
 from sweep3d.results.detection import DETECTION_VIEWS, detection_views
 from sweep3d.results.failure_modes import create_failure_modes
 from sweep3d.results.findings import register_failure_grades_view, register_findings_view
@@ -183,7 +183,8 @@ def connect(store: Store, experiment: str | None = None, read_only: bool = False
             register_compare_views(con, models, results_roles(con).has("prediction"))
         verdicts = verdict_files(store)  # other sources' verdicts (photographs, another renderer)
         register_agreement_views(con, verdicts, experiment)
-        explained = register_counterfactual_views(con, store, experiment)  # once `sweep3d explain` ran
+        explained = register_counterfactual_views(con, store, experiment,  # once `sweep3d explain` ran
+                                                   files.get(COUNTERFACTUALS, []))
         register_findings_view(con, experiment)  # once `run` listed its findings
         register_failure_grades_view(con, experiment)
         if read_only:

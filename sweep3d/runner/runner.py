@@ -23,7 +23,7 @@ from sweep3d.driver import Found, Plan, RunProgress, StageOutcome, run_stages
 from sweep3d.spec import LoadedSpec
 from sweep3d.stages.infer import InferStage, ModelHandle, pending_predictions
 from sweep3d.stages.postprocess import ImageHandoff, PostprocessStage
-from sweep3d.stages.render import LOCAL, Executor, RenderStage
+from sweep3d.stages.render import LOCAL, Executor, RenderInfo, RenderStage
 
 #: The standard stages, in order: what a run computes of each job.
 STANDARD = ("render", "postprocess", "infer")
@@ -43,7 +43,8 @@ class Runner:
         self._progress, self._console = progress, console
         self._keep_open = keep_open
         self._render: RenderStage | None = None
-        self._infers: dict[int, InferStage] = {}
+        self._every_image: PostprocessStage | None = None  # see stages(every_image=True)
+        self._infers: dict[tuple[int, bool], InferStage] = {}
         self._prepared: set[int] = set()
         self._stack = ExitStack()
 
@@ -61,24 +62,43 @@ class Runner:
             self._progress = self._stack.enter_context(RunProgress(self._console))
         return self._progress
 
-    def infer(self, model: ModelHandle, several: bool = False) -> InferStage:
-        """The infer stage of ``model`` (one per model, kept: the model loads once)."""
-        stage = self._infers.get(id(model))
+    def infer(self, model: ModelHandle, several: bool = False, every_image: bool = False) -> InferStage:
+        """The infer stage of ``model`` (one per model, kept: the model loads once); ``every_image``:
+        the one after :meth:`stages`' every-image postprocess, reading the images from the store."""
+        stage = self._infers.get((id(model), every_image))
         if stage is None:
-            stage = self._infers[id(model)] = InferStage(
-                model, on_ray=self.executor.kind == "ray", several=several, handoff=self.post.handoff,
-                images_stored=self.post.store_images)
+            post = self._post(every_image)
+            stage = self._infers[(id(model), every_image)] = InferStage(
+                model, on_ray=self.executor.kind == "ray", several=several, handoff=post.handoff,
+                images_stored=post.store_images)
         return stage
 
     def stages(self, model: ModelHandle | None = None, names: Sequence[str] = STANDARD, extra: Sequence = (),
-               several: bool = False) -> tuple:
-        """The standard stages ``names`` (in their order), then the computation's ``extra`` ones."""
+               several: bool = False, every_image: bool = False,
+               timings: dict[str, RenderInfo] | None = None) -> tuple:
+        """The standard stages ``names`` (in their order), then the computation's ``extra`` ones.
+
+        Args:
+            every_image: a postprocess stage that stores every image whatever the spec's ``[postprocess]
+                store`` says, for a computation that reads them back (the contact sheet's tiles, the
+                bench's errors against its reference).
+            timings: a render stage of this call's own that records each render's timing there
+                (the bench: a worker started for each turn, its scene loads timed apart).
+        """
         unknown = [n for n in names if n not in STANDARD]
         if unknown or ("infer" in names and model is None):
             raise ValueError(f"stages {list(names)}: name some of {list(STANDARD)} (infer needs a model)")
-        made = {"render": lambda: self.render, "postprocess": lambda: self.post,
-                "infer": lambda: self.infer(model, several)}  # type: ignore[arg-type]
+        made = {"render": lambda: self.render if timings is None else RenderStage(self.executor, timings=timings),
+                "postprocess": lambda: self._post(every_image),
+                "infer": lambda: self.infer(model, several, every_image)}  # type: ignore[arg-type]
         return tuple(made[n]() for n in STANDARD if n in names) + tuple(extra)
+
+    def _post(self, every_image: bool) -> PostprocessStage:
+        if not every_image:
+            return self.post
+        if self._every_image is None:
+            self._every_image = PostprocessStage()
+        return self._every_image
 
     def prepare(self, plan: Plan, stages: Sequence) -> None:
         """Load each infer stage's model and try it, once, where ``plan`` has something to infer:
@@ -91,18 +111,21 @@ class Runner:
 
     def run(self, plan: Plan, model: ModelHandle | None = None, *, stages: Sequence = STANDARD,
             extra: Sequence = (), several: bool = False, strict: bool = False, overlap: bool = True,
-            found: Mapping[str, Found] | None = None) -> list[StageOutcome]:
+            found: Mapping[str, Found] | None = None, every_image: bool = False,
+            timings: dict[str, RenderInfo] | None = None) -> list[StageOutcome]:
         """Run ``plan`` through ``stages`` (standard names, or stage objects of the caller's own
-        making, such as the bench's timed render stage), then ``extra``; returns each one's outcome.
+        making), then ``extra``; returns each one's outcome.
 
         Args:
+            every_image, timings: which variant of the standard stages (see :meth:`stages`).
             strict: a failed key raises (see :func:`~sweep3d.driver.run_stages`).
             overlap: the stages run together, each on what the ones before have stored so far.
             found: what the caller already looked up, by table (see ``run_stages``).
         """
         names = [s for s in stages if isinstance(s, str)]
         own = [s for s in stages if not isinstance(s, str)]
-        chosen = (*self.stages(model, names, several=several), *own, *extra) if names else (*own, *extra)
+        chosen = ((*self.stages(model, names, several=several, every_image=every_image, timings=timings), *own, *extra)
+                  if names else (*own, *extra))
         self.prepare(plan, chosen)
         return run_stages(chosen, plan, self.store, self.progress, strict=strict, overlap=overlap, found=found)
 

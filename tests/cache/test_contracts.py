@@ -51,7 +51,7 @@ def test_every_declared_table_is_known_without_importing_its_package() -> None:
     out = subprocess.run([sys.executable, "-c", probe], cwd=REPO, capture_output=True, text=True, check=True)
     before, names = json.loads(out.stdout.splitlines()[-1])
     assert before == [], "nothing of a follow-up is imported until a table of one is needed"
-    assert {"stability", "verdicts"} <= set(names)
+    assert {"stability", "verdicts", "confirmations", "counterfactuals"} <= set(names)
     assert names[:6] == ["renders", "images", "predictions", "runs", "parts", "truths"]
 
 

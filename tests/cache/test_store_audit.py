@@ -438,13 +438,16 @@ def test_only_the_lock_holder_quarantines_a_damaged_segment(run_dir: Path, caplo
 
 
 def test_counterfactuals_the_user_may_not_read_are_named_not_a_missing_table(shared_dir: Path) -> None:
-    """``explain``'s file made unreadable: one line naming it and the fix, not DuckDB's "Table with
-    name counterfactuals does not exist"; a store that was never explained still has no such view."""
-    from sweep3d.results.counterfactuals import SCHEMA, counterfactuals_path
+    """``explain``'s rows made unreadable (a segment of its table, or a store's file from before the
+    table): one line naming it and the fix, not DuckDB's "Table with name counterfactuals does not
+    exist"; a store that was never explained still has no such view."""
+    from sweep3d.followups.explain import write_counterfactuals
+    from sweep3d.results import SCHEMA, legacy_counterfactuals_path
 
     sql = "SELECT count(*) FROM counterfactuals"
     assert "counterfactuals does not exist" in one_error(*cli(shared_dir, "query", "SPEC", sql))  # never explained
-    path = counterfactuals_path(Store(shared_dir / "store"), "scale")
+    store = Store(shared_dir / "store")
+    path = legacy_counterfactuals_path(store, "scale")
     path.parent.mkdir()
     pq.write_table(pa.Table.from_pylist([], schema=SCHEMA), path)
     hand_over(shared_dir)
@@ -452,3 +455,12 @@ def test_counterfactuals_the_user_may_not_read_are_named_not_a_missing_table(sha
     path.chmod(0)
     line = one_error(*as_user(lambda: cli(shared_dir, "query", "SPEC", sql)))
     assert line == f"error: cannot read {path} (Permission denied); fix its permissions", line
+
+    row = {name: None for name in SCHEMA.names} | {"experiment": "scale", "failure_pred_key": "p", "failure_job": 0}
+    write_counterfactuals(store, "scale", [row])  # explain again: its table's rows, the older file gone
+    [segment] = store.segments("counterfactuals")
+    assert not path.exists()
+    hand_over(shared_dir)
+    segment.chmod(0)
+    line = one_error(*as_user(lambda: cli(shared_dir, "query", "SPEC", sql)))
+    assert line.startswith(f"error: cannot read {segment} (Permission denied)") and "fix its permissions" in line, line

@@ -19,10 +19,10 @@ import pyarrow.parquet as pq
 import pytest
 
 from sweep3d.cache.store import Store
+from sweep3d.followups import explain
 from sweep3d.report import build_context, render_html
 from sweep3d.report.panels import PANELS
-from sweep3d.results import connect
-from sweep3d.results.counterfactuals import SCHEMA, counterfactuals_path
+from sweep3d.results import SCHEMA, connect, legacy_counterfactuals_path
 from tests.helpers import build_store, load_spec
 
 NEAREST = tuple(p for p in PANELS if p.id == "nearest-fixes")
@@ -43,7 +43,8 @@ def failures(spec: Path) -> list[dict]:
 
 def write_counterfactuals(spec: Path, rows: list[dict], budget: int | None, old: bool = False, **more) -> None:
     """One found fix per row; ``more``: further columns, a list (one value per row) or one value for
-    all; ``old``: a file written before ``fix_fragile`` and the columns after it were added."""
+    all; ``old``: a file of a store from before the table, written before ``fix_fragile`` and the
+    columns after it were added."""
     loaded = load_spec(spec)
     out = []
     for i, r in enumerate(rows):
@@ -58,9 +59,12 @@ def write_counterfactuals(spec: Path, rows: list[dict], budget: int | None, old:
                    change="blur_sigma -1", seed=0, budget=budget)
         row.update({k: v[i] if isinstance(v, list) else v for k, v in more.items()})
         out.append(row)
-    path = counterfactuals_path(Store(loaded.store), loaded.name)
+    explain.write_counterfactuals(Store(loaded.store), loaded.name, [] if old else out)  # as explain keeps them
+    if not old:
+        return
+    path = legacy_counterfactuals_path(Store(loaded.store), loaded.name)  # a store's file from before the table
     path.parent.mkdir(exist_ok=True)
-    schema = pa.schema(list(SCHEMA)[:SCHEMA.get_field_index("fix_fragile")]) if old else SCHEMA
+    schema = pa.schema(list(SCHEMA)[:SCHEMA.get_field_index("fix_fragile")])
     pq.write_table(pa.Table.from_pylist([{k: row[k] for k in schema.names} for row in out], schema=schema), path)
 
 

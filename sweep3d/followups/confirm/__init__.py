@@ -3,8 +3,8 @@
 :mod:`.claims` turns the findings ``run`` prints into regions of the parameters, :mod:`.draw`
 draws fresh twin configurations inside and outside each, :mod:`.confirm` renders them through
 the normal cached stages and judges them (statistics in
-:mod:`sweep3d.results.confirmation`), and :mod:`.record` keeps the verdicts in the store
-for ``run``'s findings and the report.
+:mod:`sweep3d.results.confirmation`), and :mod:`.record` keeps the verdicts in the store's
+``confirmations`` table (declared in :mod:`.stored`) for ``run``'s findings and the report.
 """
 
 from __future__ import annotations
@@ -18,7 +18,8 @@ from sweep3d.core import exports as _exports  # noqa: E402
 if _TYPE_CHECKING:
     from sweep3d.followups.confirm.claims import Claim, boundary_key, region_key, rule_key
     from sweep3d.followups.confirm.draw import Space, space_of
-    from sweep3d.followups.confirm.record import mark, read_verdicts
+    from sweep3d.followups.confirm.record import mark, read_verdicts, status, write_verdicts
     from sweep3d.followups.confirm.run import ConfirmResult, Twin, claims_of, confirm, render_rows, render_twins
+    from sweep3d.followups.confirm.stored import CONFIRMATIONS, confirmation_key
 
 __getattr__, __dir__ = _exports(__name__)  # names, modules and __all__ from the block above

@@ -1,6 +1,7 @@
 """``sweep3d explain``: the nearest change that fixes each failure (see :mod:`.search`, the pure
 search, :mod:`.further`, which goes past a fragile fix, :mod:`.run`, which answers their probes
-through the stages, and :mod:`.sentence`, the words a user reads of each fix)."""
+through the stages, :mod:`.sentence`, the words a user reads of each fix, and :mod:`.stored`,
+the ``counterfactuals`` table it keeps them in)."""
 
 from __future__ import annotations
 
@@ -19,5 +20,6 @@ if _TYPE_CHECKING:
         share_words,
         trust_words,
     )
+    from sweep3d.followups.explain.stored import counterfactual_key, write_counterfactuals
 
 __getattr__, __dir__ = _exports(__name__)  # names, modules and __all__ from the block above

@@ -7,8 +7,8 @@ run's model, so its keys are the keys any run would give the same configurations
 compute what the store lacks and skip the rest: a probe that a run or an earlier ``explain``
 made costs nothing, and a search killed and started again replays its rounds from the cache
 and goes on. The experiment's jobs table is left alone: the probes are not the experiment's
-jobs (the accuracy would lean towards right answers); what the search found goes to
-``<store>/explain/<experiment>.parquet``, read by the ``counterfactuals`` views.
+jobs (the accuracy would lean towards right answers); what the search found goes to the store's
+``counterfactuals`` table (:mod:`.stored`), read by the ``counterfactuals`` views.
 """
 
 from __future__ import annotations
@@ -21,7 +21,6 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Sequence
 
 import numpy as np
-import pyarrow as pa
 from rich.console import Console
 from rich.markup import escape
 
@@ -32,7 +31,8 @@ from sweep3d.followups.explain.fragility import Rule, read_rule
 from sweep3d.followups.explain.further import Judged, needs_further, search_further
 from sweep3d.followups.explain.search import Axis, Config, Fix, Progress, explain
 from sweep3d.followups.explain.sentence import fix_sentence, move_words, share_words
-from sweep3d.results import SCHEMA, counterfactuals_path, create_margin_macro, margin_sql, no_results
+from sweep3d.followups.explain.stored import write_counterfactuals
+from sweep3d.results import COUNTERFACTUALS, create_margin_macro, margin_sql, no_results
 from sweep3d.runner import Runner, plan_spec, plans_as_run, running
 from sweep3d.spec import LoadedSpec, Point, Range, SearchSpace
 from sweep3d.stages.infer import ModelHandle
@@ -60,8 +60,9 @@ class Verdict:
 @dataclass
 class ExplainResult:
     """What ``explain`` did: the fixes (one per failure searched), how many failures the run had,
-    the probes asked and renders made, and the seconds it took; the rows written (each with its
-    ``sentence``), the stability check's threshold (None: no check) and the search's resolution."""
+    the probes asked and renders made, and the seconds it took; where its rows are kept (the
+    table's folder) and the rows (each with its ``sentence``), the stability check's threshold
+    (None: no check) and the search's resolution."""
 
     fixes: list[Fix]
     failures: int
@@ -238,8 +239,8 @@ def explain_spec(spec: LoadedSpec, *, budget: int | None = None, seed: int | Non
         fixes = [_marked(fix, stages, rule) for fix in fixes]
         fixes = _further(fixes, axes, stages, rule, own, budget, state, resolution, console)
         rows = _rows(spec, plan, stages, fixes, by_config, seed, budget, rule, resolution)
-        path = counterfactuals_path(store, spec.name)
-        store.write_table_file(path, pa.Table.from_pylist(rows, schema=SCHEMA))
+        write_counterfactuals(store, spec.name, rows)
+        path = store.table_dir(COUNTERFACTUALS)
         _write_images(spec, store, stages, [by_config[f.failure].image_key for f in fixes])
         return ExplainResult(fixes, len(failures), state.probes, state.charged, stages.rendered,
                              time.perf_counter() - started, path, rows, rule.threshold, resolution)
@@ -433,8 +434,9 @@ def print_explained(console: Console, result: ExplainResult, spec: Any = "SPEC")
                   f"{result.rendered} rendered now, in {result.seconds:.1f} s", highlight=False, soft_wrap=True)
     for line in explained_lines(result.rows, result.threshold, result.resolution, spec):
         console.print(line, highlight=False, soft_wrap=True)
-    console.print(f"[dim]read them: sweep3d query {escape(shlex.quote(str(spec)))} \"SELECT * FROM counterfactuals\" "
-                  f"({escape(str(result.path))})[/]", highlight=False, soft_wrap=True)
+    if result.rows:
+        console.print(f"[dim]read them: sweep3d query {escape(shlex.quote(str(spec)))} \"SELECT * FROM counterfactuals\" "
+                      f"({escape(str(result.path))})[/]", highlight=False, soft_wrap=True)
 
 
 def explained_lines(rows: Sequence[dict[str, Any]], threshold: float | None, resolution: float,

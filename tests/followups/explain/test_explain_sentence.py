@@ -152,7 +152,7 @@ def test_sweep3d_explain_prints_the_sentences(tmp_path: Path, monkeypatch: pytes
 
     def searched(loaded, **kwargs) -> ExplainResult:
         assert loaded.path == spec
-        return ExplainResult([], len(found), 40, 30, 30, 1.0, tmp_path / "store" / "explain" / "tiny.parquet",
+        return ExplainResult([], len(found), 40, 30, 30, 1.0, tmp_path / "store" / "tables" / "counterfactuals",
                              found, 0.05, 1 / 64)
 
     monkeypatch.setattr("sweep3d.followups.explain.explain_spec", searched)
