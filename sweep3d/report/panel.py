@@ -75,6 +75,8 @@ class Panel:
         template: the Jinja template under ``templates/`` that draws ``data``.
         build: returns the template's ``data``, or None to leave the panel out.
         late: build it after the panels that are not (it uses what they leave, e.g. images).
+        open: shown on the page's first screen; the others are folded under their title (a click
+            opens one), so the page before any click answers where the model fails, and no more.
     """
 
     id: str
@@ -82,6 +84,7 @@ class Panel:
     template: str
     build: Callable[[PanelInputs], dict[str, Any] | None]
     late: bool = False
+    open: bool = False
 
 
 @dataclass(frozen=True)
@@ -92,10 +95,11 @@ class BuiltPanel:
     title: str
     template: str
     data: dict[str, Any]
+    open: bool = False
 
 
 def build_panels(panels: tuple[Panel, ...], inputs: PanelInputs) -> list[BuiltPanel]:
     """Build ``panels`` (``late`` ones last), in page order, leaving out those whose ``build`` returns None."""
     data = {i: panels[i].build(inputs) for i in sorted(range(len(panels)), key=lambda i: panels[i].late)}
-    return [BuiltPanel(panel.id, panel.title, panel.template, data[i])
+    return [BuiltPanel(panel.id, panel.title, panel.template, data[i], panel.open)
             for i, panel in enumerate(panels) if data[i] is not None]

@@ -27,7 +27,7 @@ from typing import Any, Mapping, Sequence
 import duckdb
 
 from sweep3d.core import Roles
-from sweep3d.results import SCENE_COLUMNS, materialise, results_roles
+from sweep3d.results import SCENE_COLUMNS, has_view, materialise, results_roles
 
 WRONG, CORRECT, INVALID, NOT_EVALUABLE = 0, 1, 2, 3  # outcome codes; the first two are counted
 OUTCOME_NAMES = ("wrong", "correct", "invalid", "not-evaluable")
@@ -247,3 +247,23 @@ def _literal(text: str) -> str:
 
 def _list(texts: list[str]) -> str:
     return "[" + ", ".join(_literal(t) for t in texts) + "]"
+
+
+def read_grades(con: duckdb.DuckDBPyConnection, model: str) -> dict[str, dict[str, Any]]:
+    """Each finding's row of the ``findings`` view for ``model``, by its key (``{}`` before any
+    listing: a store written before findings were graded, or one ``run`` did not list)."""
+    if not has_view(con, "findings"):
+        return {}
+    cursor = con.execute("SELECT * FROM findings WHERE model = ? ORDER BY rank", [model])
+    names = [d[0] for d in cursor.description]
+    return {row["finding"]: row for row in (dict(zip(names, r)) for r in cursor.fetchall())}
+
+
+def level_values(con: duckdb.DuckDBPyConnection) -> dict[str, list[tuple[int, str, float | None]]]:
+    """Each parameter's levels as (level, label, value): a bin's middle, a number's value, None for
+    a name (as ``control_accuracy`` has them); for placing a finding's region on the explorer's levels."""
+    out: dict[str, list[tuple[int, str, float | None]]] = {}
+    for name, level, label, value in con.execute(
+            "SELECT parameter, level, label, value FROM control_accuracy ORDER BY position, level").fetchall():
+        out.setdefault(name, []).append((int(level), str(label), None if value is None else float(value)))
+    return out

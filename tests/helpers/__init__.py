@@ -400,11 +400,13 @@ def watch_page(page: Any) -> dict[str, list]:
 
 
 @contextmanager
-def open_page(chromium: Any, path: Path, wait_all: bool = True,
-              width: int = 1280) -> Iterator[tuple[Any, dict[str, list]]]:
+def open_page(chromium: Any, path: Path, wait_all: bool = True, width: int = 1280,
+              unfold: bool = True) -> Iterator[tuple[Any, dict[str, list]]]:
     """A page of the session's headless Chromium (the ``chromium`` fixture), in a fresh browser
     context ``width`` pixels wide, showing ``path`` once it is interactive (and, with ``wait_all``,
-    once every figure is drawn and every image loaded); events collected for :func:`assert_clean`."""
+    once every figure is drawn and every image loaded); events collected for :func:`assert_clean`.
+    With ``unfold`` every folded panel is opened, as a reader clicking each title would (the
+    first screen alone: ``unfold=False``)."""
     context = chromium.new_context(viewport={"width": width, "height": 900})
     try:
         page = context.new_page()
@@ -414,6 +416,8 @@ def open_page(chromium: Any, path: Path, wait_all: bool = True,
         if wait_all:
             page.wait_for_function("() => document.documentElement.dataset.drawn === '1'", timeout=60_000)
             page.wait_for_function("() => Array.from(document.images).every(i => i.complete)", timeout=10_000)
+        if unfold:
+            page.evaluate("() => window.sweep3d.unfoldAll()")
         yield page, events
     finally:
         context.close()

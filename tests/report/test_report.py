@@ -194,7 +194,7 @@ def test_report_draws_in_chromium(tiny_run: Path, chromium) -> None:
         effects = page.evaluate("Array.from(document.querySelectorAll('#aggregate .plot')).map(d => d.id)")
         assert sum(e.startswith("fig-effect-") for e in effects) == 3  # environment, yaw, blur
 
-        widths = page.evaluate("Array.from(document.querySelectorAll('.failure img')).map(i => i.naturalWidth)")
+        widths = page.evaluate("Array.from(document.querySelectorAll('.failure-tile img')).map(i => i.naturalWidth)")
         assert len(widths) == min(failures, 48) and all(w > 0 for w in widths)
         assert page.inner_text("#experiment") == "tiny"
         assert "box" in page.inner_text("#objects")
@@ -236,6 +236,7 @@ def test_names_are_escaped(tiny_copy: Path, chromium) -> None:
         assert page.inner_text("#experiment") == EVIL_EXPERIMENT
         assert page.title().startswith(EVIL_EXPERIMENT)
         if results_count(tiny_copy, "valid AND NOT correct"):
+            page.click("#failures .failure-table summary")  # each failure's scene, a click away
             gallery = page.inner_text("#failures")
             assert EVIL_OBJECT in gallery and EVIL_ENV in gallery
         assert EVIL_OBJECT in page.inner_text("#objects")

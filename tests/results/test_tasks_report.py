@@ -340,7 +340,7 @@ def test_the_report_shows_what_was_not_evaluable_and_how_boxes_fail(tmp_path: Pa
     loaded, con, store = opened(make_store(tmp_path, jobs))
     context = build_context(loaded, con, store)
     ids = [p.id for p in context["panels"]]
-    assert ids[:2] == ["overall", "not-evaluable"] and "outcomes" in ids
+    assert ids[:4] == ["findings", "explorer", "overall", "not-evaluable"] and "outcomes" in ids  # after the first screen
     counted, unevaluable = sum(j.counted for j in jobs), sum(j.evaluable is False for j in jobs)
     html = render_html(context)
     detail = re.search(r'id="accuracy-detail">(.*?)</div>', html, re.S).group(1)

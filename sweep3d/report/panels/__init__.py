@@ -27,10 +27,10 @@ from sweep3d.report.panels import (
     aggregate,
     boundaries,
     compare,
-    confirmations,
     explorer,
     failure_modes,
     failures,
+    findings,
     nearest_fixes,
     not_evaluable,
     objects,
@@ -41,9 +41,11 @@ from sweep3d.report.panels import (
     realism,
 )
 
+#: The first screen (open): the findings, graded, driving the explorer; every other panel is folded.
 CORE_PANELS: tuple[Panel, ...] = (
+    Panel("findings", "Findings", "panels/findings.html.j2", findings.build, open=True),
+    Panel("explorer", "Explorer", "panels/explorer.html.j2", explorer.build, late=True, open=True),
     Panel("overall", "Overall accuracy", "panels/overall.html.j2", overall.build),
-    Panel("explorer", "Explorer", "panels/explorer.html.j2", explorer.build, late=True),
     Panel("failure-modes", "Failure modes", "panels/failure_modes.html.j2", failure_modes.build),
     Panel("failures", "Worst failures", "panels/failures.html.j2", failures.build),
     Panel("objects", "Per object", "panels/objects.html.j2", objects.build),
@@ -53,15 +55,12 @@ CORE_PANELS: tuple[Panel, ...] = (
 NOT_EVALUABLE = Panel("not-evaluable", "Not evaluable", "panels/not_evaluable.html.j2", not_evaluable.build)
 OUTCOMES = Panel("outcomes", "Boxes and masks", "panels/outcomes.html.j2", outcomes.build)
 BOUNDARIES = Panel("boundaries", "Failure boundaries", "panels/boundaries.html.j2", boundaries.build)
-CONFIRMATIONS = Panel("confirmations", "Confirmed on fresh renders", "panels/confirmations.html.j2",
-                      confirmations.build)
 
 #: Panels shown only when their data exists (their ``build`` returns None otherwise).
 OPTIONAL_PANELS: tuple[Panel, ...] = (
     NOT_EVALUABLE,
     BOUNDARIES,
     OUTCOMES,
-    CONFIRMATIONS,
     Panel("compare", "Model comparison", "panels/compare.html.j2", compare.build),
     Panel("paired", "Paired comparisons", "panels/paired.html.j2", paired.build),
     Panel("part-visibility", "Part visibility", "panels/part_visibility.html.j2", part_visibility.build),
@@ -69,9 +68,11 @@ OPTIONAL_PANELS: tuple[Panel, ...] = (
     Panel("nearest-fixes", "Nearest fixes", "panels/nearest_fixes.html.j2", nearest_fixes.build),  # after explain
 )
 
-#: Page order: what was left out of the accuracy right after it, failure boundaries after the
-#: failure modes, box and mask outcomes after the aggregate plots.
-PANELS: tuple[Panel, ...] = (CORE_PANELS[0], NOT_EVALUABLE, *CORE_PANELS[1:3], BOUNDARIES, CONFIRMATIONS,
-                             *CORE_PANELS[3:], *(p for p in OPTIONAL_PANELS[2:] if p is not CONFIRMATIONS))
+#: Page order: the findings and the explorer they drive, then (folded) the overall accuracy with what
+#: was left out of it right after it, failure boundaries after the failure modes, box and mask outcomes
+#: after the aggregate plots. What ``sweep3d confirm`` recorded shows in the findings list
+#: (:func:`~sweep3d.report.panels.confirmations.verdict_row`), not in a panel of its own.
+PANELS: tuple[Panel, ...] = (*CORE_PANELS[:3], NOT_EVALUABLE, CORE_PANELS[3], BOUNDARIES, *CORE_PANELS[4:],
+                             *OPTIONAL_PANELS[2:])
 
 __all__ = ["CORE_PANELS", "OPTIONAL_PANELS", "PANELS"]

@@ -1,7 +1,8 @@
 """Failure boundaries: where along each numeric control the model starts to fail.
 
-One figure per significant boundary (overall first, then single objects and environments, most
-certain first): the accuracy of the group's results in equal-width bins of the value (points
+One small figure per significant boundary of a control with more than two values (overall first,
+then single objects and environments, most certain first; a two-valued control's boundary is only
+its two values, which the table gives): the accuracy of the group's results in equal-width bins of the value (points
 with their 95 % Wilson interval, counts in the hover), the fitted step, and the boundary with
 its 95 % interval as a band. A table lists every fit, boundaries first; a fit without a
 significant step says so ("no boundary"). Numbers from ``failure_boundaries`` (see
@@ -30,9 +31,11 @@ def build(inputs: PanelInputs) -> dict[str, Any] | None:
     if not fits:
         return None
     scales = numeric_scales(inputs.loaded.controls)
-    shown = [fit for fit in fits if fit["significant"]][:FIGURES]
+    # a two-valued control's "boundary" is only its two values: the table says it, no chart draws it
+    shown = [fit for fit in fits if fit["significant"] and fit["values"] > 2][:FIGURES]
     figures = [_figure(inputs, i, fit, scales.get(fit["parameter"], Scale())) for i, fit in enumerate(shown, 1)]
-    return {"figures": figures, "rows": [_row(fit) for fit in fits],
+    return {"figures": figures, "rows": [_row(fit) for fit in fits], "two_valued": sum(
+                fit["significant"] and fit["values"] == 2 for fit in fits),
             "boundaries": sum(fit["significant"] for fit in fits), "fits": len(fits)}
 
 
@@ -103,7 +106,8 @@ def _figure(inputs: PanelInputs, index: int, fit: dict[str, Any], scale: Scale) 
     heading = f"{_who(fit)}: {boundary_phrase(fit)}" + (
         "" if fit["values"] == 2 else f" ({_value(fit['boundary_low'])}–{_value(fit['boundary_high'])})")
     figure_layout = layout(
-        title=title(heading), height=320, shapes=shapes, showlegend=False,
+        title=title(heading), height=240, shapes=shapes, showlegend=False,
+        margin={"l": 48, "r": 8, "t": 36, "b": 40},
         xaxis={"title": {"text": fit["parameter"]}, "type": "log" if scale.log else "linear", "zeroline": False},
         yaxis=ACCURACY_AXIS,
     )

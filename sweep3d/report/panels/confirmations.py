@@ -1,7 +1,8 @@
 """Confirmations: each finding of the run tested again on fresh renders (``sweep3d confirm``).
 
-Shown once a confirmation has been recorded for the experiment: every significant failure mode
-and boundary the run names, marked confirmed, not replicated or unconfirmed (not tested since it
+The page shows them in the findings list (each finding's evidence, a click away; see
+:mod:`sweep3d.report.panels.findings`), not as a panel of their own. Once a confirmation has
+been recorded for the experiment: every significant failure mode and boundary the run names, marked confirmed, not replicated or unconfirmed (not tested since it
 was found), with the fresh twins' accuracy inside and outside and the paired difference (see
 :mod:`sweep3d.results.confirmation`).
 """
@@ -28,16 +29,18 @@ def build(inputs: PanelInputs) -> dict[str, Any] | None:
     findings += [(rule_key(r["key"]), r["text"]) for r in named_rules(summary)]
     if not findings:
         return None
-    rows = []
-    for key, text in findings:
-        entry = verdicts.get(key)
-        v = entry["verdict"] if entry else None
-        tested = v is not None and v["pairs"] > 0
-        rows.append({
-            "finding": text, "status": v["status"] if v else UNCONFIRMED, "pairs": v["pairs"] if v else 0,
-            "inside": pct(v["accuracy_inside"], 0) if tested else "", "outside": pct(v["accuracy_outside"], 0)
-            if tested else "",
-            "difference": (f"{100 * v['difference']:+.0f} pts ({100 * v['difference_low']:+.0f} to "
-                           f"{100 * v['difference_high']:+.0f})") if tested else "",
-            "p": p_text(v["p_holm"]) if tested else ""})
-    return {"rows": rows}
+    return {"rows": [{"finding": text, **verdict_row(verdicts.get(key))} for key, text in findings]}
+
+
+def verdict_row(entry: dict[str, Any] | None) -> dict[str, Any]:
+    """What ``sweep3d confirm`` recorded of one finding (its entry of ``read_verdicts``, None when it
+    was not tested): status, pairs, fresh accuracy inside and outside, difference, Holm p."""
+    v = entry["verdict"] if entry else None
+    tested = v is not None and v["pairs"] > 0
+    return {
+        "status": v["status"] if v else UNCONFIRMED, "pairs": v["pairs"] if v else 0,
+        "inside": pct(v["accuracy_inside"], 0) if tested else "", "outside": pct(v["accuracy_outside"], 0)
+        if tested else "",
+        "difference": (f"{100 * v['difference']:+.0f} pts ({100 * v['difference_low']:+.0f} to "
+                       f"{100 * v['difference_high']:+.0f})") if tested else "",
+        "p": p_text(v["p_holm"]) if tested else ""}

@@ -1,6 +1,10 @@
 """Worst failures: the wrong predictions, worst first (the highest loss; for a box or mask task
 without a loss, the lowest IoU, misses first), each with its top-k (and, for box and mask tasks,
-how it failed and its IoU; the thumbnail shows the true and predicted boxes)."""
+how it failed and its IoU; the thumbnail shows the true and predicted boxes).
+
+The page shows them as a compact grid of thumbnails captioned with the top-1 label; each one's
+scene, controls, top-k and loss are in a table a click away (near-identical cards made this panel
+the page's tallest)."""
 
 from __future__ import annotations
 
@@ -13,7 +17,7 @@ from sweep3d.results import fragile_sentence, results_roles
 
 
 def build(inputs: PanelInputs) -> dict[str, Any]:
-    """Cards of the summary's failures: thumbnail, scene, the values of the controls that vary, top-k, loss."""
+    """The summary's failures: thumbnail, scene, the values of the controls that vary, top-k, loss."""
     failures = inputs.summary.failures
     varying = {p.name for p in inputs.parameters if p.varies}  # a fixed one is stated once, in the header
     columns = [c for c in inputs.loaded.parameter_columns if c in varying]
@@ -43,6 +47,7 @@ def build(inputs: PanelInputs) -> dict[str, Any]:
             "outcome": _outcome(outcome, iou),
         })
     return {"cards": cards, "wrong": inputs.summary.wrong, "order": _order(roles),
+            "k": max((len(c["topk"]) for c in cards), default=1),
             "truth_note": _truth_note(cards, roles), "fragile": fragile_sentence(inputs.summary)}
 
 

@@ -2,7 +2,10 @@
    The heat map (accuracy and count per cell) is summed here from the counts in #explorer-data:
    the non-empty cells of the joint table over every parameter (mode "joint"), or one table per
    pair of parameters (mode "pairs": no sliders). Clicking a cell shows its sampled images,
-   wrong ones first, how many more it holds, and the SQL that lists them all. */
+   wrong ones first, how many more it holds, and the SQL that lists them all.
+   A finding of the findings list (li.finding, its region in data-region as [[parameter, [levels]]])
+   filters the explorer to its region when clicked: its parameters become the axes, the counts and
+   the images outside it drop out, and the gallery shows its images (a cell click narrows them). */
 (function () {
   'use strict';
 
@@ -29,6 +32,7 @@
     role: params.map(function () { return 'pooled'; }),
     slider: params.map(function () { return 0; }),
     cell: null, // {x: level, y: level} of the clicked cell
+    region: null, // {text, terms: [[p, {level: true}]]}: the clicked finding's region
   };
   if (data.defaults.x >= 0) state.role[data.defaults.x] = 'x';
   if (data.defaults.y >= 0) state.role[data.defaults.y] = 'y';
@@ -39,7 +43,7 @@
   var widgets = params.map(buildControl);
   var clickBound = false;
   var timings = {};
-  S.explorer = {state: state, timings: timings};
+  S.explorer = {state: state, timings: timings, showRegion: showRegion};
 
   /* One parameter's box: its name, a role menu and (as a slider) a range input. */
   function buildControl(param, p) {
@@ -127,14 +131,17 @@
   /* Valid results, correct ones and all results per cell, row-major (y, x): sums of the
      table's cells that match the sliders. */
   function tally(x, y) {
-    var size = x.n * y.n, active = sliders(), t = tableFor([x.p, y.p].concat(active));
+    var size = x.n * y.n, active = sliders(), inRegion = regionTerms();
+    var t = tableFor([x.p, y.p].concat(active, inRegion.map(function (r) { return r[0]; })));
     var n = new Float64Array(size), k = new Float64Array(size), total = new Float64Array(size);
     var lx = x.p >= 0 ? t.level[t.pos[x.p]] : null, ly = y.p >= 0 ? t.level[t.pos[y.p]] : null;
     var fixed = active.map(function (p) { return [t.level[t.pos[p]], state.slider[p]]; });
+    var within = inRegion.map(function (r) { return [t.level[t.pos[r[0]]], r[1]]; });
     var cells = t.n.length;
     for (var c = 0; c < cells; c++) {
       var match = true;
       for (var s = 0; s < fixed.length && match; s++) match = fixed[s][0][c] === fixed[s][1];
+      for (var r = 0; r < within.length && match; r++) match = within[r][1][within[r][0][c]] === true;
       if (!match) continue;
       var cx = lx ? lx[c] : 0, cy = ly ? ly[c] : 0;
       if (cx < 0 || cy < 0) continue;
@@ -150,6 +157,68 @@
   function sampledAt(i, p, level) {
     return p < 0 || sample.level[p][i] === level;
   }
+
+  /* The clicked finding's terms, [p, {level: true}] (none without one). */
+  function regionTerms() {
+    return state.region ? state.region.terms : [];
+  }
+
+  function inRegion(i) {
+    return regionTerms().every(function (r) { return r[1][sample.level[r[0]][i]] === true; });
+  }
+
+  /* Filter the explorer to a finding's region (`terms`: [[parameter name, [levels]]]): its first two
+     parameters become the axes, sliders are let go, the gallery shows the region's images. */
+  function showRegion(text, named) {
+    var terms = [];
+    named.forEach(function (term) {
+      var p = params.findIndex(function (param) { return param.name === term[0]; });
+      if (p < 0) return;
+      var levels = {};
+      term[1].forEach(function (level) { levels[level] = true; });
+      terms.push([p, levels]);
+    });
+    if (!terms.length) return Promise.resolve();
+    state.role = state.role.map(function (role) { return role === 'slider' ? 'pooled' : role; });
+    var x = state.role.indexOf('x'), y = state.role.indexOf('y');  // one region parameter: keep the other axis
+    setAxes(terms[0][0], terms.length > 1 ? terms[1][0] : (y === terms[0][0] ? x : y));
+    state.region = {text: text, terms: terms};
+    state.cell = null;
+    syncControls();
+    showGallery();
+    return render();
+  }
+
+  function setAxes(px, py) {
+    state.role = state.role.map(function (role) { return role === 'x' || role === 'y' ? 'pooled' : role; });
+    state.role[px] = 'x';
+    if (py >= 0) state.role[py] = 'y';
+  }
+
+  function clearRegion() {
+    state.region = null;
+    state.cell = null;
+    document.querySelectorAll('li.finding.active').forEach(function (li) { li.classList.remove('active'); });
+    showGallery();
+    return render();
+  }
+
+  document.querySelectorAll('li.finding:not(.no-region)').forEach(function (li) {
+    function choose(event) {
+      if (event.target.closest('details')) return;  // its evidence opens, the filter stays
+      document.querySelectorAll('li.finding.active').forEach(function (other) { other.classList.remove('active'); });
+      li.classList.add('active');
+      showRegion(li.dataset.text, JSON.parse(li.dataset.region));
+      document.getElementById('explorer').scrollIntoView({block: 'start'});
+    }
+    li.addEventListener('click', choose);
+    li.addEventListener('keydown', function (event) {
+      if (event.key === 'Enter' || event.key === ' ') {
+        event.preventDefault();
+        choose(event);
+      }
+    });
+  });
 
   function render() {
     var x = axis('x'), y = axis('y'), counts = tally(x, y);
@@ -167,7 +236,8 @@
       }
     }
     var ci = S.wilson(correct, total);
-    status.textContent = total + ' ' + COUNTED + ' results match the sliders · accuracy ' + S.percent(correct / total) +
+    status.textContent = total + ' ' + COUNTED + ' results ' + (state.region ? 'in the finding\'s region' : 'match the sliders') +
+      ' · accuracy ' + S.percent(correct / total) +
       (total ? ' (95% CI ' + S.percent(ci[0], 0) + '–' + S.percent(ci[1], 0) + ')' : '');
     var trace = {
       type: 'heatmap', z: z, x: range(x.n), y: range(y.n), zmin: 0, zmax: 1, colorscale: data.colorscale,
@@ -208,25 +278,29 @@
      first), its exact counts, and how many of its results the page does not embed. */
   function showGallery() {
     gallery.replaceChildren();
-    if (!state.cell) {
+    if (state.region) gallery.append(regionBar());
+    if (!state.cell && !state.region) {
       var hint = document.createElement('p');
       hint.className = 'note';
       hint.textContent = 'Click a cell of the heat map to see its images.';
       gallery.appendChild(hint);
       return;
     }
-    var x = axis('x'), y = axis('y'), active = sliders(), chosen = [];
-    var terms = [[x.p, state.cell.x], [y.p, state.cell.y]].filter(function (t) { return t[0] >= 0; })
+    var x = axis('x'), y = axis('y'), active = sliders(), chosen = [], cell = state.cell;
+    var terms = (cell ? [[x.p, cell.x], [y.p, cell.y]] : []).filter(function (t) { return t[0] >= 0; })
       .concat(active.map(function (p) { return [p, state.slider[p]]; }));
     for (var i = 0; i < SAMPLED; i++) {
-      if (terms.every(function (t) { return sampledAt(i, t[0], t[1]); })) chosen.push(i);
+      if (terms.every(function (t) { return sampledAt(i, t[0], t[1]); }) && inRegion(i)) chosen.push(i);
     }
-    var counts = tally(x, y), at = state.cell.y * x.n + state.cell.x;
-    var valid = counts.n[at], correct = counts.k[at], total = counts.total[at];
+    var counts = tally(x, y), valid = 0, correct = 0, total = 0;
+    for (var at = 0; at < counts.n.length; at++) {
+      if (cell && at !== cell.y * x.n + cell.x) continue;
+      valid += counts.n[at]; correct += counts.k[at]; total += counts.total[at];
+    }
     var heading = document.createElement('h3');
-    heading.textContent = terms.length ? terms.map(function (t) {
-      return params[t[0]].name + ' = ' + params[t[0]].labels[t[1]];
-    }).join(' · ') : 'all results';
+    var named = terms.map(function (t) { return params[t[0]].name + ' = ' + params[t[0]].labels[t[1]]; });
+    if (state.region) named.unshift(state.region.text);
+    heading.textContent = named.length ? named.join(' · ') : 'all results';
     var shown = Math.min(chosen.length, data.limit);
     var note = document.createElement('p');
     note.className = 'note';
@@ -244,12 +318,27 @@
     if (shown < total) gallery.append(listing(terms));
   }
 
+  /* The finding the explorer is filtered to, and a button letting it go. */
+  function regionBar() {
+    var bar = document.createElement('p');
+    bar.className = 'note region-bar';
+    var button = document.createElement('button');
+    button.type = 'button';
+    button.textContent = 'show all results';
+    button.addEventListener('click', clearRegion);
+    bar.append('Filtered to the finding ', Object.assign(document.createElement('b'), {textContent: state.region.text}),
+               ' (its levels on the explorer\'s axes; a bin is in when its middle is) ', button);
+    return bar;
+  }
+
   /* "List them all": the `sweep3d query` printing every result of the cell, in gallery order. */
   function listing(terms) {
-    var where = terms.map(function (t) {
+    function inLevels(p, levels) {
       return 'job IN (SELECT job FROM control_levels WHERE parameter = \'' +
-        params[t[0]].name.replace(/'/g, "''") + '\' AND level = ' + t[1] + ')';
-    });
+        params[p].name.replace(/'/g, "''") + '\' AND level ' + levels + ')';
+    }
+    var where = terms.map(function (t) { return inLevels(t[0], '= ' + t[1]); }).concat(
+      regionTerms().map(function (r) { return inLevels(r[0], 'IN (' + Object.keys(r[1]).join(', ') + ')'); }));
     var box = document.createElement('p');
     box.className = 'note listing';
     var code = document.createElement('code');

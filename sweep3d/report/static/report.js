@@ -3,7 +3,8 @@
    a model reaches the page through textContent, or escaped for plotly (plotText).
 
    Figures on screen are drawn first; the others as they near the viewport, or one by one
-   once the page is ready. <html data-ready="1"> marks the page interactive (the explorer
+   once the page is ready. Panels past the first screen are folded (<details class="panel">);
+   their plots are fitted to the width when they open. <html data-ready="1"> marks the page interactive (the explorer
    and the figures on screen drawn), data-drawn="1" every figure drawn. */
 (function () {
   'use strict';
@@ -119,11 +120,38 @@
     });
   }
 
+  /* Folded panels: a plot drawn while folded has no width to fit; it is fitted when its panel opens.
+     A link to a folded panel (the navigation, "#not-evaluable") opens it. */
+  function fitPlots(root) {
+    root.querySelectorAll('.js-plotly-plot').forEach(function (plot) { Plotly.Plots.resize(plot); });
+  }
+  function unfold(id) {
+    var target = id && document.getElementById(id);
+    var panel = target && target.closest('section.folded');
+    var details = panel && panel.querySelector('details.panel');
+    if (details && !details.open) details.open = true;
+  }
+  document.querySelectorAll('details.panel').forEach(function (details) {
+    details.addEventListener('toggle', function () { if (details.open) fitPlots(details); });
+  });
+  document.addEventListener('click', function (event) {
+    var link = event.target.closest && event.target.closest('a[href^="#"]');
+    if (link) unfold(decodeURIComponent(link.getAttribute('href').slice(1)));
+  });
+  window.addEventListener('hashchange', function () { unfold(decodeURIComponent(location.hash.slice(1))); });
+  if (location.hash) unfold(decodeURIComponent(location.hash.slice(1)));
+
   document.querySelectorAll('img[data-thumb]').forEach(fillThumb);
   var visible = drawVisible();
 
   window.sweep3d = {
     plotText: plotText, draw: draw, tile: tile, wilson: wilson, percent: percent,
+    /* Open every folded panel and fit its plots (what a reader clicking each title sees). */
+    unfoldAll: function () {
+      document.querySelectorAll('details.panel').forEach(function (d) { d.open = true; });
+      return Promise.all(Array.prototype.map.call(document.querySelectorAll('.js-plotly-plot'),
+                                                  function (plot) { return Plotly.Plots.resize(plot); }));
+    },
     /* Mark the page ready once `promises` and the figures on screen are drawn, then draw the rest. */
     whenDrawn: function (promises) {
       Promise.all([visible].concat(promises)).then(function () {
