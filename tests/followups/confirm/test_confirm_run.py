@@ -110,4 +110,4 @@ def test_a_real_boundary_is_confirmed_and_run_marks_it(tmp_path: Path) -> None:
     marked = runner.invoke(app, ["run", str(spec)])
     assert "[confirmed on 12 fresh pairs" in " ".join(marked.output.split())
     html = (tmp_path / "store" / "reports" / "fresh.html").read_text(encoding="utf-8")
-    assert "Confirmed on fresh renders" in html and "<td><b>confirmed</b></td>" in html
+    assert "confirm: <b>confirmed</b> on 12 fresh pairs" in html  # in the finding's evidence, a click away
