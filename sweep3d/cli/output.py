@@ -238,6 +238,7 @@ def print_findings(console: Console, plan: Plan, store: Store | None = None, fai
         marks = [graded[k] if graded.get(k, UNTESTED_MARK) != UNTESTED_MARK or m == UNCONFIRMED_MARK and k in graded
                  else m for k, m in zip(keys, marks)]
     unconfirmed = graded is None and UNCONFIRMED_MARK in marks
+    untested = graded is not None and UNTESTED_MARK in marks
     if regions:
         console.print("fails most at: " + "; ".join(_marked(describe_region(r), marks.pop(0)) for r in regions)
                       + " (each against the rest of its parameter; false discovery rate 5%)")
@@ -265,7 +266,7 @@ def print_findings(console: Console, plan: Plan, store: Store | None = None, fai
     if unconfirmed:
         console.print(f"unconfirmed: not yet tested on fresh renders (sweep3d confirm {escape(str(plan.spec.path))})",
                       soft_wrap=True)
-    if graded is not None and UNTESTED_MARK in marks:
+    if untested:
         console.print(f"untested: sweep3d grade {escape(str(plan.spec.path))} grades every finding (fresh renders, "
                       "the second renderer, fragility)", soft_wrap=True)
 

@@ -5,8 +5,9 @@ The checks, in the order they are made (each only where the one before left the 
 1. **Replication** (``confirm``'s sequential twins on fresh renders): confirmed, not replicated
    (the effect bounded below :data:`~sweep3d.results.confirmation.FUTILITY`), inconclusive (the
    budget ended first) or untested (no fresh twin could be drawn).
-2. **The second renderer**: the same twins rendered by the other engine and judged alone
-   (McNemar's one-sided test at 5 %). Reproduced, or bounded below the futility size
+2. **The second renderer**: the same twins rendered by the other engine and judged as the
+   replication judges (:func:`second_opinion`: sequential looks from a few pairs up to the
+   replication's, Holm over the findings). Reproduced, or bounded below the futility size
    (*renderer-sensitive*); anything else leaves the finding *inconclusive*.
 3. **Fragility**: the fresh twins judged again with each wrong verdict whose ``|margin|`` is below
    the stability check's fragile threshold counted as right (a change no eye sees could flip it).
@@ -18,7 +19,7 @@ A finding that passes all three is *solid*.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Iterable
+from typing import Callable, Iterable, Mapping
 
 from sweep3d.results import (
     ALPHA,
@@ -33,6 +34,7 @@ from sweep3d.results import (
     Verdict,
     judge,
     pairs_needed,
+    sequential,
     tally,
 )
 
@@ -75,16 +77,25 @@ def steady_pairs(twins: Iterable[tuple[tuple[bool, float | None], tuple[bool, fl
     return out, set_aside
 
 
-def evidence_of(replication: Verdict, twins: list[tuple[Twin, Twin]], engine: list[Pair] | None,
+def second_opinion(findings: int, first: int, cap: int,
+                   fetch: Callable[[Mapping[int, int]], Mapping[int, list[Pair]]]) -> list[Verdict]:
+    """The second renderer's verdicts on the replicated findings' twins, sequential as the
+    replication's (:func:`~sweep3d.results.confirmation.sequential`: looks doubling the pairs from
+    ``first`` to ``cap``, Holm over the findings, Bonferroni over the looks): ``fetch({finding:
+    pairs wanted})`` gives each open finding's first pairs (fewer where it has no more)."""
+    return sequential(findings, first, cap, lambda asked: {i: tally(p) for i, p in fetch(asked).items()})
+
+
+def evidence_of(replication: Verdict, twins: list[tuple[Twin, Twin]], engine: Verdict | None,
                 engine_name: str, threshold: float | None) -> Evidence:
     """The evidence of one finding: its replication's verdict on ``twins`` (each twin's counted,
-    correct, margin), the second renderer's pairs on the same twins (None: not rendered), and the
+    correct, margin), the second renderer's verdict on the same twins (None: not rendered), and the
     fragile threshold of ``|margin|`` (None: no stability check)."""
     steady, set_aside = None, 0
     if threshold is not None and twins and all(a[2] is not None and b[2] is not None for a, b in twins):
         pairs, set_aside = steady_pairs((((a[1], a[2]), (b[1], b[2])) for a, b in twins), threshold)
         steady = single(pairs)
-    return Evidence(replication, None if engine is None else single(engine), engine_name, steady, set_aside, threshold)
+    return Evidence(replication, engine, engine_name, steady, set_aside, threshold)
 
 
 def _points(value: float | None) -> str:

@@ -27,14 +27,16 @@ from rich.console import Console
 
 from sweep3d.cache import Store
 from sweep3d.core import UserError
-from sweep3d.followups.grade.decide import Evidence, evidence_of, grade
+from sweep3d.followups.grade.decide import Evidence, evidence_of, grade, second_opinion
 from sweep3d.results import (
+    ALPHA,
     CONFIRMED,
-    DEFAULT_RENDERS,
     Finding,
     grade_row,
     listed_findings,
     numeric_scales,
+    pairs_needed,
+    planned_looks,
     record_listing,
     stored_summary,
 )
@@ -47,6 +49,8 @@ DEFAULT_BUDGET = 1024
 REPLICATION_SHARE = 0.75
 MAX_PAIRS = 128  # a finding's twin pairs at most, however large the budget
 IMAGE_SHARE = 8  # 1/8 of the budget is kept for the sampled failure images on the second renderer
+REPLICATION_FIRST = 16  # twin pairs of a finding's first look: a strong effect decides on them
+ENGINE_FIRST = 8  # the second renderer's first look, in pairs
 ENGINE_SUFFIX = "-confirm-"  # the second renderer's experiment: <name>-confirm-<engine>
 
 
@@ -104,19 +108,20 @@ def _graded(loaded: LoadedSpec, store: Store, budget: int, seed: int, console: C
     used = 0
     if testable and budget >= 2:
         cap = min(2 * MAX_PAIRS, max(2, int(budget * REPLICATION_SHARE) // len(testable) // 2 * 2))
-        result = confirm(loaded, min(DEFAULT_RENDERS, cap), seed, console, claims=testable, executor=executor,
+        first = 2 * max(REPLICATION_FIRST, pairs_needed(len(testable), ALPHA / planned_looks(REPLICATION_FIRST, cap // 2)))
+        result = confirm(loaded, min(first, cap), seed, console, claims=testable, executor=executor,
                          max_renders=cap)
         rendered += result.rendered
         used = result.jobs
         verdicts = {x.claim.key: x.verdict for x in result.confirmations}
         replicated = [k for k, v in verdicts.items() if v.status == CONFIRMED]
-        engine_pairs, engine_rendered, engine_used = _second_renderer(
+        engine_verdicts, engine_rendered, engine_used = _second_renderer(
             loaded, store, space, result, replicated, budget - used - budget // IMAGE_SHARE, engine, console,
             executor)
         rendered += engine_rendered
         used += engine_used
         for key, verdict in verdicts.items():
-            evidence[key] = evidence_of(verdict, result.outcomes.get(key, []), engine_pairs.get(key), engine,
+            evidence[key] = evidence_of(verdict, result.outcomes.get(key, []), engine_verdicts.get(key), engine,
                                         threshold)
     images, image_rendered = _image_grades(loaded, store, space, model, checked, max(0, budget - used), engine,
                                            console, executor)
@@ -153,24 +158,33 @@ def _stability(loaded: LoadedSpec, seed: int, console: Console | None, executor:
 
 def _second_renderer(loaded: LoadedSpec, store: Store, space: Any, result: Any, replicated: list[str], left: int,
                      engine: str, console: Console | None, executor: Executor) -> tuple[dict, int, int]:
-    """The replicated findings' twins rendered by ``engine`` (as many pairs each as ``left`` fresh
-    jobs allow, the same for each): (key → its pairs' verdicts, renders made, jobs used)."""
+    """The replicated findings' twins rendered by ``engine`` in looks (:func:`second_opinion`), each
+    finding's pairs at most its replication's and an even share of ``left`` fresh jobs:
+    (key → verdict, renders made, jobs used)."""
     from sweep3d.followups.confirm import render_twins
     from sweep3d.stages.render import cycles_only_defaults
 
-    if not replicated or left < 2:
-        return {}, 0, 0
-    each = left // (2 * len(replicated))
-    groups = [result.pairs[k][:each] for k in replicated]
-    if each < 1 or not any(groups):
+    share = left // (2 * max(1, len(replicated)))
+    caps = [min(len(result.pairs[k]), share) for k in replicated]
+    if not replicated or max(caps, default=0) < 1:
         return {}, 0, 0
     settings = {"engine": engine, **cycles_only_defaults(engine)}
-    run_result, outcomes = render_twins(loaded, store=store, space=space, pairs=groups, console=console,
-                                        executor=executor, suffix=ENGINE_SUFFIX + engine, render=settings)
-    pairs = {key: [(a[1], b[1]) for a, b in twins if a and b and a[0] and b[0]]
-             for key, twins in zip(replicated, outcomes)}
-    render = next((o for o in run_result.outcomes if o.stage == "render"), None) if run_result else None
-    return pairs, render.computed if render else 0, 2 * sum(len(g) for g in groups)
+    taken = [0] * len(replicated)
+    rendered = 0
+
+    def fetch(asked: Any) -> dict[int, list]:
+        nonlocal rendered
+        for i, n in asked.items():
+            taken[i] = min(n, caps[i])
+        groups = [result.pairs[k][:taken[i]] for i, k in enumerate(replicated)]
+        run_result, outcomes = render_twins(loaded, store=store, space=space, pairs=groups, console=console,
+                                            executor=executor, suffix=ENGINE_SUFFIX + engine, render=settings)
+        render = next((o for o in run_result.outcomes if o.stage == "render"), None) if run_result else None
+        rendered += render.computed if render else 0
+        return {i: [(a[1], b[1]) for a, b in outcomes[i] if a and b and a[0] and b[0]] for i in asked}
+
+    verdicts = second_opinion(len(replicated), min(ENGINE_FIRST, max(caps)), max(caps), fetch)
+    return dict(zip(replicated, verdicts)), rendered, 2 * sum(taken)
 
 
 def _image_grades(loaded: LoadedSpec, store: Store, space: Any, model: str, checked: Any, left: int, engine: str,

@@ -21,7 +21,7 @@ pytestmark = [pytest.mark.slow, pytest.mark.blender, pytest.mark.torch]
 def _findings(spec: Path) -> list[tuple]:
     from sweep3d.api import Experiment
 
-    return [tuple(r) for r in Experiment(spec).sql(
+    return [tuple(r.values()) for r in Experiment(spec).sql(
         "SELECT finding, grade, evidence, pairs FROM findings ORDER BY rank").to_pylist()]
 
 
@@ -41,7 +41,7 @@ def test_grade_writes_a_grade_for_every_finding_and_a_rerun_renders_nothing(tmp_
     assert "[untested]" in ran.output and "untested: sweep3d grade" in " ".join(ran.output.split())
 
     loaded = load_spec(spec)
-    first = grade_findings(loaded, budget=48)
+    first = grade_findings(loaded, budget=96)
     assert len(first.grades) == len(listed) and first.rendered > 0
     graded = _findings(spec)
     assert [r[0] for r in graded] == [r[0] for r in listed]  # every finding, in the printed order
@@ -50,14 +50,14 @@ def test_grade_writes_a_grade_for_every_finding_and_a_rerun_renders_nothing(tmp_
     assert boundary[1] == SOLID, boundary  # fails exactly below a brightness: every check agrees
     assert boundary[3] and "mitsuba reproduces it" in boundary[2]
 
-    again = grade_findings(loaded, budget=48)
+    again = grade_findings(loaded, budget=96)
     assert again.rendered == 0 and again.grades == first.grades
 
     marked = runner.invoke(app, ["run", str(spec), "--no-report"])
     assert "[solid]" in marked.output
-    printed = runner.invoke(app, ["grade", str(spec), "--budget", "48"])
+    printed = runner.invoke(app, ["grade", str(spec), "--budget", "96"])
     assert printed.exit_code == 0, printed.output
-    assert "solid: " in printed.output and "fresh jobs of the budget's 48 used (0 rendered now)" in \
+    assert "solid: " in printed.output and "fresh jobs of the budget's 96 used (0 rendered now)" in \
         " ".join(printed.output.split())
 
 
