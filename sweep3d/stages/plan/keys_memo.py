@@ -29,8 +29,7 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from sweep3d.cache import Store, StoreWriteError, canonical, safe_filename
-from sweep3d.cache.files import read_parquet
+from sweep3d.cache import Store, StoreWriteError, canonical, read_parquet, safe_filename
 from sweep3d.stages.plan.batch import ControlBatch
 
 #: Plans smaller than this are planned in well under a second: not worth a file in the store.

@@ -16,7 +16,7 @@ from sweep3d.cache import Store
 from sweep3d.spec.framing import Framing
 from sweep3d.stages.plan import keys_memo, make_plan, planner
 from tests.helpers import examples, load_spec, write_spec
-from tests.stages.plan.test_plan_columns import specs
+from tests.helpers.plan_specs import specs
 
 pytestmark = pytest.mark.fast
 
