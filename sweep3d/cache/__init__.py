@@ -33,6 +33,7 @@ if _TYPE_CHECKING:
         atomic_write,
         full_disk_error,
         is_full_disk,
+        read_parquet,
         safe_filename,
         store_error,
         utc_now,

@@ -113,13 +113,16 @@ class RunResult:
                 f"failed={self.failed}, seconds={self.seconds:.1f}, stages=[{stages}])")
 
 
-def plan_spec(spec: LoadedSpec, model: ModelHandle | None = None, history: History | None = None) -> Plan:
+def plan_spec(spec: LoadedSpec, model: ModelHandle | None = None, history: History | None = None,
+              remember: Store | None = None) -> Plan:
     """The plan of ``spec`` for this machine's Blender and one of its models (default: the first,
-    resolved if not given)."""
+    resolved if not given); ``remember``: a store whose lock the caller holds, where an unchanged
+    plan's keys are read back instead of hashed again (``stages.plan.keys_memo``)."""
     model = model or ModelHandle.resolve(spec)
     return make_plan(spec, framing=model.framing, model_digest=model.digest, blender=blender_version(),
                      history=history, model=model.settings, classes=model.label_map(),
-                     view=(model.view.resize, model.view.crop) if model.view is not None else None)
+                     view=(model.view.resize, model.view.crop) if model.view is not None else None,
+                     remember=remember)
 
 
 def outcomes_by_scene(plan: Plan, store: Store) -> History:
@@ -258,7 +261,7 @@ def _run_locked(spec: LoadedSpec, store: Store, console: Console | None, runner:
     started_at = utc_now()
     store.snapshot_states()  # every blob's listing and state, taken on the other core while this one plans
     models = [ModelHandle.resolve(spec, settings) for settings in spec.models]
-    plans = [plan_spec(spec, model) for model in models]
+    plans = [plan_spec(spec, model, remember=store) for model in models]
     if max(len(plan.jobs) for plan in plans) < SNAPSHOT_MIN_JOBS:
         store.forget_states()  # few blobs to check: waiting for the child's look at every blob costs more
     remove_leftovers(store)  # before anything is written (planning reads no blob folder)

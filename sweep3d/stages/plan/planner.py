@@ -14,7 +14,7 @@ from typing import Any, Callable
 import numpy as np
 
 from sweep3d.assets import mesh_digest, unreadable
-from sweep3d.cache import StoreWriteError, Template, digests, file_digest
+from sweep3d.cache import Store, StoreWriteError, Template, digests, file_digest
 from sweep3d.core import SpecError, UserError, blamed
 from sweep3d.driver import JobList, Plan, PlanColumns, SceneBlock, truth_passes
 from sweep3d.spec import (
@@ -29,6 +29,7 @@ from sweep3d.spec import (
     spec_class_names,
 )
 from sweep3d.stages.infer import LabelMap, builtin_labels, evaluator_key, infer_base, key_backend, pred_keys
+from sweep3d.stages.plan import keys_memo
 from sweep3d.stages.plan.batch import ControlBatch, control_batch, groups, keyed_texts
 from sweep3d.stages.plan.checked import policy_count
 from sweep3d.stages.plan.crossing import crossing
@@ -72,7 +73,8 @@ class _Keys:
 
 def make_plan(spec: LoadedSpec, *, framing: Framing, model_digest: str, blender: str,
               history: History | None = None, model: ModelSpec | None = None, device: str | None = None,
-              classes: LabelMap | None = None, view: tuple[int, int] | None = None) -> Plan:
+              classes: LabelMap | None = None, view: tuple[int, int] | None = None,
+              remember: Store | None = None) -> Plan:
     """Expand ``spec`` into jobs, sorted by scene so workers reload as little as possible.
 
     Each scene's jobs are made as columns (see :mod:`sweep3d.stages.plan.batch`): values and
@@ -92,6 +94,8 @@ def make_plan(spec: LoadedSpec, *, framing: Framing, model_digest: str, blender:
         classes: the model's class names (a user's model's, once loaded); default: a built-in
             model's. The plan records the classes the spec names otherwise (see ``spec.class_names``).
         view: the model's own resize and crop, when known (the plan says what the model sees).
+        remember: a store whose lock the caller holds, to remember the keys in (see
+            :mod:`.keys_memo`): planned again unchanged, they are read back instead of hashed.
     """
     model = model or spec.model
     renamed = _renamed_classes(spec, classes if classes is not None else builtin_labels(model.name))
@@ -107,6 +111,8 @@ def make_plan(spec: LoadedSpec, *, framing: Framing, model_digest: str, blender:
     passes = truth_passes(spec)
     keys = _Keys(parts=[] if spec.report.part_visibility else None, truth=[] if passes else None, truth_passes=passes)
     blocks: list[SceneBlock] = []
+    scenes: list[tuple[str, list[ControlBatch], list[ControlBatch], list[Any], int]] = []  # whose keys to make
+    planned = 0
     hdri_digests = _hdri_digests(spec)
     for i, obj in enumerate(spec.objects):
         object_digest = _asset_digest(spec, f"objects[{i}].mesh", mesh_digest, spec.meshes[obj.name], spec.store)
@@ -126,7 +132,7 @@ def make_plan(spec: LoadedSpec, *, framing: Framing, model_digest: str, blender:
             else:
                 unit, choice = listed.unit, listed.choice
             n = len(unit)
-            if len(keys.render) + n > spec.experiment.max_jobs:  # a policy that cannot count
+            if planned + n > spec.experiment.max_jobs:  # a policy that cannot count
                 raise _too_many(spec, f"more than {spec.experiment.max_jobs:,}")
             if n == 0:
                 continue
@@ -134,12 +140,13 @@ def make_plan(spec: LoadedSpec, *, framing: Framing, model_digest: str, blender:
             for (control_id, param), numbers in (listed.exact.items() if listed else ()):
                 columns[control_id][param] = Column(numbers=numbers)
             batches = {c.id: control_batch(c, columns[c.id], n) for c in scene_controls}
-            blocks.append(SceneBlock(obj.name, env.name, len(keys.render), n,
+            blocks.append(SceneBlock(obj.name, env.name, planned, n,
                                      {cid: b.values for cid, b in batches.items()}, unit, choice))
-            for lo in range(0, n, KEY_CHUNK):
-                _scene_keys(spec, keys, scene, [batches[c.id] for c in rendered if c.id in batches],
-                            [batches[c.id] for c in post if c.id in batches], base, truth, lo, min(n, lo + KEY_CHUNK))
+            scenes.append((scene, [batches[c.id] for c in rendered if c.id in batches],
+                           [batches[c.id] for c in post if c.id in batches], truth, n))
+            planned += n
             keys.in_frame.append(_in_frame(rendered, batches, n))
+    _all_keys(spec, keys, scenes, base, planned, remember if not history else None, model_digest)
     mask = np.concatenate(keys.in_frame) if keys.in_frame else np.zeros(0, bool)
     plan = PlanColumns(blocks, keys.render, keys.image, keys.pred, keys.parts, mask, keys.truth)
     return Plan(spec, JobList(plan, np.flatnonzero(mask)), model_digest, JobList(plan, np.flatnonzero(~mask)), framing,
@@ -160,6 +167,32 @@ def _renamed_classes(spec: LoadedSpec, classes: LabelMap | None) -> list[tuple[i
     except NameClash as exc:
         raise SpecError(str(spec.path), exc.key, str(exc)) from None
     return classes.renamed(names)
+
+
+def _all_keys(spec: LoadedSpec, keys: _Keys, scenes: list[tuple[str, list[ControlBatch], list[ControlBatch], list[Any], int]],
+              base: dict[str, Any], planned: int, remember: Store | None, model_digest: str) -> None:
+    """Append the keys of every job of ``scenes`` to ``keys``: read back from ``remember``'s memo
+    when it holds them under the same fingerprint (:mod:`.keys_memo`), else written and hashed
+    scene by scene (and remembered there)."""
+    path = fingerprint = None
+    if remember is not None and planned >= keys_memo.MIN_JOBS:
+        prints = keys_memo.KeysPrint(base, spec.experiment.seed, keys.parts is not None, keys.truth_passes)
+        for scene, rendered, post, truth, n in scenes:
+            prints.scene(scene, truth, n, rendered, post)
+        fingerprint = prints.hexdigest()
+        path = keys_memo.memo_path(remember, spec.name, model_digest)
+        known = keys_memo.read_keys(path, fingerprint, planned)
+        if known is not None and (known["parts"] is None) == (keys.parts is None) \
+                and (known["truth"] is None) == (keys.truth is None):
+            keys.render, keys.image, keys.pred = known["render"], known["image"], known["pred"]  # type: ignore[assignment]
+            keys.parts, keys.truth = known["parts"], known["truth"]
+            return
+    for scene, rendered, post, truth, n in scenes:
+        for lo in range(0, n, KEY_CHUNK):
+            _scene_keys(spec, keys, scene, rendered, post, base, truth, lo, min(n, lo + KEY_CHUNK))
+    if path is not None and fingerprint is not None and remember is not None:
+        keys_memo.write_keys(remember, path, fingerprint, {"render": keys.render, "image": keys.image,
+                                                          "pred": keys.pred, "parts": keys.parts, "truth": keys.truth})
 
 
 def _scene_keys(spec: LoadedSpec, keys: _Keys, scene: str, rendered: list[ControlBatch], post: list[ControlBatch],
