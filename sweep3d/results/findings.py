@@ -269,12 +269,16 @@ def register_failure_grades_view(con: duckdb.DuckDBPyConnection, experiment: str
     graded = (f"(SELECT pred_key, grade, evidence FROM {IMAGES_TABLE} WHERE experiment = {literal(experiment)})"
               if IMAGES_TABLE in have else "(SELECT NULL::VARCHAR AS pred_key, NULL::VARCHAR AS grade, "
                                             "NULL::VARCHAR AS evidence WHERE false)")
+    columns = {r[0] for r in con.execute("DESCRIBE results").fetchall()}
+    if not {"job", "object", "environment", "pred_key", "image_key", "valid", "correct"} <= columns:
+        return False  # a results view made by hand, without what a failure is
+    counted = "r.counted" if "counted" in columns else "r.valid"
     con.execute(f"""CREATE OR REPLACE VIEW failure_grades AS
         SELECT r.job, r.object, r.environment, r.pred_key, r.image_key,
                coalesce(g.grade, {literal(UNTESTED)}) AS grade,
                coalesce(g.evidence, 'not in a graded sample: sweep3d grade checks a sample of the failures') AS evidence
         FROM results r LEFT JOIN {graded} g USING (pred_key)
-        WHERE r.counted AND NOT r.correct ORDER BY r.job""")
+        WHERE {counted} AND NOT r.correct ORDER BY r.job""")
     return True
 
 

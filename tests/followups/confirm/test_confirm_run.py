@@ -16,20 +16,12 @@ from sweep3d.followups.confirm.record import read_verdicts
 from sweep3d.followups.confirm.run import SUFFIX, confirm
 from sweep3d.results.confirmation import UNCONFIRMED
 from sweep3d.spec.params import Range
-from tests.helpers import load_spec, spec_toml, write_spec
+from tests.helpers import load_spec, write_spec
+from tests.helpers.planted import FRESH_SPEC as SPEC
+from tests.helpers.planted import bright_spec
 
 pytestmark = [pytest.mark.slow, pytest.mark.blender, pytest.mark.torch]
 
-SPEC = spec_toml("fresh", seed=3, model={"batch_size": 8}, body="""\
-[[controls]]
-type = "orientation"
-yaw = { range = [-180, 180] }
-pitch = { range = [-20, 20] }
-
-[policy]
-type = "random"
-samples = 4
-""")
 
 
 def test_confirm_renders_fresh_matched_twins_once_and_records_the_verdict(tmp_path: Path) -> None:
@@ -71,32 +63,12 @@ def test_confirm_before_any_run_is_one_line(tmp_path: Path) -> None:
     assert "sweep3d run" in result.output and "Traceback" not in result.output
 
 
-BRIGHT_MODEL = '''\
-import torch
-from sweep3d.stages.infer.models import Classifier, Normalize
-
-
-class Bright(torch.nn.Module):
-    """Says "carton" for a bright image, "dark" otherwise: fails exactly below a brightness."""
-
-    def forward(self, x):
-        m = x.mean(dim=(1, 2, 3))
-        return torch.stack([(m - 0.45) * 50, (0.45 - m) * 50], dim=1)
-
-
-def make():
-    return Classifier(Bright(), Normalize(), labels=["carton", "dark"])
-'''
 
 
 def test_a_real_boundary_is_confirmed_and_run_marks_it(tmp_path: Path) -> None:
     """A model that fails on dark images: the run finds the brightness boundary, confirm replicates
     it on fresh twins, a second confirm renders nothing, and run's findings say confirmed."""
-    (tmp_path / "brightmodel.py").write_text(BRIGHT_MODEL)
-    text = (SPEC.replace("[model]\nbatch_size = 8", '[model]\nname = "brightmodel:make"')
-            .replace("pitch = { range = [-20, 20] }", "\n[[controls]]\ntype = \"brightness_contrast\"\n"
-                     "brightness = { range = [-0.8, 0.2] }").replace("samples = 4", "samples = 30"))
-    spec = write_spec(tmp_path, text)
+    spec = bright_spec(tmp_path)
     runner = CliRunner()
     first = runner.invoke(app, ["run", str(spec), "--no-report"])
     assert first.exit_code == 0, first.output

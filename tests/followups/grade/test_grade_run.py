@@ -12,8 +12,9 @@ from typer.testing import CliRunner
 
 from sweep3d.cli import app
 from sweep3d.results import GRADES, SOLID, UNTESTED
-from tests.followups.confirm.test_confirm_run import BRIGHT_MODEL, SPEC
 from tests.helpers import load_spec, write_spec
+from tests.helpers.planted import FRESH_SPEC as SPEC
+from tests.helpers.planted import bright_spec
 
 pytestmark = [pytest.mark.slow, pytest.mark.blender, pytest.mark.torch]
 
@@ -28,11 +29,7 @@ def _findings(spec: Path) -> list[tuple]:
 def test_grade_writes_a_grade_for_every_finding_and_a_rerun_renders_nothing(tmp_path: Path) -> None:
     from sweep3d.followups.grade import grade_findings
 
-    (tmp_path / "brightmodel.py").write_text(BRIGHT_MODEL)
-    text = (SPEC.replace("[model]\nbatch_size = 8", '[model]\nname = "brightmodel:make"')
-            .replace("pitch = { range = [-20, 20] }", "\n[[controls]]\ntype = \"brightness_contrast\"\n"
-                     "brightness = { range = [-0.8, 0.2] }").replace("samples = 4", "samples = 30"))
-    spec = write_spec(tmp_path, text)
+    spec = bright_spec(tmp_path)
     runner = CliRunner()
     ran = runner.invoke(app, ["run", str(spec), "--no-report"])
     assert ran.exit_code == 0, ran.output
