@@ -72,7 +72,7 @@ def panel_html(spec: Path) -> str:
     loaded = load_spec(spec)
     store = Store(loaded.store)
     page = render_html(build_context(loaded, connect(store, loaded.name), store, NEAREST))
-    return re.search(r'<section id="nearest-fixes">(.*?)</section>', page, re.S).group(1)
+    return re.search(r'<section id="nearest-fixes"[^>]*>(.*?)</section>', page, re.S).group(1)  # folded or not
 
 
 def text(fragment: str) -> str:
