@@ -129,12 +129,12 @@ def plan_moves(controls: list[Any], sizes: dict[str, float]) -> tuple[list[Move]
             kind = type(inst.control).neighbour_steps.get(param)
             if inst.control.stage != "render":
                 skipped[column] = "applied to the image after rendering (the image changes stand for it)"
+            elif isinstance(space, Choice) and not all(_number(v) for v in space.options):
+                skipped[column] = "a list of names (no step lies between them)"
             elif kind is None:
                 skipped[column] = f"its control ({inst.control.type_name}) declares no invisible step for it"
             elif kind not in KINDS:
                 skipped[column] = f"its control declares the step {kind!r}, not one of {', '.join(KINDS)}"
-            elif isinstance(space, Choice) and not all(_number(v) for v in space.options):
-                skipped[column] = "a list of names (no step lies between them)"
             else:
                 wanted.append((inst, param, space, kind))
     labels = _labels([(inst.id, param, kind) for inst, param, _, kind in wanted])
