@@ -94,8 +94,11 @@ def _edges_sql() -> str:
 def register_fragile(con: duckdb.DuckDBPyConnection, drop: bool = False) -> bool:
     """Add ``fragile`` to ``results`` (all models' rows, before one is chosen) and the views of the
     stability check: ``stability_images`` (one row per checked image and model: its base margin
-    and whether any change flipped it), ``stability_bins`` (flip rate per margin bin, with Wilson
-    intervals), ``stability_changes`` (the same per change) and ``fragile_threshold`` (per model).
+    and whether any change flipped it, an image change (``flipped_image``) or a scene neighbour
+    (``flipped_scene``)), ``stability_bins`` (flip rate per margin bin, with Wilson intervals),
+    ``stability_changes`` (the same per change), ``fragile_threshold`` (per model) and
+    ``neighbourhood_accuracy`` (:data:`NEIGHBOURHOOD_SQL`). A scene neighbour's row (its
+    ``neighbour_key`` set) counts as an image change's does: a flip under it is fragile.
 
     Args:
         drop: ``[aggregate] drop_fragile``: fragile results are not ``counted`` (the column

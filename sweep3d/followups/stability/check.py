@@ -1,5 +1,6 @@
 """The stability check: re-infer a seeded sample of a run's images under changes no eye sees
-(:mod:`sweep3d.followups.stability.changes`) and record, per image and change, whether the verdict flipped.
+(:mod:`sweep3d.followups.stability.changes`) and record, per image and change, whether the verdict flipped;
+each round also re-renders its images' scene neighbours (:mod:`sweep3d.followups.stability.scene`).
 
 The sample is stratified by ``|margin|`` (the bins of ``results.fragile.MARGIN_EDGES``): bins take
 turns, lowest first, each giving its next image in a seeded order, so the near-ties that decide
