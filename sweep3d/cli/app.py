@@ -177,13 +177,22 @@ def stability(
     seed: Optional[int] = typer.Option(None, "--seed", min=0, show_default=False,
                                        help="Seeds the sample's order and the random changes (default: the spec's)."),
     wait: float = typer.Option(0.0, help="Seconds to wait for another command holding the store's lock."),
+    scene: Optional[bool] = typer.Option(None, "--scene/--no-scene", show_default=False,
+                                         help="Re-render each sampled job's scene neighbours (yaw ±1°, camera "
+                                              "distance ±1 %, light ±5 %, ...; default: the spec's [stability] "
+                                              "scene, true)."),
+    executor: str = typer.Option("local", help="Where the neighbours render: local worker processes, or ray."),
+    address: Optional[str] = typer.Option(None, help="With --executor ray: the cluster's address (default: "
+                                                      "start a local one on 127.0.0.1)."),
 ) -> None:
     """Re-infer a sample of the run's images under changes no eye sees (±1 level of noise, dither, 8-bit
-    resizing): the flip rate per margin bin, and which results are fragile."""
+    resizing) and re-render their scene neighbours (a degree, a percent away): the flip rate per margin bin,
+    which results are fragile, and worst-of-neighbourhood accuracy."""
     from sweep3d.cli.stability import run_stability
 
     check_wait(wait)
-    run_stability(console, spec, sample, seed, wait, max_sample)
+    signal.signal(signal.SIGTERM, _interrupt)  # the neighbours' render workers end with the command
+    run_stability(console, spec, sample, seed, wait, max_sample, scene=scene, executor=executor, address=address)
 
 
 @command

@@ -11,16 +11,23 @@ from rich.table import Table
 
 
 def run_stability(console: Console, spec_path: Path, sample: int, seed: int | None, wait: float = 0.0,
-                  max_sample: int | None = None) -> None:
+                  max_sample: int | None = None, scene: bool | None = None, executor: str = "local",
+                  address: str | None = None) -> None:
     """``seed``: None is the spec's ``[experiment] seed``, as ``explain`` and ``confirm`` take it;
     ``wait``: seconds to wait for another command holding the store's lock; ``max_sample``: the
-    sequential design's cap (None: one round of ``sample``)."""
-    from sweep3d.api import Experiment
+    sequential design's cap (None: one round of ``sample``); ``scene``: re-render the sampled jobs'
+    neighbours (None: the spec's ``[stability] scene``); ``executor``, ``address``: where they render."""
+    from sweep3d.api import EXECUTORS, Experiment
+    from sweep3d.core import UserError
     from sweep3d.followups.stability import check_stability
+    from sweep3d.stages.render import Executor
 
+    if executor not in EXECUTORS:
+        raise UserError(f"--executor {executor}: use local or ray")
     spec = Experiment(spec_path).spec
     seed = spec.experiment.seed if seed is None else seed
-    for found in check_stability(spec, sample, seed, console, wait, max_sample=max_sample):
+    for found in check_stability(spec, sample, seed, console, wait, executor=Executor(executor, address),
+                                 max_sample=max_sample, scene=scene):
         which = f"{escape(found.model)}: " if len(spec.spec.all_models) > 1 else ""
         console.print(f"{which}stability check of {found.sampled} images ({found.cached} cached, {found.computed} "
                       f"inferred now; seed {seed})")
@@ -41,8 +48,43 @@ def run_stability(console: Console, spec_path: Path, sample: int, seed: int | No
         for row in found.changes:
             n, flips = by_change.get(row["change"], (0, 0))
             by_change[row["change"]] = (n + row["n"], flips + row["flips"])
-        console.print("flips per change: " + ", ".join(f"{c} {f} of {n}" for c, (n, f) in by_change.items()))
+        console.print("flips per change: " + escape(", ".join(f"{c} {f} of {n}" for c, (n, f) in by_change.items())))
+        for line in scene_lines(found):
+            console.print(f"{which}{escape(line)}")
         console.print(f"{which}{escape(fragile_count_sentence(found))}")
+
+
+def scene_lines(found: Any) -> list[str]:
+    """What the scene neighbours cost and found: the neighbours, the parameters not moved, and
+    worst-of-neighbourhood accuracy beside plain accuracy, over all objects and per object."""
+    check = found.scene
+    if check is None:
+        return ["scene neighbours: not checked (--no-scene, or [stability] scene = false)"]
+    lines = [f"  not moved: {line}" for line in check.skipped_lines()]
+    if not check.moves:
+        return ["scene neighbours: none (no varied rendered parameter has an invisible step)", *lines]
+    moved = ", ".join(f"{m.label} ±{m.size * 100:g}%" if m.kind in ("distance", "closeness", "light")
+                      else f"{m.label} ±{m.size:g}°" for m in check.moves)
+    left = [f"{check.out_of_frame} out of frame"] if check.out_of_frame else []
+    left += [f"{check.no_verdict} without a verdict to compare"] if check.no_verdict else []
+    failed = f", {check.failed} failed" if check.failed else ""
+    lines.insert(0, f"scene neighbours ({moved}): {len(check.planned)} of the sampled images' neighbours, "
+                    f"{check.cached} compared before, {check.computed} now ({check.rendered} renders made{failed})"
+                    + (f"; {', '.join(left)}" if left else ""))
+    rows = found.neighbourhood
+    overall = next((r for r in rows if r["object"] is None), None)
+    if overall is None or not overall["images"]:
+        return [*lines, "worst-of-neighbourhood accuracy: no sampled image has a neighbour compared yet"]
+    lines.append(f"worst-of-neighbourhood accuracy (correct only if the image and every neighbour is): "
+                 f"{_accuracy(overall)} over {overall['images']} sampled images; "
+                 f"{overall['flipped']} flipped under a neighbour")
+    lines += [f"  {row['object']}: {_accuracy(row)} over {row['images']}" for row in rows if row["object"] is not None]
+    return lines
+
+
+def _accuracy(row: dict[str, Any]) -> str:
+    return (f"{row['worst_accuracy']:.0%} ({row['worst_low']:.0%}–{row['worst_high']:.0%}) against "
+            f"{row['accuracy']:.0%} plain ({row['accuracy_low']:.0%}–{row['accuracy_high']:.0%})")
 
 
 def stop_sentence(found: Any, max_sample: int | None) -> str:

@@ -63,6 +63,12 @@ class Control:
     #: ``canonical`` (which folds it into the one it stands for) is the base class's without it,
     #: so the planner keys the control over arrays unless it, or one it is read with, is a range.
     folds: ClassVar[dict[str, tuple[str, ...]]] = {}
+    #: The change to each parameter that a person would call invisible, as parameter → kind, for the
+    #: stability check's scene neighbours (``sweep3d stability``): "angle" (degrees, ±``[stability]
+    #: angle``), "hdri_rotation" (degrees), "distance" (a camera distance, ±a share), "closeness" (a
+    #: value that grows as the camera nears, as ``zoom``: the distance ±a share) or "light" (a light's
+    #: strength, ±a share). A rendered parameter without one is listed as not moved, with the reason.
+    neighbour_steps: ClassVar[dict[str, str]] = {}
 
     def __init__(self, control_id: str, type_name: str) -> None:
         self.id = control_id

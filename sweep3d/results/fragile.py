@@ -94,8 +94,11 @@ def _edges_sql() -> str:
 def register_fragile(con: duckdb.DuckDBPyConnection, drop: bool = False) -> bool:
     """Add ``fragile`` to ``results`` (all models' rows, before one is chosen) and the views of the
     stability check: ``stability_images`` (one row per checked image and model: its base margin
-    and whether any change flipped it), ``stability_bins`` (flip rate per margin bin, with Wilson
-    intervals), ``stability_changes`` (the same per change) and ``fragile_threshold`` (per model).
+    and whether any change flipped it, an image change (``flipped_image``) or a scene neighbour
+    (``flipped_scene``)), ``stability_bins`` (flip rate per margin bin, with Wilson intervals),
+    ``stability_changes`` (the same per change), ``fragile_threshold`` (per model) and
+    ``neighbourhood_accuracy`` (:data:`NEIGHBOURHOOD_SQL`). A scene neighbour's row (its
+    ``neighbour_key`` set) counts as an image change's does: a flip under it is fragile.
 
     Args:
         drop: ``[aggregate] drop_fragile``: fragile results are not ``counted`` (the column
@@ -112,16 +115,24 @@ def register_fragile(con: duckdb.DuckDBPyConnection, drop: bool = False) -> bool
     con.execute("ALTER VIEW results RENAME TO results_unjudged")
     model = "r.model" if "model" in have else "NULL::VARCHAR"
     # the latest check of each image and change: another --seed replaces its rows, never adds a chance to flip
-    source = ("SELECT s.*, r.model FROM stability s JOIN (SELECT DISTINCT pred_key, "
+    scene = ("s.neighbour_key IS NOT NULL" if checked and "neighbour_key" in _columns(con, "stability")
+             else "false")  # a scene neighbour's row (sweep3d stability's re-rendered neighbours)
+    source = (f"SELECT s.*, r.model, {scene} AS scene FROM stability s JOIN (SELECT DISTINCT pred_key, "
               f"{model} AS model FROM results_unjudged r) r USING (pred_key) QUALIFY row_number() OVER "
               "(PARTITION BY r.model, s.pred_key, s.change ORDER BY s.created_at DESC, s.stability_key DESC) = 1") \
         if checked else \
         ("SELECT NULL::VARCHAR AS model, NULL::VARCHAR AS pred_key, NULL::VARCHAR AS change, "
-         "NULL::DOUBLE AS base_margin, NULL::BOOLEAN AS flipped WHERE false")
+         "NULL::DOUBLE AS base_margin, NULL::BOOLEAN AS flipped, NULL::BOOLEAN AS base_correct, "
+         "NULL::BOOLEAN AS correct, NULL::BOOLEAN AS scene WHERE false")
     con.execute(f"CREATE OR REPLACE VIEW stability_checks AS {source}")
-    con.execute("CREATE OR REPLACE VIEW stability_images AS SELECT model, pred_key, any_value(base_margin) AS base_margin, "
-                f"bool_or(flipped) AS flipped, {bin_sql('any_value(base_margin)')} AS bin "
-                "FROM stability_checks GROUP BY model, pred_key")
+    # the image rows' margin first: the check's own re-inference, as before scene rows existed
+    con.execute("CREATE OR REPLACE VIEW stability_images AS SELECT *, "
+                f"{bin_sql('base_margin')} AS bin FROM (SELECT model, pred_key, coalesce(any_value(base_margin) "
+                "FILTER (WHERE NOT scene), any_value(base_margin)) AS base_margin, bool_or(flipped) AS flipped, "
+                "bool_or(flipped) FILTER (WHERE NOT scene) AS flipped_image, "
+                "bool_or(flipped) FILTER (WHERE scene) AS flipped_scene, "
+                "count(*) FILTER (WHERE scene) AS neighbours FROM stability_checks GROUP BY model, pred_key)")
+    con.execute(NEIGHBOURHOOD_SQL.format(model=model))
     for view, by, rows in (("stability_bins", "", "stability_images"),
                            ("stability_changes", "change, ",
                             f"(SELECT model, change, flipped, {bin_sql('base_margin')} AS bin FROM stability_checks)")):
@@ -147,6 +158,32 @@ def register_fragile(con: duckdb.DuckDBPyConnection, drop: bool = False) -> bool
                 f"{counted} FROM results_unjudged r LEFT JOIN fragile_threshold t ON {on} "
                 f"LEFT JOIN stability_images i ON i.pred_key = r.pred_key{on_image}")
     return True
+
+
+#: ``neighbourhood_accuracy``: per model and object (and over all objects: ``object`` NULL), over the
+#: jobs whose scene neighbours were checked: plain accuracy (the job's own verdict) and
+#: worst-of-neighbourhood accuracy (the job and every checked neighbour correct), each with its 95 %
+#: Wilson interval. ``{model}``: the results' model column (NULL::VARCHAR for one model).
+NEIGHBOURHOOD_SQL = """CREATE OR REPLACE VIEW neighbourhood_accuracy AS
+WITH jobs AS (SELECT model, pred_key, any_value(base_correct) AS correct, bool_and(correct) AS all_correct,
+                     count(*) AS neighbours, count(*) FILTER (WHERE flipped) AS flipped
+              FROM stability_checks WHERE scene GROUP BY model, pred_key),
+     objects AS (SELECT DISTINCT r.pred_key, {model} AS model, r.object FROM results_unjudged r),
+     counted AS (SELECT j.model, o.object, count(*) AS images, sum(j.neighbours)::BIGINT AS neighbours,
+                        count(*) FILTER (WHERE j.flipped > 0) AS flipped,
+                        count(*) FILTER (WHERE j.correct) AS correct,
+                        count(*) FILTER (WHERE j.correct AND j.all_correct) AS worst_correct
+                 FROM jobs j JOIN objects o ON o.pred_key = j.pred_key AND o.model IS NOT DISTINCT FROM j.model
+                 GROUP BY GROUPING SETS ((j.model, o.object), (j.model)))
+SELECT model, object, images, neighbours, flipped, correct, correct::DOUBLE / images AS accuracy,
+       wilson_low(correct, images) AS accuracy_low, wilson_high(correct, images) AS accuracy_high,
+       worst_correct, worst_correct::DOUBLE / images AS worst_accuracy,
+       wilson_low(worst_correct, images) AS worst_low, wilson_high(worst_correct, images) AS worst_high
+FROM counted ORDER BY model, object NULLS LAST"""
+
+
+def _columns(con: duckdb.DuckDBPyConnection, name: str) -> set[str]:
+    return {row[0] for row in con.execute(f"DESCRIBE {identifier(name)}").fetchall()}
 
 
 def _has_relation(con: duckdb.DuckDBPyConnection, name: str) -> bool:

@@ -19,6 +19,7 @@ if _TYPE_CHECKING:
         plans_as_run,
         remove_leftovers,
         run,
+        write_jobs,
         write_plan_images,
         write_unstored_images,
     )

@@ -23,7 +23,7 @@ from sweep3d.assets import not_a_file
 from sweep3d.core import SpecError
 
 LISTS = ("objects", "environments", "controls", "models")
-TABLES = ("experiment", "render", "model", "evaluator", "policy", "postprocess", "report", "aggregate")
+TABLES = ("experiment", "render", "model", "evaluator", "policy", "postprocess", "report", "aggregate", "stability")
 #: A control entry's folder when it came from an included file (its file parameters resolve there).
 BASE_KEY = "__folder__"
 

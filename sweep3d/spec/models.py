@@ -341,6 +341,22 @@ class AggregateSpec(StrictModel):
                            "accuracies. Without a check, nothing is left out.")
 
 
+class StabilitySpec(StrictModel):
+    """``sweep3d stability``'s scene neighbours: the changes to a sampled job's scene a person would
+    call invisible (each rendered parameter the spec varies, both ways; see ``neighbour_steps``)."""
+
+    scene: bool = Field(True, description="Re-render each sampled job's neighbours (each varied rendered parameter "
+                                          "moved both ways by the steps below) beside the image changes.")
+    angle: float = Field(1.0, gt=0.0, le=45.0, allow_inf_nan=False,
+                         description="Degrees an angle of the object, the camera or a light moves.")
+    distance: float = Field(0.01, gt=0.0, le=0.5, allow_inf_nan=False,
+                            description="Share the camera's distance moves (0.01: 1 % nearer and farther).")
+    light: float = Field(0.05, gt=0.0, le=0.5, allow_inf_nan=False,
+                         description="Share a light's strength (an HDRI's too) moves (0.05: 5 % weaker and stronger).")
+    hdri_rotation: float = Field(2.0, gt=0.0, le=45.0, allow_inf_nan=False,
+                                 description="Degrees the environment map turns.")
+
+
 class PostprocessSpec(StrictModel):
     store: Literal["all", "none"] = Field(
         "none", description="Which post-processed images are written to the store: 'none' makes each in "
@@ -432,6 +448,7 @@ class Spec(StrictModel):
     postprocess: PostprocessSpec = PostprocessSpec()
     report: ReportSpec = ReportSpec()
     aggregate: AggregateSpec = AggregateSpec()
+    stability: StabilitySpec = StabilitySpec()
 
     @model_validator(mode="after")
     def _model_or_models(self) -> Spec:

@@ -99,6 +99,23 @@ def test_a_check_before_any_result_or_of_another_task_is_one_line(tmp_path: Path
     assert result.exit_code == 2 and 'kind = "classification"' in result.output
 
 
+@pytest.mark.parametrize("table, key", [("angle = -1", "stability.angle"), ("light = 0.9", "stability.light"),
+                                        ("distance = inf", "stability.distance"), ("scene = 2", "stability.scene"),
+                                        ("yaw = 1", "stability.yaw")])
+def test_a_bad_stability_step_is_one_line_naming_the_key(tmp_path: Path, table: str, key: str) -> None:
+    """The scene neighbours' steps (``[stability]``): refused before anything is read or written."""
+    spec = write_spec(tmp_path, TINY_SPEC + f"\n[stability]\n{table}\n")
+    before = sorted(tmp_path.rglob("*"))
+    result = runner.invoke(app, ["stability", str(spec)])
+    assert result.exit_code == 2 and "Traceback" not in result.output, result.output
+    line = one_line(result.output)
+    assert str(spec) in line and key in line, line
+    assert sorted(tmp_path.rglob("*")) == before
+    result = runner.invoke(app, ["stability", str(write_spec(tmp_path, TINY_SPEC, name="ok.toml")), "--executor",
+                                 "cloud"])
+    assert result.exit_code == 2 and "--executor cloud: use local or ray" in one_line(result.output)
+
+
 @pytest.mark.parametrize("args, message", [
     (["--budget", "0"], "--budget 0: give the minutes the bench may take, a finite number > 0"),
     (["--budget", "-5"], "--budget -5: give the minutes"),

@@ -45,3 +45,29 @@ def test_the_cap_names_the_option_and_how_many_bins_are_undecided() -> None:
     found = _checked([(100, 11)], [100_000], 128, (0, 40), (0.0, 0.01))
     assert found.rounds.stopped == "cap"
     assert "the cap (--max-sample 128) reached with 1 margin bin undecided" in stop_sentence(found, 128)
+
+
+def test_the_scene_lines_give_worst_of_neighbourhood_beside_plain_accuracy_and_what_did_not_move() -> None:
+    from sweep3d.cli.stability import scene_lines
+    from sweep3d.followups.stability.neighbours import Move
+    from sweep3d.followups.stability.scene import SceneCheck
+    from sweep3d.spec import Range
+
+    found = _checked([(9, 0)] * 7, [100] * 7, 64, (68, 68), (0.5, 0.5))
+    assert "not checked" in scene_lines(found)[0]  # --no-scene says so
+    moves = [Move("orientation", "yaw", "angle", 1.0, Range(-180, 180), period=360.0, label="yaw"),
+             Move("camera", "zoom", "closeness", 0.01, Range(1, 2), label="distance")]
+    found.scene = SceneCheck(None, None, None, moves, {"blur_sigma": "applied to the image after rendering"},
+                             planned=[None] * 12, rendered=10, cached=2, computed=9, out_of_frame=1)
+    row = {"images": 4, "flipped": 1, "accuracy": 0.5, "accuracy_low": 0.15, "accuracy_high": 0.85,
+           "worst_accuracy": 0.25, "worst_low": 0.05, "worst_high": 0.7}
+    found.neighbourhood = [{**row, "object": None}, {**row, "object": "[red]mug"}]
+    lines = scene_lines(found)
+    assert lines[0] == ("scene neighbours (yaw ±1°, distance ±1%): 12 of the sampled images' neighbours, 2 compared "
+                        "before, 9 now (10 renders made); 1 out of frame")
+    assert "  not moved: blur_sigma: applied to the image after rendering" in lines
+    assert any(line.startswith("worst-of-neighbourhood accuracy") and "25% (5%–70%) against 50% plain (15%–85%) "
+               "over 4 sampled images; 1 flipped under a neighbour" in line for line in lines)
+    assert "  [red]mug: 25% (5%–70%) against 50% plain (15%–85%) over 4" in lines  # printed escaped, as text
+    found.neighbourhood = []
+    assert "no sampled image has a neighbour compared yet" in scene_lines(found)[-1]

@@ -1,7 +1,9 @@
 """The stability check (``sweep3d stability``): which verdicts changes no eye sees can flip.
 
 :mod:`~sweep3d.followups.stability.changes` makes the changes and computes margins from logits;
-:mod:`~sweep3d.followups.stability.check` samples a run's results, re-infers and stores the rows. The views that
+:mod:`~sweep3d.followups.stability.check` samples a run's results, re-infers and stores the rows;
+:mod:`~sweep3d.followups.stability.scene` re-renders the sampled jobs' scene neighbours
+(:mod:`~sweep3d.followups.stability.neighbours`) and compares their verdicts. The views that
 turn the rows into flip rates and the ``fragile`` column are :mod:`sweep3d.results.fragile`.
 """
 

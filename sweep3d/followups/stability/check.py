@@ -1,5 +1,6 @@
 """The stability check: re-infer a seeded sample of a run's images under changes no eye sees
-(:mod:`sweep3d.followups.stability.changes`) and record, per image and change, whether the verdict flipped.
+(:mod:`sweep3d.followups.stability.changes`) and record, per image and change, whether the verdict flipped;
+each round also re-renders its images' scene neighbours (:mod:`sweep3d.followups.stability.scene`).
 
 The sample is stratified by ``|margin|`` (the bins of ``results.fragile.MARGIN_EDGES``): bins take
 turns, lowest first, each giving its next image in a seeded order, so the near-ties that decide
@@ -32,6 +33,7 @@ import pyarrow as pa
 from sweep3d.cache import Store, digest, utc_now
 from sweep3d.core import UserError
 from sweep3d.followups.stability.changes import CHANGES, RANDOM_CHANGES, changed, margins
+from sweep3d.followups.stability.scene import SceneCheck
 from sweep3d.followups.stability.sequential import Rounds, allot, run_rounds, threshold_range
 from sweep3d.followups.stability.stored import SCHEMA  # the table's columns, declared once
 from sweep3d.spec import LoadedSpec
@@ -56,6 +58,8 @@ class Checked:
     failures: int
     fragile_failures: int
     rounds: Rounds | None = None  # the sequential design's looks and decisions
+    scene: Any = None  # the scene neighbours' SceneCheck (None: not checked)
+    neighbourhood: list[dict[str, Any]] = dataclasses.field(default_factory=list)  # neighbourhood_accuracy rows
     fragile_range: tuple[int, int] = (0, 0)  # fragile failures as the undecided bins may yet fall
     threshold_range: tuple[float, float] = (0.0, 0.0)  # the threshold likewise
 
@@ -100,7 +104,8 @@ def stratified_sample(rows: list[tuple[str, float]], n: int, seed: int) -> list[
 
 
 def check_stability(spec: LoadedSpec, sample: int = DEFAULT_SAMPLE, seed: int = 0, console: Any = None,
-                    wait: float = 0.0, executor: Any = None, max_sample: int | None = None) -> list[Checked]:
+                    wait: float = 0.0, executor: Any = None, max_sample: int | None = None,
+                    scene: bool | None = None) -> list[Checked]:
     """Run the stability check of ``spec``'s results (every model of it); returns what each found.
 
     ``sample`` images first; with ``max_sample`` above it, rounds follow that give the margin bins
@@ -110,7 +115,8 @@ def check_stability(spec: LoadedSpec, sample: int = DEFAULT_SAMPLE, seed: int = 
     It holds the store's writer lock from before it computes anything (``wait``: seconds to wait
     for another command holding it), and appends its rows every few seconds: a kill loses one
     batch, and the next check starts from what was stored. ``executor``: the runner's (local
-    by default; on Ray, in its session).
+    by default; on Ray, in its session). ``scene``: re-render each sampled job's scene neighbours too
+    (:mod:`~sweep3d.followups.stability.scene`; None: the spec's ``[stability] scene``).
 
     Raises:
         UserError: no results yet, or an evaluator that does not rank classes.
@@ -127,11 +133,13 @@ def check_stability(spec: LoadedSpec, sample: int = DEFAULT_SAMPLE, seed: int = 
     if not spec.store.is_dir():  # before the lock would make the store's folder
         raise no_results(store, spec.name, spec.path)
     cap = sample if max_sample is None else max(sample, max_sample)
+    scene = spec.spec.stability.scene if scene is None else scene
     with running(spec, executor=executor or LOCAL, wait=wait, console=console, store=store, leftovers=False) as runner:
-        return [_check_model(spec, runner, settings, sample, seed, cap) for settings in spec.spec.all_models]
+        return [_check_model(spec, runner, settings, sample, seed, cap, scene) for settings in spec.spec.all_models]
 
 
-def _check_model(spec: LoadedSpec, runner: Any, settings: Any, sample: int, seed: int, cap: int) -> Checked:
+def _check_model(spec: LoadedSpec, runner: Any, settings: Any, sample: int, seed: int, cap: int,
+                 scene: bool = False) -> Checked:
     """The check of one model of ``spec`` (``settings``), the runner holding the store's lock: rounds
     of images until every margin bin is decided or ``cap`` images are checked."""
     from sweep3d.results import results_store
@@ -150,6 +158,7 @@ def _check_model(spec: LoadedSpec, runner: Any, settings: Any, sample: int, seed
     stage = StabilityStage(handle, todo_changes, seed, wanted, runner.post, settings.batch_size, spec.path)
     taken = [0] * len(bins)
     cached = 0
+    neighbours = SceneCheck.of(spec, runner, handle) if scene else None
 
     def observe(now: list[int]) -> list[tuple[int, int]]:
         nonlocal taken, cached
@@ -170,12 +179,16 @@ def _check_model(spec: LoadedSpec, runner: Any, settings: Any, sample: int, seed
         left = [job for job in todo if stage.key(job) not in stage.done]
         if left:  # its input is not stored: nothing to re-infer
             stage.missing(left[0])
+        if neighbours is not None:  # the same round's images, re-rendered one invisible step away
+            neighbours.add(jobs)
         taken = list(now)
         return [(int(row["n"]), int(row["flips"])) for row in _read(spec, settings.label)[0]]
 
     rounds = run_rounds([len(b) for b in bins], sample, cap, observe)
     skipped = [f"{c}: {why}" for c, why in _inapplicable(handle, plan).items()]
-    return _found(spec, settings.label, rounds, len(stage.done), cached, skipped)
+    found = _found(spec, settings.label, rounds, len(stage.done), cached, skipped)
+    found.scene = neighbours
+    return found
 
 
 def _sampled_results(store: Store, spec: LoadedSpec, model: str | None) -> list[tuple[str, float]]:
@@ -350,7 +363,8 @@ def _found(spec: LoadedSpec, model: str, rounds: Rounds, computed: int, cached: 
     low, high = threshold_range(MARGIN_EDGES, decisions) if decisions else (0.0, 0.0)
     bins, changes, threshold, failures, fragile, (at_least, at_most) = _read(spec, model, (low, high))
     return Checked(model, rounds.sample, computed, cached, skipped, bins, changes, threshold, failures, fragile,
-                   rounds=rounds, fragile_range=(at_least, at_most), threshold_range=(low, high))
+                   rounds=rounds, fragile_range=(at_least, at_most), threshold_range=(low, high),
+                   neighbourhood=_neighbourhood(spec, model))
 
 
 def _read(spec: LoadedSpec, model: str, thresholds: tuple[float, ...] = ()) -> tuple:
@@ -381,6 +395,20 @@ def _read(spec: LoadedSpec, model: str, thresholds: tuple[float, ...] = ()) -> t
             con.close()
     return (bins, changes, float(threshold[0]) if threshold else 0.0, int(failures), int(fragile or 0),
             tuple(int(u) for u in under))
+
+
+def _neighbourhood(spec: LoadedSpec, model: str) -> list[dict[str, Any]]:
+    """``model``'s ``neighbourhood_accuracy`` rows (none before a scene check)."""
+    from sweep3d.results import connect, literal, results_store
+
+    several = len(spec.spec.all_models) > 1
+    with results_store(spec) as reading:
+        con = connect(reading, spec.name, model=model if several else None)
+        try:
+            where = f"model = {literal(model)}" if several else "true"
+            return _dicts(con, f"SELECT * FROM neighbourhood_accuracy WHERE {where}")
+        finally:
+            con.close()
 
 
 def _dicts(con: Any, sql: str) -> list[dict[str, Any]]:

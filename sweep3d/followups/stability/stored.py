@@ -15,9 +15,12 @@ from sweep3d.cache import TableContract, register_table
 SCHEMA = pa.schema([("stability_key", pa.string()), ("pred_key", pa.string()), ("image_key", pa.string()),
                     ("change", pa.string()), ("seed", pa.int64()),
                     ("base_correct", pa.bool_()), ("base_margin", pa.float64()), ("correct", pa.bool_()),
-                    ("margin", pa.float64()), ("flipped", pa.bool_()), ("created_at", pa.timestamp("us", tz="UTC"))])
-#: Columns added after the table was first written: older segments rightly lack them.
-ADDED_SINCE = ("seed",)
+                    ("margin", pa.float64()), ("flipped", pa.bool_()), ("created_at", pa.timestamp("us", tz="UTC")),
+                    ("neighbour_key", pa.string())])
+#: Columns added after the table was first written: older segments rightly lack them. ``neighbour_key``:
+#: a scene neighbour's prediction key (its row compares that prediction with ``pred_key``'s); null
+#: for an image change.
+ADDED_SINCE = ("seed", "neighbour_key")
 
 STABILITY = register_table(TableContract(
     "stability", key="stability_key", columns=tuple(n for n in SCHEMA.names if n not in ADDED_SINCE)))

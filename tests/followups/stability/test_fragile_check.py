@@ -1,7 +1,8 @@
 """``sweep3d stability`` end to end: on a tiny real run (32 px, so the model resizes and every
 change applies), cached under its keys (its bad inputs are in tests/cli/test_bad_input.py). These
-checks ask for one round (``--max-sample`` = ``--sample``); the rounds are tested in
-test_stability_stage.py and test_sequential.py."""
+checks ask for one round (``--max-sample`` = ``--sample``) of image changes (``--no-scene``); the
+rounds are tested in test_stability_stage.py and test_sequential.py, the scene neighbours in
+test_scene_check.py."""
 
 from __future__ import annotations
 
@@ -15,7 +16,7 @@ from sweep3d.cli import app
 
 def test_the_check_stores_a_row_per_image_and_change_and_recomputes_nothing(tiny_copy: Path) -> None:
     spec = str(tiny_copy / "spec.toml")
-    first = CliRunner().invoke(app, ["stability", spec, "--sample", "2", "--max-sample", "2", "--seed", "3"])
+    first = CliRunner().invoke(app, ["stability", spec, "--sample", "2", "--max-sample", "2", "--seed", "3", "--no-scene"])
     assert first.exit_code == 0, first.output
     assert "stability check of 2 images (0 cached, 2 inferred now; seed 3)" in first.output
     assert "fragile:" in first.output and "flips per change:" in first.output
@@ -28,16 +29,16 @@ def test_the_check_stores_a_row_per_image_and_change_and_recomputes_nothing(tiny
     assert flipped == [a != b for a, b in zip(rows.column("base_correct").to_pylist(),
                                                rows.column("correct").to_pylist())]
 
-    again = CliRunner().invoke(app, ["stability", spec, "--sample", "2", "--max-sample", "2", "--seed", "3"])
+    again = CliRunner().invoke(app, ["stability", spec, "--sample", "2", "--max-sample", "2", "--seed", "3", "--no-scene"])
     assert again.exit_code == 0 and "(2 cached, 0 inferred now; seed 3)" in again.output
     assert Store(tiny_copy / "store").table("stability").num_rows == 6
     images = 4  # of the run's 8 (a sample beyond the results is all of them: tests/results/test_fragile.py)
-    every = CliRunner().invoke(app, ["stability", spec, "--sample", str(images), "--max-sample", str(images), "--seed", "3"])
+    every = CliRunner().invoke(app, ["stability", spec, "--sample", str(images), "--max-sample", str(images), "--seed", "3", "--no-scene"])
     assert every.exit_code == 0, every.output  # the sample grows: only the new images are inferred
     assert Store(tiny_copy / "store").table("stability").num_rows == 3 * images
     assert f"stability check of {images} images (2 cached, {images - 2} inferred now; seed 3)" in every.output
     seed_3 = set(Store(tiny_copy / "store").table("stability").column("pred_key").to_pylist())
-    other = CliRunner().invoke(app, ["stability", spec, "--sample", str(images), "--max-sample", str(images), "--seed", "4"])
+    other = CliRunner().invoke(app, ["stability", spec, "--sample", str(images), "--max-sample", str(images), "--seed", "4", "--no-scene"])
     assert other.exit_code == 0  # new noise and dither, the resize rows reused
     rows = Store(tiny_copy / "store").table("stability")
     seed_4 = {key for key, change, seed in zip(rows.column("pred_key").to_pylist(), rows.column("change").to_pylist(),
@@ -79,10 +80,10 @@ def test_the_check_appends_as_it_goes_and_a_stopped_one_resumes(tiny_copy: Path,
         return rows_of_batch(*args, **kwargs)
 
     monkeypatch.setattr(check, "_rows", stopped_in_the_second)
-    first = CliRunner().invoke(app, ["stability", spec, "--sample", "4", "--max-sample", "4", "--seed", "3"])
+    first = CliRunner().invoke(app, ["stability", spec, "--sample", "4", "--max-sample", "4", "--seed", "3", "--no-scene"])
     assert first.exit_code == 130 and "interrupted" in first.output, first.output
     assert store.table("stability").num_rows == 6
     monkeypatch.setattr(check, "_rows", rows_of_batch)
-    again = CliRunner().invoke(app, ["stability", spec, "--sample", "4", "--max-sample", "4", "--seed", "3"])
+    again = CliRunner().invoke(app, ["stability", spec, "--sample", "4", "--max-sample", "4", "--seed", "3", "--no-scene"])
     assert again.exit_code == 0 and "stability check of 4 images (2 cached, 2 inferred now; seed 3)" in again.output
     assert store.table("stability").num_rows == 12

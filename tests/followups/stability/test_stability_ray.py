@@ -21,7 +21,7 @@ def _rows(folder: Path) -> list[tuple]:
 def test_the_check_on_ray_stores_the_local_rows(ray_cluster, tiny_copy: Path, tmp_path: Path) -> None:
     local = tmp_path / "local"
     shutil.copytree(tiny_copy, local)
-    on_ray = check_stability(load_spec(tiny_copy / "spec.toml"), sample=2, seed=3, executor=Executor("ray"))
-    here = check_stability(load_spec(local / "spec.toml"), sample=2, seed=3)
+    on_ray = check_stability(load_spec(tiny_copy / "spec.toml"), sample=2, seed=3, executor=Executor("ray"), scene=False)
+    here = check_stability(load_spec(local / "spec.toml"), sample=2, seed=3, scene=False)
     assert on_ray[0].computed == here[0].computed == 2
     assert _rows(tiny_copy) == _rows(local) and len(_rows(local)) == 6

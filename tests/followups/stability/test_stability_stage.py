@@ -65,7 +65,7 @@ def test_the_check_through_the_runner_gives_the_direct_rows(tiny_copy: Path) -> 
 
     spec_path = tiny_copy / "spec.toml"
     spec = load_spec(spec_path)
-    checked = check_stability(spec, sample=3, seed=5)
+    checked = check_stability(spec, sample=3, seed=5, scene=False)
     assert checked[0].computed == 3 and checked[0].cached == 0
     stored_rows = Store(tiny_copy / "store").table("stability").to_pylist()
     sampled = list(dict.fromkeys(r["pred_key"] for r in stored_rows))
@@ -94,7 +94,7 @@ def test_the_rounds_add_images_only_while_bins_are_undecided_and_reuse_what_is_s
     from sweep3d.followups.stability.sequential import UNDECIDED
 
     spec = load_spec(tiny_copy / "spec.toml")
-    (first,) = check_stability(spec, sample=2, seed=5, max_sample=8)
+    (first,) = check_stability(spec, sample=2, seed=5, max_sample=8, scene=False)
     rounds = first.rounds
     assert rounds is not None and 2 <= rounds.sample <= 8 and rounds.rounds >= 1
     assert first.computed == rounds.sample and len(rounds.decisions) == len(first.bins)
@@ -105,5 +105,5 @@ def test_the_rounds_add_images_only_while_bins_are_undecided_and_reuse_what_is_s
         assert any(d == UNDECIDED for d, _, _ in rounds.decisions)
     least, most = first.fragile_range
     assert least <= first.fragile_failures <= most <= first.failures
-    (again,) = check_stability(spec, sample=2, seed=5, max_sample=8)
+    (again,) = check_stability(spec, sample=2, seed=5, max_sample=8, scene=False)
     assert again.computed == 0 and again.cached == again.sampled == rounds.sample

@@ -22,6 +22,7 @@ class Orientation(RenderedControl):
     order = 10
     frame_fields = {}
     periodic = {"yaw": 360.0, "pitch": 360.0, "roll": 360.0}
+    neighbour_steps = {"yaw": "angle", "pitch": "angle", "roll": "angle"}
 
     class Params(ControlParams):
         yaw: float = 0.0
@@ -64,6 +65,7 @@ class Camera(RenderedControl):
                     "focal_length": "focal_length"}
     periodic = {"azimuth": 360.0}
     folds = {"fill": ("zoom", "focal_length")}
+    neighbour_steps = {"azimuth": "angle", "elevation": "angle", "zoom": "closeness", "fill": "closeness"}
 
     class Params(ControlParams):
         azimuth: float = 0.0

@@ -23,6 +23,7 @@ class PointLightControl(RenderedControl):
     order = 60
     frame_fields = {}
     periodic = {"azimuth": 360.0}
+    neighbour_steps = {"watts": "light", "azimuth": "angle", "elevation": "angle"}
 
     class Params(ControlParams):
         watts: float = Field(0.0, ge=0.0, le=1e7)
@@ -49,6 +50,7 @@ class Hdri(RenderedControl):
     order = 60
     frame_fields = {}
     periodic = {"rotation": 360.0}
+    neighbour_steps = {"rotation": "hdri_rotation", "strength": "light"}
 
     class Params(ControlParams):
         rotation: float = 0.0
@@ -66,6 +68,7 @@ class SkyControl(RenderedControl):
     order = 60
     frame_fields = {}
     periodic = {"sun_azimuth": 360.0}
+    neighbour_steps = {"sun_elevation": "angle", "sun_azimuth": "angle", "strength": "light"}
 
     class Params(ControlParams):
         enabled: bool = False

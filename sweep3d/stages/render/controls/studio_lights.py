@@ -27,6 +27,7 @@ class SunLightControl(RenderedControl):
     order = 60
     frame_fields = {}
     periodic = {"azimuth": 360.0}
+    neighbour_steps = {"strength": "light", "azimuth": "angle", "elevation": "angle"}
 
     class Params(ControlParams):
         strength: float = Field(0.0, ge=0.0, le=1e6)
@@ -56,6 +57,7 @@ class AreaLightControl(RenderedControl):
     order = 60
     frame_fields = {}
     periodic = {"azimuth": 360.0}
+    neighbour_steps = {"watts": "light", "azimuth": "angle", "elevation": "angle"}
 
     class Params(ControlParams):
         watts: float = Field(0.0, ge=0.0, le=1e7)
