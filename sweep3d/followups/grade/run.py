@@ -43,10 +43,12 @@ from sweep3d.results import (
 from sweep3d.spec import LoadedSpec
 from sweep3d.stages.render import LOCAL, Executor
 
-#: Fresh jobs the checks may use by default (cached ones included): about four quickstart runs.
-DEFAULT_BUDGET = 1024
-#: The share of the budget the replication may take; the second renderer gets what it leaves.
-REPLICATION_SHARE = 0.75
+#: Fresh jobs the checks may use by default (cached ones included): about eight quickstart runs' renders.
+DEFAULT_BUDGET = 2048
+#: The budget's shares: the stability check's scene neighbours, then the replication; the second
+#: renderer gets what they leave (the findings' twins first, then at most IMAGE_SHARE for images).
+STABILITY_SHARE = 0.25
+REPLICATION_SHARE = 0.5
 MAX_PAIRS = 128  # a finding's twin pairs at most, however large the budget
 IMAGE_SHARE = 8  # 1/8 of the budget is kept for the sampled failure images on the second renderer
 REPLICATION_FIRST = 16  # twin pairs of a finding's first look: a strong effect decides on them
@@ -100,19 +102,18 @@ def _graded(loaded: LoadedSpec, store: Store, budget: int, seed: int, console: C
     space = space_of(loaded)
     claims = claims_of(loaded, store, summary, space)
     testable = [c for c in claims.values() if not isinstance(c, str)]
-    checked = _stability(loaded, seed, console, executor)
+    checked, used = _stability(loaded, seed, console, executor, int(budget * STABILITY_SHARE))
     threshold = checked.threshold if checked is not None else None
     rendered = 0
     evidence: dict[str, Evidence] = {}
     engine = other_engine(loaded)
-    used = 0
     if testable and budget >= 2:
         cap = min(2 * MAX_PAIRS, max(2, int(budget * REPLICATION_SHARE) // len(testable) // 2 * 2))
         first = 2 * max(REPLICATION_FIRST, pairs_needed(len(testable), ALPHA / planned_looks(REPLICATION_FIRST, cap // 2)))
         result = confirm(loaded, min(first, cap), seed, console, claims=testable, executor=executor,
                          max_renders=cap)
         rendered += result.rendered
-        used = result.jobs
+        used += result.jobs
         verdicts = {x.claim.key: x.verdict for x in result.confirmations}
         replicated = [k for k, v in verdicts.items() if v.status == CONFIRMED]
         engine_verdicts, engine_rendered, engine_used = _second_renderer(
@@ -147,13 +148,19 @@ def other_engine(loaded: LoadedSpec) -> str:
     return "mitsuba" if loaded.spec.render.engine == "cycles" else "cycles"
 
 
-def _stability(loaded: LoadedSpec, seed: int, console: Console | None, executor: Executor) -> Any:
-    """The stability check of the first model (sequential), or None where it does not apply."""
-    from sweep3d.followups.stability import DEFAULT_SAMPLE, check_stability
+def _stability(loaded: LoadedSpec, seed: int, console: Console | None, executor: Executor,
+               share: int) -> tuple[Any, int]:
+    """The stability check of the first model (sequential), or None where it does not apply; and
+    the fresh jobs its scene neighbours used. The images are as many as ``share`` fresh jobs of
+    neighbours allow (the image changes cost no render), between 16 and 256."""
+    from sweep3d.followups.stability import DEFAULT_SAMPLE, check_stability, neighbours_per_image
 
     if loaded.evaluator.kind != "classification":
-        return None
-    return check_stability(loaded, DEFAULT_SAMPLE, seed, console, executor=executor, max_sample=4 * DEFAULT_SAMPLE)[0]
+        return None, 0
+    each = neighbours_per_image(loaded) if loaded.spec.stability.scene else 0
+    cap = 4 * DEFAULT_SAMPLE if not each else max(16, min(4 * DEFAULT_SAMPLE, share // each))
+    checked = check_stability(loaded, min(DEFAULT_SAMPLE, cap), seed, console, executor=executor, max_sample=cap)[0]
+    return checked, len(checked.scene.planned) if checked.scene is not None else 0
 
 
 def _second_renderer(loaded: LoadedSpec, store: Store, space: Any, result: Any, replicated: list[str], left: int,

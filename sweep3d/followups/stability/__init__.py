@@ -15,6 +15,7 @@ from sweep3d.core import exports as _exports  # noqa: E402
 
 if _TYPE_CHECKING:
     from sweep3d.followups.stability.check import DEFAULT_SAMPLE, check_stability
+    from sweep3d.followups.stability.scene import neighbours_per_image
     from sweep3d.followups.stability.sequential import ALPHA, UNDECIDED, look_z, needed
 
 __getattr__, __dir__ = _exports(__name__)  # names, modules and __all__ from the block above

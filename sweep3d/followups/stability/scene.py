@@ -52,6 +52,13 @@ def sizes_of(loaded: LoadedSpec) -> dict[str, float]:
             "hdri_rotation": settings.hdri_rotation}
 
 
+def neighbours_per_image(loaded: LoadedSpec) -> int:
+    """The most scene neighbours one sampled image gets (two per moved parameter): what a check
+    of n images renders at most, n times this."""
+    moves, _ = plan_moves(loaded.controls, sizes_of(loaded))
+    return 2 * len(moves)
+
+
 @dataclass
 class Neighbour:
     """One neighbour of a sampled job, as planned."""
