@@ -93,7 +93,7 @@ def test_each_image_of_a_pair_names_its_job_and_configuration_on_hover(tmp_path:
 
     spec, photos = scored_run(tmp_path)
     page = write_report(load_spec(spec)).read_text()
-    section = re.search(r'<section id="realism">(.*?)</section>', page, re.S).group(1)
+    section = re.search(r'<section id="realism"[^>]*>(.*?)</section>', page, re.S).group(1)
     colours = job_colours()
     for job in photos:
         pair = re.search(rf'<div class="realism-pair[^"]*" data-job="{job}"(.*?)</div>', section, re.S).group(1)
@@ -122,7 +122,7 @@ def test_every_pair_is_on_a_page_and_another_renderer_says_what_it_shares(tmp_pa
     rows += [verdict(job, engine[job], source="engine:mitsuba", at=T2) for job in sim]
     Store(tmp_path / "store").append(VERDICTS, rows, VERDICT_SCHEMA)
     page = write_report(load_spec(spec)).read_text()
-    section = re.search(r'<section id="realism">(.*?)</section>', page, re.S).group(1)
+    section = re.search(r'<section id="realism"[^>]*>(.*?)</section>', page, re.S).group(1)
     for source, other in (("photo", photo), ("engine:mitsuba", engine)):
         blocks = re.findall(rf'<div class="tiles realism-pairs" data-source="{source}"[^>]*>(.*?)\n</div>', section,
                             re.S)
