@@ -293,7 +293,7 @@ def bench(
 @command
 def grade(
     spec: Path = SpecArg,
-    budget: int = typer.Option(1024, "--budget", min=0,
+    budget: int = typer.Option(2048, "--budget", min=0,  # followups.grade.DEFAULT_BUDGET
                                help="Most fresh jobs the checks may use, cached ones included (the same budget "
                                     "and seed give the same grades and render nothing the second time)."),
     seed: Optional[int] = typer.Option(None, "--seed", min=0, show_default=False,

@@ -193,16 +193,6 @@ def _within(value: Any, side: Side) -> bool:
 def scene_order(space: Space, rows: Sequence[Row]) -> list[int]:
     """Each row's index among the jobs a plan of ``rows`` makes: scenes in spec order (objects,
     then environments), rows of a scene in the order given."""
-    counts: dict[tuple[str, str], int] = {}
-    position = []
-    for row in rows:
-        scene = (row["object"], row["environment"])
-        position.append((scene, counts.get(scene, 0)))
-        counts[scene] = counts.get(scene, 0) + 1
-    offsets, total = {}, 0
-    for o in space.objects:
-        for e in space.environments:
-            if (o, e) in counts:
-                offsets[(o, e)] = total
-                total += counts[(o, e)]
-    return [offsets[scene] + k for scene, k in position]
+    from sweep3d.stages.plan import design_order
+
+    return design_order(space.objects, space.environments, rows)

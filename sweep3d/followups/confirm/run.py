@@ -257,18 +257,10 @@ def _variant(loaded: LoadedSpec, space: Space, rows: list[Row], suffix: str = SU
              render: dict[str, Any] | None = None) -> LoadedSpec:
     """``loaded`` as the experiment ``<name><suffix>`` whose jobs are ``rows`` (first model only),
     with ``render`` over its ``[render]`` settings."""
-    from sweep3d.stages.plan import SceneRows, TablePolicy
+    from sweep3d.stages.plan import TablePolicy, rows_by_scene
 
-    scenes: dict[tuple[str, str], SceneRows] = {}
-    columns = {p.column: (p.control_id, p.param) for p in space.parameters}
-    for row in rows:
-        scene = scenes.setdefault((row["object"], row["environment"]), SceneRows(0, {}))
-        for column, value in row.items():
-            if column in columns:
-                scene.values.setdefault(columns[column], []).append(value)
-        scene.count += 1
     policy = TablePolicy(TablePolicy.Params(file="(drawn by sweep3d confirm)"))
-    policy.rows = scenes
+    policy.rows = rows_by_scene(rows, {p.column: (p.control_id, p.param) for p in space.parameters})
     experiment = loaded.spec.experiment.model_copy(update={"name": loaded.name + suffix})
     update: dict[str, Any] = {
         "experiment": experiment, "policy": PolicySpec(type="table", file="(drawn by sweep3d confirm)"),

@@ -81,7 +81,7 @@ def neighbour_rows(loaded: LoadedSpec, job: Any, moves: list[Move]) -> list[Neig
 def variant(loaded: LoadedSpec, model: Any, rows: list[dict[str, Any]], moves: list[Move]) -> LoadedSpec:
     """``loaded`` as the neighbours' experiment whose jobs are ``rows`` (``model`` only). A moved
     list takes its neighbours' values as options of its own (they are points beside its points)."""
-    from sweep3d.stages.plan import SceneRows, TablePolicy
+    from sweep3d.stages.plan import TablePolicy, rows_by_scene
 
     extra: dict[tuple[str, str], list[Any]] = {}
     for move in moves:
@@ -94,16 +94,9 @@ def variant(loaded: LoadedSpec, model: Any, rows: list[dict[str, Any]], moves: l
         for param, space in inst.spaces.items()}) for inst in loaded.controls]
     columns = {f"{inst.id}_{param}": (inst.id, param) for inst in controls for param, space in inst.spaces.items()
                if isinstance(space, (Choice, Range))}
-    scenes: dict[tuple[str, str], SceneRows] = {}
-    for row in rows:
-        scene = scenes.setdefault((row["object"], row["environment"]), SceneRows(0, {}))
-        for column, value in row.items():
-            if column in columns:
-                scene.values.setdefault(columns[column], []).append(value)
-        scene.count += 1
     what = "(the neighbours of sweep3d stability)"
     policy = TablePolicy(TablePolicy.Params(file=what))
-    policy.rows = scenes
+    policy.rows = rows_by_scene(rows, columns)
     experiment = loaded.spec.experiment.model_copy(update={"name": variant_name(loaded, model)})
     update: dict[str, Any] = {"experiment": experiment, "policy": PolicySpec(type="table", file=what)}
     if loaded.spec.models:
@@ -113,19 +106,9 @@ def variant(loaded: LoadedSpec, model: Any, rows: list[dict[str, Any]], moves: l
 
 def scene_order(loaded: LoadedSpec, rows: list[dict[str, Any]]) -> list[int]:
     """Each row's job index in a plan of ``rows``: scenes in spec order, a scene's rows as given."""
-    counts: dict[tuple[str, str], int] = {}
-    position = []
-    for row in rows:
-        scene = (row["object"], row["environment"])
-        position.append((scene, counts.get(scene, 0)))
-        counts[scene] = counts.get(scene, 0) + 1
-    offsets, total = {}, 0
-    for obj in loaded.objects:
-        for env in loaded.environments:
-            if (obj.name, env.name) in counts:
-                offsets[(obj.name, env.name)] = total
-                total += counts[(obj.name, env.name)]
-    return [offsets[scene] + k for scene, k in position]
+    from sweep3d.stages.plan import design_order
+
+    return design_order([o.name for o in loaded.objects], [e.name for e in loaded.environments], rows)
 
 
 @dataclass

@@ -18,7 +18,7 @@ import difflib
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Mapping, Sequence
 
 import pyarrow as pa
 
@@ -47,6 +47,39 @@ class SceneRows:
 
     count: int
     values: dict[tuple[str, str], list[Any]]
+
+
+def rows_by_scene(rows: Sequence[Mapping[str, Any]],
+                  columns: Mapping[str, tuple[str, str]]) -> dict[tuple[str, str], SceneRows]:
+    """Configurations given in memory (each a dict of ``object``, ``environment`` and parameter
+    columns) as a design's rows per scene; ``columns``: column → (control id, parameter) of those
+    the rows set (others are left out)."""
+    scenes: dict[tuple[str, str], SceneRows] = {}
+    for row in rows:
+        scene = scenes.setdefault((row["object"], row["environment"]), SceneRows(0, {}))
+        for column, value in row.items():
+            if column in columns:
+                scene.values.setdefault(columns[column], []).append(value)
+        scene.count += 1
+    return scenes
+
+
+def design_order(objects: Sequence[str], environments: Sequence[str], rows: Sequence[Mapping[str, Any]]) -> list[int]:
+    """Each of ``rows``' job index in a plan of them (:func:`rows_by_scene`): scenes in spec order
+    (objects, then environments), a scene's rows in the order given."""
+    counts: dict[tuple[str, str], int] = {}
+    position = []
+    for row in rows:
+        scene = (row["object"], row["environment"])
+        position.append((scene, counts.get(scene, 0)))
+        counts[scene] = counts.get(scene, 0) + 1
+    offsets, total = {}, 0
+    for o in objects:
+        for e in environments:
+            if (o, e) in counts:
+                offsets[(o, e)] = total
+                total += counts[(o, e)]
+    return [offsets[scene] + k for scene, k in position]
 
 
 def read_design(path: Path, controls: Sequence[ControlInstance], objects: Sequence[str],
