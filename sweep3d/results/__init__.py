@@ -31,6 +31,7 @@ if _TYPE_CHECKING:
         FUTILITY,
         INCONCLUSIVE,
         NOT_REPLICATED,
+        OPEN,
         UNCONFIRMED,
         Verdict,
         judge,

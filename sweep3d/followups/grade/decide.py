@@ -5,9 +5,9 @@ The checks, in the order they are made (each only where the one before left the 
 1. **Replication** (``confirm``'s sequential twins on fresh renders): confirmed, not replicated
    (the effect bounded below :data:`~sweep3d.results.confirmation.FUTILITY`), inconclusive (the
    budget ended first) or untested (no fresh twin could be drawn).
-2. **The second renderer**: the same twins rendered by the other engine and judged as the
-   replication judges (:func:`second_opinion`: sequential looks from a few pairs up to the
-   replication's, Holm over the findings). Reproduced, or bounded below the futility size
+2. **The second renderer**: the same twins rendered by the other engine, in looks from a few
+   pairs up to the replication's (:func:`second_opinion`), each finding judged alone: reproduced
+   (McNemar's one-sided test at 5 %, split over the looks), or bounded below the futility size
    (*renderer-sensitive*); anything else leaves the finding *inconclusive*.
 3. **Fragility**: the fresh twins judged again with each wrong verdict whose ``|margin|`` is below
    the stability check's fragile threshold counted as right (a change no eye sees could flip it).
@@ -18,6 +18,7 @@ A finding that passes all three is *solid*.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Callable, Iterable, Mapping
 
@@ -25,16 +26,17 @@ from sweep3d.results import (
     ALPHA,
     CONFIRMED,
     FRAGILE,
+    INCONCLUSIVE,
     INCONCLUSIVE_GRADE,
     NOT_REPLICATED,
     NOT_REPLICATED_GRADE,
+    OPEN,
     RENDERER_SENSITIVE,
     SOLID,
     UNTESTED,
     Verdict,
     judge,
     pairs_needed,
-    sequential,
     tally,
 )
 
@@ -79,11 +81,33 @@ def steady_pairs(twins: Iterable[tuple[tuple[bool, float | None], tuple[bool, fl
 
 def second_opinion(findings: int, first: int, cap: int,
                    fetch: Callable[[Mapping[int, int]], Mapping[int, list[Pair]]]) -> list[Verdict]:
-    """The second renderer's verdicts on the replicated findings' twins, sequential as the
-    replication's (:func:`~sweep3d.results.confirmation.sequential`: looks doubling the pairs from
-    ``first`` to ``cap``, Holm over the findings, Bonferroni over the looks): ``fetch({finding:
-    pairs wanted})`` gives each open finding's first pairs (fewer where it has no more)."""
-    return sequential(findings, first, cap, lambda asked: {i: tally(p) for i, p in fetch(asked).items()})
+    """The second renderer's verdicts on the replicated findings' twins, in looks doubling the pairs
+    from ``first`` to ``cap`` (``fetch({finding: pairs wanted})`` gives each open finding's first
+    pairs, fewer where it has no more). Each finding is judged alone, at :data:`ALPHA` split over
+    the looks (Bonferroni): the replication has already controlled the error over the findings,
+    so the second renderer asks of one finding only whether it shows it too (a finding without a
+    real effect passes both with probability at most ALPHA²)."""
+    sizes, size = [], max(1, first)
+    while size < max(cap, first):
+        sizes.append(size)
+        size *= 2
+    sizes.append(max(cap, first))
+    final: dict[int, Verdict] = {}
+    seen: dict[int, int] = {}
+    for look, size in enumerate(sizes, 1):
+        open_ = [i for i in range(findings) if i not in final]
+        if not open_:
+            break
+        got = fetch({i: size for i in open_})
+        for i in open_:
+            verdict = judge([tally(got[i])], ALPHA, look, len(sizes))[0]
+            stalled = look > 1 and verdict.pairs <= seen.get(i, 0)
+            seen[i] = verdict.pairs
+            if verdict.status == OPEN and stalled:
+                verdict = dataclasses.replace(verdict, status=INCONCLUSIVE)
+            if verdict.status != OPEN:
+                final[i] = verdict
+    return [final[i] for i in range(findings)]
 
 
 def evidence_of(replication: Verdict, twins: list[tuple[Twin, Twin]], engine: Verdict | None,
