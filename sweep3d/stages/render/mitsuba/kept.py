@@ -93,6 +93,16 @@ def without_poses(description: dict[str, Any], poses: dict[str, np.ndarray]) -> 
             for k, v in description.items()}
 
 
+def _no_op(_value: Any) -> None:
+    """``scalar_rgb`` has no kernels for a value to be baked into."""
+
+
+def _jit_opaque() -> Any:
+    import drjit as dr
+
+    return dr.make_opaque
+
+
 class KeptScene:
     """The latest structure's loaded scene, its parameters and its objects' untransformed vertices.
 
@@ -104,6 +114,9 @@ class KeptScene:
     def __init__(self, mi: Any, converted: Any) -> None:
         self.mi = mi
         self.converted = converted
+        # under a JIT variant, a value is set as an array in memory, not a constant in the kernel:
+        # one recording of a frozen render (frozen.py) and one compilation serve every value
+        self.opaque = _no_op if mi.variant().startswith("scalar") else _jit_opaque()
         self.key: tuple | None = None
         self.scene: Any = None
         self.params: Any = None
@@ -168,6 +181,7 @@ class KeptScene:
                 params[target] = kind(*value) if len(value) > 1 else kind(value[0])
             else:
                 params[target] = kind(value)
+            self.opaque(params[target])
             applied[target] = frozen
         turned_by: dict[bytes, np.ndarray] = {}  # the objects' pieces share one pose: its inverse once
         for shape, matrix in parts.poses.items():

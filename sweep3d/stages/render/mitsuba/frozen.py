@@ -1,0 +1,48 @@
+"""A job's beauty and aux renders, replayed by Dr.Jit without tracing them again.
+
+Why: under ``llvm_ad_rgb`` each ``mitsuba.render`` call traces the whole path tracer in Python
+and C++ before its (cached) kernels run, about half of a 224², 4-sample render's CPU time. A
+frozen function (``drjit.freeze``) records the kernel launches once per scene structure and then
+replays them with the kept scene's current parameters (its inputs are traversed on every call, so
+a changed pose, camera, light or material reaches the kernels; a changed structure records again).
+The pixels are the traced render's to a float's last bits (tests/stages/render/test_mitsuba_kept.py
+compares renders replayed by a kept worker with fresh ones). ``scalar_rgb`` has nothing to trace:
+it renders directly.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+#: Recordings a worker keeps (least recently used out): one per scene structure (object, environment,
+#: lights' kinds, samples), and the render stage hands a worker its jobs grouped by them.
+MAX_RECORDINGS = 4
+
+
+class FrozenRender:
+    """Renders a scene's beauty image and, when given an aux integrator, the denoiser's albedo and normals."""
+
+    def __init__(self, mi: Any) -> None:
+        self.mi = mi
+        self.replayed: Any = None
+        if not mi.variant().startswith("scalar"):
+            import drjit as dr
+
+            # the same structure in a new scene records again: a worker meets many, never warned of
+            self.replayed = dr.freeze(self._render, limit=MAX_RECORDINGS, warn_after=1 << 30)
+
+    def _render(self, scene: Any, seed: Any, spp: int, aux: Any) -> tuple[Any, Any]:
+        mi = self.mi
+        beauty = mi.render(scene, spp=spp, seed=seed)
+        return beauty, (mi.render(scene, integrator=aux, spp=spp, seed=seed) if aux is not None else None)
+
+    def __call__(self, scene: Any, spp: int, seed: int, aux: Any = None) -> tuple[np.ndarray, np.ndarray | None]:
+        """The beauty image (H, W, 4: RGB and alpha) and the aux integrator's (or None), float32."""
+        if self.replayed is None:
+            beauty, channels = self._render(scene, seed, spp, aux)
+        else:
+            beauty, channels = self.replayed(scene, self.mi.UInt32(seed), spp, aux)
+        return (np.asarray(beauty, dtype=np.float32),
+                None if channels is None else np.asarray(channels, dtype=np.float32))
