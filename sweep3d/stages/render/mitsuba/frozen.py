@@ -33,16 +33,20 @@ class FrozenRender:
             # the same structure in a new scene records again: a worker meets many, never warned of
             self.replayed = dr.freeze(self._render, limit=MAX_RECORDINGS, warn_after=1 << 30)
 
-    def _render(self, scene: Any, seed: Any, spp: int, aux: Any) -> tuple[Any, Any]:
+    def _render(self, scene: Any, seed: Any, spp: int, aux: Any, sensors: tuple[int, int]) -> tuple[Any, Any]:
         mi = self.mi
-        beauty = mi.render(scene, spp=spp, seed=seed)
-        return beauty, (mi.render(scene, integrator=aux, spp=spp, seed=seed) if aux is not None else None)
+        beauty = mi.render(scene, sensor=sensors[0], spp=spp, seed=seed)
+        if aux is None:
+            return beauty, None
+        return beauty, mi.render(scene, sensor=sensors[1], integrator=aux, spp=spp, seed=seed)
 
-    def __call__(self, scene: Any, spp: int, seed: int, aux: Any = None) -> tuple[np.ndarray, np.ndarray | None]:
-        """The beauty image (H, W, 4: RGB and alpha) and the aux integrator's (or None), float32."""
+    def __call__(self, scene: Any, spp: int, seed: int, aux: Any = None,
+                 sensors: tuple[int, int] = (0, 0)) -> tuple[np.ndarray, np.ndarray | None]:
+        """The beauty image (H, W, 4: RGB and alpha) and the aux integrator's (or None), float32,
+        through the scene's sensors of those numbers."""
         if self.replayed is None:
-            beauty, channels = self._render(scene, seed, spp, aux)
+            beauty, channels = self._render(scene, seed, spp, aux, sensors)
         else:
-            beauty, channels = self.replayed(scene, self.mi.UInt32(seed), spp, aux)
+            beauty, channels = self.replayed(scene, self.mi.UInt32(seed), spp, aux, sensors)
         return (np.asarray(beauty, dtype=np.float32),
                 None if channels is None else np.asarray(channels, dtype=np.float32))

@@ -5,12 +5,19 @@ Why: describing a job afresh to ``load_dict`` costs tens of milliseconds, and un
 (about a second) whenever a yaw, a camera or a light changes. A job that changes only values
 (the object's pose, the camera, lights' places and strengths, the world's rotation and strength,
 material values, the occluder's place) is rendered by the kept scene with those parameters
-updated (``mitsuba.traverse``), so its kernels are reused.
+updated (``mitsuba.traverse``), so its kernels are reused. Under a JIT variant each value is set
+opaque (an array in memory, not a constant compiled into the kernel), so one recording of the
+frozen render (``frozen.py``) serves every job of the structure.
+
+The object's pose: under ``llvm_ad_rgb`` the pieces sit untransformed in a shape group and the
+pose is its instance's ``to_world``, a value like any other (a new pose rebuilds only Embree's
+top level); under ``scalar_rgb`` (whose path tracer crashes on an instance with
+``hide_emitters``) each piece's ``to_world`` is applied to its vertices here (``poses``).
 
 Determinism: a freshly loaded scene takes every value through the parameter update, a kept one
-the values that changed since, and the object's pose is applied to its vertices here (the mesh is
-loaded untransformed), so a render's pixels depend on the job alone, never on the job the worker
-rendered before it (tests/stages/render/test_mitsuba_kept.py renders a sequence both ways).
+the values that changed since (the vertices of an unmoved piece stay as they are), so a
+render's pixels depend on the job alone, never on the job the worker rendered before it
+(tests/stages/render/test_mitsuba_kept.py renders a sequence both ways).
 
 A value with no parameter to update (a description key Mitsuba does not expose) is part of the
 structure: changing it loads the scene afresh.
