@@ -31,8 +31,10 @@ LLVM_LIBRARIES = ("/usr/lib/x86_64-linux-gnu/libLLVM-19.so", "/usr/lib/llvm-19/l
                   "/usr/lib/aarch64-linux-gnu/libLLVM-19.so")
 #: Bump when sweep3d's own translation of a scene into Mitsuba's (the OBJ/MTL reader, materials,
 #: lights, the world, the filter) changes its pixels: part of every Mitsuba render key.
-MITSUBA_TRANSLATION = 4  # 2: poses on the vertices, suns by to_world (kept.py); 3: the denoiser's aux pass apart;
-# 4: the object posed by an instance, renders replayed by Dr.Jit (frozen.py), the aux pass through a box filter
+#: 2: poses on the vertices, suns by to_world (kept.py); 3: the denoiser's aux pass apart; 4: the object
+#: posed by an instance, renders replayed by Dr.Jit (frozen.py), the aux pass through a box filter, a tent
+#: pixel filter (scene.py)
+MITSUBA_TRANSLATION = 4
 #: Mesh files the Mitsuba engine reads (its own OBJ/MTL reader: ``mitsuba/objfile.py``).
 MITSUBA_MESHES = (".obj",)
 

@@ -35,8 +35,12 @@ from sweep3d.stages.render.mitsuba.objfile import MtlMaterial, ObjMesh, read_obj
 from sweep3d.stages.render.state import SceneState
 from sweep3d.stages.render.worker_protocol import EnvironmentRef, Look, RenderSettings
 
-#: The pixel filter's standard deviation in pixels: close to Cycles' 1.5 px Blackman-Harris.
-FILTER_STDDEV = 0.3
+#: The pixel filter's radius in pixels: a tent as wide as Cycles' 1.5 px Blackman-Harris. Its
+#: standard deviation (0.31 px) is the Gaussian's that it replaced (0.3 px; 54–60 dB apart at 256
+#: samples), whose 1.2 px reach spread each sample over 16 pixels of Mitsuba's film instead of 9:
+#: 61 against 52 ms of a 4-sample 224² render's path tracing (benchmarks/RESULTS.md, "Mitsuba at
+#: half Cycles' cost").
+FILTER_RADIUS = 0.75
 #: OpenImageDenoise's quality for Mitsuba's renders, chosen by measurement against Mitsuba's own
 #: 512-sample renders of the quickstart's scenes (benchmarks/RESULTS.md, "Mitsuba at half Cycles'
 #: cost"): at 4 samples "fast" is 36.7 dB from them against 38.0 dB for "high" (Cycles' own), in
@@ -167,7 +171,7 @@ class MitsubaScene:
         denoise = s.denoise if state.denoise is None else state.denoise
         background = self.background()
         path = {"type": "path", "max_depth": s.max_bounces + 1, "hide_emitters": background is not None}
-        scene = self.describe(path, translate.camera(state, s.resolution, s.crop, FILTER_STDDEV))
+        scene = self.describe(path, translate.camera(state, s.resolution, s.crop, FILTER_RADIUS))
         if denoise:  # the denoiser's albedo and normals seen by a twin of the camera (aux_sensor)
             scene[AUX_SENSOR] = aux_sensor(scene["sensor"])
         self.loaded = self.kept.scene_for(scene)  # the truth passes look at the same scene
