@@ -37,9 +37,9 @@ from sweep3d.stages.render.worker_protocol import EnvironmentRef, Look, RenderSe
 
 #: The pixel filter's radius in pixels: a tent as wide as Cycles' 1.5 px Blackman-Harris. Its
 #: standard deviation (0.31 px) is the Gaussian's that it replaced (0.3 px; 54–60 dB apart at 256
-#: samples), whose 1.2 px reach spread each sample over 16 pixels of Mitsuba's film instead of 9:
-#: 61 against 52 ms of a 4-sample 224² render's path tracing (benchmarks/RESULTS.md, "Mitsuba at
-#: half Cycles' cost").
+#: samples), whose 1.2 px reach (4 standard deviations) spread each sample over more pixels of
+#: Mitsuba's film: 61 against 52 ms CPU of a 4-sample 224² render's path tracing (toaster in studio;
+#: benchmarks/RESULTS.md, "Mitsuba at half Cycles' cost").
 FILTER_RADIUS = 0.75
 #: OpenImageDenoise's quality for Mitsuba's renders, chosen by measurement against Mitsuba's own
 #: 512-sample renders of the quickstart's scenes (benchmarks/RESULTS.md, "Mitsuba at half Cycles'
