@@ -27,6 +27,9 @@ BASE = SceneState(yaw=10.0, lights=[SunLight((1.0, 1.0, 1.0), 3.0, 0.0, 30.0, 40
 #: blocks in the order its threads finish them, so a pixel may move by a float's last bits (a
 #: wrong parameter moves pixels by far more).
 ULPS = 1e-6
+#: The same through OpenImageDenoise, whose network carries those last bits a little further
+#: (still far below an 8-bit step, 1/255).
+DENOISED_ULPS = 1e-5
 #: Jobs as a run's worker meets them: values change, then the structure, then values again.
 STATES = [
     BASE,
@@ -104,7 +107,7 @@ def test_a_denoised_job_replayed_by_a_kept_worker_is_the_same_as_afresh(tmp_path
         fresh = _scene(tmp_path, "llvm_ad_rgb", denoise=True)
         fresh.prepare(mesh, environment)
         fresh.pose_scene(STATES[i])
-        assert np.abs(fresh.render() - images[i]).max() <= ULPS, f"job {i} differs from its fresh render"
+        assert np.abs(fresh.render() - images[i]).max() <= DENOISED_ULPS, f"job {i} differs from its fresh render"
     assert not np.array_equal(images[2], images[3])
 
 
