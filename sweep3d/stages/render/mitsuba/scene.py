@@ -39,7 +39,7 @@ from sweep3d.stages.render.worker_protocol import EnvironmentRef, Look, RenderSe
 #: standard deviation (0.31 px) is the Gaussian's that it replaced (0.3 px; 54–60 dB apart at 256
 #: samples), whose 1.2 px reach (4 standard deviations) spread each sample over more pixels of
 #: Mitsuba's film: 61 against 52 ms CPU of a 4-sample 224² render's path tracing (toaster in studio;
-#: benchmarks/RESULTS.md, "Mitsuba at half Cycles' cost").
+#: benchmarks/RESULTS.md, "Mitsuba at a fraction of Cycles' cost").
 FILTER_RADIUS = 0.75
 #: OpenImageDenoise's quality for Mitsuba's renders, chosen by measurement against Mitsuba's own
 #: 512-sample renders of the quickstart's scenes (benchmarks/RESULTS.md, "Mitsuba at half Cycles'
@@ -363,7 +363,8 @@ def aux_sensor(sensor: dict[str, Any]) -> dict[str, Any]:
     """The camera's twin for the denoiser's albedo and normals: the same view, samples and seed
     through a box filter. Each sample then lands in one pixel, where the Gaussian's overlapping
     footprint cost the first-hit pass 20 ms of its 27 (toaster in studio, 224², 4 samples) for
-    0.16 dB against Mitsuba's 512-sample renders (benchmarks/RESULTS.md, "Mitsuba at half Cycles' cost")."""
+    0.16 dB against Mitsuba's 512-sample renders (benchmarks/RESULTS.md, "Mitsuba at a fraction of
+    Cycles' cost")."""
     return {**sensor, "film": {**sensor["film"], "rfilter": {"type": "box"}}}
 
 
