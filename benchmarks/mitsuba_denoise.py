@@ -40,7 +40,7 @@ def main() -> None:
     from sweep3d.assets.sources import builtin_hdris, materialise_mesh
     from sweep3d.spec.models import KeyLightSpec
     from sweep3d.stages.render.mitsuba import translate
-    from sweep3d.stages.render.mitsuba.scene import FILTER_STDDEV, MitsubaScene, srgb
+    from sweep3d.stages.render.mitsuba.scene import FILTER_RADIUS, MitsubaScene, srgb
     from sweep3d.stages.render.state import SceneState
     from sweep3d.stages.render.worker_protocol import EnvironmentRef, RenderSettings
 
@@ -62,7 +62,7 @@ def main() -> None:
                 s, background = scene.settings, scene.background()
                 path = {"type": "path", "max_depth": s.max_bounces + 1, "hide_emitters": background is not None}
                 loaded = scene.kept.scene_for(scene.describe(path, translate.camera(scene.state, s.resolution, s.crop,
-                                                                                     FILTER_STDDEV)))
+                                                                                     FILTER_RADIUS)))
                 image = np.asarray(mi.render(loaded, spp=512, seed=7), dtype=np.float32)
                 reference = finish(np.maximum(image[..., :3], 0), np.clip(image[..., 3:4], 0, 1), background, srgb)
                 for samples, quality in SETTINGS:

@@ -7,7 +7,9 @@ known, and each setting's image is brought to that view by the model's own resiz
 before PSNR and SSIM, so full-frame and model-framed settings are compared like with like.
 Agreement is measured on the predictions (same top-1 class; same correct/incorrect verdict),
 with a 95 % Wilson interval, against a noise floor: the reference rendered again with
-another Cycles seed (a near-tie job can flip between two references too).
+another seed (a near-tie job can flip between two references too). The reference and the grid
+are rendered by the spec's renderer; another renderer (``--engine``) adds its rows at the spec's
+setting.
 
 Time is steady-state: each worker reports what switching to a job's scene cost (a mesh import,
 a world, Cycles' BVH and importance map: ``RenderInfo.load_seconds``), and a setting's s/img is
@@ -18,6 +20,7 @@ as one cut to a single scene. The loads are reported beside it.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import statistics
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -47,8 +50,8 @@ class Setting:
     max_bounces: int = 8
     resolution: int | str | None = None  # None: the spec's; "model": the model's input
     adaptive: float = 0.0  # Cycles adaptive sampling threshold (0 = off)
-    seed: int = 0  # Cycles seed: the noise-floor reference differs from the reference only here
-    engine: str = "cycles"  # another renderer's row: its time against agreement with Cycles' reference
+    seed: int = 0  # the renderer's seed: the noise-floor reference differs from the reference only here
+    engine: str = "cycles"  # the spec's renderer, or another's row: its time against the spec renderer's reference
 
     def render_update(self, spec_resolution: int | str) -> dict:
         return {"samples": self.samples, "denoise": self.denoise != "off",
@@ -116,28 +119,36 @@ class BenchRow:
 
 def default_settings(current: Setting, model_view: bool = True, full_frame: int | None = None,
                      engines: Sequence[str] = ()) -> list[Setting]:
-    """The grid: samples × denoiser, adaptive sampling, bounces, resolutions, the model's view
-    (when its input size is known), the spec's own setting, and that setting in each of ``engines``.
+    """The grid in the spec's renderer: samples × denoiser, adaptive sampling (where the renderer
+    has it), bounces, resolutions, the model's view (when its input size is known), the spec's own
+    setting, and that setting in each of ``engines``.
 
     Args:
         full_frame: the pixel size of the grid's full-frame settings when the spec itself renders
             at the model's framing (they would otherwise repeat the model-framed ones).
-        engines: other renderers to time and compare with the (Cycles) reference at the spec's setting.
+        engines: other renderers to time and compare with the reference at the spec's setting.
     """
+    from sweep3d.stages.render.backends import backend
+
     side = full_frame if current.resolution == "model" else None
-    grid = [Setting(s, d, resolution=side) for s in (1, 4, 16) for d in ("off", "fast", "accurate")]
-    grid += [Setting(64, "fast", resolution=side), Setting(64, "fast", resolution=side, adaptive=0.05)]
-    grid += [Setting(4, "fast", max_bounces=b, resolution=side) for b in (2, 4)]
-    grid += [Setting(4, "fast", resolution=160)]
+    own = functools.partial(Setting, engine=current.engine)
+    grid = [own(s, d, resolution=side) for s in (1, 4, 16) for d in ("off", "fast", "accurate")]
+    grid += [own(64, "fast", resolution=side)]
+    if "adaptive_threshold" not in backend(current.engine).ignored_settings:
+        grid += [own(64, "fast", resolution=side, adaptive=0.05)]
+    grid += [own(4, "fast", max_bounces=b, resolution=side) for b in (2, 4)]
+    grid += [own(4, "fast", resolution=160)]
     if model_view:
-        grid += [Setting(s, d, resolution="model") for s, d in ((1, "fast"), (4, "fast"), (4, "accurate"), (16, "fast"))]
+        grid += [own(s, d, resolution="model") for s, d in ((1, "fast"), (4, "fast"), (4, "accurate"), (16, "fast"))]
     others = [dataclasses.replace(current, engine=e) for e in engines if e != current.engine]
     return list(dict.fromkeys(grid + [current] + others))
 
 
 def reference_settings(samples: int, denoise: str, current: Setting, model_view: bool) -> tuple[Setting, Setting]:
-    """The reference and its noise floor: the same render with another Cycles seed."""
-    reference = Setting(samples, denoise, max(current.max_bounces, 12), "model" if model_view else None)
+    """The reference and its noise floor (the same render with another seed), both in the spec's
+    renderer: a second renderer's settings are judged by its own converged image."""
+    reference = Setting(samples, denoise, max(current.max_bounces, 12), "model" if model_view else None,
+                        engine=current.engine)
     return reference, dataclasses.replace(reference, seed=1)
 
 

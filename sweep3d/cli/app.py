@@ -209,14 +209,15 @@ def bench(
     reference_samples: int = typer.Option(512, min=1, help="Samples per pixel of the reference renders."),
     reference_denoise: str = typer.Option("off", help="The reference's denoiser: off, or OIDN with the "
                                                       "accurate/fast/none prefilter."),
-    floor: bool = typer.Option(True, help="Render the reference again with another Cycles seed: how often two "
+    floor: bool = typer.Option(True, help="Render the reference again with another seed: how often two "
                                           "references disagree is the noise floor (doubles the reference's cost)."),
     agreement: float = typer.Option(0.99, min=0.0, max=1.0, help="Top-1 agreement with the reference a setting "
                                                                  "needs (lowered to the noise floor's, if lower)."),
     apply: bool = typer.Option(False, "--apply", help="Write the recommended setting into the spec's [render]."),
     engine: list[str] = typer.Option([], "--engine", help="Also render the spec's setting with this renderer "
-                                                          "(mitsuba): its time against agreement with the "
-                                                          "Cycles reference (never recommended). Repeatable."),
+                                                          "(mitsuba, cycles): its time against agreement with the "
+                                                          "reference, rendered by the spec's renderer (never "
+                                                          "recommended). Repeatable."),
     wait: float = typer.Option(0.0, help="Seconds to wait for another command holding the store's lock."),
 ) -> None:
     """Render time against error: find the cheapest render setting the model cannot tell apart.

@@ -148,6 +148,23 @@ def test_another_engine_is_measured_beside_the_grid_but_never_recommended() -> N
     assert recommend(rows, 0.99, engine="mitsuba") is rows[1]  # a Mitsuba spec's bench tunes Mitsuba
 
 
+def test_a_mitsuba_specs_bench_renders_its_grid_and_reference_with_mitsuba() -> None:
+    """A second renderer is judged by its own converged image: the reference, its noise floor and
+    the grid are Mitsuba's, without the Cycles-only adaptive sampling; Cycles is a row of its own."""
+    current = Setting(4, "fast", resolution="model", engine="mitsuba")
+    reference, floor = reference_settings(512, "off", current, model_view=True)
+    assert reference.engine == floor.engine == "mitsuba" and floor.seed != reference.seed
+    settings = default_settings(current, True, 256, ["cycles"])
+    cycles = [s for s in settings if s.engine == "cycles"]
+    assert cycles == [Setting(4, "fast", resolution="model")]  # the spec's setting, once
+    mitsuba = [s for s in settings if s.engine == "mitsuba"]
+    assert current in mitsuba and not any(s.adaptive for s in mitsuba)
+    assert {s.samples for s in mitsuba} >= {1, 4, 16} and len(mitsuba) == len(settings) - 1
+    cycles_grid = default_settings(Setting(4, "fast", resolution="model"), True, 256)
+    assert any(s.adaptive for s in cycles_grid) and len(cycles_grid) == len(mitsuba) + 1  # the same grid, and adaptive
+    assert reference_settings(512, "off", Setting(4, "fast"), model_view=True)[0].engine == "cycles"
+
+
 def test_an_unknown_engine_is_one_line_and_exit_code_2(tmp_path: Path) -> None:
     result = CliRunner().invoke(app, ["bench", str(write_spec(tmp_path, TINY_SPEC)), "--engine", "luxcore"])
     assert result.exit_code == 2 and "--engine 'luxcore': use one of cycles, mitsuba" in result.output

@@ -1,7 +1,7 @@
 """The Mitsuba worker's kept scene (``stages/render/mitsuba/kept.py``): a job's pixels are the same
-whether the worker updates the scene it kept or loads the job afresh (to the last bits that
-Mitsuba's threads leave to chance), whatever came before; and a
-sequence of jobs that change only values loads once.
+whether the worker updates the scene it kept and replays its frozen render (``frozen.py``) or
+loads the job afresh (to the last bits that Mitsuba's threads leave to chance), whatever came
+before; and a sequence of jobs that change only values loads once.
 
 In-process, 32 px and 2 samples: no Blender and no worker process."""
 
@@ -27,6 +27,9 @@ BASE = SceneState(yaw=10.0, lights=[SunLight((1.0, 1.0, 1.0), 3.0, 0.0, 30.0, 40
 #: blocks in the order its threads finish them, so a pixel may move by a float's last bits (a
 #: wrong parameter moves pixels by far more).
 ULPS = 1e-6
+#: The same through OpenImageDenoise, whose network carries those last bits a little further
+#: (still far below an 8-bit step, 1/255).
+DENOISED_ULPS = 1e-5
 #: Jobs as a run's worker meets them: values change, then the structure, then values again.
 STATES = [
     BASE,
@@ -51,10 +54,10 @@ def mesh(tmp_path: Path) -> str:
     return str(tmp_path / "box.obj")
 
 
-def _scene(tmp_path: Path, variant: str):
+def _scene(tmp_path: Path, variant: str, denoise: bool = False):
     from sweep3d.stages.render.mitsuba.scene import MitsubaScene
 
-    settings = RenderSettings(resolution=32, samples=2, denoise=False, engine="mitsuba", variant=variant)
+    settings = RenderSettings(resolution=32, samples=2, denoise=denoise, engine="mitsuba", variant=variant)
     return MitsubaScene(settings, tmp_path)
 
 
@@ -75,6 +78,9 @@ def test_a_job_renders_the_same_pixels_kept_or_loaded_afresh(tmp_path: Path, mes
         kept.pose_scene(state)
         images.append(kept.render())
     assert kept.kept.loads < len(STATES) / 2  # values changed in place, not loaded per job
+    if variant != "scalar_rgb":  # the renders compared below were replayed, not traced: at most two
+        # recordings per structure (the first with Dr.Jit's constants, then with what changed opaque)
+        assert kept.frozen.replayed.n_recordings <= 2 * kept.kept.loads < len(STATES)
     for i in (1, 4, 5, 7, 9, 10, 11):  # each alone, in a fresh worker's scene
         fresh = _scene(tmp_path, variant)
         fresh.prepare(mesh, environment)
@@ -83,6 +89,26 @@ def test_a_job_renders_the_same_pixels_kept_or_loaded_afresh(tmp_path: Path, mes
         assert np.abs(again - images[i]).max() <= ULPS, f"job {i} differs from its fresh render"
     assert np.abs(images[0] - images[-1]).max() <= ULPS  # the first job again, after all the others
     assert not np.array_equal(images[0], images[1]) and not np.array_equal(images[3], images[4])
+
+
+@pytest.mark.skipif(llvm_library() is None, reason="no LLVM library: nothing is frozen under scalar_rgb")
+def test_a_denoised_job_replayed_by_a_kept_worker_is_the_same_as_afresh(tmp_path: Path, mesh: str) -> None:
+    """The denoiser's albedo and normals come through the camera's twin (a second sensor, moved
+    with the camera): replayed after other jobs, as traced in a fresh worker."""
+    environment = EnvironmentRef(color=(0.2, 0.3, 0.4), key_light=KeyLightSpec())
+    kept = _scene(tmp_path, "llvm_ad_rgb", denoise=True)
+    kept.prepare(mesh, environment)
+    images = []
+    for state in STATES[:5]:
+        kept.pose_scene(state)
+        images.append(kept.render())
+    assert kept.kept.loads == 1 and kept.frozen.replayed.n_recordings <= 2  # the last three replayed
+    for i in (2, 4):
+        fresh = _scene(tmp_path, "llvm_ad_rgb", denoise=True)
+        fresh.prepare(mesh, environment)
+        fresh.pose_scene(STATES[i])
+        assert np.abs(fresh.render() - images[i]).max() <= DENOISED_ULPS, f"job {i} differs from its fresh render"
+    assert not np.array_equal(images[2], images[3])
 
 
 def test_what_no_parameter_updates_loads_the_scene_again() -> None:

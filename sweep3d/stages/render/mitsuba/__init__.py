@@ -8,7 +8,9 @@ knows of it (its key, what it refuses at plan, its scene: :class:`~..backend.Bac
   Principled BSDF values);
 - :mod:`.translate` turns a job (object, environment, state) into Mitsuba's scene description;
 - :mod:`.scene` renders it (denoised with OpenImageDenoise like Cycles), writes the same PNG
-  blobs, and :mod:`.passes` the same mask and depth passes and truth numbers.
+  blobs, and :mod:`.passes` the same mask and depth passes and truth numbers;
+- :mod:`.kept` keeps a worker's loaded scene and sets only what a job changes, and :mod:`.frozen`
+  replays its render under ``llvm_ad_rgb`` instead of tracing it again.
 
 The ``mitsuba`` package itself is imported only by :mod:`.scene`, in a worker whose engine is
 Mitsuba: nothing else in sweep3d loads it.

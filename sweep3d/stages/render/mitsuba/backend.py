@@ -31,7 +31,10 @@ LLVM_LIBRARIES = ("/usr/lib/x86_64-linux-gnu/libLLVM-19.so", "/usr/lib/llvm-19/l
                   "/usr/lib/aarch64-linux-gnu/libLLVM-19.so")
 #: Bump when sweep3d's own translation of a scene into Mitsuba's (the OBJ/MTL reader, materials,
 #: lights, the world, the filter) changes its pixels: part of every Mitsuba render key.
-MITSUBA_TRANSLATION = 3  # 2: poses on the vertices, suns by to_world (kept.py); 3: the denoiser's aux pass apart
+#: 2: poses on the vertices, suns by to_world (kept.py); 3: the denoiser's aux pass apart; 4: the object
+#: posed by an instance, renders replayed by Dr.Jit (frozen.py), the aux pass through a box filter, a tent
+#: pixel filter (scene.py)
+MITSUBA_TRANSLATION = 4
 #: Mesh files the Mitsuba engine reads (its own OBJ/MTL reader: ``mitsuba/objfile.py``).
 MITSUBA_MESHES = (".obj",)
 
@@ -97,13 +100,14 @@ class MitsubaBackend(Backend):
     ignored_settings = CYCLES_ONLY
     support = SUPPORT
     #: Per 224² render, on Cycles' basis (its figures in cycles/backend.py), by the variant this
-    #: machine renders with. llvm_ad_rgb (the scene kept per worker, the denoiser's aux pass apart,
-    #: OpenImageDenoise "fast"): 0.74× Cycles' time per render at the quickstart's 4 samples, its
-    #: samples about 0.2× Cycles' cost each (benchmarks/engine_cost.py and mitsuba_denoise.py;
-    #: RESULTS.md, "Mitsuba at a fraction of Cycles' cost"). scalar_rgb: the issue-45 measurement,
-    #: 2.2× Cycles' CPU a sample and 0.17 s more a render ("The Mitsuba engine's cost in plan's
-    #: estimate"), made before those changes: an upper bound.
-    seconds_224 = (0.007, 0.077) if llvm_library() else (0.075, 0.19)
+    #: machine renders with. llvm_ad_rgb (the scene kept per worker, the object posed by an
+    #: instance, the render replayed by Dr.Jit, OpenImageDenoise "fast"): 0.56× Cycles' time per
+    #: render at the quickstart's 4 samples on a quiet machine (0.57× its CPU; 0.43× under a load
+    #: of 4–7), its samples about 0.2× Cycles' cost each (benchmarks/engine_cost.py and
+    #: mitsuba_denoise.py; RESULTS.md, "Mitsuba at a fraction of Cycles' cost"). scalar_rgb: the
+    #: issue-45 measurement, 2.2× Cycles' CPU a sample and 0.17 s more a render ("The Mitsuba
+    #: engine's cost in plan's estimate"), made before those changes: an upper bound.
+    seconds_224 = (0.007, 0.042) if llvm_library() else (0.075, 0.19)
 
     def scene(self, settings, scratch, log=None, gpu=None) -> MitsubaScene:
         """A ``MitsubaScene`` (imported only now: Cycles' workers never load Mitsuba)."""

@@ -5,12 +5,19 @@ Why: describing a job afresh to ``load_dict`` costs tens of milliseconds, and un
 (about a second) whenever a yaw, a camera or a light changes. A job that changes only values
 (the object's pose, the camera, lights' places and strengths, the world's rotation and strength,
 material values, the occluder's place) is rendered by the kept scene with those parameters
-updated (``mitsuba.traverse``), so its kernels are reused.
+updated (``mitsuba.traverse``), so its kernels are reused. Under a JIT variant each value is set
+opaque (an array in memory, not a constant compiled into the kernel), so one recording of the
+frozen render (``frozen.py``) serves every job of the structure.
+
+The object's pose: under ``llvm_ad_rgb`` the pieces sit untransformed in a shape group and the
+pose is its instance's ``to_world``, a value like any other (a new pose rebuilds only Embree's
+top level); under ``scalar_rgb`` (whose path tracer crashes on an instance with
+``hide_emitters``) each piece's ``to_world`` is applied to its vertices here (``poses``).
 
 Determinism: a freshly loaded scene takes every value through the parameter update, a kept one
-the values that changed since, and the object's pose is applied to its vertices here (the mesh is
-loaded untransformed), so a render's pixels depend on the job alone, never on the job the worker
-rendered before it (tests/stages/render/test_mitsuba_kept.py renders a sequence both ways).
+the values that changed since (the vertices of an unmoved piece stay as they are), so a
+render's pixels depend on the job alone, never on the job the worker rendered before it
+(tests/stages/render/test_mitsuba_kept.py renders a sequence both ways).
 
 A value with no parameter to update (a description key Mitsuba does not expose) is part of the
 structure: changing it loads the scene afresh.
@@ -93,6 +100,16 @@ def without_poses(description: dict[str, Any], poses: dict[str, np.ndarray]) -> 
             for k, v in description.items()}
 
 
+def _no_op(_value: Any) -> None:
+    """``scalar_rgb`` has no kernels for a value to be baked into."""
+
+
+def _jit_opaque() -> Any:
+    import drjit as dr
+
+    return dr.make_opaque
+
+
 class KeptScene:
     """The latest structure's loaded scene, its parameters and its objects' untransformed vertices.
 
@@ -104,6 +121,9 @@ class KeptScene:
     def __init__(self, mi: Any, converted: Any) -> None:
         self.mi = mi
         self.converted = converted
+        # under a JIT variant, a value is set as an array in memory, not a constant in the kernel:
+        # one recording of a frozen render (frozen.py) and one compilation serve every value
+        self.opaque = _no_op if mi.variant().startswith("scalar") else _jit_opaque()
         self.key: tuple | None = None
         self.scene: Any = None
         self.params: Any = None
@@ -168,6 +188,7 @@ class KeptScene:
                 params[target] = kind(*value) if len(value) > 1 else kind(value[0])
             else:
                 params[target] = kind(value)
+            self.opaque(params[target])
             applied[target] = frozen
         turned_by: dict[bytes, np.ndarray] = {}  # the objects' pieces share one pose: its inverse once
         for shape, matrix in parts.poses.items():

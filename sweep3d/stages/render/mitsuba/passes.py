@@ -20,6 +20,7 @@ import numpy as np
 
 from sweep3d.core import encode_depth, encode_mask, ground_truth
 from sweep3d.stages.render.mitsuba import translate
+from sweep3d.stages.render.mitsuba.scene import OBJECT
 from sweep3d.stages.render.silhouette import MAX_SILHOUETTE_PIXELS, framed_count
 
 if TYPE_CHECKING:
@@ -107,13 +108,13 @@ def surfaces(scene: MitsubaScene, size: int, widen: float, window: tuple[int, in
         loaded = scene.load(scene.describe(SURFACES, sensor, scenery=scenery, lit=False))
         image = mi.render(loaded, spp=1, seed=scene.settings.seed)
     image = np.asarray(image, dtype=np.float64)
-    numbers = shape_numbers(mi, loaded)
-    is_object = np.zeros(max(numbers) + 1, dtype=bool)
-    for number, shape in zip(numbers, loaded.shapes(), strict=True):
-        is_object[number] = shape.id().startswith("object_")
+    # the scenery's numbers: a hit on anything else is the object's (the pieces of its instance
+    # are numbered apart from the scene's shapes under llvm_ad_rgb: shape_numbers)
+    scenery_numbers = [number for number, shape in zip(shape_numbers(mi, loaded), loaded.shapes(), strict=True)
+                       if not shape.id().startswith(OBJECT)]
     index = np.rint(image[..., 4]).astype(np.int64)
-    hit = (image[..., 0] > 0) & (index > 0) & (index < len(is_object))
-    obj = hit & is_object[np.where(hit, index, 0)]
+    hit = (image[..., 0] > 0) & (index > 0)
+    obj = hit & ~np.isin(index, scenery_numbers)
     position, _, _, forward = state.camera_basis()
     z = (image[..., 1:4] - position) @ forward
     return hit, obj, np.where(hit, z, np.inf)
@@ -121,8 +122,8 @@ def surfaces(scene: MitsubaScene, size: int, widen: float, window: tuple[int, in
 
 def shape_numbers(mi, loaded) -> list[int]:
     """What the ``shape_index`` AOV gives for each of ``loaded.shapes()``: its place from 1 under
-    ``scalar_rgb``, its number in Dr.Jit's registry (shared by every scene in the process) under
-    ``llvm_ad_rgb``."""
+    ``scalar_rgb`` (an instance's pieces: the instance's), its number in Dr.Jit's registry (shared
+    by every scene in the process) under ``llvm_ad_rgb`` (an instance's pieces: their own numbers)."""
     if mi.variant().startswith("scalar"):
         return list(range(1, len(loaded.shapes()) + 1))
     import drjit as dr

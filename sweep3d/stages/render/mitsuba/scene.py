@@ -28,19 +28,29 @@ from sweep3d.spec import unknown_name
 from sweep3d.stages.render.lights import WHITE, SunLight
 from sweep3d.stages.render.mitsuba import translate
 from sweep3d.stages.render.mitsuba.backend import llvm_library, mitsuba_variant
+from sweep3d.stages.render.mitsuba.frozen import FrozenRender
 from sweep3d.stages.render.mitsuba.hdri import load_bitmap
 from sweep3d.stages.render.mitsuba.kept import KeptScene
 from sweep3d.stages.render.mitsuba.objfile import MtlMaterial, ObjMesh, read_obj
 from sweep3d.stages.render.state import SceneState
 from sweep3d.stages.render.worker_protocol import EnvironmentRef, Look, RenderSettings
 
-#: The pixel filter's standard deviation in pixels: close to Cycles' 1.5 px Blackman-Harris.
-FILTER_STDDEV = 0.3
+#: The pixel filter's radius in pixels: a tent as wide as Cycles' 1.5 px Blackman-Harris. Its
+#: standard deviation (0.31 px) is the Gaussian's that it replaced (0.3 px; 54–60 dB apart at 256
+#: samples), whose 1.2 px reach (4 standard deviations) spread each sample over more pixels of
+#: Mitsuba's film: 61 against 52 ms CPU of a 4-sample 224² render's path tracing (toaster in studio;
+#: benchmarks/RESULTS.md, "Mitsuba at a fraction of Cycles' cost").
+FILTER_RADIUS = 0.75
 #: OpenImageDenoise's quality for Mitsuba's renders, chosen by measurement against Mitsuba's own
 #: 512-sample renders of the quickstart's scenes (benchmarks/RESULTS.md, "Mitsuba at half Cycles'
 #: cost"): at 4 samples "fast" is 36.7 dB from them against 38.0 dB for "high" (Cycles' own), in
 #: half the time; the denoiser is most of a render's cost.
 DENOISE_QUALITY = "fast"
+#: Names of the object's instance and of the group of its pieces (``object_0000``, …) in a scene
+#: description: every shape of the object is named from "object".
+OBJECT, OBJECT_PARTS = "object", "object_parts"
+#: The name of the camera's twin that sees the denoiser's albedo and normals (:func:`aux_sensor`).
+AUX_SENSOR = "aux_sensor"
 #: Objects (mesh, look) a worker keeps read, least recently used first out (as Cycles' workers keep 16).
 MAX_KEPT_OBJECTS = 16
 
@@ -111,6 +121,11 @@ class MitsubaScene:
         self.loaded: Any = None  # the latest job's loaded Mitsuba scene
         self.aux_integrator: Any = None  # _aux()
         self.kept = KeptScene(self.mi, self.converted)  # loaded once per structure, updated per job (kept.py)
+        self.frozen = FrozenRender(self.mi)  # renders replayed without tracing them again (frozen.py)
+        # the object posed by an instance (a new pose rebuilds only Embree's top level, where moving
+        # the vertices rebuilt the mesh's BVH: 25 ms a job for the quickstart's toaster), but not under
+        # scalar_rgb: Mitsuba 3.9's scalar path tracer crashes on an instance with hide_emitters
+        self.instanced = not self.mi.variant().startswith("scalar")
         self.serial = 0  # names each read object's PLY files
         self.stale = False
         truth = tuple(p for p in settings.passes if p in TRUTH_PASSES)
@@ -152,21 +167,23 @@ class MitsubaScene:
     # -- rendering -----------------------------------------------------------------------------
     def render(self) -> np.ndarray:
         """The job's image: float32 (H, W, 3), sRGB values in [0, 1], as ``BlenderScene.render``."""
-        mi, s, state = self.mi, self.settings, self.state
+        s, state = self.settings, self.state
         denoise = s.denoise if state.denoise is None else state.denoise
         background = self.background()
         path = {"type": "path", "max_depth": s.max_bounces + 1, "hide_emitters": background is not None}
-        scene = self.describe(path, translate.camera(state, s.resolution, s.crop, FILTER_STDDEV))
+        scene = self.describe(path, translate.camera(state, s.resolution, s.crop, FILTER_RADIUS))
+        if denoise:  # the denoiser's albedo and normals seen by a twin of the camera (aux_sensor)
+            scene[AUX_SENSOR] = aux_sensor(scene["sensor"])
         self.loaded = self.kept.scene_for(scene)  # the truth passes look at the same scene
-        image = np.asarray(mi.render(self.loaded, spp=s.samples, seed=s.seed), dtype=np.float32)
+        # the denoiser's albedo and normals from a first-hit pass over the same samples: the path
+        # tracer nested in an ``aov`` integrator took twice as long for the same pixels
+        camera = sensor_index(self.loaded, "sensor")
+        image, aux = self.frozen(self.loaded, s.samples, s.seed, self._aux() if denoise else None,
+                                 (camera, sensor_index(self.loaded, AUX_SENSOR) if denoise else camera))
         rgb, alpha = np.maximum(image[..., :3], 0.0), np.clip(image[..., 3:4], 0.0, 1.0)
-        if denoise:
+        if aux is not None:
             import pyoidn
 
-            # the denoiser's albedo and normals from a first-hit pass over the same samples: the
-            # path tracer nested in an ``aov`` integrator took twice as long for the same pixels
-            aux = np.asarray(mi.render(self.loaded, integrator=self._aux(), spp=s.samples, seed=s.seed),
-                             dtype=np.float32)
             albedo = np.clip(aux[..., -6:-3], 0.0, 1.0)
             normal = np.clip(aux[..., -3:], -1.0, 1.0)
             rgb = np.maximum(pyoidn.denoise(np.ascontiguousarray(rgb), np.ascontiguousarray(albedo),
@@ -201,11 +218,16 @@ class MitsubaScene:
         if lit:
             scene["world"] = self._world(env, state)
             scene.update(translate.lights(state.lights + self._key_light(env, state), state))
-        matrix = translate.object_matrix(state, loaded.centre, loaded.radius)
         edits = self._edited(loaded, state)
-        for i, (ply, material) in enumerate(loaded.files):
-            scene[f"object_{i:04d}"] = {"type": "ply", "filename": ply, "to_world": matrix,
-                                        "bsdf": self._bsdf(loaded, material, edits.get(material, {}))}
+        matrix = translate.object_matrix(state, loaded.centre, loaded.radius)
+        pieces = {f"object_{i:04d}": {"type": "ply", "filename": ply,
+                                      "bsdf": self._bsdf(loaded, material, edits.get(material, {}))}
+                  for i, (ply, material) in enumerate(loaded.files)}
+        if self.instanced:  # the pieces untransformed in a group, posed by one instance's to_world
+            scene[OBJECT_PARTS] = {"type": "shapegroup", **pieces}
+            scene[OBJECT] = {"type": "instance", "shapegroup": {"type": "ref", "id": OBJECT_PARTS}, "to_world": matrix}
+        else:  # each piece posed (kept.py moves their vertices)
+            scene.update({name: {**piece, "to_world": matrix} for name, piece in pieces.items()})
         plate = translate.occluder(state) if scenery else None
         if plate is not None:
             scene["scenery_occluder"] = plate
@@ -335,6 +357,20 @@ class MitsubaScene:
             if own.texture and "base_color" not in dict(look.material if look else ()) | dict(named.get(name, ())):
                 textures[name] = own.texture
         return values, textures
+
+
+def aux_sensor(sensor: dict[str, Any]) -> dict[str, Any]:
+    """The camera's twin for the denoiser's albedo and normals: the same view, samples and seed
+    through a box filter. Each sample then lands in one pixel, where the Gaussian's overlapping
+    footprint cost the first-hit pass 20 ms of its 27 (toaster in studio, 224², 4 samples) for
+    0.16 dB against Mitsuba's 512-sample renders (benchmarks/RESULTS.md, "Mitsuba at a fraction of
+    Cycles' cost")."""
+    return {**sensor, "film": {**sensor["film"], "rfilter": {"type": "box"}}}
+
+
+def sensor_index(loaded: Any, name: str) -> int:
+    """The place of the sensor ``name`` among a loaded scene's (``mitsuba.render``'s ``sensor``)."""
+    return next(i for i, sensor in enumerate(loaded.sensors()) if sensor.id() == name)
 
 
 def srgb(linear: np.ndarray) -> np.ndarray:

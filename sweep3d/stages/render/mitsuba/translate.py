@@ -62,14 +62,14 @@ def object_matrix(state: SceneState, centre: np.ndarray, radius: float) -> np.nd
     return pose @ normalise
 
 
-def camera(state: SceneState, size: int, crop: int | None, filter_stddev: float) -> dict[str, Any]:
+def camera(state: SceneState, size: int, crop: int | None, filter_radius: float) -> dict[str, Any]:
     """The sensor: Blender's camera for ``state`` over a ``size``² frame, of which the centre
-    ``crop``² is rendered (None: all of it)."""
+    ``crop``² is rendered (None: all of it), through a tent pixel filter of ``filter_radius`` pixels."""
     position, right, up, forward = state.camera_basis()
     fov = math.degrees(2.0 * math.atan(SENSOR_WIDTH_MM / (2.0 * state.focal_length)))
     distance = state.camera_distance()
     film: dict[str, Any] = {"type": "hdrfilm", "width": size, "height": size, "pixel_format": "rgba",
-                            "rfilter": {"type": "gaussian", "stddev": filter_stddev}}
+                            "rfilter": {"type": "tent", "radius": filter_radius}}
     if crop is not None and crop < size:
         left = (size - crop) // 2  # as Cycles' border: from the top left
         film.update(crop_offset_x=left, crop_offset_y=left, crop_width=crop, crop_height=crop)
