@@ -300,18 +300,24 @@ def grade(
     seed: Optional[int] = typer.Option(None, "--seed", min=0, show_default=False,
                                        help="Seed of the checks' draws (default: the spec's)."),
     wait: float = typer.Option(0.0, help="Seconds to wait for another command holding the store's lock."),
+    executor: str = typer.Option("local", help="Where the checks' renders run: local worker processes, or ray."),
+    address: Optional[str] = typer.Option(None, help="With --executor ray: the cluster's address (default: "
+                                                     "start a local Ray)."),
 ) -> None:
     """Grade every finding of the last run: replicated on fresh renders, reproduced by the second renderer, not
     fragile (solid), or renderer-sensitive, fragile, not replicated, inconclusive or untested, with its evidence."""
-    from sweep3d.api import Experiment
+    from sweep3d.api import EXECUTORS, Experiment
     from sweep3d.cli.grading import print_grades
     from sweep3d.followups.grade import grade_findings
+    from sweep3d.stages.render import Executor
 
     check_wait(wait)
+    if executor not in EXECUTORS:
+        raise UserError(f"--executor {executor}: use local or ray")
     experiment = Experiment(spec)
     require_store(experiment.spec)
     signal.signal(signal.SIGTERM, _interrupt)
-    graded = grade_findings(experiment.spec, budget, seed, console, wait=wait)
+    graded = grade_findings(experiment.spec, budget, seed, console, wait=wait, executor=Executor(executor, address))
     print_grades(console, graded, spec)
 
 

@@ -47,10 +47,10 @@ from sweep3d.stages.render import LOCAL, Executor
 DEFAULT_BUDGET = 2048
 #: The budget's shares: the stability check's scene neighbours, then the replication; the second
 #: renderer gets what they leave (the findings' twins first, then at most IMAGE_SHARE for images).
-STABILITY_SHARE = 0.25
+STABILITY_SHARE = 0.125
 REPLICATION_SHARE = 0.5
 MAX_PAIRS = 128  # a finding's twin pairs at most, however large the budget
-IMAGE_SHARE = 8  # 1/8 of the budget is kept for the sampled failure images on the second renderer
+IMAGE_SHARE = 16  # 1/16 of the budget is kept for the sampled failure images on the second renderer
 REPLICATION_FIRST = 16  # twin pairs of a finding's first look: a strong effect decides on them
 ENGINE_FIRST = 8  # the second renderer's first look, in pairs
 ENGINE_SUFFIX = "-confirm-"  # the second renderer's experiment: <name>-confirm-<engine>
