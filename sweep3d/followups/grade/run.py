@@ -104,7 +104,7 @@ def _graded(loaded: LoadedSpec, store: Store, budget: int, seed: int, console: C
     testable = [c for c in claims.values() if not isinstance(c, str)]
     checked, used = _stability(loaded, seed, console, executor, int(budget * STABILITY_SHARE))
     threshold = checked.threshold if checked is not None else None
-    rendered = 0
+    rendered = checked.scene.rendered if checked is not None and checked.scene is not None else 0
     evidence: dict[str, Evidence] = {}
     engine = other_engine(loaded)
     if testable and budget >= 2:
