@@ -128,7 +128,7 @@ def default_settings(current: Setting, model_view: bool = True, full_frame: int 
             at the model's framing (they would otherwise repeat the model-framed ones).
         engines: other renderers to time and compare with the reference at the spec's setting.
     """
-    from sweep3d.stages.render.backends import backend
+    from sweep3d.stages.render import backend
 
     side = full_frame if current.resolution == "model" else None
     own = functools.partial(Setting, engine=current.engine)

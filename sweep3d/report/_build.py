@@ -28,6 +28,7 @@ from sweep3d.report.reading import Results, materialise_views
 from sweep3d.report.thumbs import Thumbnails
 from sweep3d.results import (
     COUNTERFACTUAL_VIEWS,
+    GRADE_VIEWS,
     MACROS,
     MEASURES,
     VIEWS,
@@ -128,7 +129,7 @@ def build_context(loaded: LoadedSpec, con: duckdb.DuckDBPyConnection, store: Sto
         "thumb_size": thumbs.size,
         "images": {"shown": len(uris) - thumbs.missing - thumbs.damaged - thumbs.left_out, "of": page.images,
                    "missing": thumbs.missing, "damaged": thumbs.damaged, "left_out": thumbs.left_out},
-        "views": [v for v in (*VIEWS, BOUNDARIES_VIEW, *COUNTERFACTUAL_VIEWS) if has_view(con, v)],
+        "views": [v for v in (*VIEWS, BOUNDARIES_VIEW, *COUNTERFACTUAL_VIEWS, *GRADE_VIEWS) if has_view(con, v)],
         "macros": MACROS,
     }
 

@@ -55,6 +55,7 @@ if _TYPE_CHECKING:
         FAILURE_MODE,
         FINDINGS_TABLE,
         FRAGILE,
+        GRADE_VIEWS,
         GRADES,
         IMAGE_SCHEMA,
         IMAGES_TABLE,

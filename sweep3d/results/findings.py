@@ -55,6 +55,8 @@ UNTESTED = "untested"
 GRADES = (SOLID, RENDERER_SENSITIVE, FRAGILE, NOT_REPLICATED_GRADE, INCONCLUSIVE_GRADE, UNTESTED)
 
 FAILURE_MODE, BOUNDARY, BOX = "failure mode", "boundary", "box"
+#: The views over the grades (``findings`` once ``run`` listed its findings).
+GRADE_VIEWS = ("findings", "failure_grades")
 
 SCHEMA = pa.schema([
     ("finding_grade_key", pa.string()), ("experiment", pa.string()), ("model", pa.string()),

@@ -17,6 +17,7 @@ if _TYPE_CHECKING:
     from sweep3d.stages.render.backend import Backend, RenderScene
     from sweep3d.stages.render.backends import (
         BACKENDS,
+        backend,
         check_engine,
         cycles_only_defaults,
         engine_key,
