@@ -128,13 +128,13 @@ def default_settings(current: Setting, model_view: bool = True, full_frame: int 
             at the model's framing (they would otherwise repeat the model-framed ones).
         engines: other renderers to time and compare with the reference at the spec's setting.
     """
-    from sweep3d.stages.render import backend
+    from sweep3d.stages.render import engine_backend
 
     side = full_frame if current.resolution == "model" else None
     own = functools.partial(Setting, engine=current.engine)
     grid = [own(s, d, resolution=side) for s in (1, 4, 16) for d in ("off", "fast", "accurate")]
     grid += [own(64, "fast", resolution=side)]
-    if "adaptive_threshold" not in backend(current.engine).ignored_settings:
+    if "adaptive_threshold" not in engine_backend(current.engine).ignored_settings:
         grid += [own(64, "fast", resolution=side, adaptive=0.05)]
     grid += [own(4, "fast", max_bounces=b, resolution=side) for b in (2, 4)]
     grid += [own(4, "fast", resolution=160)]

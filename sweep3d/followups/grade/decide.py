@@ -127,8 +127,12 @@ def _points(value: float | None) -> str:
 
 
 def _effect(v: Verdict) -> str:
+    """``-46 pts on 28 fresh pairs (-62 pts to -23 pts, Holm p = 0.002)``: the interval at the level
+    of the look that decided (1 - 5 % / looks); Holm's p over the findings judged together (one
+    finding alone: its own p)."""
+    p = f"Holm p = {v.p_holm:.2g}" if v.findings > 1 else f"p = {v.p_value:.2g}"
     return (f"{_points(v.difference)} on {v.pairs} fresh pairs ({_points(v.difference_low)} to "
-            f"{_points(v.difference_high)}, p = {v.p_holm:.2g})")
+            f"{_points(v.difference_high)}, {p})")
 
 
 def grade(e: Evidence) -> tuple[str, str]:

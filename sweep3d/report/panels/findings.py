@@ -55,7 +55,7 @@ def _row(finding: Finding, graded: Mapping[str, Any] | None, confirmed: Mapping[
     details = []
     if graded and graded.get("pairs"):
         details.append(f"fresh renders: {_points(graded['effect'])} points on {graded['pairs']} pairs "
-                       f"(95 % interval {_points(graded['effect_low'])} to {_points(graded['effect_high'])})")
+                       f"(interval {_points(graded['effect_low'])} to {_points(graded['effect_high'])})")
     if graded and graded.get("engine_pairs"):
         details.append(f"second renderer ({graded['engine']}): {_points(graded['engine_effect'])} points on "
                        f"{graded['engine_pairs']} pairs")

@@ -17,13 +17,13 @@ if _TYPE_CHECKING:
     from sweep3d.stages.render.backend import Backend, RenderScene
     from sweep3d.stages.render.backends import (
         BACKENDS,
-        backend,
         check_engine,
         cycles_only_defaults,
         engine_key,
         plan_device,
         variant_note,
     )
+    from sweep3d.stages.render.backends import backend as engine_backend  # `backend` is the protocol's module
     from sweep3d.stages.render.child import Child
     from sweep3d.stages.render.controls.rendered_control import RENDERED_CONTROLS, RenderedControl, frame_fields
     from sweep3d.stages.render.cycles.describe import COLUMNS, describe_materials
