@@ -133,6 +133,10 @@ def _boundary_gap(row: Mapping[str, Any]) -> float | None:
     return (below - above) if row["fails"] == "below" else (above - below)
 
 
+#: The row that stands for a listing of no finding (the ``findings`` view leaves it out).
+NO_FINDING = Finding("", "none", "", -1, {})
+
+
 def listing_of(findings: Iterable[Finding]) -> str:
     """The digest naming a set of findings (their keys and texts, in order)."""
     text = json.dumps([[f.key, f.text] for f in findings], ensure_ascii=False)
@@ -204,14 +208,12 @@ def record_listing(store: Store, experiment: str, model: str, findings: list[Fin
     now = utc_now()
     earlier = {r["finding"]: r for r in rows if r["listing"] == listing}
     fresh = []
-    for finding in findings:
+    for finding in findings or [NO_FINDING]:  # none now: one marker row makes the empty listing the latest
         old = earlier.get(finding.key)
         if old is not None:
             fresh.append({**old, "listed_at": now, "created_at": now})
         else:
             fresh.append(grade_row(experiment, model, listing, now, finding, UNTESTED, not_graded(spec_path)))
-    if not findings:  # the run names none now: an empty listing hides the last one's rows
-        return listing
     store.append(FINDINGS_TABLE, fresh, SCHEMA)
     return listing
 
@@ -236,7 +238,7 @@ def register_findings_view(con: duckdb.DuckDBPyConnection, experiment: str | Non
         WITH mine AS ({mine}),
         latest AS (SELECT model, arg_max(listing, listed_at) AS listing FROM mine GROUP BY model)
         SELECT {', '.join(VIEW_COLUMNS)} FROM mine JOIN latest USING (model, listing)
-        ORDER BY model, rank""")
+        WHERE finding <> '' ORDER BY model, rank""")
     return True
 
 
