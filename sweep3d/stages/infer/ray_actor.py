@@ -14,10 +14,16 @@ import numpy as np
 class InferenceActor:
     """Holds one classifier; ``logits`` runs a batch on the actor's device."""
 
-    def __init__(self, name: str, model_framed: bool = False) -> None:
+    def __init__(self, name: str, model_framed: bool = False, paths: tuple[str, ...] = ()) -> None:
+        import sys
+
         import torch
 
         from sweep3d.stages.infer.models import for_model_framing, load_model
+
+        # the driver's import path first, as a render worker is sent it: a user's model beside the spec
+        # (``module:make``) is found on a node that has its folder
+        sys.path[:0] = [p for p in paths if p not in sys.path]
 
         self.model = load_model(name)
         if model_framed:  # images are the model's input already (resolution = "model")
@@ -44,5 +50,7 @@ def remote_runner(name: str, model_framed: bool = False) -> Any:
     ray = join_ray()
 
     gpus = 1 if ray.cluster_resources().get("GPU", 0) >= 1 else 0
-    actor = ray.remote(num_gpus=gpus, num_cpus=1)(InferenceActor).remote(name, model_framed)
+    import sys
+
+    actor = ray.remote(num_gpus=gpus, num_cpus=1)(InferenceActor).remote(name, model_framed, tuple(sys.path))
     return lambda images: ray.get(actor.logits.remote(images))
