@@ -240,11 +240,12 @@ def judge(findings: Sequence[Pairs], alpha: float = ALPHA, look: int = 1, looks:
 
 
 def sequential(findings: int, first: int, cap: int, observe: Callable[[Mapping[int, int]], Mapping[int, Pairs]],
-               alpha: float = ALPHA, futility: float = FUTILITY) -> list[Verdict]:
+               alpha: float = ALPHA, futility: float = FUTILITY, together: bool = True) -> list[Verdict]:
     """Judge ``findings`` in looks: ``observe({finding: pairs wanted})`` gives each open finding's
     fresh pairs so far (cumulative; fewer when no more can be drawn), the pairs doubling from
     ``first`` to ``cap``. A finding leaves once decided (confirmed, or its effect bounded), or when
-    no more pairs come; the rest are inconclusive after the last look."""
+    no more pairs come; the rest are inconclusive after the last look. ``together``: Holm over the
+    open findings at each look (else each judged alone, Bonferroni over the looks only)."""
     sizes, size = [], max(1, first)
     while size < max(cap, first):
         sizes.append(size)
@@ -258,7 +259,8 @@ def sequential(findings: int, first: int, cap: int, observe: Callable[[Mapping[i
         if not open_:
             break
         got = observe({i: size for i in open_})
-        verdicts = judge([got[i] for i in open_], alpha, look, looks, futility)
+        verdicts = (judge([got[i] for i in open_], alpha, look, looks, futility) if together
+                    else [judge([got[i]], alpha, look, looks, futility)[0] for i in open_])
         for i, verdict in zip(open_, verdicts):
             stalled = look > 1 and verdict.pairs <= seen.get(i, 0)  # no more pairs could be drawn
             seen[i] = verdict.pairs

@@ -18,7 +18,6 @@ A finding that passes all three is *solid*.
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 from typing import Callable, Iterable, Mapping
 
@@ -26,17 +25,16 @@ from sweep3d.results import (
     ALPHA,
     CONFIRMED,
     FRAGILE,
-    INCONCLUSIVE,
     INCONCLUSIVE_GRADE,
     NOT_REPLICATED,
     NOT_REPLICATED_GRADE,
-    OPEN,
     RENDERER_SENSITIVE,
     SOLID,
     UNTESTED,
     Verdict,
     judge,
     pairs_needed,
+    sequential,
     tally,
 )
 
@@ -87,27 +85,8 @@ def second_opinion(findings: int, first: int, cap: int,
     the looks (Bonferroni): the replication has already controlled the error over the findings,
     so the second renderer asks of one finding only whether it shows it too (a finding without a
     real effect passes both with probability at most ALPHA²)."""
-    sizes, size = [], max(1, first)
-    while size < max(cap, first):
-        sizes.append(size)
-        size *= 2
-    sizes.append(max(cap, first))
-    final: dict[int, Verdict] = {}
-    seen: dict[int, int] = {}
-    for look, size in enumerate(sizes, 1):
-        open_ = [i for i in range(findings) if i not in final]
-        if not open_:
-            break
-        got = fetch({i: size for i in open_})
-        for i in open_:
-            verdict = judge([tally(got[i])], ALPHA, look, len(sizes))[0]
-            stalled = look > 1 and verdict.pairs <= seen.get(i, 0)
-            seen[i] = verdict.pairs
-            if verdict.status == OPEN and stalled:
-                verdict = dataclasses.replace(verdict, status=INCONCLUSIVE)
-            if verdict.status != OPEN:
-                final[i] = verdict
-    return [final[i] for i in range(findings)]
+    return sequential(findings, first, cap, lambda asked: {i: tally(p) for i, p in fetch(asked).items()},
+                      together=False)
 
 
 def evidence_of(replication: Verdict, twins: list[tuple[Twin, Twin]], engine: Verdict | None,
