@@ -84,7 +84,8 @@ def second_opinion(findings: int, first: int, cap: int,
     pairs, fewer where it has no more). Each finding is judged alone, at :data:`ALPHA` split over
     the looks (Bonferroni): the replication has already controlled the error over the findings,
     so the second renderer asks of one finding only whether it shows it too (a finding without a
-    real effect passes both with probability at most ALPHA²)."""
+    real effect is graded solid with probability at most the replication's ALPHA: the second check,
+    on the same twins and so not independent of the first, can only lower it)."""
     return sequential(findings, first, cap, lambda asked: {i: tally(p) for i, p in fetch(asked).items()},
                       together=False)
 
