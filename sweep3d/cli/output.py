@@ -316,12 +316,11 @@ def confirmation_marks(store: Store, experiment: str, regions: list[Region], bou
                        rules: list[dict] = ()) -> list[str]:
     """What follows each finding (regions, boundaries, then rules): its verdict on fresh renders, as
     ``sweep3d confirm`` recorded it (see :mod:`sweep3d.followups.confirm.record`), or `` [unconfirmed]``."""
-    from sweep3d.followups.confirm import boundary_key, mark, read_verdicts, region_key, rule_key
+    from sweep3d.followups.confirm import mark, read_verdicts
 
     verdicts = read_verdicts(store, experiment)
-    keys = ([region_key(r.column, r.label) for r in regions] + [boundary_key(b) for b in boundaries]
-            + [rule_key(r["key"]) for r in rules])
-    return [mark(verdicts, key) if key in verdicts else UNCONFIRMED_MARK for key in keys]
+    return [mark(verdicts, key) if key in verdicts else UNCONFIRMED_MARK
+            for key in _printed_keys(regions, boundaries, rules)]
 
 
 def describe_region(region: Region) -> str:
