@@ -145,7 +145,8 @@ MACROS = ("wilson_low", "wilson_high", "binomial_cdf", "hypergeometric_cdf", "di
 
 
 def connect(store: Store, experiment: str | None = None, read_only: bool = False,
-            writable: Sequence[Path] = (), model: str | None = None) -> duckdb.DuckDBPyConnection:
+            writable: Sequence[Path] = (), model: str | None = None,
+            results_only: bool = False) -> duckdb.DuckDBPyConnection:
     """:meth:`Store.connect` with the aggregate views and macros over ``experiment``'s results.
 
     An experiment may test several models: ``results_all`` then holds every model's results,
@@ -158,6 +159,9 @@ def connect(store: Store, experiment: str | None = None, read_only: bool = False
             SQL that a user wrote.
         writable: files the caller itself will write through the connection (an export).
         model: the model ``results`` and the views show (its id); default the spec's first.
+        results_only: stop at ``results`` and the stability views beside it (the fragile verdicts): a
+            follow-up reading its own jobs' verdicts need not wait for every aggregate view to be
+            made (most of a cached ``grade``'s time).
 
     Raises:
         UserError: when ``model`` is not one of the experiment's models.
@@ -179,6 +183,8 @@ def connect(store: Store, experiment: str | None = None, read_only: bool = False
             shown = _select_model(con, models, model)
         elif model is not None:
             raise UserError(f"--model {model}: the experiment has no results yet")
+        if results_only:
+            return con
         if register_views(con, parameters, model=shown, min_visible=min_visible) and has_view(con, "results_all"):
             register_compare_views(con, models, results_roles(con).has("prediction"))
         verdicts = verdict_files(store)  # other sources' verdicts (photographs, another renderer)

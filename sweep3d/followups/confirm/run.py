@@ -288,7 +288,7 @@ class _Placed:
 
 def _outcomes(store: Store, experiment: str) -> dict[int, Twin]:
     """Job → (counted, correct, margin) of the fresh jobs' results."""
-    con = connect(store, experiment)
+    con = connect(store, experiment, results_only=True)
     try:
         if not has_view(con, "results"):
             return {}
