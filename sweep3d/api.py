@@ -199,16 +199,15 @@ class Experiment:
 
     def grade(self, budget: int | None = None, seed: int | None = None, progress: bool = True, *,
               wait: float = 0.0) -> Graded:
-        """Grade every finding of the last run, like ``sweep3d grade`` (``budget``: the most fresh
-        jobs the checks may use, default 1024; ``seed`` default the spec's); the grades are the
-        ``findings`` view's and lead the report."""
+        """Grade every finding of the last run, like ``sweep3d grade`` (``budget``: the most renders
+        the checks may use, cached ones included, default as many as the run rendered; ``seed``
+        default the spec's); the grades are the ``findings`` view's and lead the report."""
         from rich.console import Console
 
-        from sweep3d.followups.grade import DEFAULT_BUDGET, grade_findings
+        from sweep3d.followups.grade import grade_findings
 
         check_wait(wait)
-        return grade_findings(self.spec, DEFAULT_BUDGET if budget is None else budget, seed,
-                              Console() if progress else None, wait=wait)
+        return grade_findings(self.spec, budget, seed, Console() if progress else None, wait=wait)
 
     def report(self, path: str | Path | None = None, model: str | None = None) -> Path:
         """Write the HTML report (default ``<store>/reports/<experiment>.html``) and return its path."""

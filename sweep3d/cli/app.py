@@ -294,9 +294,10 @@ def bench(
 @command
 def grade(
     spec: Path = SpecArg,
-    budget: int = typer.Option(2048, "--budget", min=0,  # followups.grade.DEFAULT_BUDGET
-                               help="Most fresh jobs the checks may use, cached ones included (the same budget "
-                                    "and seed give the same grades and render nothing the second time)."),
+    budget: Optional[int] = typer.Option(None, "--budget", min=0, show_default=False,
+                                         help="Most renders the checks may use, cached ones included (default: as "
+                                              "many as the run rendered; the same budget and seed give the same "
+                                              "grades and render nothing the second time)."),
     seed: Optional[int] = typer.Option(None, "--seed", min=0, show_default=False,
                                        help="Seed of the checks' draws (default: the spec's)."),
     wait: float = typer.Option(0.0, help="Seconds to wait for another command holding the store's lock."),

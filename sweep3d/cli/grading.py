@@ -31,7 +31,7 @@ def print_grades(console: Console, graded: Graded, spec_path: object) -> None:
                    (f" (between {low} and {high} as the undecided margin bins fall)" if high > low else ""))
         console.print(f"stability: {checked.sampled} images checked; {fragile}; threshold |margin| < "
                       f"{checked.threshold:.3g}", highlight=False, soft_wrap=True)
-    console.print(f"{graded.used} fresh jobs of the budget's {graded.budget} used ({graded.rendered} rendered now); "
+    console.print(f"{graded.used} renders of the budget's {graded.budget} used ({graded.rendered} rendered now); "
                   f"second renderer {graded.engine}; {graded.seconds:.0f} s. The grades are the `findings` view "
                   f"(sweep3d query {escape(str(spec_path))} \"SELECT * FROM findings\") and lead the report",
                   soft_wrap=True, highlight=False)

@@ -23,7 +23,7 @@ if _TYPE_CHECKING:
         write_plan_images,
         write_unstored_images,
     )
-    from sweep3d.runner.runner import STANDARD, Runner, running
+    from sweep3d.runner.runner import STANDARD, Runner, running, session
     from sweep3d.runner.status import PlanStatus, plan_status
 
 __getattr__, __dir__ = _exports(__name__)  # names, modules and __all__ from the block above

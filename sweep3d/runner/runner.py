@@ -14,6 +14,7 @@ round after round keeps its Blender workers warm.
 from __future__ import annotations
 
 from contextlib import ExitStack, contextmanager
+from contextvars import ContextVar
 from typing import Iterator, Mapping, Sequence
 
 from rich.console import Console
@@ -27,6 +28,8 @@ from sweep3d.stages.render import LOCAL, Executor, RenderInfo, RenderStage
 
 #: The standard stages, in order: what a run computes of each job.
 STANDARD = ("render", "postprocess", "infer")
+#: The runner of the follow-up session now open (:func:`session`), if any.
+_SESSION: ContextVar["Runner | None"] = ContextVar("sweep3d_runner_session", default=None)
 
 
 class Runner:
@@ -44,7 +47,7 @@ class Runner:
         self._keep_open = keep_open
         self._render: RenderStage | None = None
         self._every_image: PostprocessStage | None = None  # see stages(every_image=True)
-        self._infers: dict[tuple[int, bool], InferStage] = {}
+        self._infers: dict[tuple[str, str, bool, bool], InferStage] = {}
         self._prepared: set[int] = set()
         self._stack = ExitStack()
 
@@ -63,12 +66,14 @@ class Runner:
         return self._progress
 
     def infer(self, model: ModelHandle, several: bool = False, every_image: bool = False) -> InferStage:
-        """The infer stage of ``model`` (one per model, kept: the model loads once); ``every_image``:
-        the one after :meth:`stages`' every-image postprocess, reading the images from the store."""
-        stage = self._infers.get((id(model), every_image))
+        """The infer stage of ``model`` (one per model, kept: the model loads once, also for another
+        plan's handle of the same model, by its digest); ``every_image``: the one after
+        :meth:`stages`' every-image postprocess, reading the images from the store."""
+        found = (model.digest, model.label, several, every_image)
+        stage = self._infers.get(found)
         if stage is None:
             post = self._post(every_image)
-            stage = self._infers[(id(model), every_image)] = InferStage(
+            stage = self._infers[found] = InferStage(
                 model, on_ray=self.executor.kind == "ray", several=several, handoff=post.handoff,
                 images_stored=post.store_images)
         return stage
@@ -149,6 +154,10 @@ def running(spec: LoadedSpec, *, executor: Executor = LOCAL, wait: float = 0.0, 
     from sweep3d.runner.pipeline import remove_leftovers
 
     store = store or Store(spec.store)
+    shared = _SESSION.get()
+    if shared is not None and shared.store.root == store.root and shared.executor == executor and progress is None:
+        yield shared  # within a session: its lock, its warm workers and loaded models
+        return
     with ExitStack() as stack:
         if executor.kind == "ray":
             from sweep3d.stages.render import ray_session
@@ -160,3 +169,19 @@ def running(spec: LoadedSpec, *, executor: Executor = LOCAL, wait: float = 0.0, 
         runner = Runner(spec, store, executor, progress, keep_open, console)
         stack.callback(runner.close)
         yield runner
+
+
+@contextmanager
+def session(spec: LoadedSpec, *, executor: Executor = LOCAL, wait: float = 0.0,
+            console: Console | None = None) -> Iterator[Runner]:
+    """One runner for a follow-up's several computations over ``spec``'s store (its variants'
+    plans, one after another): each :func:`running` within it on the same store and executor is
+    this runner, so the render workers stay warm between plans of the same render settings and
+    each model loads once (``sweep3d grade``'s checks: a dozen plans, each of which would start
+    Blender and load the model again). The plans must share the spec's post-processing."""
+    with running(spec, executor=executor, wait=wait, console=console, keep_open=True) as runner:
+        token = _SESSION.set(runner)
+        try:
+            yield runner
+        finally:
+            _SESSION.reset(token)

@@ -19,7 +19,16 @@ if _TYPE_CHECKING:
     from sweep3d.followups.confirm.claims import Claim, boundary_key, region_key, rule_key
     from sweep3d.followups.confirm.draw import Space, space_of
     from sweep3d.followups.confirm.record import mark, read_verdicts, status, write_verdicts
-    from sweep3d.followups.confirm.run import ConfirmResult, Twin, claims_of, confirm, render_rows, render_twins
+    from sweep3d.followups.confirm.run import (
+        ConfirmResult,
+        Twin,
+        claims_of,
+        confirm,
+        distinct_renders,
+        pairs_within,
+        render_rows,
+        render_twins,
+    )
     from sweep3d.followups.confirm.stored import CONFIRMATIONS, confirmation_key
 
 __getattr__, __dir__ = _exports(__name__)  # names, modules and __all__ from the block above

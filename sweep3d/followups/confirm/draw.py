@@ -65,39 +65,72 @@ def space_of(loaded: Any) -> Space:
 
 
 def claim_seed(seed: int, claim: Claim) -> list[int]:
-    """The seed of a claim's draws: the confirmation's seed and the claim's key, so each claim's
-    pairs do not depend on which other claims are confirmed with it."""
-    return [seed, int.from_bytes(hashlib.sha256(claim.key.encode()).digest()[:8], "little")]
+    """The seed of a claim's own draws (its scenes' order, the values its base does not give): the
+    confirmation's seed and the claim's key, so each claim's pairs do not depend on which other
+    claims are confirmed with it."""
+    return [seed, _digest(claim.key)]
+
+
+def base_row(space: Space, seed: int, scene: tuple[str, str], index: int) -> Row:
+    """The ``index``-th base of ``scene``: every parameter drawn from its whole space, from a seed of
+    the scene and the index alone. Every claim's ``index``-th pair in a scene starts from it, so
+    claims whose twins fall in the same scene share their renders (a blur claim's pair and a
+    blur boundary's are one render; an elevation claim's differs from it in one twin only)."""
+    rng = np.random.default_rng([seed, _digest(scene[0] + "\0" + scene[1]), index])
+    return {p.column: _value(rng, p.space) for p in space.parameters}
 
 
 def draw_pairs(space: Space, claim: Claim, count: int, seed: int) -> list[tuple[Row, Row]]:
     """``count`` twin pairs (inside, outside) for ``claim``; fewer (none) when no scene has the
-    claim's parameter within its scope."""
+    claim's parameter within its scope.
+
+    The pairs go round the claim's scenes in an order of its own, the ``k``-th round taking each
+    scene's ``k``-th base (:func:`base_row`). A twin keeps the base's value of the claim's
+    parameter when that value is on the twin's side and draws one on that side otherwise: each
+    twin's value is still uniform over its side and the pairs are independent (no two share a
+    base), while most twins are a base that other claims render too."""
     rng = np.random.default_rng(claim_seed(seed, claim))
     scenes = _scenes(space, claim)
     if not scenes:
         return []
+    order = [scenes[i] for i in rng.permutation(len(scenes))]
     target = space.parameter(claim.parameter)
     pairs = []
-    for _ in range(count):
-        base: Row = {p.column: _value(rng, p.space) for p in space.parameters}
+    for j in range(count):
+        obj, env = order[j % len(order)]
         if claim.parameter in ("object", "environment"):
-            obj, env = scenes[int(rng.integers(len(scenes)))]
             a, b = _pick(rng, claim.inside), _pick(rng, claim.outside)
             inside_scene = (a, env) if claim.parameter == "object" else (obj, a)
             outside_scene = (b, env) if claim.parameter == "object" else (obj, b)
+            base = base_row(space, seed, inside_scene, j // len(order))
             pairs.append((_row(space, inside_scene, base), _row(space, outside_scene, base)))
             continue
-        scene = scenes[int(rng.integers(len(scenes)))]
+        scene = (obj, env)
+        base = base_row(space, seed, scene, j // len(order))
         if claim.box:
-            pairs.append((_row(space, scene, {**base, **_box_inside(rng, space, claim)}),
-                          _row(space, scene, {**base, **_box_outside(rng, space, claim)})))
+            inside = {column: _on_side(rng, space.parameter(column).space, side, None, base[column])
+                      for column, side in claim.box}
+            outside = _box_outside(rng, space, claim, base)
+            pairs.append((_row(space, scene, {**base, **inside}), _row(space, scene, {**base, **outside})))
             continue
-        inside = _row(space, scene, {**base, claim.parameter: _side_value(rng, target.space, claim.inside, None)})
-        outside = _row(space, scene, {**base, claim.parameter: _side_value(rng, target.space, claim.outside,
-                                                                             claim.inside)})
+        value = base[claim.parameter]
+        inside = _row(space, scene, {**base, claim.parameter: _on_side(rng, target.space, claim.inside, None, value)})
+        outside = _row(space, scene, {**base, claim.parameter: _on_side(rng, target.space, claim.outside,
+                                                                         claim.inside, value)})
         pairs.append((inside, outside))
     return pairs
+
+
+def _digest(text: str) -> int:
+    return int.from_bytes(hashlib.sha256(text.encode()).digest()[:8], "little")
+
+
+def _on_side(rng: np.random.Generator, space: Choice | Range, side: Side, avoid: Side | None, base: Any) -> Any:
+    """``base`` when it lies on ``side`` (and not on ``avoid``), else a value drawn on ``side``: uniform
+    over the side either way, ``base`` being uniform over the whole space."""
+    if _within(base, side) and (avoid is None or not _within(base, avoid)):
+        return base
+    return _side_value(rng, space, side, avoid)
 
 
 def _scenes(space: Space, claim: Claim) -> list[tuple[str, str]]:
@@ -116,14 +149,11 @@ def _scenes(space: Space, claim: Claim) -> list[tuple[str, str]]:
             and o == scope.get("object", o) and e == scope.get("environment", e)]
 
 
-def _box_inside(rng: np.random.Generator, space: Space, claim: Claim) -> Row:
-    """Every box parameter drawn within its side."""
-    return {column: _side_value(rng, space.parameter(column).space, side, None) for column, side in claim.box}
-
-
-def _box_outside(rng: np.random.Generator, space: Space, claim: Claim) -> Row:
-    """The box parameters drawn from their whole spaces until they fall outside the box (uniformly
-    over the rest of their joint space)."""
+def _box_outside(rng: np.random.Generator, space: Space, claim: Claim, base: Row) -> Row:
+    """The base's box parameters when they fall outside the box, else drawn from their whole
+    spaces until they do (uniformly over the rest of their joint space either way)."""
+    if not all(_within(base[column], side) for column, side in claim.box):
+        return {column: base[column] for column, _ in claim.box}
     for _ in range(10_000):
         values = {column: _value(rng, space.parameter(column).space) for column, _ in claim.box}
         if not all(_within(values[column], side) for column, side in claim.box):

@@ -66,16 +66,22 @@ class ConfirmResult:
     #: claim key → its judged twin pairs (rows as drawn) and each twin's (counted, correct, margin)
     pairs: dict[str, list[tuple[Row, Row]]] = dataclasses.field(default_factory=dict)
     outcomes: dict[str, list[tuple[Twin, Twin]]] = dataclasses.field(default_factory=dict)
+    #: claim key → each pair's two render keys (with ``pairs``): what the pairs cost in renders
+    render_keys: dict[str, list[tuple[str, str]]] = dataclasses.field(default_factory=dict)
+    renders_used: int = 0  # distinct renders the judged pairs use, cached or not
 
 
 def confirm(loaded: LoadedSpec, renders: int = DEFAULT_RENDERS, seed: int | None = None,
             console: Console | None = None, claims: list[Claim] | None = None, wait: float = 0.0,
-            executor: Executor = LOCAL, max_renders: int | None = None) -> ConfirmResult:
+            executor: Executor = LOCAL, max_renders: int | None = None,
+            render_budget: int | None = None) -> ConfirmResult:
     """Confirm every significant finding of ``loaded``'s last run on ``renders`` fresh renders each
     (``renders // 2`` twin pairs), drawn with ``seed`` (default: the spec's); ``claims``: these
     instead of the run's findings. With ``max_renders`` above ``renders``, the findings neither
     confirmed nor bounded get more pairs in looks, doubling up to ``max_renders // 2``
-    (:func:`sweep3d.results.confirmation.sequential`; None: one look). It holds the store's writer lock from its start to its end
+    (:func:`sweep3d.results.confirmation.sequential`; None: one look). ``render_budget``: the most
+    distinct renders the pairs may use, cached or not (the pairs per finding cut to fit; claims
+    share renders, see :func:`~sweep3d.followups.confirm.draw.draw_pairs`). It holds the store's writer lock from its start to its end
     (``wait``: seconds to wait for another command holding it), its renders' run within it, by
     the runner on ``executor``."""
     from sweep3d.results import no_results
@@ -88,11 +94,12 @@ def confirm(loaded: LoadedSpec, renders: int = DEFAULT_RENDERS, seed: int | None
         raise no_results(store, loaded.name, loaded.path)
     cap = renders if max_renders is None else max(renders, max_renders)
     with store.lock(wait):
-        return _confirmed(loaded, store, renders, seed, console, claims, executor, cap)
+        return _confirmed(loaded, store, renders, seed, console, claims, executor, cap, render_budget)
 
 
 def _confirmed(loaded: LoadedSpec, store: Store, renders: int, seed: int, console: Console | None,
-               claims: list[Claim] | None, executor: Executor = LOCAL, cap: int | None = None) -> ConfirmResult:
+               claims: list[Claim] | None, executor: Executor = LOCAL, cap: int | None = None,
+               render_budget: int | None = None) -> ConfirmResult:
     """:func:`confirm`, holding the store's lock."""
     from sweep3d.runner import plans_as_run, run
 
@@ -110,6 +117,7 @@ def _confirmed(loaded: LoadedSpec, store: Store, renders: int, seed: int, consol
     candidates = {c.key: draw_pairs(space, c, OVERDRAW * wanted, seed) for c in claims}
     rows = [row for c in claims for pair in candidates[c.key] for row in pair]
     chosen: dict[str, list[tuple[Row, Row]]] = {c.key: [] for c in claims}
+    chosen_keys: dict[str, list[tuple[str, str]]] = {c.key: [] for c in claims}
     if rows:
         probe = _variant(loaded, space, rows)
         jobs = _jobs_by_index(plans_as_run(probe, store)[0])
@@ -121,7 +129,12 @@ def _confirmed(loaded: LoadedSpec, store: Store, renders: int, seed: int, consol
                 keys = [j.image_key if j is not None and j.in_frame else None for j in twins]
                 if len(chosen[c.key]) < wanted and None not in keys and not (set(keys) & used) and keys[0] != keys[1]:
                     chosen[c.key].append(pair)
+                    chosen_keys[c.key].append((twins[0].render_key, twins[1].render_key))
                     used.update(keys)
+    if render_budget is not None:
+        wanted = pairs_within(chosen_keys, wanted, render_budget)
+        first = min(first, max(1, wanted))
+        chosen = {k: pairs[:wanted] for k, pairs in chosen.items()}  # none at all: each inconclusive on 0 pairs
     taken = {c.key: 0 for c in claims}
     totals = {"rendered": 0, "cached": 0, "failed": 0, "jobs": 0}
     judged: dict[str, list[tuple[Twin, Twin]]] = {}
@@ -157,8 +170,28 @@ def _confirmed(loaded: LoadedSpec, store: Store, renders: int, seed: int, consol
     write_verdicts(store, loaded.name, {
         x.claim.key: {"text": x.claim.text, "verdict": x.verdict.as_dict(), "renders": renders, "seed": seed,
                       "drawn": x.drawn, "experiment": loaded.name + SUFFIX} for x in confirmations})
+    keys = {c.key: chosen_keys[c.key][:taken[c.key]] for c in claims}
     return ConfirmResult(loaded.name + SUFFIX, confirmations, fresh_jobs, rendered, cached, failed, renders,
-                         {c.key: chosen[c.key][:taken[c.key]] for c in claims}, judged)
+                         {c.key: chosen[c.key][:taken[c.key]] for c in claims}, judged, keys,
+                         distinct_renders(keys.values()))
+
+
+def distinct_renders(groups: Any) -> int:
+    """The distinct renders of groups of twin pairs' render keys."""
+    return len({key for group in groups for pair in group for key in pair})
+
+
+def pairs_within(keys: dict[str, list[tuple[str, str]]], wanted: int, budget: int) -> int:
+    """The most pairs per finding (up to ``wanted``) whose renders, the first that many pairs of
+    every finding together, are at most ``budget``."""
+    low, high = 0, wanted
+    while low < high:  # the renders grow with the pairs: the largest count within the budget
+        middle = (low + high + 1) // 2
+        if distinct_renders(group[:middle] for group in keys.values()) <= budget:
+            low = middle
+        else:
+            high = middle - 1
+    return low
 
 
 def twin_outcomes(space: Space, fresh: list[Row], outcomes: dict[int, Twin],
@@ -274,15 +307,16 @@ def _variant(loaded: LoadedSpec, space: Space, rows: list[Row], suffix: str = SU
 def _jobs_by_index(plan: Any) -> dict[int, Any]:
     jobs = {}
     for job in plan.jobs:
-        jobs[job.index] = _Placed(job.image_key, True)
+        jobs[job.index] = _Placed(job.image_key, job.render_key, True)
     for job in plan.out_of_frame:
-        jobs[job.index] = _Placed(job.image_key, False)
+        jobs[job.index] = _Placed(job.image_key, job.render_key, False)
     return jobs
 
 
 @dataclass(frozen=True)
 class _Placed:
     image_key: str
+    render_key: str
     in_frame: bool
 
 

@@ -15,6 +15,6 @@ from sweep3d.core import exports as _exports  # noqa: E402
 
 if _TYPE_CHECKING:
     from sweep3d.followups.grade.decide import Evidence, evidence_of, grade, second_opinion, single, steady_pairs
-    from sweep3d.followups.grade.run import DEFAULT_BUDGET, Graded, grade_findings, other_engine
+    from sweep3d.followups.grade.run import Graded, grade_findings, other_engine
 
 __getattr__, __dir__ = _exports(__name__)  # names, modules and __all__ from the block above

@@ -10,9 +10,11 @@ The grading is three plans for the one runner, in order, each through the same c
    Cycles under a Mitsuba one), as many pairs as the budget has left.
 
 Then :mod:`.decide` grades each finding and the grades become the listing's rows of the
-``finding_grades`` table (the ``findings`` view). The budget counts the fresh jobs the checks use,
-cached or not, so a second call with the same budget and seed renders nothing and writes the same
-grades; a larger budget goes on from where a smaller one stopped.
+``finding_grades`` table (the ``findings`` view). The budget counts the distinct renders the checks
+use, cached or not (by default as many as the run itself rendered), so a second call with the
+same budget and seed renders nothing and writes the same grades; a larger budget goes on from
+where a smaller one stopped. The findings' twins share renders (a blur claim's twin is the blur
+boundary's, see :func:`~sweep3d.followups.confirm.draw.draw_pairs`), so a render counts once.
 """
 
 from __future__ import annotations
@@ -43,11 +45,9 @@ from sweep3d.results import (
 from sweep3d.spec import LoadedSpec
 from sweep3d.stages.render import LOCAL, Executor
 
-#: Fresh jobs the checks may use by default (cached ones included): about eight quickstart runs' renders.
-DEFAULT_BUDGET = 2048
 #: The budget's shares: the stability check's scene neighbours, then the replication; the second
 #: renderer gets what they leave (the findings' twins first, then at most IMAGE_SHARE for images).
-STABILITY_SHARE = 0.125
+STABILITY_SHARE = 0.25
 REPLICATION_SHARE = 0.5
 MAX_PAIRS = 128  # a finding's twin pairs at most, however large the budget
 IMAGE_SHARE = 16  # 1/16 of the budget is kept for the sampled failure images on the second renderer
@@ -62,8 +62,8 @@ class Graded:
 
     findings: list[Finding]
     grades: list[tuple[str, str]]  # (grade, evidence) per finding
-    budget: int
-    used: int  # fresh jobs the checks used (cached or not)
+    budget: int  # renders
+    used: int  # distinct renders the checks used (cached or not)
     rendered: int  # renders this call made
     seconds: float
     engine: str
@@ -71,24 +71,27 @@ class Graded:
     listing: str = ""
 
 
-def grade_findings(loaded: LoadedSpec, budget: int = DEFAULT_BUDGET, seed: int | None = None,
+def grade_findings(loaded: LoadedSpec, budget: int | None = None, seed: int | None = None,
                    console: Console | None = None, wait: float = 0.0, executor: Executor = LOCAL) -> Graded:
-    """Grade every finding of ``loaded``'s last run (its first model) within ``budget`` fresh jobs."""
+    """Grade every finding of ``loaded``'s last run (its first model) within ``budget`` renders
+    (None: as many as the run rendered)."""
     from sweep3d.results import no_results
 
-    if budget < 0:
-        raise UserError(f"--budget {budget}: the fresh jobs the checks may use is 0 or more")
+    if budget is not None and budget < 0:
+        raise UserError(f"--budget {budget}: the renders the checks may use is 0 or more")
     started = time.perf_counter()
     seed = loaded.experiment.seed if seed is None else seed
     store = Store(loaded.store, warn=False)
     if not loaded.store.is_dir():
         raise no_results(store, loaded.name, loaded.path)
-    with store.lock(wait):
+    from sweep3d.runner import session
+
+    with store.lock(wait), session(loaded, executor=executor, console=console):  # warm workers, one model load
         return _graded(loaded, store, budget, seed, console, executor, started)
 
 
-def _graded(loaded: LoadedSpec, store: Store, budget: int, seed: int, console: Console | None, executor: Executor,
-            started: float) -> Graded:
+def _graded(loaded: LoadedSpec, store: Store, budget: int | None, seed: int, console: Console | None,
+            executor: Executor, started: float) -> Graded:
     from sweep3d.followups.confirm import claims_of, confirm, space_of
     from sweep3d.runner import plans_as_run
 
@@ -97,6 +100,8 @@ def _graded(loaded: LoadedSpec, store: Store, budget: int, seed: int, console: C
     if summary.accuracy is None:
         raise UserError(f"{loaded.path}: no results to grade yet; run: sweep3d run {loaded.path}")
     findings = listed_findings(summary)
+    if budget is None:
+        budget = len({job.render_key for job in plan.jobs})
     model = plan.model
     listing = record_listing(store, loaded.name, model, findings, loaded.path)
     space = space_of(loaded)
@@ -108,12 +113,12 @@ def _graded(loaded: LoadedSpec, store: Store, budget: int, seed: int, console: C
     evidence: dict[str, Evidence] = {}
     engine = other_engine(loaded)
     if testable and budget >= 2:
-        cap = min(2 * MAX_PAIRS, max(2, int(budget * REPLICATION_SHARE) // len(testable) // 2 * 2))
-        first = 2 * max(REPLICATION_FIRST, pairs_needed(len(testable), ALPHA / planned_looks(REPLICATION_FIRST, cap // 2)))
-        result = confirm(loaded, min(first, cap), seed, console, claims=testable, executor=executor,
-                         max_renders=cap)
+        looks = planned_looks(REPLICATION_FIRST, MAX_PAIRS)
+        first = 2 * max(REPLICATION_FIRST, pairs_needed(len(testable), ALPHA / looks))
+        result = confirm(loaded, first, seed, console, claims=testable, executor=executor,
+                         max_renders=2 * MAX_PAIRS, render_budget=int(budget * REPLICATION_SHARE))
         rendered += result.rendered
-        used += result.jobs
+        used += result.renders_used
         verdicts = {x.claim.key: x.verdict for x in result.confirmations}
         replicated = [k for k, v in verdicts.items() if v.status == CONFIRMED]
         engine_verdicts, engine_rendered, engine_used = _second_renderer(
@@ -151,7 +156,7 @@ def other_engine(loaded: LoadedSpec) -> str:
 def _stability(loaded: LoadedSpec, seed: int, console: Console | None, executor: Executor,
                share: int) -> tuple[Any, int]:
     """The stability check of the first model (sequential), or None where it does not apply; and
-    the fresh jobs its scene neighbours used. The images are as many as ``share`` fresh jobs of
+    the renders its scene neighbours used. The images are as many as ``share`` renders of
     neighbours allow (the image changes cost no render), between 16 and 256."""
     from sweep3d.followups.stability import DEFAULT_SAMPLE, check_stability, neighbours_per_image
 
@@ -166,13 +171,14 @@ def _stability(loaded: LoadedSpec, seed: int, console: Console | None, executor:
 def _second_renderer(loaded: LoadedSpec, store: Store, space: Any, result: Any, replicated: list[str], left: int,
                      engine: str, console: Console | None, executor: Executor) -> tuple[dict, int, int]:
     """The replicated findings' twins rendered by ``engine`` in looks (:func:`second_opinion`), each
-    finding's pairs at most its replication's and an even share of ``left`` fresh jobs:
-    (key → verdict, renders made, jobs used)."""
-    from sweep3d.followups.confirm import render_twins
+    finding's pairs at most its replication's, as many as ``left`` renders allow (the twins'
+    renders shared as in the replication): (key → verdict, renders made, renders used)."""
+    from sweep3d.followups.confirm import distinct_renders, pairs_within, render_twins
     from sweep3d.stages.render import cycles_only_defaults
 
-    share = left // (2 * max(1, len(replicated)))
-    caps = [min(len(result.pairs[k]), share) for k in replicated]
+    keys = {k: result.render_keys[k] for k in replicated}
+    within = pairs_within(keys, max((len(v) for v in keys.values()), default=0), max(0, left))
+    caps = [min(len(result.pairs[k]), within) for k in replicated]
     if not replicated or max(caps, default=0) < 1:
         return {}, 0, 0
     settings = {"engine": engine, **cycles_only_defaults(engine)}
@@ -191,7 +197,7 @@ def _second_renderer(loaded: LoadedSpec, store: Store, space: Any, result: Any, 
         return {i: [(a[1], b[1]) for a, b in outcomes[i] if a and b and a[0] and b[0]] for i in asked}
 
     verdicts = second_opinion(len(replicated), min(ENGINE_FIRST, max(caps)), max(caps), fetch)
-    return dict(zip(replicated, verdicts)), rendered, 2 * sum(taken)
+    return dict(zip(replicated, verdicts)), rendered, distinct_renders(keys[k][:n] for k, n in zip(replicated, taken))
 
 
 def _image_grades(loaded: LoadedSpec, store: Store, space: Any, model: str, checked: Any, left: int, engine: str,

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from sweep3d.followups.grade import evidence_of, grade, second_opinion, single, steady_pairs
-from sweep3d.followups.grade.run import DEFAULT_BUDGET, ENGINE_FIRST, MAX_PAIRS, REPLICATION_FIRST, REPLICATION_SHARE
+from sweep3d.followups.grade.run import ENGINE_FIRST, MAX_PAIRS, REPLICATION_FIRST
 from sweep3d.results import (
     ALPHA,
     CONFIRMED,
@@ -43,13 +43,13 @@ def twin(rng: np.random.Generator, fails: float) -> tuple[bool, bool, float]:
 
 
 def grades_of(seed: int, regions: list[tuple[float, float]], engine_fails: list[tuple[float, float]] | None = None,
-              budget: int = DEFAULT_BUDGET) -> list[tuple[str, Verdict]]:
-    """Grade findings whose twins fail at (inside, outside) rates ``regions``, sized from ``budget``
-    as ``grade`` sizes them; the second renderer follows the first at AGREEMENT, or fails at its own
-    rates ``engine_fails``."""
+              pairs: int = MAX_PAIRS) -> list[tuple[str, Verdict]]:
+    """Grade findings whose twins fail at (inside, outside) rates ``regions``, at most ``pairs`` each
+    (what a budget's renders allow), sized as ``grade`` sizes them; the second renderer follows the
+    first at AGREEMENT, or fails at its own rates ``engine_fails``."""
     rng = np.random.default_rng([seed, 43])
-    cap = min(2 * MAX_PAIRS, int(budget * REPLICATION_SHARE) // len(regions) // 2 * 2)
-    first = 2 * max(REPLICATION_FIRST, pairs_needed(len(regions), ALPHA / planned_looks(REPLICATION_FIRST, cap // 2)))
+    cap = 2 * pairs
+    first = 2 * max(REPLICATION_FIRST, pairs_needed(len(regions), ALPHA / planned_looks(REPLICATION_FIRST, MAX_PAIRS)))
     drawn: list[list[tuple]] = [[] for _ in regions]
 
     def observe(asked):
