@@ -296,7 +296,7 @@ def grade(
     spec: Path = SpecArg,
     budget: Optional[int] = typer.Option(None, "--budget", min=0, show_default=False,
                                          help="Most renders the checks may use, cached ones included (default: as "
-                                              "many as the run rendered; the same budget and seed give the same "
+                                              "twice the renders the run made; the same budget and seed give the same "
                                               "grades and render nothing the second time)."),
     seed: Optional[int] = typer.Option(None, "--seed", min=0, show_default=False,
                                        help="Seed of the checks' draws (default: the spec's)."),

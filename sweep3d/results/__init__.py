@@ -36,6 +36,7 @@ if _TYPE_CHECKING:
         Verdict,
         judge,
         look_z,
+        mcnemar_one_sided,
         pairs_needed,
         planned_looks,
         renders_for,

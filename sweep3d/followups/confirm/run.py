@@ -28,6 +28,7 @@ from sweep3d.results import (
     Verdict,
     connect,
     has_view,
+    mcnemar_one_sided,
     numeric_scales,
     sequential,
     stored_summary,
@@ -114,6 +115,8 @@ def _confirmed(loaded: LoadedSpec, store: Store, renders: int, seed: int, consol
         claims = findings_claims(loaded, store, summary, space)
     first = max(1, renders // 2)
     wanted = max(first, (renders if cap is None else cap) // 2)
+    if render_budget is not None and claims:  # no claim gets four even shares' worth of pairs: draw no more
+        wanted = min(wanted, max(first, 4 * render_budget // len(claims)))
     candidates = {c.key: draw_pairs(space, c, OVERDRAW * wanted, seed) for c in claims}
     rows = [row for c in claims for pair in candidates[c.key] for row in pair]
     chosen: dict[str, list[tuple[Row, Row]]] = {c.key: [] for c in claims}
@@ -131,18 +134,24 @@ def _confirmed(loaded: LoadedSpec, store: Store, renders: int, seed: int, consol
                     chosen[c.key].append(pair)
                     chosen_keys[c.key].append((twins[0].render_key, twins[1].render_key))
                     used.update(keys)
-    if render_budget is not None:
-        wanted = pairs_within(chosen_keys, wanted, render_budget)
-        first = min(first, max(1, wanted))
+    if render_budget is not None:  # looks planned to twice the even share; the budget's renders go first to
+        even = pairs_within(chosen_keys, wanted, render_budget)  # the findings nearest a decision
+        first = min(first, max(1, even))
+        wanted = max(first, min(wanted, 2 * even)) if even else 0
         chosen = {k: pairs[:wanted] for k, pairs in chosen.items()}  # none at all: each inconclusive on 0 pairs
+    nearest: dict[int, float] = {}  # claim → its last look's one-sided p: the smallest is nearest confirmed
     taken = {c.key: 0 for c in claims}
     totals = {"rendered": 0, "cached": 0, "failed": 0, "jobs": 0}
     judged: dict[str, list[tuple[Twin, Twin]]] = {}
 
     def observe(asked: Any) -> dict[int, Any]:
-        """Render and judge the first ``asked[i]`` pairs of each open claim (the others keep theirs)."""
-        for i, n in asked.items():
-            taken[claims[i].key] = min(n, len(chosen[claims[i].key]))
+        """Render and judge the first ``asked[i]`` pairs of each open claim (the others keep theirs),
+        as many as the render budget allows, nearest a decision first."""
+        order = sorted(asked, key=lambda i: (nearest.get(i, 0.0), i))
+        given = granted({i: min(n, len(chosen[claims[i].key])) for i, n in asked.items()},
+                        [taken[c.key] for c in claims], [chosen_keys[c.key] for c in claims], render_budget, order)
+        for i, n in given.items():
+            taken[claims[i].key] = n
         fresh = [row for c in claims for pair in chosen[c.key][:taken[c.key]] for row in pair]
         outcomes: dict[int, Twin] = {}
         if fresh:
@@ -161,6 +170,7 @@ def _confirmed(loaded: LoadedSpec, store: Store, renders: int, seed: int, consol
             kept = [(a, b) for a, b in twins if a and b and a[0] and b[0]]
             judged[c.key] = kept
             out[i] = tally((a[1], b[1]) for a, b in kept)
+            nearest[i] = mcnemar_one_sided(out[i].inside_wrong, out[i].inside_right)
         return out
 
     verdicts = sequential(len(claims), first, wanted, observe)
@@ -179,6 +189,28 @@ def _confirmed(loaded: LoadedSpec, store: Store, renders: int, seed: int, consol
 def distinct_renders(groups: Any) -> int:
     """The distinct renders of groups of twin pairs' render keys."""
     return len({key for group in groups for pair in group for key in pair})
+
+
+def granted(asked: dict[int, int], taken: list[int], keys: list[list[tuple[str, str]]], budget: int | None,
+            order: list[int]) -> dict[int, int]:
+    """The pairs each claim of ``asked`` gets (what it asks, at least what it has): in ``order``, as many
+    as fit in ``budget`` distinct renders with every pair taken before (renders the pairs share
+    count once); all it asks without a budget."""
+    if budget is None:
+        return dict(asked)
+    held = {key for i, n in enumerate(taken) if i not in asked for pair in keys[i][:n] for key in pair}
+    held.update(key for i in asked for pair in keys[i][:taken[i]] for key in pair)
+    out = {}
+    for i in order:
+        n = taken[i]
+        while n < asked[i]:
+            new = set(keys[i][n]) - held
+            if len(held) + len(new) > budget:
+                break
+            held.update(new)
+            n += 1
+        out[i] = max(n, min(taken[i], asked[i]))
+    return out
 
 
 def pairs_within(keys: dict[str, list[tuple[str, str]]], wanted: int, budget: int) -> int:

@@ -11,7 +11,7 @@ The grading is three plans for the one runner, in order, each through the same c
 
 Then :mod:`.decide` grades each finding and the grades become the listing's rows of the
 ``finding_grades`` table (the ``findings`` view). The budget counts the distinct renders the checks
-use, cached or not (by default as many as the run itself rendered), so a second call with the
+use, cached or not (by default twice as many as the run itself rendered), so a second call with the
 same budget and seed renders nothing and writes the same grades; a larger budget goes on from
 where a smaller one stopped. The findings' twins share renders (a blur claim's twin is the blur
 boundary's, see :func:`~sweep3d.followups.confirm.draw.draw_pairs`), so a render counts once.
@@ -47,6 +47,9 @@ from sweep3d.stages.render import LOCAL, Executor
 
 #: The budget's shares: the stability check's scene neighbours, then the replication; the second
 #: renderer gets what they leave (the findings' twins first, then at most IMAGE_SHARE for images).
+#: The default budget in runs' worth of renders: the renders the run made, twice (a render of the
+#: checks shares its twins among findings: the quickstart's 18 findings take about 28 pairs each).
+DEFAULT_RUNS = 2
 STABILITY_SHARE = 0.25
 REPLICATION_SHARE = 0.5
 MAX_PAIRS = 128  # a finding's twin pairs at most, however large the budget
@@ -74,7 +77,7 @@ class Graded:
 def grade_findings(loaded: LoadedSpec, budget: int | None = None, seed: int | None = None,
                    console: Console | None = None, wait: float = 0.0, executor: Executor = LOCAL) -> Graded:
     """Grade every finding of ``loaded``'s last run (its first model) within ``budget`` renders
-    (None: as many as the run rendered)."""
+    (None: :data:`DEFAULT_RUNS` times as many as the run rendered)."""
     from sweep3d.results import no_results
 
     if budget is not None and budget < 0:
@@ -101,7 +104,7 @@ def _graded(loaded: LoadedSpec, store: Store, budget: int | None, seed: int, con
         raise UserError(f"{loaded.path}: no results to grade yet; run: sweep3d run {loaded.path}")
     findings = listed_findings(summary)
     if budget is None:
-        budget = len({job.render_key for job in plan.jobs})
+        budget = DEFAULT_RUNS * len({job.render_key for job in plan.jobs})
     model = plan.model
     listing = record_listing(store, loaded.name, model, findings, loaded.path)
     space = space_of(loaded)
