@@ -142,6 +142,57 @@ def test_an_object_claim_swaps_the_object_and_keeps_the_rest() -> None:
         assert inside["orientation_yaw"] == outside["orientation_yaw"]
 
 
+def _rendered(row: dict) -> tuple:
+    """What a twin's render depends on here (the occluder's coverage stands for a post control: left out)."""
+    return row["object"], row["environment"], row["orientation_yaw"], row["camera_elevation"]
+
+
+def test_claims_in_the_same_scenes_share_their_twins_renders() -> None:
+    """Two claims on a post-like parameter (the occluder) in the same scenes start each pair from
+    the scene's same base: their twins are the same renders; an elevation claim's differ from them
+    in one twin at most."""
+    half = value_claim("occluder_coverage", "half", "", Choice(("none", "half", "full")))
+    full = value_claim("occluder_coverage", "full", "", Choice(("none", "half", "full")))
+    a, b = draw_pairs(SPACE, half, 40, seed=6), draw_pairs(SPACE, full, 40, seed=6)
+    renders_a = {_rendered(r) for pair in a for r in pair}
+    assert len(renders_a) == 40 and renders_a == {_rendered(r) for pair in b for r in pair}
+    elevation = boundary_claim(boundary_row("camera_elevation", "above", 40.0), "", Range(0.0, 80.0))
+    drawn = draw_pairs(SPACE, elevation, 80, seed=6)
+    base = {_rendered(r)[:3]: _rendered(r) for pair in a for r in pair}
+    shared = [p for p in drawn if _rendered(p[0])[:3] in base]
+    assert len(shared) >= 35  # the mug's scenes: the same bases (yaw) as the occluder claims'
+    assert all(base[_rendered(p[0])[:3]] in (_rendered(p[0]), _rendered(p[1])) for p in shared)
+    assert len({_rendered(r) for pair in drawn for r in pair}) > 80  # and never two pairs on one base
+
+
+def test_a_twin_keeping_its_bases_value_is_still_uniform_over_its_side() -> None:
+    """The inside twin keeps the base's value when it lies inside, else draws one: over many pairs
+    each side's values are uniform (chi-square over thirds of the side), the outside's too."""
+    from scipy.stats import chisquare
+
+    claim = boundary_claim(boundary_row("camera_elevation", "above", 20.0), "", Range(0.0, 80.0))
+    drawn = draw_pairs(SPACE, claim, 3000, seed=8)
+    inside = np.array([a["camera_elevation"] for a, _ in drawn])
+    outside = np.array([b["camera_elevation"] for _, b in drawn])
+    assert chisquare(np.histogram(inside, bins=3, range=(20, 80))[0]).pvalue > 0.001
+    assert chisquare(np.histogram(outside, bins=3, range=(0, 20))[0]).pvalue > 0.001
+    kept = np.mean([a["camera_elevation"] == b["camera_elevation"] for a, b in drawn])
+    assert kept == 0  # the twins always differ in the claim's parameter
+
+
+def test_a_budget_grants_pairs_nearest_a_decision_first_and_shared_renders_free() -> None:
+    from sweep3d.followups.confirm.run import granted, pairs_within
+
+    keys = [[("a", "b"), ("c", "d"), ("e", "f")],  # claim 0: two renders a pair
+            [("a", "x"), ("c", "y"), ("e", "z")],  # claim 1: shares a, c, e with claim 0
+            [("p", "q"), ("r", "s"), ("t", "u")]]
+    assert granted({0: 3, 1: 3, 2: 3}, [0, 0, 0], keys, None, [0, 1, 2]) == {0: 3, 1: 3, 2: 3}
+    assert granted({0: 3, 1: 3, 2: 3}, [0, 0, 0], keys, 9, [0, 1, 2]) == {0: 3, 1: 3, 2: 0}
+    assert granted({0: 3, 1: 3, 2: 3}, [0, 0, 0], keys, 9, [2, 1, 0]) == {2: 3, 1: 1, 0: 1}
+    assert granted({0: 3}, [1, 2, 0], keys, 4, [0]) == {0: 1}  # what it has stays; nothing more fits
+    assert pairs_within({"0": keys[0], "1": keys[1]}, 3, 6) == 2 and pairs_within({"0": keys[0]}, 3, 1) == 0
+
+
 def test_a_scoped_boundary_draws_in_its_object_only() -> None:
     claim = boundary_claim(boundary_row("orientation_yaw", "below", 0.0, "object", "toaster"), "",
                            Range(-180.0, 180.0))

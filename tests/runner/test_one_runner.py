@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import ast
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 
@@ -58,7 +59,7 @@ def runner(tmp_path: Path) -> Runner:
 
 
 def test_the_variants_of_the_standard_stages_are_the_runner_s(runner: Runner) -> None:
-    model = object()
+    model = SimpleNamespace(digest="d", label="m")  # a model as the runner tells models apart
     render, post, infer = runner.stages(model, every_image=True, timings={})  # type: ignore[arg-type]
     assert isinstance(render, RenderStage) and render is not runner.render and render.timings == {}
     assert isinstance(post, PostprocessStage) and post.store_images and post.handoff is None

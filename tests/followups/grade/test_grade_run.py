@@ -54,7 +54,7 @@ def test_grade_writes_a_grade_for_every_finding_and_a_rerun_renders_nothing(tmp_
     assert "[solid]" in marked.output
     printed = runner.invoke(app, ["grade", str(spec), "--budget", "96"])
     assert printed.exit_code == 0, printed.output
-    assert "solid: " in printed.output and "fresh jobs of the budget's 96 used (0 rendered now)" in \
+    assert "solid: " in printed.output and "renders of the budget's 96 used (0 rendered now)" in \
         " ".join(printed.output.split())
 
 
