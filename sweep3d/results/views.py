@@ -146,7 +146,7 @@ MACROS = ("wilson_low", "wilson_high", "binomial_cdf", "hypergeometric_cdf", "di
 
 def connect(store: Store, experiment: str | None = None, read_only: bool = False,
             writable: Sequence[Path] = (), model: str | None = None,
-            results_only: bool = False) -> duckdb.DuckDBPyConnection:
+            views: str = "all") -> duckdb.DuckDBPyConnection:
     """:meth:`Store.connect` with the aggregate views and macros over ``experiment``'s results.
 
     An experiment may test several models: ``results_all`` then holds every model's results,
@@ -159,9 +159,11 @@ def connect(store: Store, experiment: str | None = None, read_only: bool = False
             SQL that a user wrote.
         writable: files the caller itself will write through the connection (an export).
         model: the model ``results`` and the views show (its id); default the spec's first.
-        results_only: stop at ``results`` and the stability views beside it (the fragile verdicts): a
-            follow-up reading its own jobs' verdicts need not wait for every aggregate view to be
-            made (most of a cached ``grade``'s time).
+        views: ``"all"``; ``"results"`` to stop at ``results`` and the stability views beside it (the
+            fragile verdicts); ``"controls"`` to stop after the per-control views (``control_accuracy``,
+            ``control_stats``, ...), before the part, task, paired and failure-mode views. A follow-up
+            reading its own jobs' verdicts need not wait for every view to be made (most of a cached
+            ``grade``'s time).
 
     Raises:
         UserError: when ``model`` is not one of the experiment's models.
@@ -183,9 +185,12 @@ def connect(store: Store, experiment: str | None = None, read_only: bool = False
             shown = _select_model(con, models, model)
         elif model is not None:
             raise UserError(f"--model {model}: the experiment has no results yet")
-        if results_only:
+        if views == "results":
             return con
-        if register_views(con, parameters, model=shown, min_visible=min_visible) and has_view(con, "results_all"):
+        made = register_views(con, parameters, model=shown, min_visible=min_visible, controls_only=views == "controls")
+        if views == "controls":
+            return con
+        if made and has_view(con, "results_all"):
             register_compare_views(con, models, results_roles(con).has("prediction"))
         verdicts = verdict_files(store)  # other sources' verdicts (photographs, another renderer)
         register_agreement_views(con, verdicts, experiment)
@@ -234,7 +239,7 @@ def _select_model(con: duckdb.DuckDBPyConnection, models: list[str], model: str 
 
 
 def register_views(con: duckdb.DuckDBPyConnection, parameters: list[str] | None = None, *,
-                   model: str | None = None, min_visible: float | None = None) -> bool:
+                   model: str | None = None, min_visible: float | None = None, controls_only: bool = False) -> bool:
     """Create the aggregate views and macros on ``con`` (idempotent).
 
     Args:
@@ -245,6 +250,7 @@ def register_views(con: duckdb.DuckDBPyConnection, parameters: list[str] | None 
         model: the model ``results`` shows, when the jobs table holds several (``not_evaluable``
             counts that model's jobs).
         min_visible: the plan's ``[evaluator] min_visible``, shown beside the jobs it excluded.
+        controls_only: the per-control views only (no part, task, paired or failure-mode views).
 
     Returns:
         True if the views were created; False (and nothing created but the Wilson macros) when
@@ -266,6 +272,8 @@ def register_views(con: duckdb.DuckDBPyConnection, parameters: list[str] | None 
     roles = results_roles(con)
     for sql in _view_statements(columns, roles, result_measures(result_columns, roles)):
         con.execute(sql)
+    if controls_only:
+        return True
     register_part_views(con, set(result_columns))
     register_task_views(con, roles, set(result_columns), model, min_visible)
     detection_views(con, roles, set(result_columns))

@@ -306,7 +306,7 @@ def claims_of(loaded: LoadedSpec, store: Store, summary: Summary, space: Space) 
 
 def _levels(store: Store, experiment: str) -> dict[tuple[str, str], tuple[float | None, float | None]]:
     """(parameter, label) → (the level's number or bin centre, the bin's width when binned)."""
-    con = connect(store, experiment)
+    con = connect(store, experiment, views="controls")
     try:
         if not has_view(con, "control_accuracy"):
             return {}
@@ -354,7 +354,7 @@ class _Placed:
 
 def _outcomes(store: Store, experiment: str) -> dict[int, Twin]:
     """Job → (counted, correct, margin) of the fresh jobs' results."""
-    con = connect(store, experiment, results_only=True)
+    con = connect(store, experiment, views="results")
     try:
         if not has_view(con, "results"):
             return {}

@@ -33,7 +33,7 @@ def read_rule(spec: LoadedSpec) -> Rule:
 
 
 def _rule(store: Store, experiment: str) -> Rule:
-    con = connect(store, experiment, results_only=True)
+    con = connect(store, experiment, views="results")
     try:
         if not has_view(con, "fragile_threshold"):
             return Rule()

@@ -216,7 +216,7 @@ def _image_grades(loaded: LoadedSpec, store: Store, space: Any, model: str, chec
     if checked is None:
         return 0, 0
     columns = [p.column for p in space.parameters]
-    con = connect(store, loaded.name, results_only=True)
+    con = connect(store, loaded.name, views="results")
     try:
         select = ", ".join(f"r.{c}" for c in ["object", "environment", *columns])
         found = con.execute(

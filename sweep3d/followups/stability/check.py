@@ -195,7 +195,7 @@ def _sampled_results(store: Store, spec: LoadedSpec, model: str | None) -> list[
     """(pred_key, margin) of the counted results with a margin, one per prediction key."""
     from sweep3d.results import connect, no_results
 
-    con = connect(store, spec.name, model=model, results_only=True)
+    con = connect(store, spec.name, model=model, views="results")
     try:
         have = {row[0] for row in con.execute("DESCRIBE results").fetchall()} \
             if con.execute("SELECT count(*) FROM duckdb_views() WHERE view_name = 'results'").fetchone()[0] else set()
@@ -375,7 +375,7 @@ def _read(spec: LoadedSpec, model: str, thresholds: tuple[float, ...] = ()) -> t
 
     several = len(spec.spec.all_models) > 1
     with results_store(spec) as reading:
-        con = connect(reading, spec.name, model=model if several else None, results_only=True)
+        con = connect(reading, spec.name, model=model if several else None, views="results")
         try:
             have = {row[0] for row in con.execute("DESCRIBE results").fetchall()}
             shown = con.execute("SELECT any_value(model) FROM results").fetchone()[0] if "model" in have else None
@@ -403,7 +403,7 @@ def _neighbourhood(spec: LoadedSpec, model: str) -> list[dict[str, Any]]:
 
     several = len(spec.spec.all_models) > 1
     with results_store(spec) as reading:
-        con = connect(reading, spec.name, model=model if several else None, results_only=True)
+        con = connect(reading, spec.name, model=model if several else None, views="results")
         try:
             where = f"model = {literal(model)}" if several else "true"
             return _dicts(con, f"SELECT * FROM neighbourhood_accuracy WHERE {where}")

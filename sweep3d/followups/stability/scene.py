@@ -218,7 +218,7 @@ def _verdicts(store: Store, experiment: str, model: str | None, keys: set[str]) 
     """pred_key → (correct, margin) of ``experiment``'s counted results with a margin among ``keys``."""
     from sweep3d.results import connect, has_view
 
-    con = connect(store, experiment, model=model, results_only=True)
+    con = connect(store, experiment, model=model, views="results")
     try:
         if not has_view(con, "results"):
             return {}
