@@ -1,0 +1,29 @@
+"""What ``sweep3d grade`` prints after its grades: the cost, and where the budget left findings
+inconclusive, the command that goes on from there."""
+
+from __future__ import annotations
+
+from rich.console import Console
+
+from sweep3d.cli.grading import print_grades
+from sweep3d.followups.grade import Graded
+from sweep3d.results import Finding
+
+
+def _printed(grades: list[tuple[str, str]], used: int, budget: int) -> str:
+    findings = [Finding(f"k{i}", "boundary", f"[b]finding {i}[/b]", i, {}) for i in range(len(grades))]
+    console = Console(record=True, width=300)
+    print_grades(console, Graded(findings, grades, budget, used, 7, 1.0, "mitsuba"), "my [spec].toml")
+    return console.export_text()
+
+
+def test_inconclusive_findings_after_a_spent_budget_name_the_budget_that_goes_on() -> None:
+    text = _printed([("solid", "replicated"), ("inconclusive", "the budget ended")], used=470, budget=480)
+    assert "1 inconclusive: a larger budget goes on from here" in text
+    assert "sweep3d grade my [spec].toml --budget 960" in text  # the path as text, not markup
+    assert "[b]finding 1[/b]" in text and "470 renders of the budget's 480 used (7 rendered now)" in text
+
+
+def test_no_advice_when_nothing_is_inconclusive_or_the_budget_was_not_what_stopped_it() -> None:
+    assert "larger budget" not in _printed([("solid", "replicated")], used=470, budget=480)
+    assert "larger budget" not in _printed([("inconclusive", "mitsuba did not decide")], used=10, budget=480)
