@@ -1,9 +1,11 @@
 """List and stat every blob of a store's blob folders; imports nothing but the standard library,
 so that it runs as a script in a child process (see :class:`sweep3d.cache.snapshot.StateSnapshot`).
 
-    python stat_blobs.py STORE/blobs
+    python stat_blobs.py STORE/blobs [PART PARTS]
 
-writes to standard output the number of blobs n and the byte length k of their keys' text (8
+lists the blob folders (with PART and PARTS, only the PART-th of PARTS runs of them in name
+order, so that several children share the work and their outputs follow one another in key
+order) and writes to standard output the number of blobs n and the byte length k of their keys' text (8
 bytes each, little-endian), their states (n × 4 native int64: size, mtime_ns, ctime_ns, inode),
 their keys (k bytes of UTF-8, NUL between two) in key order (folder by folder, each sorted: the
 parent's sorted keys then meet them without a hash lookup), and then every other name in the
@@ -43,14 +45,13 @@ def stat_folder(path: str, folder: str, keys: list[str], states: array.array, ot
         os.close(fd)
 
 
-def main(blobs: str) -> None:
+def main(blobs: str, part: int = 0, parts: int = 1) -> None:
     keys: list[str] = []
     others: list[str] = []
     states = array.array("q")
-    for folder in sorted(os.listdir(blobs)):
-        path = os.path.join(blobs, folder)
-        if len(folder) == 2 and os.path.isdir(path):
-            stat_folder(path, folder, keys, states, others)
+    folders = [f for f in sorted(os.listdir(blobs)) if len(f) == 2 and os.path.isdir(os.path.join(blobs, f))]
+    for folder in folders[len(folders) * part // parts: len(folders) * (part + 1) // parts]:
+        stat_folder(os.path.join(blobs, folder), folder, keys, states, others)
     text = SEPARATOR.join(keys).encode("utf-8", "surrogateescape")  # names as the file system gave them
     out = sys.stdout.buffer
     out.write(len(keys).to_bytes(8, "little") + len(text).to_bytes(8, "little"))
@@ -61,4 +62,4 @@ def main(blobs: str) -> None:
 
 
 if __name__ == "__main__":
-    main(sys.argv[1])
+    main(sys.argv[1], *map(int, sys.argv[2:4]))
