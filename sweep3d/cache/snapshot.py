@@ -44,13 +44,20 @@ CHILDREN = 2  # at most this many children share the blob folders
 
 @dataclass(frozen=True)
 class Taken:
-    """What the child found: every blob's key (in key order) and file state, and each blob
+    """What the children found: every blob's key (in key order) and file state, and each blob
     folder's other names (a killed writer's temp file, a pass's blob)."""
 
-    keys: pa.Array
+    texts: tuple[str, ...]  # each child's keys, NUL between two (split when first asked for)
     states: np.ndarray
     others: dict[str, list[str]]
-    digest: str = ""  # SHA-256 of every blob's key and state as the child wrote them (not the others)
+    digest: str = ""  # SHA-256 of every blob's key and state as the children wrote them (not the others)
+
+    @cached_property
+    def keys(self) -> pa.Array:
+        """Every blob's key, in key order (a run that finds its outcomes recorded never asks)."""
+        sep = stat_blobs.SEPARATOR
+        parts = [pc.split_pattern(pa.array([text]), sep).flatten() for text in self.texts if text]
+        return pa.concat_arrays(parts) if parts else pa.array([], type=pa.string())
 
     @cached_property
     def key_set(self) -> frozenset[str]:
@@ -132,8 +139,7 @@ def _part(data: bytes) -> Taken | None:
     except UnicodeDecodeError:  # a blob's name that is not UTF-8: the parent looks for itself
         return None
     sep = stat_blobs.SEPARATOR
-    keys = pc.split_pattern(pa.array([text]), sep).flatten() if n else pa.array([], type=pa.string())
-    if len(keys) != n:
+    if (text.count(sep) + 1 if n else 0) != n or (n and not text) or (not n and text):
         return None
     others: dict[str, list[str]] = {}
     rest = data[end + length:].decode("utf-8", "surrogateescape")  # as os.listdir would name them
@@ -141,14 +147,13 @@ def _part(data: bytes) -> Taken | None:
         folder, _, name = entry.partition("/")
         others.setdefault(folder, []).append(name)
     digest = hashlib.sha256(memoryview(data)[:end + length]).hexdigest()  # ~0.05 s per 100 MB
-    return Taken(keys, states, others, digest)
+    return Taken((text,), states, others, digest)
 
 
 def _joined(parts: list[Taken]) -> Taken:
     """The children's parts as one (they hold runs of folders in name order: keys stay in order)."""
     if len(parts) == 1:
         return parts[0]
-    keys = pa.concat_arrays([p.keys for p in parts])
     others = {folder: names for p in parts for folder, names in p.others.items()}
     digest = hashlib.sha256("".join(p.digest for p in parts).encode()).hexdigest()
-    return Taken(keys, np.concatenate([p.states for p in parts]), others, digest)
+    return Taken(tuple(t for p in parts for t in p.texts), np.concatenate([p.states for p in parts]), others, digest)
