@@ -111,3 +111,17 @@ def test_damage_after_a_settled_run_is_found_and_repaired(tiny_copy: Path, many,
     assert any("damaged" in r.getMessage() for r in caplog.records)
     looked = run(load_spec(spec))  # written since: looks once more, and records
     assert sum(o.computed for o in looked.outcomes) == 0
+
+
+def test_a_run_that_computed_looks_again_so_its_first_rerun_reads_back(tiny_copy: Path, many, monkeypatch) -> None:
+    spec = tiny_copy / "spec.toml"
+    spec.write_text(spec.read_text().replace("yaw = [0, 45]", "yaw = [0, 90]"))
+    passes: list[int] = []
+    real = pipeline._run_passes
+    monkeypatch.setattr(pipeline, "_run_passes", lambda *a: passes.append(1) or real(*a))
+    computed = run(load_spec(spec))
+    assert [o.computed for o in computed.outcomes] == [2, 2, 4] and passes == [1, 1], "its passes, then a look"
+    again = run(load_spec(spec))
+    assert passes == [1, 1], "the first rerun reads back what the look found"
+    assert [(o.stage, o.total, o.cached, o.computed) for o in again.outcomes] == \
+        [(o.stage, o.total, o.total, 0) for o in computed.outcomes]
