@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import select
 import subprocess
 import sys
 import time
@@ -65,17 +66,33 @@ class Taken:
         return frozenset(self.keys.to_pylist())
 
 
+@dataclass(frozen=True)
+class Head:
+    """What a child says first: how many blobs and how long their keys' text, the digest of
+    their states and keys, and the blob folders' other names (``<folder>/<name>``)."""
+
+    n: int
+    length: int
+    digest: str
+    others: dict[str, list[str]]
+
+
 class StateSnapshot:
     """The children listing and stat'ing every blob under ``blobs`` (a store's blob folder): one
     per :data:`CHILDREN` share of the folders, as the machine has cores (the ``stat`` calls are
-    mostly the kernel's time, and a machine of two cores has one to spare while the parent plans)."""
+    mostly the kernel's time, and a machine of two cores has one to spare while the parent plans).
+    Each says its digest and other names first (:meth:`head`); the states and keys, 100 MB at
+    10⁶ blobs, are read only by a run that looks key by key (:meth:`read`)."""
 
     def __init__(self, blobs: Path) -> None:
         parts = max(1, min(CHILDREN, os.cpu_count() or 1))
         self.processes: list[subprocess.Popen] = [subprocess.Popen(
             [sys.executable, stat_blobs.__file__, str(blobs), str(part), str(parts)],
             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL) for part in range(parts)]
+        self.deadline = time.monotonic() + WAIT
+        self.heads: list[Head] | None = None  # once read
         self.taken: Taken | None = None  # once read
+        self.failed = False
 
     def states(self, keys: pa.Array) -> tuple[np.ndarray, np.ndarray] | None:
         """(the states of ``keys`` in their order, whether the snapshot has each one), waiting for
@@ -87,31 +104,89 @@ class StateSnapshot:
         found = where >= 0
         return taken.states[np.where(found, where, 0)], found
 
+    def head(self) -> tuple[str, dict[str, list[str]]] | None:
+        """(the digest of every blob's key and state, each blob folder's other names), waiting for
+        the children to have stat'ed every blob; None when one failed or hung."""
+        heads = self._heads()
+        if heads is None:
+            return None
+        digest = heads[0].digest if len(heads) == 1 else \
+            hashlib.sha256("".join(h.digest for h in heads).encode()).hexdigest()
+        return digest, {folder: names for h in heads for folder, names in h.others.items()}
+
     def read(self) -> Taken | None:
         """What the children found, waiting for them; None when one failed or hung."""
-        processes, self.processes = self.processes, []
-        if not processes:
+        if self.taken is not None or self.failed:
             return self.taken
-        deadline = time.monotonic() + WAIT
-        outputs: list[bytes] = []
-        for process in processes:
+        looked = self.head()
+        heads = self.heads
+        if looked is None or heads is None:
+            return None
+        texts, states = [], []
+        for process, head in zip(self.processes, heads):
+            bulk = _read_exact(process, 32 * head.n + head.length, self.deadline)
+            if bulk is None:
+                return self._fail()
+            states.append(np.frombuffer(bulk, dtype=np.int64, count=4 * head.n).reshape(head.n, 4))
             try:
-                outputs.append(process.communicate(timeout=max(0.0, deadline - time.monotonic()))[0])
-            except subprocess.TimeoutExpired:
-                _stop(processes)
-                return None
-        if any(p.returncode != 0 for p in processes):
-            return None
-        parts = [_part(data) for data in outputs]
-        if None in parts:
-            return None
-        self.taken = _joined(parts)  # type: ignore[arg-type]
+                texts.append(bulk[32 * head.n:].decode())
+            except UnicodeDecodeError:  # a blob's name that is not UTF-8: the parent looks for itself
+                return self._fail()
+            if (texts[-1].count(stat_blobs.SEPARATOR) + 1 if head.n else 0) != head.n:
+                return self._fail()
+        _stop(self.processes)
+        self.taken = Taken(tuple(texts), np.concatenate(states), looked[1], looked[0])
         return self.taken
 
     def close(self) -> None:
         """Stop the children if they still run (their answer is not needed)."""
-        processes, self.processes = self.processes, []
-        _stop(processes)
+        _stop(self.processes)
+
+    def _heads(self) -> list[Head] | None:
+        if self.heads is None and not self.failed:
+            heads = [_read_head(process, self.deadline) for process in self.processes]
+            if None in heads:
+                self._fail()
+                return None
+            self.heads = heads  # type: ignore[assignment]
+        return self.heads
+
+    def _fail(self) -> None:
+        self.failed = True
+        _stop(self.processes)
+
+
+def _read_head(process: subprocess.Popen, deadline: float) -> Head | None:
+    """A child's :class:`Head`; None when it failed, hung or wrote something else."""
+    sizes = _read_exact(process, 56, deadline)
+    if sizes is None:
+        return None
+    n, length, rest = (int.from_bytes(sizes[i:i + 8], "little") for i in (0, 8, 16))
+    names = _read_exact(process, rest, deadline)
+    if names is None:
+        return None
+    others: dict[str, list[str]] = {}
+    text = names.decode("utf-8", "surrogateescape")  # as os.listdir would name them
+    for entry in text.split(stat_blobs.SEPARATOR) if text else ():
+        folder, _, name = entry.partition("/")
+        others.setdefault(folder, []).append(name)
+    return Head(n, length, sizes[24:56].hex(), others)
+
+
+def _read_exact(process: subprocess.Popen, size: int, deadline: float) -> bytes | None:
+    """``size`` bytes of the child's output, waiting until ``deadline``; None when it ends first."""
+    fd = process.stdout.fileno()  # type: ignore[union-attr]
+    chunks, left = [], size
+    while left:
+        ready, _, _ = select.select([fd], [], [], max(0.0, deadline - time.monotonic()))
+        if not ready:
+            return None
+        chunk = os.read(fd, min(left, 1 << 20))
+        if not chunk:
+            return None
+        chunks.append(chunk)
+        left -= len(chunk)
+    return b"".join(chunks)
 
 
 def _stop(processes: list[subprocess.Popen]) -> None:
@@ -119,41 +194,6 @@ def _stop(processes: list[subprocess.Popen]) -> None:
     for process in processes:
         if process.poll() is None:
             process.kill()
-        try:
-            process.communicate()
-        except ValueError:  # its output was read already
-            pass
-
-
-def _part(data: bytes) -> Taken | None:
-    """What one child wrote, as a :class:`Taken`; None when it is not whole."""
-    if len(data) < 16:
-        return None
-    n, length = int.from_bytes(data[:8], "little"), int.from_bytes(data[8:16], "little")
-    end = 16 + 32 * n
-    if len(data) < end + length:
-        return None
-    states = np.frombuffer(data, dtype=np.int64, count=4 * n, offset=16).reshape(n, 4)
-    try:
-        text = data[end:end + length].decode()
-    except UnicodeDecodeError:  # a blob's name that is not UTF-8: the parent looks for itself
-        return None
-    sep = stat_blobs.SEPARATOR
-    if (text.count(sep) + 1 if n else 0) != n or (n and not text) or (not n and text):
-        return None
-    others: dict[str, list[str]] = {}
-    rest = data[end + length:].decode("utf-8", "surrogateescape")  # as os.listdir would name them
-    for entry in rest.split(sep) if rest else ():
-        folder, _, name = entry.partition("/")
-        others.setdefault(folder, []).append(name)
-    digest = hashlib.sha256(memoryview(data)[:end + length]).hexdigest()  # ~0.05 s per 100 MB
-    return Taken((text,), states, others, digest)
-
-
-def _joined(parts: list[Taken]) -> Taken:
-    """The children's parts as one (they hold runs of folders in name order: keys stay in order)."""
-    if len(parts) == 1:
-        return parts[0]
-    others = {folder: names for p in parts for folder, names in p.others.items()}
-    digest = hashlib.sha256("".join(p.digest for p in parts).encode()).hexdigest()
-    return Taken(tuple(t for p in parts for t in p.texts), np.concatenate([p.states for p in parts]), others, digest)
+        process.wait()
+        if process.stdout is not None:
+            process.stdout.close()

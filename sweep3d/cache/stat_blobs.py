@@ -5,12 +5,15 @@ so that it runs as a script in a child process (see :class:`sweep3d.cache.snapsh
 
 lists the blob folders (with PART and PARTS, only the PART-th of PARTS runs of them in name
 order, so that several children share the work and their outputs follow one another in key
-order) and writes to standard output the number of blobs n and the byte length k of their keys' text (8
-bytes each, little-endian), their states (n × 4 native int64: size, mtime_ns, ctime_ns, inode),
-their keys (k bytes of UTF-8, NUL between two) in key order (folder by folder, each sorted: the
-parent's sorted keys then meet them without a hash lookup), and then every other name in the
-blob folders as ``<folder>/<name>``, NUL between two (a killed writer's temp file, a pass's blob);
-a name that is not UTF-8 is written as the file system gave it (``surrogateescape``).
+order) and writes to standard output the number of blobs n, the byte length k of their keys' text and the
+byte length m of the other names (8 bytes each, little-endian), the SHA-256 of the states and
+keys that follow (32 bytes), every other name in the blob folders as ``<folder>/<name>``, NUL
+between two (m bytes: a killed writer's temp file, a pass's blob), then the blobs' states (n × 4
+native int64: size, mtime_ns, ctime_ns, inode) and their keys (k bytes of UTF-8, NUL between
+two) in key order (folder by folder, each sorted: the parent's sorted keys then meet them
+without a hash lookup). A name that is not UTF-8 is written as the file system gave it
+(``surrogateescape``). A parent that needs only the digest and the other names closes the pipe
+after them.
 A blob is ``<key>.png`` in the folder named by its key's first two characters, as the store
 places it. Everything is listed and stat'ed before anything is written: the reader only streams.
 """
@@ -18,6 +21,7 @@ places it. Everything is listed and stat'ed before anything is written: the read
 from __future__ import annotations
 
 import array
+import hashlib
 import os
 import sys
 
@@ -53,12 +57,19 @@ def main(blobs: str, part: int = 0, parts: int = 1) -> None:
     for folder in folders[len(folders) * part // parts: len(folders) * (part + 1) // parts]:
         stat_folder(os.path.join(blobs, folder), folder, keys, states, others)
     text = SEPARATOR.join(keys).encode("utf-8", "surrogateescape")  # names as the file system gave them
+    rest = SEPARATOR.join(others).encode("utf-8", "surrogateescape")
+    digest = hashlib.sha256(states.tobytes())
+    digest.update(text)
     out = sys.stdout.buffer
-    out.write(len(keys).to_bytes(8, "little") + len(text).to_bytes(8, "little"))
-    states.tofile(out)
-    out.write(text)
-    out.write(SEPARATOR.join(others).encode("utf-8", "surrogateescape"))
-    out.flush()
+    try:
+        out.write(len(keys).to_bytes(8, "little") + len(text).to_bytes(8, "little") + len(rest).to_bytes(8, "little"))
+        out.write(digest.digest() + rest)
+        out.flush()
+        states.tofile(out)  # read only by a parent that looks key by key: one that has the digest may close the pipe
+        out.write(text)
+        out.flush()
+    except BrokenPipeError:
+        os._exit(0)
 
 
 if __name__ == "__main__":

@@ -45,11 +45,11 @@ def fingerprint(store: Store, spec: LoadedSpec, jobs: str | None) -> str | None:
     """The digest of what a run's passes over ``jobs`` (the jobs file's digest) would read, from
     the snapshot of blob states the run took; None where there is none, or no jobs digest."""
     snapshot = store.state_snapshot
-    taken = snapshot.read() if snapshot is not None else None
-    if taken is None or not taken.digest or jobs is None or spec.policy.adaptive:
+    looked = snapshot.head() if snapshot is not None and jobs is not None and not spec.policy.adaptive else None
+    if looked is None:
         return None
     h = hashlib.sha256(FORMAT)
-    for part in (source_digest(), jobs, spec.text(), taken.digest, table_states(store)):
+    for part in (source_digest(), jobs, spec.text(), looked[0], table_states(store)):
         data = part.encode("utf-8", "surrogatepass")
         h.update(len(data).to_bytes(8, "little") + data)
     return h.hexdigest()
