@@ -10,7 +10,8 @@ and nothing is discarded or made again over it.
 A run also checks the blobs it counts as cached (:func:`damaged_blobs`), so a damaged one is
 recomputed even when nothing downstream reads it again. What it verified is remembered in
 ``verified/<table>.parquet`` under the store, by file state, so a rerun hashes only blobs whose
-file changed since (see :func:`damaged_blobs` for what that does and does not catch).
+file changed since (see :func:`damaged_blobs` for what that does and does not catch); a run's
+passes add the blobs they write (:func:`remember_verified`), so the first rerun hashes none.
 """
 
 from __future__ import annotations

@@ -16,6 +16,12 @@ lock (what killed runs left are temp files, not blobs: removing them changes no 
 forgets it (:meth:`Store.forget_states`) once its first pass has found what is cached, before
 anything is computed. A key the snapshot lacks is stat'ed directly, and a child
 that fails or hangs costs only the time waited: the states are then taken as before.
+
+The work is shared by up to :data:`CHILDREN` children, each a run of the folders in name order.
+Each sends the digest of its blobs' keys and states and the folders' other names first
+(:meth:`StateSnapshot.head`: what a run whose outcomes are recorded needs, see
+``sweep3d.runner.settled``), and the states and keys themselves after, read only by a run that
+looks key by key (:meth:`StateSnapshot.read`).
 """
 
 from __future__ import annotations
