@@ -293,8 +293,8 @@ def _run_locked(spec: LoadedSpec, store: Store, console: Console | None, runner:
         _run_passes(spec, store, overlap, models, runner, result, found)
         if before is not None and tables == settled.table_states(store):  # the passes wrote no table
             settled.remember(store, spec, before, result.outcomes)
-        elif before is not None and not result.failed:
-            _look_again(spec, store, overlap, models, runner, result, jobs)
+        elif not result.failed and max(len(plan.jobs) for plan in result.plans) >= SNAPSHOT_MIN_JOBS:
+            _look_again(spec, store, overlap, models, runner, result, jobs)  # a cold run's too: it took no snapshot
     result.seconds = time.perf_counter() - started
     store.append("runs", [{
         "run_id": result.run_id, "experiment": spec.name, "spec_path": str(spec.path),
@@ -308,12 +308,17 @@ def _run_locked(spec: LoadedSpec, store: Store, console: Console | None, runner:
 
 def _look_again(spec: LoadedSpec, store: Store, overlap: bool, models: list[ModelHandle], runner: Runner,
                 result: RunResult, jobs: str | None) -> None:
-    """After a run over a large store that computed something, look at the store once more as
-    its next run would, and record what that finds when it is settled (:mod:`.settled`): the
-    first rerun then reads its outcomes back instead of looking key by key. At 10⁶ jobs the look
-    costs seconds after hours of rendering; anything it finds to do it does, as the next run would."""
+    """After a large run that computed something (a cold one included), look at the store once
+    more as its next run would, and record what that finds when it is settled (:mod:`.settled`):
+    the first rerun then reads its outcomes back instead of looking key by key. At 10⁶ jobs the
+    look costs seconds after hours of rendering; anything it finds to do it does, as the next run
+    would. ``jobs``: the plans' jobs digest, when the run made it already."""
+    if spec.policy.adaptive:  # each round planned from the outcomes: its reruns always look
+        return
     store.snapshot_states()
-    digest = settled.fingerprint(store, spec, jobs)
+    if store.state_snapshot is None:  # few blobs: the next run looks key by key anyway (and cheaply)
+        return
+    digest = settled.fingerprint(store, spec, jobs or jobs_digest(result.plans))
     tables = settled.table_states(store)
     look = RunResult(result.run_id, result.plan, plans=result.plans, store=store)
     _run_passes(spec, store, overlap, models, runner, look, [None] * len(result.plans))  # type: ignore[list-item]

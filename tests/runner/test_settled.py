@@ -125,3 +125,19 @@ def test_a_run_that_computed_looks_again_so_its_first_rerun_reads_back(tiny_copy
     assert passes == [1, 1], "the first rerun reads back what the look found"
     assert [(o.stage, o.total, o.cached, o.computed) for o in again.outcomes] == \
         [(o.stage, o.total, o.total, 0) for o in computed.outcomes]
+
+
+@pytest.mark.slow
+def test_a_cold_run_looks_again_at_its_end_so_its_first_rerun_reads_back(tmp_path: Path, many,
+                                                                           monkeypatch) -> None:
+    from tests.helpers import TINY_SPEC, write_spec
+
+    spec = write_spec(tmp_path, TINY_SPEC)
+    monkeypatch.setattr(snapshot, "MIN_BLOBS", 1)  # none at its start: the snapshot is taken at its end only
+    passes: list[int] = []
+    real = pipeline._run_passes
+    monkeypatch.setattr(pipeline, "_run_passes", lambda *a: passes.append(1) or real(*a))
+    cold = run(load_spec(spec))
+    assert cold.failed == 0 and sum(o.computed for o in cold.outcomes) > 0 and passes == [1, 1]
+    assert _outcomes(run(load_spec(spec))) == [(o.stage, o.total, o.total, 0, 0, 0) for o in cold.outcomes]
+    assert passes == [1, 1]
