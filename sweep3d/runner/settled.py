@@ -18,8 +18,9 @@ rewritten is another digest, and the run looks key by key as before (and finds t
 The blob states are the ones the run's child takes anyway while the parent plans
 (:mod:`sweep3d.cache.snapshot`: one ``stat`` per blob, on the other core), hashed as the child
 wrote them: a run with no snapshot (a store of few blobs, a small plan, a child that failed)
-has no digest and looks key by key. Temp files that killed writers left are removed before
-the digest is taken and are not part of it. Not covered, as for the memo: damage that
+has no digest and looks key by key. The blob folders' other files (a truth pass's
+``<key>.depth.npz``, which a run checks only for being there) enter the digest by their names;
+temp files that killed writers left are removed before the passes and are not part of it. Not covered, as for the memo: damage that
 bypasses the file system (bit rot, writes to the raw device); ``sweep3d cache verify`` hashes
 every blob. Adaptive policies, whose later rounds are planned from the outcomes, always look.
 """
@@ -48,8 +49,10 @@ def fingerprint(store: Store, spec: LoadedSpec, jobs: str | None) -> str | None:
     looked = snapshot.head() if snapshot is not None and jobs is not None and not spec.policy.adaptive else None
     if looked is None:
         return None
+    others = "\n".join(f"{folder}/{name}" for folder, names in sorted(looked[1].items())
+                       for name in sorted(names) if not _temp(name))  # a pass's blob (depth.npz): by its name
     h = hashlib.sha256(FORMAT)
-    for part in (source_digest(), jobs, spec.text(), looked[0], table_states(store)):
+    for part in (source_digest(), jobs, spec.text(), looked[0], others, table_states(store)):
         data = part.encode("utf-8", "surrogatepass")
         h.update(len(data).to_bytes(8, "little") + data)
     return h.hexdigest()
@@ -92,6 +95,12 @@ def remember(store: Store, spec: LoadedSpec, digest: str | None, outcomes: list[
 def forget(store: Store, spec: LoadedSpec) -> None:
     """Drop the record (a run that found work to do: it would only be read to be refused)."""
     _path(store, spec).unlink(missing_ok=True)
+
+
+def _temp(name: str) -> bool:
+    """Whether ``name`` is a killed writer's temp file (``cache.garbage.TEMP_PATTERN``): the run
+    removes it before its passes, whatever the digest says."""
+    return name.startswith(".") and name.endswith(".tmp")
 
 
 def _path(store: Store, spec: LoadedSpec) -> Path:

@@ -61,7 +61,11 @@ def test_the_digest_follows_every_file_and_input_a_run_reads(tiny_copy: Path, ma
     spec = tiny_copy / "spec.toml"
     spec.write_text(spec.read_text() + "\n# another spec\n")
     seen.append(_print(tiny_copy))
+    (first.parent / f"{first.stem}.depth.npz").write_bytes(b"a pass")  # another kind of blob, by its name
+    seen.append(_print(tiny_copy))
     assert len(set(seen)) == len(seen), seen
+    (first.parent / ".killed.png.dead.tmp").write_bytes(b"half")
+    assert _print(tiny_copy) == seen[-1], "a killed writer's temp file is removed before the passes, not looked at"
 
 
 def test_without_a_snapshot_there_is_no_digest(tiny_copy: Path, monkeypatch) -> None:
