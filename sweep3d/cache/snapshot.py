@@ -95,7 +95,6 @@ class StateSnapshot:
         self.processes: list[subprocess.Popen] = [subprocess.Popen(
             [sys.executable, stat_blobs.__file__, str(blobs), str(part), str(parts)],
             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL) for part in range(parts)]
-        self.deadline = time.monotonic() + WAIT
         self.heads: list[Head] | None = None  # once read
         self.taken: Taken | None = None  # once read
         self.failed = False
@@ -129,8 +128,9 @@ class StateSnapshot:
         if looked is None or heads is None:
             return None
         texts, states = [], []
+        deadline = time.monotonic() + WAIT  # the children have stat'ed every blob: they only write now
         for process, head in zip(self.processes, heads):
-            bulk = _read_exact(process, 32 * head.n + head.length, self.deadline)
+            bulk = _read_exact(process, 32 * head.n + head.length, deadline)
             if bulk is None:
                 return self._fail()
             states.append(np.frombuffer(bulk, dtype=np.int64, count=4 * head.n).reshape(head.n, 4))
@@ -150,7 +150,8 @@ class StateSnapshot:
 
     def _heads(self) -> list[Head] | None:
         if self.heads is None and not self.failed:
-            heads = [_read_head(process, self.deadline) for process in self.processes]
+            deadline = time.monotonic() + WAIT  # counted from the first look, as planning may take long
+            heads = [_read_head(process, deadline) for process in self.processes]
             if None in heads:
                 self._fail()
                 return None
