@@ -9,7 +9,16 @@ from typing import TYPE_CHECKING as _TYPE_CHECKING  # noqa: E402
 from sweep3d.core import exports as _exports  # noqa: E402
 
 if _TYPE_CHECKING:
-    from sweep3d.cache.blobs import damaged_blobs, load_image, load_pass, load_pixels, sha256_bytes
+    from sweep3d.cache.blobs import (
+        Verified,
+        damaged_blobs,
+        load_image,
+        load_pass,
+        load_pixels,
+        remember_verified,
+        sha256_bytes,
+        verified_now,
+    )
     from sweep3d.cache.compaction import compact_table
     from sweep3d.cache.contracts import (
         KEY_COLUMN,
@@ -35,6 +44,7 @@ if _TYPE_CHECKING:
         is_full_disk,
         read_parquet,
         safe_filename,
+        scan,
         store_error,
         utc_now,
     )

@@ -10,7 +10,8 @@ and nothing is discarded or made again over it.
 A run also checks the blobs it counts as cached (:func:`damaged_blobs`), so a damaged one is
 recomputed even when nothing downstream reads it again. What it verified is remembered in
 ``verified/<table>.parquet`` under the store, by file state, so a rerun hashes only blobs whose
-file changed since (see :func:`damaged_blobs` for what that does and does not catch).
+file changed since (see :func:`damaged_blobs` for what that does and does not catch); a run's
+passes add the blobs they write (:func:`remember_verified`), so the first rerun hashes none.
 """
 
 from __future__ import annotations
@@ -27,7 +28,16 @@ import pyarrow as pa
 import pyarrow.compute as pc
 
 from sweep3d.cache.key_join import positions, sorted_keys
-from sweep3d.cache.store import DIGEST_COLUMN, KEY_COLUMN, READ_ERRORS, Store, StoreReadError, read_parquet, store_error
+from sweep3d.cache.store import (
+    DIGEST_COLUMN,
+    KEY_COLUMN,
+    READ_ERRORS,
+    Store,
+    StoreReadError,
+    StoreWriteError,
+    read_parquet,
+    store_error,
+)
 
 #: Columns of a ``verified/<table>.parquet`` memo: a blob's key, its file state when it was last
 #: hashed, and the digest it had then.
@@ -320,6 +330,33 @@ def check_blob(path: str, digests: set[str], last: Verified | None) -> Verified 
     digest = sha256_bytes(data)
     intact = digest in digests if digests else decode_image(data) is not None
     return Verified(state, digest) if intact else "damaged"
+
+
+def verified_now(path: str) -> Verified | None:
+    """The blob at ``path`` as it is now: its file state, taken before its bytes are read (as
+    :func:`check_blob` takes it, so that a later write shows as another state), and their digest;
+    None when it cannot be read."""
+    try:
+        with open(path, "rb") as fh:
+            st = os.fstat(fh.fileno())
+            data = fh.read()
+    except OSError:
+        return None
+    return Verified((st.st_size, st.st_mtime_ns, st.st_ctime_ns, st.st_ino), sha256_bytes(data))
+
+
+def remember_verified(store: Store, table: str, fresh: dict[str, Verified]) -> None:
+    """Add ``fresh`` to the memo of ``table``: blobs a stage has just written, each read back
+    (:func:`verified_now`) with the digest its row records, so that the first rerun hashes none of
+    them again (:func:`damaged_blobs`). A memo that cannot be written is only hashed again."""
+    if not fresh:
+        return
+    memo = _read_memo_table(store, table)
+    kept = memo.filter(pc.invert(pc.is_in(memo.column("key"), value_set=pa.array(sorted(fresh), type=pa.string()))))
+    try:
+        store.write_table_file(memo_path(store, table), _memo_rows(kept, fresh))
+    except StoreWriteError:
+        pass
 
 
 def memo_path(store: Store, table: str) -> Path:

@@ -1,14 +1,19 @@
 """List and stat every blob of a store's blob folders; imports nothing but the standard library,
 so that it runs as a script in a child process (see :class:`sweep3d.cache.snapshot.StateSnapshot`).
 
-    python stat_blobs.py STORE/blobs
+    python stat_blobs.py STORE/blobs [PART PARTS]
 
-writes to standard output the number of blobs n and the byte length k of their keys' text (8
-bytes each, little-endian), their states (n × 4 native int64: size, mtime_ns, ctime_ns, inode),
-their keys (k bytes of UTF-8, NUL between two) in key order (folder by folder, each sorted: the
-parent's sorted keys then meet them without a hash lookup), and then every other name in the
-blob folders as ``<folder>/<name>``, NUL between two (a killed writer's temp file, a pass's blob);
-a name that is not UTF-8 is written as the file system gave it (``surrogateescape``).
+lists the blob folders (with PART and PARTS, only the PART-th of PARTS runs of them in name
+order, so that several children share the work and their outputs follow one another in key
+order) and writes to standard output the number of blobs n, the byte length k of their keys' text and the
+byte length m of the other names (8 bytes each, little-endian), the SHA-256 of the states and
+keys that follow (32 bytes), every other name in the blob folders as ``<folder>/<name>``, NUL
+between two (m bytes: a killed writer's temp file, a pass's blob), then the blobs' states (n × 4
+native int64: size, mtime_ns, ctime_ns, inode) and their keys (k bytes of UTF-8, NUL between
+two) in key order (folder by folder, each sorted: the parent's sorted keys then meet them
+without a hash lookup). A name that is not UTF-8 is written as the file system gave it
+(``surrogateescape``). A parent that needs only the digest and the other names closes the pipe
+after them.
 A blob is ``<key>.png`` in the folder named by its key's first two characters, as the store
 places it. Everything is listed and stat'ed before anything is written: the reader only streams.
 """
@@ -16,6 +21,7 @@ places it. Everything is listed and stat'ed before anything is written: the read
 from __future__ import annotations
 
 import array
+import hashlib
 import os
 import sys
 
@@ -43,22 +49,28 @@ def stat_folder(path: str, folder: str, keys: list[str], states: array.array, ot
         os.close(fd)
 
 
-def main(blobs: str) -> None:
+def main(blobs: str, part: int = 0, parts: int = 1) -> None:
     keys: list[str] = []
     others: list[str] = []
     states = array.array("q")
-    for folder in sorted(os.listdir(blobs)):
-        path = os.path.join(blobs, folder)
-        if len(folder) == 2 and os.path.isdir(path):
-            stat_folder(path, folder, keys, states, others)
+    folders = [f for f in sorted(os.listdir(blobs)) if len(f) == 2 and os.path.isdir(os.path.join(blobs, f))]
+    for folder in folders[len(folders) * part // parts: len(folders) * (part + 1) // parts]:
+        stat_folder(os.path.join(blobs, folder), folder, keys, states, others)
     text = SEPARATOR.join(keys).encode("utf-8", "surrogateescape")  # names as the file system gave them
+    rest = SEPARATOR.join(others).encode("utf-8", "surrogateescape")
+    digest = hashlib.sha256(states.tobytes())
+    digest.update(text)
     out = sys.stdout.buffer
-    out.write(len(keys).to_bytes(8, "little") + len(text).to_bytes(8, "little"))
-    states.tofile(out)
-    out.write(text)
-    out.write(SEPARATOR.join(others).encode("utf-8", "surrogateescape"))
-    out.flush()
+    try:
+        out.write(len(keys).to_bytes(8, "little") + len(text).to_bytes(8, "little") + len(rest).to_bytes(8, "little"))
+        out.write(digest.digest() + rest)
+        out.flush()
+        states.tofile(out)  # read only by a parent that looks key by key: one that has the digest may close the pipe
+        out.write(text)
+        out.flush()
+    except BrokenPipeError:
+        os._exit(0)
 
 
 if __name__ == "__main__":
-    main(sys.argv[1])
+    main(sys.argv[1], *map(int, sys.argv[2:4]))

@@ -111,8 +111,8 @@ class BlobFolders:
     def blob_others(self, folder: str) -> Iterable[str]:
         """What the blob folder ``blobs/<folder>`` holds besides blobs: from the snapshot's
         listing where a run took one (:meth:`snapshot_states`), else from :meth:`blob_listing`."""
-        taken = self.state_snapshot.read() if self.state_snapshot is not None and len(folder) == 2 else None
-        return taken.others.get(folder, ()) if taken is not None else self.blob_listing(folder).others
+        looked = self.state_snapshot.head() if self.state_snapshot is not None and len(folder) == 2 else None
+        return looked[1].get(folder, ()) if looked is not None else self.blob_listing(folder).others
 
     def blob_listing(self, folder: str) -> BlobListing:
         """What the blob folder ``blobs/<folder>`` holds (nothing when it is not there).

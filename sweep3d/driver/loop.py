@@ -28,7 +28,17 @@ from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import pyarrow as pa
 
-from sweep3d.cache import BLOB_TABLES, KEY_COLUMN, SegmentWriter, Store, damaged_blobs
+from sweep3d.cache import (
+    BLOB_TABLES,
+    DIGEST_COLUMN,
+    KEY_COLUMN,
+    SegmentWriter,
+    Store,
+    Verified,
+    damaged_blobs,
+    remember_verified,
+    verified_now,
+)
 from sweep3d.core import UserError
 from sweep3d.driver.jobs import Job, JobList, Plan
 from sweep3d.driver.outcome import StageOutcome
@@ -246,8 +256,9 @@ class _Pass:
     """Runs the stages of one pass together; everything it records, it records in one thread."""
 
     def __init__(self, runs: list[StagePass], plan: Plan, store: Store, bars: list[StageProgress],
-                 writers: Writers) -> None:
+                 writers: Writers, fresh: dict[str, dict[str, Verified]] | None = None) -> None:
         self.runs, self.plan, self.store, self.bars, self.writers = runs, plan, store, bars, writers
+        self.fresh = fresh if fresh is not None else defaultdict(dict)  # blobs written, read back: see _record
         self.recorded: dict[str, dict[str, dict[str, Any]]] = {
             table: {} for r in runs for table in (r.stage.table, *r.stage.side_tables)}
         self.running = [bool(r.ready or r.waiting) for r in runs]  # stages still computing
@@ -332,6 +343,8 @@ class _Pass:
             if item.row is not None:
                 self.recorded[stage.table][item.key] = item.row
                 self.writers.add(stage.table, item.row)
+                if stage.owns_blobs and item.row.get(DIGEST_COLUMN):
+                    self._written(stage.table, item.key, item.row[DIGEST_COLUMN])
             for row in item.rows:
                 self.recorded[stage.table][row[KEY_COLUMN[stage.table]]] = row
                 self.writers.add(stage.table, row)
@@ -342,6 +355,14 @@ class _Pass:
                 for job in later.waiting.pop((stage.table, item.key), ()):
                     feed.put(job)
         self.bars[index].advance(failed=item.error is not None)
+
+    def _written(self, table: str, key: str, digest: str) -> None:
+        """Remember the blob a stage has just written as verified, when it reads back with the
+        digest its row records: the memo of verified blobs gets it at the pass's end, and the
+        first rerun need not hash it (a write after this read shows as another file state)."""
+        verified = verified_now(self.store.blob_file(key))
+        if verified is not None and verified.digest == digest:
+            self.fresh[table][key] = verified
 
     def _done(self, index: int) -> None:
         """Stage ``index`` has computed everything: what still waits for it is skipped, and a
@@ -377,13 +398,21 @@ def run_pass(stages: Sequence[Stage], plan: Plan, store: Store, progress: RunPro
     with ExitStack() as stack:
         bars = [stack.enter_context(progress.stage(getattr(r.stage, "title", r.stage.name), len(r.keys), r.outcome.cached))
                 if b else StageProgress(None, None) for r, b in zip(runs, busy)]
+        fresh: dict[str, dict[str, Verified]] = defaultdict(dict)
+        stack.callback(_remember_fresh, store, fresh)  # after the rows are flushed (the last callback runs first)
         writers = Writers(store, schemas)
         stack.callback(writers.flush)
-        _Pass(runs, plan, store, bars, writers).run()
+        _Pass(runs, plan, store, bars, writers, fresh).run()
     _discard_damaged_inputs(runs, store)
     for run in runs:
         run.outcome.seconds = run.seconds
     return [r.outcome for r in runs]
+
+
+def _remember_fresh(store: Store, fresh: dict[str, dict[str, Verified]]) -> None:
+    """Add the blobs the pass wrote and read back to the memo of verified blobs, one write per table."""
+    for table, verified in fresh.items():
+        remember_verified(store, table, verified)
 
 
 def _discard_damaged_inputs(runs: list[StagePass], store: Store) -> None:

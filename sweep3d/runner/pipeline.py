@@ -53,6 +53,7 @@ from sweep3d.driver import (
     unique_jobs,
 )
 from sweep3d.driver import metadata as plugins_metadata
+from sweep3d.runner import settled
 from sweep3d.runner.runner import Runner, running
 from sweep3d.spec import CLASS_NAMES_METADATA, MODELS_METADATA, PROTOCOL_METADATA, LoadedSpec
 from sweep3d.stages.infer import ModelHandle
@@ -163,25 +164,34 @@ def _hidden_truths(plan: Plan, store: Store, con) -> set[str]:
         "AND coalesce(visible_fraction, 0) < ?", [keys, plan.spec.evaluator.min_visible]).fetchall()}
 
 
-def write_jobs(plans: Plan | list[Plan], store: Store) -> None:
+def write_jobs(plans: Plan | list[Plan], store: Store, digest: str | None = None) -> None:
     """Record the plans (one per model) as the experiment's jobs table (what ``results`` joins
     against); an unchanged table leaves the file as it is.
 
-    A plan's digest (:meth:`Plan.fingerprint`, with :func:`_jobs_format`) is remembered with the
-    file it was written to (:mod:`sweep3d.cache.written`): a rerun of the same plan compares
-    digests instead of building and encoding 10⁶ rows again, unless the file changed since.
+    A plan's digest (:func:`jobs_digest`; ``digest``: the caller's, made from the same plans) is
+    remembered with the file it was written to (:mod:`sweep3d.cache.written`): a rerun of the
+    same plan compares digests instead of building and encoding 10⁶ rows again, unless the file
+    changed since.
     """
     plans = [plans] if isinstance(plans, Plan) else plans
     path = store.jobs_path(plans[0].spec.name)
     recorded = _recorded(plans)
-    prints, salt = [plan.fingerprint() for plan in plans], _jobs_format()
-    digest = None if None in prints or salt is None else \
-        hashlib.sha256(b"\n".join([salt, *map(str.encode, prints), *recorded.values()])).hexdigest()
+    digest = digest or jobs_digest(plans, recorded)
     if digest is not None and written_from(store, path) == digest:
         return
     store.write_table_file(path, jobs_table(plans, recorded), keep_same=True)
     if digest is not None:
         remember_written(store, path, digest)
+
+
+def jobs_digest(plans: list[Plan], recorded: dict[bytes, bytes] | None = None) -> str | None:
+    """A digest of the jobs file ``plans`` make (:meth:`Plan.fingerprint`, what the run records
+    beside them, :func:`_jobs_format`) without building it; None where a plan has none."""
+    recorded = _recorded(plans) if recorded is None else recorded
+    prints, salt = [plan.fingerprint() for plan in plans], _jobs_format()
+    if None in prints or salt is None:
+        return None
+    return hashlib.sha256(b"\n".join([salt, *map(str.encode, prints), *recorded.values()])).hexdigest()  # type: ignore[arg-type]
 
 
 def jobs_table(plans: list[Plan], recorded: dict[bytes, bytes] | None = None) -> pa.Table:
@@ -266,12 +276,25 @@ def _run_locked(spec: LoadedSpec, store: Store, console: Console | None, runner:
         store.forget_states()  # few blobs to check: waiting for the child's look at every blob costs more
     remove_leftovers(store)  # before anything is written (planning reads no blob folder)
     result = RunResult(uuid.uuid4().hex[:12], plans[0], plans=plans, store=store)
-    missing, found = _missing_renders(plans, store, runner.executor)
-    _note_device(plans, missing, console)
-    _warn_if_slow(plans, store, runner.executor, console, missing)
-    if any(missing.values()):
-        runner.render.warm_up(plans[0])  # Blender starts while the model is checked (both take seconds)
-    _run_passes(spec, store, overlap, models, runner, result, found)
+    jobs = jobs_digest(plans) if store.state_snapshot is not None else None
+    before = settled.fingerprint(store, spec, jobs)  # what the passes would read, as it is now
+    remembered = settled.recall(store, spec, before)
+    if remembered is not None:  # the same run found everything complete, and nothing it reads has changed
+        store.forget_states()
+        write_jobs(plans, store, jobs)
+        result.outcomes = remembered
+    else:
+        tables = settled.table_states(store) if before is not None else None
+        missing, found = _missing_renders(plans, store, runner.executor)
+        _note_device(plans, missing, console)
+        _warn_if_slow(plans, store, runner.executor, console, missing)
+        if any(missing.values()):
+            runner.render.warm_up(plans[0])  # Blender starts while the model is checked (both take seconds)
+        _run_passes(spec, store, overlap, models, runner, result, found)
+        if before is not None and tables == settled.table_states(store):  # the passes wrote no table
+            settled.remember(store, spec, before, result.outcomes)
+        elif not result.failed and max(len(plan.jobs) for plan in result.plans) >= SNAPSHOT_MIN_JOBS:
+            _look_again(spec, store, overlap, models, runner, result, jobs)  # a cold run's too: it took no snapshot
     result.seconds = time.perf_counter() - started
     store.append("runs", [{
         "run_id": result.run_id, "experiment": spec.name, "spec_path": str(spec.path),
@@ -281,6 +304,27 @@ def _run_locked(spec: LoadedSpec, store: Store, console: Console | None, runner:
     }])
     compact_crowded_tables(store)
     return result
+
+
+def _look_again(spec: LoadedSpec, store: Store, overlap: bool, models: list[ModelHandle], runner: Runner,
+                result: RunResult, jobs: str | None) -> None:
+    """After a large run that computed something (a cold one included), look at the store once
+    more as its next run would, and record what that finds when it is settled (:mod:`.settled`):
+    the first rerun then reads its outcomes back instead of looking key by key. At 10⁶ jobs the
+    look costs seconds after hours of rendering; anything it finds to do it does, as the next run
+    would. ``jobs``: the plans' jobs digest, when the run made it already."""
+    if spec.policy.adaptive:  # each round planned from the outcomes: its reruns always look
+        return
+    store.snapshot_states()
+    if store.state_snapshot is None:  # few blobs: the next run looks key by key anyway (and cheaply)
+        return
+    digest = settled.fingerprint(store, spec, jobs or jobs_digest(result.plans))
+    tables = settled.table_states(store)
+    look = RunResult(result.run_id, result.plan, plans=result.plans, store=store)
+    _run_passes(spec, store, overlap, models, runner, look, [None] * len(result.plans))  # type: ignore[list-item]
+    store.forget_states()
+    if tables == settled.table_states(store):
+        settled.remember(store, spec, digest, look.outcomes)
 
 
 def _run_passes(spec: LoadedSpec, store: Store, overlap: bool, models: list[ModelHandle], runner: Runner,
@@ -402,7 +446,7 @@ def compact_crowded_tables(store: Store, limit: int = AUTO_COMPACT_SEGMENTS) -> 
     Every run adds a few segments per table; readers bind each file, so a store grown over
     hundreds of runs would take seconds to open. Returns the tables merged.
     """
-    crowded = [t for t in TABLES if len(store.readable_segments(t)) > limit]
+    crowded = [t for t in TABLES if len(store.segments(t)) > limit and len(store.readable_segments(t)) > limit]
     for table in crowded:
         compact_table(store, table)
     return crowded

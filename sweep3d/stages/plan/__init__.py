@@ -10,6 +10,7 @@ from sweep3d.core import exports as _exports  # noqa: E402
 
 if _TYPE_CHECKING:
     from sweep3d.stages.plan.design import SceneRows, check_output, design_order, rows_by_scene, write_design
+    from sweep3d.stages.plan.keys_memo import source_digest
     from sweep3d.stages.plan.planner import History, count_jobs, make_plan
     from sweep3d.stages.plan.policies import POLICIES, GridPolicy, Listed, Outcome, Policy, PolicyParams, TablePolicy
     from sweep3d.stages.plan.step_fit import fit_step

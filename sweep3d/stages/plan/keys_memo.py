@@ -137,3 +137,9 @@ def write_keys(store: Store, path: Path, fingerprint: str, keys: dict[str, list[
         store.write_table_file(path, table)
     except StoreWriteError:
         pass
+
+
+def source_digest() -> str:
+    """What :func:`_code_digest` covers (sweep3d's source, Python's and numpy's versions), for
+    another record of the store that holds only while the code that made it is the same."""
+    return _code_digest()
