@@ -33,8 +33,9 @@ LLVM_LIBRARIES = ("/usr/lib/x86_64-linux-gnu/libLLVM-19.so", "/usr/lib/llvm-19/l
 #: lights, the world, the filter) changes its pixels: part of every Mitsuba render key.
 #: 2: poses on the vertices, suns by to_world (kept.py); 3: the denoiser's aux pass apart; 4: the object
 #: posed by an instance, renders replayed by Dr.Jit (frozen.py), the aux pass through a box filter, a tent
-#: pixel filter (scene.py)
-MITSUBA_TRANSLATION = 4
+#: pixel filter (scene.py); 5: under a JIT variant the tent filter sampled by importance, a pixel the mean
+#: of its samples, the denoiser's albedo and normals along the camera's rays (frozen.py)
+MITSUBA_TRANSLATION = 5
 #: Mesh files the Mitsuba engine reads (its own OBJ/MTL reader: ``mitsuba/objfile.py``).
 MITSUBA_MESHES = (".obj",)
 
