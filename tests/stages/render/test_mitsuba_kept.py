@@ -150,10 +150,11 @@ def test_sweep3d_s_traced_render_is_mitsuba_s_through_a_box_filter(tmp_path: Pat
     scene.render()
     loaded, mi, aux = scene.loaded, scene.mi, scene._aux()
     camera = sensor_index(loaded, "sensor")
-    image, channels = scene.frozen(loaded, 3, 5, aux, (camera, camera), structure=hash(scene.kept.key))
+    # 5 samples: the multi-jittered sampler takes 6 (a 2 × 3 grid), as mitsuba.render does
+    image, channels = scene.frozen(loaded, 5, 7, aux, (camera, camera), structure=hash(scene.kept.key))
     assert image.shape == (24, 24, 4) and channels is not None and channels.shape == (24, 24, 6)
-    beauty = np.asarray(mi.render(loaded, sensor=camera, spp=3, seed=5), dtype=np.float32)
-    albedo_normals = np.asarray(mi.render(loaded, sensor=camera, integrator=aux, spp=3, seed=5), dtype=np.float32)
+    beauty = np.asarray(mi.render(loaded, sensor=camera, spp=5, seed=7), dtype=np.float32)
+    albedo_normals = np.asarray(mi.render(loaded, sensor=camera, integrator=aux, spp=5, seed=7), dtype=np.float32)
     assert np.abs(image - beauty).max() <= 1e-4 * max(1.0, float(beauty.max()))
     assert np.abs(channels - albedo_normals[..., -6:]).max() <= 1e-5
     assert beauty[..., 3].min() < 0.5 < beauty[..., 3].max()  # the object and the background both in the crop

@@ -69,6 +69,7 @@ class FrozenRender:
         width, height = (int(v) for v in camera.film().crop_size())
         sampler = camera.sampler().clone()  # seeded as mitsuba.render seeds the sensor's sampler
         sampler.set_sample_count(spp)
+        spp = sampler.sample_count()  # the multi-jittered grid's: 5 asked are 6 (2 × 3), as mitsuba.render takes
         sampler.set_samples_per_wavefront(spp)
         sampler.seed(seed, width * height * spp)
         pixel = dr.arange(mi.UInt32, width * height * spp) // spp  # a pixel's samples side by side
