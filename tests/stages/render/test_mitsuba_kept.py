@@ -93,8 +93,8 @@ def test_a_job_renders_the_same_pixels_kept_or_loaded_afresh(tmp_path: Path, mes
 
 @pytest.mark.skipif(llvm_library() is None, reason="no LLVM library: nothing is frozen under scalar_rgb")
 def test_a_denoised_job_replayed_by_a_kept_worker_is_the_same_as_afresh(tmp_path: Path, mesh: str) -> None:
-    """The denoiser's albedo and normals come through the camera's twin (a second sensor, moved
-    with the camera): replayed after other jobs, as traced in a fresh worker."""
+    """The denoiser's albedo and normals come along the camera's own rays (frozen.py): replayed
+    after other jobs, as traced in a fresh worker."""
     environment = EnvironmentRef(color=(0.2, 0.3, 0.4), key_light=KeyLightSpec())
     kept = _scene(tmp_path, "llvm_ad_rgb", denoise=True)
     kept.prepare(mesh, environment)
@@ -135,3 +135,34 @@ def test_what_no_parameter_updates_loads_the_scene_again() -> None:
     structure = dict(parts.structure)
     assert structure["integrator.max_depth"] == 9 and structure["integrator.hide_emitters"] is False
     assert structure["sensor.film.width"] == 32 and structure["object_0000.filename"] == "a.ply"
+
+
+@pytest.mark.skipif(llvm_library() is None, reason="no LLVM library: nothing is traced under scalar_rgb")
+def test_sweep3d_s_traced_render_is_mitsuba_s_through_a_box_filter(tmp_path: Path, mesh: str) -> None:
+    """frozen.py's own loop (a pixel the mean of its samples, the aux integrator along the same
+    rays) takes the samples and rays that ``mitsuba.render`` takes through a box-filtered film:
+    the same pixels, crop and all."""
+    from sweep3d.stages.render.mitsuba.scene import sensor_index
+
+    scene = MitsubaSceneFactory(tmp_path)
+    scene.prepare(mesh, EnvironmentRef(color=(0.2, 0.3, 0.4), key_light=KeyLightSpec()))
+    scene.pose_scene(replace(BASE, yaw=60.0))
+    scene.render()
+    loaded, mi, aux = scene.loaded, scene.mi, scene._aux()
+    camera = sensor_index(loaded, "sensor")
+    # 5 samples: the multi-jittered sampler takes 6 (a 2 × 3 grid), as mitsuba.render does
+    image, channels = scene.frozen(loaded, 5, 7, aux, (camera, camera), structure=hash(scene.kept.key))
+    assert image.shape == (24, 24, 4) and channels is not None and channels.shape == (24, 24, 6)
+    beauty = np.asarray(mi.render(loaded, sensor=camera, spp=5, seed=7), dtype=np.float32)
+    albedo_normals = np.asarray(mi.render(loaded, sensor=camera, integrator=aux, spp=5, seed=7), dtype=np.float32)
+    assert np.abs(image - beauty).max() <= 1e-4 * max(1.0, float(beauty.max()))
+    assert np.abs(channels - albedo_normals[..., -6:]).max() <= 1e-5
+    assert beauty[..., 3].min() < 0.5 < beauty[..., 3].max()  # the object and the background both in the crop
+
+
+def MitsubaSceneFactory(tmp_path: Path):  # noqa: N802  (a 32² frame cropped to its centre 24²)
+    from sweep3d.stages.render.mitsuba.scene import MitsubaScene
+
+    settings = RenderSettings(resolution=32, crop=24, samples=2, denoise=True, engine="mitsuba",
+                              variant="llvm_ad_rgb")
+    return MitsubaScene(settings, tmp_path)

@@ -33,8 +33,9 @@ LLVM_LIBRARIES = ("/usr/lib/x86_64-linux-gnu/libLLVM-19.so", "/usr/lib/llvm-19/l
 #: lights, the world, the filter) changes its pixels: part of every Mitsuba render key.
 #: 2: poses on the vertices, suns by to_world (kept.py); 3: the denoiser's aux pass apart; 4: the object
 #: posed by an instance, renders replayed by Dr.Jit (frozen.py), the aux pass through a box filter, a tent
-#: pixel filter (scene.py)
-MITSUBA_TRANSLATION = 4
+#: pixel filter (scene.py); 5: under a JIT variant the tent filter sampled by importance, a pixel the mean
+#: of its samples, the denoiser's albedo and normals along the camera's rays (frozen.py)
+MITSUBA_TRANSLATION = 5
 #: Mesh files the Mitsuba engine reads (its own OBJ/MTL reader: ``mitsuba/objfile.py``).
 MITSUBA_MESHES = (".obj",)
 
@@ -101,13 +102,14 @@ class MitsubaBackend(Backend):
     support = SUPPORT
     #: Per 224² render, on Cycles' basis (its figures in cycles/backend.py), by the variant this
     #: machine renders with. llvm_ad_rgb (the scene kept per worker, the object posed by an
-    #: instance, the render replayed by Dr.Jit, OpenImageDenoise "fast"): 0.56× Cycles' time per
-    #: render at the quickstart's 4 samples on a quiet machine (0.57× its CPU; 0.43× under a load
-    #: of 4–7), its samples about 0.2× Cycles' cost each (benchmarks/engine_cost.py and
-    #: mitsuba_denoise.py; RESULTS.md, "Mitsuba at a fraction of Cycles' cost"). scalar_rgb: the
-    #: issue-45 measurement, 2.2× Cycles' CPU a sample and 0.17 s more a render ("The Mitsuba
+    #: instance, the render replayed by Dr.Jit, a pixel the mean of its own samples with the
+    #: denoiser's albedo and normals along the same rays, OpenImageDenoise "fast"): 0.49× Cycles'
+    #: CPU a render at the quickstart's 4 samples (0.50× its time; load about 2), its samples about
+    #: 0.13× Cycles' cost each (benchmarks/engine_cost.py and mitsuba_denoise.py; RESULTS.md, "Mitsuba
+    #: at a fraction of Cycles' cost" and "2026-11-29: the film's splatting left out"). scalar_rgb:
+    #: the issue-45 measurement, 2.2× Cycles' CPU a sample and 0.17 s more a render ("The Mitsuba
     #: engine's cost in plan's estimate"), made before those changes: an upper bound.
-    seconds_224 = (0.007, 0.042) if llvm_library() else (0.075, 0.19)
+    seconds_224 = (0.0045, 0.042) if llvm_library() else (0.075, 0.19)
 
     def scene(self, settings, scratch, log=None, gpu=None) -> MitsubaScene:
         """A ``MitsubaScene`` (imported only now: Cycles' workers never load Mitsuba)."""

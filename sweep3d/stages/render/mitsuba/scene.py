@@ -35,7 +35,9 @@ from sweep3d.stages.render.mitsuba.objfile import MtlMaterial, ObjMesh, read_obj
 from sweep3d.stages.render.state import SceneState
 from sweep3d.stages.render.worker_protocol import EnvironmentRef, Look, RenderSettings
 
-#: The pixel filter's radius in pixels: a tent as wide as Cycles' 1.5 px Blackman-Harris. Its
+#: The pixel filter's radius in pixels under ``scalar_rgb`` (a JIT variant renders each pixel as the
+#: mean of its own samples, a box of the same 0.29–0.31 px standard deviation, its film's splatting
+#: 20 ms CPU a render: frozen.py): a tent as wide as Cycles' 1.5 px Blackman-Harris. Its
 #: standard deviation (0.31 px) is the Gaussian's that it replaced (0.3 px; 54–60 dB apart at 256
 #: samples), whose 1.2 px reach (4 standard deviations) spread each sample over more pixels of
 #: Mitsuba's film: 61 against 52 ms CPU of a 4-sample 224² render's path tracing (toaster in studio;
@@ -49,7 +51,8 @@ DENOISE_QUALITY = "fast"
 #: Names of the object's instance and of the group of its pieces (``object_0000``, …) in a scene
 #: description: every shape of the object is named from "object".
 OBJECT, OBJECT_PARTS = "object", "object_parts"
-#: The name of the camera's twin that sees the denoiser's albedo and normals (:func:`aux_sensor`).
+#: The name of the camera's twin that sees the denoiser's albedo and normals under ``scalar_rgb``
+#: (:func:`aux_sensor`; a JIT variant reads them along the camera's own rays: frozen.py).
 AUX_SENSOR = "aux_sensor"
 #: Objects (mesh, look) a worker keeps read, least recently used first out (as Cycles' workers keep 16).
 MAX_KEPT_OBJECTS = 16
@@ -171,15 +174,22 @@ class MitsubaScene:
         denoise = s.denoise if state.denoise is None else state.denoise
         background = self.background()
         path = {"type": "path", "max_depth": s.max_bounces + 1, "hide_emitters": background is not None}
-        scene = self.describe(path, translate.camera(state, s.resolution, s.crop, FILTER_RADIUS))
-        if denoise:  # the denoiser's albedo and normals seen by a twin of the camera (aux_sensor)
+        traced = self.frozen.replayed is not None  # a JIT variant: sweep3d's own loop (frozen.py)
+        sensor = translate.camera(state, s.resolution, s.crop, FILTER_RADIUS)
+        if traced:  # each pixel the mean of its own samples, no splatting (frozen.py)
+            sensor["film"]["rfilter"] = {"type": "box"}
+        scene = self.describe(path, sensor)
+        twin = denoise and not traced
+        if twin:  # scalar_rgb: the denoiser's albedo and normals seen by a twin of the camera (aux_sensor)
             scene[AUX_SENSOR] = aux_sensor(scene["sensor"])
         self.loaded = self.kept.scene_for(scene)  # the truth passes look at the same scene
-        # the denoiser's albedo and normals from a first-hit pass over the same samples: the path
-        # tracer nested in an ``aov`` integrator took twice as long for the same pixels
+        # the denoiser's albedo and normals from a first-hit pass over the same samples (under a JIT
+        # variant along the camera's own rays, in the same kernel: frozen.py): the path tracer nested
+        # in an ``aov`` integrator took twice as long for the same pixels
         camera = sensor_index(self.loaded, "sensor")
         image, aux = self.frozen(self.loaded, s.samples, s.seed, self._aux() if denoise else None,
-                                 (camera, sensor_index(self.loaded, AUX_SENSOR) if denoise else camera))
+                                 (camera, sensor_index(self.loaded, AUX_SENSOR) if twin else camera),
+                                 hash(self.kept.key))
         rgb, alpha = np.maximum(image[..., :3], 0.0), np.clip(image[..., 3:4], 0.0, 1.0)
         if aux is not None:
             import pyoidn
