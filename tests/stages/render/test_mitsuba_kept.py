@@ -166,3 +166,22 @@ def MitsubaSceneFactory(tmp_path: Path):  # noqa: N802  (a 32² frame cropped to
     settings = RenderSettings(resolution=32, crop=24, samples=2, denoise=True, engine="mitsuba",
                               variant="llvm_ad_rgb")
     return MitsubaScene(settings, tmp_path)
+
+
+@pytest.mark.skipif(llvm_library() is None, reason="no LLVM library: nothing is frozen under scalar_rgb")
+def test_a_thin_lens_renders_between_replayed_jobs_as_in_a_fresh_worker(tmp_path: Path, mesh: str) -> None:
+    """A camera with an aperture (``fstop`` > 0) holds a value a frozen render cannot take as input:
+    its jobs are traced each time, between pinhole jobs that are replayed, and equal a fresh worker's."""
+    environment = EnvironmentRef(color=(0.2, 0.3, 0.4), key_light=KeyLightSpec())
+    states = [replace(BASE, fstop=2.8), BASE, replace(BASE, fstop=2.8, yaw=50.0), replace(BASE, yaw=50.0)]
+    kept = _scene(tmp_path, "llvm_ad_rgb", denoise=True)
+    kept.prepare(mesh, environment)
+    images = []
+    for state in states:
+        kept.pose_scene(state)
+        images.append(kept.render())
+    fresh = _scene(tmp_path, "llvm_ad_rgb", denoise=True)
+    fresh.prepare(mesh, environment)
+    fresh.pose_scene(states[2])
+    assert np.abs(fresh.render() - images[2]).max() <= DENOISED_ULPS
+    assert not np.array_equal(images[2], images[3])  # the aperture blurs what the pinhole keeps sharp

@@ -100,8 +100,11 @@ class FrozenRender:
             beauty, channels = self._rendered(scene, seed, spp, aux, sensors)
             return (np.asarray(beauty, dtype=np.float32),
                     None if channels is None else np.asarray(channels, dtype=np.float32))
-        self._prime(scene, sensors[0], aux)
-        out = self.replayed(scene, self.mi.UInt32(seed), spp, aux, sensors[0], structure)
+        if scene.sensors()[sensors[0]].needs_aperture_sample():  # a thin lens holds a value Dr.Jit cannot
+            out = self._traced(scene, self.mi.UInt32(seed), spp, aux, sensors[0], structure)  # see: traced each time
+        else:
+            self._prime(scene, sensors[0], aux)
+            out = self.replayed(scene, self.mi.UInt32(seed), spp, aux, sensors[0], structure)
         width, height = (int(v) for v in scene.sensors()[sensors[0]].film().crop_size())
         image = np.stack([np.asarray(channel, dtype=np.float32) for channel in out], axis=-1)
         image = image.reshape(height, width, len(out))
