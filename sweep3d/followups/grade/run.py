@@ -45,11 +45,11 @@ from sweep3d.results import (
 from sweep3d.spec import LoadedSpec
 from sweep3d.stages.render import LOCAL, Executor
 
-#: The budget's shares: the stability check's scene neighbours, then the replication; the second
-#: renderer gets what they leave (the findings' twins first, then at most IMAGE_SHARE for images).
 #: The default budget in runs' worth of renders: the renders the run made, twice (a render of the
 #: checks shares its twins among findings: the quickstart's 18 findings take about 28 pairs each).
 DEFAULT_RUNS = 2
+#: The budget's shares: the stability check's scene neighbours, then the replication; the second
+#: renderer gets what they leave (the findings' twins first, then at most IMAGE_SHARE for images).
 STABILITY_SHARE = 0.25
 REPLICATION_SHARE = 0.5
 MAX_PAIRS = 128  # a finding's twin pairs at most, however large the budget
