@@ -53,6 +53,7 @@ DEFAULT_RUNS = 2
 STABILITY_SHARE = 0.25
 REPLICATION_SHARE = 0.5
 MAX_PAIRS = 128  # a finding's twin pairs at most, however large the budget
+MIN_IMAGES = 16  # the stability check's least sample within a grade
 IMAGE_SHARE = 16  # 1/16 of the budget is kept for the sampled failure images on the second renderer
 REPLICATION_FIRST = 16  # twin pairs of a finding's first look: a strong effect decides on them
 ENGINE_FIRST = 8  # the second renderer's first look, in pairs
@@ -160,15 +161,27 @@ def _stability(loaded: LoadedSpec, seed: int, console: Console | None, executor:
                share: int) -> tuple[Any, int]:
     """The stability check of the first model (sequential), or None where it does not apply; and
     the renders its scene neighbours used. The images are as many as ``share`` renders of
-    neighbours allow (the image changes cost no render), between 16 and 256."""
+    neighbours allow (the image changes cost no render): see :func:`stability_sample`."""
     from sweep3d.followups.stability import DEFAULT_SAMPLE, check_stability, neighbours_per_image
 
     if loaded.evaluator.kind != "classification":
         return None, 0
     each = neighbours_per_image(loaded) if loaded.spec.stability.scene else 0
-    cap = 4 * DEFAULT_SAMPLE if not each else max(16, min(4 * DEFAULT_SAMPLE, share // each))
-    checked = check_stability(loaded, min(DEFAULT_SAMPLE, cap), seed, console, executor=executor, max_sample=cap)[0]
+    scene, cap = stability_sample(share, each, DEFAULT_SAMPLE)
+    checked = check_stability(loaded, min(DEFAULT_SAMPLE, cap), seed, console, executor=executor, max_sample=cap,
+                              scene=None if scene else False)[0]
     return checked, len(checked.scene.planned) if checked.scene is not None else 0
+
+
+def stability_sample(share: int, each: int, sample: int) -> tuple[bool, int]:
+    """(whether the scene neighbours are rendered, the most images) for ``share`` renders at
+    ``each`` neighbours an image: as many images as the share renders the neighbours of, between
+    :data:`MIN_IMAGES` and four default samples. A share that cannot render the neighbours of half
+    the least sample (a budget of a few renders, ``--budget 0``) checks the image changes only,
+    which render nothing; without scene neighbours the images cost no render at all."""
+    if each and share >= each * MIN_IMAGES // 2:
+        return True, max(MIN_IMAGES, min(4 * sample, share // each))
+    return False, 4 * sample
 
 
 def _second_renderer(loaded: LoadedSpec, store: Store, space: Any, result: Any, replicated: list[str], left: int,
