@@ -95,7 +95,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Sequence
+from typing import Literal, Sequence
 
 import duckdb
 import pyarrow as pa
@@ -146,7 +146,7 @@ MACROS = ("wilson_low", "wilson_high", "binomial_cdf", "hypergeometric_cdf", "di
 
 def connect(store: Store, experiment: str | None = None, read_only: bool = False,
             writable: Sequence[Path] = (), model: str | None = None,
-            views: str = "all") -> duckdb.DuckDBPyConnection:
+            views: Literal["all", "controls", "results"] = "all") -> duckdb.DuckDBPyConnection:
     """:meth:`Store.connect` with the aggregate views and macros over ``experiment``'s results.
 
     An experiment may test several models: ``results_all`` then holds every model's results,
