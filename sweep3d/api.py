@@ -200,7 +200,7 @@ class Experiment:
     def grade(self, budget: int | None = None, seed: int | None = None, progress: bool = True, *,
               wait: float = 0.0) -> Graded:
         """Grade every finding of the last run, like ``sweep3d grade`` (``budget``: the most renders
-        the checks may use, cached ones included, default twice as many as the run rendered; ``seed``
+        the checks may use, cached ones included, default two thirds of what the run rendered; ``seed``
         default the spec's); the grades are the ``findings`` view's and lead the report."""
         from rich.console import Console
 

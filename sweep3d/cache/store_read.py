@@ -284,6 +284,7 @@ class SegmentReads:
         """
         files = self.view_files(experiment) if files is None else files
         con = duckdb.connect()
+        con.execute("SET parquet_metadata_cache = true")
         for contract in table_contracts():
             if contract.name in files:
                 listing = ", ".join(_sql_str(str(p)) for p in files[contract.name])

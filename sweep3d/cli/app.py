@@ -295,9 +295,10 @@ def bench(
 def grade(
     spec: Path = SpecArg,
     budget: Optional[int] = typer.Option(None, "--budget", min=0, show_default=False,
-                                         help="Most renders the checks may use, cached ones included (default: as "
-                                              "twice the renders the run made; the same budget and seed give the same "
-                                              "grades and render nothing the second time)."),
+                                         help="Most renders the checks may use, cached ones included (default: two "
+                                              "thirds of the renders the run made, so grading takes less time than the "
+                                              "run; the same budget and seed give the same grades and render nothing "
+                                              "the second time)."),
     seed: Optional[int] = typer.Option(None, "--seed", min=0, show_default=False,
                                        help="Seed of the checks' draws (default: the spec's)."),
     wait: float = typer.Option(0.0, help="Seconds to wait for another command holding the store's lock."),

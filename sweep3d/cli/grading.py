@@ -32,7 +32,7 @@ def print_grades(console: Console, graded: Graded, spec_path: object) -> None:
         console.print(f"stability: {checked.sampled} images checked; {fragile}; threshold |margin| < "
                       f"{checked.threshold:.3g}", highlight=False, soft_wrap=True)
     if counts["inconclusive"] and graded.used >= graded.budget // 2:
-        console.print(f"{counts['inconclusive']} inconclusive: a larger budget goes on from here, reusing every render "
+        console.print(f"{counts['inconclusive']} inconclusive: a larger budget goes on from here, reusing the renders made "
                       f"(sweep3d grade {escape(str(spec_path))} --budget {2 * max(graded.budget, 1)})",
                       highlight=False, soft_wrap=True)
     console.print(f"{graded.used} renders of the budget's {graded.budget} used ({graded.rendered} rendered now); "

@@ -34,6 +34,7 @@ if _TYPE_CHECKING:
         OPEN,
         UNCONFIRMED,
         Verdict,
+        first_look,
         judge,
         look_z,
         mcnemar_one_sided,

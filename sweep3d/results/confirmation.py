@@ -190,6 +190,17 @@ def look_z(looks: int, alpha: float = ALPHA) -> float:
     return NormalDist().inv_cdf(1 - alpha / (2 * max(1, looks)))
 
 
+def first_look(pairs: int, least: int) -> int:
+    """The first look's pairs when the looks double up to ``pairs`` (what a budget pays each
+    finding): ``pairs`` halved, rounded up, while the half is still ``least`` or more. A budget
+    too small for two looks of ``least`` pairs gets one look, so no share of the error rate goes
+    to a look the budget could not pay for."""
+    first = max(1, pairs)
+    while (first + 1) // 2 >= max(1, least):
+        first = (first + 1) // 2
+    return first
+
+
 def pairs_needed(findings: int, alpha: float = ALPHA) -> int:
     """The fewest twin pairs with which a finding tested among ``findings`` can be confirmed at
     all: every pair discordant its way gives p = 2^-n, which Holm multiplies by up to ``findings``."""

@@ -34,7 +34,7 @@ REGION_LIMIT = 3  # control values a summary names where the model fails, most c
 BOUNDARY_LIMIT = 3  # boundaries of single objects or environments a summary names, most certain first
 #: Bump when :func:`summarise` gives other numbers for the same rows without a change to this
 #: module or to the views' module (both are part of a remembered summary's key).
-SUMMARY_FORMAT = 6
+SUMMARY_FORMAT = 7
 
 
 @dataclass
@@ -96,6 +96,9 @@ class Summary:
     #: boxes over several parameters where the model fails more (``rules.rule_dict``; best first;
     #: none beyond ``rules.SUMMARY_LIMIT`` counted results)
     rules: list[dict[str, Any]] = field(default_factory=list)
+    #: each level of each parameter as [parameter, label, value or bin centre, bin width when binned]
+    #: (``control_accuracy``): what a failure mode's fresh twins are drawn around
+    levels: list[list[Any]] = field(default_factory=list)
 
     @property
     def wrong(self) -> int:
@@ -171,7 +174,19 @@ def summarise(con: duckdb.DuckDBPyConnection, columns: list[str], failure_limit:
     rules = [rule_dict(rule) for rule in rules_of(con)] if counted <= RULES_LIMIT else []
     return Summary(jobs, evaluated, invalid, correct, accuracy, objects, environments, scene_accuracy,
                    scene_count, effects, failures, per_object, counted, sum(reasons.values()), reasons, min_visible,
-                   regions, gap, boundaries, no_boundaries, len(more), more, *fragile_findings(con, have), rules)
+                   regions, gap, boundaries, no_boundaries, len(more), more, *fragile_findings(con, have), rules,
+                   level_values(con))
+
+
+def level_values(con: duckdb.DuckDBPyConnection) -> list[list[Any]]:
+    """[parameter, label, value or bin centre, bin width when binned] of each level present
+    (``control_accuracy`` with ``control_stats``); none without those views."""
+    if not has_view(con, "control_accuracy"):
+        return []
+    rows = con.execute("SELECT a.parameter, a.label, a.value, CASE WHEN s.binned THEN s.width END "
+                       "FROM control_accuracy a JOIN control_stats s USING (parameter, position) "
+                       "WHERE NOT a.absent ORDER BY a.parameter, a.label").fetchall()
+    return [[p, label, value, width] for p, label, value, width in rows]
 
 
 def fragile_findings(con: duckdb.DuckDBPyConnection, have: set[str]) -> tuple[int | None, float | None, int, int]:

@@ -180,17 +180,20 @@ def test_a_twin_keeping_its_bases_value_is_still_uniform_over_its_side() -> None
     assert kept == 0  # the twins always differ in the claim's parameter
 
 
-def test_a_budget_grants_pairs_nearest_a_decision_first_and_shared_renders_free() -> None:
-    from sweep3d.followups.confirm.run import granted, pairs_within
+def test_a_budget_allots_shared_renders_first_and_stays_within_it() -> None:
+    from sweep3d.followups.confirm.run import allotted
 
     keys = [[("a", "b"), ("c", "d"), ("e", "f")],  # claim 0: two renders a pair
-            [("a", "x"), ("c", "y"), ("e", "z")],  # claim 1: shares a, c, e with claim 0
-            [("p", "q"), ("r", "s"), ("t", "u")]]
-    assert granted({0: 3, 1: 3, 2: 3}, [0, 0, 0], keys, None, [0, 1, 2]) == {0: 3, 1: 3, 2: 3}
-    assert granted({0: 3, 1: 3, 2: 3}, [0, 0, 0], keys, 9, [0, 1, 2]) == {0: 3, 1: 3, 2: 0}
-    assert granted({0: 3, 1: 3, 2: 3}, [0, 0, 0], keys, 9, [2, 1, 0]) == {2: 3, 1: 1, 0: 1}
-    assert granted({0: 3}, [1, 2, 0], keys, 4, [0]) == {0: 1}  # what it has stays; nothing more fits
-    assert pairs_within({"0": keys[0], "1": keys[1]}, 3, 6) == 2 and pairs_within({"0": keys[0]}, 3, 1) == 0
+            [("a", "b"), ("c", "d"), ("e", "f")],  # claim 1: the same twins (a blur claim's beside another's)
+            [("p", "q"), ("r", "s"), ("t", "u")]]  # claim 2: its own renders
+    assert allotted(keys, 0) == [0, 0, 0]
+    assert allotted(keys, 2) == [1, 1, 0]  # one pair's renders give two claims a pair each
+    assert allotted(keys, 4) == [1, 1, 1]  # then a claim with none before one with one (the root of its pairs)
+    assert allotted(keys, 12) == [3, 3, 3]
+    assert allotted(keys, 11) == [3, 3, 2]
+    for budget in range(13):  # never more distinct renders than the budget, each claim a prefix of its pairs
+        counts = allotted(keys, budget)
+        assert len({k for group, n in zip(keys, counts) for pair in group[:n] for k in pair}) <= budget
 
 
 def test_a_scoped_boundary_draws_in_its_object_only() -> None:

@@ -22,10 +22,10 @@ if _TYPE_CHECKING:
     from sweep3d.followups.confirm.run import (
         ConfirmResult,
         Twin,
+        allotted,
         claims_of,
         confirm,
         distinct_renders,
-        pairs_within,
         render_rows,
         render_twins,
     )

@@ -12,6 +12,7 @@ on. Twins whose prediction is invalid or whose object is hidden are dropped with
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -28,7 +29,6 @@ from sweep3d.results import (
     Verdict,
     connect,
     has_view,
-    mcnemar_one_sided,
     numeric_scales,
     sequential,
     stored_summary,
@@ -75,14 +75,15 @@ class ConfirmResult:
 def confirm(loaded: LoadedSpec, renders: int = DEFAULT_RENDERS, seed: int | None = None,
             console: Console | None = None, claims: list[Claim] | None = None, wait: float = 0.0,
             executor: Executor = LOCAL, max_renders: int | None = None,
-            render_budget: int | None = None) -> ConfirmResult:
+            render_budget: int | None = None, found: tuple[Any, Summary] | None = None) -> ConfirmResult:
     """Confirm every significant finding of ``loaded``'s last run on ``renders`` fresh renders each
     (``renders // 2`` twin pairs), drawn with ``seed`` (default: the spec's); ``claims``: these
     instead of the run's findings. With ``max_renders`` above ``renders``, the findings neither
     confirmed nor bounded get more pairs in looks, doubling up to ``max_renders // 2``
     (:func:`sweep3d.results.confirmation.sequential`; None: one look). ``render_budget``: the most
-    distinct renders the pairs may use, cached or not (the pairs per finding cut to fit; claims
-    share renders, see :func:`~sweep3d.followups.confirm.draw.draw_pairs`). It holds the store's writer lock from its start to its end
+    distinct renders the pairs may use, cached or not, allotted to the claims where they give the
+    most pairs (claims share renders, see :func:`allotted`), judged in one look. ``found``: the run's plan
+    and summary when the caller has them (read again otherwise). It holds the store's writer lock from its start to its end
     (``wait``: seconds to wait for another command holding it), its renders' run within it, by
     the runner on ``executor``."""
     from sweep3d.results import no_results
@@ -95,18 +96,21 @@ def confirm(loaded: LoadedSpec, renders: int = DEFAULT_RENDERS, seed: int | None
         raise no_results(store, loaded.name, loaded.path)
     cap = renders if max_renders is None else max(renders, max_renders)
     with store.lock(wait):
-        return _confirmed(loaded, store, renders, seed, console, claims, executor, cap, render_budget)
+        return _confirmed(loaded, store, renders, seed, console, claims, executor, cap, render_budget, found)
 
 
 def _confirmed(loaded: LoadedSpec, store: Store, renders: int, seed: int, console: Console | None,
                claims: list[Claim] | None, executor: Executor = LOCAL, cap: int | None = None,
-               render_budget: int | None = None) -> ConfirmResult:
+               render_budget: int | None = None, found: tuple[Any, Summary] | None = None) -> ConfirmResult:
     """:func:`confirm`, holding the store's lock."""
     from sweep3d.runner import plans_as_run, run
 
-    discovery = plans_as_run(loaded, store)[0]
+    if found is None:
+        discovery = plans_as_run(loaded, store)[0]
+        summary = stored_summary(store, loaded.name, discovery.columns, scales=numeric_scales(loaded.controls))
+    else:
+        discovery, summary = found
     seen = {job.image_key for job in list(discovery.jobs) + list(discovery.out_of_frame)}
-    summary = stored_summary(store, loaded.name, discovery.columns, scales=numeric_scales(loaded.controls))
     store.require_readable(loaded.path)  # findings of the rows that read would not be the run's
     if summary.accuracy is None:
         raise UserError(f"{loaded.path}: no results to confirm yet; run: sweep3d run {loaded.path}")
@@ -134,24 +138,18 @@ def _confirmed(loaded: LoadedSpec, store: Store, renders: int, seed: int, consol
                     chosen[c.key].append(pair)
                     chosen_keys[c.key].append((twins[0].render_key, twins[1].render_key))
                     used.update(keys)
-    if render_budget is not None:  # looks planned to twice the even share; the budget's renders go first to
-        even = pairs_within(chosen_keys, wanted, render_budget)  # the findings nearest a decision
-        first = min(first, max(1, even))
-        wanted = max(first, min(wanted, 2 * even)) if even else 0
-        chosen = {k: pairs[:wanted] for k, pairs in chosen.items()}  # none at all: each inconclusive on 0 pairs
-    nearest: dict[int, float] = {}  # claim → its last look's one-sided p: the smallest is nearest confirmed
+    if render_budget is not None:  # one look, each claim's pairs as many as the budget's renders allot it
+        counts = allotted([chosen_keys[c.key] for c in claims], render_budget)
+        chosen = {c.key: chosen[c.key][:n] for c, n in zip(claims, counts)}
+        first = wanted = max([1, *counts])
     taken = {c.key: 0 for c in claims}
     totals = {"rendered": 0, "cached": 0, "failed": 0, "jobs": 0}
     judged: dict[str, list[tuple[Twin, Twin]]] = {}
 
     def observe(asked: Any) -> dict[int, Any]:
-        """Render and judge the first ``asked[i]`` pairs of each open claim (the others keep theirs),
-        as many as the render budget allows, nearest a decision first."""
-        order = sorted(asked, key=lambda i: (nearest.get(i, 0.0), i))
-        given = granted({i: min(n, len(chosen[claims[i].key])) for i, n in asked.items()},
-                        [taken[c.key] for c in claims], [chosen_keys[c.key] for c in claims], render_budget, order)
-        for i, n in given.items():
-            taken[claims[i].key] = n
+        """Render and judge the first ``asked[i]`` pairs of each open claim (the others keep theirs)."""
+        for i, n in asked.items():
+            taken[claims[i].key] = max(taken[claims[i].key], min(n, len(chosen[claims[i].key])))
         fresh = [row for c in claims for pair in chosen[c.key][:taken[c.key]] for row in pair]
         outcomes: dict[int, Twin] = {}
         if fresh:
@@ -170,7 +168,6 @@ def _confirmed(loaded: LoadedSpec, store: Store, renders: int, seed: int, consol
             kept = [(a, b) for a, b in twins if a and b and a[0] and b[0]]
             judged[c.key] = kept
             out[i] = tally((a[1], b[1]) for a, b in kept)
-            nearest[i] = mcnemar_one_sided(out[i].inside_wrong, out[i].inside_right)
         return out
 
     verdicts = sequential(len(claims), first, wanted, observe)
@@ -191,39 +188,47 @@ def distinct_renders(groups: Any) -> int:
     return len({key for group in groups for pair in group for key in pair})
 
 
-def granted(asked: dict[int, int], taken: list[int], keys: list[list[tuple[str, str]]], budget: int | None,
-            order: list[int]) -> dict[int, int]:
-    """The pairs each claim of ``asked`` gets (what it asks, at least what it has): in ``order``, as many
-    as fit in ``budget`` distinct renders with every pair taken before (renders the pairs share
-    count once); all it asks without a budget."""
-    if budget is None:
-        return dict(asked)
-    held = {key for i, n in enumerate(taken) if i not in asked for pair in keys[i][:n] for key in pair}
-    held.update(key for i in asked for pair in keys[i][:taken[i]] for key in pair)
-    out = {}
-    for i in order:
-        n = taken[i]
-        while n < asked[i]:
-            new = set(keys[i][n]) - held
+def allotted(keys: list[list[tuple[str, str]]], budget: int) -> list[int]:
+    """The pairs each claim gets (a prefix of its ``keys``, each pair's two render keys) within
+    ``budget`` distinct renders, cached or not. Every pair whose renders are bought already is
+    taken free; then the renders are bought that are worth the most per render (:func:`_worth`
+    of the pairs they free over all claims: a blur boundary's twin is one render, and the
+    per-object and per-environment blur boundaries' and the object claims' twins in its scene
+    are that render too), first claim
+    first on a tie. It reads only the keys, never an outcome: what a claim gets cannot depend on
+    how its fresh twins turn out."""
+    held: set[str] = set()
+
+    def extended(counts: list[int], have: set[str]) -> list[int]:
+        out = list(counts)
+        for i, group in enumerate(keys):
+            while out[i] < len(group) and have.issuperset(group[out[i]]):
+                out[i] += 1
+        return out
+
+    taken = extended([0] * len(keys), held)
+    while True:
+        best: tuple[float, set[str]] | None = None
+        for i, group in enumerate(keys):
+            if taken[i] >= len(group):
+                continue
+            new = set(group[taken[i]]) - held
             if len(held) + len(new) > budget:
-                break
-            held.update(new)
-            n += 1
-        out[i] = max(n, min(taken[i], asked[i]))
-    return out
+                continue
+            gain = _worth(extended(taken, held | new)) - _worth(taken)
+            if best is None or gain / len(new) > best[0] + 1e-12:
+                best = (gain / len(new), new)
+        if best is None:
+            return taken
+        held |= best[1]
+        taken = extended(taken, held)
 
 
-def pairs_within(keys: dict[str, list[tuple[str, str]]], wanted: int, budget: int) -> int:
-    """The most pairs per finding (up to ``wanted``) whose renders, the first that many pairs of
-    every finding together, are at most ``budget``."""
-    low, high = 0, wanted
-    while low < high:  # the renders grow with the pairs: the largest count within the budget
-        middle = (low + high + 1) // 2
-        if distinct_renders(group[:middle] for group in keys.values()) <= budget:
-            low = middle
-        else:
-            high = middle - 1
-    return low
+def _worth(counts: list[int]) -> float:
+    """What claims' pair counts are worth to the decisions: each claim's square root (a finding's
+    evidence grows as the root of its pairs), so a render goes where it lifts a claim with few
+    pairs before one that has many."""
+    return sum(math.sqrt(n) for n in counts)
 
 
 def twin_outcomes(space: Space, fresh: list[Row], outcomes: dict[int, Twin],
@@ -273,7 +278,7 @@ def claims_of(loaded: LoadedSpec, store: Store, summary: Summary, space: Space) 
 
     names = {"object": [o.name for o in loaded.objects], "environment": [e.name for e in loaded.environments]}
     findings = listed_findings(summary)
-    levels = _levels(store, loaded.name) if any(f.kind == FAILURE_MODE for f in findings) else {}
+    levels = {(p, label): (value, width) for p, label, value, width in summary.levels}
     spaces = {p.column: p.space for p in space.parameters}
     out: dict[str, Claim | str] = {}
     for finding in findings:
@@ -302,20 +307,6 @@ def claims_of(loaded: LoadedSpec, store: Store, summary: Summary, space: Space) 
                    "alone is tested as their failure modes)")
         out[finding.key] = claim if claim is not None else why
     return out
-
-
-def _levels(store: Store, experiment: str) -> dict[tuple[str, str], tuple[float | None, float | None]]:
-    """(parameter, label) → (the level's number or bin centre, the bin's width when binned)."""
-    con = connect(store, experiment, views="controls")
-    try:
-        if not has_view(con, "control_accuracy"):
-            return {}
-        rows = con.execute("SELECT a.parameter, a.label, a.value, CASE WHEN s.binned THEN s.width END "
-                           "FROM control_accuracy a JOIN control_stats s USING (parameter, position) "
-                           "WHERE NOT a.absent").fetchall()
-    finally:
-        con.close()
-    return {(p, label): (value, width) for p, label, value, width in rows}
 
 
 def _variant(loaded: LoadedSpec, space: Space, rows: list[Row], suffix: str = SUFFIX,

@@ -11,9 +11,9 @@ The grading is three plans for the one runner, in order, each through the same c
 
 Then :mod:`.decide` grades each finding and the grades become the listing's rows of the
 ``finding_grades`` table (the ``findings`` view). The budget counts the distinct renders the checks
-use, cached or not (by default twice as many as the run itself rendered), so a second call with the
-same budget and seed renders nothing and writes the same grades; a larger budget goes on from
-where a smaller one stopped. The findings' twins share renders (a blur claim's twin is the blur
+use, cached or not (by default two thirds of what the run itself rendered, so that the grades
+take less time than the run), so a second call with the same budget and seed renders nothing and
+writes the same grades; a larger budget reuses what a smaller one rendered. The findings' twins share renders (a blur claim's twin is the blur
 boundary's, see :func:`~sweep3d.followups.confirm.draw.draw_pairs`), so a render counts once.
 """
 
@@ -34,6 +34,7 @@ from sweep3d.results import (
     ALPHA,
     CONFIRMED,
     Finding,
+    first_look,
     grade_row,
     listed_findings,
     numeric_scales,
@@ -45,13 +46,14 @@ from sweep3d.results import (
 from sweep3d.spec import LoadedSpec
 from sweep3d.stages.render import LOCAL, Executor
 
-#: The default budget in runs' worth of renders: the renders the run made, twice (a render of the
-#: checks shares its twins among findings: the quickstart's 18 findings take about 28 pairs each).
-DEFAULT_RUNS = 2
-#: The budget's shares: the stability check's scene neighbours, then the replication; the second
-#: renderer gets what they leave (the findings' twins first, then at most IMAGE_SHARE for images).
+#: The default budget as a share of the renders the run made: two thirds, so that grading
+#: takes less time than the run did (a render of the checks costs what one of the run does).
+DEFAULT_SHARE = 2 / 3
+#: The budget's shares: the stability check's scene neighbours first; of what they leave, the
+#: replication's; the second renderer gets the rest (the findings' twins first, then at most
+#: 1/IMAGE_SHARE of the budget for the sampled failure images).
 STABILITY_SHARE = 0.25
-REPLICATION_SHARE = 0.5
+REPLICATION_SHARE = 2 / 3
 MAX_PAIRS = 128  # a finding's twin pairs at most, however large the budget
 MIN_IMAGES = 16  # the stability check's least sample within a grade
 IMAGE_SHARE = 16  # 1/16 of the budget is kept for the sampled failure images on the second renderer
@@ -78,7 +80,7 @@ class Graded:
 def grade_findings(loaded: LoadedSpec, budget: int | None = None, seed: int | None = None,
                    console: Console | None = None, wait: float = 0.0, executor: Executor = LOCAL) -> Graded:
     """Grade every finding of ``loaded``'s last run (its first model) within ``budget`` renders
-    (None: :data:`DEFAULT_RUNS` times as many as the run rendered)."""
+    (None: :data:`DEFAULT_SHARE` of the renders the run made)."""
     from sweep3d.results import no_results
 
     if budget is not None and budget < 0:
@@ -105,7 +107,7 @@ def _graded(loaded: LoadedSpec, store: Store, budget: int | None, seed: int, con
         raise UserError(f"{loaded.path}: no results to grade yet; run: sweep3d run {loaded.path}")
     findings = listed_findings(summary)
     if budget is None:
-        budget = DEFAULT_RUNS * len({job.render_key for job in plan.jobs})
+        budget = math.ceil(DEFAULT_SHARE * len({job.render_key for job in plan.jobs}))
     model = plan.model
     listing = record_listing(store, loaded.name, model, findings, loaded.path)
     space = space_of(loaded)
@@ -120,7 +122,8 @@ def _graded(loaded: LoadedSpec, store: Store, budget: int | None, seed: int, con
         looks = planned_looks(REPLICATION_FIRST, MAX_PAIRS)
         first = 2 * max(REPLICATION_FIRST, pairs_needed(len(testable), ALPHA / looks))
         result = confirm(loaded, first, seed, console, claims=testable, executor=executor,
-                         max_renders=2 * MAX_PAIRS, render_budget=int(budget * REPLICATION_SHARE))
+                         max_renders=2 * MAX_PAIRS, render_budget=int((budget - used) * REPLICATION_SHARE),
+                         found=(plan, summary))
         rendered += result.rendered
         used += result.renders_used
         verdicts = {x.claim.key: x.verdict for x in result.confirmations}
@@ -176,12 +179,13 @@ def _stability(loaded: LoadedSpec, seed: int, console: Console | None, executor:
 def stability_sample(share: int, each: int, sample: int) -> tuple[bool, int]:
     """(whether the scene neighbours are rendered, the most images) for ``share`` renders at
     ``each`` neighbours an image: as many images as the share renders the neighbours of, between
-    :data:`MIN_IMAGES` and four default samples. A share that cannot render the neighbours of half
-    the least sample (a budget of a few renders, ``--budget 0``) checks the image changes only,
-    which render nothing; without scene neighbours the images cost no render at all."""
-    if each and share >= each * MIN_IMAGES // 2:
+    :data:`MIN_IMAGES` and four default samples. A share that cannot render the neighbours of the
+    least sample (the default budget of a run of a few hundred renders, ``--budget 0``) checks the
+    image changes only, which render nothing (one default sample: their inference is what they
+    cost): a sample too small to set a threshold would take renders the replication decides with."""
+    if each and share >= each * MIN_IMAGES:
         return True, max(MIN_IMAGES, min(4 * sample, share // each))
-    return False, 4 * sample
+    return False, sample
 
 
 def _second_renderer(loaded: LoadedSpec, store: Store, space: Any, result: Any, replicated: list[str], left: int,
@@ -189,12 +193,11 @@ def _second_renderer(loaded: LoadedSpec, store: Store, space: Any, result: Any, 
     """The replicated findings' twins rendered by ``engine`` in looks (:func:`second_opinion`), each
     finding's pairs at most its replication's, as many as ``left`` renders allow (the twins'
     renders shared as in the replication): (key → verdict, renders made, renders used)."""
-    from sweep3d.followups.confirm import distinct_renders, pairs_within, render_twins
+    from sweep3d.followups.confirm import allotted, distinct_renders, render_twins
     from sweep3d.stages.render import cycles_only_defaults
 
     keys = {k: result.render_keys[k] for k in replicated}
-    within = pairs_within(keys, max((len(v) for v in keys.values()), default=0), max(0, left))
-    caps = [min(len(result.pairs[k]), within) for k in replicated]
+    caps = allotted([keys[k] for k in replicated], max(0, left))
     if not replicated or max(caps, default=0) < 1:
         return {}, 0, 0
     settings = {"engine": engine, **cycles_only_defaults(engine)}
@@ -212,8 +215,9 @@ def _second_renderer(loaded: LoadedSpec, store: Store, space: Any, result: Any, 
         rendered += render.computed if render else 0
         return {i: [(a[1], b[1]) for a, b in outcomes[i] if a and b and a[0] and b[0]] for i in asked}
 
-    verdicts = second_opinion(len(replicated), min(ENGINE_FIRST, max(caps)), max(caps), fetch)
-    return dict(zip(replicated, verdicts)), rendered, distinct_renders(keys[k][:n] for k, n in zip(replicated, taken))
+    verdicts = second_opinion(len(replicated), first_look(max(caps), ENGINE_FIRST), max(caps), fetch)
+    checked = {k: v for k, v, n in zip(replicated, verdicts, caps) if n}  # no pair within the budget: not checked
+    return checked, rendered, distinct_renders(keys[k][:n] for k, n in zip(replicated, taken))
 
 
 def _image_grades(loaded: LoadedSpec, store: Store, space: Any, model: str, checked: Any, left: int, engine: str,

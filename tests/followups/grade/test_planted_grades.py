@@ -153,9 +153,10 @@ def test_a_replicated_finding_without_a_second_renderer_check_is_inconclusive_no
 def test_the_stability_share_renders_scene_neighbours_only_where_it_affords_them() -> None:
     from sweep3d.followups.grade.run import MIN_IMAGES, stability_sample
 
-    assert stability_sample(120, 4, 64) == (True, 30)  # the quickstart's default budget: 30 images
-    assert stability_sample(60, 4, 64) == (True, MIN_IMAGES)  # a run's worth: the least sample
+    assert stability_sample(120, 4, 64) == (True, 30)  # twice the quickstart's renders: 30 images
+    assert stability_sample(64, 4, 64) == (True, MIN_IMAGES)  # the least sample's neighbours
+    assert stability_sample(40, 4, 64) == (False, 64)  # the default (2/3 of its 240): image changes only
     assert stability_sample(10_000, 4, 64) == (True, 256)
-    assert stability_sample(0, 4, 64) == (False, 256)  # --budget 0: the image changes only, no render
-    assert stability_sample(31, 4, 64)[0] is False and stability_sample(32, 4, 64)[0] is True
-    assert stability_sample(500, 0, 64) == (False, 256)  # no scene neighbours in the spec
+    assert stability_sample(0, 4, 64) == (False, 64)  # --budget 0: the image changes only, no render
+    assert stability_sample(63, 4, 64)[0] is False and stability_sample(64, 4, 64)[0] is True
+    assert stability_sample(500, 0, 64) == (False, 64)  # no scene neighbours in the spec
