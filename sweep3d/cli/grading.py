@@ -29,8 +29,10 @@ def print_grades(console: Console, graded: Graded, spec_path: object) -> None:
         low, high = checked.fragile_range
         fragile = (f"{checked.fragile_failures} of {checked.failures} failures fragile" +
                    (f" (between {low} and {high} as the undecided margin bins fall)" if high > low else ""))
+        scene = ("" if graded.scene_budget is None else
+                 f"; the image changes only: the scene neighbours need --budget {graded.scene_budget} at least")
         console.print(f"stability: {checked.sampled} images checked; {fragile}; threshold |margin| < "
-                      f"{checked.threshold:.3g}", highlight=False, soft_wrap=True)
+                      f"{checked.threshold:.3g}{scene}", highlight=False, soft_wrap=True)
     if counts["inconclusive"] and graded.used >= graded.budget // 2:
         console.print(f"{counts['inconclusive']} inconclusive: a larger budget goes on from here, reusing the renders made "
                       f"(sweep3d grade {escape(str(spec_path))} --budget {2 * max(graded.budget, 1)})",

@@ -27,3 +27,19 @@ def test_inconclusive_findings_after_a_spent_budget_name_the_budget_that_goes_on
 def test_no_advice_when_nothing_is_inconclusive_or_the_budget_was_not_what_stopped_it() -> None:
     assert "larger budget" not in _printed([("solid", "replicated")], used=470, budget=480)
     assert "larger budget" not in _printed([("inconclusive", "mitsuba did not decide")], used=10, budget=480)
+
+
+def test_a_budget_too_small_for_the_scene_neighbours_says_which_budget_renders_them() -> None:
+    from types import SimpleNamespace
+
+    checked = SimpleNamespace(fragile_range=(3, 9), fragile_failures=3, failures=10, sampled=64, threshold=0.05)
+    findings = [Finding("k0", "boundary", "finding 0", 0, {})]
+
+    def printed(scene_budget: int | None) -> str:
+        console = Console(record=True, width=300)
+        print_grades(console, Graded(findings, [("solid", "replicated")], 160, 150, 7, 1.0, "mitsuba", checked,
+                                     scene_budget=scene_budget), "spec.toml")
+        return console.export_text()
+
+    assert "the image changes only: the scene neighbours need --budget 256 at least" in printed(256)
+    assert "stability: 64 images checked" in printed(None) and "image changes only" not in printed(None)

@@ -75,6 +75,9 @@ class Graded:
     engine: str
     stability: Any = None  # the stability check's Checked (first model), None when not made
     listing: str = ""
+    #: the least budget whose share renders the scene neighbours, where this one checked the image
+    #: changes alone (None: the neighbours were rendered, or the spec moves nothing they would move)
+    scene_budget: int | None = None
 
 
 def grade_findings(loaded: LoadedSpec, budget: int | None = None, seed: int | None = None,
@@ -113,7 +116,7 @@ def _graded(loaded: LoadedSpec, store: Store, budget: int | None, seed: int, con
     space = space_of(loaded)
     claims = claims_of(loaded, store, summary, space)
     testable = [c for c in claims.values() if not isinstance(c, str)]
-    checked, used = _stability(loaded, seed, console, executor, int(budget * STABILITY_SHARE))
+    checked, used, scene_budget = _stability(loaded, seed, console, executor, int(budget * STABILITY_SHARE))
     threshold = checked.threshold if checked is not None else None
     rendered = checked.scene.rendered if checked is not None and checked.scene is not None else 0
     evidence: dict[str, Evidence] = {}
@@ -152,7 +155,8 @@ def _graded(loaded: LoadedSpec, store: Store, budget: int | None, seed: int, con
         else:
             grades.append(grade(Evidence()))
     _record(store, loaded, model, listing, findings, grades, evidence)
-    return Graded(findings, grades, budget, used, rendered, time.perf_counter() - started, engine, checked, listing)
+    return Graded(findings, grades, budget, used, rendered, time.perf_counter() - started, engine, checked, listing,
+                  scene_budget)
 
 
 def other_engine(loaded: LoadedSpec) -> str:
@@ -161,19 +165,21 @@ def other_engine(loaded: LoadedSpec) -> str:
 
 
 def _stability(loaded: LoadedSpec, seed: int, console: Console | None, executor: Executor,
-               share: int) -> tuple[Any, int]:
-    """The stability check of the first model (sequential), or None where it does not apply; and
-    the renders its scene neighbours used. The images are as many as ``share`` renders of
-    neighbours allow (the image changes cost no render): see :func:`stability_sample`."""
+               share: int) -> tuple[Any, int, int | None]:
+    """The stability check of the first model (sequential), or None where it does not apply; the
+    renders its scene neighbours used; and the least budget that would render them, where
+    ``share`` did not. The images are as many as ``share`` renders of neighbours allow (the image
+    changes cost no render): see :func:`stability_sample`."""
     from sweep3d.followups.stability import DEFAULT_SAMPLE, check_stability, neighbours_per_image
 
     if loaded.evaluator.kind != "classification":
-        return None, 0
+        return None, 0, None
     each = neighbours_per_image(loaded) if loaded.spec.stability.scene else 0
     scene, cap = stability_sample(share, each, DEFAULT_SAMPLE)
     checked = check_stability(loaded, min(DEFAULT_SAMPLE, cap), seed, console, executor=executor, max_sample=cap,
                               scene=None if scene else False)[0]
-    return checked, len(checked.scene.planned) if checked.scene is not None else 0
+    wanted = math.ceil(each * MIN_IMAGES / STABILITY_SHARE) if each and not scene else None
+    return checked, len(checked.scene.planned) if checked.scene is not None else 0, wanted
 
 
 def stability_sample(share: int, each: int, sample: int) -> tuple[bool, int]:
