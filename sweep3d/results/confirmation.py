@@ -218,16 +218,24 @@ def renders_for(want: int, got: int, renders: int) -> int:
 def judge(findings: Sequence[Pairs], alpha: float = ALPHA, look: int = 1, looks: int = 1,
           futility: float = FUTILITY) -> list[Verdict]:
     """One :class:`Verdict` per finding's fresh pairs at look ``look`` of ``looks``, tested together
-    (Holm at ``alpha / looks`` over those with pairs): confirmed, not replicated (the effect bounded
-    below ``futility``), and otherwise open, or inconclusive at the last look."""
+    (Holm at ``alpha / looks`` over those with enough pairs): confirmed, not replicated (the effect
+    bounded below ``futility``), and otherwise open, or inconclusive at the last look. A finding
+    with fewer pairs than any outcome could confirm it with (:func:`pairs_needed`, over the
+    findings tested) is left out of Holm's family: it could not be confirmed, and counting it
+    would only raise the others' bar. The family depends on the pair counts alone, never on how
+    the pairs turned out."""
     share = alpha / max(1, looks)
     z = look_z(looks, alpha)
     tested = [i for i, pairs in enumerate(findings) if pairs.n]
-    raw = [mcnemar_one_sided(findings[i].inside_wrong, findings[i].inside_right) for i in tested]
-    adjusted = dict(zip(tested, holm(raw)))
+    counts = sorted((findings[i].n for i in tested), reverse=True)  # the family: the most findings m whose
+    family = max((m for m in range(1, len(counts) + 1) if counts[m - 1] >= pairs_needed(m, share)), default=0)
+    if family:  # m-th most pairs could be confirmed among m, and every finding with that many pairs
+        tested = [i for i in tested if findings[i].n >= pairs_needed(family, share)]
+    raw = {i: mcnemar_one_sided(pairs.inside_wrong, pairs.inside_right) for i, pairs in enumerate(findings) if pairs.n}
+    adjusted = dict(zip(tested, holm([raw[i] for i in tested])))
     verdicts = []
     for i, pairs in enumerate(findings):
-        p = raw[tested.index(i)] if i in adjusted else 1.0
+        p = raw.get(i, 1.0)
         q = adjusted.get(i, 1.0)
         interval = paired_difference_interval(pairs, z)
         too_few = pairs.n < pairs_needed(len(tested), share)  # no outcome of so few pairs could confirm it

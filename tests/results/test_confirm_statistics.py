@@ -297,6 +297,17 @@ def test_pairs_too_few_for_any_outcome_to_confirm_leave_a_finding_unconfirmed_no
         assert {v.status for v in one_short} == {UNCONFIRMED}  # "not replicated" would claim what was not tested
 
 
+def test_a_finding_too_short_of_pairs_to_be_confirmed_does_not_raise_the_others_bar() -> None:
+    """Five pairs all one way (p = 1/32) confirm a finding alone; beside a finding of one pair,
+    which no outcome could confirm, Holm over two would miss it (2/32 > 5 %): the short one is
+    left out of the family, and stays unconfirmed, not refuted."""
+    alone, short = judge([Pairs(inside_wrong=5), Pairs(both_right=1)])
+    assert alone.status == CONFIRMED and alone.findings == 1
+    assert short.status == UNCONFIRMED and short.p_holm == 1.0
+    both = judge([Pairs(inside_wrong=5), Pairs(both_right=6)])  # six pairs could be confirmed among two
+    assert both[0].status != CONFIRMED and both[0].findings == 2
+
+
 @given(want=st.integers(1, 40), renders=st.integers(2, 10_000), kept=st.floats(0.01, 1.0))
 def test_the_renders_advised_give_the_pairs_wanted_at_the_share_kept(want: int, renders: int, kept: float) -> None:
     """Pairs dropped as hidden or invalid are lost in proportion: the advice scales with the pairs

@@ -26,6 +26,7 @@ if _TYPE_CHECKING:
         claims_of,
         confirm,
         distinct_renders,
+        evidence_rate,
         render_rows,
         render_twins,
     )

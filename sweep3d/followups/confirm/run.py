@@ -14,6 +14,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from statistics import NormalDist
 from typing import Any
 
 from rich.console import Console
@@ -24,6 +25,7 @@ from sweep3d.followups.confirm.claims import Claim, boundary_claim, rule_claim, 
 from sweep3d.followups.confirm.draw import Row, Space, draw_pairs, scene_order, space_of
 from sweep3d.followups.confirm.record import write_verdicts
 from sweep3d.results import (
+    ALPHA,
     DEFAULT_RENDERS,
     Summary,
     Verdict,
@@ -75,14 +77,16 @@ class ConfirmResult:
 def confirm(loaded: LoadedSpec, renders: int = DEFAULT_RENDERS, seed: int | None = None,
             console: Console | None = None, claims: list[Claim] | None = None, wait: float = 0.0,
             executor: Executor = LOCAL, max_renders: int | None = None,
-            render_budget: int | None = None, found: tuple[Any, Summary] | None = None) -> ConfirmResult:
+            render_budget: int | None = None, found: tuple[Any, Summary] | None = None,
+            weights: dict[str, float] | None = None) -> ConfirmResult:
     """Confirm every significant finding of ``loaded``'s last run on ``renders`` fresh renders each
     (``renders // 2`` twin pairs), drawn with ``seed`` (default: the spec's); ``claims``: these
     instead of the run's findings. With ``max_renders`` above ``renders``, the findings neither
     confirmed nor bounded get more pairs in looks, doubling up to ``max_renders // 2``
     (:func:`sweep3d.results.confirmation.sequential`; None: one look). ``render_budget``: the most
     distinct renders the pairs may use, cached or not, allotted to the claims where they give the
-    most pairs (claims share renders, see :func:`allotted`), judged in one look. ``found``: the run's plan
+    most pairs (claims share renders, see :func:`allotted`; ``weights``: claim key → the expected z of
+    its evidence per root pair, :func:`evidence_rate`), judged in one look. ``found``: the run's plan
     and summary when the caller has them (read again otherwise). It holds the store's writer lock from its start to its end
     (``wait``: seconds to wait for another command holding it), its renders' run within it, by
     the runner on ``executor``."""
@@ -96,12 +100,14 @@ def confirm(loaded: LoadedSpec, renders: int = DEFAULT_RENDERS, seed: int | None
         raise no_results(store, loaded.name, loaded.path)
     cap = renders if max_renders is None else max(renders, max_renders)
     with store.lock(wait):
-        return _confirmed(loaded, store, renders, seed, console, claims, executor, cap, render_budget, found)
+        return _confirmed(loaded, store, renders, seed, console, claims, executor, cap, render_budget, found,
+                          weights)
 
 
 def _confirmed(loaded: LoadedSpec, store: Store, renders: int, seed: int, console: Console | None,
                claims: list[Claim] | None, executor: Executor = LOCAL, cap: int | None = None,
-               render_budget: int | None = None, found: tuple[Any, Summary] | None = None) -> ConfirmResult:
+               render_budget: int | None = None, found: tuple[Any, Summary] | None = None,
+               weights: dict[str, float] | None = None) -> ConfirmResult:
     """:func:`confirm`, holding the store's lock."""
     from sweep3d.runner import plans_as_run, run
 
@@ -139,7 +145,8 @@ def _confirmed(loaded: LoadedSpec, store: Store, renders: int, seed: int, consol
                     chosen_keys[c.key].append((twins[0].render_key, twins[1].render_key))
                     used.update(keys)
     if render_budget is not None:  # one look, each claim's pairs as many as the budget's renders allot it
-        counts = allotted([chosen_keys[c.key] for c in claims], render_budget)
+        counts = allotted([chosen_keys[c.key] for c in claims], render_budget,
+                          None if weights is None else [weights.get(c.key, 1.0) for c in claims])
         chosen = {c.key: chosen[c.key][:n] for c, n in zip(claims, counts)}
         first = wanted = max([1, *counts])
     taken = {c.key: 0 for c in claims}
@@ -188,15 +195,17 @@ def distinct_renders(groups: Any) -> int:
     return len({key for group in groups for pair in group for key in pair})
 
 
-def allotted(keys: list[list[tuple[str, str]]], budget: int) -> list[int]:
+def allotted(keys: list[list[tuple[str, str]]], budget: int, weights: list[float] | None = None) -> list[int]:
     """The pairs each claim gets (a prefix of its ``keys``, each pair's two render keys) within
     ``budget`` distinct renders, cached or not. Every pair whose renders are bought already is
     taken free; then the renders are bought that are worth the most per render (:func:`_worth`
     of the pairs they free over all claims: a blur boundary's twin is one render, and the
     per-object and per-environment blur boundaries' and the object claims' twins in its scene
-    are that render too), first claim
-    first on a tie. It reads only the keys, never an outcome: what a claim gets cannot depend on
-    how its fresh twins turn out."""
+    are that render too), first claim first on a tie. ``weights``: each claim's expected z per root
+    pair (:func:`evidence_rate`), its worth then capped where it is likely decided. It reads only
+    the keys and the weights, never a fresh outcome: what a claim gets cannot depend on how its
+    fresh twins turn out."""
+    enough = None if weights is None else decisive_z(len(keys))
     held: set[str] = set()
 
     def extended(counts: list[int], have: set[str]) -> list[int]:
@@ -215,7 +224,7 @@ def allotted(keys: list[list[tuple[str, str]]], budget: int) -> list[int]:
             new = set(group[taken[i]]) - held
             if len(held) + len(new) > budget:
                 continue
-            gain = _worth(extended(taken, held | new)) - _worth(taken)
+            gain = _worth(extended(taken, held | new), weights, enough) - _worth(taken, weights, enough)
             if best is None or gain / len(new) > best[0] + 1e-12:
                 best = (gain / len(new), new)
         if best is None:
@@ -224,11 +233,31 @@ def allotted(keys: list[list[tuple[str, str]]], budget: int) -> list[int]:
         taken = extended(taken, held)
 
 
-def _worth(counts: list[int]) -> float:
+def _worth(counts: list[int], weights: list[float] | None = None, enough: float | None = None) -> float:
     """What claims' pair counts are worth to the decisions: each claim's square root (a finding's
     evidence grows as the root of its pairs), so a render goes where it lifts a claim with few
-    pairs before one that has many."""
-    return sum(math.sqrt(n) for n in counts)
+    pairs before one that has many; with ``weights``, each claim's expected z (weight × root),
+    at most ``enough``: a render goes where it brings a claim nearest a decision, none to a
+    claim already likely decided while another is not."""
+    if weights is None or enough is None:
+        return sum(math.sqrt(n) for n in counts)
+    return sum(min(w * math.sqrt(n), enough) for n, w in zip(counts, weights))
+
+
+def evidence_rate(difference: float | None) -> float:
+    """The expected z of a finding's fresh twins per root pair, from the run's accuracy difference
+    inside less outside: McNemar's z is about ``|d| √n / √p`` with ``p`` the share of discordant
+    pairs, at least ``|d|`` (taken as ``|d|`` + 0.1). An unknown difference counts as 0.3's. Only
+    an order of the findings' needs, from the run's data: it decides where renders go, never a
+    verdict."""
+    d = 0.3 if difference is None or not math.isfinite(difference) else min(1.0, abs(difference))
+    return d / math.sqrt(d + 0.1)
+
+
+def decisive_z(claims: int) -> float:
+    """The expected z at which a claim among ``claims`` tested together is likely confirmed: Holm's
+    first one-sided threshold at 5 % over ``claims``, plus 80 % power's margin."""
+    return NormalDist().inv_cdf(1 - ALPHA / max(1, claims)) + NormalDist().inv_cdf(0.8)
 
 
 def twin_outcomes(space: Space, fresh: list[Row], outcomes: dict[int, Twin],

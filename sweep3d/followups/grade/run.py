@@ -101,7 +101,7 @@ def grade_findings(loaded: LoadedSpec, budget: int | None = None, seed: int | No
 
 def _graded(loaded: LoadedSpec, store: Store, budget: int | None, seed: int, console: Console | None,
             executor: Executor, started: float) -> Graded:
-    from sweep3d.followups.confirm import claims_of, confirm, space_of
+    from sweep3d.followups.confirm import claims_of, confirm, evidence_rate, space_of
     from sweep3d.runner import plans_as_run
 
     plan = plans_as_run(loaded, store)[0]
@@ -126,7 +126,8 @@ def _graded(loaded: LoadedSpec, store: Store, budget: int | None, seed: int, con
         first = 2 * max(REPLICATION_FIRST, pairs_needed(len(testable), ALPHA / looks))
         result = confirm(loaded, first, seed, console, claims=testable, executor=executor,
                          max_renders=2 * MAX_PAIRS, render_budget=int((budget - used) * REPLICATION_SHARE),
-                         found=(plan, summary))
+                         found=(plan, summary),
+                         weights={f.key: evidence_rate(f.run_difference) for f in findings})
         rendered += result.rendered
         used += result.renders_used
         verdicts = {x.claim.key: x.verdict for x in result.confirmations}
