@@ -4,17 +4,18 @@ The grading is three plans for the one runner, in order, each through the same c
 
 1. the stability check (:mod:`sweep3d.followups.stability`), sequential over margin bins: the
    fragile threshold the fragility check reads (classification only);
-2. ``confirm``'s sequential twins for every finding fresh twins can test, the pairs per finding
-   sized from the budget;
+2. ``confirm``'s twins for every finding fresh twins can test, the budget's renders allotted where
+   they decide most (:func:`~sweep3d.followups.confirm.allotted`), judged in one look;
 3. the replicated findings' twins again with the second renderer (Mitsuba under a Cycles spec,
-   Cycles under a Mitsuba one), as many pairs as the budget has left.
+   Cycles under a Mitsuba one), as many pairs as the budget has left, in looks within them.
 
 Then :mod:`.decide` grades each finding and the grades become the listing's rows of the
 ``finding_grades`` table (the ``findings`` view). The budget counts the distinct renders the checks
 use, cached or not (by default two thirds of what the run itself rendered, so that the grades
 take less time than the run), so a second call with the same budget and seed renders nothing and
-writes the same grades; a larger budget reuses what a smaller one rendered. The findings' twins share renders (a blur claim's twin is the blur
-boundary's, see :func:`~sweep3d.followups.confirm.draw.draw_pairs`), so a render counts once.
+writes the same grades; a larger budget reuses what a smaller one rendered. The findings' twins
+share renders (a blur claim's twin is the blur boundary's, see
+:func:`~sweep3d.followups.confirm.draw.draw_pairs`), so a render counts once.
 """
 
 from __future__ import annotations
@@ -31,15 +32,12 @@ from sweep3d.cache import Store
 from sweep3d.core import UserError
 from sweep3d.followups.grade.decide import Evidence, evidence_of, grade, second_opinion
 from sweep3d.results import (
-    ALPHA,
     CONFIRMED,
     Finding,
     first_look,
     grade_row,
     listed_findings,
     numeric_scales,
-    pairs_needed,
-    planned_looks,
     record_listing,
     stored_summary,
 )
@@ -57,7 +55,7 @@ REPLICATION_SHARE = 2 / 3
 MAX_PAIRS = 128  # a finding's twin pairs at most, however large the budget
 MIN_IMAGES = 16  # the stability check's least sample within a grade
 IMAGE_SHARE = 16  # 1/16 of the budget is kept for the sampled failure images on the second renderer
-REPLICATION_FIRST = 16  # twin pairs of a finding's first look: a strong effect decides on them
+REPLICATION_FIRST = 16  # candidate pairs drawn per finding at least (more where the budget could give more)
 ENGINE_FIRST = 8  # the second renderer's first look, in pairs
 ENGINE_SUFFIX = "-confirm-"  # the second renderer's experiment: <name>-confirm-<engine>
 
@@ -122,9 +120,7 @@ def _graded(loaded: LoadedSpec, store: Store, budget: int | None, seed: int, con
     evidence: dict[str, Evidence] = {}
     engine = other_engine(loaded)
     if testable and budget >= 2:
-        looks = planned_looks(REPLICATION_FIRST, MAX_PAIRS)
-        first = 2 * max(REPLICATION_FIRST, pairs_needed(len(testable), ALPHA / looks))
-        result = confirm(loaded, first, seed, console, claims=testable, executor=executor,
+        result = confirm(loaded, 2 * REPLICATION_FIRST, seed, console, claims=testable, executor=executor,
                          max_renders=2 * MAX_PAIRS, render_budget=int((budget - used) * REPLICATION_SHARE),
                          found=(plan, summary),
                          weights={f.key: evidence_rate(f.run_difference) for f in findings})

@@ -46,9 +46,9 @@ def twin(rng: np.random.Generator, fails: float) -> tuple[bool, bool, float]:
 def grades_of(seed: int, regions: list[tuple[float, float]], engine_fails: list[tuple[float, float]] | None = None,
               pairs: int = MAX_PAIRS, one_look: int | None = None) -> list[tuple[str, Verdict]]:
     """Grade findings whose twins fail at (inside, outside) rates ``regions``, at most ``pairs`` each
-    (what a budget's renders allow), sized as ``grade`` sizes them without a budget; or, with
-    ``one_look``, in one look at that many pairs each, as ``grade`` judges the pairs a budget
-    allots. The second renderer follows the first at AGREEMENT, or fails at its own rates
+    (what a budget's renders allow), in looks doubling from REPLICATION_FIRST as ``confirm`` makes
+    them without a budget; or, with ``one_look``, in one look at that many pairs each, as ``grade``
+    judges the pairs its budget allots. The second renderer follows the first at AGREEMENT, or fails at its own rates
     ``engine_fails``."""
     rng = np.random.default_rng([seed, 43])
     cap = 2 * pairs
