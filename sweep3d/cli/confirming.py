@@ -6,22 +6,30 @@ from rich.console import Console
 from rich.markup import escape
 
 from sweep3d.followups.confirm import ConfirmResult
-from sweep3d.results import ALPHA, CONFIRMED, FUTILITY, INCONCLUSIVE, UNCONFIRMED, Verdict, pairs_needed, renders_for
+from sweep3d.results import (
+    ALPHA,
+    CONFIRMED,
+    FUTILITY,
+    INCONCLUSIVE,
+    UNCONFIRMED,
+    Verdict,
+    pairs_to_confirm,
+    renders_for,
+)
 
 
 def print_confirmation(console: Console, result: ConfirmResult) -> None:
     if not result.confirmations:
         console.print("no significant finding to confirm: the run names no failure mode and no boundary")
         return
-    tested = sum(x.verdict.pairs > 0 for x in result.confirmations)
     looks = max((x.verdict.looks for x in result.confirmations), default=1)
-    needed = pairs_needed(tested, ALPHA / looks)
     for x in result.confirmations:
         v = x.verdict
         style = "green" if v.status == CONFIRMED else "yellow"
         if v.pairs and v.status == UNCONFIRMED:  # too few; the advice counts the pairs kept of those drawn
+            needed = pairs_to_confirm(v)
             console.print(f"[{style}]{v.status}[/]: {escape(x.claim.text)}: {v.pairs} fresh pairs are too few for any "
-                          f"outcome to confirm it among {tested} findings ({needed} at least; --renders "
+                          f"outcome to confirm it among the findings tested ({needed} at least; --renders "
                           f"{renders_for(needed, v.pairs, result.renders)} or more)", soft_wrap=True)
             continue
         if not v.pairs:
@@ -30,12 +38,12 @@ def print_confirmation(console: Console, result: ConfirmResult) -> None:
                           "not evaluable)", soft_wrap=True)
             continue
         console.print(f"[{style}]{v.status}[/]: {escape(confirmation_line(x.claim.text, v))}", soft_wrap=True)
-    n = len(result.confirmations)
     console.print(
         f"fresh jobs: {result.jobs}, renders {result.rendered} made and {result.cached} cached (experiment "
         f"{escape(result.experiment)}); "
         "twins matched on every other parameter, none an image of the run; test: McNemar's exact, one-sided, on the "
-        f"fresh pairs only, Holm-adjusted over the {n} finding{'s' * (n != 1)}; {looks_sentence(looks)}",
+        "fresh pairs only, Holm-adjusted over the findings with pairs enough to be confirmed; "
+        f"{looks_sentence(looks)}",
         soft_wrap=True)
     if result.failed:
         console.print(f"[red]{result.failed} fresh jobs failed[/]; their pairs are left out")

@@ -35,8 +35,8 @@ def print_grades(console: Console, graded: Graded, spec_path: object) -> None:
                       f"{checked.threshold:.3g}{scene}", highlight=False, soft_wrap=True)
     if counts["inconclusive"] and graded.used >= graded.budget // 2:
         console.print(f"{counts['inconclusive']} inconclusive: a larger budget goes on from here, reusing the renders made "
-                      f"(sweep3d grade {escape(str(spec_path))} --budget {2 * max(graded.budget, 1)})",
-                      highlight=False, soft_wrap=True)
+                      f"(sweep3d grade {escape(str(spec_path))} --budget {2 * max(graded.budget, 1)}; a second look "
+                      "at these pairs, each look at 5 %)", highlight=False, soft_wrap=True)
     console.print(f"{graded.used} renders of the budget's {graded.budget} used ({graded.rendered} rendered now); "
                   f"second renderer {graded.engine}; {graded.seconds:.0f} s. The grades are the `findings` view "
                   f"(sweep3d query {escape(str(spec_path))} \"SELECT * FROM findings\") and lead the report",

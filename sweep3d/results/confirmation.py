@@ -154,6 +154,7 @@ class Verdict:
     look: int = 1  # the look that gave this verdict
     looks: int = 1  # the planned looks (alpha split evenly over them)
     futility: float = FUTILITY  # the effect bounded below for "not replicated"
+    in_family: bool = True  # whether it was in Holm's family (False: too few pairs, see family_of)
 
     @property
     def decided(self) -> bool:
@@ -201,6 +202,24 @@ def first_look(pairs: int, least: int) -> int:
     return first
 
 
+def family_of(counts: Sequence[int], alpha: float, ids: Sequence[int]) -> list[int]:
+    """Holm's family among findings with ``counts`` pairs (``ids`` theirs): the most findings m such
+    that each could be confirmed among m (``pairs_needed(m, alpha)`` pairs each), those with the
+    most pairs, the first on a tie; all of them when not even one could. It reads how many pairs
+    each finding has, never how they came out."""
+    order = sorted(range(len(counts)), key=lambda j: (-counts[j], j))
+    family = max((m for m in range(1, len(order) + 1) if counts[order[m - 1]] >= pairs_needed(m, alpha)), default=0)
+    kept = set(order[:family]) if family else set(order)
+    return [ids[j] for j in range(len(counts)) if j in kept]
+
+
+def pairs_to_confirm(verdict: "Verdict", alpha: float = ALPHA) -> int:
+    """The fewest pairs with which ``verdict``'s finding could be confirmed: among its family, or,
+    when it was left out for want of pairs, joining it."""
+    share = alpha / max(1, verdict.looks)
+    return pairs_needed(verdict.findings + (not verdict.in_family), share)
+
+
 def pairs_needed(findings: int, alpha: float = ALPHA) -> int:
     """The fewest twin pairs with which a finding tested among ``findings`` can be confirmed at
     all: every pair discordant its way gives p = 2^-n, which Holm multiplies by up to ``findings``."""
@@ -219,18 +238,14 @@ def judge(findings: Sequence[Pairs], alpha: float = ALPHA, look: int = 1, looks:
           futility: float = FUTILITY) -> list[Verdict]:
     """One :class:`Verdict` per finding's fresh pairs at look ``look`` of ``looks``, tested together
     (Holm at ``alpha / looks`` over those with enough pairs): confirmed, not replicated (the effect
-    bounded below ``futility``), and otherwise open, or inconclusive at the last look. A finding
-    with fewer pairs than any outcome could confirm it with (:func:`pairs_needed`, over the
-    findings tested) is left out of Holm's family: it could not be confirmed, and counting it
-    would only raise the others' bar. The family depends on the pair counts alone, never on how
-    the pairs turned out."""
+    bounded below ``futility``), and otherwise open, or inconclusive at the last look. Holm's
+    family is :func:`family_of`'s: a finding too short of pairs for any outcome to confirm it is
+    left out (counting it would only raise the others' bar). The family depends on how many pairs
+    each finding has, never on whether its twins came out right or wrong."""
     share = alpha / max(1, looks)
     z = look_z(looks, alpha)
     tested = [i for i, pairs in enumerate(findings) if pairs.n]
-    counts = sorted((findings[i].n for i in tested), reverse=True)  # the family: the most findings m whose
-    family = max((m for m in range(1, len(counts) + 1) if counts[m - 1] >= pairs_needed(m, share)), default=0)
-    if family:  # m-th most pairs could be confirmed among m, and every finding with that many pairs
-        tested = [i for i in tested if findings[i].n >= pairs_needed(family, share)]
+    tested = family_of([findings[i].n for i in tested], share, tested)
     raw = {i: mcnemar_one_sided(pairs.inside_wrong, pairs.inside_right) for i, pairs in enumerate(findings) if pairs.n}
     adjusted = dict(zip(tested, holm([raw[i] for i in tested])))
     verdicts = []
@@ -238,7 +253,7 @@ def judge(findings: Sequence[Pairs], alpha: float = ALPHA, look: int = 1, looks:
         p = raw.get(i, 1.0)
         q = adjusted.get(i, 1.0)
         interval = paired_difference_interval(pairs, z)
-        too_few = pairs.n < pairs_needed(len(tested), share)  # no outcome of so few pairs could confirm it
+        too_few = i not in adjusted or pairs.n < pairs_needed(len(tested), share)  # no outcome could confirm it
         if not pairs.n:
             status = UNCONFIRMED
         elif q < share:
@@ -254,7 +269,7 @@ def judge(findings: Sequence[Pairs], alpha: float = ALPHA, look: int = 1, looks:
             status, pairs.n, pairs.both_right, pairs.inside_wrong, pairs.inside_right, pairs.both_wrong, inside,
             outside, None if inside is None or outside is None else inside - outside,
             None if interval is None else interval[0], None if interval is None else interval[1], p, q, len(tested),
-            look, looks, futility))
+            look, looks, futility, i in adjusted))
     return verdicts
 
 

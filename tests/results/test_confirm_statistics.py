@@ -22,10 +22,13 @@ from sweep3d.results.confirmation import (
     NOT_REPLICATED,
     UNCONFIRMED,
     Pairs,
+    family_of,
     holm,
     judge,
     mcnemar_one_sided,
     paired_difference_interval,
+    pairs_needed,
+    pairs_to_confirm,
     tally,
     wilson,
 )
@@ -196,6 +199,21 @@ def test_a_budget_allots_shared_renders_first_and_stays_within_it() -> None:
         assert len({k for group, n in zip(keys, counts) for pair in group[:n] for k in pair}) <= budget
 
 
+def test_a_budget_brings_the_strongest_claims_to_a_confirmable_count_before_spreading() -> None:
+    """Eighteen claims with no render in common, 100 renders (50 pairs): spread evenly none would
+    have the 9 pairs any outcome needs among 18 (and Holm's family would be small); the strongest
+    claims first reach 9, and a claim of no weight gets nothing once the others are likely decided."""
+    from sweep3d.followups.confirm.run import allotted
+
+    keys = [[(f"{c}a{k}", f"{c}b{k}") for k in range(40)] for c in range(18)]
+    weights = [0.9] * 5 + [0.5] * 12 + [0.05]
+    counts = allotted(keys, 100, weights, least=9)
+    assert all(n >= 9 for n in counts[:5]) and sum(counts) == 50 and counts[17] <= 1
+    few = [[(f"{c}a{k}", f"{c}b{k}") for k in range(60)] for c in range(3)]
+    capped = allotted(few, 1000, [0.95] * 3, least=5)  # each likely decided long before 1000 renders
+    assert all(5 <= n < 60 for n in capped) and len({k for g, n in zip(few, capped) for p in g[:n] for k in p}) < 1000
+
+
 def test_a_scoped_boundary_draws_in_its_object_only() -> None:
     claim = boundary_claim(boundary_row("orientation_yaw", "below", 0.0, "object", "toaster"), "",
                            Range(-180.0, 180.0))
@@ -294,7 +312,13 @@ def test_pairs_too_few_for_any_outcome_to_confirm_leave_a_finding_unconfirmed_no
         all_its_way = judge([Pairs(inside_wrong=n)] + [Pairs(both_right=n)] * (findings - 1))
         assert all_its_way[0].status == CONFIRMED
         one_short = judge([Pairs(inside_wrong=n - 1)] + [Pairs(both_right=n - 1)] * (findings - 1))
-        assert {v.status for v in one_short} == {UNCONFIRMED}  # "not replicated" would claim what was not tested
+        # among all of them none could be confirmed: the family is the first few that could, the
+        # rest are left out, unconfirmed ("not replicated" would claim what was not tested)
+        family = one_short[0].findings
+        assert (family < findings or findings == 1) and all(v.status == UNCONFIRMED for v in one_short[family:])
+        assert NOT_REPLICATED not in {v.status for v in one_short}
+    short = judge([Pairs(inside_wrong=4), Pairs(both_right=4)])  # below the 5 any finding needs alone
+    assert {v.status for v in short} == {UNCONFIRMED}
 
 
 def test_a_finding_too_short_of_pairs_to_be_confirmed_does_not_raise_the_others_bar() -> None:
@@ -303,9 +327,24 @@ def test_a_finding_too_short_of_pairs_to_be_confirmed_does_not_raise_the_others_
     left out of the family, and stays unconfirmed, not refuted."""
     alone, short = judge([Pairs(inside_wrong=5), Pairs(both_right=1)])
     assert alone.status == CONFIRMED and alone.findings == 1
-    assert short.status == UNCONFIRMED and short.p_holm == 1.0
-    both = judge([Pairs(inside_wrong=5), Pairs(both_right=6)])  # six pairs could be confirmed among two
-    assert both[0].status != CONFIRMED and both[0].findings == 2
+    assert short.status == UNCONFIRMED and short.p_holm == 1.0 and pairs_to_confirm(short) == 6  # 6 among 2
+    # two of five pairs: among two, each would need six; the family is the one of them the order
+    # picks (by pairs, then first), whatever their outcomes, and only it can be confirmed
+    first, second = judge([Pairs(inside_wrong=5), Pairs(inside_wrong=5)])
+    assert (first.status, first.findings, second.status) == (CONFIRMED, 1, UNCONFIRMED)
+    assert [v.status for v in judge([Pairs(both_right=5), Pairs(inside_wrong=6)])] == [UNCONFIRMED, CONFIRMED]
+
+
+@given(st.lists(st.integers(1, 40), min_size=1, max_size=30), st.integers(1, 4))
+def test_every_finding_of_holms_family_could_be_confirmed_among_it(counts: list[int], looks: int) -> None:
+    share = ALPHA / looks
+    family = family_of(counts, share, list(range(len(counts))))
+    could = [n for n in counts if n >= pairs_needed(1, share)]
+    if could:
+        assert family and all(counts[i] >= pairs_needed(len(family), share) for i in family)
+        assert all(counts[i] <= min(counts[j] for j in family) for i in range(len(counts)) if i not in family)
+    else:
+        assert family == list(range(len(counts)))  # none could: all tested, none confirmed
 
 
 @given(want=st.integers(1, 40), renders=st.integers(2, 10_000), kept=st.floats(0.01, 1.0))

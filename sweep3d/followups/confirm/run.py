@@ -32,6 +32,7 @@ from sweep3d.results import (
     connect,
     has_view,
     numeric_scales,
+    pairs_needed,
     sequential,
     stored_summary,
     tally,
@@ -55,6 +56,7 @@ class Confirmation:
     claim: Claim
     drawn: int  # pairs kept for rendering
     verdict: Verdict
+    candidates: int = 0  # fresh pairs that could be drawn for it (a budget's allotment may take fewer)
 
 
 @dataclass
@@ -84,8 +86,8 @@ def confirm(loaded: LoadedSpec, renders: int = DEFAULT_RENDERS, seed: int | None
     instead of the run's findings. With ``max_renders`` above ``renders``, the findings neither
     confirmed nor bounded get more pairs in looks, doubling up to ``max_renders // 2``
     (:func:`sweep3d.results.confirmation.sequential`; None: one look). ``render_budget``: the most
-    distinct renders the pairs may use, cached or not, allotted to the claims where they give the
-    most pairs (claims share renders, see :func:`allotted`; ``weights``: claim key → the expected z of
+    distinct renders the pairs may use, cached or not, allotted to the claims where they are worth
+    the most (claims share renders, see :func:`allotted`; ``weights``: claim key → the expected z of
     its evidence per root pair, :func:`evidence_rate`), judged in one look. ``found``: the run's plan
     and summary when the caller has them (read again otherwise). It holds the store's writer lock from its start to its end
     (``wait``: seconds to wait for another command holding it), its renders' run within it, by
@@ -144,9 +146,11 @@ def _confirmed(loaded: LoadedSpec, store: Store, renders: int, seed: int, consol
                     chosen[c.key].append(pair)
                     chosen_keys[c.key].append((twins[0].render_key, twins[1].render_key))
                     used.update(keys)
+    available = {c.key: len(chosen[c.key]) for c in claims}
     if render_budget is not None:  # one look, each claim's pairs as many as the budget's renders allot it
         counts = allotted([chosen_keys[c.key] for c in claims], render_budget,
-                          None if weights is None else [weights.get(c.key, 1.0) for c in claims])
+                          None if weights is None else [weights.get(c.key, evidence_rate(None)) for c in claims],
+                          least=pairs_needed(len(claims), ALPHA))
         chosen = {c.key: chosen[c.key][:n] for c, n in zip(claims, counts)}
         first = wanted = max([1, *counts])
     taken = {c.key: 0 for c in claims}
@@ -178,7 +182,7 @@ def _confirmed(loaded: LoadedSpec, store: Store, renders: int, seed: int, consol
         return out
 
     verdicts = sequential(len(claims), first, wanted, observe)
-    confirmations = [Confirmation(c, taken[c.key], v) for c, v in zip(claims, verdicts)]
+    confirmations = [Confirmation(c, taken[c.key], v, available[c.key]) for c, v in zip(claims, verdicts)]
     rendered, cached, failed = totals["rendered"], totals["cached"], totals["failed"]
     fresh_jobs = totals["jobs"]
     write_verdicts(store, loaded.name, {
@@ -195,16 +199,21 @@ def distinct_renders(groups: Any) -> int:
     return len({key for group in groups for pair in group for key in pair})
 
 
-def allotted(keys: list[list[tuple[str, str]]], budget: int, weights: list[float] | None = None) -> list[int]:
+def allotted(keys: list[list[tuple[str, str]]], budget: int, weights: list[float] | None = None,
+             least: int = 1) -> list[int]:
     """The pairs each claim gets (a prefix of its ``keys``, each pair's two render keys) within
-    ``budget`` distinct renders, cached or not. Every pair whose renders are bought already is
-    taken free; then the renders are bought that are worth the most per render (:func:`_worth`
-    of the pairs they free over all claims: a blur boundary's twin is one render, and the
-    per-object and per-environment blur boundaries' and the object claims' twins in its scene
-    are that render too), first claim first on a tie. ``weights``: each claim's expected z per root
-    pair (:func:`evidence_rate`), its worth then capped where it is likely decided. It reads only
-    the keys and the weights, never a fresh outcome: what a claim gets cannot depend on how its
-    fresh twins turn out."""
+    ``budget`` distinct renders, cached or not, in two rounds:
+
+    1. the claims in order of ``weights`` (each claim's expected z per root pair,
+       :func:`evidence_rate`; the first claim first on a tie) are each brought to ``least`` pairs,
+       the fewest with which one could be confirmed, where the budget has the renders for it;
+    2. then, over and over, the renders are bought that are worth the most per render
+       (:func:`_worth` of the pairs they free over all claims: a blur boundary's twin is one
+       render, and the per-object and per-environment blur boundaries' and the object claims'
+       twins in its scene are that render too), until nothing left is worth a render.
+
+    Every pair whose renders are bought already is taken free. It reads only the keys and the
+    weights, never a fresh outcome: what a claim gets cannot depend on how its twins turn out."""
     enough = None if weights is None else decisive_z(len(keys))
     held: set[str] = set()
 
@@ -216,6 +225,11 @@ def allotted(keys: list[list[tuple[str, str]]], budget: int, weights: list[float
         return out
 
     taken = extended([0] * len(keys), held)
+    for i in sorted(range(len(keys)), key=lambda i: (-(weights[i] if weights else 1.0), i)):
+        new = {key for pair in keys[i][taken[i]:least] for key in pair} - held
+        if len(held) + len(new) <= budget:
+            held |= new
+            taken = extended(taken, held)
     while True:
         best: tuple[float, set[str]] | None = None
         for i, group in enumerate(keys):
@@ -227,7 +241,7 @@ def allotted(keys: list[list[tuple[str, str]]], budget: int, weights: list[float
             gain = _worth(extended(taken, held | new), weights, enough) - _worth(taken, weights, enough)
             if best is None or gain / len(new) > best[0] + 1e-12:
                 best = (gain / len(new), new)
-        if best is None:
+        if best is None or best[0] <= 1e-12:
             return taken
         held |= best[1]
         taken = extended(taken, held)

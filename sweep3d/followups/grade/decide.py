@@ -33,7 +33,7 @@ from sweep3d.results import (
     UNTESTED,
     Verdict,
     judge,
-    pairs_needed,
+    pairs_to_confirm,
     sequential,
     tally,
 )
@@ -55,6 +55,7 @@ class Evidence:
     set_aside: int = 0  # wrong verdicts set aside as fragile
     threshold: float | None = None  # the fragile threshold of |margin| used
     untested: str | None = None  # why no check could be made
+    candidates: int = 0  # fresh pairs that could be drawn for it (the budget may have given it fewer)
 
 
 def single(pairs: Iterable[Pair]) -> Verdict:
@@ -91,7 +92,7 @@ def second_opinion(findings: int, first: int, cap: int,
 
 
 def evidence_of(replication: Verdict, twins: list[tuple[Twin, Twin]], engine: Verdict | None,
-                engine_name: str, threshold: float | None) -> Evidence:
+                engine_name: str, threshold: float | None, candidates: int = 0) -> Evidence:
     """The evidence of one finding: its replication's verdict on ``twins`` (each twin's counted,
     correct, margin), the second renderer's verdict on the same twins (None: not rendered), and the
     fragile threshold of ``|margin|`` (None: no stability check)."""
@@ -99,7 +100,7 @@ def evidence_of(replication: Verdict, twins: list[tuple[Twin, Twin]], engine: Ve
     if threshold is not None and twins and all(a[2] is not None and b[2] is not None for a, b in twins):
         pairs, set_aside = steady_pairs((((a[1], a[2]), (b[1], b[2])) for a, b in twins), threshold)
         steady = single(pairs)
-    return Evidence(replication, engine, engine_name, steady, set_aside, threshold)
+    return Evidence(replication, engine, engine_name, steady, set_aside, threshold, candidates=candidates)
 
 
 def _points(value: float | None) -> str:
@@ -122,12 +123,15 @@ def grade(e: Evidence) -> tuple[str, str]:
     r = e.replication
     if r is None:
         return UNTESTED, "the budget gave it no fresh renders"
+    if r.pairs == 0 and e.candidates:
+        return INCONCLUSIVE_GRADE, ("the budget's renders went to findings nearer a decision and gave it no fresh "
+                                    f"pair; {pairs_to_confirm(r)} pairs at least could confirm it")
     if r.pairs == 0:
         return UNTESTED, "no fresh configuration could be drawn for it"
     if r.status == NOT_REPLICATED:
         return NOT_REPLICATED_GRADE, f"fresh renders bound its effect below {r.futility:.0%}: {_effect(r)}"
     if r.status != CONFIRMED:
-        need = pairs_needed(r.findings, ALPHA / max(1, r.looks))
+        need = pairs_to_confirm(r)
         short = f"; {need} pairs at least could confirm it" if r.pairs < need else ""
         return INCONCLUSIVE_GRADE, f"the budget ended before fresh renders decided: {_effect(r)}{short}"
     replicated = f"replicated: {_effect(r)}"

@@ -32,12 +32,14 @@ from sweep3d.cache import Store
 from sweep3d.core import UserError
 from sweep3d.followups.grade.decide import Evidence, evidence_of, grade, second_opinion
 from sweep3d.results import (
+    ALPHA,
     CONFIRMED,
     Finding,
     first_look,
     grade_row,
     listed_findings,
     numeric_scales,
+    pairs_needed,
     record_listing,
     stored_summary,
 )
@@ -108,7 +110,7 @@ def _graded(loaded: LoadedSpec, store: Store, budget: int | None, seed: int, con
         raise UserError(f"{loaded.path}: no results to grade yet; run: sweep3d run {loaded.path}")
     findings = listed_findings(summary)
     if budget is None:
-        budget = math.ceil(DEFAULT_SHARE * len({job.render_key for job in plan.jobs}))
+        budget = max(2, math.ceil(DEFAULT_SHARE * len({job.render_key for job in plan.jobs})))
     model = plan.model
     listing = record_listing(store, loaded.name, model, findings, loaded.path)
     space = space_of(loaded)
@@ -133,9 +135,10 @@ def _graded(loaded: LoadedSpec, store: Store, budget: int | None, seed: int, con
             executor)
         rendered += engine_rendered
         used += engine_used
+        candidates = {x.claim.key: x.candidates for x in result.confirmations}
         for key, verdict in verdicts.items():
             evidence[key] = evidence_of(verdict, result.outcomes.get(key, []), engine_verdicts.get(key), engine,
-                                        threshold)
+                                        threshold, candidates[key])
     images, image_rendered = _image_grades(loaded, store, space, model, checked, max(0, budget - used), engine,
                                            console, executor)
     used += images
@@ -184,8 +187,9 @@ def stability_sample(share: int, each: int, sample: int) -> tuple[bool, int]:
     ``each`` neighbours an image: as many images as the share renders the neighbours of, between
     :data:`MIN_IMAGES` and four default samples. A share that cannot render the neighbours of the
     least sample (the default budget of a run of a few hundred renders, ``--budget 0``) checks the
-    image changes only, which render nothing (one default sample: their inference is what they
-    cost): a sample too small to set a threshold would take renders the replication decides with."""
+    image changes only, on one default sample, which renders nothing (their inference is what
+    they cost): neighbours of a sample too small to set a threshold would take renders the
+    replication decides with. Without scene neighbours the check is that one sample too."""
     if each and share >= each * MIN_IMAGES:
         return True, max(MIN_IMAGES, min(4 * sample, share // each))
     return False, sample
@@ -200,7 +204,7 @@ def _second_renderer(loaded: LoadedSpec, store: Store, space: Any, result: Any, 
     from sweep3d.stages.render import cycles_only_defaults
 
     keys = {k: result.render_keys[k] for k in replicated}
-    caps = allotted([keys[k] for k in replicated], max(0, left))
+    caps = allotted([keys[k] for k in replicated], max(0, left), least=pairs_needed(1, ALPHA))
     if not replicated or max(caps, default=0) < 1:
         return {}, 0, 0
     settings = {"engine": engine, **cycles_only_defaults(engine)}
