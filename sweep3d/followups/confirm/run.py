@@ -32,7 +32,6 @@ from sweep3d.results import (
     connect,
     has_view,
     numeric_scales,
-    pairs_needed,
     sequential,
     stored_summary,
     tally,
@@ -149,8 +148,7 @@ def _confirmed(loaded: LoadedSpec, store: Store, renders: int, seed: int, consol
     available = {c.key: len(chosen[c.key]) for c in claims}
     if render_budget is not None:  # one look, each claim's pairs as many as the budget's renders allot it
         counts = allotted([chosen_keys[c.key] for c in claims], render_budget,
-                          None if weights is None else [weights.get(c.key, evidence_rate(None)) for c in claims],
-                          least=pairs_needed(len(claims), ALPHA))
+                          None if weights is None else [weights.get(c.key, evidence_rate(None)) for c in claims])
         chosen = {c.key: chosen[c.key][:n] for c, n in zip(claims, counts)}
         first = wanted = max([1, *counts])
     taken = {c.key: 0 for c in claims}
@@ -199,22 +197,19 @@ def distinct_renders(groups: Any) -> int:
     return len({key for group in groups for pair in group for key in pair})
 
 
-def allotted(keys: list[list[tuple[str, str]]], budget: int, weights: list[float] | None = None,
-             least: int = 1) -> list[int]:
+def allotted(keys: list[list[tuple[str, str]]], budget: int, weights: list[float] | None = None) -> list[int]:
     """The pairs each claim gets (a prefix of its ``keys``, each pair's two render keys) within
-    ``budget`` distinct renders, cached or not, in two rounds:
-
-    1. the claims in order of ``weights`` (each claim's expected z per root pair,
-       :func:`evidence_rate`; the first claim first on a tie) are each brought to ``least`` pairs,
-       the fewest with which one could be confirmed, where the budget has the renders for it;
-    2. then, over and over, the renders are bought that are worth the most per render
-       (:func:`_worth` of the pairs they free over all claims: a blur boundary's twin is one
-       render, and the per-object and per-environment blur boundaries' and the object claims'
-       twins in its scene are that render too), until nothing left is worth a render.
-
-    Every pair whose renders are bought already is taken free. It reads only the keys and the
-    weights, never a fresh outcome: what a claim gets cannot depend on how its twins turn out."""
-    enough = None if weights is None else decisive_z(len(keys))
+    ``budget`` distinct renders, cached or not. Over and over, it buys the renders worth the most
+    per render: a claim's next few pairs (up to :data:`LOOKAHEAD`), counted with every pair, of
+    any claim, that those renders make free (a blur boundary's twin is one render, and the
+    per-object and per-environment blur boundaries' and the object claims' twins in its scene are
+    that render too), worth :func:`_worth`'s; until nothing left is worth a render
+    (:data:`WORTH_A_RENDER`). Looking a few
+    pairs ahead lets a claim that needs several pairs before any could confirm it be bought whole,
+    not spread thin. ``weights``: each claim's expected z per root pair (:func:`evidence_rate`).
+    It reads only the keys and the weights, never a fresh outcome: what a claim gets cannot
+    depend on how its twins turn out."""
+    critical = None if weights is None else NormalDist().inv_cdf(1 - ALPHA / max(1, len(keys)))
     held: set[str] = set()
 
     def extended(counts: list[int], have: set[str]) -> list[int]:
@@ -225,37 +220,40 @@ def allotted(keys: list[list[tuple[str, str]]], budget: int, weights: list[float
         return out
 
     taken = extended([0] * len(keys), held)
-    for i in sorted(range(len(keys)), key=lambda i: (-(weights[i] if weights else 1.0), i)):
-        new = {key for pair in keys[i][taken[i]:least] for key in pair} - held
-        if len(held) + len(new) <= budget:
-            held |= new
-            taken = extended(taken, held)
     while True:
+        now = _worth(taken, weights, critical)
         best: tuple[float, set[str]] | None = None
         for i, group in enumerate(keys):
-            if taken[i] >= len(group):
-                continue
-            new = set(group[taken[i]]) - held
-            if len(held) + len(new) > budget:
-                continue
-            gain = _worth(extended(taken, held | new), weights, enough) - _worth(taken, weights, enough)
-            if best is None or gain / len(new) > best[0] + 1e-12:
-                best = (gain / len(new), new)
-        if best is None or best[0] <= 1e-12:
+            new: set[str] = set()
+            for k in range(taken[i], min(len(group), taken[i] + LOOKAHEAD)):
+                new |= set(group[k]) - held
+                if len(held) + len(new) > budget:
+                    break
+                gain = (_worth(extended(taken, held | new), weights, critical) - now) / len(new)
+                if best is None or gain > best[0] + 1e-12:
+                    best = (gain, set(new))
+        if best is None or best[0] <= (1e-12 if weights is None else WORTH_A_RENDER):
             return taken
         held |= best[1]
         taken = extended(taken, held)
 
 
-def _worth(counts: list[int], weights: list[float] | None = None, enough: float | None = None) -> float:
-    """What claims' pair counts are worth to the decisions: each claim's square root (a finding's
-    evidence grows as the root of its pairs), so a render goes where it lifts a claim with few
-    pairs before one that has many; with ``weights``, each claim's expected z (weight × root),
-    at most ``enough``: a render goes where it brings a claim nearest a decision, none to a
-    claim already likely decided while another is not."""
-    if weights is None or enough is None:
+#: Pairs of one claim :func:`allotted` weighs buying together.
+LOOKAHEAD = 16
+#: The least gain a render must bring, in expected confirmations, to be bought (with weights).
+WORTH_A_RENDER = 1e-3
+
+
+def _worth(counts: list[int], weights: list[float] | None = None, critical: float | None = None) -> float:
+    """What claims' pair counts are worth to the decisions. Without ``weights``, each claim's square
+    root (a finding's evidence grows as the root of its pairs): a render goes where it lifts a
+    claim with few pairs before one with many. With them, the expected number of claims
+    confirmed: each claim's chance that its z (weight × root of its pairs, on average) clears
+    ``critical``, so a render goes where it moves a claim towards a decision, none to a claim
+    already likely decided or out of reach."""
+    if weights is None or critical is None:
         return sum(math.sqrt(n) for n in counts)
-    return sum(min(w * math.sqrt(n), enough) for n, w in zip(counts, weights))
+    return sum(NormalDist().cdf(w * math.sqrt(n) - critical) if n else 0.0 for n, w in zip(counts, weights))
 
 
 def evidence_rate(difference: float | None) -> float:
@@ -266,12 +264,6 @@ def evidence_rate(difference: float | None) -> float:
     verdict."""
     d = 0.3 if difference is None or not math.isfinite(difference) else min(1.0, abs(difference))
     return d / math.sqrt(d + 0.1)
-
-
-def decisive_z(claims: int) -> float:
-    """The expected z at which a claim among ``claims`` tested together is likely confirmed: Holm's
-    first one-sided threshold at 5 % over ``claims``, plus 80 % power's margin."""
-    return NormalDist().inv_cdf(1 - ALPHA / max(1, claims)) + NormalDist().inv_cdf(0.8)
 
 
 def twin_outcomes(space: Space, fresh: list[Row], outcomes: dict[int, Twin],

@@ -27,6 +27,7 @@ VERDICT_FIELDS = pa.schema([
     ("accuracy_outside", pa.float64()), ("difference", pa.float64()), ("difference_low", pa.float64()),
     ("difference_high", pa.float64()), ("p_value", pa.float64()), ("p_holm", pa.float64()),
     ("findings", pa.int64()), ("look", pa.int64()), ("looks", pa.int64()), ("futility", pa.float64()),
+    ("in_family", pa.bool_()),  # null in rows from before Holm's family left findings out
 ])
 #: One claim's confirmation: ``experiment`` is the discovery run's (whose finding it tests),
 #: ``fresh_experiment`` the twins' (``<experiment>-confirm``).

@@ -32,14 +32,12 @@ from sweep3d.cache import Store
 from sweep3d.core import UserError
 from sweep3d.followups.grade.decide import Evidence, evidence_of, grade, second_opinion
 from sweep3d.results import (
-    ALPHA,
     CONFIRMED,
     Finding,
     first_look,
     grade_row,
     listed_findings,
     numeric_scales,
-    pairs_needed,
     record_listing,
     stored_summary,
 )
@@ -204,7 +202,7 @@ def _second_renderer(loaded: LoadedSpec, store: Store, space: Any, result: Any, 
     from sweep3d.stages.render import cycles_only_defaults
 
     keys = {k: result.render_keys[k] for k in replicated}
-    caps = allotted([keys[k] for k in replicated], max(0, left), least=pairs_needed(1, ALPHA))
+    caps = allotted([keys[k] for k in replicated], max(0, left))
     if not replicated or max(caps, default=0) < 1:
         return {}, 0, 0
     settings = {"engine": engine, **cycles_only_defaults(engine)}
