@@ -86,11 +86,11 @@ def confirm(loaded: LoadedSpec, renders: int = DEFAULT_RENDERS, seed: int | None
     confirmed nor bounded get more pairs in looks, doubling up to ``max_renders // 2``
     (:func:`sweep3d.results.confirmation.sequential`; None: one look). ``render_budget``: the most
     distinct renders the pairs may use, cached or not, allotted to the claims where they are worth
-    the most (claims share renders, see :func:`allotted`; ``weights``: claim key → the expected z of
-    its evidence per root pair, :func:`evidence_rate`), judged in one look. ``found``: the run's plan
-    and summary when the caller has them (read again otherwise). It holds the store's writer lock from its start to its end
-    (``wait``: seconds to wait for another command holding it), its renders' run within it, by
-    the runner on ``executor``."""
+    the most (claims share renders, see :func:`allotted`; ``weights``: claim key → the expected z
+    of its evidence per root pair, :func:`evidence_rate`), judged in one look. ``found``: the
+    run's plan and summary when the caller has them (read again otherwise). It holds the store's
+    writer lock from its start to its end (``wait``: seconds to wait for another command holding
+    it), its renders' run within it, by the runner on ``executor``."""
     from sweep3d.results import no_results
 
     if renders < 2:
@@ -204,11 +204,10 @@ def allotted(keys: list[list[tuple[str, str]]], budget: int, weights: list[float
     any claim, that those renders make free (a blur boundary's twin is one render, and the
     per-object and per-environment blur boundaries' and the object claims' twins in its scene are
     that render too), worth :func:`_worth`'s; until nothing left is worth a render
-    (:data:`WORTH_A_RENDER`). Looking a few
-    pairs ahead lets a claim that needs several pairs before any could confirm it be bought whole,
-    not spread thin. ``weights``: each claim's expected z per root pair (:func:`evidence_rate`).
-    It reads only the keys and the weights, never a fresh outcome: what a claim gets cannot
-    depend on how its twins turn out."""
+    (:data:`WORTH_A_RENDER`). Looking a few pairs ahead lets a claim that needs several pairs
+    before any could confirm it be bought whole, not spread thin. ``weights``: each claim's
+    expected z per root pair (:func:`evidence_rate`). It reads only the keys and the weights,
+    never a fresh outcome: what a claim gets cannot depend on how its twins turn out."""
     critical = None if weights is None else NormalDist().inv_cdf(1 - ALPHA / max(1, len(keys)))
     held: set[str] = set()
 
@@ -259,9 +258,8 @@ def _worth(counts: list[int], weights: list[float] | None = None, critical: floa
 def evidence_rate(difference: float | None) -> float:
     """The expected z of a finding's fresh twins per root pair, from the run's accuracy difference
     inside less outside: McNemar's z is about ``|d| √n / √p`` with ``p`` the share of discordant
-    pairs, at least ``|d|`` (taken as ``|d|`` + 0.1). An unknown difference counts as 0.3's. Only
-    an order of the findings' needs, from the run's data: it decides where renders go, never a
-    verdict."""
+    pairs, at least ``|d|`` (taken as ``|d|`` + 0.1). An unknown difference counts as 0.3's. From
+    the run's data alone, it decides where renders go, never a verdict."""
     d = 0.3 if difference is None or not math.isfinite(difference) else min(1.0, abs(difference))
     return d / math.sqrt(d + 0.1)
 
