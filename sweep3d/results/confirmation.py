@@ -274,27 +274,40 @@ def judge(findings: Sequence[Pairs], alpha: float = ALPHA, look: int = 1, looks:
 
 
 def sequential(findings: int, first: int, cap: int, observe: Callable[[Mapping[int, int]], Mapping[int, Pairs]],
-               alpha: float = ALPHA, futility: float = FUTILITY, together: bool = True) -> list[Verdict]:
+               alpha: float = ALPHA, futility: float = FUTILITY, together: bool = True,
+               caps: Sequence[int] | None = None) -> list[Verdict]:
     """Judge ``findings`` in looks: ``observe({finding: pairs wanted})`` gives each open finding's
     fresh pairs so far (cumulative; fewer when no more can be drawn), the pairs doubling from
     ``first`` to ``cap``. A finding leaves once decided (confirmed, or its effect bounded), or when
     no more pairs come; the rest are inconclusive after the last look. ``together``: Holm over the
-    open findings at each look (else each judged alone, Bonferroni over the looks only)."""
+    open findings at each look (else each judged alone, Bonferroni over the looks only). ``caps``
+    (each judged alone): each finding's own most pairs; its looks are then only those that give it
+    more pairs, the error rate split over them alone (a finding of 8 pairs where the looks go to 23
+    has one look, at the whole rate)."""
     sizes, size = [], max(1, first)
     while size < max(cap, first):
         sizes.append(size)
         size *= 2
     sizes.append(max(cap, first))
     looks = len(sizes)
+    own = [sorted({min(s, c) for s in sizes}) for c in caps] if caps is not None and not together else None
     final: dict[int, Verdict] = {}
     seen: dict[int, int] = {}
     for look, size in enumerate(sizes, 1):
         open_ = [i for i in range(findings) if i not in final]
+        if own is not None:  # a finding whose pairs this look would not add to waits for a look that does
+            open_ = [i for i in open_ if look == 1 or min(size, caps[i]) > min(sizes[look - 2], caps[i])]
         if not open_:
-            break
+            if len(final) == findings:
+                break
+            continue
         got = observe({i: size for i in open_})
-        verdicts = (judge([got[i] for i in open_], alpha, look, looks, futility) if together
-                    else [judge([got[i]], alpha, look, looks, futility)[0] for i in open_])
+        if own is None:
+            verdicts = (judge([got[i] for i in open_], alpha, look, looks, futility) if together
+                        else [judge([got[i]], alpha, look, looks, futility)[0] for i in open_])
+        else:
+            verdicts = [judge([got[i]], alpha, own[i].index(min(size, caps[i])) + 1, len(own[i]), futility)[0]
+                        for i in open_]
         for i, verdict in zip(open_, verdicts):
             stalled = look > 1 and verdict.pairs <= seen.get(i, 0)  # no more pairs could be drawn
             seen[i] = verdict.pairs

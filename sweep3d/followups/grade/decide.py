@@ -19,7 +19,7 @@ A finding that passes all three is *solid*.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable, Iterable, Mapping
+from typing import Callable, Iterable, Mapping, Sequence
 
 from sweep3d.results import (
     ALPHA,
@@ -79,16 +79,18 @@ def steady_pairs(twins: Iterable[tuple[tuple[bool, float | None], tuple[bool, fl
 
 
 def second_opinion(findings: int, first: int, cap: int,
-                   fetch: Callable[[Mapping[int, int]], Mapping[int, list[Pair]]]) -> list[Verdict]:
+                   fetch: Callable[[Mapping[int, int]], Mapping[int, list[Pair]]],
+                   caps: Sequence[int] | None = None) -> list[Verdict]:
     """The second renderer's verdicts on the replicated findings' twins, in looks doubling the pairs
     from ``first`` to ``cap`` (``fetch({finding: pairs wanted})`` gives each open finding's first
-    pairs, fewer where it has no more). Each finding is judged alone, at :data:`ALPHA` split over
-    the looks (Bonferroni): the replication has already controlled the error over the findings,
+    pairs, fewer where it has no more; ``caps``: each finding's most pairs, its looks only those
+    that add to them). Each finding is judged alone, at :data:`ALPHA` split over its looks
+    (Bonferroni): the replication has already controlled the error over the findings,
     so the second renderer asks of one finding only whether it shows it too (a finding without a
     real effect is graded solid with probability at most the replication's ALPHA: the second check,
     on the same twins and so not independent of the first, can only lower it)."""
     return sequential(findings, first, cap, lambda asked: {i: tally(p) for i, p in fetch(asked).items()},
-                      together=False)
+                      together=False, caps=caps)
 
 
 def evidence_of(replication: Verdict, twins: list[tuple[Twin, Twin]], engine: Verdict | None,
@@ -112,7 +114,7 @@ def _effect(v: Verdict) -> str:
     of the look that decided (1 - 5 % / looks); Holm's p over the findings judged together (one
     finding alone: its own p)."""
     p = f"Holm p = {v.p_holm:.2g}" if v.findings > 1 else f"p = {v.p_value:.2g}"
-    return (f"{_points(v.difference)} on {v.pairs} fresh pairs ({_points(v.difference_low)} to "
+    return (f"{_points(v.difference)} on {v.pairs} fresh pair{'s' * (v.pairs != 1)} ({_points(v.difference_low)} to "
             f"{_points(v.difference_high)}, {p})")
 
 
@@ -124,8 +126,9 @@ def grade(e: Evidence) -> tuple[str, str]:
     if r is None:
         return UNTESTED, "the budget gave it no fresh renders"
     if r.pairs == 0 and e.candidates:
-        return INCONCLUSIVE_GRADE, ("the budget's renders went to findings nearer a decision and gave it no fresh "
-                                    f"pair; {pairs_to_confirm(r)} pairs at least could confirm it")
+        return INCONCLUSIVE_GRADE, ("the budget gave it no fresh pair: its renders went where they were worth more "
+                                    "(pairs that cost fewer renders, or effects nearer a decision); "
+                                    f"{pairs_to_confirm(r)} pairs at least could confirm it")
     if r.pairs == 0:
         return UNTESTED, "no fresh configuration could be drawn for it"
     if r.status == NOT_REPLICATED:

@@ -220,7 +220,7 @@ def _second_renderer(loaded: LoadedSpec, store: Store, space: Any, result: Any, 
         rendered += render.computed if render else 0
         return {i: [(a[1], b[1]) for a, b in outcomes[i] if a and b and a[0] and b[0]] for i in asked}
 
-    verdicts = second_opinion(len(replicated), first_look(max(caps), ENGINE_FIRST), max(caps), fetch)
+    verdicts = second_opinion(len(replicated), first_look(max(caps), ENGINE_FIRST), max(caps), fetch, caps)
     checked = {k: v for k, v, n in zip(replicated, verdicts, caps) if n}  # no pair within the budget: not checked
     return checked, rendered, distinct_renders(keys[k][:n] for k, n in zip(replicated, taken))
 

@@ -180,3 +180,17 @@ def test_the_stability_share_renders_scene_neighbours_only_where_it_affords_them
     assert stability_sample(0, 4, 64) == (False, 64)  # --budget 0: the image changes only, no render
     assert stability_sample(63, 4, 64)[0] is False and stability_sample(64, 4, 64)[0] is True
     assert stability_sample(500, 0, 64) == (False, 64)  # no scene neighbours in the spec
+
+
+def test_the_second_renderer_splits_the_error_rate_over_a_findings_own_looks_only() -> None:
+    """Eight pairs, five wrong only inside (p = 1/32): beside a finding of 23 pairs the looks go 12,
+    23, but this one's pairs never grow past 8: one look, at the whole 5 %, reproduces it; split
+    over the two looks (2.5 % each) it would not."""
+    short = [(False, True)] * 5 + [(True, True)] * 3
+    other = [(True, True)] * 23
+    pairs = [short, other]
+    fetch = lambda asked: {i: pairs[i][:n] for i, n in asked.items()}  # noqa: E731
+    own = second_opinion(2, first_look(23, ENGINE_FIRST), 23, fetch, caps=[8, 23])
+    shared = second_opinion(2, first_look(23, ENGINE_FIRST), 23, fetch)
+    assert (own[0].status, own[0].looks) == (CONFIRMED, 1)
+    assert shared[0].status != CONFIRMED and own[1].looks == 2
