@@ -37,6 +37,10 @@ def print_grades(console: Console, graded: Graded, spec_path: object) -> None:
         console.print(f"{counts['inconclusive']} inconclusive: a larger budget goes on from here, reusing the renders made "
                       f"(sweep3d grade {escape(str(spec_path))} --budget {2 * max(graded.budget, 1)}; a second look "
                       "at these pairs, each look at 5 %)", highlight=False, soft_wrap=True)
+    if graded.replaced is not None:
+        console.print(f"note: these grades replace those of --budget {graded.replaced} (more renders); "
+                      f"sweep3d grade {escape(str(spec_path))} --budget {graded.replaced} gives them back, every "
+                      "render cached", highlight=False, soft_wrap=True)
     console.print(f"{graded.used} renders of the budget's {graded.budget} used ({graded.rendered} rendered now); "
                   f"second renderer {graded.engine}; {graded.seconds:.0f} s. The grades are the `findings` view "
                   f"(sweep3d query {escape(str(spec_path))} \"SELECT * FROM findings\") and lead the report",

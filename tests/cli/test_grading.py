@@ -43,3 +43,22 @@ def test_a_budget_too_small_for_the_scene_neighbours_says_which_budget_renders_t
 
     assert "the image changes only: the scene neighbours need --budget 256 at least" in printed(256)
     assert "stability: 64 images checked" in printed(None) and "image changes only" not in printed(None)
+
+
+def test_a_smaller_budget_says_whose_grades_it_replaced_and_how_to_get_them_back() -> None:
+    import json
+
+    from sweep3d.followups.grade.run import larger_budget
+
+    def row(budget: int, seed: int = 0, listing: str = "L") -> dict:
+        return {"listing": listing, "details": json.dumps({"budget": budget, "seed": seed})}
+
+    assert larger_budget([row(160), row(160)], "L", 2, 0) == 160
+    assert larger_budget([row(160)], "L", 320, 0) is None  # a larger one replaces nothing it had
+    assert larger_budget([row(160, seed=1), row(160, listing="M"), {"listing": "L", "details": None}], "L", 2, 0) \
+        is None  # another seed's pairs, another listing, a row from before budgets were recorded
+    findings = [Finding("k0", "boundary", "finding 0", 0, {})]
+    console = Console(record=True, width=300)
+    print_grades(console, Graded(findings, [("inconclusive", "x")], 2, 2, 0, 1.0, "mitsuba", replaced=160), "s.toml")
+    assert "these grades replace those of --budget 160 (more renders); sweep3d grade s.toml --budget 160" in \
+        console.export_text()

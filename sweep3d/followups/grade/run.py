@@ -39,6 +39,7 @@ from sweep3d.results import (
     listed_findings,
     numeric_scales,
     record_listing,
+    stored_rows,
     stored_summary,
 )
 from sweep3d.spec import LoadedSpec
@@ -76,6 +77,7 @@ class Graded:
     #: the least budget whose share renders the scene neighbours, where this one checked the image
     #: changes alone (None: the neighbours were rendered, or the spec moves nothing they would move)
     scene_budget: int | None = None
+    replaced: int | None = None  # the larger budget of the earlier grades these replaced (same seed)
 
 
 def grade_findings(loaded: LoadedSpec, budget: int | None = None, seed: int | None = None,
@@ -152,9 +154,10 @@ def _graded(loaded: LoadedSpec, store: Store, budget: int | None, seed: int, con
             grades.append(grade(Evidence(untested=f"--budget {budget} gives no fresh pair")))
         else:
             grades.append(grade(Evidence()))
-    _record(store, loaded, model, listing, findings, grades, evidence)
+    replaced = larger_budget(stored_rows(store, loaded.name, model), listing, budget, seed)
+    _record(store, loaded, model, listing, findings, grades, evidence, budget, seed)
     return Graded(findings, grades, budget, used, rendered, time.perf_counter() - started, engine, checked, listing,
-                  scene_budget)
+                  scene_budget, replaced)
 
 
 def other_engine(loaded: LoadedSpec) -> str:
@@ -280,8 +283,25 @@ def _image_grades(loaded: LoadedSpec, store: Store, space: Any, model: str, chec
     return len(taken), render.computed if render else 0
 
 
+def larger_budget(rows: list[dict[str, Any]], listing: str, budget: int, seed: int) -> int | None:
+    """The budget of the grading these grades replace (``rows``: the stored ones, newest per
+    finding), when it was larger than ``budget`` with the same seed: a smaller budget's grades
+    replace a larger one's, however many renders that one had; None otherwise."""
+    earlier = []
+    for row in rows:
+        if row.get("listing") != listing or not row.get("details"):
+            continue
+        try:
+            details = json.loads(row["details"])
+        except ValueError:
+            continue
+        if isinstance(details, dict) and details.get("seed") == seed and isinstance(details.get("budget"), int):
+            earlier.append(details["budget"])
+    return max(earlier) if earlier and max(earlier) > budget else None
+
+
 def _record(store: Store, loaded: LoadedSpec, model: str, listing: str, findings: list[Finding],
-            grades: list[tuple[str, str]], evidence: dict[str, Evidence]) -> None:
+            grades: list[tuple[str, str]], evidence: dict[str, Evidence], budget: int, seed: int) -> None:
     """The listing's rows with their grades (newer than its untested ones)."""
     from sweep3d.cache import utc_now
     from sweep3d.results import FINDINGS_SCHEMA, FINDINGS_TABLE
@@ -293,7 +313,7 @@ def _record(store: Store, loaded: LoadedSpec, model: str, listing: str, findings
         r, g = (e.replication, e.engine) if e else (None, None)
         details = {"replication": r.as_dict() if r else None, "engine": g.as_dict() if g else None,
                    "steady": e.steady.as_dict() if e and e.steady else None,
-                   "threshold": e.threshold if e else None}
+                   "threshold": e.threshold if e else None, "budget": budget, "seed": seed}
         rows.append(grade_row(
             loaded.name, model, listing, now, finding, grade_name, sentence,
             pairs=r.pairs if r else None, effect=_finite(r.difference) if r else None,
