@@ -208,7 +208,7 @@ def allotted(keys: list[list[tuple[str, str]]], budget: int, weights: list[float
     before any could confirm it be bought whole, not spread thin. ``weights``: each claim's
     expected z per root pair (:func:`evidence_rate`). It reads only the keys and the weights,
     never a fresh outcome: what a claim gets cannot depend on how its twins turn out."""
-    critical = None if weights is None else NormalDist().inv_cdf(1 - ALPHA / max(1, len(keys)))
+    critical = None if weights is None else _STANDARD.inv_cdf(1 - ALPHA / max(1, len(keys)))
     held: set[str] = set()
 
     def extended(counts: list[int], have: set[str]) -> list[int]:
@@ -241,6 +241,7 @@ def allotted(keys: list[list[tuple[str, str]]], budget: int, weights: list[float
 LOOKAHEAD = 16
 #: The least gain a render must bring, in expected confirmations, to be bought (with weights).
 WORTH_A_RENDER = 1e-3
+_STANDARD = NormalDist()  # one standard normal for the allotment's inner loop
 
 
 def _worth(counts: list[int], weights: list[float] | None = None, critical: float | None = None) -> float:
@@ -252,7 +253,7 @@ def _worth(counts: list[int], weights: list[float] | None = None, critical: floa
     already likely decided or out of reach."""
     if weights is None or critical is None:
         return sum(math.sqrt(n) for n in counts)
-    return sum(NormalDist().cdf(w * math.sqrt(n) - critical) if n else 0.0 for n, w in zip(counts, weights))
+    return sum(_STANDARD.cdf(w * math.sqrt(n) - critical) if n else 0.0 for n, w in zip(counts, weights))
 
 
 def evidence_rate(difference: float | None) -> float:
