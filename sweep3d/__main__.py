@@ -1,6 +1,6 @@
 """``python -m sweep3d`` runs the command line."""
 
-from sweep3d.cli import main
+from sweep3d.cli import console_main
 
 if __name__ == "__main__":
-    main()
+    console_main()

@@ -121,7 +121,9 @@ def _short(filename: str) -> str:
 
 def _refuse_workers(guard: _LaneGuard) -> None:
     """Starting a render worker (which imports bpy in a child process) fails the test in the lane;
-    a post-processing worker (a :class:`Child` running ``stages.postprocess``' code) is allowed."""
+    a post-processing worker (a :class:`Child` running ``stages.postprocess``' code) is allowed,
+    and so is the interpreter ``sweep3d run`` starts ahead (``stages.render.early``, a Child with
+    no work yet): only a render pool, refused here, would give it any."""
     import multiprocessing.context
 
     def refuse(what: str, allowed=None):
@@ -144,8 +146,9 @@ def _refuse_workers(guard: _LaneGuard) -> None:
 
 
 def _post_worker(child, target=None, *args, **kwargs) -> bool:
-    """Whether a :class:`Child` is to run a post-processing worker (numpy and the post controls, no bpy)."""
-    return getattr(target, "__module__", "").startswith("sweep3d.stages.postprocess.")
+    """Whether a :class:`Child` is to run a post-processing worker (numpy and the post controls, no
+    bpy), or nothing yet (started ahead: see :func:`_refuse_workers`)."""
+    return target is None or getattr(target, "__module__", "").startswith("sweep3d.stages.postprocess.")
 
 
 _GUARD = pytest.StashKey[_LaneGuard]()

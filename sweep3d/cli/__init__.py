@@ -2,6 +2,6 @@
 
 from __future__ import annotations
 
-from sweep3d.cli.app import app, main  # eager: the command line is what importing this package is for
+from sweep3d.cli.app import app, console_main, main  # eager: the command line is what importing this package is for
 
-__all__ = ["app", "main"]
+__all__ = ["app", "console_main", "main"]

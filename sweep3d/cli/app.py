@@ -95,12 +95,19 @@ def run(
                                                       "start a local one on 127.0.0.1)."),
 ) -> None:
     """Render, postprocess and infer everything the spec needs that the store lacks."""
-    from sweep3d.api import Experiment
-
     check_wait(wait)
-    experiment = Experiment(spec)
-    signal.signal(signal.SIGTERM, _interrupt)  # clean up workers and scratch files as on Ctrl-C
-    result = experiment.run(wait=wait, executor=executor, address=address, console=console)
+    from sweep3d.stages.render import drop_early_worker, start_early_worker
+
+    if executor == "local":
+        start_early_worker()  # Blender loads in a render worker while the spec is read and planned
+    try:
+        from sweep3d.api import Experiment
+
+        experiment = Experiment(spec)
+        signal.signal(signal.SIGTERM, _interrupt)  # clean up workers and scratch files as on Ctrl-C
+        result = experiment.run(wait=wait, executor=executor, address=address, console=console)
+    finally:
+        drop_early_worker()  # a run that rendered nothing, or not with Cycles on the CPU
     from sweep3d.cli.output import print_run
 
     print_run(console, result)
@@ -607,11 +614,24 @@ def _write_report(experiment: Experiment, output: Optional[Path], model: Optiona
 
 
 def main() -> None:
-    """Console entry point."""
+    """The command line, ending with ``SystemExit`` as any click application does (tests call it)."""
     from sweep3d.cache import skip_pandas_probe
 
     skip_pandas_probe()
     app()
+
+
+def console_main() -> None:
+    """The ``sweep3d`` command and ``python -m sweep3d``: :func:`main`, then an exit that skips
+    the interpreter's teardown (:mod:`.quick_exit`). An exception no command caught (a bug) goes
+    on to Python's own handling, traceback and all."""
+    from sweep3d.cli.quick_exit import exit_now
+
+    try:
+        main()
+    except SystemExit as exc:
+        exit_now(exc.code)
+    exit_now(0)
 
 
 def _register_subcommands() -> None:

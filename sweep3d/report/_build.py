@@ -69,7 +69,7 @@ def write_report(loaded: LoadedSpec, output: Path | None = None, model: str | No
         UserError: if the store holds no results for the experiment, or the file cannot be written.
     """
     with results_store(loaded) as store:
-        con = connect(store, loaded.name, model=model)
+        con = connect(store, loaded.name, model=model, read_once=True)
         try:
             context = build_context(loaded, con, store, model=model)
         finally:
@@ -169,7 +169,7 @@ def image_keys(loaded: LoadedSpec, panels: tuple[Panel, ...] = PANELS) -> list[s
     (``benchmarks/report_scale.py``) needs image blobs for these only.
     """
     with results_store(loaded) as store:
-        con = connect(store, loaded.name)
+        con = connect(store, loaded.name, read_once=True)
         try:
             thumbs = gather(loaded, con, store, panels).thumbs
         finally:

@@ -360,7 +360,7 @@ def stored_summary(store: Store, experiment: str, columns: list[str], failure_li
     remembered = _read_summary(path, key)
     if remembered is not None:
         return remembered
-    con = connect(store, experiment)
+    con = connect(store, experiment, read_once=True)
     try:
         summary = summarise(con, columns, failure_limit, scales)
     finally:

@@ -146,7 +146,7 @@ MACROS = ("wilson_low", "wilson_high", "binomial_cdf", "hypergeometric_cdf", "di
 
 def connect(store: Store, experiment: str | None = None, read_only: bool = False,
             writable: Sequence[Path] = (), model: str | None = None,
-            views: Literal["all", "controls", "results"] = "all") -> duckdb.DuckDBPyConnection:
+            views: Literal["all", "controls", "results"] = "all", read_once: bool = False) -> duckdb.DuckDBPyConnection:
     """:meth:`Store.connect` with the aggregate views and macros over ``experiment``'s results.
 
     An experiment may test several models: ``results_all`` then holds every model's results,
@@ -164,6 +164,10 @@ def connect(store: Store, experiment: str | None = None, read_only: bool = False
             ``control_stats``, ...), before the part, task, paired and failure-mode views. A follow-up
             reading its own jobs' verdicts need not wait for every view to be made (most of a cached
             ``grade``'s time).
+        read_once: compute ``results`` once into a temp table before the views are made on it
+            (:func:`materialise`), for a caller that reads most views (the summary, the report):
+            each view's creation then binds that table instead of the segments' scans again (the
+            cold quickstart's 33 views: 0.5 s → 0.2 s).
 
     Raises:
         UserError: when ``model`` is not one of the experiment's models.
@@ -183,6 +187,8 @@ def connect(store: Store, experiment: str | None = None, read_only: bool = False
             _create_macros(con)  # the stability views' Wilson intervals
             register_fragile(con, drop=experiment is not None and plan_drops_fragile(store.jobs_path(experiment)))
             shown = _select_model(con, models, model)
+            if read_once:
+                materialise(con, ["results"])
         elif model is not None:
             raise UserError(f"--model {model}: the experiment has no results yet")
         if views == "results":

@@ -107,6 +107,24 @@ def test_blender_starts_while_the_model_is_checked_and_a_broken_model_leaves_no_
     assert starts == [0], "the worker started ahead renders: no second one"
 
 
+def test_the_command_line_renders_with_the_worker_it_started_before_reading_the_spec(tiny_copy, monkeypatch) -> None:
+    from sweep3d.stages.render import pool
+    from sweep3d.stages.render.child import live_children
+
+    edit_spec(tiny_copy, "yaw = [0, 45]", "yaw = [10, 55]")  # renders to make
+    spawned: list[tuple] = []
+    real_child = pool.Child
+    monkeypatch.setattr(pool, "Child", lambda *args, **kwargs: spawned.append(args) or real_child(*args, **kwargs))
+    result = CliRunner().invoke(app, ["run", str(tiny_copy / "spec.toml"), "--no-report"])
+    assert result.exit_code == 0, result.output
+    assert re.search(r"render\s*│\s*4\s*│\s*0\s*│\s*4\s*│", result.output), result.output  # needed, cached, computed
+    assert spawned == [], "the pool took the worker started ahead instead of starting one"
+    assert live_children() == []
+    result = CliRunner().invoke(app, ["run", str(tiny_copy / "spec.toml"), "--no-report"])  # nothing to render
+    assert result.exit_code == 0, result.output
+    assert live_children() == [], "the worker started ahead is ended when nothing takes it"
+
+
 def test_cli_run_prints_stage_counts_and_writes_report(tiny_copy: Path) -> None:
     result = CliRunner().invoke(app, ["run", str(tiny_copy / "spec.toml")])
     assert result.exit_code == 0, result.output

@@ -30,6 +30,8 @@ if _TYPE_CHECKING:
     from sweep3d.stages.render.cycles.paint import SIDES, paint_objects
     from sweep3d.stages.render.cycles.scene_edit import SceneEdit
     from sweep3d.stages.render.device import device_note, missing_gpu_warning, resolve_device
+    from sweep3d.stages.render.early import drop as drop_early_worker
+    from sweep3d.stages.render.early import start as start_early_worker
     from sweep3d.stages.render.estimate import duration, estimate_render_seconds, slow_render_warning
     from sweep3d.stages.render.pool import death_cause, remove_stale_scratch, scratch_root
     from sweep3d.stages.render.ray_pool import connect, ray_session

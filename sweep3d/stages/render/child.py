@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import atexit
 import ctypes
+import importlib
 import os
 import pickle
 import signal
@@ -29,6 +30,7 @@ import subprocess
 import sys
 import time
 import traceback
+from dataclasses import dataclass
 from multiprocessing import Pipe
 from multiprocessing.connection import Connection, wait
 from typing import Any, Callable
@@ -51,7 +53,10 @@ class Child:
     (``pid``, ``sentinel``, ``is_alive``, ``exitcode``, ``kill``, ``join``), acting on the
     child's whole process group."""
 
-    def __init__(self, target: Callable[..., Any], args: tuple = (), name: str = "sweep3d-child") -> None:
+    def __init__(self, target: Callable[..., Any] | None, args: tuple = (), name: str = "sweep3d-child",
+                 preload: tuple[str, ...] = ()) -> None:
+        """``target`` None: a child started ahead of its work, importing ``preload`` (bpy) while
+        the parent goes on; :meth:`assign` gives it the work."""
         self.name = name
         self.conn, theirs = Pipe()
         watch_r, watch_w = os.pipe()  # where pidfd_open is missing: EOF once the child (and what it forked) ends
@@ -64,9 +69,25 @@ class Child:
             os.close(watch_w)
         self.pid = self.popen.pid
         self.sentinel = _pidfd(self.pid, watch_r)  # readable once it exits, before it is reaped
+        self._assigned_path = list(sys.path)  # the sys.path the child has
         _live.add(self)
         try:
             self.conn.send(list(sys.path))
+            if preload:
+                self.conn.send(Preload(preload))
+        except (BrokenPipeError, ConnectionResetError):
+            pass  # it died at once: its reader sees the closed pipe and the exit code says why
+        if target is not None:
+            self.assign(target, args)
+
+    def assign(self, target: Callable[..., Any], args: tuple = (), name: str | None = None) -> None:
+        """Have the child run ``target(conn, *args)``; a child started ahead is sent this process's
+        ``sys.path`` again first (a spec read since may have put its folder there)."""
+        self.name = name or self.name
+        try:
+            if self._assigned_path != sys.path:
+                self.conn.send(list(sys.path))
+                self._assigned_path = list(sys.path)
             self.conn.send((target, args))
         except (BrokenPipeError, ConnectionResetError):
             pass  # it died at once: its reader sees the closed pipe and the exit code says why
@@ -176,7 +197,14 @@ def serve(conn: Connection, parent: int) -> None:
     signal.signal(signal.SIGTTOU, signal.SIG_IGN)  # its own group is not the terminal's: may still write
     code = 0
     try:
-        target, args = conn.recv()
+        message = conn.recv()
+        while not isinstance(message, tuple):  # a child started ahead: what to import, a newer sys.path
+            if isinstance(message, Preload):
+                message.load()
+            else:
+                sys.path[:] = message
+            message = conn.recv()
+        target, args = message
         target(conn, *args)
     except SystemExit as exc:
         code = exc.code if isinstance(exc.code, int) else int(exc.code is not None)
@@ -186,6 +214,26 @@ def serve(conn: Connection, parent: int) -> None:
     _stop_multiprocessing_children()
     end_descendants(os.getpid(), spare_group=os.getpgid(0))  # what left the group; the parent ends the group
     sys.exit(code)
+
+
+@dataclass(frozen=True)
+class Preload:
+    """What a child started ahead imports while it waits for its work (:class:`Child`)."""
+
+    #: modules to import, or ``module:function`` to call (with no arguments) once imported
+    names: tuple[str, ...]
+
+    def load(self) -> None:
+        """Import each; one that fails is left for the work itself to import, and to say what is
+        wrong in its own words."""
+        for name in self.names:
+            module, _, function = name.partition(":")
+            try:
+                loaded = importlib.import_module(module)
+                if function:
+                    getattr(loaded, function)()
+            except Exception:  # noqa: BLE001  (see above)
+                pass
 
 
 def _stop_multiprocessing_children() -> None:

@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Iterator, Literal
 
 from sweep3d.core import RenderError, UserError, control_label, is_user_plugin
+from sweep3d.stages.render import early
 from sweep3d.stages.render.child import Child
 from sweep3d.stages.render.device import KERNEL_GRACE, prepare_gpu_environment
 from sweep3d.stages.render.worker import worker_main
@@ -131,7 +132,12 @@ class RenderPool:
     def _start(self, slot: int) -> tuple[Child, Connection]:
         """A fresh worker process (in its own process group: see :mod:`.child`) and its pipe."""
         gpu = slot if self.settings.device != "cpu" and self.n_workers > 1 else None  # one GPU per worker
-        process = Child(worker_main, (self.settings, str(self.scratch), self.limits, gpu), "sweep3d-render")
+        args = (self.settings, str(self.scratch), self.limits, gpu)
+        process = early.take(self.settings.engine, self.settings.device) if slot == 0 else None
+        if process is not None:  # started by the command line before the spec was read, Blender loaded
+            process.assign(worker_main, args, "sweep3d-render")
+        else:
+            process = Child(worker_main, args, "sweep3d-render")
         return process, process.conn
 
     def _spawn(self, slot: int) -> _Worker:
