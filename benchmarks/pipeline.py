@@ -34,6 +34,13 @@ interleaved round by round), in images/s against linear scaling:
 
     .venv/bin/python benchmarks/pipeline.py --post-heavy --objects 1 --cores 1,2 [--rounds 2]
 
+`--run-phases --old ../other-checkout` times where a cold `sweep3d run` of the quickstart spends
+its time before its first render and after its last: this checkout's and the other one's runs
+interleaved (ABBA), each from process start to exit, with the store's render blobs counted every
+50 ms (the first, the last), on a fresh store each:
+
+    .venv/bin/python benchmarks/pipeline.py --run-phases --old ../other-checkout [--rounds 2]
+
 `--image-path-paired` runs both sides in this one process instead, alternated run by run (ABBA),
 at 960 images, torch imported first (its import is reported apart): on a machine whose speed
 drifts, the tightest comparison.
@@ -765,6 +772,43 @@ def _cpu() -> float:
                                                  resource.getrusage(resource.RUSAGE_CHILDREN)))
 
 
+def run_phases(rounds: int, old: Path | None, console: Console) -> None:
+    """Cold quickstart runs of this checkout and ``old`` interleaved (ABBA): seconds from process
+    start to the first render blob, to the last, and to exit."""
+    sides = {"this": CHECKOUT, **({"old": old.resolve()} if old is not None else {})}
+    times: dict[str, list[tuple[float, float, float]]] = {side: [] for side in sides}
+    with tempfile.TemporaryDirectory(prefix="sweep3d-phases-") as tmp:
+        for i in range(rounds):
+            for side in list(sides) if i % 2 == 0 else list(sides)[::-1]:
+                console.print(f"round {i + 1}: {side} ...")
+                folder = Path(tmp) / f"{side}{i}"
+                spec = quickstart_spec(folder)
+                env = {**os.environ, "PYTHONPATH": str(sides[side])}
+                started = time.perf_counter()
+                run = subprocess.Popen([sys.executable, "-m", "sweep3d", "run", str(spec), "--no-report"], cwd=folder,
+                                       env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+                first = last = None
+                seen = 0
+                while run.poll() is None:
+                    blobs = len(list((folder / "store" / "blobs").glob("*/*.png")))
+                    now = time.perf_counter() - started
+                    if blobs and first is None:
+                        first = now
+                    if blobs > seen:
+                        seen, last = blobs, now
+                    time.sleep(0.05)
+                ended = time.perf_counter() - started
+                assert run.returncode == 0, run.stderr.read()[-3000:]
+                times[side].append((first or ended, last or ended, ended))
+    table = Table(title=f"cold `sweep3d run` of the quickstart, phases (rounds: {rounds}, sides interleaved)")
+    for column in ("side", "to the first render (s)", "renders (s)", "last render to exit (s)", "whole (s)"):
+        table.add_column(column, justify="right" if column != "side" else "left")
+    for side, rows in times.items():
+        table.add_row(side, *(" / ".join(f"{x:.2f}" for x in column) for column in (
+            [r[0] for r in rows], [r[1] - r[0] for r in rows], [r[2] - r[1] for r in rows], [r[2] for r in rows])))
+    console.print(table)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--renders", type=int, default=40, help="renders in the throughput comparison")
@@ -780,9 +824,12 @@ def main() -> None:
                         "core counts ([postprocess] workers), e.g. 1,2, instead of whole runs")
     parser.add_argument("--post-alone", type=Path, help=argparse.SUPPRESS)  # one side of --post-heavy --cores
     parser.add_argument("--workers", type=int, default=1, help=argparse.SUPPRESS)
-    parser.add_argument("--old", type=Path, help="with --post-heavy or --image-path: another checkout to time beside this one")
+    parser.add_argument("--old", type=Path, help="with --post-heavy, --image-path or --run-phases: another checkout to "
+                        "time beside this one")
     parser.add_argument("--image-path", action="store_true",
                         help="only the image path, per image: sweep3d's stages against the bare process")
+    parser.add_argument("--run-phases", action="store_true",
+                        help="only cold runs of the quickstart: time to the first render, the renders, last render to exit")
     parser.add_argument("--image-path-paired", action="store_true",
                         help="only the image path: sweep3d's stages and the bare loop in one process, alternated")
     parser.add_argument("--infer-alone", type=Path, help=argparse.SUPPRESS)  # one side of --image-path
@@ -795,6 +842,9 @@ def main() -> None:
         took: dict = {}
         took["wall"] = infer_alone({"store": Store(args.infer_alone / "store")}, args.infer_alone, SIGMAS[args.sigmas], took)
         print(json.dumps(took))
+        return
+    if args.run_phases:
+        run_phases(args.rounds, args.old, console)
         return
     if args.image_path:
         image_path(args.rounds, args.old, console)
