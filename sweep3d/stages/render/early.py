@@ -27,7 +27,7 @@ def start() -> None:
     """Start the interpreter now (once; a second call keeps the first), where this process may
     use more than one core: on one, Blender's import would only slow the planning down."""
     global _waiting
-    if _waiting is None and len(os.sched_getaffinity(0)) > 1:
+    if _waiting is None and _usable_cores() > 1:
         try:
             _waiting = Child(None, name="sweep3d-render", preload=PRELOAD)
         except OSError:  # the pool starts its worker as ever, and says what stops it in its own words
@@ -52,3 +52,9 @@ def drop() -> None:
     child, _waiting = _waiting, None
     if child is not None:
         child.end(grace=0)
+
+
+def _usable_cores() -> int:
+    """The cores this process may run on (its affinity, where the system says; else every core)."""
+    affinity = getattr(os, "sched_getaffinity", None)
+    return len(affinity(0)) if affinity is not None else os.cpu_count() or 1

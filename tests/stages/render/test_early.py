@@ -60,3 +60,10 @@ def test_a_fitting_worker_is_taken_once_and_one_left_is_ended(started) -> None:
     left = early._waiting
     early.drop()
     assert left.exitcode is not None and early._waiting is None
+
+
+def test_on_one_core_nothing_is_started_ahead(monkeypatch) -> None:
+    monkeypatch.setattr(early, "_usable_cores", lambda: 1)
+    early.start()
+    assert early._waiting is None
+    assert early.take("cycles", "cpu") is None
