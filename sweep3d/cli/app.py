@@ -627,28 +627,11 @@ def console_main() -> None:
     on to Python's own handling, traceback and all."""
     from sweep3d.cli.quick_exit import exit_now
 
-    if _local_run(sys.argv[1:]):  # before typer and pyarrow load (0.1 s): run() keeps this one
-        from sweep3d.stages.render import start_early_worker
-
-        start_early_worker()
     try:
         main()
     except SystemExit as exc:
         exit_now(exc.code)
     exit_now(0)
-
-
-def _local_run(args: list[str]) -> bool:
-    """Whether the command line asks for a ``run`` on local workers, the one command the render
-    worker started ahead serves (read before typer parses it; ``run`` ends the worker otherwise)."""
-    if not args or args[0] != "run" or "--help" in args:
-        return False
-    for i, arg in enumerate(args):
-        if arg == "--executor":
-            return args[i + 1 : i + 2] == ["local"]
-        if arg.startswith("--executor="):
-            return arg == "--executor=local"
-    return True
 
 
 def _register_subcommands() -> None:

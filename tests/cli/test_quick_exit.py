@@ -46,19 +46,3 @@ def test_the_command_keeps_its_exit_status_and_its_one_line_error(tmp_path: Path
     assert done.returncode == 2
     assert "missing.toml" in done.stderr + done.stdout and "Traceback" not in done.stderr
 
-
-@pytest.mark.parametrize(("args", "early"), [
-    (["run", "spec.toml"], True),
-    (["run", "spec.toml", "--no-report", "--executor", "local"], True),
-    (["run", "spec.toml", "--executor=local"], True),
-    (["run", "spec.toml", "--executor", "ray"], False),
-    (["run", "spec.toml", "--executor=ray"], False),
-    (["run", "spec.toml", "--executor"], False),  # typer says what is missing; nothing to start
-    (["run", "--help"], False),
-    (["plan", "spec.toml"], False),
-    ([], False),
-])
-def test_the_render_worker_starts_before_parsing_only_for_a_local_run(args: list[str], early: bool) -> None:
-    from sweep3d.cli.app import _local_run
-
-    assert _local_run(args) is early
