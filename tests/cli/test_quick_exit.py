@@ -45,4 +45,3 @@ def test_the_command_keeps_its_exit_status_and_its_one_line_error(tmp_path: Path
                           capture_output=True, text=True, timeout=60)
     assert done.returncode == 2
     assert "missing.toml" in done.stderr + done.stdout and "Traceback" not in done.stderr
-
