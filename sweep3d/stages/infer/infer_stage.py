@@ -182,9 +182,14 @@ class InferStage:
     def _predicted(self, plan: Plan, store: Store, todo: Feed, images: ModelInputs, valid: dict[str, Mapping[str, Any]],
                  jobs: Iterable[Job], kept: KeptOutputs) -> Iterator[Computed]:
         """The prediction rows of ``jobs``, batch by batch."""
-        infer = self._inferrer(plan, store, self._threads(beside="render" in todo.computing), kept)
+        threads = self._threads(beside="render" in todo.computing)
+        infer = self._inferrer(plan, store, threads, kept)
+        widen = threads < self._threads() and self._widens()
         passes = self._evaluator(plan).passes
         for batch_jobs in _batches(jobs, self.model.settings.batch_size):
+            if widen and not todo.more:  # the renders are done: what is left gets every core
+                self._runner.use_threads(self._threads())  # type: ignore[union-attr]
+                widen = False
             t0 = time.perf_counter()
             batch, pixels, invalid, damaged = _load(images, batch_jobs, valid)
             arrays, lost = _load_passes(store, batch, passes)
@@ -293,8 +298,16 @@ class InferStage:
         (Blender renders on every core: one thread gave the shortest runs, benchmarks/RESULTS.md),
         else every core (beside post-processing alone, which takes one core for a fraction of
         the time, every core took the quickstart's 960 images from 13–15 s to 8–10 s: issue 37). Chosen from what the pass had to do, not
-        from how fast upstream went, since torch's answers change with its thread count."""
+        from how fast upstream went, since torch's answers change with its thread count; only
+        where they cannot change does inference widen once upstream is done (:meth:`_widens`)."""
         return self.model.settings.threads or (1 if beside else os.cpu_count() or 1)
+
+    def _widens(self) -> bool:
+        """Whether the pass's last batches may take every core once the stages upstream are done:
+        where ONNX Runtime stands in for a built-in classifier on the CPU, whose rows are the same
+        bits at any thread count (``test_onnx_rows_are_the_same_bits_at_any_thread_count``), so
+        that how fast the renders went changes nothing stored."""
+        return self.backend == STAND_IN and self._runner is not None and self._runner.batch_invariant
 
     def _evaluator(self, plan: Plan) -> Evaluator:
         """The run's evaluator, made once (the schema and the rows of every batch come from it)."""

@@ -226,9 +226,11 @@ def test_top5_and_label_ids_whatever_top_k() -> None:
     assert sixth["correct_top5"] is False and sixth["correct"] is False
 
 
-def _infer_in_batches(folder, orders: list[list[int]], images: np.ndarray, model: str) -> list[list[dict]]:
+def _infer_in_batches(folder, orders: list[list[int]], images: np.ndarray, model: str, threads: str = "threads = 1\n",
+                      computing: tuple[str, ...] = ()) -> list[list[dict]]:
     """Each order of ``images`` through the infer stage's own batching (``compute``), each image
-    under a key of its own per order (so no kept outputs are read back); the rows in that order."""
+    under a key of its own per order (so no kept outputs are read back); the rows in that order.
+    ``computing``: the stages upstream that computed in the pass (done by the time it infers)."""
     from sweep3d.cache.store import Store
     from sweep3d.core.pixels import encode_png
     from sweep3d.driver.jobs import Job
@@ -237,7 +239,7 @@ def _infer_in_batches(folder, orders: list[list[int]], images: np.ndarray, model
     from sweep3d.stages.infer import InferStage, ModelHandle
     from tests.helpers import load_spec
 
-    loaded = load_spec(write_spec(folder, TINY_SPEC.replace("batch_size = 8\n", f"batch_size = 4\nthreads = 1\n{model}")))
+    loaded = load_spec(write_spec(folder, TINY_SPEC.replace("batch_size = 8\n", f"batch_size = 4\n{threads}{model}")))
     handle = ModelHandle.resolve(loaded)
     plan, store = plan_spec(loaded, handle), Store(loaded.store)
     stage = InferStage(handle)
@@ -249,7 +251,7 @@ def _infer_in_batches(folder, orders: list[list[int]], images: np.ndarray, model
             store.blob_path(key).parent.mkdir(parents=True, exist_ok=True)
             store.blob_path(key).write_bytes(encode_png(images[i]))
             jobs.append(Job(len(jobs), "box", "white", {}, key, key, f"p{key}"))
-        rows = {c.key: c.row for c in stage.compute(Feed(store, {}, jobs), plan, store)}
+        rows = {c.key: c.row for c in stage.compute(Feed(store, {}, jobs, computing=computing), plan, store)}
         out.append([rows[job.pred_key] for job in jobs])
     return out, stage
 
@@ -270,3 +272,39 @@ def test_an_image_s_outputs_are_the_same_bytes_whatever_batch_it_is_in(tmp_path,
     seen = [rows[order.index(0)] for rows, order in zip(runs, orders)]
     for field in ("topk_probs", "label_prob", "loss", "top1"):
         assert len({repr(row[field]) for row in seen}) == 1, [row[field] for row in seen]
+
+
+@pytest.mark.torch
+@pytest.mark.parametrize(("model", "computing", "threads"), [
+    pytest.param("", ("render", "postprocess"), [1, 3], id="stand-in beside renders: widens once they are done"),
+    pytest.param("", ("postprocess",), [3], id="stand-in without renders: every core from the start"),
+    pytest.param('backend = "onnx"\n', ("render", "postprocess"), [1], id="a model's own ONNX: stays on one"),
+])
+def test_inference_beside_renders_takes_every_core_once_upstream_is_done(tmp_path, monkeypatch, model, computing,
+                                                                         threads) -> None:
+    from sweep3d.stages.infer.onnx_backend import OnnxRunner
+
+    calls: list[int] = []
+    real = OnnxRunner.use_threads
+    monkeypatch.setattr(OnnxRunner, "use_threads", lambda runner, n: calls.append(n) or real(runner, n))
+    monkeypatch.setattr("os.cpu_count", lambda: 3)
+    images = np.random.default_rng(4).random((6, 32, 32, 3), dtype=np.float32)
+    _infer_in_batches(tmp_path, [[0, 1, 2, 3, 4, 5]], images, model, threads="", computing=computing)
+    assert calls == threads
+
+
+@pytest.mark.torch
+def test_onnx_rows_are_the_same_bits_at_any_thread_count(lite0, tmp_path) -> None:
+    """What lets the stand-in widen mid-pass (``InferStage._widens``): the rows stored do not
+    depend on when the renders finished."""
+    from skimage import data
+
+    from sweep3d.stages.infer.onnx_backend import OnnxRunner
+
+    coffee = data.coffee().astype(np.float32) / 255.0
+    batch = lite0.preprocess(np.stack([coffee, coffee[::-1], coffee[:, ::-1]]))
+    runner = OnnxRunner(lite0, tmp_path, "lite0", threads=1)
+    one = runner(batch)
+    for threads in (2, 3):
+        runner.use_threads(threads)
+        assert np.array_equal(runner(batch), one)
