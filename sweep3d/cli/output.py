@@ -22,6 +22,7 @@ from sweep3d.results import (
     control_number,
     has_view,
     named_rules,
+    rules_left_out,
     nearest_miss_region,
     numeric_scales,
     results_store,
@@ -260,7 +261,9 @@ def print_findings(console: Console, plan: Plan, store: Store | None = None, fai
         console.print("no significant boundary (q ≥ 0.05): "
                       + "; ".join(describe_flat(rows) for rows in by_parameter(summary.no_boundaries)))
     if rules:
+        more = rules_left_out(summary)
         console.print("fails more in a box: " + "; ".join(_marked(escape(r["text"]), marks.pop(0)) for r in rules)
+                      + (f"; {more} more in the findings view" if more else "")
                       + " (subgroup discovery over intervals; best of many boxes, so optimistic until confirmed)",
                       soft_wrap=True)
     if unconfirmed:

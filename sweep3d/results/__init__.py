@@ -97,6 +97,7 @@ if _TYPE_CHECKING:
         named_rules,
         nearest_miss_region,
         region_min_count,
+        rules_left_out,
         stored_summary,
         summarise,
         weakest_regions,

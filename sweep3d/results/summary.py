@@ -241,6 +241,11 @@ def named_rules(summary: Summary, limit: int = RULE_LIMIT) -> list[dict[str, Any
     return [r for r in summary.rules if len(r["conditions"]) >= 2 and r["p_adjusted"] < ALPHA][:limit]
 
 
+def rules_left_out(summary: Summary, limit: int = RULE_LIMIT) -> int:
+    """How many boxes :func:`named_rules` would name but for ``limit`` (the findings view lists them)."""
+    return len(named_rules(summary, limit=len(summary.rules))) - len(named_rules(summary, limit))
+
+
 def region_min_count(counted: int) -> int:
     """The fewest counted results a region needs to be tested as a failure mode: 5 % of the
     counted results, between 2 and 10 (the report and the printed findings use the same)."""

@@ -88,3 +88,17 @@ def test_the_summary_names_the_box_and_the_rules_view_lists_it(tmp_path: Path) -
     assert {c["column"] for c in first["conditions"]} == {"orientation_yaw", "camera_elevation"}
     assert first["text"].startswith(first["key"] + ": ") and "elsewhere" in first["text"]
     assert rules_of(con)[0].key() == first["key"]
+
+
+def test_the_boxes_run_leaves_unnamed_are_counted() -> None:
+    from sweep3d.results.summary import RULE_LIMIT, Summary, rules_left_out
+
+    def box(p: float, conditions: int = 2) -> dict:
+        return {"conditions": [{"column": f"c{i}"} for i in range(conditions)], "p_adjusted": p}
+
+    named = [box(0.001), box(0.01), box(0.02)]  # three that qualify; one of a single condition, one not significant
+    summary = Summary(jobs=0, evaluated=0, invalid=0, correct=0, accuracy=None, objects=[], environments=[],
+                      scene_accuracy=[], scene_count=[], rules=[*named, box(0.001, conditions=1), box(0.2)])
+    assert len(named_rules(summary)) == RULE_LIMIT == 2
+    assert rules_left_out(summary) == 1
+    assert rules_left_out(summary, limit=3) == 0
