@@ -51,6 +51,7 @@ drifts, the tightest comparison.
 from __future__ import annotations
 
 import argparse
+import compileall
 import json
 import os
 import shutil
@@ -435,11 +436,21 @@ def image_path_side(renders: Path, folder: Path, sigmas: list[float], checkout: 
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
+def compiled(*checkouts: Path | None) -> None:
+    """Byte-compile each checkout's package before it is timed: a checkout only ever run with
+    ``PYTHONDONTWRITEBYTECODE`` set (or whose render workers alone import a module) compiles from
+    source in every process, a tenth of a second at each start that the other side does not pay."""
+    for checkout in checkouts:
+        if checkout is not None:
+            compileall.compile_dir(str(Path(checkout) / "sweep3d"), quiet=1)
+
+
 def image_path(rounds: int, old: Path | None, console: Console) -> None:
     """The image path per image: sweep3d's stages against the bare process at 960 and 1,920 images."""
     sides = {"bare": None, "sweep3d": (REPO, True), "sweep3d, nothing kept": (REPO, False),
              **({"old checkout": (old, False)} if old else {})}
     seconds: dict[tuple[str, int], list[dict]] = {(side, n): [] for side in sides for n in SIGMAS}
+    compiled(REPO, old)
     with tempfile.TemporaryDirectory(prefix="sweep3d-path-") as tmp:
         console.print("the quickstart's renders, once ...")
         stage = stage_multi(Path(tmp) / "renders")
@@ -585,6 +596,7 @@ def multi_scene(rounds: int, console: Console) -> None:
 
     sides = {"bare": bare_multi, "stage": stage_multi, "run": cli_multi}
     done: dict[str, list[dict]] = {side: [] for side in sides}
+    compiled(REPO)
     with tempfile.TemporaryDirectory(prefix="sweep3d-bench-") as tmp:
         for i in range(rounds):
             for side in list(sides) if i % 2 == 0 else list(sides)[::-1]:
@@ -672,6 +684,7 @@ def post_heavy(rounds: int, objects: int, old: Path | None, console: Console) ->
     ``old`` (another checkout, e.g. the commit before the in-memory image path), interleaved."""
     sides = {"new": REPO, **({"old": old} if old else {})}
     walls: dict[str, list[float]] = {side: [] for side in sides}
+    compiled(REPO, old)
     with tempfile.TemporaryDirectory(prefix="sweep3d-heavy-") as tmp:
         for i in range(rounds):
             for side in list(sides) if i % 2 == 0 else list(sides)[::-1]:
@@ -777,6 +790,7 @@ def run_phases(rounds: int, old: Path | None, console: Console) -> None:
     start to the first render blob, to the last, and to exit."""
     sides = {"this": CHECKOUT, **({"old": old.resolve()} if old is not None else {})}
     times: dict[str, list[tuple[float, float, float]]] = {side: [] for side in sides}
+    compiled(*sides.values())
     with tempfile.TemporaryDirectory(prefix="sweep3d-phases-") as tmp:
         for i in range(rounds):
             for side in list(sides) if i % 2 == 0 else list(sides)[::-1]:
