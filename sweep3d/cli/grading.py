@@ -34,9 +34,12 @@ def print_grades(console: Console, graded: Graded, spec_path: object) -> None:
         console.print(f"stability: {checked.sampled} images checked; {fragile}; threshold |margin| < "
                       f"{checked.threshold:.3g}{scene}", highlight=False, soft_wrap=True)
     if counts["inconclusive"] and graded.used >= graded.budget // 2:
+        doubled = 2 * max(graded.budget, 1)
+        why = ("about what gives each of them the pairs that could confirm it" if graded.wanted > doubled else
+               "a second look at these pairs, each look at 5 %")
         console.print(f"{counts['inconclusive']} inconclusive: a larger budget goes on from here, reusing the renders made "
-                      f"(sweep3d grade {escape(str(spec_path))} --budget {2 * max(graded.budget, 1)}; a second look "
-                      "at these pairs, each look at 5 %)", highlight=False, soft_wrap=True)
+                      f"(sweep3d grade {escape(str(spec_path))} --budget {max(doubled, graded.wanted)}; {why})",
+                      highlight=False, soft_wrap=True)
     if graded.replaced is not None:
         console.print(f"note: these grades replace those of --budget {graded.replaced} (more renders); "
                       f"sweep3d grade {escape(str(spec_path))} --budget {graded.replaced} gives them back, every "

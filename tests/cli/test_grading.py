@@ -62,3 +62,26 @@ def test_a_smaller_budget_says_whose_grades_it_replaced_and_how_to_get_them_back
     print_grades(console, Graded(findings, [("inconclusive", "x")], 2, 2, 0, 1.0, "mitsuba", replaced=160), "s.toml")
     assert "these grades replace those of --budget 160 (more renders); sweep3d grade s.toml --budget 160" in \
         console.export_text()
+
+
+def test_findings_short_of_the_pairs_that_could_confirm_them_are_advised_the_budget_that_gives_them() -> None:
+    from types import SimpleNamespace
+
+    from sweep3d.followups.grade.run import REPLICATION_SHARE, wanted_budget
+    from sweep3d.results import pairs_to_confirm
+
+    short = [SimpleNamespace(pairs=pairs, findings=18, looks=1, in_family=pairs > 0) for pairs in (0, 1, 5)]
+    missing = sum(pairs_to_confirm(v) - v.pairs for v in short)
+    wanted = wanted_budget(short, stability_used=16, replication_used=8)
+
+    def replication_share(budget: int) -> int:  # what grade gives the replication of a budget
+        return int((budget - 16) * REPLICATION_SHARE)
+
+    assert replication_share(wanted) >= 8 + 2 * missing > replication_share(wanted - 1)  # the least that is enough
+    assert wanted_budget([], 16, 8) == 0
+    findings = [Finding(f"k{i}", "boundary", f"finding {i}", i, {}) for i in range(3)]
+    console = Console(record=True, width=300)
+    print_grades(console, Graded(findings, [("inconclusive", "x")] * 3, 8, 8, 8, 1.0, "mitsuba", wanted=wanted),
+                 "s.toml")
+    assert (f"--budget {wanted}; about what gives each of them the pairs that could confirm it"
+            in console.export_text())

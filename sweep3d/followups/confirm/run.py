@@ -18,6 +18,7 @@ from statistics import NormalDist
 from typing import Any
 
 from rich.console import Console
+from rich.markup import escape
 
 from sweep3d.cache import Store
 from sweep3d.core import UserError
@@ -295,6 +296,9 @@ def render_rows(loaded: LoadedSpec, space: Space, store: Store, rows: list[Row],
     if not rows:
         return None, []
     variant = _variant(loaded, space, rows, suffix, render)
+    if console is not None:  # names the progress lines that follow: one follow-up runs several of these
+        console.print(f"{escape(variant.name)}: {len(rows)} fresh configurations on {variant.spec.render.engine}",
+                      highlight=False, soft_wrap=True)
     result = run(variant, console, executor=executor)
     outcomes = _outcomes(store, variant.name)
     return result, [outcomes.get(i) for i in scene_order(space, rows)]

@@ -33,11 +33,13 @@ from sweep3d.core import UserError
 from sweep3d.followups.grade.decide import Evidence, evidence_of, grade, second_opinion
 from sweep3d.results import (
     CONFIRMED,
+    INCONCLUSIVE_GRADE,
     Finding,
     first_look,
     grade_row,
     listed_findings,
     numeric_scales,
+    pairs_to_confirm,
     record_listing,
     stored_rows,
     stored_summary,
@@ -78,6 +80,9 @@ class Graded:
     #: changes alone (None: the neighbours were rendered, or the spec moves nothing they would move)
     scene_budget: int | None = None
     replaced: int | None = None  # the larger budget of the earlier grades these replaced (same seed)
+    #: the least budget that could give every inconclusive finding the pairs that could confirm it
+    #: (two renders a pair, at the replication's share; 0: none is short of them)
+    wanted: int = 0
 
 
 def grade_findings(loaded: LoadedSpec, budget: int | None = None, seed: int | None = None,
@@ -117,6 +122,7 @@ def _graded(loaded: LoadedSpec, store: Store, budget: int | None, seed: int, con
     claims = claims_of(loaded, store, summary, space)
     testable = [c for c in claims.values() if not isinstance(c, str)]
     checked, used, scene_budget = _stability(loaded, seed, console, executor, int(budget * STABILITY_SHARE))
+    stability_used, replication_used = used, 0
     threshold = checked.threshold if checked is not None else None
     rendered = checked.scene.rendered if checked is not None and checked.scene is not None else 0
     evidence: dict[str, Evidence] = {}
@@ -128,6 +134,7 @@ def _graded(loaded: LoadedSpec, store: Store, budget: int | None, seed: int, con
                          weights={f.key: evidence_rate(f.run_difference) for f in findings})
         rendered += result.rendered
         used += result.renders_used
+        replication_used = result.renders_used
         verdicts = {x.claim.key: x.verdict for x in result.confirmations}
         replicated = [k for k, v in verdicts.items() if v.status == CONFIRMED]
         engine_verdicts, engine_rendered, engine_used = _second_renderer(
@@ -156,8 +163,21 @@ def _graded(loaded: LoadedSpec, store: Store, budget: int | None, seed: int, con
             grades.append(grade(Evidence()))
     replaced = larger_budget(stored_rows(store, loaded.name, model), listing, budget, seed)
     _record(store, loaded, model, listing, findings, grades, evidence, budget, seed)
+    short = [evidence[f.key].replication for f, (g, _) in zip(findings, grades)
+             if g == INCONCLUSIVE_GRADE and f.key in evidence and evidence[f.key].replication is not None]
     return Graded(findings, grades, budget, used, rendered, time.perf_counter() - started, engine, checked, listing,
-                  scene_budget, replaced)
+                  scene_budget, replaced, wanted_budget(short, stability_used, replication_used))
+
+
+def wanted_budget(short: list[Any], stability_used: int, replication_used: int) -> int:
+    """The least budget at which the replication could give each of the ``short`` findings'
+    verdicts the pairs that could confirm it: the renders it used, two more for each pair missing
+    (twins share renders, so this is at most what it takes), over its share of what the stability
+    check leaves. 0 when none is short."""
+    missing = sum(max(0, pairs_to_confirm(verdict) - verdict.pairs) for verdict in short)
+    if not missing:
+        return 0
+    return stability_used + math.ceil((replication_used + 2 * missing) / REPLICATION_SHARE)
 
 
 def other_engine(loaded: LoadedSpec) -> str:

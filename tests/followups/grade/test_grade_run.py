@@ -5,6 +5,7 @@ the same budget renders nothing and gives the same grades; ``run`` then marks ea
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -56,6 +57,9 @@ def test_grade_writes_a_grade_for_every_finding_and_a_rerun_renders_nothing(tmp_
     assert printed.exit_code == 0, printed.output
     assert "solid: " in printed.output and "renders of the budget's 96 used (0 rendered now)" in \
         " ".join(printed.output.split())
+    # each check's progress lines follow a line naming it (its experiment and engine)
+    assert re.search(r"-confirm-mitsuba: \d+ fresh configurations on mitsuba", printed.output), printed.output
+    assert re.search(r"-grade-mitsuba: \d+ fresh configurations on mitsuba", printed.output), printed.output
 
 
 def test_grade_before_any_run_is_one_line(tmp_path: Path) -> None:
