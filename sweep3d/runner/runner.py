@@ -135,10 +135,13 @@ class Runner:
         return run_stages(chosen, plan, self.store, self.progress, strict=strict, overlap=overlap, found=found)
 
     def close(self) -> None:
-        """Stop what the stages keep open (workers started ahead), and the progress bars."""
+        """Stop what the stages keep open (workers started ahead, the process answering near
+        ties), and the progress bars."""
         try:
             if self._render is not None:
                 self._render.close()
+            for stage in self._infers.values():
+                stage.close()
         finally:
             self._stack.close()
 

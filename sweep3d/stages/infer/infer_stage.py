@@ -42,6 +42,7 @@ from sweep3d.stages.infer.models import Classifier, builtin_model
 from sweep3d.stages.infer.outputs import Localized
 from sweep3d.stages.infer.prediction_keys import STAND_IN, choose_backend
 from sweep3d.stages.infer.task_calls import check_task, model_outputs
+from sweep3d.stages.infer.torch_aside import MIN_IMAGES as ASIDE_MIN_IMAGES
 from sweep3d.stages.postprocess import ImageHandoff, make_image, post_controls, truth_digests
 
 if TYPE_CHECKING:
@@ -146,7 +147,7 @@ class InferStage:
             check_task(model, task, self.model.name)
             size = self.model.framing.crop
             outputs = model_outputs(model, np.zeros((1, size, size, 3), np.uint8), task, self.model.name,
-                                    self._runner if served else None)
+                                    self._runner.unranked if served else None)  # shapes and classes: no torch
             _check_classes(outputs, labels, self.model.name)
         except SpecError:
             raise
@@ -155,7 +156,15 @@ class InferStage:
         object_class_ids(plan, labels, self.model.name)  # a label the model lacks fails now, naming the object
         if self.backend in ("onnx", STAND_IN) and self._runner is None:
             self._runner = self._served_by_onnx(plan, store)
+        if self.backend == STAND_IN and self._runner is not None and len(plan.jobs) >= ASIDE_MIN_IMAGES \
+                and (os.cpu_count() or 1) > 1:  # prepare runs on the thread that outlives the pass
+            self._runner.answer_ties_aside(self.model.name)
         self._labels = labels
+
+    def close(self) -> None:
+        """End what the stage keeps beside the run (the process answering near ties)."""
+        if self._runner is not None:
+            self._runner.close()
 
     def _served_by_onnx(self, plan: Plan, store: Store) -> OnnxRunner:
         """The ONNX Runtime runner of the run's backend, asked for or standing in (exported and

@@ -74,6 +74,7 @@ class OnnxRunner:
             raise UserError("model.backend = 'onnx' needs onnxruntime: pip install onnxruntime") from None
         self._load = model if callable(model) else (lambda: model)
         self._classifier: Classifier | None = None
+        self._aside: Any = None  # a TorchAside answering the near ties, when one was started
         self.exact_ranks = exact_ranks
         self.by_torch = 0  # images run through torch instead (near ties)
         self.error = TOLERANCE  # how far a logit may be from torch's: set by the check below
@@ -114,14 +115,43 @@ class OnnxRunner:
                 self.by_torch += int(rows.size)
         return logits
 
+    def unranked(self, batch: Any) -> np.ndarray:
+        """ONNX Runtime's logits alone, near ties left as they are: for a check of the model's
+        outputs (their shape, its classes), which needs no torch."""
+        return self._run(batch)
+
     def _run(self, batch: Any) -> np.ndarray:
         """ONNX Runtime's logits of a preprocessed batch."""
         array = batch.numpy() if hasattr(batch, "numpy") else np.asarray(batch)
         return self.session.run(None, {self.input: np.ascontiguousarray(array, dtype=np.float32)})[0]
 
+    def answer_ties_aside(self, name: str) -> None:
+        """Have a child process load the built-in model ``name`` in torch now, at the lowest
+        priority, and answer the near ties (:mod:`.torch_aside`): call it from the thread that
+        outlives the pass."""
+        from sweep3d.stages.infer.torch_aside import TorchAside
+
+        if self.exact_ranks is not None and self._aside is None and self._classifier is None:
+            try:
+                self._aside = TorchAside(name)
+            except OSError:  # no process to spare: the near ties are answered here
+                self._aside = None
+
+    def close(self) -> None:
+        """End the process answering near ties, if one was started."""
+        aside, self._aside = self._aside, None
+        if aside is not None:
+            aside.close()
+
     def _torch(self, batch: Any, rows: np.ndarray) -> np.ndarray:
         """Torch's logits for ``rows`` of the batch, each row alone: torch's bits change with the
         batch size, so run together a near tie's logits would depend on how many others its batch had."""
+        layout = _layout(batch) if self._aside is not None else None
+        if layout is not None:
+            answer = self._aside.logits(batch[rows], channels_last=layout == "channels last")  # type: ignore[union-attr]
+            if answer is not None and answer.shape[0] == rows.size:
+                return answer
+            self.close()  # it could not answer: this process does from now on
         import torch
 
         module, images = self.classifier.module, torch.as_tensor(batch)
@@ -195,6 +225,16 @@ def providers(available: list[str]) -> list[str]:
     Runtime falls back to the CPU for what CUDA cannot run), else the CPU alone."""
     cuda = ["CUDAExecutionProvider"] if "CUDAExecutionProvider" in available else []
     return [*cuda, "CPUExecutionProvider"]
+
+
+def _layout(batch: Any) -> str | None:
+    """How a preprocessed numpy batch (N, 3, H, W) lies in memory, as torch would see it: "channels
+    last" (``Preprocess.of_pixels``), "contiguous", else None (a torch tensor: torch is loaded)."""
+    if not isinstance(batch, np.ndarray) or batch.ndim != 4:
+        return None
+    if batch.transpose(0, 2, 3, 1).flags.c_contiguous:
+        return "channels last"
+    return "contiguous" if batch.flags.c_contiguous else None
 
 
 def near_ties(logits: np.ndarray, ranks: int, margin: float = 2 * TOLERANCE) -> np.ndarray:

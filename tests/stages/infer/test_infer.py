@@ -227,7 +227,7 @@ def test_top5_and_label_ids_whatever_top_k() -> None:
 
 
 def _infer_in_batches(folder, orders: list[list[int]], images: np.ndarray, model: str, threads: str = "threads = 1\n",
-                      computing: tuple[str, ...] = ()) -> list[list[dict]]:
+                      computing: tuple[str, ...] = (), resolution: str = "32") -> list[list[dict]]:
     """Each order of ``images`` through the infer stage's own batching (``compute``), each image
     under a key of its own per order (so no kept outputs are read back); the rows in that order.
     ``computing``: the stages upstream that computed in the pass (done by the time it infers)."""
@@ -239,7 +239,8 @@ def _infer_in_batches(folder, orders: list[list[int]], images: np.ndarray, model
     from sweep3d.stages.infer import InferStage, ModelHandle
     from tests.helpers import load_spec
 
-    loaded = load_spec(write_spec(folder, TINY_SPEC.replace("batch_size = 8\n", f"batch_size = 4\n{threads}{model}")))
+    text = TINY_SPEC.replace("batch_size = 8\n", f"batch_size = 4\n{threads}{model}")
+    loaded = load_spec(write_spec(folder, text.replace("resolution = 32\n", f"resolution = {resolution}\n")))
     handle = ModelHandle.resolve(loaded)
     plan, store = plan_spec(loaded, handle), Store(loaded.store)
     stage = InferStage(handle)
@@ -308,3 +309,47 @@ def test_onnx_rows_are_the_same_bits_at_any_thread_count(lite0, tmp_path) -> Non
     for threads in (2, 3):
         runner.use_threads(threads)
         assert np.array_equal(runner(batch), one)
+
+
+@pytest.mark.torch
+def test_near_ties_answered_aside_are_the_same_bytes(tmp_path, monkeypatch) -> None:
+    """A large pass's near ties go to a process of their own (``torch_aside``): the rows are the
+    bytes this process's torch gives, and the process ends with the stage."""
+    from sweep3d.stages.infer import infer_stage
+    from sweep3d.stages.render.child import live_children
+
+    images = np.random.default_rng(5).random((5, 224, 224, 3), dtype=np.float32)  # the model's input: no resize
+    ties = "[evaluator]\ntop_k = 100\n"  # 101 ranks checked: near ties everywhere
+    (tmp_path / "here").mkdir()
+    (tmp_path / "aside").mkdir()
+    here, stage_here = _infer_in_batches(tmp_path / "here", [[0, 1, 2, 3, 4]], images, ties, resolution='"model"')
+    assert stage_here._runner._aside is None and stage_here._runner.by_torch > 0
+    monkeypatch.setattr(infer_stage, "ASIDE_MIN_IMAGES", 1)  # the tiny plan counts as large
+    aside, stage_aside = _infer_in_batches(tmp_path / "aside", [[0, 1, 2, 3, 4]], images, ties, resolution='"model"')
+    runner = stage_aside._runner
+    assert runner._aside is not None and runner._aside.child.is_alive() and runner._classifier is None  # torch not here
+    assert runner.by_torch == stage_here._runner.by_torch
+    for field in ("topk_probs", "label_prob", "loss", "top1", "correct"):
+        assert [repr(row[field]) for row in aside[0]] == [repr(row[field]) for row in here[0]]
+    stage_aside.close()
+    assert runner._aside is None and live_children() == []
+
+
+@pytest.mark.torch
+def test_the_process_aside_gives_torch_s_bits_in_either_memory_layout(lite0, tmp_path) -> None:
+    from sweep3d.stages.infer.models import Preprocess
+    from sweep3d.stages.infer.onnx_backend import OnnxRunner
+
+    runner = OnnxRunner(lite0, tmp_path, "lite0", threads=1, exact_ranks=5)
+    pixels = np.random.default_rng(6).integers(0, 256, (3, 224, 224, 3), dtype=np.uint8)
+    last = Preprocess(resize=224, crop=224, mean=(0.485, 0.456, 0.406), std=(0.229, 0.224, 0.225)).of_pixels(pixels)
+    rows = np.array([0, 2])
+    for batch in (last, np.ascontiguousarray(last)):  # channels last (the 8-bit path), and plain
+        expected = runner._torch(batch, rows)  # in this process
+        runner._classifier = None  # as in a run that never loaded torch
+        runner.answer_ties_aside("efficientnet-lite0")
+        try:
+            assert np.array_equal(runner._torch(batch, rows), expected)
+            assert runner._aside is not None and runner._classifier is None  # the process aside answered
+        finally:
+            runner.close()
