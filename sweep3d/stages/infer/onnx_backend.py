@@ -18,7 +18,8 @@ its check's outcome is kept beside it under the graph's bytes, the torch and onn
 and the CPU (``onnx_kept``): a new release or another machine is checked again. Both are also kept
 in the user's cache folder, so that a fresh store neither exports nor checks again. With both
 kept, ONNX Runtime answers without torch being imported: the module is loaded at the first near
-tie (a second and a half on two cores, benchmarks/RESULTS.md, issue 37), or never.
+tie (a second and a half on two cores, benchmarks/RESULTS.md, issue 37), or never; a large pass
+has a process of its own load it and answer its near ties (:mod:`.torch_aside`).
 """
 
 from __future__ import annotations
