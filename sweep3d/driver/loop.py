@@ -371,6 +371,7 @@ class _Pass:
         self.running[index] = False
         run.seconds += time.perf_counter() - self.started
         for later in range(index + 1, len(self.runs)):
+            self.feeds[later].finish(run.stage.name)
             waiting = self.runs[later].waiting
             for source in [s for s in waiting if s[0] == run.stage.table]:
                 self.runs[later].outcome.skipped += len(waiting.pop(source))

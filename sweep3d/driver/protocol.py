@@ -64,7 +64,14 @@ class Feed:
         # Which of the stages before this one compute in the pass: fixed, unlike ``more`` (which
         # says how fast they went), so what a stage chooses from it is the same run to run.
         self.computing = computing
+        self.finished: set[str] = set()  # of those, the ones done computing so far (see finish)
         self._changed = threading.Condition()
+
+    def finish(self, stage: str) -> None:
+        """Stage ``stage`` upstream is done computing; it may still hand jobs over through the
+        stages between (how fast the stages went: nothing stored may depend on it)."""
+        with self._changed:
+            self.finished.add(stage)
 
     def put(self, job: Job) -> None:
         with self._changed:

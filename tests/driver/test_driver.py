@@ -285,3 +285,18 @@ def test_a_stage_s_feed_names_the_stages_before_it_that_compute_in_the_pass(tmp_
     assert seen.pop("infer") == ("render", "postprocess")
     overlapped([Render(), Post(), Noting(damaged={"i000"})], make_plan(), Store(tmp_path / "fresh"))  # cached
     assert "infer" not in seen  # nothing to compute: no feed at all
+
+
+def test_a_stage_s_feed_learns_when_each_stage_before_it_is_done(tmp_path: Path) -> None:
+    """What lets inference take every core once the renders are done, while post-processing still
+    hands it their last images (``Feed.finished``)."""
+    seen: list[set[str]] = []
+
+    class Noting(Infer):
+        def compute(self, todo: Feed, plan: Plan, store: Store) -> Iterator[Computed]:
+            seen.append(set(todo.finished))
+            yield from super().compute(todo, plan, store)
+            seen.append(set(todo.finished))  # its feed has closed: every stage before is done
+
+    overlapped([Render(), Post(), Noting()], make_plan(), Store(tmp_path))
+    assert seen[0] <= {"render", "postprocess"} and seen[-1] == {"render", "postprocess"}

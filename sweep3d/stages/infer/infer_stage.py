@@ -196,7 +196,7 @@ class InferStage:
         widen = threads < self._threads() and self._widens()
         passes = self._evaluator(plan).passes
         for batch_jobs in _batches(jobs, self.model.settings.batch_size):
-            if widen and not todo.more:  # the renders are done: what is left gets every core
+            if widen and (not todo.more or "render" in todo.finished):  # the renders are done: every core
                 self._runner.use_threads(self._threads())  # type: ignore[union-attr]
                 widen = False
             t0 = time.perf_counter()

@@ -10,8 +10,10 @@ on the cycles the renders leave idle, and answers the near ties as they come.
 
 Its answers are the run's own process's bits: the same module, one torch thread, each image alone
 and in the memory layout the run's process would have given torch (channels last, as
-``Preprocess.of_pixels`` lays it out; ``test_near_ties_aside_are_the_same_bits``). Anything
-wrong with it (it died, it cannot load the model) sends the near ties back to the run's process.
+``Preprocess.of_pixels`` lays it out; tests/stages/infer/test_infer.py). Anything wrong with it
+(it died, it cannot load the model, or it has not answered within :data:`ANSWER_WITHIN` seconds:
+a machine busy with other work leaves the lowest priority little) sends the near ties back to
+the run's process.
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ from sweep3d.stages.render import Child
 #: any: a near tie is one image in a few hundred, and the process costs a core-second.
 MIN_IMAGES = 256
 LOWEST = 19  # the niceness: it runs on what the renders leave idle
+ANSWER_WITHIN = 30.0  # seconds a near tie waits for it (its import included) before this process answers
 
 
 class TorchAside:
@@ -49,6 +52,8 @@ class TorchAside:
         layout = images.transpose(0, 2, 3, 1) if channels_last else images
         try:
             self.child.conn.send((np.ascontiguousarray(layout, dtype=np.float32), channels_last))
+            if not self.child.conn.poll(ANSWER_WITHIN):
+                return None  # the caller ends it: no late answer is left in the pipe
             answer = self.child.conn.recv()
         except (EOFError, OSError):
             return None

@@ -353,3 +353,23 @@ def test_the_process_aside_gives_torch_s_bits_in_either_memory_layout(lite0, tmp
             assert runner._aside is not None and runner._classifier is None  # the process aside answered
         finally:
             runner.close()
+
+
+@pytest.mark.torch
+def test_a_process_aside_that_does_not_answer_in_time_is_ended_and_this_process_answers(lite0, tmp_path,
+                                                                                        monkeypatch) -> None:
+    from sweep3d.stages.infer import torch_aside
+    from sweep3d.stages.infer.models import Preprocess
+    from sweep3d.stages.infer.onnx_backend import OnnxRunner
+    from sweep3d.stages.render.child import live_children
+
+    runner = OnnxRunner(lite0, tmp_path, "lite0", threads=1, exact_ranks=5)
+    pixels = np.random.default_rng(7).integers(0, 256, (2, 224, 224, 3), dtype=np.uint8)
+    batch = Preprocess(resize=224, crop=224, mean=(0.485, 0.456, 0.406), std=(0.229, 0.224, 0.225)).of_pixels(pixels)
+    expected = runner._torch(batch, np.array([1]))
+    runner._classifier = None
+    monkeypatch.setattr(torch_aside, "ANSWER_WITHIN", 0.0)  # still importing torch: too late
+    runner.answer_ties_aside("efficientnet-lite0")
+    assert runner._aside is not None
+    assert np.array_equal(runner._torch(batch, np.array([1])), expected)
+    assert runner._aside is None and runner._classifier is not None and live_children() == []
