@@ -317,8 +317,7 @@ class RayRenderPool:
     def prestart(self) -> None:
         """Nothing: actors start on the cluster when :meth:`run` asks for them."""
 
-    def close(self, wait: bool = True) -> None:
-        """Kill the actors (at once, ``wait`` or not) and end a Ray this pool started."""
+    def close(self) -> None:
         for actor in self.actors:
             try:
                 self.ray.kill(actor)
@@ -327,6 +326,3 @@ class RayRenderPool:
         self.actors = []
         if self._owns_ray:
             self.ray.shutdown()
-
-    def join(self) -> None:
-        """Nothing: :meth:`close` ends the actors at once."""
