@@ -148,9 +148,13 @@ def test_ctrl_c_stops_a_run_whose_post_control_hangs(tmp_path: Path) -> None:
         'type = "myscene:Slab"\nsize = [0.0, 0.6]', 'type = "hang:Hang"\nseconds = [100000.0]').replace(
         '[[controls]]\ntype = "mypost:Dim"\nstrength = [0.0, 0.5]\n', ""))
     mark = tmp_path / "hanging"
+    # Ctrl-C as in a terminal: the run starts with SIGINT's default action. A process started with
+    # SIGINT ignored keeps ignoring it (Python honours an inherited SIG_IGN), and a test worker may
+    # have it ignored by then (something earlier in the session: the run stayed in its loop).
     process = subprocess.Popen([sys.executable, "-m", "sweep3d", "run", str(spec), "--no-report"], cwd=tmp_path,
                                env={**os.environ, "HANG_MARK": str(mark)}, stdout=subprocess.PIPE,
-                               stderr=subprocess.STDOUT, text=True)
+                               stderr=subprocess.STDOUT, text=True,
+                               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         deadline = time.monotonic() + 120
         while not mark.exists() and time.monotonic() < deadline and process.poll() is None:
