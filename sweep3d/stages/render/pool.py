@@ -20,6 +20,7 @@ import os
 import shutil
 import signal
 import tempfile
+import threading
 import time
 from collections import Counter, deque
 from dataclasses import dataclass, field
@@ -116,6 +117,7 @@ class RenderPool:
         self.scratch = Path(tempfile.mkdtemp(prefix=f"{SCRATCH_PREFIX}{os.getpid()}-", dir=root))
         self.workers: list[_Worker] = []
         self._started: tuple[Child, Connection] | None = None  # slot 0's process, started ahead (prestart)
+        self._ending: threading.Thread | None = None  # ends the workers after close(wait=False)
 
     def __enter__(self) -> "RenderPool":
         return self
@@ -252,7 +254,14 @@ class RenderPool:
         if queue:  # also when only other groups are left: a pool never runs out of workers
             self.workers.append(self._spawn(worker.slot))
 
-    def close(self) -> None:
+    def close(self, wait: bool = True) -> None:
+        """Stop the workers and remove the scratch folder.
+
+        Args:
+            wait: return once they have exited; else return at once, having told them to exit,
+                and end them on a thread (:meth:`join` waits for it). Blender's exit takes a
+                worker 0.2 s, which the images of a run's last renders need not wait for.
+        """
         if self._started is not None:  # started ahead and never given a job: nothing of it to keep
             process, conn = self._started
             self._started = None
@@ -264,9 +273,22 @@ class RenderPool:
                 worker.conn.send(None)
             except (OSError, ValueError):
                 pass
-        for worker in self.workers:
+        workers, self.workers = self.workers, []
+        if wait:
+            self._end(workers)
+        else:
+            self._ending = threading.Thread(target=self._end, args=(workers,), name="sweep3d-render-end")
+            self._ending.start()
+
+    def join(self) -> None:
+        """Wait until the workers a :meth:`close` without waiting told to exit have ended."""
+        if self._ending is not None:
+            self._ending.join()
+            self._ending = None
+
+    def _end(self, workers: list[_Worker]) -> None:
+        for worker in workers:
             worker.process.end(5)  # with whatever it started: nothing outlives the run
-        self.workers = []
         shutil.rmtree(self.scratch, ignore_errors=True)
 
 

@@ -317,7 +317,8 @@ class RayRenderPool:
     def prestart(self) -> None:
         """Nothing: actors start on the cluster when :meth:`run` asks for them."""
 
-    def close(self) -> None:
+    def close(self, wait: bool = True) -> None:
+        """Kill the actors (at once, ``wait`` or not) and end a Ray this pool started."""
         for actor in self.actors:
             try:
                 self.ray.kill(actor)
@@ -326,3 +327,6 @@ class RayRenderPool:
         self.actors = []
         if self._owns_ray:
             self.ray.shutdown()
+
+    def join(self) -> None:
+        """Nothing: :meth:`close` ends the actors at once."""

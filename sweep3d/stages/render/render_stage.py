@@ -120,6 +120,7 @@ class RenderStage:
         self.timings = timings
         self.keep_open = keep_open and executor.kind == "local"
         self._warm: tuple[RenderSettings, RenderExecutor] | None = None  # see warm_up
+        self._ending: list[RenderExecutor] = []  # closed without waiting: see close
 
     def warm_up(self, plan: Plan) -> None:
         """Start ``plan``'s first local render worker now, so that Blender's start overlaps the
@@ -133,10 +134,14 @@ class RenderStage:
         self._warm = settings, pool
 
     def close(self) -> None:
-        """Stop a worker started by :meth:`warm_up` that no :meth:`compute` used (or kept open)."""
+        """Stop a worker started by :meth:`warm_up` that no :meth:`compute` used (or kept open),
+        and wait until the workers of finished computes have ended."""
         if self._warm is not None:
             self._warm[1].close()
             self._warm = None
+        ending, self._ending = self._ending, []
+        for pool in ending:
+            pool.join()
 
     def schema(self, plan: Plan) -> pa.Schema:
         return RENDERS_SCHEMA
@@ -179,16 +184,19 @@ class RenderStage:
                 warm[1].close()
             workers = worker_count(spec, plan.device)  # a pool starts only the workers its groups need
             pool = self.executor.pool(settings, workers if self.keep_open else min(workers, len(groups)), spec)
-        kept = False
+        kept = done = False
         try:
             yield from self._replies(pool.run(groups), plan, store, jobs, stored)
             if pool.recycled:
                 log.warning(recycled_note(spec, pool.recycled))
                 pool.recycled.clear()
-            kept = self.keep_open
+            kept, done = self.keep_open, True
         finally:
             if kept:  # warm for the next compute; close() stops it
                 self._warm = settings, pool
+            elif done:  # the stages downstream go on while Blender exits; close() waits for it
+                pool.close(wait=False)
+                self._ending.append(pool)
             else:
                 pool.close()
 

@@ -289,6 +289,11 @@ class RenderExecutor(Protocol):
         """Start the first worker ahead of :meth:`run`, where that can overlap other work."""
         ...
 
-    def close(self) -> None:
-        """Stop the workers and remove their scratch files."""
+    def close(self, wait: bool = True) -> None:
+        """Stop the workers and remove their scratch files (``wait``: before returning; else
+        :meth:`join` waits for that)."""
+        ...
+
+    def join(self) -> None:
+        """Wait for what a :meth:`close` without waiting left ending."""
         ...

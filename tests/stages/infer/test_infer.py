@@ -312,6 +312,28 @@ def test_onnx_rows_are_the_same_bits_at_any_thread_count(lite0, tmp_path) -> Non
 
 
 @pytest.mark.torch
+def test_a_batch_run_in_chunks_gives_the_whole_batch_s_bits(lite0, tmp_path) -> None:
+    """``OnnxRunner`` runs a CPU batch ``CHUNK`` images at a time (faster: the activations stay in
+    the caches); the logits are the bits of one call on the whole batch, for any batch size."""
+    from skimage import data
+
+    from sweep3d.stages.infer.onnx_backend import CHUNK, OnnxRunner
+
+    coffee = data.coffee().astype(np.float32) / 255.0
+    views = [coffee, coffee[::-1], coffee[:, ::-1], coffee[::-1, ::-1], 1 - coffee, coffee ** 2, np.sqrt(coffee)]
+    batch = lite0.preprocess(np.stack([views[i % len(views)][i:i + 380, i:i + 500] for i in range(2 * CHUNK + 1)]))
+    runner = OnnxRunner(lite0, tmp_path, "lite0", threads=1)
+    calls = []
+    real = runner.session.run
+    runner.session = type("Counted", (), {"run": lambda self, *a: calls.append(a[1]) or real(*a)})()
+    for n in (1, CHUNK, CHUNK + 1, 2 * CHUNK + 1):
+        calls.clear()
+        whole = real(None, {runner.input: np.ascontiguousarray(batch[:n].numpy())})[0]
+        assert np.array_equal(runner.unranked(batch[:n]), whole), n
+        assert [len(next(iter(c.values()))) for c in calls] == [min(CHUNK, n - i) for i in range(0, n, CHUNK)]
+
+
+@pytest.mark.torch
 def test_near_ties_answered_aside_are_the_same_bytes(tmp_path, monkeypatch) -> None:
     """A large pass's near ties go to a process of their own (``torch_aside``): the rows are the
     bytes this process's torch gives, and the process ends with the stage."""

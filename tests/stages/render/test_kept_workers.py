@@ -11,6 +11,7 @@ from sweep3d.cache.store import Store
 from sweep3d.driver.loop import run_stage
 from sweep3d.driver.progress import RunProgress
 from sweep3d.stages.render import LOCAL, RenderStage
+from sweep3d.stages.render.child import live_children
 from tests.helpers import load_spec, plan_for, spec_toml, write_spec
 
 pytestmark = pytest.mark.blender
@@ -39,5 +40,9 @@ def test_a_kept_stage_renders_each_plan_with_one_worker_and_stops_it_on_close(tm
         plain = RenderStage(LOCAL)
         third = _plan(tmp_path / "c", 60.0)
         assert run_stage(plain, third, store, RunProgress(None)).computed == 1
-        assert plain._warm is None  # nothing left running after the plan
+        assert plain._warm is None  # not kept: its worker was told to exit with the plan's last render
+        [ending] = plain._ending
+        assert ending.workers == []
+        plain.close()  # waits until it has
+        assert plain._ending == [] and live_children() == [] and not ending.scratch.exists()
     assert {j.render_key for p in (first, second, third) for j in p.jobs} <= store.keys("renders")
