@@ -132,9 +132,9 @@ class OnnxRunner:
         time (the same bits as the whole batch at once, and faster)."""
         array = batch.numpy() if hasattr(batch, "numpy") else np.asarray(batch)
         step = CHUNK if self.batch_invariant else max(len(array), 1)
-        return np.concatenate([self.session.run(None, {self.input: np.ascontiguousarray(array[i:i + step],
-                                                                                        dtype=np.float32)})[0]
-                               for i in range(0, max(len(array), 1), step)])
+        chunks = [array[i:i + step] for i in range(0, max(len(array), 1), step)]  # an empty batch: one empty chunk
+        return np.concatenate([self.session.run(None, {self.input: np.ascontiguousarray(chunk, dtype=np.float32)})[0]
+                               for chunk in chunks])
 
     def answer_ties_aside(self, name: str) -> None:
         """Have a child process load the built-in model ``name`` in torch now, at the lowest
