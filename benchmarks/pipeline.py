@@ -15,7 +15,9 @@ a fresh store (in this process); and a cold `sweep3d run` of the quickstart from
 exit on a fresh store (what a user waits for), interleaved round by round (`--rounds 2` runs
 bare, stage, run, then run, stage, bare). The whole run's honest limit is the bare loop plus the
 inference of the same images (timed alone on the stage's store): on 2 cores both are CPU-bound,
-so overlapping them cannot beat their sum by much. Stores and frames are on disk, as a user's are.
+so overlapping them cannot beat their sum by much. The bare image path is also timed in batches
+of 4, as sweep3d's ONNX Runtime runs them on the CPU, and the run's ratio printed against that
+limit too. Stores and frames are on disk, as a user's are.
 
     .venv/bin/python benchmarks/pipeline.py --multi-scene [--rounds 2]
 
