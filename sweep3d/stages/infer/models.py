@@ -347,6 +347,21 @@ def inference_device() -> str:
     return "cuda" if torch.cuda.is_available() else "cpu"
 
 
+def logits_each_alone(module: Any, images: Any, rows: Sequence[int] | None = None) -> np.ndarray:
+    """float32 (N, C) logits of a classifier ``module`` for ``rows`` of ``images`` (a tensor
+    (N, 3, H, W); default every row), each image run alone and sliced, so in its batch's memory
+    layout: torch's bits change with the batch size and the layout, so a near tie's logits must
+    not depend on how many others its batch had (``onnx_backend``, ``torch_aside``)."""
+    import torch
+
+    out = []
+    with torch.inference_mode():
+        for row in range(len(images)) if rows is None else rows:
+            logits = module(on_device(module, images[row : row + 1]))
+            out.append((logits[0] if isinstance(logits, (tuple, list)) else logits).float().cpu().numpy())
+    return np.concatenate(out) if out else np.zeros((0, 0), np.float32)
+
+
 def on_device(module: Any, batch: Any) -> Any:
     """A preprocessed ``batch`` (a tensor, or a list or tuple of them: a detector's images) where
     ``module``'s weights are; on the CPU, ``batch`` itself (preprocessing makes CPU tensors)."""

@@ -36,7 +36,7 @@ import numpy as np
 from sweep3d.cache import atomic_write
 from sweep3d.core import UserError
 from sweep3d.stages.infer import onnx_kept
-from sweep3d.stages.infer.models import Classifier, on_device
+from sweep3d.stages.infer.models import Classifier, logits_each_alone, on_device
 
 TOLERANCE = 1e-3  # max |logit difference| accepted between torch and ONNX Runtime
 CHECK_BATCH = 4
@@ -165,13 +165,7 @@ class OnnxRunner:
             self.close()  # it could not answer: this process does from now on
         import torch
 
-        module, images = self.classifier.module, torch.as_tensor(batch)
-        out = []
-        with torch.inference_mode():
-            for row in rows.tolist():
-                logits = module(on_device(module, images[row : row + 1]))
-                out.append((logits[0] if isinstance(logits, (tuple, list)) else logits).float().cpu().numpy())
-        return np.concatenate(out)
+        return logits_each_alone(self.classifier.module, torch.as_tensor(batch), rows.tolist())
 
     def _export(self, scratch: Path) -> None:
         import torch

@@ -69,7 +69,7 @@ def serve(conn: Any, name: str) -> None:
     """In the child: load the model, then answer each batch of images until told to stop."""
     import torch
 
-    from sweep3d.stages.infer.models import load_model, on_device
+    from sweep3d.stages.infer.models import load_model, logits_each_alone
 
     torch.set_num_threads(1)  # as the run's process does for its near ties
     try:
@@ -85,10 +85,4 @@ def serve(conn: Any, name: str) -> None:
             conn.send(None)
             continue
         images = torch.from_numpy(array)
-        images = images.permute(0, 3, 1, 2) if channels_last else images
-        out = []
-        with torch.inference_mode():
-            for row in range(len(images)):
-                logits = module(on_device(module, images[row : row + 1]))
-                out.append((logits[0] if isinstance(logits, (tuple, list)) else logits).float().cpu().numpy())
-        conn.send(np.concatenate(out) if out else np.zeros((0, 0), np.float32))
+        conn.send(logits_each_alone(module, images.permute(0, 3, 1, 2) if channels_last else images))
